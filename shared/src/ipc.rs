@@ -1,0 +1,304 @@
+//! iceoryx2 plumbing: one node per process, publishers that wake their subscribers,
+//! subscribers that can be attached to a `WaitSet`.
+//!
+//! Every navsync service is a pair: a publish-subscribe service carrying the samples and an
+//! event service of the same name. [`Publisher::publish`] writes the sample straight into a
+//! shared-memory slot loaned from iceoryx2 and then notifies the event service, so a
+//! subscriber sleeping in a [`WaitSet`] wakes up without polling.
+//!
+//! ```no_run
+//! use navsync_shared::{ipc::IpcNode, samples::NavState, services};
+//! # fn main() -> Result<(), navsync_shared::ipc::IpcError> {
+//! let node = IpcNode::new("my-client")?;
+//! let nav = node.subscriber::<NavState>(services::NAV_STATE)?;
+//! while let Some(state) = nav.wait_next(std::time::Duration::from_secs(1))? {
+//!     println!("lat {} lon {}", state.lat_deg, state.lon_deg);
+//! }
+//! # Ok(()) }
+//! ```
+
+use core::fmt::Debug;
+use core::time::Duration;
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+
+use crate::reflect::Reflect;
+use crate::services::{self, MAX_NODES, MAX_PUBLISHERS, MAX_SUBSCRIBERS, ServiceKind};
+
+/// The iceoryx2 service variant navsync uses: inter-process, shared memory.
+pub type Transport = ipc::Service;
+
+/// What went wrong in the IPC layer. iceoryx2's own error is kept as text with the
+/// service it concerns.
+#[derive(Debug, thiserror::Error)]
+pub enum IpcError {
+    /// An iceoryx2 operation failed.
+    #[error("{what} `{service}`: {detail}")]
+    Iceoryx {
+        /// The operation.
+        what: &'static str,
+        /// The service or node concerned.
+        service: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// A name was not acceptable to iceoryx2.
+    #[error("invalid name `{0}`")]
+    InvalidName(String),
+}
+
+fn err(what: &'static str, service: &str, e: impl Debug) -> IpcError {
+    IpcError::Iceoryx { what, service: service.to_string(), detail: format!("{e:?}") }
+}
+
+/// The iceoryx2 resource prefix in use: `$NAVSYNC_IPC_PREFIX` or `navsync_`.
+pub fn prefix() -> String {
+    std::env::var(services::PREFIX_ENV).unwrap_or_else(|_| services::DEFAULT_PREFIX.to_string())
+}
+
+/// iceoryx2 configuration with navsync's resource prefix.
+pub fn config() -> Result<Config, IpcError> {
+    let mut config = Config::default();
+    let p = prefix();
+    config.global.prefix = FileName::new(p.as_bytes()).map_err(|_| IpcError::InvalidName(p))?;
+    Ok(config)
+}
+
+/// One process's iceoryx2 node.
+pub struct IpcNode {
+    node: Node<Transport>,
+}
+
+impl IpcNode {
+    /// Creates the node, named after the process role (e.g. `gps-0`). SIGINT and SIGTERM are
+    /// turned into a termination request that [`termination_requested`](Self::termination_requested)
+    /// and every wait reports.
+    pub fn new(process: &str) -> Result<Self, IpcError> {
+        let config = config()?;
+        let name = NodeName::new(process).map_err(|_| IpcError::InvalidName(process.to_string()))?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .config(&config)
+            .create::<Transport>()
+            .map_err(|e| err("creating node", process, e))?;
+        // Reclaim what processes that died without cleaning up (kill -9) left behind.
+        let _ = node.try_cleanup_dead_nodes();
+        Ok(Self { node })
+    }
+
+    /// The iceoryx2 node.
+    pub fn node(&self) -> &Node<Transport> {
+        &self.node
+    }
+
+    /// True once SIGINT or SIGTERM was received.
+    pub fn termination_requested(&self) -> bool {
+        self.node.wait(Duration::ZERO).is_err()
+    }
+
+    /// Sleeps up to `d`; returns false when termination was requested.
+    pub fn sleep(&self, d: Duration) -> bool {
+        self.node.wait(d).is_ok()
+    }
+
+    fn event_service(
+        &self,
+        service: &str,
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Transport>, IpcError> {
+        let name: ServiceName =
+            service.try_into().map_err(|_| IpcError::InvalidName(service.to_string()))?;
+        self.node
+            .service_builder(&name)
+            .event()
+            .max_nodes(MAX_NODES)
+            .max_listeners(MAX_SUBSCRIBERS)
+            .max_notifiers(MAX_PUBLISHERS)
+            .open_or_create()
+            .map_err(|e| err("opening event service", service, e))
+    }
+
+    fn pubsub_service<T: Reflect + ZeroCopySend + Debug>(
+        &self,
+        service: &str,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, T, ()>,
+        IpcError,
+    > {
+        let kind = ServiceKind::of(service).ok_or_else(|| IpcError::InvalidName(service.to_string()))?;
+        if kind.type_name() != T::TYPE_NAME {
+            return Err(err("opening", service, format!("carries {}, not {}", kind.type_name(), T::TYPE_NAME)));
+        }
+        let qos = kind.qos();
+        let name: ServiceName =
+            service.try_into().map_err(|_| IpcError::InvalidName(service.to_string()))?;
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<T>()
+            .enable_safe_overflow(true)
+            .history_size(qos.history)
+            .subscriber_max_buffer_size(qos.buffer)
+            .subscriber_max_borrowed_samples(4)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_publishers(MAX_PUBLISHERS)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| err("opening service", service, e))
+    }
+
+    /// A publisher on `service`; the service is created if it does not exist yet.
+    pub fn publisher<T: Reflect + ZeroCopySend + Debug>(
+        &self,
+        service: &str,
+    ) -> Result<Publisher<T>, IpcError> {
+        let ps = self.pubsub_service::<T>(service)?;
+        let publisher = ps
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .create()
+            .map_err(|e| err("creating publisher", service, e))?;
+        let notifier = self
+            .event_service(service)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| err("creating notifier", service, e))?;
+        Ok(Publisher { publisher, notifier, service: service.to_string(), sent: 0 })
+    }
+
+    /// A subscriber on `service`; the service is created if it does not exist yet.
+    pub fn subscriber<T: Reflect + ZeroCopySend + Debug>(
+        &self,
+        service: &str,
+    ) -> Result<Subscriber<T>, IpcError> {
+        let ps = self.pubsub_service::<T>(service)?;
+        let subscriber = ps
+            .subscriber_builder()
+            .create()
+            .map_err(|e| err("creating subscriber", service, e))?;
+        let listener = self
+            .event_service(service)?
+            .listener_builder()
+            .create()
+            .map_err(|e| err("creating listener", service, e))?;
+        Ok(Subscriber { subscriber, listener, service: service.to_string() })
+    }
+
+    /// A WaitSet that returns on SIGINT/SIGTERM.
+    pub fn waitset(&self) -> Result<WaitSet<Transport>, IpcError> {
+        WaitSetBuilder::new().create::<Transport>().map_err(|e| err("creating waitset", "-", e))
+    }
+}
+
+/// Publishes samples of one type on one service and wakes its subscribers.
+pub struct Publisher<T: Reflect + ZeroCopySend + Debug> {
+    publisher: iceoryx2::port::publisher::Publisher<Transport, T, ()>,
+    notifier: Notifier<Transport>,
+    service: String,
+    sent: u64,
+}
+
+impl<T: Reflect + ZeroCopySend + Debug> Publisher<T> {
+    /// Writes `value` into a loaned shared-memory slot, sends it and notifies listeners.
+    /// Never blocks: a subscriber with a full buffer loses its oldest sample.
+    pub fn publish(&mut self, value: &T) -> Result<(), IpcError> {
+        let slot = self.publisher.loan_uninit().map_err(|e| err("loaning sample on", &self.service, e))?;
+        slot.write_payload(*value).send().map_err(|e| err("sending on", &self.service, e))?;
+        self.notifier.notify().map_err(|e| err("notifying on", &self.service, e))?;
+        self.sent += 1;
+        Ok(())
+    }
+
+    /// Samples published so far.
+    pub fn sent(&self) -> u64 {
+        self.sent
+    }
+
+    /// The service name.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+}
+
+/// Receives samples of one type from one service.
+pub struct Subscriber<T: Reflect + ZeroCopySend + Debug> {
+    subscriber: iceoryx2::port::subscriber::Subscriber<Transport, T, ()>,
+    listener: Listener<Transport>,
+    service: String,
+}
+
+impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
+    /// The next buffered sample (copied out of shared memory), if any.
+    pub fn receive(&self) -> Result<Option<T>, IpcError> {
+        match self.subscriber.receive() {
+            Ok(Some(sample)) => Ok(Some(*sample.payload())),
+            Ok(None) => Ok(None),
+            Err(e) => Err(err("receiving from", &self.service, e)),
+        }
+    }
+
+    /// Calls `f` with a reference into shared memory for every buffered sample (zero copy).
+    pub fn for_each(&self, mut f: impl FnMut(&T)) -> Result<usize, IpcError> {
+        let mut n = 0;
+        while let Some(sample) = self.subscriber.receive().map_err(|e| err("receiving from", &self.service, e))? {
+            f(sample.payload());
+            n += 1;
+        }
+        Ok(n)
+    }
+
+    /// Consumes pending wake-up events (call before draining the samples).
+    pub fn clear_events(&self) {
+        let _ = self.listener.try_wait(|_| {});
+    }
+
+    /// Blocks until a sample is available or `timeout` passes; `Ok(None)` on timeout or on a
+    /// termination request.
+    pub fn wait_next(&self, timeout: Duration) -> Result<Option<T>, IpcError> {
+        if let Some(s) = self.receive()? {
+            return Ok(Some(s));
+        }
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            let now = std::time::Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            self.listener
+                .timed_wait(|_| {}, deadline - now)
+                .map_err(|e| err("waiting on", &self.service, e))?;
+            if let Some(s) = self.receive()? {
+                return Ok(Some(s));
+            }
+        }
+    }
+
+    /// The listener to attach to a WaitSet.
+    pub fn listener(&self) -> &Listener<Transport> {
+        &self.listener
+    }
+
+    /// The service name.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+}
+
+/// Names of the navsync services that currently exist under this prefix (pub-sub only).
+pub fn list_services() -> Result<Vec<String>, IpcError> {
+    let config = config()?;
+    let mut names = Vec::new();
+    Transport::list(&config, |s| {
+        if matches!(
+            s.static_details.messaging_pattern(),
+            iceoryx2::service::static_config::messaging_pattern::MessagingPattern::PublishSubscribe(_)
+        ) {
+            names.push(s.static_details.name().as_str().to_string());
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| err("listing services", "-", e))?;
+    names.sort();
+    names.dedup();
+    Ok(names)
+}

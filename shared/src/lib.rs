@@ -1,0 +1,26 @@
+//! # navsync-shared
+//!
+//! What every navsync process agrees on, and nothing else: no driver and no estimator logic
+//! lives here. Read the modules in this order:
+//!
+//! 1. [`samples`]: the `#[repr(C)]` sample types that travel through shared memory
+//!    ([`samples::GnssFix`], [`samples::PpsEdge`], [`samples::ImuSample`],
+//!    [`samples::TimeState`], [`samples::NavState`], [`samples::Health`], [`samples::SimTruth`]),
+//!    with units and frames on every field.
+//! 2. [`services`]: the service names (`navsync/imu/{id}/sample`, …) and their QoS.
+//! 3. [`ipc`]: the iceoryx2 plumbing: [`ipc::IpcNode`], [`ipc::Publisher`] (zero-copy publish
+//!    with wake-up), [`ipc::Subscriber`] (WaitSet-friendly, blocking wait with timeout).
+//! 4. [`time`]: host monotonic time, UTC, GPS time, leap seconds.
+//! 5. [`earth`]: the WGS-84 model (radii, normal gravity, earth rate, transport rate).
+//! 6. [`reflect`] and [`json`]: the field tables behind the layout contract and the JSON codec.
+//!
+//! Frames: navigation frame NED (north-east-down), body frame FRD (forward-right-down).
+//! Times: integer nanoseconds; `host_ns` is `CLOCK_MONOTONIC`.
+
+pub mod earth;
+pub mod ipc;
+pub mod json;
+pub mod reflect;
+pub mod samples;
+pub mod services;
+pub mod time;

@@ -1,0 +1,134 @@
+//! One GNSS epoch, assembled from the NMEA sentences that carry its time tag.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use super::Stamp;
+
+crate::sample_struct! {
+    /// A GNSS receiver's solution for one epoch (all sentences of one time tag merged).
+    ///
+    /// `stamp.host_ns` is the host time at which the epoch's first byte was received
+    /// (`StampSource::Receipt`); the epoch itself happened earlier, at `utc_ns`.
+    pub struct GnssFix = "navsync.GnssFix.v1" {
+        /// Receipt stamp of the epoch's first byte and the driver's epoch counter.
+        pub stamp: Stamp,
+        /// Epoch time, ns UTC since 1970-01-01 (`i64::MIN` when the receiver gave no time).
+        pub utc_ns: i64,
+        /// Epoch time, ns GPS time since 1980-01-06 (`i64::MIN` when not known: no date or no time).
+        pub gps_ns: i64,
+        /// UTC time of day of the epoch's time tag, ns since midnight (−1 when the epoch had no
+        /// time tag); known even when the date is not.
+        pub tod_ns: i64,
+        /// Latitude, degrees north (WGS-84), NaN when not known.
+        pub lat_deg: f64,
+        /// Longitude, degrees east (WGS-84), NaN when not known.
+        pub lon_deg: f64,
+        /// Altitude above mean sea level, m, NaN when not known.
+        pub alt_msl_m: f64,
+        /// Geoid separation (ellipsoid height minus MSL altitude), m, NaN when not known.
+        pub geoid_sep_m: f64,
+        /// Velocity north, m/s (NED), NaN when not known.
+        pub vel_n_mps: f64,
+        /// Velocity east, m/s (NED), NaN when not known.
+        pub vel_e_mps: f64,
+        /// Velocity down, m/s (NED), NaN when not known (NMEA carries none).
+        pub vel_d_mps: f64,
+        /// Speed over ground, m/s, NaN when not known.
+        pub speed_mps: f64,
+        /// Track over ground, degrees clockwise from true north, NaN when not known.
+        pub track_deg: f64,
+        /// Horizontal dilution of precision, NaN when not known.
+        pub hdop: f64,
+        /// Vertical dilution of precision, NaN when not known.
+        pub vdop: f64,
+        /// Position dilution of precision, NaN when not known.
+        pub pdop: f64,
+        /// 1-sigma latitude error from GST, m, NaN when not known.
+        pub std_lat_m: f64,
+        /// 1-sigma longitude error from GST, m, NaN when not known.
+        pub std_lon_m: f64,
+        /// 1-sigma altitude error from GST, m, NaN when not known.
+        pub std_alt_m: f64,
+        /// Bit set of the sentences merged into this epoch (bit order: GGA, RMC, GNS, VTG, GSA, GST, ZDA, GLL).
+        pub sentences: u32,
+        /// Satellites used in the solution, `u16::MAX` when not known.
+        pub sats_used: u16,
+        /// Fix mode: 0 unknown, 1 no fix, 2 2D, 3 3D (as gpsd's TPV `mode`).
+        pub mode: u8,
+        /// GGA fix quality (0 invalid, 1 GPS, 2 DGPS, 4 RTK fixed, 5 RTK float, 6 dead reckoning), 255 unknown.
+        pub quality: u8,
+    }
+}
+
+/// [`GnssFix::sentences`] bit of a GGA sentence.
+pub const SENTENCE_GGA: u32 = 1 << 0;
+/// [`GnssFix::sentences`] bit of an RMC sentence.
+pub const SENTENCE_RMC: u32 = 1 << 1;
+/// [`GnssFix::sentences`] bit of a GNS sentence.
+pub const SENTENCE_GNS: u32 = 1 << 2;
+/// [`GnssFix::sentences`] bit of a VTG sentence.
+pub const SENTENCE_VTG: u32 = 1 << 3;
+/// [`GnssFix::sentences`] bit of a GSA sentence.
+pub const SENTENCE_GSA: u32 = 1 << 4;
+/// [`GnssFix::sentences`] bit of a GST sentence.
+pub const SENTENCE_GST: u32 = 1 << 5;
+/// [`GnssFix::sentences`] bit of a ZDA sentence.
+pub const SENTENCE_ZDA: u32 = 1 << 6;
+/// [`GnssFix::sentences`] bit of a GLL sentence.
+pub const SENTENCE_GLL: u32 = 1 << 7;
+
+/// Fix mode as in gpsd's TPV `mode`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+#[repr(u8)]
+pub enum FixMode {
+    /// Not known.
+    Unknown = 0,
+    /// No fix.
+    NoFix = 1,
+    /// 2D fix.
+    Fix2d = 2,
+    /// 3D fix.
+    Fix3d = 3,
+}
+
+impl GnssFix {
+    /// An epoch with nothing known yet.
+    pub fn empty(stamp: Stamp) -> Self {
+        Self {
+            stamp,
+            utc_ns: i64::MIN,
+            gps_ns: i64::MIN,
+            tod_ns: -1,
+            lat_deg: f64::NAN,
+            lon_deg: f64::NAN,
+            alt_msl_m: f64::NAN,
+            geoid_sep_m: f64::NAN,
+            vel_n_mps: f64::NAN,
+            vel_e_mps: f64::NAN,
+            vel_d_mps: f64::NAN,
+            speed_mps: f64::NAN,
+            track_deg: f64::NAN,
+            hdop: f64::NAN,
+            vdop: f64::NAN,
+            pdop: f64::NAN,
+            std_lat_m: f64::NAN,
+            std_lon_m: f64::NAN,
+            std_alt_m: f64::NAN,
+            sentences: 0,
+            sats_used: u16::MAX,
+            mode: FixMode::Unknown as u8,
+            quality: u8::MAX,
+        }
+    }
+
+    /// True when the receiver reported a 2D or 3D position.
+    pub fn has_position(&self) -> bool {
+        self.mode >= FixMode::Fix2d as u8 && self.lat_deg.is_finite() && self.lon_deg.is_finite()
+    }
+
+    /// Ellipsoidal height (WGS-84), m: MSL altitude plus geoid separation (separation 0 when unknown).
+    pub fn height_m(&self) -> f64 {
+        let sep = if self.geoid_sep_m.is_finite() { self.geoid_sep_m } else { 0.0 };
+        self.alt_msl_m + sep
+    }
+}

@@ -1,0 +1,34 @@
+//! The sample types that travel through shared memory.
+//!
+//! Conventions for every type here:
+//! - `#[repr(C)]`, fixed size, no pointers, [`ZeroCopySend`](iceoryx2::prelude::ZeroCopySend);
+//!   the layout version is part of the iceoryx2 type name (`navsync.ImuSample.v1`), so a
+//!   process built against another layout cannot open the service.
+//! - Time stamps are integer nanoseconds. `host_ns` is the host's `CLOCK_MONOTONIC`;
+//!   `utc_ns` is UTC since the Unix epoch; `gps_ns` is GPS time since 1980-01-06.
+//! - Navigation frame: local-level NED (north, east, down). Body frame: forward, right, down (FRD).
+//! - A float that is not known is NaN (written as JSON `null`).
+
+mod gnss_fix;
+mod health;
+mod imu_sample;
+mod nav_state;
+mod pps_edge;
+mod sim_truth;
+mod stamp;
+mod time_state;
+
+pub use gnss_fix::{
+    FixMode, GnssFix, SENTENCE_GGA, SENTENCE_GLL, SENTENCE_GNS, SENTENCE_GSA, SENTENCE_GST, SENTENCE_RMC,
+    SENTENCE_VTG, SENTENCE_ZDA,
+};
+pub use health::{Counter, Health, RateEntry, MAX_COUNTERS, MAX_RATES};
+pub use imu_sample::{ImuSample, IMU_FLAG_SATURATED};
+pub use nav_state::{NavState, NavStatus};
+pub use pps_edge::PpsEdge;
+pub use sim_truth::SimTruth;
+pub use stamp::{Stamp, StampSource};
+pub use time_state::{ImuSync, ImuSyncReason, TimeState, TimeStatus};
+
+/// Largest number of IMUs in one array (per-IMU tables in [`TimeState`] and [`NavState`]).
+pub const MAX_IMUS: usize = 8;

@@ -1,0 +1,151 @@
+//! Service names and per-service quality of service: the one place that spells them.
+//!
+//! | service | type | publisher |
+//! |---|---|---|
+//! | `navsync/gnss/{id}/fix` | [`GnssFix`] | `navsync gps` |
+//! | `navsync/pps/{id}/edge` | [`PpsEdge`] | `navsync pps` (or the simulator) |
+//! | `navsync/imu/{id}/sample` | [`ImuSample`] | `navsync imu` (or the simulator) |
+//! | `navsync/time/state` | [`TimeState`] | `navsync estimator` |
+//! | `navsync/nav/state` | [`NavState`] | `navsync estimator` |
+//! | `navsync/health/{process}` | [`Health`] | every process |
+//! | `navsync/sim/truth` | [`SimTruth`] | `navsync sim` |
+//!
+//! Each publish-subscribe service has an event service of the same name through which
+//! publishers wake subscribers.
+
+use crate::reflect::Reflect;
+use crate::samples::{GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
+
+/// Environment variable with the iceoryx2 resource prefix (default [`DEFAULT_PREFIX`]).
+/// Tests set a unique value so that parallel tests and a running demo never meet.
+pub const PREFIX_ENV: &str = "NAVSYNC_IPC_PREFIX";
+/// Default iceoryx2 resource prefix for shared-memory and lock files.
+pub const DEFAULT_PREFIX: &str = "navsync_";
+
+/// `navsync/gnss/{id}/fix`
+pub fn gnss_fix(id: &str) -> String {
+    format!("navsync/gnss/{id}/fix")
+}
+/// `navsync/pps/{id}/edge`
+pub fn pps_edge(id: &str) -> String {
+    format!("navsync/pps/{id}/edge")
+}
+/// `navsync/imu/{id}/sample`
+pub fn imu_sample(id: &str) -> String {
+    format!("navsync/imu/{id}/sample")
+}
+/// `navsync/health/{process}`
+pub fn health(process: &str) -> String {
+    format!("navsync/health/{process}")
+}
+/// The time mapping.
+pub const TIME_STATE: &str = "navsync/time/state";
+/// The navigation solution.
+pub const NAV_STATE: &str = "navsync/nav/state";
+/// Simulator ground truth.
+pub const SIM_TRUTH: &str = "navsync/sim/truth";
+
+/// The sample type carried by a service.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ServiceKind {
+    /// [`GnssFix`]
+    GnssFix,
+    /// [`PpsEdge`]
+    PpsEdge,
+    /// [`ImuSample`]
+    ImuSample,
+    /// [`TimeState`]
+    TimeState,
+    /// [`NavState`]
+    NavState,
+    /// [`Health`]
+    Health,
+    /// [`SimTruth`]
+    SimTruth,
+}
+
+impl ServiceKind {
+    /// All kinds.
+    pub const ALL: [ServiceKind; 7] = [
+        Self::GnssFix,
+        Self::PpsEdge,
+        Self::ImuSample,
+        Self::TimeState,
+        Self::NavState,
+        Self::Health,
+        Self::SimTruth,
+    ];
+
+    /// The kind of a service from its name, or `None` for a name navsync does not use.
+    pub fn of(service: &str) -> Option<Self> {
+        let parts: Vec<&str> = service.split('/').collect();
+        match parts.as_slice() {
+            ["navsync", "gnss", id, "fix"] if !id.is_empty() => Some(Self::GnssFix),
+            ["navsync", "pps", id, "edge"] if !id.is_empty() => Some(Self::PpsEdge),
+            ["navsync", "imu", id, "sample"] if !id.is_empty() => Some(Self::ImuSample),
+            ["navsync", "time", "state"] => Some(Self::TimeState),
+            ["navsync", "nav", "state"] => Some(Self::NavState),
+            ["navsync", "health", p] if !p.is_empty() => Some(Self::Health),
+            ["navsync", "sim", "truth"] => Some(Self::SimTruth),
+            _ => None,
+        }
+    }
+
+    /// iceoryx2 type name, which includes the layout version.
+    pub fn type_name(self) -> &'static str {
+        match self {
+            Self::GnssFix => GnssFix::TYPE_NAME,
+            Self::PpsEdge => PpsEdge::TYPE_NAME,
+            Self::ImuSample => ImuSample::TYPE_NAME,
+            Self::TimeState => TimeState::TYPE_NAME,
+            Self::NavState => NavState::TYPE_NAME,
+            Self::Health => Health::TYPE_NAME,
+            Self::SimTruth => SimTruth::TYPE_NAME,
+        }
+    }
+
+    /// Quality of service of this kind of service.
+    pub fn qos(self) -> Qos {
+        match self {
+            // Up to 1 kHz per IMU: a 0.5 s buffer rides out a scheduling hiccup of the estimator.
+            Self::ImuSample => Qos { history: 0, buffer: 512 },
+            Self::SimTruth => Qos { history: 1, buffer: 512 },
+            Self::NavState => Qos { history: 1, buffer: 512 },
+            Self::GnssFix | Self::PpsEdge => Qos { history: 1, buffer: 64 },
+            Self::TimeState | Self::Health => Qos { history: 1, buffer: 16 },
+        }
+    }
+}
+
+/// Publish-subscribe settings of a service. Publishers never block: a subscriber whose
+/// buffer is full loses its oldest sample (iceoryx2 safe overflow), which shows as a gap
+/// in the sequence numbers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Qos {
+    /// Samples a late subscriber receives on connecting.
+    pub history: usize,
+    /// Samples buffered per subscriber.
+    pub buffer: usize,
+}
+
+/// Maximum subscribers per service.
+pub const MAX_SUBSCRIBERS: usize = 16;
+/// Maximum publishers per service (a replay and a driver may overlap briefly).
+pub const MAX_PUBLISHERS: usize = 4;
+/// Maximum nodes (processes) attached to one service.
+pub const MAX_NODES: usize = 24;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kinds_from_names() {
+        assert_eq!(ServiceKind::of(&gnss_fix("0")), Some(ServiceKind::GnssFix));
+        assert_eq!(ServiceKind::of(&imu_sample("3")), Some(ServiceKind::ImuSample));
+        assert_eq!(ServiceKind::of(&health("gps-0")), Some(ServiceKind::Health));
+        assert_eq!(ServiceKind::of(NAV_STATE), Some(ServiceKind::NavState));
+        assert_eq!(ServiceKind::of("navsync/imu//sample"), None);
+        assert_eq!(ServiceKind::of("other/thing"), None);
+    }
+}
