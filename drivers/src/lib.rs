@@ -1,1 +1,15 @@
-//! placeholder
+//! # navsync-drivers
+//!
+//! The driver processes: thin shells that read a device, decode the bytes with a pure
+//! function, stamp and publish. Each driver's process entry point is a `run` function that
+//! the `navsync` binary calls.
+//!
+//! - [`gps`]: NMEA 0183 over a serial port → `navsync/gnss/{id}/fix`.
+//! - [`sim`]: the simulated sensor world (trajectory on WGS-84, IMUs, GNSS receiver, PPS,
+//!   host oscillator), which stands in for the hardware.
+//! - [`pty`]: pseudo-terminals, through which the simulator (and the feeder) talk to the
+//!   GPS driver exactly as a receiver would.
+
+pub mod gps;
+pub mod pty;
+pub mod sim;

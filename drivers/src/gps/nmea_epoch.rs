@@ -1,0 +1,1 @@
+//! Groups NMEA sentences into GNSS epochs.

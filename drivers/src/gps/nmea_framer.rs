@@ -1,0 +1,1 @@
+//! Splits a serial byte stream into NMEA sentences.

@@ -1,0 +1,3 @@
+//! The simulated sensor world.
+
+pub mod world;

@@ -1,0 +1,1 @@
+//! The simulated world: a deterministic, time-ordered stream of sensor events.
