@@ -1,0 +1,354 @@
+//! Host ↔ GNSS time synchronisation: labels PPS edges with their GNSS second, drives the
+//! [`ClockModel`], measures the receiver latency d0 and decides the [`TimeStatus`].
+//!
+//! Labelling. A receiver emits its PPS edge at the start of GNSS second T and the NMEA that
+//! describes epoch T some d0 later (0.1–0.9 s typically). Before the clock is locked, an edge
+//! is labelled by the first whole-second fix received within one second after it (so d0 must
+//! be below 1 s while acquiring). Once locked, every edge is labelled by rounding the mapped
+//! time to the nearest second, which stays unambiguous for any d0 as long as the mapping error
+//! is far below 0.5 s; an edge mapping more than [`EDGE_GATE_NS`] from a whole second is
+//! rejected as early/late.
+//!
+//! Trust. An edge counts only if the receiver reported a valid fix in the last
+//! [`FIX_TRUST_NS`]; without one, the edge is rejected and the mapping goes into holdover.
+//!
+//! Pure state machine: fed with samples, no clocks or IPC inside.
+
+use navsync_shared::samples::{GnssFix, PpsEdge, TimeState, TimeStatus};
+use navsync_shared::time::{NS_PER_S, gps_minus_utc_s};
+
+use super::clock_model::{ClockModel, ClockUpdate, OscillatorNoise};
+use super::latency_stats::LatencyStats;
+
+/// An edge farther than this from a whole mapped second is early/late, ns.
+pub const EDGE_GATE_NS: i64 = 100_000_000;
+/// A fix older than this no longer vouches for the PPS, ns.
+pub const FIX_TRUST_NS: i64 = 2_500_000_000;
+/// No accepted edge for this long: holdover, ns.
+pub const HOLDOVER_AFTER_NS: i64 = 1_500_000_000;
+/// Updates needed before the mapping is declared locked.
+const LOCK_UPDATES: u64 = 3;
+/// Offset 1-sigma below which the mapping is declared locked, ns.
+const LOCK_SIGMA_NS: f64 = 100_000.0;
+
+/// Configuration of the time synchronisation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimeSyncConfig {
+    /// Oscillator process noise.
+    pub noise: OscillatorNoise,
+    /// Edge stamp noise used when the source does not state its own, ns.
+    pub default_edge_sigma_ns: f64,
+    /// Ignore PPS entirely (software sync).
+    pub software_sync: bool,
+}
+
+impl Default for TimeSyncConfig {
+    fn default() -> Self {
+        Self { noise: OscillatorNoise::default(), default_edge_sigma_ns: 30_000.0, software_sync: false }
+    }
+}
+
+/// Counters of edges and labels.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TimeSyncCounters {
+    /// Edges used by the clock model.
+    pub pps_used: u64,
+    /// Edges arriving less than half a second after the previous one.
+    pub pps_duplicate: u64,
+    /// Edges whose mapped time is not close to a whole second, or rejected by the filter gate.
+    pub pps_early_late: u64,
+    /// Edges without a recent valid fix.
+    pub pps_no_fix: u64,
+    /// Edges that no fix labelled while acquiring.
+    pub pps_unlabelled: u64,
+    /// Times the mapping was re-initialised after persistent rejections.
+    pub resyncs: u64,
+}
+
+impl TimeSyncCounters {
+    /// All rejected edges.
+    pub fn rejected(&self) -> u64 {
+        self.pps_duplicate + self.pps_early_late + self.pps_no_fix + self.pps_unlabelled
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Edge {
+    host_ns: i64,
+    sigma_ns: f64,
+}
+
+/// The time-synchronisation state machine.
+#[derive(Debug, Clone)]
+pub struct TimeSync {
+    cfg: TimeSyncConfig,
+    clock: ClockModel,
+    /// Edges waiting for a label while acquiring (most recent last).
+    pending: [Option<Edge>; 4],
+    last_edge_host_ns: Option<i64>,
+    last_used_host_ns: Option<i64>,
+    last_valid_fix_host_ns: Option<i64>,
+    consecutive_rejects: u32,
+    latency: LatencyStats,
+    counters: TimeSyncCounters,
+    status: TimeStatus,
+    leap_s: i16,
+    seq: u64,
+    /// Software-sync mapping: receipt host time and UTC of the last whole-second fix.
+    last_fix_label: Option<(i64, i64)>,
+    /// Externally estimated GNSS delay (the navigation filter's Δ), s and 1-sigma s.
+    gnss_delay: (f64, f64),
+}
+
+impl TimeSync {
+    /// A synchroniser with nothing known.
+    pub fn new(cfg: TimeSyncConfig) -> Self {
+        Self {
+            cfg,
+            clock: ClockModel::new(cfg.noise),
+            pending: [None; 4],
+            last_edge_host_ns: None,
+            last_used_host_ns: None,
+            last_valid_fix_host_ns: None,
+            consecutive_rejects: 0,
+            latency: LatencyStats::default(),
+            counters: TimeSyncCounters::default(),
+            status: TimeStatus::None,
+            leap_s: 18,
+            seq: 0,
+            last_fix_label: None,
+            gnss_delay: (f64::NAN, f64::NAN),
+        }
+    }
+
+    /// Counters so far.
+    pub fn counters(&self) -> &TimeSyncCounters {
+        &self.counters
+    }
+
+    /// Current status.
+    pub fn status(&self) -> TimeStatus {
+        self.status
+    }
+
+    /// The clock filter.
+    pub fn clock(&self) -> &ClockModel {
+        &self.clock
+    }
+
+    /// Records the navigation filter's estimate of the GNSS delay Δ, s.
+    pub fn set_gnss_delay(&mut self, delay_s: f64, std_s: f64) {
+        self.gnss_delay = (delay_s, std_s);
+    }
+
+    fn edge_sigma(&self, edge: &PpsEdge) -> f64 {
+        if edge.jitter_ns > 0.0 { edge.jitter_ns } else { self.cfg.default_edge_sigma_ns }
+    }
+
+    fn fix_trusted(&self, host_ns: i64) -> bool {
+        self.last_valid_fix_host_ns.is_some_and(|f| host_ns - f <= FIX_TRUST_NS)
+    }
+
+    /// Feeds one PPS edge. Returns true when the mapping was updated.
+    pub fn on_pps(&mut self, edge: &PpsEdge) -> bool {
+        if self.cfg.software_sync || edge.assert_edge == 0 {
+            return false;
+        }
+        let h = edge.stamp.host_ns;
+        if self.last_edge_host_ns.is_some_and(|prev| h - prev < NS_PER_S / 2) {
+            self.counters.pps_duplicate += 1;
+            return false;
+        }
+        self.last_edge_host_ns = Some(h);
+        let sigma = self.edge_sigma(edge);
+        if !self.clock.is_initialized() || self.status == TimeStatus::Acquiring && self.clock.updates() < 2 {
+            if self.pending.iter().flatten().any(|e| e.host_ns == h) {
+                return false;
+            }
+            if self.pending[0].is_some() {
+                self.counters.pps_unlabelled += 1;
+            }
+            self.pending.rotate_left(1);
+            self.pending[3] = Some(Edge { host_ns: h, sigma_ns: sigma });
+            return false;
+        }
+        if !self.fix_trusted(h) {
+            self.counters.pps_no_fix += 1;
+            return false;
+        }
+        let mapped = self.clock.utc_ns_at(h);
+        let label = (mapped + NS_PER_S / 2).div_euclid(NS_PER_S) * NS_PER_S;
+        if (mapped - label).abs() > EDGE_GATE_NS {
+            self.reject_edge();
+            return false;
+        }
+        match self.clock.update(h, label, sigma) {
+            ClockUpdate::Accepted(_) => {
+                self.accept_edge(h);
+                true
+            }
+            ClockUpdate::Rejected(_) => {
+                self.reject_edge();
+                false
+            }
+        }
+    }
+
+    fn accept_edge(&mut self, host_ns: i64) {
+        self.counters.pps_used += 1;
+        self.consecutive_rejects = 0;
+        self.last_used_host_ns = Some(host_ns);
+        let p = self.clock.covariance();
+        if self.clock.updates() >= LOCK_UPDATES && p[(0, 0)].sqrt() < LOCK_SIGMA_NS {
+            self.status = TimeStatus::Locked;
+        } else if self.status != TimeStatus::Locked {
+            self.status = TimeStatus::Acquiring;
+        }
+    }
+
+    fn reject_edge(&mut self) {
+        self.counters.pps_early_late += 1;
+        self.consecutive_rejects += 1;
+        // A persistent disagreement means the time base jumped (receiver reset, wrong label):
+        // start over rather than hold a wrong mapping forever.
+        if self.consecutive_rejects >= 5 {
+            self.counters.resyncs += 1;
+            self.clock = ClockModel::new(self.cfg.noise);
+            self.pending = [None; 4];
+            self.consecutive_rejects = 0;
+            self.status = TimeStatus::None;
+        }
+    }
+
+    /// Feeds one GNSS epoch. Returns true when the mapping was updated.
+    pub fn on_fix(&mut self, fix: &GnssFix) -> bool {
+        let h = fix.stamp.host_ns;
+        let valid = fix.has_position() && fix.utc_ns != i64::MIN;
+        if !valid {
+            return false;
+        }
+        self.last_valid_fix_host_ns = Some(h);
+        self.leap_s = gps_minus_utc_s(fix.utc_ns);
+        let whole_second = fix.utc_ns.rem_euclid(NS_PER_S) == 0;
+        if !whole_second {
+            return false;
+        }
+        self.last_fix_label = Some((h, fix.utc_ns));
+        let mut updated = false;
+        if self.cfg.software_sync {
+            self.status = TimeStatus::Software;
+            return true;
+        }
+        if !self.clock.is_initialized() || self.clock.updates() < 2 {
+            // Acquisition: the latest pending edge within one second before the fix.
+            let found = self
+                .pending
+                .iter()
+                .rev()
+                .flatten()
+                .find(|e| e.host_ns <= h && h - e.host_ns < NS_PER_S)
+                .copied();
+            if let Some(edge) = found {
+                if self.clock.is_initialized() {
+                    if let ClockUpdate::Accepted(_) = self.clock.update(edge.host_ns, fix.utc_ns, edge.sigma_ns) {
+                        self.accept_edge(edge.host_ns);
+                        updated = true;
+                    }
+                } else {
+                    // Rate unknown to 100 ppm: any crystal.
+                    self.clock.init(edge.host_ns, fix.utc_ns, edge.sigma_ns, 1e-4);
+                    self.counters.pps_used += 1;
+                    self.last_used_host_ns = Some(edge.host_ns);
+                    self.status = TimeStatus::Acquiring;
+                    updated = true;
+                }
+                self.pending = [None; 4];
+            }
+        }
+        if self.clock.is_initialized() && matches!(self.status, TimeStatus::Locked | TimeStatus::Holdover) {
+            // Receiver output latency: first byte minus the host time of the epoch's PPS.
+            let epoch_host = self.clock_host_ns_at(fix.utc_ns);
+            self.latency.push((h - epoch_host) as f64 * 1e-9);
+        }
+        updated
+    }
+
+    fn clock_host_ns_at(&self, utc_ns: i64) -> i64 {
+        // Invert utc(h) = h + base + x0 + x1·(h − h_s): one fixed-point step is exact to < 1 ns.
+        let guess = utc_ns - (self.clock.utc_ns_at(self.clock.host_ns()) - self.clock.host_ns());
+        guess - (self.clock.utc_ns_at(guess) - utc_ns)
+    }
+
+    /// Advances the status with the passage of host time (holdover when edges stop).
+    pub fn tick(&mut self, now_host_ns: i64) {
+        if self.status == TimeStatus::Locked
+            && self.last_used_host_ns.is_some_and(|h| now_host_ns - h > HOLDOVER_AFTER_NS)
+        {
+            self.status = TimeStatus::Holdover;
+        }
+        if self.status == TimeStatus::None && !self.clock.is_initialized() && self.last_fix_label.is_some() {
+            let last_edge_recent = self.last_edge_host_ns.is_some_and(|e| now_host_ns - e < 3 * NS_PER_S);
+            if !last_edge_recent {
+                self.status = TimeStatus::Software;
+            }
+        }
+        if self.status == TimeStatus::Software && !self.cfg.software_sync && self.clock.is_initialized() {
+            self.status = TimeStatus::Acquiring;
+        }
+    }
+
+    /// The published time state at host time `now_host_ns`.
+    pub fn time_state(&mut self, now_host_ns: i64) -> TimeState {
+        let mut s = TimeState::unknown();
+        self.seq += 1;
+        s.seq = self.seq;
+        s.computed_host_ns = now_host_ns;
+        s.status = self.status as u8;
+        s.leap_s = self.leap_s;
+        s.pps_used = self.counters.pps_used;
+        s.pps_rejected = self.counters.rejected();
+        s.last_pps_host_ns = self.last_used_host_ns.unwrap_or(0);
+        s.gnss_delay_s = self.gnss_delay.0;
+        s.gnss_delay_std_s = self.gnss_delay.1;
+        let noise = self.clock.noise();
+        s.q_offset_ns2_per_s = noise.q_offset_ns2_per_s;
+        s.q_rate_per_s = noise.q_rate_per_s;
+        if self.clock.is_initialized() && self.status != TimeStatus::Software {
+            let p = self.clock.covariance();
+            s.ref_host_ns = self.clock.host_ns();
+            s.ref_utc_ns = self.clock.utc_ns_at_state();
+            s.rate_error = self.clock.rate_error();
+            s.offset_std_ns = p[(0, 0)].max(0.0).sqrt();
+            s.rate_std = p[(1, 1)].max(0.0).sqrt();
+            s.offset_rate_cov_ns = p[(0, 1)];
+        } else if let Some((h, utc)) = self.last_fix_label {
+            // Software sync: receipt time minus the best latency estimate we have.
+            let (lat_s, lat_std_s) = self.software_latency();
+            s.ref_host_ns = h - (lat_s * 1e9) as i64;
+            s.ref_utc_ns = utc;
+            s.rate_error = 0.0;
+            s.offset_std_ns = lat_std_s * 1e9;
+            s.rate_std = 1e-4;
+        }
+        if let Some(l) = self.latency.summary() {
+            s.latency_min_s = l.min_s;
+            s.latency_median_s = l.median_s;
+            s.latency_p99_s = l.p99_s;
+            s.latency_max_s = l.max_s;
+            s.latency_count = l.count;
+        }
+        s
+    }
+
+    /// Latency to subtract in software sync and its 1-sigma, s: the navigation filter's Δ when
+    /// it has one, else the measured median d0, else 0 ± 0.5 s.
+    fn software_latency(&mut self) -> (f64, f64) {
+        if self.gnss_delay.0.is_finite() {
+            return self.gnss_delay;
+        }
+        match self.latency.summary() {
+            Some(l) => (l.median_s, (l.max_s - l.min_s).max(1e-3)),
+            None => (0.0, 0.5),
+        }
+    }
+}
