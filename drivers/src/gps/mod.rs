@@ -6,4 +6,6 @@
 //! `GnssFix`) → publish.
 
 pub mod nmea_epoch;
+pub mod driver;
 pub mod nmea_framer;
+pub mod offline;
