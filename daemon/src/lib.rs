@@ -8,3 +8,4 @@
 //! model) and the process shells in [`roles`] that wire the core to the services.
 
 pub mod estimator;
+pub mod roles;

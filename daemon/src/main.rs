@@ -1,1 +1,189 @@
-fn main() {}
+//! `navsync`: one multi-call binary; each subcommand is one role and runs as its own process.
+
+use std::io::{Read, Write};
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use navsync::roles;
+use navsync_drivers::gps::driver::{Baud, GpsArgs};
+use tracing::Level;
+use tracing_subscriber::filter::Targets;
+use tracing_subscriber::prelude::*;
+
+#[derive(Parser)]
+#[command(name = "navsync", version, about = "GNSS/INS time-synchronisation daemon")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+/// Comma-separated ids, e.g. `0,1,2,3`.
+fn id_list(s: &str) -> Result<Vec<String>, String> {
+    let ids: Vec<String> = s
+        .split(',')
+        .map(str::trim)
+        .filter(|x| !x.is_empty())
+        .map(String::from)
+        .collect();
+    if ids
+        .iter()
+        .all(|i| i.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_'))
+    {
+        Ok(ids)
+    } else {
+        Err(format!(
+            "`{s}`: ids are letters, digits, `-` and `_`, separated by commas"
+        ))
+    }
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// GNSS receiver driver: NMEA 0183 from a serial port to `navsync/gnss/{id}/fix`.
+    Gps {
+        /// Serial device (e.g. /dev/ttyUSB0, or a pseudo-terminal).
+        #[arg(long)]
+        port: String,
+        /// Line rate, or `auto` to hunt the common rates.
+        #[arg(long, default_value = "9600")]
+        baud: Baud,
+        /// Receiver id.
+        #[arg(long, default_value = "0")]
+        id: String,
+    },
+    /// The estimator: time mapping (and navigation filter) from the sensor services.
+    Estimator {
+        /// GNSS receiver ids.
+        #[arg(long, default_value = "0", value_parser = id_list)]
+        gnss: Vec<String>,
+        /// PPS source ids (empty: none).
+        #[arg(long, default_value = "0", value_parser = id_list)]
+        pps: Vec<String>,
+        /// IMU ids.
+        #[arg(long, default_value = "0", value_parser = id_list)]
+        imus: Vec<String>,
+        /// Ignore PPS: stamp fixes by receipt time (ms-level time).
+        #[arg(long)]
+        software_sync: bool,
+    },
+    /// Runs sim, gps and estimator as child processes with a live status line.
+    Demo {
+        /// Stop after this many seconds (default: at the end of the scenario or Ctrl-C).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Number of simulated IMUs.
+        #[arg(long, default_value_t = 4)]
+        imus: usize,
+        /// Scenario file (TOML); default: the embedded ~10 minute drive.
+        #[arg(long)]
+        scenario: Option<PathBuf>,
+    },
+    /// Prints the samples of any navsync service, one per line.
+    Echo {
+        /// Service, e.g. navsync/imu/0/sample, navsync/time/state.
+        service: String,
+        /// Stop after N samples.
+        #[arg(long)]
+        count: Option<u64>,
+        /// JSON lines instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Fail if no sample arrives for this many seconds.
+        #[arg(long)]
+        timeout: Option<f64>,
+    },
+    /// Decodes an NMEA capture offline (same code as the live driver): one JSON object per epoch.
+    Nmea {
+        /// Capture file, or `-` for stdin.
+        file: String,
+    },
+}
+
+fn init_logging() {
+    let filter: Targets = std::env::var("RUST_LOG")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| Targets::new().with_default(Level::INFO));
+    let _ = tracing_subscriber::registry()
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_writer(std::io::stderr)
+                .with_target(false),
+        )
+        .with(filter)
+        .try_init();
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    init_logging();
+    match cli.cmd {
+        Cmd::Gps { port, baud, id } => {
+            navsync_drivers::gps::driver::run(&GpsArgs {
+                port: port.clone(),
+                baud,
+                id,
+            })
+            .with_context(|| format!("gps driver on {port}"))?;
+        }
+        Cmd::Estimator {
+            gnss,
+            pps,
+            imus,
+            software_sync,
+        } => {
+            roles::estimator::run(&roles::estimator::EstimatorArgs {
+                gnss_ids: gnss,
+                pps_ids: pps,
+                imu_ids: imus,
+                software_sync,
+            })
+            .context("estimator")?;
+        }
+        Cmd::Demo {
+            duration,
+            imus,
+            scenario,
+        } => {
+            roles::demo::run(&roles::demo::DemoArgs {
+                duration_s: duration,
+                imus,
+                scenario,
+                sim_args: Vec::new(),
+            })
+            .context("demo")?;
+        }
+        Cmd::Echo {
+            service,
+            count,
+            json,
+            timeout,
+        } => {
+            roles::echo::run(&roles::echo::EchoArgs {
+                service: service.clone(),
+                count,
+                json,
+                timeout: timeout.map(Duration::from_secs_f64),
+            })
+            .with_context(|| format!("echo {service}"))?;
+        }
+        Cmd::Nmea { file } => {
+            let bytes = if file == "-" {
+                let mut b = Vec::new();
+                std::io::stdin().read_to_end(&mut b).context("reading stdin")?;
+                b
+            } else {
+                std::fs::read(&file).with_context(|| format!("reading {file}"))?
+            };
+            let (fixes, counters) = navsync_drivers::gps::offline::decode_capture(&bytes);
+            let mut out = std::io::stdout().lock();
+            for f in &fixes {
+                writeln!(out, "{}", navsync_drivers::gps::offline::epoch_json(f))?;
+            }
+            eprintln!("{} epochs; {counters:?}", fixes.len());
+        }
+    }
+    Ok(())
+}

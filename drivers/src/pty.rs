@@ -23,7 +23,11 @@ pub struct Pty {
 }
 
 fn check(rc: libc::c_int) -> io::Result<libc::c_int> {
-    if rc < 0 { Err(io::Error::last_os_error()) } else { Ok(rc) }
+    if rc < 0 {
+        Err(io::Error::last_os_error())
+    } else {
+        Ok(rc)
+    }
 }
 
 impl Pty {
@@ -32,7 +36,9 @@ impl Pty {
     pub fn open(link: Option<&Path>) -> io::Result<Self> {
         // SAFETY: plain libc calls on descriptors we own; buffers are sized and checked.
         unsafe {
-            let m = check(libc::posix_openpt(libc::O_RDWR | libc::O_NOCTTY | libc::O_NONBLOCK | libc::O_CLOEXEC))?;
+            let m = check(libc::posix_openpt(
+                libc::O_RDWR | libc::O_NOCTTY | libc::O_NONBLOCK | libc::O_CLOEXEC,
+            ))?;
             let master = File::from_raw_fd(m);
             check(libc::grantpt(m))?;
             check(libc::unlockpt(m))?;
@@ -44,7 +50,10 @@ impl Pty {
             let path = PathBuf::from(CStr::from_ptr(buf.as_ptr()).to_string_lossy().into_owned());
             let cpath = std::ffi::CString::new(path.as_os_str().as_encoded_bytes())
                 .map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "pty path"))?;
-            let s = check(libc::open(cpath.as_ptr(), libc::O_RDWR | libc::O_NOCTTY | libc::O_CLOEXEC))?;
+            let s = check(libc::open(
+                cpath.as_ptr(),
+                libc::O_RDWR | libc::O_NOCTTY | libc::O_CLOEXEC,
+            ))?;
             let slave = OwnedFd::from_raw_fd(s);
             let mut tio: libc::termios = std::mem::zeroed();
             check(libc::tcgetattr(s, &mut tio))?;
@@ -61,7 +70,13 @@ impl Pty {
                 }
                 None => None,
             };
-            Ok(Self { master, _slave: slave, path, link, dropped_bytes: 0 })
+            Ok(Self {
+                master,
+                _slave: slave,
+                path,
+                link,
+                dropped_bytes: 0,
+            })
         }
     }
 
@@ -82,7 +97,11 @@ impl Pty {
         while done < bytes.len() {
             // SAFETY: writing from a valid slice to our own descriptor.
             let n = unsafe {
-                libc::write(self.master.as_raw_fd(), bytes[done..].as_ptr().cast(), bytes.len() - done)
+                libc::write(
+                    self.master.as_raw_fd(),
+                    bytes[done..].as_ptr().cast(),
+                    bytes.len() - done,
+                )
             };
             if n < 0 {
                 let e = io::Error::last_os_error();

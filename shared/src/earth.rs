@@ -54,7 +54,11 @@ pub fn geodetic_to_ecef(lat_rad: f64, lon_rad: f64, h_m: f64) -> [f64; 3] {
     let (_, rn) = radii(lat_rad);
     let (sl, cl) = lat_rad.sin_cos();
     let (so, co) = lon_rad.sin_cos();
-    [(rn + h_m) * cl * co, (rn + h_m) * cl * so, ((1.0 - WGS84_E2) * rn + h_m) * sl]
+    [
+        (rn + h_m) * cl * co,
+        (rn + h_m) * cl * so,
+        ((1.0 - WGS84_E2) * rn + h_m) * sl,
+    ]
 }
 
 /// NED offset of point 2 from point 1, m, through ECEF (exact for any distance; the NED

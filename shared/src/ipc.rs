@@ -50,7 +50,11 @@ pub enum IpcError {
 }
 
 fn err(what: &'static str, service: &str, e: impl Debug) -> IpcError {
-    IpcError::Iceoryx { what, service: service.to_string(), detail: format!("{e:?}") }
+    IpcError::Iceoryx {
+        what,
+        service: service.to_string(),
+        detail: format!("{e:?}"),
+    }
 }
 
 /// The iceoryx2 resource prefix in use: `$NAVSYNC_IPC_PREFIX` or `navsync_`.
@@ -60,9 +64,13 @@ pub fn prefix() -> String {
 
 /// iceoryx2 configuration with navsync's resource prefix.
 pub fn config() -> Result<Config, IpcError> {
+    config_with_prefix(&prefix())
+}
+
+/// iceoryx2 configuration with an explicit resource prefix.
+pub fn config_with_prefix(prefix: &str) -> Result<Config, IpcError> {
     let mut config = Config::default();
-    let p = prefix();
-    config.global.prefix = FileName::new(p.as_bytes()).map_err(|_| IpcError::InvalidName(p))?;
+    config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|_| IpcError::InvalidName(prefix.to_string()))?;
     Ok(config)
 }
 
@@ -76,7 +84,13 @@ impl IpcNode {
     /// turned into a termination request that [`termination_requested`](Self::termination_requested)
     /// and every wait reports.
     pub fn new(process: &str) -> Result<Self, IpcError> {
-        let config = config()?;
+        Self::with_prefix(process, &prefix())
+    }
+
+    /// Like [`new`](Self::new) with an explicit resource prefix instead of `$NAVSYNC_IPC_PREFIX`
+    /// (tests that talk to several isolated navsync instances from one process).
+    pub fn with_prefix(process: &str, prefix: &str) -> Result<Self, IpcError> {
+        let config = config_with_prefix(prefix)?;
         let name = NodeName::new(process).map_err(|_| IpcError::InvalidName(process.to_string()))?;
         let node = NodeBuilder::new()
             .name(&name)
@@ -107,8 +121,9 @@ impl IpcNode {
         &self,
         service: &str,
     ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Transport>, IpcError> {
-        let name: ServiceName =
-            service.try_into().map_err(|_| IpcError::InvalidName(service.to_string()))?;
+        let name: ServiceName = service
+            .try_into()
+            .map_err(|_| IpcError::InvalidName(service.to_string()))?;
         self.node
             .service_builder(&name)
             .event()
@@ -122,17 +137,19 @@ impl IpcNode {
     fn pubsub_service<T: Reflect + ZeroCopySend + Debug>(
         &self,
         service: &str,
-    ) -> Result<
-        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, T, ()>,
-        IpcError,
-    > {
+    ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, T, ()>, IpcError> {
         let kind = ServiceKind::of(service).ok_or_else(|| IpcError::InvalidName(service.to_string()))?;
         if kind.type_name() != T::TYPE_NAME {
-            return Err(err("opening", service, format!("carries {}, not {}", kind.type_name(), T::TYPE_NAME)));
+            return Err(err(
+                "opening",
+                service,
+                format!("carries {}, not {}", kind.type_name(), T::TYPE_NAME),
+            ));
         }
         let qos = kind.qos();
-        let name: ServiceName =
-            service.try_into().map_err(|_| IpcError::InvalidName(service.to_string()))?;
+        let name: ServiceName = service
+            .try_into()
+            .map_err(|_| IpcError::InvalidName(service.to_string()))?;
         self.node
             .service_builder(&name)
             .publish_subscribe::<T>()
@@ -148,10 +165,7 @@ impl IpcNode {
     }
 
     /// A publisher on `service`; the service is created if it does not exist yet.
-    pub fn publisher<T: Reflect + ZeroCopySend + Debug>(
-        &self,
-        service: &str,
-    ) -> Result<Publisher<T>, IpcError> {
+    pub fn publisher<T: Reflect + ZeroCopySend + Debug>(&self, service: &str) -> Result<Publisher<T>, IpcError> {
         let ps = self.pubsub_service::<T>(service)?;
         let publisher = ps
             .publisher_builder()
@@ -163,14 +177,16 @@ impl IpcNode {
             .notifier_builder()
             .create()
             .map_err(|e| err("creating notifier", service, e))?;
-        Ok(Publisher { publisher, notifier, service: service.to_string(), sent: 0 })
+        Ok(Publisher {
+            publisher,
+            notifier,
+            service: service.to_string(),
+            sent: 0,
+        })
     }
 
     /// A subscriber on `service`; the service is created if it does not exist yet.
-    pub fn subscriber<T: Reflect + ZeroCopySend + Debug>(
-        &self,
-        service: &str,
-    ) -> Result<Subscriber<T>, IpcError> {
+    pub fn subscriber<T: Reflect + ZeroCopySend + Debug>(&self, service: &str) -> Result<Subscriber<T>, IpcError> {
         let ps = self.pubsub_service::<T>(service)?;
         let subscriber = ps
             .subscriber_builder()
@@ -181,12 +197,18 @@ impl IpcNode {
             .listener_builder()
             .create()
             .map_err(|e| err("creating listener", service, e))?;
-        Ok(Subscriber { subscriber, listener, service: service.to_string() })
+        Ok(Subscriber {
+            subscriber,
+            listener,
+            service: service.to_string(),
+        })
     }
 
     /// A WaitSet that returns on SIGINT/SIGTERM.
     pub fn waitset(&self) -> Result<WaitSet<Transport>, IpcError> {
-        WaitSetBuilder::new().create::<Transport>().map_err(|e| err("creating waitset", "-", e))
+        WaitSetBuilder::new()
+            .create::<Transport>()
+            .map_err(|e| err("creating waitset", "-", e))
     }
 }
 
@@ -202,9 +224,16 @@ impl<T: Reflect + ZeroCopySend + Debug> Publisher<T> {
     /// Writes `value` into a loaned shared-memory slot, sends it and notifies listeners.
     /// Never blocks: a subscriber with a full buffer loses its oldest sample.
     pub fn publish(&mut self, value: &T) -> Result<(), IpcError> {
-        let slot = self.publisher.loan_uninit().map_err(|e| err("loaning sample on", &self.service, e))?;
-        slot.write_payload(*value).send().map_err(|e| err("sending on", &self.service, e))?;
-        self.notifier.notify().map_err(|e| err("notifying on", &self.service, e))?;
+        let slot = self
+            .publisher
+            .loan_uninit()
+            .map_err(|e| err("loaning sample on", &self.service, e))?;
+        slot.write_payload(*value)
+            .send()
+            .map_err(|e| err("sending on", &self.service, e))?;
+        self.notifier
+            .notify()
+            .map_err(|e| err("notifying on", &self.service, e))?;
         self.sent += 1;
         Ok(())
     }
@@ -240,7 +269,11 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
     /// Calls `f` with a reference into shared memory for every buffered sample (zero copy).
     pub fn for_each(&self, mut f: impl FnMut(&T)) -> Result<usize, IpcError> {
         let mut n = 0;
-        while let Some(sample) = self.subscriber.receive().map_err(|e| err("receiving from", &self.service, e))? {
+        while let Some(sample) = self
+            .subscriber
+            .receive()
+            .map_err(|e| err("receiving from", &self.service, e))?
+        {
             f(sample.payload());
             n += 1;
         }

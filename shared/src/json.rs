@@ -74,7 +74,10 @@ pub fn from_json<T: Reflect>(v: &Value) -> Result<T, JsonError> {
 }
 
 fn bad(path: &str, problem: impl Into<String>) -> JsonError {
-    JsonError { field: path.to_string(), problem: problem.into() }
+    JsonError {
+        field: path.to_string(),
+        problem: problem.into(),
+    }
 }
 
 unsafe fn decode_struct(fields: &[Field], base: *mut u8, v: &Value, path: &str) -> Result<(), JsonError> {
@@ -83,7 +86,11 @@ unsafe fn decode_struct(fields: &[Field], base: *mut u8, v: &Value, path: &str) 
         if f.name == "reserved" {
             continue;
         }
-        let p = if path.is_empty() { f.name.to_string() } else { format!("{path}.{}", f.name) };
+        let p = if path.is_empty() {
+            f.name.to_string()
+        } else {
+            format!("{path}.{}", f.name)
+        };
         let fv = obj.get(f.name).ok_or_else(|| bad(&p, "missing"))?;
         unsafe { decode_value(&f.ty, base.add(f.offset), fv, &p)? };
     }
@@ -146,7 +153,10 @@ unsafe fn decode_value(ty: &FieldType, p: *mut u8, v: &Value, path: &str) -> Res
 pub fn schema<T: Reflect>() -> Value {
     let mut s = struct_schema(T::FIELDS);
     if let Value::Object(m) = &mut s {
-        m.insert("$schema".into(), Value::from("https://json-schema.org/draft/2020-12/schema"));
+        m.insert(
+            "$schema".into(),
+            Value::from("https://json-schema.org/draft/2020-12/schema"),
+        );
         m.insert("title".into(), Value::from(T::TYPE_NAME));
     }
     s
@@ -168,8 +178,13 @@ fn struct_schema(fields: &[Field]) -> Value {
 
 fn type_schema(ty: &FieldType) -> Value {
     match ty {
-        FieldType::I64 | FieldType::U64 | FieldType::I32 | FieldType::U32 | FieldType::I16
-        | FieldType::U16 | FieldType::U8 => serde_json::json!({ "type": "integer" }),
+        FieldType::I64
+        | FieldType::U64
+        | FieldType::I32
+        | FieldType::U32
+        | FieldType::I16
+        | FieldType::U16
+        | FieldType::U8 => serde_json::json!({ "type": "integer" }),
         FieldType::F64 | FieldType::F32 => serde_json::json!({ "type": ["number", "null"] }),
         FieldType::Str(n) => serde_json::json!({ "type": "string", "maxLength": n }),
         FieldType::Array(t, n) => {

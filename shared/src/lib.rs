@@ -18,6 +18,7 @@
 //! Times: integer nanoseconds; `host_ns` is `CLOCK_MONOTONIC`.
 
 pub mod earth;
+pub mod health_reporter;
 pub mod ipc;
 pub mod json;
 pub mod reflect;

@@ -108,9 +108,18 @@ impl ServiceKind {
     pub fn qos(self) -> Qos {
         match self {
             // Up to 1 kHz per IMU: a 0.5 s buffer rides out a scheduling hiccup of the estimator.
-            Self::ImuSample => Qos { history: 0, buffer: 512 },
-            Self::SimTruth => Qos { history: 1, buffer: 512 },
-            Self::NavState => Qos { history: 1, buffer: 512 },
+            Self::ImuSample => Qos {
+                history: 0,
+                buffer: 512,
+            },
+            Self::SimTruth => Qos {
+                history: 1,
+                buffer: 512,
+            },
+            Self::NavState => Qos {
+                history: 1,
+                buffer: 512,
+            },
             Self::GnssFix | Self::PpsEdge => Qos { history: 1, buffer: 64 },
             Self::TimeState | Self::Health => Qos { history: 1, buffer: 16 },
         }

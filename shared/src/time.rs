@@ -81,8 +81,7 @@ pub struct Civil {
 /// UTC ns since 1970 of a date and time of day (seconds may carry a fraction via `nanos`).
 pub fn utc_ns_from_civil(c: &Civil) -> i64 {
     let days = days_from_civil(c.year, c.month, c.day);
-    (days * 86_400 + c.hour as i64 * 3600 + c.minute as i64 * 60 + c.second as i64) * NS_PER_S
-        + c.nanos as i64
+    (days * 86_400 + c.hour as i64 * 3600 + c.minute as i64 * 60 + c.second as i64) * NS_PER_S + c.nanos as i64
 }
 
 /// Breaks UTC ns since 1970 into date and time of day.
@@ -92,7 +91,15 @@ pub fn civil_from_utc_ns(utc_ns: i64) -> Civil {
     let days = secs.div_euclid(86_400);
     let sod = secs.rem_euclid(86_400) as u32;
     let (year, month, day) = civil_from_days(days);
-    Civil { year, month, day, hour: sod / 3600, minute: sod / 60 % 60, second: sod % 60, nanos }
+    Civil {
+        year,
+        month,
+        day,
+        hour: sod / 3600,
+        minute: sod / 60 % 60,
+        second: sod % 60,
+        nanos,
+    }
 }
 
 /// RFC 3339 UTC text with millisecond precision, as gpsd prints it: `2004-03-04T16:48:43.000Z`.
@@ -172,12 +179,28 @@ mod tests {
 
     #[test]
     fn rfc3339_and_leaps() {
-        let c = Civil { year: 2004, month: 3, day: 4, hour: 16, minute: 48, second: 43, nanos: 5_000_000 };
+        let c = Civil {
+            year: 2004,
+            month: 3,
+            day: 4,
+            hour: 16,
+            minute: 48,
+            second: 43,
+            nanos: 5_000_000,
+        };
         let t = utc_ns_from_civil(&c);
         assert_eq!(format_rfc3339_ms(t), "2004-03-04T16:48:43.005Z");
         assert_eq!(civil_from_utc_ns(t), c);
         assert_eq!(gps_minus_utc_s(t), 13);
-        let t2 = utc_ns_from_civil(&Civil { year: 2026, month: 11, day: 23, hour: 0, minute: 0, second: 0, nanos: 0 });
+        let t2 = utc_ns_from_civil(&Civil {
+            year: 2026,
+            month: 11,
+            day: 23,
+            hour: 0,
+            minute: 0,
+            second: 0,
+            nanos: 0,
+        });
         assert_eq!(gps_minus_utc_s(t2), 18);
         assert_eq!(utc_ns_from_gps_ns(gps_ns_from_utc_ns(t2)), t2);
         assert_eq!(utc_ns_from_gps_ns(gps_ns_from_utc_ns(t)), t);

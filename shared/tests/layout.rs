@@ -18,11 +18,21 @@ fn ty(t: &FieldType) -> String {
 }
 
 fn fields_sig(fields: &[Field]) -> String {
-    fields.iter().map(|f| format!("{}@{}:{}", f.name, f.offset, ty(&f.ty))).collect::<Vec<_>>().join(",")
+    fields
+        .iter()
+        .map(|f| format!("{}@{}:{}", f.name, f.offset, ty(&f.ty)))
+        .collect::<Vec<_>>()
+        .join(",")
 }
 
 fn signature<T: Reflect>() -> String {
-    format!("{} size={} align={} {}", T::TYPE_NAME, size_of::<T>(), align_of::<T>(), fields_sig(T::FIELDS))
+    format!(
+        "{} size={} align={} {}",
+        T::TYPE_NAME,
+        size_of::<T>(),
+        align_of::<T>(),
+        fields_sig(T::FIELDS)
+    )
 }
 
 fn all() -> Vec<String> {

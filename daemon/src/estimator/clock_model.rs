@@ -28,7 +28,10 @@ pub struct OscillatorNoise {
 impl Default for OscillatorNoise {
     /// A TCXO-class host oscillator: σ_y(1 s) ≈ 1e−10, random walk σ_y(100 s) ≈ 1e−10.
     fn default() -> Self {
-        Self { q_offset_ns2_per_s: 1e-2, q_rate_per_s: 3e-22 }
+        Self {
+            q_offset_ns2_per_s: 1e-2,
+            q_rate_per_s: 3e-22,
+        }
     }
 }
 
@@ -218,6 +221,9 @@ mod tests {
         for k in 1..10 {
             m.update(k * 1_000_000_000, (k + 1) * 1_000_000_000, 1000.0);
         }
-        assert!(matches!(m.update(10_001_000_000, 11_000_000_000, 1000.0), ClockUpdate::Rejected(_)));
+        assert!(matches!(
+            m.update(10_001_000_000, 11_000_000_000, 1000.0),
+            ClockUpdate::Rejected(_)
+        ));
     }
 }

@@ -31,7 +31,13 @@ pub struct LatencySummary {
 
 impl Default for LatencyStats {
     fn default() -> Self {
-        Self { ring: [0.0; LATENCY_WINDOW], scratch: [0.0; LATENCY_WINDOW], len: 0, next: 0, total: 0 }
+        Self {
+            ring: [0.0; LATENCY_WINDOW],
+            scratch: [0.0; LATENCY_WINDOW],
+            len: 0,
+            next: 0,
+            total: 0,
+        }
     }
 }
 
@@ -75,7 +81,10 @@ mod tests {
             s.push(i as f64 * 0.01);
         }
         let m = s.summary().unwrap();
-        assert_eq!((m.min_s, m.median_s, m.p99_s, m.max_s, m.count), (0.01, 0.5, 0.99, 1.0, 100));
+        assert_eq!(
+            (m.min_s, m.median_s, m.p99_s, m.max_s, m.count),
+            (0.01, 0.5, 0.99, 1.0, 100)
+        );
         for _ in 0..LATENCY_WINDOW {
             s.push(0.6);
         }

@@ -26,12 +26,20 @@ pub struct ImuIncrement {
 impl ImuIncrement {
     /// Increments from interval-average rate (rad/s) and specific force (m/s²).
     pub fn from_rates(dt_s: f64, gyro_rps: Vector3<f64>, accel_mps2: Vector3<f64>) -> Self {
-        Self { dt_s, dtheta_rad: gyro_rps * dt_s, dvel_mps: accel_mps2 * dt_s }
+        Self {
+            dt_s,
+            dtheta_rad: gyro_rps * dt_s,
+            dvel_mps: accel_mps2 * dt_s,
+        }
     }
 
     /// A zero-length interval (used as the "previous" increment before the first sample).
     pub fn zero() -> Self {
-        Self { dt_s: 0.0, dtheta_rad: Vector3::zeros(), dvel_mps: Vector3::zeros() }
+        Self {
+            dt_s: 0.0,
+            dtheta_rad: Vector3::zeros(),
+            dvel_mps: Vector3::zeros(),
+        }
     }
 }
 
@@ -132,18 +140,18 @@ pub fn propagate(prev: &Pva, pre: &ImuIncrement, cur: &ImuIncrement) -> Pva {
     let q_nn = UnitQuaternion::from_scaled_axis(-(e_att.w_ie + e_att.w_en) * dt);
     let q_nb = UnitQuaternion::new_normalize((q_nn * prev.q_nb * q_bb).into_inner());
 
-    Pva { lat_rad: lat, lon_rad: lon, h_m: h, vel_ned_mps: vel, q_nb }
+    Pva {
+        lat_rad: lat,
+        lon_rad: lon,
+        h_m: h,
+        vel_ned_mps: vel,
+        q_nb,
+    }
 }
 
 /// Position after `dt` with the mean of `v0` and `v1` and the radii in `e`
 /// (φ̇ = v_N/(R_M+h), λ̇ = v_E/((R_N+h) cos φ), ḣ = −v_D; Groves eq. 5.56).
-fn advance_position(
-    p: &Pva,
-    v0: &Vector3<f64>,
-    v1: &Vector3<f64>,
-    dt: f64,
-    e: &EarthAt,
-) -> (f64, f64, f64) {
+fn advance_position(p: &Pva, v0: &Vector3<f64>, v1: &Vector3<f64>, dt: f64, e: &EarthAt) -> (f64, f64, f64) {
     let v = (v0 + v1) * 0.5;
     let h = p.h_m - v.z * dt;
     let h_mid = 0.5 * (p.h_m + h);
@@ -178,7 +186,11 @@ mod tests {
             pre = inc;
         }
         let (rm, _) = earth::radii(lat);
-        assert!((p.lat_rad - lat).abs() * rm < 0.05, "north drift {}", (p.lat_rad - lat) * rm);
+        assert!(
+            (p.lat_rad - lat).abs() * rm < 0.05,
+            "north drift {}",
+            (p.lat_rad - lat) * rm
+        );
         assert!((p.h_m - 20.0).abs() < 0.05, "height {}", p.h_m);
         assert!(p.vel_ned_mps.norm() < 1e-3, "velocity {:?}", p.vel_ned_mps);
         assert!(p.rpy_rad().norm() < 1e-6, "attitude {:?}", p.rpy_rad());
@@ -207,6 +219,10 @@ mod tests {
             p = propagate(&p, &pre, &inc);
             pre = inc;
         }
-        assert!((p.rpy_rad().z - 20f64.to_radians()).abs() < 1e-4, "yaw {}", p.rpy_rad().z.to_degrees());
+        assert!(
+            (p.rpy_rad().z - 20f64.to_radians()).abs() < 1e-4,
+            "yaw {}",
+            p.rpy_rad().z.to_degrees()
+        );
     }
 }

@@ -44,7 +44,11 @@ pub struct TimeSyncConfig {
 
 impl Default for TimeSyncConfig {
     fn default() -> Self {
-        Self { noise: OscillatorNoise::default(), default_edge_sigma_ns: 30_000.0, software_sync: false }
+        Self {
+            noise: OscillatorNoise::default(),
+            default_edge_sigma_ns: 30_000.0,
+            software_sync: false,
+        }
     }
 }
 
@@ -142,7 +146,11 @@ impl TimeSync {
     }
 
     fn edge_sigma(&self, edge: &PpsEdge) -> f64 {
-        if edge.jitter_ns > 0.0 { edge.jitter_ns } else { self.cfg.default_edge_sigma_ns }
+        if edge.jitter_ns > 0.0 {
+            edge.jitter_ns
+        } else {
+            self.cfg.default_edge_sigma_ns
+        }
     }
 
     fn fix_trusted(&self, host_ns: i64) -> bool {
@@ -169,7 +177,10 @@ impl TimeSync {
                 self.counters.pps_unlabelled += 1;
             }
             self.pending.rotate_left(1);
-            self.pending[3] = Some(Edge { host_ns: h, sigma_ns: sigma });
+            self.pending[3] = Some(Edge {
+                host_ns: h,
+                sigma_ns: sigma,
+            });
             return false;
         }
         if !self.fix_trusted(h) {
@@ -282,7 +293,9 @@ impl TimeSync {
     /// Advances the status with the passage of host time (holdover when edges stop).
     pub fn tick(&mut self, now_host_ns: i64) {
         if self.status == TimeStatus::Locked
-            && self.last_used_host_ns.is_some_and(|h| now_host_ns - h > HOLDOVER_AFTER_NS)
+            && self
+                .last_used_host_ns
+                .is_some_and(|h| now_host_ns - h > HOLDOVER_AFTER_NS)
         {
             self.status = TimeStatus::Holdover;
         }

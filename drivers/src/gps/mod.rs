@@ -5,7 +5,7 @@
 //! first byte) → [`nmea_epoch::EpochAssembler`] (sentences of one time tag merged into one
 //! `GnssFix`) → publish.
 
-pub mod nmea_epoch;
 pub mod driver;
+pub mod nmea_epoch;
 pub mod nmea_framer;
 pub mod offline;

@@ -128,7 +128,11 @@ impl GnssFix {
 
     /// Ellipsoidal height (WGS-84), m: MSL altitude plus geoid separation (separation 0 when unknown).
     pub fn height_m(&self) -> f64 {
-        let sep = if self.geoid_sep_m.is_finite() { self.geoid_sep_m } else { 0.0 };
+        let sep = if self.geoid_sep_m.is_finite() {
+            self.geoid_sep_m
+        } else {
+            0.0
+        };
         self.alt_msl_m + sep
     }
 }

@@ -23,7 +23,7 @@ crate::sample_struct! {
 }
 
 /// Counter slots in [`Health`].
-pub const MAX_COUNTERS: usize = 16;
+pub const MAX_COUNTERS: usize = 32;
 /// Rate slots in [`Health`].
 pub const MAX_RATES: usize = 8;
 
@@ -71,6 +71,9 @@ impl Health {
 
     /// Value of a rate by name, Hz.
     pub fn rate(&self, name: &str) -> Option<f64> {
-        self.rates.iter().find(|r| crate::reflect::str_of(&r.name) == name).map(|r| r.hz)
+        self.rates
+            .iter()
+            .find(|r| crate::reflect::str_of(&r.name) == name)
+            .map(|r| r.hz)
     }
 }

@@ -19,11 +19,11 @@ mod stamp;
 mod time_state;
 
 pub use gnss_fix::{
-    FixMode, GnssFix, SENTENCE_GGA, SENTENCE_GLL, SENTENCE_GNS, SENTENCE_GSA, SENTENCE_GST, SENTENCE_RMC,
-    SENTENCE_VTG, SENTENCE_ZDA,
+    FixMode, GnssFix, SENTENCE_GGA, SENTENCE_GLL, SENTENCE_GNS, SENTENCE_GSA, SENTENCE_GST, SENTENCE_RMC, SENTENCE_VTG,
+    SENTENCE_ZDA,
 };
-pub use health::{Counter, Health, RateEntry, MAX_COUNTERS, MAX_RATES};
-pub use imu_sample::{ImuSample, IMU_FLAG_SATURATED};
+pub use health::{Counter, Health, MAX_COUNTERS, MAX_RATES, RateEntry};
+pub use imu_sample::{IMU_FLAG_SATURATED, ImuSample};
 pub use nav_state::{NavState, NavStatus};
 pub use pps_edge::PpsEdge;
 pub use sim_truth::SimTruth;

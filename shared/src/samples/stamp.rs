@@ -72,12 +72,26 @@ impl StampSource {
 impl Stamp {
     /// A stamp with host time only.
     pub fn host(host_ns: i64, seq: u64, source: StampSource) -> Self {
-        Self { host_ns, device_ns: 0, seq, source: source as u8, has_device_time: 0, reserved: [0; 6] }
+        Self {
+            host_ns,
+            device_ns: 0,
+            seq,
+            source: source as u8,
+            has_device_time: 0,
+            reserved: [0; 6],
+        }
     }
 
     /// A stamp with host and device time.
     pub fn with_device(host_ns: i64, device_ns: i64, seq: u64, source: StampSource) -> Self {
-        Self { host_ns, device_ns, seq, source: source as u8, has_device_time: 1, reserved: [0; 6] }
+        Self {
+            host_ns,
+            device_ns,
+            seq,
+            source: source as u8,
+            has_device_time: 1,
+            reserved: [0; 6],
+        }
     }
 
     /// The decoded stamp source.
