@@ -5,8 +5,19 @@
 //! - [`clock_model`]: Kalman filter of host-clock offset and drift against GNSS time.
 //! - [`time_sync`]: PPS labelling, holdover, software-sync fallback, receiver latency.
 //! - [`latency_stats`]: order statistics of the receiver output latency d0.
+//! - [`error_state`], [`eskf`]: the 22-state error model (KF-GINS conventions + GNSS delay Δ)
+//!   and the Kalman filter engine with chi-square gating.
+//! - [`gnss_fusion`]: GNSS position/velocity aiding with lever arm and the Δ Jacobians.
+//! - [`alignment`]: levelling and GNSS-course heading.
+//! - [`imu_buffer`], [`navigator`]: the fusion horizon (delayed filter + output predictor).
 
+pub mod alignment;
 pub mod clock_model;
+pub mod error_state;
+pub mod eskf;
+pub mod gnss_fusion;
+pub mod imu_buffer;
 pub mod latency_stats;
 pub mod mechanization;
+pub mod navigator;
 pub mod time_sync;

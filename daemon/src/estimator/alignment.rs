@@ -1,0 +1,159 @@
+//! Initial alignment: roll and pitch by levelling the averaged accelerometers while static,
+//! heading from the GNSS course once the vehicle moves faster than a threshold (a car does not
+//! slip sideways), the gyro bias from the static average minus the earth rate.
+//!
+//! Levelling (Groves 2013 eq. 5.101): at rest f^b = C_n^b [0, 0, −g], so
+//! θ = atan2(f_x, √(f_y² + f_z²)) and φ = atan2(−f_y, −f_z).
+
+use nalgebra::{UnitQuaternion, Vector3};
+use navsync_shared::earth;
+
+use super::gnss_fusion::GnssObservation;
+use super::imu_buffer::ImuRecord;
+use super::mechanization::Pva;
+
+/// Thresholds of the alignment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AlignConfig {
+    /// GNSS speed above which the course is taken as the heading, m/s.
+    pub min_speed_mps: f64,
+    /// Largest angular rate still counted as static, rad/s.
+    pub static_gyro_rps: f64,
+    /// Largest deviation of |f| from 1 g still counted as static, m/s².
+    pub static_accel_mps2: f64,
+}
+
+impl Default for AlignConfig {
+    fn default() -> Self {
+        Self {
+            min_speed_mps: 3.0,
+            static_gyro_rps: 0.05,
+            static_accel_mps2: 0.3,
+        }
+    }
+}
+
+/// Result of the alignment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Alignment {
+    /// Initial position, velocity and attitude at the fix's time.
+    pub pva: Pva,
+    /// Gyro bias from the static average, rad/s (zero without a static period).
+    pub gyro_bias: Vector3<f64>,
+    /// Whether roll and pitch came from a static levelling (else assumed level).
+    pub levelled: bool,
+    /// Static time averaged, s.
+    pub static_s: f64,
+}
+
+/// Accumulates the static period and produces the [`Alignment`].
+#[derive(Debug, Clone, Default)]
+pub struct Aligner {
+    cfg: AlignConfig,
+    sum_f: Vector3<f64>,
+    sum_w: Vector3<f64>,
+    time_s: f64,
+    in_static: bool,
+}
+
+impl Aligner {
+    /// An aligner with thresholds `cfg`.
+    pub fn new(cfg: AlignConfig) -> Self {
+        Self {
+            cfg,
+            ..Default::default()
+        }
+    }
+
+    /// Adds one IMU interval. A new static period after motion restarts the average.
+    pub fn on_imu(&mut self, r: &ImuRecord) {
+        // Normal gravity at 45° latitude: the static test's tolerance covers 9.78–9.83 m/s².
+        let g = earth::normal_gravity(std::f64::consts::FRAC_PI_4, 0.0);
+        let still = r.gyro_rps.norm() < self.cfg.static_gyro_rps
+            && (r.accel_mps2.norm() - g).abs() < self.cfg.static_accel_mps2;
+        if still {
+            if !self.in_static {
+                *self = Self {
+                    cfg: self.cfg,
+                    in_static: true,
+                    ..Default::default()
+                };
+            }
+            self.sum_f += r.accel_mps2 * r.dt_s;
+            self.sum_w += r.gyro_rps * r.dt_s;
+            self.time_s += r.dt_s;
+        } else {
+            self.in_static = false;
+        }
+    }
+
+    /// Seconds of static data averaged so far.
+    pub fn static_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Roll and pitch from the static average, rad, if there is one.
+    pub fn level(&self) -> Option<(f64, f64)> {
+        (self.time_s > 0.5).then(|| {
+            let f = self.sum_f / self.time_s;
+            ((-f.y).atan2(-f.z), f.x.atan2((f.y * f.y + f.z * f.z).sqrt()))
+        })
+    }
+
+    /// Aligns on a fix moving fast enough, or returns `None`.
+    pub fn try_align(&self, obs: &GnssObservation) -> Option<Alignment> {
+        let v = obs.vel_ned_mps;
+        if !(obs.speed_mps >= self.cfg.min_speed_mps && obs.track_rad.is_finite() && v.x.is_finite() && v.y.is_finite())
+        {
+            return None;
+        }
+        let (roll, pitch, levelled) = match self.level() {
+            Some((r, p)) => (r, p, true),
+            None => (0.0, 0.0, false),
+        };
+        let q_nb = UnitQuaternion::from_euler_angles(roll, pitch, obs.track_rad);
+        let gyro_bias = if levelled {
+            let w_ie_b = q_nb.inverse() * Vector3::from(earth::omega_ie_n(obs.lat_rad));
+            self.sum_w / self.time_s - w_ie_b
+        } else {
+            Vector3::zeros()
+        };
+        let vd = if v.z.is_finite() { v.z } else { 0.0 };
+        Some(Alignment {
+            pva: Pva {
+                lat_rad: obs.lat_rad,
+                lon_rad: obs.lon_rad,
+                h_m: obs.h_m,
+                vel_ned_mps: Vector3::new(v.x, v.y, vd),
+                q_nb,
+            },
+            gyro_bias,
+            levelled,
+            static_s: self.time_s,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn levels_a_tilted_body() {
+        let (roll, pitch) = (3f64.to_radians(), -2f64.to_radians());
+        let q = UnitQuaternion::from_euler_angles(roll, pitch, 1.0);
+        let g = earth::normal_gravity(0.78, 0.0);
+        let f_b = q.inverse() * Vector3::new(0.0, 0.0, -g);
+        let mut a = Aligner::new(AlignConfig::default());
+        for _ in 0..400 {
+            a.on_imu(&ImuRecord {
+                host_ns: 0,
+                dt_s: 0.005,
+                gyro_rps: Vector3::zeros(),
+                accel_mps2: f_b,
+            });
+        }
+        let (r, p) = a.level().unwrap();
+        assert!((r - roll).abs() < 1e-9 && (p - pitch).abs() < 1e-9, "{r} {p}");
+    }
+}

@@ -1,0 +1,194 @@
+//! The error state of the navigation filter, its continuous-time dynamics and process noise.
+//!
+//! Conventions follow KF-GINS (`gi_engine.cpp`; Shin 2005, *Estimation Techniques for Low-Cost
+//! Inertial Navigation*, ch. 2): position and velocity errors are *computed − true* (NED, m and
+//! m/s); the attitude error φ is the phi angle with C_b^n(true) = exp([φ×]) C_b^n(computed); the
+//! sensor errors (biases, scale factors) and the GNSS delay are *true − estimated*, fed back by
+//! addition. Error state (N = 22):
+//!
+//! | index | state | unit |
+//! |---|---|---|
+//! | 0–2 | δr: position error N, E, D | m |
+//! | 3–5 | δv: velocity error N, E, D | m/s |
+//! | 6–8 | φ: attitude error (NED axes) | rad |
+//! | 9–11 | gyro bias b_g (body FRD) | rad/s |
+//! | 12–14 | accelerometer bias b_a (body FRD) | m/s² |
+//! | 15–17 | gyro scale factor s_g | — |
+//! | 18–20 | accelerometer scale factor s_a | — |
+//! | 21 | GNSS time-synchronisation error Δ | s |
+
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use navsync_shared::earth::{self, OMEGA_IE};
+
+use super::mechanization::{Pva, skew};
+
+/// Error-state dimension.
+pub const N: usize = 22;
+/// Position error.
+pub const POS: usize = 0;
+/// Velocity error.
+pub const VEL: usize = 3;
+/// Attitude error (phi angle).
+pub const ATT: usize = 6;
+/// Gyro bias.
+pub const BG: usize = 9;
+/// Accelerometer bias.
+pub const BA: usize = 12;
+/// Gyro scale factor.
+pub const SG: usize = 15;
+/// Accelerometer scale factor.
+pub const SA: usize = 18;
+/// GNSS delay.
+pub const DELAY: usize = 21;
+
+/// Error-state vector.
+pub type StateVec = SVector<f64, N>;
+/// Error-state covariance / transition matrix.
+pub type StateMat = SMatrix<f64, N, N>;
+
+/// IMU and filter process-noise figures (KF-GINS `ImuNoise`), SI units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProcessNoise {
+    /// Angle random walk, rad/√s.
+    pub arw: f64,
+    /// Velocity random walk, m/s/√s.
+    pub vrw: f64,
+    /// Gyro bias Gauss–Markov standard deviation, rad/s.
+    pub gyro_bias_std: f64,
+    /// Accelerometer bias Gauss–Markov standard deviation, m/s².
+    pub accel_bias_std: f64,
+    /// Gyro scale-factor Gauss–Markov standard deviation.
+    pub gyro_scale_std: f64,
+    /// Accelerometer scale-factor Gauss–Markov standard deviation.
+    pub accel_scale_std: f64,
+    /// Correlation time of the bias and scale Gauss–Markov processes, s.
+    pub corr_time_s: f64,
+    /// Random walk of the GNSS delay, s/√s (lets Δ follow slow changes of the receiver).
+    pub delay_rw: f64,
+    /// Estimate scale factors (else their states are frozen at zero).
+    pub estimate_scale: bool,
+    /// Estimate the GNSS delay Δ (else frozen).
+    pub estimate_delay: bool,
+}
+
+/// Builds F (continuous-time error dynamics) at `pva` with bias-compensated specific force
+/// `f_b` (m/s²) and angular rate `w_b` (rad/s) in the body frame: the blocks of KF-GINS
+/// `insPropagation` (Shin 2005 eq. 2.41–2.49 in NED position metres).
+pub fn system_matrix(pva: &Pva, f_b: &Vector3<f64>, w_b: &Vector3<f64>, noise: &ProcessNoise) -> StateMat {
+    let mut f = StateMat::zeros();
+    let (lat, h) = (pva.lat_rad, pva.h_m);
+    let v = pva.vel_ned_mps;
+    let (rm, rn) = earth::radii(lat);
+    let (rmh, rnh) = (rm + h, rn + h);
+    let (sl, cl) = lat.sin_cos();
+    let tl = sl / cl;
+    let g = earth::normal_gravity(lat, h);
+    let c_bn = pva.q_nb.to_rotation_matrix().into_inner();
+    let w_ie = Vector3::from(earth::omega_ie_n(lat));
+    let w_en = Vector3::from(earth::omega_en_n(lat, h, [v.x, v.y, v.z]));
+
+    // Position error.
+    let frr = Matrix3::new(
+        -v.z / rmh,
+        0.0,
+        v.x / rmh,
+        v.y * tl / rnh,
+        -(v.z + v.x * tl) / rnh,
+        v.y / rnh,
+        0.0,
+        0.0,
+        0.0,
+    );
+    f.fixed_view_mut::<3, 3>(POS, POS).copy_from(&frr);
+    f.fixed_view_mut::<3, 3>(POS, VEL).copy_from(&Matrix3::identity());
+
+    // Velocity error.
+    let fvr = Matrix3::new(
+        -2.0 * v.y * OMEGA_IE * cl / rmh - v.y * v.y / (rmh * rnh * cl * cl),
+        0.0,
+        v.x * v.z / (rmh * rmh) - v.y * v.y * tl / (rnh * rnh),
+        2.0 * OMEGA_IE * (v.x * cl - v.z * sl) / rmh + v.x * v.y / (rmh * rnh * cl * cl),
+        0.0,
+        (v.y * v.z + v.x * v.y * tl) / (rnh * rnh),
+        2.0 * OMEGA_IE * v.y * sl / rmh,
+        0.0,
+        -v.y * v.y / (rnh * rnh) - v.x * v.x / (rmh * rmh) + 2.0 * g / ((rm * rn).sqrt() + h),
+    );
+    let fvv = Matrix3::new(
+        v.z / rmh,
+        -2.0 * (OMEGA_IE * sl + v.y * tl / rnh),
+        v.x / rmh,
+        2.0 * OMEGA_IE * sl + v.y * tl / rnh,
+        (v.z + v.x * tl) / rnh,
+        2.0 * OMEGA_IE * cl + v.y / rnh,
+        -2.0 * v.x / rmh,
+        -2.0 * (OMEGA_IE * cl + v.y / rnh),
+        0.0,
+    );
+    f.fixed_view_mut::<3, 3>(VEL, POS).copy_from(&fvr);
+    f.fixed_view_mut::<3, 3>(VEL, VEL).copy_from(&fvv);
+    f.fixed_view_mut::<3, 3>(VEL, ATT).copy_from(&skew(&(c_bn * f_b)));
+    f.fixed_view_mut::<3, 3>(VEL, BA).copy_from(&c_bn);
+    if noise.estimate_scale {
+        f.fixed_view_mut::<3, 3>(VEL, SA)
+            .copy_from(&(c_bn * Matrix3::from_diagonal(f_b)));
+    }
+
+    // Attitude error.
+    let fpr = Matrix3::new(
+        -OMEGA_IE * sl / rmh,
+        0.0,
+        v.y / (rnh * rnh),
+        0.0,
+        0.0,
+        -v.x / (rmh * rmh),
+        -OMEGA_IE * cl / rmh - v.y / (rmh * rnh * cl * cl),
+        0.0,
+        -v.y * tl / (rnh * rnh),
+    );
+    let fpv = Matrix3::new(0.0, 1.0 / rnh, 0.0, -1.0 / rmh, 0.0, 0.0, 0.0, -tl / rnh, 0.0);
+    f.fixed_view_mut::<3, 3>(ATT, POS).copy_from(&fpr);
+    f.fixed_view_mut::<3, 3>(ATT, VEL).copy_from(&fpv);
+    f.fixed_view_mut::<3, 3>(ATT, ATT).copy_from(&(-skew(&(w_ie + w_en))));
+    f.fixed_view_mut::<3, 3>(ATT, BG).copy_from(&(-c_bn));
+    if noise.estimate_scale {
+        f.fixed_view_mut::<3, 3>(ATT, SG)
+            .copy_from(&(-c_bn * Matrix3::from_diagonal(w_b)));
+    }
+
+    // Sensor errors: first-order Gauss–Markov, ẋ = −x/T + w.
+    let decay = -1.0 / noise.corr_time_s;
+    for i in BG..SG {
+        f[(i, i)] = decay;
+    }
+    if noise.estimate_scale {
+        for i in SG..DELAY {
+            f[(i, i)] = decay;
+        }
+    }
+    f
+}
+
+/// Discrete process noise over `dt`: Q_d = G Q_c Gᵀ·dt with the white-noise intensities of the
+/// random walks (ARW², VRW²) and of the Gauss–Markov drivers (2σ²/T). The noise enters velocity
+/// and attitude through C_b^n, and C (σ²I) Cᵀ = σ²I, so Q_d is diagonal. KF-GINS uses the
+/// trapezoid ½(Φ Q Φᵀ + Q)·dt; the difference is O(F·dt) relative, below 2 % of the
+/// off-diagonal terms at the 20 ms covariance step, and the diagonal form costs nothing.
+pub fn process_noise(noise: &ProcessNoise, dt: f64) -> SVector<f64, N> {
+    let mut q = SVector::<f64, N>::zeros();
+    let gm = |std: f64| 2.0 * std * std / noise.corr_time_s;
+    for i in 0..3 {
+        q[VEL + i] = noise.vrw * noise.vrw;
+        q[ATT + i] = noise.arw * noise.arw;
+        q[BG + i] = gm(noise.gyro_bias_std);
+        q[BA + i] = gm(noise.accel_bias_std);
+        if noise.estimate_scale {
+            q[SG + i] = gm(noise.gyro_scale_std);
+            q[SA + i] = gm(noise.accel_scale_std);
+        }
+    }
+    if noise.estimate_delay {
+        q[DELAY] = noise.delay_rw * noise.delay_rw;
+    }
+    q * dt
+}

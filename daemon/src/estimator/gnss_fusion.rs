@@ -1,0 +1,144 @@
+//! Loosely coupled GNSS aiding: position and velocity of the antenna, with the lever arm and
+//! the GNSS time-synchronisation error Δ (PX4 EKF2 keeps each aiding source in its own file;
+//! this is the GNSS one).
+//!
+//! Measurement model. The receiver reports the antenna state at its epoch t_e; the filter fuses
+//! the fix at t_f = t_stamp − Δ̂ (t_stamp: the epoch mapped to host time under hardware sync, the
+//! receipt time of its first byte under software sync). With δΔ = Δ − Δ̂ the true epoch is
+//! t_f − δΔ, so the fix measures p(t_f − δΔ) ≈ p(t_f) − v·δΔ and v(t_f − δΔ) ≈ v(t_f) − a·δΔ:
+//! the measurement Jacobian w.r.t. Δ is −v for position and −a for velocity (Li et al.,
+//! GPS/SINS time synchronisation). In KF-GINS's innovation form dz = INS − GNSS = H δx this
+//! appears as +v and +a in the Δ column, with δΔ "true − estimated".
+//!
+//! Position innovation (KF-GINS `gnssUpdate`): dz_r = D_R (p_ant − p_gnss), p_ant = p + D_R⁻¹ C_b^n l,
+//! D_R = diag(R_M+h, (R_N+h) cos φ, −1); H_r = [I₃, 0, [(C_b^n l)×], 0, …, v].
+//! Velocity innovation: v_ant = v + C_b^n (ω_ib^b × l); dz_v = v_ant − v_gnss;
+//! H_v = [0, I₃, [(C_b^n (ω×l))×], −C_b^n [l×], 0, …, a].
+
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use navsync_shared::earth;
+use navsync_shared::samples::GnssFix;
+
+use super::error_state::{ATT, BG, DELAY, N, POS, VEL};
+use super::mechanization::{Pva, skew};
+
+/// A fix reduced to what the filter fuses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GnssObservation {
+    /// Host time of the fix before the Δ correction, ns (see module docs).
+    pub stamp_host_ns: i64,
+    /// Latitude, rad.
+    pub lat_rad: f64,
+    /// Longitude, rad.
+    pub lon_rad: f64,
+    /// Ellipsoidal height of the antenna, m.
+    pub h_m: f64,
+    /// NED velocity, m/s; the down component may be NaN (NMEA carries none).
+    pub vel_ned_mps: Vector3<f64>,
+    /// 1-sigma position error N, E, D, m.
+    pub pos_std_m: Vector3<f64>,
+    /// 1-sigma velocity error per axis, m/s.
+    pub vel_std_mps: f64,
+    /// Speed over ground, m/s (NaN when unknown).
+    pub speed_mps: f64,
+    /// Track over ground, rad (NaN when unknown).
+    pub track_rad: f64,
+}
+
+/// Defaults for fixes that carry no accuracy of their own.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GnssAccuracy {
+    /// User-equivalent range error, m: σ_horizontal axis = HDOP·UERE/√2, σ_down = VDOP·UERE.
+    pub uere_m: f64,
+    /// Velocity 1-sigma per axis, m/s (NMEA reports none).
+    pub vel_std_mps: f64,
+}
+
+impl Default for GnssAccuracy {
+    fn default() -> Self {
+        Self {
+            uere_m: 2.0,
+            vel_std_mps: 0.1,
+        }
+    }
+}
+
+/// Prepares a fix for fusion; `None` when it has no usable position. Accuracy from GST when
+/// present, else from the DOPs (VDOP unknown: 1.5·HDOP; HDOP unknown: 2).
+pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Option<GnssObservation> {
+    if !fix.has_position() || !fix.alt_msl_m.is_finite() {
+        return None;
+    }
+    let hdop = if fix.hdop.is_finite() { fix.hdop } else { 2.0 };
+    let vdop = if fix.vdop.is_finite() { fix.vdop } else { 1.5 * hdop };
+    let gst = [fix.std_lat_m, fix.std_lon_m, fix.std_alt_m];
+    let pos_std = if gst.iter().all(|s| s.is_finite() && *s > 0.0) {
+        Vector3::from(gst)
+    } else {
+        let h = hdop * acc.uere_m / std::f64::consts::SQRT_2;
+        Vector3::new(h, h, vdop * acc.uere_m)
+    };
+    Some(GnssObservation {
+        stamp_host_ns,
+        lat_rad: fix.lat_deg.to_radians(),
+        lon_rad: fix.lon_deg.to_radians(),
+        h_m: fix.height_m(),
+        vel_ned_mps: Vector3::new(fix.vel_n_mps, fix.vel_e_mps, fix.vel_d_mps),
+        pos_std_m: pos_std,
+        vel_std_mps: acc.vel_std_mps,
+        speed_mps: fix.speed_mps,
+        track_rad: fix.track_deg.to_radians(),
+    })
+}
+
+/// Position update terms at the filter state `pva`, fused `eps_s` after the observation's
+/// (Δ-corrected) time: the GNSS position is extrapolated by v·ε.
+pub fn position_terms(
+    pva: &Pva,
+    lever_b: &Vector3<f64>,
+    obs: &GnssObservation,
+    eps_s: f64,
+) -> (SVector<f64, 3>, SMatrix<f64, 3, N>, Matrix3<f64>) {
+    let c_bn = pva.q_nb.to_rotation_matrix().into_inner();
+    let (rm, rn) = earth::radii(pva.lat_rad);
+    let d_r = Vector3::new(rm + pva.h_m, (rn + pva.h_m) * pva.lat_rad.cos(), -1.0);
+    let lever_n = c_bn * lever_b;
+    let v = pva.vel_ned_mps;
+    let dz = Vector3::new(
+        (pva.lat_rad - obs.lat_rad) * d_r.x,
+        (pva.lon_rad - obs.lon_rad) * d_r.y,
+        (pva.h_m - obs.h_m) * d_r.z,
+    ) + lever_n
+        - v * eps_s;
+    let mut h = SMatrix::<f64, 3, N>::zeros();
+    h.fixed_view_mut::<3, 3>(0, POS).copy_from(&Matrix3::identity());
+    h.fixed_view_mut::<3, 3>(0, ATT).copy_from(&skew(&lever_n));
+    h.fixed_view_mut::<3, 1>(0, DELAY).copy_from(&v);
+    let r = Matrix3::from_diagonal(&obs.pos_std_m.component_mul(&obs.pos_std_m));
+    (dz, h, r)
+}
+
+/// Horizontal velocity update terms (NMEA has no vertical velocity), with body rate `w_b`
+/// (rad/s, bias compensated) and NED acceleration `acc_ned` for the Δ column.
+pub fn velocity_terms(
+    pva: &Pva,
+    lever_b: &Vector3<f64>,
+    w_b: &Vector3<f64>,
+    acc_ned: &Vector3<f64>,
+    obs: &GnssObservation,
+    eps_s: f64,
+) -> (SVector<f64, 2>, SMatrix<f64, 2, N>, nalgebra::Matrix2<f64>) {
+    let c_bn = pva.q_nb.to_rotation_matrix().into_inner();
+    let rot = c_bn * w_b.cross(lever_b);
+    let v_ant = pva.vel_ned_mps + rot;
+    let dz3 = v_ant - obs.vel_ned_mps - acc_ned * eps_s;
+    let mut h3 = SMatrix::<f64, 3, N>::zeros();
+    h3.fixed_view_mut::<3, 3>(0, VEL).copy_from(&Matrix3::identity());
+    h3.fixed_view_mut::<3, 3>(0, ATT).copy_from(&skew(&rot));
+    h3.fixed_view_mut::<3, 3>(0, BG).copy_from(&(-c_bn * skew(lever_b)));
+    h3.fixed_view_mut::<3, 1>(0, DELAY).copy_from(acc_ned);
+    let dz = SVector::<f64, 2>::new(dz3.x, dz3.y);
+    let h = h3.fixed_rows::<2>(0).into_owned();
+    let r = nalgebra::Matrix2::identity() * (obs.vel_std_mps * obs.vel_std_mps);
+    (dz, h, r)
+}

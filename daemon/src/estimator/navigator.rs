@@ -1,0 +1,545 @@
+//! The navigation filter with a fusion horizon: a delayed error-state filter plus an output
+//! predictor (the structure of PX4's EKF2).
+//!
+//! - Every IMU interval enters the [`ImuBuffer`]. The *delayed* filter consumes intervals once
+//!   they are older than the horizon (default 1.5 s): strapdown mechanization at the IMU rate,
+//!   covariance propagation every ~20 ms. A GNSS fix waits in a small queue until the delayed
+//!   filter reaches the fix's epoch t_f = t_stamp − Δ̂ and is fused *there*, at its measurement
+//!   time, so neither the receiver's output latency nor the serial transfer biases it.
+//! - The *output* state is the delayed state carried to the present through the buffered
+//!   intervals. It advances one mechanization step per new IMU interval; after a correction
+//!   of the delayed state it is recomputed by replaying the buffer. A `NavState` is therefore
+//!   available for every IMU sample the moment it arrives, with no added latency.
+//!
+//! Pure and deterministic: the output depends only on the samples and their order.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use navsync_shared::earth;
+use navsync_shared::samples::{ImuSync, MAX_IMUS, NavState, NavStatus};
+
+use super::alignment::{AlignConfig, Aligner};
+use super::error_state::{self, ATT, BA, BG, DELAY, N, POS, ProcessNoise, SA, SG, StateMat, StateVec, VEL};
+use super::eskf::{Eskf, Update};
+use super::gnss_fusion::{self, GnssObservation};
+use super::imu_buffer::{ImuBuffer, ImuRecord};
+use super::mechanization::{ImuIncrement, Pva, propagate};
+
+/// Filter settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavConfig {
+    /// IMU and state process noise.
+    pub noise: ProcessNoise,
+    /// GNSS antenna position in the body frame (FRD), m.
+    pub lever_arm_b_m: Vector3<f64>,
+    /// Fusion horizon: how far the delayed filter runs behind the present, s. Must exceed the
+    /// largest GNSS delay (epoch to receipt, plus Δ in software sync).
+    pub horizon_s: f64,
+    /// Covariance propagation step, s.
+    pub cov_step_s: f64,
+    /// Prior of the GNSS delay Δ, s, and its 1-sigma.
+    pub delay_prior_s: f64,
+    /// 1-sigma of the delay prior, s.
+    pub delay_prior_std_s: f64,
+    /// Alignment thresholds.
+    pub align: AlignConfig,
+    /// Initial 1-sigma of roll and pitch after levelling, rad.
+    pub init_level_std_rad: f64,
+    /// Initial 1-sigma of the heading from the GNSS course, rad.
+    pub init_yaw_std_rad: f64,
+    /// Initial 1-sigma of the velocity, m/s.
+    pub init_vel_std_mps: f64,
+    /// Scale of the 99.9 % chi-square innovation gate.
+    pub gate_scale: f64,
+    /// No fix for this long: INS-only, s.
+    pub outage_after_s: f64,
+}
+
+impl NavConfig {
+    /// Defaults for a car with the given IMU process noise.
+    pub fn with_noise(noise: ProcessNoise) -> Self {
+        Self {
+            noise,
+            lever_arm_b_m: Vector3::zeros(),
+            horizon_s: 1.5,
+            cov_step_s: 0.02,
+            delay_prior_s: 0.0,
+            delay_prior_std_s: 0.02,
+            align: AlignConfig::default(),
+            init_level_std_rad: 0.5f64.to_radians(),
+            init_yaw_std_rad: 5f64.to_radians(),
+            init_vel_std_mps: 0.3,
+            gate_scale: 1.0,
+            outage_after_s: 2.5,
+        }
+    }
+}
+
+/// Counters of the navigation filter.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct NavCounters {
+    /// Fixes fused (position accepted).
+    pub fixes_used: u64,
+    /// Fixes whose position failed the innovation gate.
+    pub fixes_rejected: u64,
+    /// Velocity updates that failed the gate.
+    pub vel_rejected: u64,
+    /// Fixes whose epoch was already behind the delayed filter (horizon too short).
+    pub fixes_too_old: u64,
+    /// Fixes without a usable position.
+    pub fixes_unusable: u64,
+    /// IMU intervals longer than 1.5 nominal periods (dropped samples bridged).
+    pub imu_gaps: u64,
+    /// IMU samples going back in time (ignored).
+    pub imu_backwards: u64,
+    /// Output replays after a correction.
+    pub replays: u64,
+}
+
+#[derive(Debug, Clone)]
+struct Delayed {
+    pva: Pva,
+    pre: ImuIncrement,
+    t_ns: i64,
+    eskf: Eskf,
+    bias_g: Vector3<f64>,
+    bias_a: Vector3<f64>,
+    scale_g: Vector3<f64>,
+    scale_a: Vector3<f64>,
+    delay_s: f64,
+    acc_ned: Vector3<f64>,
+    last_w: Vector3<f64>,
+    cov_dt: f64,
+    cov_f: Vector3<f64>,
+    cov_w: Vector3<f64>,
+}
+
+impl Delayed {
+    /// Bias- and scale-compensated rates of a record (KF-GINS `imuCompensate`).
+    fn compensate(&self, r: &ImuRecord) -> (Vector3<f64>, Vector3<f64>) {
+        let w = (r.gyro_rps - self.bias_g).component_div(&(Vector3::repeat(1.0) + self.scale_g));
+        let f = (r.accel_mps2 - self.bias_a).component_div(&(Vector3::repeat(1.0) + self.scale_a));
+        (w, f)
+    }
+
+    fn step(&mut self, r: &ImuRecord, cfg: &NavConfig) {
+        let (w, f) = self.compensate(r);
+        let inc = ImuIncrement::from_rates(r.dt_s, w, f);
+        let v0 = self.pva.vel_ned_mps;
+        self.pva = propagate(&self.pva, &self.pre, &inc);
+        self.pre = inc;
+        self.t_ns = r.host_ns;
+        if r.dt_s > 0.0 {
+            self.acc_ned = (self.pva.vel_ned_mps - v0) / r.dt_s;
+        }
+        self.last_w = w;
+        self.cov_dt += r.dt_s;
+        self.cov_f += f * r.dt_s;
+        self.cov_w += w * r.dt_s;
+        if self.cov_dt >= cfg.cov_step_s {
+            self.propagate_covariance(cfg);
+        }
+    }
+
+    /// P ← Φ P Φᵀ + Q over the accumulated interval, Φ = I + F·Δt with F at the current state
+    /// and the interval-mean rates (KF-GINS propagates per IMU sample; grouping ~20 ms keeps the
+    /// cost per sample low and changes Φ by O((F·Δt)²)).
+    fn propagate_covariance(&mut self, cfg: &NavConfig) {
+        if self.cov_dt <= 0.0 {
+            return;
+        }
+        let f_b = self.cov_f / self.cov_dt;
+        let w_b = self.cov_w / self.cov_dt;
+        let f = error_state::system_matrix(&self.pva, &f_b, &w_b, &cfg.noise);
+        let phi = StateMat::identity() + f * self.cov_dt;
+        let q = error_state::process_noise(&cfg.noise, self.cov_dt);
+        self.eskf.predict(&phi, &q);
+        self.cov_dt = 0.0;
+        self.cov_f = Vector3::zeros();
+        self.cov_w = Vector3::zeros();
+    }
+
+    /// Closed-loop feedback of an error-state estimate (KF-GINS `stateFeedback`).
+    fn feedback(&mut self, dx: &StateVec, horizon_s: f64) {
+        let (rm, rn) = earth::radii(self.pva.lat_rad);
+        self.pva.lat_rad -= dx[POS] / (rm + self.pva.h_m);
+        self.pva.lon_rad -= dx[POS + 1] / ((rn + self.pva.h_m) * self.pva.lat_rad.cos());
+        self.pva.h_m += dx[POS + 2];
+        self.pva.vel_ned_mps -= dx.fixed_rows::<3>(VEL);
+        let q_pn = UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(ATT).into_owned());
+        self.pva.q_nb = UnitQuaternion::new_normalize((q_pn * self.pva.q_nb).into_inner());
+        self.bias_g += dx.fixed_rows::<3>(BG);
+        self.bias_a += dx.fixed_rows::<3>(BA);
+        self.scale_g += dx.fixed_rows::<3>(SG);
+        self.scale_a += dx.fixed_rows::<3>(SA);
+        self.delay_s = (self.delay_s + dx[DELAY]).clamp(-0.5, horizon_s - 0.05);
+    }
+}
+
+/// The navigation filter.
+#[derive(Debug, Clone)]
+pub struct Navigator {
+    cfg: NavConfig,
+    buf: ImuBuffer,
+    aligner: Aligner,
+    filt: Option<Delayed>,
+    out: Option<(Pva, ImuIncrement)>,
+    out_w: Vector3<f64>,
+    out_f: Vector3<f64>,
+    pending: [Option<GnssObservation>; 8],
+    counters: NavCounters,
+    last_imu_ns: Option<i64>,
+    last_fix_rx_ns: Option<i64>,
+    last_fused_ns: i64,
+    consecutive_rejects: u32,
+}
+
+impl Navigator {
+    /// A filter that waits for alignment.
+    pub fn new(cfg: NavConfig) -> Self {
+        Self {
+            cfg,
+            buf: ImuBuffer::default(),
+            aligner: Aligner::new(cfg.align),
+            filt: None,
+            out: None,
+            out_w: Vector3::zeros(),
+            out_f: Vector3::zeros(),
+            pending: [None; 8],
+            counters: NavCounters::default(),
+            last_imu_ns: None,
+            last_fix_rx_ns: None,
+            last_fused_ns: 0,
+            consecutive_rejects: 0,
+        }
+    }
+
+    /// Counters so far.
+    pub fn counters(&self) -> &NavCounters {
+        &self.counters
+    }
+
+    /// Configuration in use.
+    pub fn config(&self) -> &NavConfig {
+        &self.cfg
+    }
+
+    /// True once aligned.
+    pub fn is_aligned(&self) -> bool {
+        self.filt.is_some()
+    }
+
+    /// Estimated GNSS delay Δ and its 1-sigma, s (NaN before alignment or when switched off).
+    pub fn gnss_delay(&self) -> (f64, f64) {
+        match &self.filt {
+            Some(f) if self.cfg.noise.estimate_delay => (f.delay_s, f.eskf.std(DELAY)),
+            _ => (f64::NAN, f64::NAN),
+        }
+    }
+
+    /// Forgets the delay estimate (the time base of the fix stamps changed).
+    pub fn reset_delay(&mut self, prior_s: f64, prior_std_s: f64) {
+        self.cfg.delay_prior_s = prior_s;
+        self.cfg.delay_prior_std_s = prior_std_s;
+        if let Some(f) = &mut self.filt {
+            f.delay_s = prior_s;
+            for i in 0..N {
+                f.eskf.p[(i, DELAY)] = 0.0;
+                f.eskf.p[(DELAY, i)] = 0.0;
+            }
+            f.eskf.p[(DELAY, DELAY)] = if self.cfg.noise.estimate_delay {
+                prior_std_s * prior_std_s
+            } else {
+                0.0
+            };
+        }
+    }
+
+    /// The present output state, if aligned.
+    pub fn output(&self) -> Option<&Pva> {
+        self.out.as_ref().map(|(p, _)| p)
+    }
+
+    /// Queues a fix for fusion at its epoch (receipt host time `rx_ns` only marks GNSS as alive).
+    pub fn on_gnss(&mut self, obs: GnssObservation, rx_ns: i64) {
+        self.last_fix_rx_ns = Some(rx_ns);
+        if self.filt.is_none() {
+            self.try_align(&obs);
+            return;
+        }
+        let Some(f) = &self.filt else { return };
+        let t_f = obs.stamp_host_ns - (f.delay_s * 1e9) as i64;
+        // Behind the delayed filter by more than one covariance step: the horizon was too short.
+        if f.t_ns - t_f > (self.cfg.cov_step_s * 1e9) as i64 {
+            self.counters.fixes_too_old += 1;
+            return;
+        }
+        match self.pending.iter_mut().find(|p| p.is_none()) {
+            Some(slot) => *slot = Some(obs),
+            None => self.counters.fixes_too_old += 1,
+        }
+    }
+
+    fn try_align(&mut self, obs: &GnssObservation) {
+        let Some(a) = self.aligner.try_align(obs) else { return };
+        let cfg = &self.cfg;
+        let mut p = StateMat::zeros();
+        for i in 0..3 {
+            p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
+            p[(VEL + i, VEL + i)] = cfg.init_vel_std_mps.powi(2);
+            p[(BG + i, BG + i)] = if a.levelled {
+                // Static average: noise over the static time plus the bias instability.
+                (cfg.noise.arw * cfg.noise.arw / a.static_s.max(1.0) + (0.3 * cfg.noise.gyro_bias_std).powi(2))
+                    .max(1e-12)
+            } else {
+                cfg.noise.gyro_bias_std.powi(2)
+            };
+            p[(BA + i, BA + i)] = cfg.noise.accel_bias_std.powi(2);
+            if cfg.noise.estimate_scale {
+                p[(SG + i, SG + i)] = cfg.noise.gyro_scale_std.powi(2);
+                p[(SA + i, SA + i)] = cfg.noise.accel_scale_std.powi(2);
+            }
+        }
+        let level_std = if a.levelled {
+            cfg.init_level_std_rad
+        } else {
+            5f64.to_radians()
+        };
+        p[(ATT, ATT)] = level_std.powi(2);
+        p[(ATT + 1, ATT + 1)] = level_std.powi(2);
+        p[(ATT + 2, ATT + 2)] = cfg.init_yaw_std_rad.powi(2);
+        if cfg.noise.estimate_delay {
+            p[(DELAY, DELAY)] = cfg.delay_prior_std_s.powi(2);
+        }
+        let t_f = obs.stamp_host_ns - (cfg.delay_prior_s * 1e9) as i64;
+        while self.buf.front().is_some_and(|r| r.host_ns <= t_f) {
+            self.buf.pop();
+        }
+        self.filt = Some(Delayed {
+            pva: a.pva,
+            pre: ImuIncrement::zero(),
+            t_ns: t_f,
+            eskf: Eskf::new(p),
+            bias_g: a.gyro_bias,
+            bias_a: Vector3::zeros(),
+            scale_g: Vector3::zeros(),
+            scale_a: Vector3::zeros(),
+            delay_s: cfg.delay_prior_s,
+            acc_ned: Vector3::zeros(),
+            last_w: Vector3::zeros(),
+            cov_dt: 0.0,
+            cov_f: Vector3::zeros(),
+            cov_w: Vector3::zeros(),
+        });
+        self.last_fused_ns = t_f;
+        self.replay();
+    }
+
+    /// Feeds one IMU interval (host time of its end, ns; nominal length, s; average rate and
+    /// specific force in the body frame). Returns true when a present-time state is available.
+    pub fn on_imu(
+        &mut self,
+        host_ns: i64,
+        nominal_dt_s: f64,
+        gyro_rps: Vector3<f64>,
+        accel_mps2: Vector3<f64>,
+    ) -> bool {
+        let dt_s = match self.last_imu_ns {
+            Some(prev) if host_ns <= prev => {
+                self.counters.imu_backwards += 1;
+                return self.out.is_some();
+            }
+            Some(prev) => {
+                let gap = (host_ns - prev) as f64 * 1e-9;
+                if gap > 1.5 * nominal_dt_s {
+                    // Dropped samples: bridge the gap assuming constant rates (at most 0.1 s).
+                    self.counters.imu_gaps += 1;
+                    gap.min(0.1)
+                } else {
+                    nominal_dt_s
+                }
+            }
+            None => nominal_dt_s,
+        };
+        self.last_imu_ns = Some(host_ns);
+        let rec = ImuRecord {
+            host_ns,
+            dt_s,
+            gyro_rps,
+            accel_mps2,
+        };
+        if self.filt.is_none() {
+            self.aligner.on_imu(&rec);
+        }
+        self.buf.push(rec);
+        let horizon_ns = (self.cfg.horizon_s * 1e9) as i64;
+        let Some(filt) = &mut self.filt else {
+            while self.buf.front().is_some_and(|r| r.host_ns < host_ns - horizon_ns) {
+                self.buf.pop();
+            }
+            return false;
+        };
+        let mut corrected = false;
+        while let Some(r) = self.buf.front().copied() {
+            if r.host_ns > host_ns - horizon_ns {
+                break;
+            }
+            self.buf.pop();
+            filt.step(&r, &self.cfg);
+            corrected |= fuse_due(
+                filt,
+                &mut self.pending,
+                &self.cfg,
+                &mut self.counters,
+                &mut self.consecutive_rejects,
+                &mut self.last_fused_ns,
+            );
+        }
+        if corrected {
+            self.counters.replays += 1;
+            self.replay();
+        } else if let Some((pva, pre)) = &mut self.out {
+            let (w, f) = filt.compensate(&rec);
+            let inc = ImuIncrement::from_rates(rec.dt_s, w, f);
+            *pva = propagate(pva, pre, &inc);
+            *pre = inc;
+            self.out_w = w;
+            self.out_f = f;
+        }
+        true
+    }
+
+    /// Recomputes the output state from the delayed state through the buffered intervals.
+    fn replay(&mut self) {
+        let Some(filt) = &self.filt else { return };
+        let mut pva = filt.pva;
+        let mut pre = filt.pre;
+        let (mut w, mut f) = (filt.last_w, Vector3::zeros());
+        for r in self.buf.iter() {
+            (w, f) = filt.compensate(r);
+            let inc = ImuIncrement::from_rates(r.dt_s, w, f);
+            pva = propagate(&pva, &pre, &inc);
+            pre = inc;
+        }
+        self.out = Some((pva, pre));
+        self.out_w = w;
+        self.out_f = f;
+    }
+
+    /// Filter status at host time `now_ns`.
+    pub fn status(&self, now_ns: i64) -> NavStatus {
+        if self.filt.is_none() {
+            return NavStatus::Aligning;
+        }
+        let outage = self
+            .last_fix_rx_ns
+            .is_none_or(|t| (now_ns - t) as f64 * 1e-9 > self.cfg.outage_after_s);
+        if outage {
+            NavStatus::InsOnly
+        } else if self.consecutive_rejects >= 3 {
+            NavStatus::Degraded
+        } else {
+            NavStatus::Aligned
+        }
+    }
+
+    /// Fills the navigation part of a [`NavState`] for the present (host time `now_ns`).
+    pub fn fill(&self, s: &mut NavState, now_ns: i64) {
+        s.host_ns = now_ns;
+        s.status = self.status(now_ns) as u8;
+        s.fixes_used = self.counters.fixes_used as u32;
+        s.fixes_rejected = self.counters.fixes_rejected as u32;
+        s.last_fix_host_ns = self.last_fused_ns;
+        let (Some((pva, _)), Some(filt)) = (&self.out, &self.filt) else {
+            for v in [
+                &mut s.lat_deg,
+                &mut s.lon_deg,
+                &mut s.height_m,
+                &mut s.gnss_delay_s,
+                &mut s.gnss_delay_std_s,
+            ] {
+                *v = f64::NAN;
+            }
+            if let Some((r, p)) = self.aligner.level() {
+                s.rpy_rad = [r, p, f64::NAN];
+            } else {
+                s.rpy_rad = [f64::NAN; 3];
+            }
+            s.vel_ned_mps = [f64::NAN; 3];
+            s.q_nb = [f64::NAN; 4];
+            return;
+        };
+        s.lat_deg = pva.lat_rad.to_degrees();
+        s.lon_deg = pva.lon_rad.to_degrees();
+        s.height_m = pva.h_m;
+        s.vel_ned_mps = pva.vel_ned_mps.into();
+        s.rpy_rad = pva.rpy_rad().into();
+        let q = pva.q_nb.quaternion();
+        s.q_nb = [q.w, q.i, q.j, q.k];
+        s.gyro_body_rps = self.out_w.into();
+        s.accel_body_mps2 = self.out_f.into();
+        let std3 = |i: usize| [filt.eskf.std(i), filt.eskf.std(i + 1), filt.eskf.std(i + 2)];
+        s.pos_std_ned_m = std3(POS);
+        s.vel_std_ned_mps = std3(VEL);
+        s.att_std_rad = std3(ATT);
+        s.gyro_bias_rps = filt.bias_g.into();
+        s.accel_bias_mps2 = filt.bias_a.into();
+        s.gyro_bias_std_rps = std3(BG);
+        s.accel_bias_std_mps2 = std3(BA);
+        let (d, ds) = self.gnss_delay();
+        s.gnss_delay_s = d;
+        s.gnss_delay_std_s = ds;
+    }
+
+    /// An empty per-IMU table.
+    pub fn empty_imu_table() -> [ImuSync; MAX_IMUS] {
+        [<ImuSync as navsync_shared::reflect::Reflect>::zeroed(); MAX_IMUS]
+    }
+}
+
+/// Fuses every pending fix whose (Δ-corrected) epoch the delayed filter has reached.
+/// Returns true when the state was corrected.
+fn fuse_due(
+    f: &mut Delayed,
+    pending: &mut [Option<GnssObservation>; 8],
+    cfg: &NavConfig,
+    counters: &mut NavCounters,
+    consecutive_rejects: &mut u32,
+    last_fused_ns: &mut i64,
+) -> bool {
+    let mut corrected = false;
+    loop {
+        let due = pending
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| p.map(|o| (i, o.stamp_host_ns - (f.delay_s * 1e9) as i64)))
+            .filter(|(_, t)| *t <= f.t_ns)
+            .min_by_key(|(_, t)| *t);
+        let Some((i, t_f)) = due else { break };
+        let Some(obs) = pending[i].take() else { break };
+        f.propagate_covariance(cfg);
+        let eps = (f.t_ns - t_f) as f64 * 1e-9;
+        let (dz, h, r) = gnss_fusion::position_terms(&f.pva, &cfg.lever_arm_b_m, &obs, eps);
+        match f.eskf.update(&dz, &h, &r, cfg.gate_scale) {
+            Update::Accepted { dx, .. } => {
+                f.feedback(&dx, cfg.horizon_s);
+                counters.fixes_used += 1;
+                *consecutive_rejects = 0;
+                *last_fused_ns = t_f;
+                corrected = true;
+            }
+            Update::Rejected { .. } => {
+                counters.fixes_rejected += 1;
+                *consecutive_rejects += 1;
+                continue;
+            }
+        }
+        if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
+            let (dz, h, r) = gnss_fusion::velocity_terms(&f.pva, &cfg.lever_arm_b_m, &f.last_w, &f.acc_ned, &obs, eps);
+            match f.eskf.update(&dz, &h, &r, cfg.gate_scale) {
+                Update::Accepted { dx, .. } => f.feedback(&dx, cfg.horizon_s),
+                Update::Rejected { .. } => counters.vel_rejected += 1,
+            }
+        }
+    }
+    corrected
+}
