@@ -51,14 +51,15 @@
 //! `tod_ns` known.
 
 use navsync_shared::samples::{
-    FixMode, GnssFix, SENTENCE_GGA, SENTENCE_GLL, SENTENCE_GNS, SENTENCE_GSA, SENTENCE_GST, SENTENCE_RMC,
-    SENTENCE_VTG, SENTENCE_ZDA, Stamp, StampSource,
+    FixMode, GnssFix, SENTENCE_GGA, SENTENCE_GLL, SENTENCE_GNS, SENTENCE_GSA, SENTENCE_GST, SENTENCE_RMC, SENTENCE_VTG,
+    SENTENCE_ZDA, Stamp, StampSource,
 };
 use navsync_shared::time::{NS_PER_S, civil_from_days, days_from_civil, gps_ns_from_utc_ns};
 use nmea::ParseResult;
 use nmea::sentences::gns::NavigationStatus;
 use nmea::sentences::gsa::GsaMode2;
 use nmea::sentences::rmc::RmcStatusOfFix;
+use nmea::sentences::rmz::PgrmzFixType;
 use nmea::sentences::{FaaMode, FixType};
 
 /// Nanoseconds per day.
@@ -106,15 +107,18 @@ pub struct EpochCounters {
     /// Epochs emitted by [`EpochAssembler::flush`] (subset of `epochs`).
     pub flush_emits: u64,
     /// Time-tagged sentences for an epoch already emitted on the learned ender (the ender
-    /// was wrong; it is forgotten and relearned). The late data start a new epoch.
+    /// was wrong; it is forgotten and relearned). That epoch is reassembled with the late
+    /// data and emitted again (same stamp, next sequence number).
     pub late_sentences: u64,
     /// Epochs closed because a time-tagged sentence repeated with the same (or no) time.
     pub repeats: u64,
+    /// ZDA/GST sentences for an epoch already emitted (date used, sigmas dropped).
+    pub after_epoch: u64,
 }
 
 impl EpochCounters {
     /// The counters with short names for a `Health` report (names ≤ 24 bytes).
-    pub fn named(&self) -> [(&'static str, u64); 12] {
+    pub fn named(&self) -> [(&'static str, u64); 13] {
         [
             ("nmea_sentences_in", self.sentences),
             ("nmea_bad_checksum", self.bad_checksum),
@@ -128,6 +132,7 @@ impl EpochCounters {
             ("nmea_flush_emits", self.flush_emits),
             ("nmea_late_sentences", self.late_sentences),
             ("nmea_repeats", self.repeats),
+            ("nmea_after_epoch", self.after_epoch),
         ]
     }
 }
@@ -143,12 +148,17 @@ enum Kind {
     Gst,
     Zda,
     Gll,
+    /// Garmin proprietary `$PGRMZ`: altitude (feet) and fix dimension.
+    Rmz,
 }
 
 impl Kind {
     /// The type of a 5-character address `TTSSS` (any two-character talker: GP, GN, GL, GA,
     /// GB, BD, GQ, QZ, GI, and Quectel's PQ).
     fn of_address(addr: &[u8]) -> Option<Self> {
+        if addr == b"PGRMZ" {
+            return Some(Self::Rmz);
+        }
         if addr.len() != 5 || !addr[..2].iter().all(u8::is_ascii_alphanumeric) {
             return None;
         }
@@ -165,6 +175,11 @@ impl Kind {
         })
     }
 
+    /// A sentence that reports a fix with the epoch's time tag (GGA, RMC, GNS, GLL).
+    fn is_fix(self) -> bool {
+        matches!(self, Self::Gga | Self::Rmc | Self::Gns | Self::Gll)
+    }
+
     /// The [`GnssFix::sentences`] bit.
     fn bit(self) -> u32 {
         match self {
@@ -176,6 +191,8 @@ impl Kind {
             Self::Gst => SENTENCE_GST,
             Self::Zda => SENTENCE_ZDA,
             Self::Gll => SENTENCE_GLL,
+            // No GnssFix::sentences bit is defined for PGRMZ.
+            Self::Rmz => 0,
         }
     }
 }
@@ -209,7 +226,10 @@ fn check(text: &[u8]) -> Result<Checked<'_>, Reject> {
     if hex.len() != 2 {
         return Err(Reject::NoChecksum);
     }
-    let want = hex_digit(hex[0]).zip(hex_digit(hex[1])).map(|(h, l)| h << 4 | l).ok_or(Reject::NoChecksum)?;
+    let want = hex_digit(hex[0])
+        .zip(hex_digit(hex[1]))
+        .map(|(h, l)| h << 4 | l)
+        .ok_or(Reject::NoChecksum)?;
     let body = &text[1..star];
     if body.iter().fold(0u8, |c, &b| c ^ b) != want {
         return Err(Reject::BadChecksum);
@@ -218,7 +238,11 @@ fn check(text: &[u8]) -> Result<Checked<'_>, Reject> {
     let data = body.get(comma + 1..).unwrap_or(&[]);
     // The text is ASCII (checked above), hence UTF-8.
     let as_str = |b| core::str::from_utf8(b).map_err(|_| Reject::NoChecksum);
-    Ok(Checked { text: as_str(text)?, address: &body[..comma], data: as_str(data)? })
+    Ok(Checked {
+        text: as_str(text)?,
+        address: &body[..comma],
+        data: as_str(data)?,
+    })
 }
 
 fn hex_digit(b: u8) -> Option<u8> {
@@ -253,7 +277,11 @@ fn two_digits(b: &[u8]) -> Option<u32> {
 /// fraction digits beyond nanoseconds are ignored.
 fn parse_tod(s: &str) -> Option<i64> {
     let b = s.as_bytes();
-    let (hh, mm, ss) = (two_digits(b.get(0..2)?)?, two_digits(b.get(2..4)?)?, two_digits(b.get(4..6)?)?);
+    let (hh, mm, ss) = (
+        two_digits(b.get(0..2)?)?,
+        two_digits(b.get(2..4)?)?,
+        two_digits(b.get(4..6)?)?,
+    );
     if hh > 23 || mm > 59 || ss > 60 {
         return None;
     }
@@ -353,10 +381,14 @@ fn parse_lat_lon(data: &str, first: usize) -> Option<(f64, f64)> {
 /// What a sentence says about the fix mode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum ModeHint {
-    /// An explicit mode (GSA, or a sentence flagging the fix invalid).
+    /// A mode the sentence determines: GSA and PGRMZ state it, GGA/GNS imply it (altitude
+    /// with ≥ 4 satellites: 3D), and any sentence flagging its fix invalid means no fix.
     Mode(u8),
-    /// A valid position without dimension information (RMC, GLL): 3D when the epoch has an
-    /// altitude or more than 3 satellites, 2D otherwise.
+    /// A valid position from a sentence that says nothing about the dimension (RMC, GLL).
+    /// It does not override a mode determined in the same epoch; otherwise it is 3D when the
+    /// epoch has an altitude or more than 3 satellites used, else the dimension of the
+    /// receiver's last fix (its dimension does not change because a sentence was left out),
+    /// else 2D. (gpsd: RMC/GLL "probably 3D" rules and its no-downgrade rule.)
     Position,
 }
 
@@ -447,8 +479,9 @@ fn quality_digit(t: FixType) -> u8 {
 }
 
 /// GGA. A position is used when quality is not 0 (an empty quality is "unknown", as gpsd);
-/// mode: 3D with altitude and ≥ 4 satellites, 2D otherwise, no fix with < 3 satellites
-/// (gpsd's rule) or quality 0.
+/// mode: no fix for quality 0 or no position, else 3D with an altitude and ≥ 4 satellites,
+/// else 2D. (gpsd also calls < 3 satellites "no fix"; multi-constellation receivers send one
+/// GGA per system whose count covers that system only, so that rule is not applied.)
 fn decode_gga(d: &str, parsed: Option<&nmea::sentences::GgaData>) -> Update {
     let mut u = Update::new(Kind::Gga);
     u.tod_ns = u.tod(field(d, 1));
@@ -478,14 +511,7 @@ fn decode_gga(d: &str, parsed: Option<&nmea::sentences::GgaData>) -> Update {
     u.lat_lon = Some(lat_lon);
     u.alt_msl_m = u.opt_num(field(d, 9), num);
     u.geoid_sep_m = u.opt_num(field(d, 11), num);
-    let n = sats.unwrap_or(0);
-    let mode = if n < 3 {
-        FixMode::NoFix
-    } else if u.alt_msl_m.is_some() && n >= 4 {
-        FixMode::Fix3d
-    } else {
-        FixMode::Fix2d
-    };
+    let mode = if u.alt_msl_m.is_some() && sats.unwrap_or(0) >= 4 { FixMode::Fix3d } else { FixMode::Fix2d };
     u.mode = Some(ModeHint::Mode(mode as u8));
     u
 }
@@ -501,7 +527,11 @@ fn decode_rmc(d: &str, parsed: Option<&nmea::sentences::RmcData>) -> Update {
             p.lat.zip(p.lon),
             p.faa_mode == Some(FaaMode::DataNotValid),
         ),
-        None => (matches!(field(d, 2), "A" | "D"), parse_lat_lon(d, 3), field(d, 12) == "N"),
+        None => (
+            matches!(field(d, 2), "A" | "D"),
+            parse_lat_lon(d, 3),
+            field(d, 12) == "N",
+        ),
     };
     u.tod_ns = tod;
     if !valid {
@@ -537,7 +567,10 @@ fn decode_gns(d: &str, parsed: Option<&nmea::sentences::GnsData>) -> Update {
         Some(p) => (
             p.lat.zip(p.lon),
             Some(p.nsattelites),
-            matches!(p.nav_status, Some(NavigationStatus::Unsafe | NavigationStatus::NotValidForNavigation)),
+            matches!(
+                p.nav_status,
+                Some(NavigationStatus::Unsafe | NavigationStatus::NotValidForNavigation)
+            ),
         ),
         None => (
             parse_lat_lon(d, 2),
@@ -557,7 +590,11 @@ fn decode_gns(d: &str, parsed: Option<&nmea::sentences::GnsData>) -> Update {
     u.lat_lon = Some(lat_lon);
     u.alt_msl_m = u.opt_num(field(d, 9), num);
     u.geoid_sep_m = u.opt_num(field(d, 10), num);
-    let mode = if u.alt_msl_m.is_some() && sats.unwrap_or(0) > 3 { FixMode::Fix3d } else { FixMode::Fix2d };
+    let mode = if u.alt_msl_m.is_some() && sats.unwrap_or(0) > 3 {
+        FixMode::Fix3d
+    } else {
+        FixMode::Fix2d
+    };
     u.mode = Some(ModeHint::Mode(mode as u8));
     u
 }
@@ -589,7 +626,9 @@ fn decode_gsa(d: &str, talker: u8, parsed: Option<&nmea::sentences::GsaData>) ->
             GsaMode2::Fix2D => 2,
             GsaMode2::Fix3D => 3,
         }),
-        None => int(field(d, 2)).and_then(|m| u8::try_from(m).ok()).filter(|m| (1..=3).contains(m)),
+        None => int(field(d, 2))
+            .and_then(|m| u8::try_from(m).ok())
+            .filter(|m| (1..=3).contains(m)),
     };
     if n < 17 {
         // Runt (e.g. i.Trek's "$GPGSA,A,1,,,,*32"): only the mode, if any.
@@ -602,7 +641,11 @@ fn decode_gsa(d: &str, talker: u8, parsed: Option<&nmea::sentences::GsaData>) ->
     u.pdop = u.opt_num(field(d, dops_at), dop);
     u.hdop = u.opt_num(field(d, dops_at + 1), dop);
     u.vdop = u.opt_num(field(d, dops_at + 2), dop);
-    u.gsa_system = if n == 18 { int(field(d, 18)).map_or(talker, |s| b'0' + (s % 10) as u8) } else { talker };
+    u.gsa_system = if n == 18 {
+        int(field(d, 18)).map_or(talker, |s| b'0' + (s % 10) as u8)
+    } else {
+        talker
+    };
     match parsed {
         Some(p) => {
             for &prn in p.fix_sats_prn.iter() {
@@ -616,6 +659,12 @@ fn decode_gsa(d: &str, talker: u8, parsed: Option<&nmea::sentences::GsaData>) ->
                 }
             }
         }
+    }
+    if u.gsa_prn_count == 0 && u.mode != Some(ModeHint::Mode(FixMode::NoFix as u8)) {
+        // A 2D/3D claim without a single satellite used is not credible (i.Trek sends
+        // "A,2" with no PRNs and DOPs of 50 while losing lock; per-system NMEA 4.11 GSAs
+        // of unused systems look alike): keep its DOPs, not its mode.
+        u.mode = None;
     }
     Some(u)
 }
@@ -645,10 +694,17 @@ fn decode_zda(d: &str, parsed: Option<&nmea::sentences::ZdaData>) -> Update {
     u.aux_tod_ns = u.tod(field(d, 1));
     let (day, month, year) = match parsed {
         Some(p) => (p.day.map(u32::from), p.month.map(u32::from), p.year.map(u32::from)),
-        None => (int(field(d, 2)), int(field(d, 3)), int(field(d, 4)).filter(|_| field(d, 4).len() == 4)),
+        None => (
+            int(field(d, 2)),
+            int(field(d, 3)),
+            int(field(d, 4)).filter(|_| field(d, 4).len() == 4),
+        ),
     };
     if let (Some(day), Some(month), Some(year)) = (day, month, year) {
-        u.date_days = ZDA_YEARS.contains(&year).then(|| valid_days(i64::from(year), month, day)).flatten();
+        u.date_days = ZDA_YEARS
+            .contains(&year)
+            .then(|| valid_days(i64::from(year), month, day))
+            .flatten();
         u.bad_fields += u32::from(u.date_days.is_none());
     }
     if u.aux_tod_ns.is_none() {
@@ -662,7 +718,11 @@ fn decode_gll(d: &str, parsed: Option<&nmea::sentences::GllData>) -> Update {
     let mut u = Update::new(Kind::Gll);
     u.tod_ns = u.tod(field(d, 5));
     let (valid, lat_lon, faa_invalid) = match parsed {
-        Some(p) => (p.valid, p.latitude.zip(p.longitude), p.faa_mode == Some(FaaMode::DataNotValid)),
+        Some(p) => (
+            p.valid,
+            p.latitude.zip(p.longitude),
+            p.faa_mode == Some(FaaMode::DataNotValid),
+        ),
         None => (field(d, 6) == "A", parse_lat_lon(d, 1), field(d, 7) == "N"),
     };
     match lat_lon {
@@ -675,8 +735,35 @@ fn decode_gll(d: &str, parsed: Option<&nmea::sentences::GllData>) -> Update {
     u
 }
 
-/// Decodes a checked sentence of a supported kind. Returns the update and whether the
-/// lenient decoder had to be used; `None` when nothing usable could be decoded.
+/// PGRMZ (Garmin proprietary): 1 altitude in feet (MSL, as gpsd reads it; integer), 2 `f`,
+/// 3 fix dimension 1 none / 2 2D / 3 3D.
+fn decode_rmz(d: &str, parsed: Option<&nmea::sentences::PgrmzData>) -> Update {
+    /// International foot, m.
+    const FOOT_M: f64 = 0.3048;
+    let mut u = Update::new(Kind::Rmz);
+    let (alt_ft, mode) = match parsed {
+        Some(p) => (
+            Some(f64::from(p.altitude)),
+            Some(match p.fix_type {
+                PgrmzFixType::NoFix => 1,
+                PgrmzFixType::TwoDimensional => 2,
+                PgrmzFixType::ThreeDimensional => 3,
+            }),
+        ),
+        None => {
+            let alt = if field(d, 2) == "f" { field(d, 1).trim().parse::<i32>().ok().map(f64::from) } else { None };
+            let mode = int(field(d, 3)).and_then(|m| u8::try_from(m).ok()).filter(|m| (1..=3).contains(m));
+            (alt, mode)
+        }
+    };
+    u.alt_msl_m = alt_ft.map(|ft| ft * FOOT_M);
+    u.mode = mode.map(ModeHint::Mode);
+    u
+}
+
+/// Decodes a checked sentence of a supported kind. Returns the update (possibly empty, e.g.
+/// a VTG whose fields are all blank) and whether the lenient decoder had to be used; `None`
+/// when the sentence is malformed (the crate rejects it and no field could be read).
 fn decode(kind: Kind, s: &Checked<'_>) -> Option<(Update, bool)> {
     let d = s.data;
     // The crate's GSA parser panics on more than 18 PRN fields: never hand it one.
@@ -699,14 +786,18 @@ fn decode(kind: Kind, s: &Checked<'_>) -> Option<(Update, bool)> {
         (Kind::Zda, _) => decode_zda(d, None),
         (Kind::Gll, Some(ParseResult::GLL(p))) => decode_gll(d, Some(p)),
         (Kind::Gll, _) => decode_gll(d, None),
+        (Kind::Rmz, Some(ParseResult::PGRMZ(p))) => decode_rmz(d, Some(p)),
+        (Kind::Rmz, _) => decode_rmz(d, None),
     };
     let nothing = u.tod_ns.is_none()
         && u.aux_tod_ns.is_none()
         && u.mode.is_none()
         && u.speed_mps.is_none()
         && u.track_deg.is_none()
+        && u.alt_msl_m.is_none()
         && u.std_m.iter().all(Option::is_none);
-    (!nothing).then_some((u, lenient))
+    // Unparsable: neither the crate nor the lenient decoder could read anything from it.
+    (!(nothing && lenient)).then_some((u, lenient))
 }
 
 /// Identity of a sentence within a cycle: its address and how many times that address has
@@ -730,18 +821,26 @@ impl Key {
 /// The epoch being assembled.
 #[derive(Debug, Clone, Copy)]
 struct Epoch {
-    /// Some sentence has been merged (the epoch exists).
+    /// The epoch exists (some valid sentence has been seen since the last one was emitted).
     open: bool,
+    /// Some decoded sentence has been merged.
+    has_data: bool,
     fix: GnssFix,
+    /// Time tag, ns since midnight.
     tod_ns: Option<i64>,
+    /// The time tag came from a ZDA (no GGA/RMC/GNS/GLL has tagged the epoch yet).
+    tod_from_zda: bool,
+    /// `fix.mode` was determined by a sentence of this epoch (not implied by RMC/GLL).
+    mode_determined: bool,
     /// Addresses seen in this epoch and their counts.
     seen: [([u8; ADDR_MAX], u8); SEEN_MAX],
     n_seen: usize,
-    last_key: Option<Key>,
+    /// The last sentence that carried fix data.
+    last_data_key: Option<Key>,
     /// (system, PRN) pairs used according to GSA.
     prns: [(u8, u16); PRN_MAX],
     n_prns: usize,
-    /// Satellites used from GGA/GNS (preferred over the GSA count).
+    /// Largest satellites-used count from GGA/GNS.
     sats_reported: Option<u16>,
 }
 
@@ -749,11 +848,14 @@ impl Epoch {
     fn closed() -> Self {
         Self {
             open: false,
+            has_data: false,
             fix: GnssFix::empty(Stamp::host(0, 0, StampSource::Receipt)),
             tod_ns: None,
+            tod_from_zda: false,
+            mode_determined: false,
             seen: [([0; ADDR_MAX], 0); SEEN_MAX],
             n_seen: 0,
-            last_key: None,
+            last_data_key: None,
             prns: [(0, 0); PRN_MAX],
             n_prns: 0,
             sats_reported: None,
@@ -768,8 +870,9 @@ impl Epoch {
     }
 
     /// Times `address` has occurred in this epoch.
-    fn count_of(&self, addr: &[u8; ADDR_MAX]) -> u8 {
-        self.seen[..self.n_seen].iter().find(|(a, _)| a == addr).map_or(0, |s| s.1)
+    fn count_of(&self, address: &[u8]) -> u8 {
+        let addr = Key::addr_of(address);
+        self.seen[..self.n_seen].iter().find(|(a, _)| *a == addr).map_or(0, |s| s.1)
     }
 
     /// Records one more occurrence of `address`; returns its key.
@@ -788,29 +891,65 @@ impl Epoch {
             }
             None => 1,
         };
-        let key = Key { addr, occurrence };
-        self.last_key = Some(key);
-        key
+        Key { addr, occurrence }
     }
 
-    /// Applies a mode claim: later sentences win, except that a 2D claim does not downgrade
-    /// a 3D fix of the same epoch (RMC/GLL after a 3D GGA).
-    fn apply_mode(&mut self, mode: u8) {
-        if !(mode == FixMode::Fix2d as u8 && self.fix.mode == FixMode::Fix3d as u8) {
-            self.fix.mode = mode;
+    /// Satellites used: the larger of the GGA/GNS count and the GSA PRN count (both can
+    /// fall short: GGA per constellation or capped at 12, GSA at 12 PRNs per sentence).
+    fn sats_used(&self) -> Option<u16> {
+        let gsa = (self.n_prns > 0).then_some(self.n_prns as u16);
+        self.sats_reported.max(gsa)
+    }
+
+    fn add_prn(&mut self, entry: (u8, u16)) {
+        if self.n_prns < PRN_MAX && !self.prns[..self.n_prns].contains(&entry) {
+            self.prns[self.n_prns] = entry;
+            self.n_prns += 1;
         }
     }
 
-    fn sats_used(&self) -> Option<u16> {
-        self.sats_reported.or((self.n_prns > 0).then_some(self.n_prns as u16))
+    /// Applies a mode claim (see [`ModeHint`]); `last_dim` is the dimension (2 or 3) of the
+    /// receiver's last fix, 0 when unknown.
+    fn apply_mode(&mut self, hint: ModeHint, last_dim: u8) {
+        match hint {
+            // A 2D claim does not downgrade a 3D one of the same epoch: GGA/GNS report 3D
+            // for an altitude from ≥ 4 satellites, and some receivers (Quectel) send GSA
+            // mode 2 alongside (gpsd keeps 3D too).
+            ModeHint::Mode(m) if m == FixMode::Fix2d as u8 && self.fix.mode == FixMode::Fix3d as u8 => {
+                self.mode_determined = true;
+            }
+            ModeHint::Mode(m) => {
+                self.fix.mode = m;
+                self.mode_determined = true;
+            }
+            ModeHint::Position if !self.mode_determined => {
+                self.fix.mode = if self.fix.alt_msl_m.is_finite() || self.sats_used().unwrap_or(0) > 3 {
+                    FixMode::Fix3d as u8
+                } else if last_dim == FixMode::Fix3d as u8 {
+                    FixMode::Fix3d as u8
+                } else {
+                    FixMode::Fix2d as u8
+                };
+            }
+            ModeHint::Position => {}
+        }
     }
 
-    /// Merges a decoded sentence (later values replace earlier ones).
-    fn merge(&mut self, u: &Update) {
+    /// Merges a decoded sentence (later values replace earlier ones, as in gpsd).
+    fn merge(&mut self, u: &Update, last_dim: u8) {
+        self.has_data = true;
         let f = &mut self.fix;
         f.sentences |= u.kind.bit();
-        if let Some(t) = u.tod_ns {
-            self.tod_ns = Some(t);
+        match (u.tod_ns, u.aux_tod_ns) {
+            (Some(t), _) => {
+                self.tod_ns = Some(t);
+                self.tod_from_zda = false;
+            }
+            (None, Some(z)) if u.kind == Kind::Zda && self.tod_ns.is_none() => {
+                self.tod_ns = Some(z);
+                self.tod_from_zda = true;
+            }
+            _ => {}
         }
         if let Some((lat, lon)) = u.lat_lon {
             f.lat_deg = lat;
@@ -823,6 +962,7 @@ impl Epoch {
         set(&mut f.hdop, u.hdop);
         set(&mut f.vdop, u.vdop);
         set(&mut f.pdop, u.pdop);
+        // GST refers to the fix at its own time: use it only for that epoch.
         if u.kind != Kind::Gst || u.aux_tod_ns.is_none() || u.aux_tod_ns == self.tod_ns {
             set(&mut f.std_lat_m, u.std_m[0]);
             set(&mut f.std_lon_m, u.std_m[1]);
@@ -832,23 +972,57 @@ impl Epoch {
             f.quality = q;
         }
         if let Some(n) = u.sats_used {
-            self.sats_reported = Some(n);
+            self.sats_reported = self.sats_reported.max(Some(n));
         }
         for &prn in &u.gsa_prns[..u.gsa_prn_count] {
-            let entry = (u.gsa_system, prn);
-            if self.n_prns < PRN_MAX && !self.prns[..self.n_prns].contains(&entry) {
-                self.prns[self.n_prns] = entry;
-                self.n_prns += 1;
+            self.add_prn((u.gsa_system, prn));
+        }
+        if let Some(hint) = u.mode {
+            self.apply_mode(hint, last_dim);
+        }
+    }
+
+    /// Merges an epoch assembled later for the same time (data that arrived after this epoch
+    /// had been emitted on a wrongly learned cycle ender).
+    fn absorb(&mut self, later: &Epoch) {
+        if !later.has_data {
+            return;
+        }
+        self.has_data = true;
+        let (f, g) = (&mut self.fix, &later.fix);
+        f.sentences |= g.sentences;
+        if g.lat_deg.is_finite() && g.lon_deg.is_finite() {
+            f.lat_deg = g.lat_deg;
+            f.lon_deg = g.lon_deg;
+        }
+        for (dst, src) in [
+            (&mut f.alt_msl_m, g.alt_msl_m),
+            (&mut f.geoid_sep_m, g.geoid_sep_m),
+            (&mut f.speed_mps, g.speed_mps),
+            (&mut f.track_deg, g.track_deg),
+            (&mut f.hdop, g.hdop),
+            (&mut f.vdop, g.vdop),
+            (&mut f.pdop, g.pdop),
+            (&mut f.std_lat_m, g.std_lat_m),
+            (&mut f.std_lon_m, g.std_lon_m),
+            (&mut f.std_alt_m, g.std_alt_m),
+        ] {
+            if src.is_finite() {
+                *dst = src;
             }
         }
-        match u.mode {
-            Some(ModeHint::Mode(m)) => self.apply_mode(m),
-            Some(ModeHint::Position) => {
-                let three_d = self.fix.alt_msl_m.is_finite() || self.sats_used().unwrap_or(0) > 3;
-                self.apply_mode(if three_d { FixMode::Fix3d as u8 } else { FixMode::Fix2d as u8 });
-            }
-            None => {}
+        if g.quality != u8::MAX {
+            f.quality = g.quality;
         }
+        if later.mode_determined || (!self.mode_determined && g.mode != FixMode::Unknown as u8) {
+            f.mode = g.mode;
+            self.mode_determined |= later.mode_determined;
+        }
+        self.sats_reported = self.sats_reported.max(later.sats_reported);
+        for &entry in &later.prns[..later.n_prns] {
+            self.add_prn(entry);
+        }
+        self.last_data_key = later.last_data_key.or(self.last_data_key);
     }
 }
 
@@ -880,13 +1054,30 @@ impl DateAnchor {
     }
 }
 
+/// How an epoch came to be emitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Close {
+    /// A sentence with another time tag (or a repeated one) started the next epoch.
+    NextEpoch,
+    /// The learned last sentence of the cycle arrived.
+    Ender,
+    /// [`EpochAssembler::flush`].
+    Flush,
+}
+
 /// Sentences → [`GnssFix`] epochs. Pure state machine: no I/O, no clock, no allocation.
 #[derive(Debug, Clone)]
 pub struct EpochAssembler {
     cur: Epoch,
-    /// Time tag of the last epoch emitted on the learned ender.
-    ender_emitted_tod: Option<i64>,
+    /// The last epoch emitted on the learned ender, kept in case late data for it arrive.
+    prev: Option<Epoch>,
     date: Option<DateAnchor>,
+    /// Dimension (2 or 3) of the last emitted fix, 0 after a no-fix epoch or none yet.
+    last_dim: u8,
+    /// Time tag of the last emitted epoch.
+    last_emitted_tod: Option<i64>,
+    /// Mode of the last emitted epoch.
+    last_mode: u8,
     ender: Option<Key>,
     candidate: Option<Key>,
     votes: u8,
@@ -905,8 +1096,11 @@ impl EpochAssembler {
     pub fn new() -> Self {
         Self {
             cur: Epoch::closed(),
-            ender_emitted_tod: None,
+            prev: None,
             date: None,
+            last_dim: 0,
+            last_emitted_tod: None,
+            last_mode: FixMode::Unknown as u8,
             ender: None,
             candidate: None,
             votes: 0,
@@ -920,8 +1114,8 @@ impl EpochAssembler {
         &self.counters
     }
 
-    /// The learned last sentence of the receiver's cycle, e.g. `("GPGSV", 3)` for the third
-    /// GPGSV of a cycle; `None` while not (or no longer) known.
+    /// The learned last data-carrying sentence of the receiver's cycle and its occurrence
+    /// within the cycle, e.g. `("GPGSA", 2)`; `None` while not (or no longer) known.
     pub fn cycle_ender(&self) -> Option<(&str, u8)> {
         let k = self.ender.as_ref()?;
         let len = k.addr.iter().position(|&b| b == 0).unwrap_or(ADDR_MAX);
@@ -930,7 +1124,7 @@ impl EpochAssembler {
 
     /// Consumes one sentence (text from `$` to before CR/LF; `host_ns` the host time of its
     /// first byte) and calls `out` for every epoch it completes (0, 1 or 2: the previous
-    /// epoch on a new time tag, this one if the sentence is the learned cycle ender).
+    /// epoch when this sentence starts a new one, this one if it is the cycle ender).
     pub fn push(&mut self, text: &[u8], host_ns: i64, out: &mut impl FnMut(&GnssFix)) {
         self.counters.sentences += 1;
         let s = match check(text) {
@@ -955,61 +1149,111 @@ impl EpochAssembler {
                 None
             }
         };
-        if let Some(u) = &update {
-            self.route(u, s.address, out);
-            if let (Some(days), Some(tod)) = (u.date_days, u.tod_ns.or(u.aux_tod_ns)) {
-                self.date = Some(DateAnchor { days, tod_ns: tod });
+        let Some(u) = update else {
+            // A sentence without fix data (GSV, TXT, proprietary) is only counted in the open
+            // epoch; it neither opens an epoch nor can become the learned cycle ender, so an
+            // epoch is emitted on its last data sentence without waiting for trailing ones.
+            if self.cur.open {
+                self.cur.note(s.address);
             }
+            return;
+        };
+        self.route(&u, s.address, out);
+        if let (Some(days), Some(tod)) = (u.date_days, u.tod_ns.or(u.aux_tod_ns)) {
+            self.date = Some(DateAnchor { days, tod_ns: tod });
         }
         if !self.cur.open {
-            if update.is_none() {
-                // Data-less sentences between epochs do not start one.
+            if u.tod_ns.is_none() && u.aux_tod_ns.is_some() && u.aux_tod_ns == self.last_emitted_tod {
+                // A ZDA or GST for the epoch just emitted (sent after the cycle's usual last
+                // sentence): its date is taken, but it does not start an epoch of its own.
+                self.counters.after_epoch += 1;
                 return;
             }
             self.cur = Epoch::start(host_ns);
         }
-        if let Some(u) = &update {
-            self.cur.merge(u);
-        }
+        self.cur.merge(&u, self.last_dim);
         let key = self.cur.note(s.address);
+        self.cur.last_data_key = Some(key);
         if self.ender == Some(key) {
-            self.counters.ender_emits += 1;
-            self.ender_emitted_tod = self.cur.tod_ns;
-            self.emit(out);
+            if has_fix(self.cur.fix.mode) == has_fix(self.last_mode) {
+                self.emit(Close::Ender, out);
+            } else {
+                // Receivers change their cycle when they gain or lose the fix (other
+                // sentences, another order): the learned ender no longer applies.
+                self.forget_ender();
+            }
         }
     }
 
-    /// Emits the epoch being assembled, if any (call when the line has been idle for longer
-    /// than the gap between sentences of one burst).
+    /// Emits the epoch being assembled, if any. The live driver calls this when the line has
+    /// been idle for longer than the gap between sentences of one burst (a read timeout).
     pub fn flush(&mut self, out: &mut impl FnMut(&GnssFix)) {
-        if self.cur.open && self.emit(out) {
-            self.counters.flush_emits += 1;
+        if self.cur.open {
+            self.emit(Close::Flush, out);
         }
     }
 
     /// Decides, before a decoded sentence is merged, whether it closes the open epoch.
     fn route(&mut self, u: &Update, address: &[u8], out: &mut impl FnMut(&GnssFix)) {
-        let Some(t) = u.tod_ns else { return };
-        if !self.cur.open || self.cur.tod_ns.is_none() {
-            if self.ender_emitted_tod == Some(t) {
-                // Data for the epoch just emitted on the ender: the ender was wrong.
-                self.counters.late_sentences += 1;
-                self.forget_ender();
+        if u.kind.is_fix() {
+            self.route_fix(u.tod_ns, address, out);
+        } else if let (Kind::Zda, Some(z)) = (u.kind, u.aux_tod_ns) {
+            // A ZDA with another time closes an epoch that only a ZDA has tagged.
+            if self.cur.open && self.cur.tod_from_zda && self.cur.tod_ns != Some(z) {
+                self.emit(Close::NextEpoch, out);
             }
-            return;
-        }
-        if self.cur.tod_ns != Some(t) {
-            if let Some(last) = self.cur.last_key {
-                self.learn(last);
-            }
-            self.emit(out);
-        } else if self.cur.count_of(&Key::addr_of(address)) > 0 {
-            self.counters.repeats += 1;
-            self.emit(out);
         }
     }
 
-    /// One vote for `key` as the cycle ender (it was last before a time-tag change).
+    /// Routing of a fix sentence (GGA, RMC, GNS, GLL) with time tag `t` (if any).
+    fn route_fix(&mut self, t: Option<i64>, address: &[u8], out: &mut impl FnMut(&GnssFix)) {
+        if self.cur.open {
+            match (self.cur.tod_ns, t) {
+                (Some(c), Some(t)) if c != t => {
+                    if !self.cur.tod_from_zda {
+                        if let Some(k) = self.cur.last_data_key {
+                            self.learn(k);
+                        }
+                    }
+                    self.emit(Close::NextEpoch, out);
+                }
+                // The same fix sentence again without a new time: the receiver started a new
+                // cycle with the same (or no) time tag.
+                _ if self.cur.count_of(address) > 0 => {
+                    self.counters.repeats += 1;
+                    self.emit(Close::NextEpoch, out);
+                }
+                _ => {}
+            }
+        }
+        let untagged = !self.cur.open || self.cur.tod_ns.is_none();
+        if t.is_some() && untagged && self.prev.as_ref().and_then(|p| p.tod_ns) == t {
+            self.reopen();
+        }
+    }
+
+    /// Data for the epoch last emitted on the learned ender: that sentence was not the
+    /// cycle's last after all. Forget it, and continue assembling that epoch (with whatever
+    /// arrived in between) so that it is emitted again, complete, with the same stamp.
+    fn reopen(&mut self) {
+        self.counters.late_sentences += 1;
+        self.forget_ender();
+        if let Some(mut prev) = self.prev.take() {
+            if self.cur.open {
+                prev.absorb(&self.cur);
+            }
+            self.cur = prev;
+        }
+    }
+
+    fn forget_ender(&mut self) {
+        self.ender = None;
+        self.candidate = None;
+        self.votes = 0;
+    }
+
+    /// One vote for `key` as the cycle ender (it was the last data sentence before a time-tag
+    /// change); trusted after [`ENDER_VOTES`] consecutive votes.
     fn learn(&mut self, key: Key) {
         if self.candidate == Some(key) {
             self.votes = self.votes.saturating_add(1);
@@ -1022,40 +1266,50 @@ impl EpochAssembler {
         }
     }
 
-    fn forget_ender(&mut self) {
-        self.ender = None;
-        self.candidate = None;
-        self.votes = 0;
-        self.ender_emitted_tod = None;
-    }
-
-    /// Completes the open epoch and hands it to `out` (skipped when it holds no fix data).
-    /// Returns whether a fix was emitted.
-    fn emit(&mut self, out: &mut impl FnMut(&GnssFix)) -> bool {
-        let mut e = core::mem::replace(&mut self.cur, Epoch::closed());
-        if e.fix.sentences == 0 {
-            return false;
+    /// Completes the open epoch and hands it to `out` (epochs without fix data are dropped).
+    fn emit(&mut self, how: Close, out: &mut impl FnMut(&GnssFix)) {
+        let e = core::mem::replace(&mut self.cur, Epoch::closed());
+        if !e.has_data {
+            return;
         }
+        self.prev = (how == Close::Ender).then_some(e);
+        let mut fix = e.fix;
         if let Some(n) = e.sats_used() {
-            e.fix.sats_used = n;
+            fix.sats_used = n;
         }
         if let Some(tod) = e.tod_ns {
-            e.fix.tod_ns = tod;
+            fix.tod_ns = tod;
             if let Some(anchor) = self.date {
                 let days = anchor.days_at(tod);
-                e.fix.utc_ns = days * NS_PER_DAY + tod;
-                e.fix.gps_ns = gps_ns_from_utc_ns(e.fix.utc_ns);
+                fix.utc_ns = days * NS_PER_DAY + tod;
+                fix.gps_ns = gps_ns_from_utc_ns(fix.utc_ns);
                 // Carry the date forward from this epoch (keeps rollovers monotonic).
                 self.date = Some(DateAnchor { days, tod_ns: tod });
             }
         }
-        velocity(&mut e.fix);
-        e.fix.stamp = Stamp::host(e.fix.stamp.host_ns, self.seq, StampSource::Receipt);
+        velocity(&mut fix);
+        self.last_emitted_tod = e.tod_ns;
+        self.last_mode = fix.mode;
+        self.last_dim = match fix.mode {
+            m if m == FixMode::Fix2d as u8 || m == FixMode::Fix3d as u8 => m,
+            m if m == FixMode::NoFix as u8 => 0,
+            _ => self.last_dim,
+        };
+        fix.stamp = Stamp::host(fix.stamp.host_ns, self.seq, StampSource::Receipt);
         self.seq += 1;
         self.counters.epochs += 1;
-        out(&e.fix);
-        true
+        match how {
+            Close::Ender => self.counters.ender_emits += 1,
+            Close::Flush => self.counters.flush_emits += 1,
+            Close::NextEpoch => {}
+        }
+        out(&fix);
     }
+}
+
+/// A 2D or 3D fix.
+fn has_fix(mode: u8) -> bool {
+    mode == FixMode::Fix2d as u8 || mode == FixMode::Fix3d as u8
 }
 
 /// North and east velocity from speed over ground and track (0 when the speed is 0, even if

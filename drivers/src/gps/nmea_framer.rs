@@ -183,7 +183,10 @@ impl LineFramer {
         self.state = State::Hunt;
         let len = std::mem::take(&mut self.len);
         self.counters.sentences += 1;
-        out(Sentence { text: &self.buf[..len], host_ns: self.start_ns });
+        out(Sentence {
+            text: &self.buf[..len],
+            host_ns: self.start_ns,
+        });
     }
 }
 

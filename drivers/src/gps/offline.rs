@@ -2,7 +2,8 @@
 //!
 //! Used by `navsync nmea FILE|-` (one JSON object per epoch) and by the gpsd conformance
 //! test. Lines starting with `#` are gpsd log comments (receiver name, location), not
-//! receiver output, and are skipped.
+//! receiver output, and are skipped; a `# Delay-Cookie: <c> …` header makes `<c>` a read
+//! boundary rather than data, as gpsd's test player `gpsfake` treats it.
 
 use navsync_shared::samples::{FixMode, GnssFix};
 use navsync_shared::time::format_rfc3339_ms;
@@ -26,8 +27,9 @@ pub struct CaptureCounters {
     pub comment_lines: u64,
 }
 
-/// Decodes a whole capture: every line not starting with `#` goes through
-/// [`LineFramer`] and [`EpochAssembler`] as one read, stamped as if the capture had arrived
+/// Decodes a whole capture: every line not starting with `#` (split at the delay cookie, if
+/// the log declares one) goes through [`LineFramer`] and [`EpochAssembler`] as one read,
+/// stamped as if the capture had arrived
 /// at [`REPLAY_NS_PER_BYTE`] from host time 0; the assembler is flushed at the end, as the
 /// live driver does when the line goes idle.
 pub fn decode_capture(bytes: &[u8]) -> (Vec<GnssFix>, CaptureCounters) {
@@ -35,21 +37,43 @@ pub fn decode_capture(bytes: &[u8]) -> (Vec<GnssFix>, CaptureCounters) {
     let mut assembler = EpochAssembler::new();
     let mut fixes = Vec::new();
     let mut comment_lines = 0;
+    let mut cookie = None;
     let mut offset = 0usize;
     for line in bytes.split_inclusive(|&b| b == b'\n') {
-        offset += line.len();
         if line.first() == Some(&b'#') {
+            offset += line.len();
             comment_lines += 1;
+            cookie = cookie.or_else(|| delay_cookie(line));
             continue;
         }
-        let read_ns = i64::try_from(offset).unwrap_or(i64::MAX).saturating_mul(REPLAY_NS_PER_BYTE);
-        framer.push(line, read_ns, REPLAY_NS_PER_BYTE, &mut |s| {
-            assembler.push(s.text, s.host_ns, &mut |fix| fixes.push(*fix));
-        });
+        // Between delay cookies gpsfake writes separately: replay them as separate reads.
+        for chunk in line.split(|&b| Some(b) == cookie) {
+            offset += chunk.len();
+            let read_ns = i64::try_from(offset).unwrap_or(i64::MAX).saturating_mul(REPLAY_NS_PER_BYTE);
+            framer.push(chunk, read_ns, REPLAY_NS_PER_BYTE, &mut |s| {
+                assembler.push(s.text, s.host_ns, &mut |fix| fixes.push(*fix));
+            });
+        }
     }
     assembler.flush(&mut |fix| fixes.push(*fix));
-    let counters = CaptureCounters { framer: *framer.counters(), epochs: *assembler.counters(), comment_lines };
+    let counters = CaptureCounters {
+        framer: *framer.counters(),
+        epochs: *assembler.counters(),
+        comment_lines,
+    };
     (fixes, counters)
+}
+
+/// The write-boundary character declared by a gpsd log header `# Delay-Cookie: <c> <s>`:
+/// gpsfake splits the following data at `<c>` (dropping it) and pauses `<s>` seconds between
+/// the pieces, so `<c>` is not receiver output.
+fn delay_cookie(comment: &[u8]) -> Option<u8> {
+    let text = core::str::from_utf8(comment).ok()?;
+    let rest = text.trim_start_matches('#').trim_start().strip_prefix("Delay-Cookie:")?;
+    match rest.trim_start().as_bytes() {
+        [c, ..] if !c.is_ascii_whitespace() => Some(*c),
+        _ => None,
+    }
 }
 
 /// A float as JSON, `null` when not known (NaN).
@@ -63,16 +87,28 @@ fn num(v: f64) -> Value {
 /// such field.
 pub fn epoch_json(fix: &GnssFix) -> Value {
     let mut m = Map::new();
-    let time = if fix.utc_ns == i64::MIN { Value::Null } else { Value::String(format_rfc3339_ms(fix.utc_ns)) };
+    let time = if fix.utc_ns == i64::MIN {
+        Value::Null
+    } else {
+        Value::String(format_rfc3339_ms(fix.utc_ns))
+    };
     m.insert("time".into(), time);
     m.insert("lat".into(), num(fix.lat_deg));
     m.insert("lon".into(), num(fix.lon_deg));
     m.insert("alt_msl".into(), num(fix.alt_msl_m));
     m.insert("speed_mps".into(), num(fix.speed_mps));
     m.insert("track_deg".into(), num(fix.track_deg));
-    let mode = if fix.mode <= FixMode::Fix3d as u8 { fix.mode } else { FixMode::Unknown as u8 };
+    let mode = if fix.mode <= FixMode::Fix3d as u8 {
+        fix.mode
+    } else {
+        FixMode::Unknown as u8
+    };
     m.insert("mode".into(), Value::from(mode));
-    let sats = if fix.sats_used == u16::MAX { Value::Null } else { Value::from(fix.sats_used) };
+    let sats = if fix.sats_used == u16::MAX {
+        Value::Null
+    } else {
+        Value::from(fix.sats_used)
+    };
     m.insert("sats_used".into(), sats);
     m.insert("hdop".into(), num(fix.hdop));
     Value::Object(m)
@@ -98,6 +134,16 @@ mod tests {
         assert!((j["alt_msl"].as_f64().unwrap_or(0.0) - 545.4).abs() < 1e-9);
         // First byte at offset 13 of a 92-byte file, read completing at its end.
         assert_eq!(fixes[0].stamp.host_ns, 13 * REPLAY_NS_PER_BYTE);
+    }
+
+    #[test]
+    fn delay_cookie_splits_reads_and_is_not_data() {
+        let cap = b"# Delay-Cookie: | 0.01\n$GPGGA,|12351|9,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\n";
+        let (fixes, c) = decode_capture(cap);
+        assert_eq!(c.epochs.bad_checksum, 0);
+        assert_eq!(fixes.len(), 1);
+        assert_eq!(fixes[0].alt_msl_m, 545.4);
+        assert_eq!(delay_cookie(b"# Date: 2013-11-03\n"), None);
     }
 
     #[test]
