@@ -1,0 +1,129 @@
+//! One simulated IMU: its sample grid, true averaged outputs, sensor errors and host stamps.
+//!
+//! Sample k (seq = k) carries the sensor-frame averages over [t_k − T, t_k] of scenario time,
+//! t_k = phase + (k + 1)·T, T = 1/rate (increment / T, with the intervals tiling time
+//! exactly: sample k's interval starts at t_{k−1} as computed for sample k − 1), and is
+//! stamped at host(t_k + Td) + N(0, σ²): stamps
+//! are late by the IMU's offset Td (its delay relative to true time; IMU 0 is the reference
+//! with Td = 0 by default). A stamp is never earlier than the previous one of the same IMU.
+//! Producing a sample does not allocate.
+
+use nalgebra::Vector3;
+use navsync_shared::samples::{IMU_FLAG_SATURATED, ImuSample, Stamp, StampSource};
+
+use super::imu_errors::ImuErrorState;
+use super::inverse_mechanization::{ImuMount, SAMPLE_RULE, increments};
+use super::oscillator::Oscillator;
+use super::rng::{Rng, streams};
+use super::scenario::ResolvedImu;
+use super::trajectory::Trajectory;
+
+/// One IMU's generator state.
+#[derive(Debug, Clone)]
+pub struct ImuStream {
+    index: usize,
+    id: [u8; 8],
+    cfg: ResolvedImu,
+    period_s: f64,
+    mount: ImuMount,
+    errors: ImuErrorState,
+    error_rng: Rng,
+    stamp_rng: Rng,
+    k: u64,
+    end_s: f64,
+    last_host_ns: i64,
+}
+
+impl ImuStream {
+    /// IMU `index` of a world with seed `seed` lasting `duration_s`.
+    pub fn new(index: usize, cfg: ResolvedImu, seed: u64, duration_s: f64) -> Self {
+        let period_s = 1.0 / cfg.rate_hz;
+        let mut error_rng = Rng::stream(seed, streams::IMU_ERRORS + index as u64);
+        let errors = ImuErrorState::new(&cfg.preset.spec(), period_s, &mut error_rng);
+        Self {
+            index,
+            id: imu_id(index),
+            cfg,
+            period_s,
+            mount: ImuMount::new(cfg.mount_rpy_rad, cfg.lever_arm_m),
+            errors,
+            error_rng,
+            stamp_rng: Rng::stream(seed, streams::IMU_STAMPS + index as u64),
+            k: 0,
+            end_s: duration_s,
+            last_host_ns: i64::MIN,
+        }
+    }
+
+    /// Index of this IMU in the array.
+    pub fn index(&self) -> usize {
+        self.index
+    }
+
+    /// The resolved configuration.
+    pub fn config(&self) -> &ResolvedImu {
+        &self.cfg
+    }
+
+    /// The drawn constant errors and current bias state (for evaluation).
+    pub fn errors(&self) -> &ImuErrorState {
+        &self.errors
+    }
+
+    /// The mount (rotation and lever arm).
+    pub fn mount(&self) -> &ImuMount {
+        &self.mount
+    }
+
+    /// Scenario time of the end of sample `k`'s interval, s.
+    pub fn sample_time_s(&self, k: u64) -> f64 {
+        self.cfg.phase_s + (k + 1) as f64 * self.period_s
+    }
+
+    /// The next sample, `None` once its interval would end after the scenario.
+    pub fn next_sample(&mut self, traj: &Trajectory, osc: &Oscillator) -> Option<ImuSample> {
+        let k = self.k;
+        let t = self.sample_time_s(k);
+        if t > self.end_s {
+            return None;
+        }
+        self.k += 1;
+        let t_start = if k == 0 {
+            self.cfg.phase_s
+        } else {
+            self.sample_time_s(k - 1)
+        };
+        let (dth, dv) = increments(traj, &self.mount, t_start, t, SAMPLE_RULE);
+        let (w, f) = (dth.map(|x| x / self.period_s), dv.map(|x| x / self.period_s));
+        let (gyro, sat_g) = self.errors.gyro.apply(w, &mut self.error_rng);
+        let (accel, sat_a) = self.errors.accel.apply(f, &mut self.error_rng);
+        let jitter_ns = (self.stamp_rng.gaussian(self.cfg.stamp_jitter_s) * 1e9).round() as i64;
+        let host_ns = (osc.host_ns_at_tau(t + self.cfg.offset_s) + jitter_ns).max(self.last_host_ns);
+        self.last_host_ns = host_ns;
+        Some(ImuSample {
+            stamp: Stamp::host(host_ns, k, StampSource::Simulated),
+            gyro_rps: gyro,
+            accel_mps2: accel,
+            dt_s: self.period_s,
+            temperature_c: self.errors.temperature_c,
+            imu_id: self.id,
+            flags: if sat_g || sat_a { IMU_FLAG_SATURATED } else { 0 },
+            reserved: 0,
+        })
+    }
+
+    /// Lever arm of this IMU, body axes, m.
+    pub fn lever_arm_b(&self) -> Vector3<f64> {
+        self.mount.lever_arm_b
+    }
+}
+
+/// The NUL-padded ASCII id of IMU `index` ("0", "1", …).
+pub fn imu_id(index: usize) -> [u8; 8] {
+    let mut id = [0u8; 8];
+    let text = index.to_string();
+    for (d, s) in id.iter_mut().zip(text.bytes()) {
+        *d = s;
+    }
+    id
+}

@@ -1,0 +1,354 @@
+//! True IMU outputs by inverse strapdown mechanization in the local-level NED frame.
+//!
+//! Given the exact kinematics ([`Kinematics`]) the inertial angular rate and the specific
+//! force of the body frame follow from inverting the NED mechanization equations of Groves
+//! (2013) §5.4 (the same conventions as KF-GINS `insmech.cpp`):
+//!
+//! ```text
+//! attitude (§5.4.1, Ċ_b^n = C_b^n Ω_ib^b − (Ω_ie^n + Ω_en^n) C_b^n), solved for ω_ib^b:
+//!     ω_ib^b = ω_nb^b + C_n^b (ω_ie^n + ω_en^n)
+//! velocity (eq. 5.54, v̇^n = C_b^n f_ib^b + g^n − (Ω_en^n + 2Ω_ie^n) v^n), solved for f_ib^b:
+//!     f_ib^b = C_n^b ( v̇^n + (2ω_ie^n + ω_en^n) × v^n − g^n ),   g^n = [0, 0, γ(φ, h)]
+//! ```
+//!
+//! with ω_ie^n (eq. 2.123), ω_en^n (eq. 5.44) and the normal gravity γ of
+//! [`navsync_shared::earth`]. A sensor at lever arm r (body axes) from the body origin feels
+//! f_ib^b + ω̇_ib^b × r + ω_ib^b × (ω_ib^b × r) (rigid-body kinematics, Groves §2.5.5; the gravity
+//! gradient over r is neglected: < 2e-7 m/s² for r < 0.1 m), expressed in its own axes by the
+//! mounting rotation C_b^s.
+//!
+//! An `ImuSample` reports averages over its interval [t − T, t]: ∫ω dt/T and ∫f dt/T of the
+//! sensor-frame quantities (the increments an integrating IMU outputs, before coning and
+//! sculling compensation), computed here by Gauss–Legendre quadrature on each smooth piece of
+//! the interval (split at segment boundaries).
+
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use navsync_shared::earth;
+
+use super::quadrature::{self, Rule};
+use super::trajectory::{Kinematics, Trajectory, geodetic_rates};
+
+/// Quadrature rule of the sample averages (see the tests for its measured error).
+pub const SAMPLE_RULE: Rule = quadrature::GL5;
+
+/// Inertial quantities of the body frame at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InertialState {
+    /// Earth rate in NED, ω_ie^n, rad/s.
+    pub omega_ie_n: Vector3<f64>,
+    /// Transport rate, ω_en^n, rad/s.
+    pub omega_en_n: Vector3<f64>,
+    /// Normal gravity γ(φ, h), m/s² (g^n = [0, 0, γ]).
+    pub gravity_mps2: f64,
+    /// Angular rate of the body w.r.t. inertial space in body axes, ω_ib^b, rad/s.
+    pub omega_ib_b: Vector3<f64>,
+    /// Time derivative of ω_ib^b (body axes), rad/s².
+    pub omega_ib_b_dot: Vector3<f64>,
+    /// Specific force at the body origin, body axes, f_ib^b, m/s².
+    pub f_ib_b: Vector3<f64>,
+}
+
+/// Inverse mechanization at one instant (see the module documentation for the equations).
+pub fn inertial_state(k: &Kinematics) -> InertialState {
+    let (lat, h) = (k.lat_rad, k.height_m);
+    let v = &k.v_ned;
+    let omega_ie_n = Vector3::from(earth::omega_ie_n(lat));
+    let omega_en_n = Vector3::from(earth::omega_en_n(lat, h, [v[0], v[1], v[2]]));
+    let gravity = earth::normal_gravity(lat, h);
+    let c_n_b = k.c_b_n.transpose();
+    let w_in_n = omega_ie_n + omega_en_n;
+    let omega_ib_b = k.omega_nb_b + c_n_b * w_in_n;
+    // d/dt (C_n^b w) = −ω_nb^b × (C_n^b w) + C_n^b ẇ, since Ċ_n^b = −[ω_nb^b ×] C_n^b.
+    let w_dot = earth_rates_dot(k);
+    let omega_ib_b_dot = k.omega_nb_b_dot - k.omega_nb_b.cross(&(c_n_b * w_in_n)) + c_n_b * w_dot;
+    let coriolis = (2.0 * omega_ie_n + omega_en_n).cross(v);
+    let f_n = k.a_ned + coriolis - Vector3::new(0.0, 0.0, gravity);
+    InertialState {
+        omega_ie_n,
+        omega_en_n,
+        gravity_mps2: gravity,
+        omega_ib_b,
+        omega_ib_b_dot,
+        f_ib_b: c_n_b * f_n,
+    }
+}
+
+/// Time derivative of ω_ie^n + ω_en^n along the trajectory, rad/s², from the analytic
+/// derivatives of Groves eq. 2.123 and 5.44 with dR_N/dφ = R_N e² sinφ cosφ / (1 − e² sin²φ) and
+/// dR_M/dφ = 3 R_M e² sinφ cosφ / (1 − e² sin²φ) (from eq. 2.105–2.106).
+pub fn earth_rates_dot(k: &Kinematics) -> Vector3<f64> {
+    let (lat, h) = (k.lat_rad, k.height_m);
+    let (v, a) = (&k.v_ned, &k.a_ned);
+    let [lat_dot, _, h_dot] = geodetic_rates(lat, h, v);
+    let (s, c) = lat.sin_cos();
+    let (rm, rn) = earth::radii(lat);
+    let w2 = 1.0 - earth::WGS84_E2 * s * s;
+    let drn = rn * earth::WGS84_E2 * s * c / w2;
+    let drm = 3.0 * rm * earth::WGS84_E2 * s * c / w2;
+    let (an, bm) = (rn + h, rm + h);
+    let (an_dot, bm_dot) = (drn * lat_dot + h_dot, drm * lat_dot + h_dot);
+    let ie_dot = Vector3::new(-s, 0.0, -c) * (earth::OMEGA_IE * lat_dot);
+    let tan = s / c;
+    let en_dot = Vector3::new(
+        a[1] / an - v[1] * an_dot / (an * an),
+        -a[0] / bm + v[0] * bm_dot / (bm * bm),
+        -(a[1] * tan / an + v[1] * lat_dot / (c * c * an) - v[1] * tan * an_dot / (an * an)),
+    );
+    ie_dot + en_dot
+}
+
+/// How one IMU is attached to the body.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuMount {
+    /// Body-to-sensor rotation C_b^s (transpose of the mounting C_s^b).
+    pub c_b_s: Matrix3<f64>,
+    /// Lever arm from the body origin to the sensor, body axes, m.
+    pub lever_arm_b: Vector3<f64>,
+}
+
+impl ImuMount {
+    /// Sensor aligned with the body axes at the body origin.
+    pub fn identity() -> Self {
+        Self {
+            c_b_s: Matrix3::identity(),
+            lever_arm_b: Vector3::zeros(),
+        }
+    }
+
+    /// Mount from the sensor's roll, pitch, yaw w.r.t. the body (C_s^b = R_z R_y R_x), rad,
+    /// and its lever arm, m.
+    pub fn new(rpy_rad: [f64; 3], lever_arm_m: [f64; 3]) -> Self {
+        let c_s_b = UnitQuaternion::from_euler_angles(rpy_rad[0], rpy_rad[1], rpy_rad[2]).to_rotation_matrix();
+        Self {
+            c_b_s: c_s_b.matrix().transpose(),
+            lever_arm_b: Vector3::from(lever_arm_m),
+        }
+    }
+
+    /// Instantaneous true sensor outputs (ω_is^s rad/s, f^s m/s²).
+    pub fn sensor_outputs(&self, s: &InertialState) -> (Vector3<f64>, Vector3<f64>) {
+        let w = &s.omega_ib_b;
+        let r = &self.lever_arm_b;
+        let f = s.f_ib_b + s.omega_ib_b_dot.cross(r) + w.cross(&w.cross(r));
+        (self.c_b_s * w, self.c_b_s * f)
+    }
+}
+
+/// Average sensor outputs over [t_end − period, t_end] of scenario time: (∫ω_is^s dt/T rad/s,
+/// ∫f^s dt/T m/s²), by [`SAMPLE_RULE`] on each piece between segment boundaries.
+pub fn averaged_outputs(traj: &Trajectory, mount: &ImuMount, t_end: f64, period: f64) -> ([f64; 3], [f64; 3]) {
+    let (dth, dv) = increments(traj, mount, t_end - period, t_end, SAMPLE_RULE);
+    (dth.map(|x| x / period), dv.map(|x| x / period))
+}
+
+/// [`averaged_outputs`] with an explicit quadrature rule (for accuracy tests).
+pub fn averaged_outputs_with(
+    traj: &Trajectory,
+    mount: &ImuMount,
+    t_end: f64,
+    period: f64,
+    rule: Rule,
+) -> ([f64; 3], [f64; 3]) {
+    let (dth, dv) = increments(traj, mount, t_end - period, t_end, rule);
+    (dth.map(|x| x / period), dv.map(|x| x / period))
+}
+
+/// Sensor-frame increments over [t_start, t_end] of scenario time: (Δθ = ∫ω_is^s dt rad,
+/// Δv = ∫f^s dt m/s), by `rule` on each piece between segment boundaries. Consecutive samples
+/// pass the same instant as one's end and the next one's start, so the intervals tile time
+/// exactly and the increments add up to the integral over any span.
+pub fn increments(traj: &Trajectory, mount: &ImuMount, t_start: f64, t_end: f64, rule: Rule) -> ([f64; 3], [f64; 3]) {
+    let mut cuts = [0.0; 8];
+    let n = traj.boundaries_in(t_start, t_end, &mut cuts);
+    let mut acc = [0.0; 6];
+    let mut a = t_start;
+    for b in cuts[..n].iter().copied().chain(std::iter::once(t_end)) {
+        let piece = quadrature::integrate(rule, a, b, |t| {
+            let (w, f) = mount.sensor_outputs(&inertial_state(&traj.kinematics(t)));
+            [w[0], w[1], w[2], f[0], f[1], f[2]]
+        });
+        for (s, p) in acc.iter_mut().zip(piece) {
+            *s += p;
+        }
+        a = b;
+    }
+    // More boundaries than `cuts` holds (segments shorter than T/8) fall inside one piece;
+    // validation keeps segments ≥ 0.1 s, so this happens only for IMU rates below 80 Hz.
+    ([acc[0], acc[1], acc[2]], [acc[3], acc[4], acc[5]])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::quadrature::GL8;
+    use crate::sim::scenario::{SegmentConfig, SegmentKind, StartConfig};
+    use crate::sim::trajectory::tests::default_traj;
+
+    fn static_traj(lat_deg: f64, h: f64) -> Trajectory {
+        let start = StartConfig {
+            lat_deg,
+            lon_deg: 10.0,
+            height_m: h,
+            heading_deg: 30.0,
+            pitch_deg: 0.0,
+            speed_mps: 0.0,
+        };
+        let seg = SegmentConfig {
+            kind: SegmentKind::Static,
+            duration_s: 10.0,
+            to_speed_mps: None,
+            heading_change_deg: None,
+            to_pitch_deg: None,
+        };
+        Trajectory::new(&start, &[seg])
+    }
+
+    #[test]
+    fn at_rest_reads_minus_gravity_and_earth_rate() {
+        let lat = 48.0f64;
+        let traj = static_traj(lat, 500.0);
+        let (w, f) = averaged_outputs(&traj, &ImuMount::identity(), 5.0, 0.005);
+        let g = earth::normal_gravity(lat.to_radians(), 500.0);
+        // (t_end − period) carries a rounding of ~1e-16·t, i.e. a relative 2e-14 on T.
+        assert!(f[0].abs() < 1e-12 && f[1].abs() < 1e-12, "{f:?}");
+        assert!((f[2] + g).abs() < 1e-12, "{f:?}");
+        // Earth rate magnitude and vertical component: −Ω sinφ on the down axis.
+        let norm = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+        let tol = 1e-13 * earth::OMEGA_IE;
+        assert!((norm - earth::OMEGA_IE).abs() < tol, "{norm}");
+        assert!((w[2] + earth::OMEGA_IE * lat.to_radians().sin()).abs() < tol);
+        // Heading 30°: the horizontal earth rate Ω cosφ points north, i.e. at −30° in body axes.
+        let hz = earth::OMEGA_IE * lat.to_radians().cos();
+        assert!((w[0] - hz * 30f64.to_radians().cos()).abs() < tol);
+        assert!((w[1] + hz * 30f64.to_radians().sin()).abs() < tol);
+    }
+
+    #[test]
+    fn earth_rates_dot_matches_finite_difference() {
+        let traj = default_traj();
+        let h = 1e-3;
+        for i in 1..600 {
+            let t = i as f64 + 0.37;
+            if t + 2.0 * h > traj.duration_s() {
+                break;
+            }
+            let w = |t: f64| {
+                let s = inertial_state(&traj.kinematics(t));
+                s.omega_ie_n + s.omega_en_n
+            };
+            let fd = (-w(t + 2.0 * h) + 8.0 * w(t + h) - 8.0 * w(t - h) + w(t - 2.0 * h)) / (12.0 * h);
+            let an = earth_rates_dot(&traj.kinematics(t));
+            assert!((fd - an).norm() < 1e-14, "t={t}: {fd} vs {an}");
+            let s = |t: f64| inertial_state(&traj.kinematics(t)).omega_ib_b;
+            let fd = (-s(t + 2.0 * h) + 8.0 * s(t + h) - 8.0 * s(t - h) + s(t - 2.0 * h)) / (12.0 * h);
+            let an = inertial_state(&traj.kinematics(t)).omega_ib_b_dot;
+            assert!((fd - an).norm() < 1e-8, "t={t}: {fd} vs {an}");
+        }
+    }
+
+    /// Forward mechanization of the truth: v̇ = C_b^n f + g − (2ω_ie + ω_en) × v and
+    /// Ċ_b^n = C_b^n Ω_ib − Ω_in C_b^n must reproduce the trajectory's own derivatives.
+    #[test]
+    fn forward_mechanization_closes() {
+        let traj = default_traj();
+        let h = 1e-4;
+        for i in 0..300 {
+            let t = 2.0 * i as f64 + 0.5;
+            if t + h > traj.duration_s() {
+                break;
+            }
+            let k = traj.kinematics(t);
+            let s = inertial_state(&k);
+            let vdot = k.c_b_n * s.f_ib_b + Vector3::new(0.0, 0.0, s.gravity_mps2)
+                - (2.0 * s.omega_ie_n + s.omega_en_n).cross(&k.v_ned);
+            let v_fd = (traj.kinematics(t + h).v_ned - traj.kinematics(t - h).v_ned) / (2.0 * h);
+            assert!((vdot - v_fd).norm() < 1e-7, "t={t}");
+            let cdot = k.c_b_n * s.omega_ib_b.cross_matrix() - (s.omega_ie_n + s.omega_en_n).cross_matrix() * k.c_b_n;
+            let c_fd = (traj.kinematics(t + h).c_b_n - traj.kinematics(t - h).c_b_n) / (2.0 * h);
+            assert!((cdot - c_fd).norm() < 1e-9, "t={t}");
+        }
+    }
+
+    /// The sample averages by [`SAMPLE_RULE`] against the 8-point rule and against an
+    /// 8-point rule on 16 sub-intervals, over the whole default drive at 200 Hz.
+    #[test]
+    fn averaged_outputs_quadrature_error() {
+        let traj = default_traj();
+        let mount = ImuMount::new([0.01, -0.02, 1.5], [0.05, -0.03, 0.02]);
+        let period = 0.005;
+        let (mut worst_w, mut worst_f): (f64, f64) = (0.0, 0.0);
+        let mut t = period;
+        while t <= traj.duration_s() {
+            let (w5, f5) = averaged_outputs(&traj, &mount, t, period);
+            let (w8, f8) = averaged_outputs_with(&traj, &mount, t, period, GL8);
+            for k in 0..3 {
+                worst_w = worst_w.max((w5[k] - w8[k]).abs());
+                worst_f = worst_f.max((f5[k] - f8[k]).abs());
+            }
+            t += 0.0371;
+        }
+        println!("GL5 vs GL8 sample averages: gyro {worst_w:.3e} rad/s, accel {worst_f:.3e} m/s²");
+        assert!(worst_w < 1e-15 && worst_f < 1e-12, "{worst_w} {worst_f}");
+        // Composite reference (8 × GL8 on each side of the boundary) on intervals straddling
+        // segment boundaries.
+        for seg in &traj.segments()[1..12] {
+            let t_end = seg.t0 + 0.0021;
+            let (w5, f5) = averaged_outputs(&traj, &mount, t_end, period);
+            let mut acc = [0.0; 6];
+            for (a0, b0) in [(t_end - period, seg.t0), (seg.t0, t_end)] {
+                for j in 0..8 {
+                    let a = a0 + j as f64 * (b0 - a0) / 8.0;
+                    let b = a0 + (j + 1) as f64 * (b0 - a0) / 8.0;
+                    let p = quadrature::integrate(GL8, a, b, |t| {
+                        let (w, f) = mount.sensor_outputs(&inertial_state(&traj.kinematics(t)));
+                        [w[0], w[1], w[2], f[0], f[1], f[2]]
+                    });
+                    for (s, v) in acc.iter_mut().zip(p) {
+                        *s += v / period;
+                    }
+                }
+            }
+            for k in 0..3 {
+                assert!((w5[k] - acc[k]).abs() < 1e-15, "gyro {k}: {} vs {}", w5[k], acc[k]);
+                assert!(
+                    (f5[k] - acc[k + 3]).abs() < 1e-12,
+                    "accel {k}: {} vs {}",
+                    f5[k],
+                    acc[k + 3]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn lever_arm_centripetal_in_a_turn() {
+        // In a steady turn the lever-arm term ω × (ω × r) for r along body y is −ω_z² r.
+        let traj = default_traj();
+        let turn = traj
+            .segments()
+            .iter()
+            .find(|s| s.heading.1.abs() > 1.0)
+            .expect("a turn");
+        let t = turn.t0 + turn.duration / 2.0;
+        let k = traj.kinematics(t);
+        let s = inertial_state(&k);
+        let r = 0.5;
+        let (_, f0) = ImuMount::identity().sensor_outputs(&s);
+        let (_, f1) = ImuMount::new([0.0; 3], [0.0, r, 0.0]).sensor_outputs(&s);
+        let w = s.omega_ib_b;
+        let expected =
+            s.omega_ib_b_dot.cross(&Vector3::new(0.0, r, 0.0)) + w.cross(&w.cross(&Vector3::new(0.0, r, 0.0)));
+        assert!(((f1 - f0) - expected).norm() < 1e-15);
+        assert!((f1 - f0)[1] < -0.5 * w[2] * w[2] * r, "centripetal towards the centre");
+    }
+
+    #[test]
+    fn mounting_rotation_rotates_outputs() {
+        let traj = default_traj();
+        let s = inertial_state(&traj.kinematics(123.4));
+        // Sensor yawed +90°: sensor x = body y, so f^s_x = f^b_y and f^s_y = −f^b_x.
+        let (w, f) = ImuMount::new([0.0, 0.0, std::f64::consts::FRAC_PI_2], [0.0; 3]).sensor_outputs(&s);
+        assert!((f[0] - s.f_ib_b[1]).abs() < 1e-12 && (f[1] + s.f_ib_b[0]).abs() < 1e-12);
+        assert!((w[2] - s.omega_ib_b[2]).abs() < 1e-18);
+    }
+}
