@@ -67,7 +67,10 @@ fn gpsd_mode(tpv: &Value) -> u64 {
 
 /// A gpsd TPV that holds nothing but a time and a mode (no position, no velocity).
 fn time_only(tpv: &Value) -> bool {
-    tpv.as_object().is_some_and(|o| o.keys().all(|k| matches!(k.as_str(), "class" | "mode" | "time" | "ept" | "status")))
+    tpv.as_object().is_some_and(|o| {
+        o.keys()
+            .all(|k| matches!(k.as_str(), "class" | "mode" | "time" | "ept" | "status"))
+    })
 }
 
 const EXCEPTIONS: &[Exception] = &[
@@ -194,17 +197,24 @@ fn gpsd_epochs(chk: &str) -> Vec<(String, Value)> {
         if !line.starts_with('{') {
             continue;
         }
-        let Ok(v) = serde_json::from_str::<Value>(line) else { continue };
+        let Ok(v) = serde_json::from_str::<Value>(line) else {
+            continue;
+        };
         if v.get("class").and_then(Value::as_str) != Some("TPV") {
             continue;
         }
-        let Some(time) = v.get("time").and_then(Value::as_str).map(str::to_owned) else { continue };
+        let Some(time) = v.get("time").and_then(Value::as_str).map(str::to_owned) else {
+            continue;
+        };
         if !last.contains_key(&time) {
             order.push(time.clone());
         }
         last.insert(time, v);
     }
-    order.into_iter().filter_map(|t| last.remove(&t).map(|v| (t, v))).collect()
+    order
+        .into_iter()
+        .filter_map(|t| last.remove(&t).map(|v| (t, v)))
+        .collect()
 }
 
 /// One field difference.
@@ -221,7 +231,10 @@ fn compare(gpsd: &Value, fix: &GnssFix) -> (Vec<Diff>, bool) {
     let g = |k: &str| gpsd.get(k).and_then(Value::as_f64);
     let mode = gpsd.get("mode").and_then(Value::as_u64).unwrap_or(0);
     if mode != u64::from(fix.mode) {
-        diffs.push(Diff { field: "mode", detail: format!("gpsd {mode} ours {}", fix.mode) });
+        diffs.push(Diff {
+            field: "mode",
+            detail: format!("gpsd {mode} ours {}", fix.mode),
+        });
     }
     let mut num = |field: &'static str, key: &str, ours: f64, tol: f64, circular: bool| {
         let Some(theirs) = g(key) else { return };
@@ -229,8 +242,11 @@ fn compare(gpsd: &Value, fix: &GnssFix) -> (Vec<Diff>, bool) {
         if circular {
             d = d.min(360.0 - d);
         }
-        if !(d <= tol) {
-            diffs.push(Diff { field, detail: format!("gpsd {theirs} ours {ours}") });
+        if d.is_nan() || d > tol {
+            diffs.push(Diff {
+                field,
+                detail: format!("gpsd {theirs} ours {ours}"),
+            });
         }
     };
     num("lat", "lat", fix.lat_deg, LATLON_TOL_DEG, false);
@@ -250,7 +266,13 @@ fn compare(gpsd: &Value, fix: &GnssFix) -> (Vec<Diff>, bool) {
 /// the decoder's epochs, its counters and gpsd's epochs for one capture.
 fn dump(fixes: &[GnssFix], counters: &CaptureCounters, chk: &str) {
     for f in fixes {
-        println!("ours {} tod={} bits={:#04x} host={}", epoch_json(f), f.tod_ns, f.sentences, f.stamp.host_ns);
+        println!(
+            "ours {} tod={} bits={:#04x} host={}",
+            epoch_json(f),
+            f.tod_ns,
+            f.sentences,
+            f.stamp.host_ns
+        );
     }
     println!("counters {counters:?}");
     for (t, v) in gpsd_epochs(chk) {
@@ -283,8 +305,15 @@ fn check_capture(name: &str, log: &[u8], chk: &str, used: &mut [usize]) -> Row {
             by_time.insert(format_rfc3339_ms(f.utc_ns), f);
         }
     }
-    let shift_s = TIME_SHIFTS.iter().find(|s| s.captures.contains(&name)).map_or(0, |s| s.shift_s);
-    let mut row = Row { name: name.to_owned(), fixes: fixes.len(), ..Row::default() };
+    let shift_s = TIME_SHIFTS
+        .iter()
+        .find(|s| s.captures.contains(&name))
+        .map_or(0, |s| s.shift_s);
+    let mut row = Row {
+        name: name.to_owned(),
+        fixes: fixes.len(),
+        ..Row::default()
+    };
     for (time, tpv) in gpsd_epochs(chk) {
         row.epochs += 1;
         let ours_time = match shift_s {
@@ -298,7 +327,10 @@ fn check_capture(name: &str, log: &[u8], chk: &str, used: &mut [usize]) -> Row {
                 row.derived += usize::from(derived);
                 diffs
             }
-            None => vec![Diff { field: "time", detail: "no decoded epoch at this time".into() }],
+            None => vec![Diff {
+                field: "time",
+                detail: "no decoded epoch at this time".into(),
+            }],
         };
         if diffs.is_empty() {
             row.matched += 1;
@@ -346,7 +378,10 @@ fn check_capture(name: &str, log: &[u8], chk: &str, used: &mut [usize]) -> Row {
 fn gpsd_conformance() {
     let dir = corpus_dir();
     let entries = std::fs::read_dir(&dir).unwrap_or_else(|e| {
-        panic!("gpsd NMEA corpus not found at {} ({e}); it lives outside the repository", dir.display())
+        panic!(
+            "gpsd NMEA corpus not found at {} ({e}); it lives outside the repository",
+            dir.display()
+        )
     });
     let mut logs: Vec<PathBuf> = entries
         .filter_map(Result::ok)
@@ -396,15 +431,28 @@ fn gpsd_conformance() {
         100.0 * ratio
     );
     for (e, n) in EXCEPTIONS.iter().zip(&used) {
-        println!("exception {} ({n} epochs in {}): {}", e.name, e.captures.join(", "), e.reason);
+        println!(
+            "exception {} ({n} epochs in {}): {}",
+            e.name,
+            e.captures.join(", "),
+            e.reason
+        );
     }
     for s in TIME_SHIFTS {
         println!("date shift {} s ({}): {}", s.shift_s, s.captures.join(", "), s.reason);
     }
 
     assert!(total > 0, "no timed gpsd epochs found in {}", dir.display());
-    assert_eq!(unexplained, 0, "{unexplained} epochs differ from gpsd without a listed exception (see table)");
-    let unused: Vec<_> = EXCEPTIONS.iter().zip(&used).filter(|(_, n)| **n == 0).map(|(e, _)| e.name).collect();
+    assert_eq!(
+        unexplained, 0,
+        "{unexplained} epochs differ from gpsd without a listed exception (see table)"
+    );
+    let unused: Vec<_> = EXCEPTIONS
+        .iter()
+        .zip(&used)
+        .filter(|(_, n)| **n == 0)
+        .map(|(e, _)| e.name)
+        .collect();
     assert!(unused.is_empty(), "exceptions that no longer apply: {unused:?}");
     assert!(
         ratio >= MIN_MATCH_RATIO,

@@ -378,6 +378,12 @@ fn parse_lat_lon(data: &str, first: usize) -> Option<(f64, f64)> {
     Some((lat, lon))
 }
 
+/// A coordinate pair from the `nmea` crate, which does not range-check: `None` unless
+/// |lat| ≤ 90° and |lon| ≤ 180°.
+fn plausible(lat_lon: Option<(f64, f64)>) -> Option<(f64, f64)> {
+    lat_lon.filter(|(lat, lon)| lat.abs() <= 90.0 && lon.abs() <= 180.0)
+}
+
 /// What a sentence says about the fix mode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum ModeHint {
@@ -488,7 +494,7 @@ fn decode_gga(d: &str, parsed: Option<&nmea::sentences::GgaData>) -> Update {
     let (quality, lat_lon, sats) = match parsed {
         Some(p) => (
             p.fix_type.map(quality_digit),
-            p.latitude.zip(p.longitude),
+            plausible(p.latitude.zip(p.longitude)),
             p.fix_satellites.map(|n| n.min(u32::from(u16::MAX - 1)) as u16),
         ),
         None => (
@@ -511,7 +517,11 @@ fn decode_gga(d: &str, parsed: Option<&nmea::sentences::GgaData>) -> Update {
     u.lat_lon = Some(lat_lon);
     u.alt_msl_m = u.opt_num(field(d, 9), num);
     u.geoid_sep_m = u.opt_num(field(d, 11), num);
-    let mode = if u.alt_msl_m.is_some() && sats.unwrap_or(0) >= 4 { FixMode::Fix3d } else { FixMode::Fix2d };
+    let mode = if u.alt_msl_m.is_some() && sats.unwrap_or(0) >= 4 {
+        FixMode::Fix3d
+    } else {
+        FixMode::Fix2d
+    };
     u.mode = Some(ModeHint::Mode(mode as u8));
     u
 }
@@ -524,7 +534,7 @@ fn decode_rmc(d: &str, parsed: Option<&nmea::sentences::RmcData>) -> Update {
     let (valid, lat_lon, faa_invalid) = match parsed {
         Some(p) => (
             p.status_of_fix != RmcStatusOfFix::Invalid,
-            p.lat.zip(p.lon),
+            plausible(p.lat.zip(p.lon)),
             p.faa_mode == Some(FaaMode::DataNotValid),
         ),
         None => (
@@ -565,7 +575,7 @@ fn decode_gns(d: &str, parsed: Option<&nmea::sentences::GnsData>) -> Update {
     }
     let (lat_lon, sats, unusable) = match parsed {
         Some(p) => (
-            p.lat.zip(p.lon),
+            plausible(p.lat.zip(p.lon)),
             Some(p.nsattelites),
             matches!(
                 p.nav_status,
@@ -720,7 +730,7 @@ fn decode_gll(d: &str, parsed: Option<&nmea::sentences::GllData>) -> Update {
     let (valid, lat_lon, faa_invalid) = match parsed {
         Some(p) => (
             p.valid,
-            p.latitude.zip(p.longitude),
+            plausible(p.latitude.zip(p.longitude)),
             p.faa_mode == Some(FaaMode::DataNotValid),
         ),
         None => (field(d, 6) == "A", parse_lat_lon(d, 1), field(d, 7) == "N"),
@@ -751,8 +761,14 @@ fn decode_rmz(d: &str, parsed: Option<&nmea::sentences::PgrmzData>) -> Update {
             }),
         ),
         None => {
-            let alt = if field(d, 2) == "f" { field(d, 1).trim().parse::<i32>().ok().map(f64::from) } else { None };
-            let mode = int(field(d, 3)).and_then(|m| u8::try_from(m).ok()).filter(|m| (1..=3).contains(m));
+            let alt = if field(d, 2) == "f" {
+                field(d, 1).trim().parse::<i32>().ok().map(f64::from)
+            } else {
+                None
+            };
+            let mode = int(field(d, 3))
+                .and_then(|m| u8::try_from(m).ok())
+                .filter(|m| (1..=3).contains(m));
             (alt, mode)
         }
     };
@@ -872,7 +888,10 @@ impl Epoch {
     /// Times `address` has occurred in this epoch.
     fn count_of(&self, address: &[u8]) -> u8 {
         let addr = Key::addr_of(address);
-        self.seen[..self.n_seen].iter().find(|(a, _)| *a == addr).map_or(0, |s| s.1)
+        self.seen[..self.n_seen]
+            .iter()
+            .find(|(a, _)| *a == addr)
+            .map_or(0, |s| s.1)
     }
 
     /// Records one more occurrence of `address`; returns its key.
@@ -923,9 +942,10 @@ impl Epoch {
                 self.mode_determined = true;
             }
             ModeHint::Position if !self.mode_determined => {
-                self.fix.mode = if self.fix.alt_msl_m.is_finite() || self.sats_used().unwrap_or(0) > 3 {
-                    FixMode::Fix3d as u8
-                } else if last_dim == FixMode::Fix3d as u8 {
+                let three_d = self.fix.alt_msl_m.is_finite()
+                    || self.sats_used().unwrap_or(0) > 3
+                    || last_dim == FixMode::Fix3d as u8;
+                self.fix.mode = if three_d {
                     FixMode::Fix3d as u8
                 } else {
                     FixMode::Fix2d as u8
@@ -1210,10 +1230,8 @@ impl EpochAssembler {
         if self.cur.open {
             match (self.cur.tod_ns, t) {
                 (Some(c), Some(t)) if c != t => {
-                    if !self.cur.tod_from_zda {
-                        if let Some(k) = self.cur.last_data_key {
-                            self.learn(k);
-                        }
+                    if let (false, Some(k)) = (self.cur.tod_from_zda, self.cur.last_data_key) {
+                        self.learn(k);
                     }
                     self.emit(Close::NextEpoch, out);
                 }
@@ -1322,5 +1340,465 @@ fn velocity(f: &mut GnssFix) {
         let (s, c) = f.track_deg.to_radians().sin_cos();
         f.vel_n_mps = f.speed_mps * c;
         f.vel_e_mps = f.speed_mps * s;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use navsync_shared::time::{Civil, format_rfc3339_ms, utc_ns_from_civil};
+
+    /// `$<body>*hh` with the right checksum.
+    fn nmea(body: &str) -> String {
+        let sum = body.bytes().fold(0u8, |c, b| c ^ b);
+        format!("${body}*{sum:02X}")
+    }
+
+    /// Feeds sentences (host time = index × 1 ms) and returns the fixes, each with the index
+    /// of the sentence whose push emitted it.
+    fn run(asm: &mut EpochAssembler, sentences: &[String]) -> Vec<(usize, GnssFix)> {
+        let mut out = Vec::new();
+        for (i, s) in sentences.iter().enumerate() {
+            asm.push(s.as_bytes(), i as i64 * 1_000_000, &mut |f| out.push((i, *f)));
+        }
+        out
+    }
+
+    fn flush(asm: &mut EpochAssembler) -> Vec<GnssFix> {
+        let mut out = Vec::new();
+        asm.flush(&mut |f| out.push(*f));
+        out
+    }
+
+    fn gga(hhmmss: &str) -> String {
+        nmea(&format!(
+            "GPGGA,{hhmmss},4807.0381,N,01131.0004,E,1,08,0.9,545.437,M,46.9,M,,"
+        ))
+    }
+
+    fn rmc(hhmmss: &str, ddmmyy: &str) -> String {
+        nmea(&format!(
+            "GPRMC,{hhmmss},A,4807.0381,N,01131.0004,E,010.0,090.0,{ddmmyy},,,A"
+        ))
+    }
+
+    fn gsa() -> String {
+        nmea("GPGSA,A,3,04,05,,09,12,,,24,,,,,2.5,1.3,2.1")
+    }
+
+    fn utc(year: i64, month: u32, day: u32, hour: u32, minute: u32, second: u32, ms: u32) -> i64 {
+        utc_ns_from_civil(&Civil {
+            year,
+            month,
+            day,
+            hour,
+            minute,
+            second,
+            nanos: ms * 1_000_000,
+        })
+    }
+
+    #[test]
+    fn checksums_are_verified() {
+        let mut asm = EpochAssembler::new();
+        let good = gga("123519");
+        let mut bad = good.clone();
+        bad.replace_range(8..9, "9");
+        let lower = good
+            .to_lowercase()
+            .replace("$gpgga", "$GPGGA")
+            .replace("n,", "N,")
+            .replace("e,", "E,");
+        let missing = good[..good.len() - 3].to_string();
+        let out = run(&mut asm, &[bad, missing, "$".into(), "garbage".into(), lower]);
+        assert!(out.is_empty());
+        let c = *asm.counters();
+        assert_eq!(c.bad_checksum, 1);
+        assert_eq!(c.no_checksum, 3);
+        assert_eq!(flush(&mut asm).len(), 1, "lower-case hex checksum is accepted");
+    }
+
+    #[test]
+    fn gga_rmc_fields_and_units() {
+        let mut asm = EpochAssembler::new();
+        run(&mut asm, &[gga("123519.25"), rmc("123519.25", "230394"), gsa()]);
+        let f = flush(&mut asm);
+        assert_eq!(f.len(), 1);
+        let f = f[0];
+        assert!((f.lat_deg - (48.0 + 7.0381 / 60.0)).abs() < 1e-12);
+        assert!((f.lon_deg - (11.0 + 31.0004 / 60.0)).abs() < 1e-12);
+        assert_eq!(f.alt_msl_m, 545.437, "altitude kept to the mm (the crate has f32)");
+        assert_eq!(f.geoid_sep_m, 46.9);
+        assert_eq!(f.speed_mps, 10.0 * 1852.0 / 3600.0);
+        assert_eq!(f.track_deg, 90.0);
+        assert!((f.vel_e_mps - f.speed_mps).abs() < 1e-12 && f.vel_n_mps.abs() < 1e-12);
+        assert_eq!(
+            (f.hdop, f.pdop, f.vdop),
+            (1.3, 2.5, 2.1),
+            "GSA DOPs win over GGA's (later)"
+        );
+        assert_eq!(f.sats_used, 8, "GGA count (8) over GSA PRNs (5)");
+        assert_eq!((f.mode, f.quality), (3, 1));
+        assert_eq!(f.sentences, SENTENCE_GGA | SENTENCE_RMC | SENTENCE_GSA);
+        assert_eq!(f.tod_ns, (12 * 3600 + 35 * 60 + 19) * NS_PER_S + 250_000_000);
+        assert_eq!(f.utc_ns, utc(1994, 3, 23, 12, 35, 19, 250));
+        assert_eq!(format_rfc3339_ms(f.utc_ns), "1994-03-23T12:35:19.250Z");
+        assert_eq!(f.gps_ns, gps_ns_from_utc_ns(f.utc_ns));
+        assert_eq!(
+            f.gps_ns - f.utc_ns,
+            (9 - 315_964_800) * NS_PER_S,
+            "9 leap seconds in March 1994"
+        );
+        assert_eq!(f.stamp.source(), StampSource::Receipt);
+    }
+
+    #[test]
+    fn epoch_closes_on_new_time_and_stamps_its_first_byte() {
+        let mut asm = EpochAssembler::new();
+        let out = run(
+            &mut asm,
+            &[
+                rmc("000001", "010125"),
+                gga("000001"),
+                rmc("000002", "010125"),
+                gga("000002"),
+            ],
+        );
+        assert_eq!(out.len(), 1);
+        let (emitted_at, f) = out[0];
+        assert_eq!(emitted_at, 2, "emitted when the next time tag arrives");
+        assert_eq!(f.stamp.host_ns, 0, "host time of the epoch's first sentence");
+        assert_eq!(f.stamp.seq, 0);
+        let last = flush(&mut asm);
+        assert_eq!(last[0].stamp.host_ns, 2_000_000);
+        assert_eq!(last[0].stamp.seq, 1);
+        assert_eq!(asm.counters().flush_emits, 1);
+    }
+
+    #[test]
+    fn last_sentence_of_cycle_is_learned() {
+        let mut asm = EpochAssembler::new();
+        let mut sentences = Vec::new();
+        for s in 10..16 {
+            let t = format!("1200{s}");
+            sentences.extend([rmc(&t, "150326"), nmea("GPGSV,1,1,01,01,40,083,46"), gga(&t), gsa()]);
+            sentences.push(nmea("GPGSV,1,1,01,01,40,083,46"));
+        }
+        let out = run(&mut asm, &sentences);
+        // Cycles 1 and 2 close on the next RMC; both vote GSA #1 (the last sentence with fix
+        // data; GSV carries none), so from cycle 3 on each epoch is emitted on its own GSA.
+        let emitted_at: Vec<usize> = out.iter().map(|o| o.0).collect();
+        assert_eq!(emitted_at, vec![5, 10, 13, 18, 23, 28]);
+        assert_eq!(asm.cycle_ender(), Some(("GPGSA", 1)));
+        assert_eq!(asm.counters().ender_emits, 4);
+        assert!(flush(&mut asm).is_empty(), "nothing left over");
+        let times: Vec<i64> = out.iter().map(|o| o.1.utc_ns).collect();
+        assert!(times.windows(2).all(|w| w[1] - w[0] == NS_PER_S));
+    }
+
+    #[test]
+    fn late_data_reopens_the_epoch() {
+        let mut asm = EpochAssembler::new();
+        let mut sentences = Vec::new();
+        for s in 10..14 {
+            let t = format!("1200{s}");
+            sentences.extend([rmc(&t, "150326"), gga(&t)]);
+        }
+        // The ender (GGA) is learned; now the receiver adds a GLL after it.
+        sentences.extend([rmc("120014", "150326"), gga("120014")]);
+        sentences.push(nmea("GPGLL,4807.0382,N,01131.0005,E,120014,A,A"));
+        let out = run(&mut asm, &sentences);
+        let rest = flush(&mut asm);
+        let last_early = out
+            .last()
+            .map(|o| o.1)
+            .unwrap_or_else(|| GnssFix::empty(Stamp::host(0, 0, StampSource::Unknown)));
+        assert_eq!(last_early.sentences, SENTENCE_RMC | SENTENCE_GGA);
+        assert_eq!(asm.counters().late_sentences, 1);
+        assert_eq!(asm.cycle_ender(), None, "forgotten");
+        assert_eq!(rest.len(), 1);
+        let again = rest[0];
+        assert_eq!(again.utc_ns, last_early.utc_ns);
+        assert_eq!(again.stamp.host_ns, last_early.stamp.host_ns, "same first byte");
+        assert_eq!(again.stamp.seq, last_early.stamp.seq + 1);
+        assert_eq!(again.sentences, SENTENCE_RMC | SENTENCE_GGA | SENTENCE_GLL);
+        assert!((again.lat_deg - (48.0 + 7.0382 / 60.0)).abs() < 1e-12, "GLL came last");
+    }
+
+    #[test]
+    fn date_rolls_over_at_midnight() {
+        let mut asm = EpochAssembler::new();
+        let mut out = run(
+            &mut asm,
+            &[
+                rmc("235959.50", "311224"),
+                gga("235959.50"),
+                gga("000000.50"),
+                gga("000001.50"),
+            ],
+        );
+        out.extend(flush(&mut asm).into_iter().map(|f| (0, f)));
+        let times: Vec<String> = out.iter().map(|o| format_rfc3339_ms(o.1.utc_ns)).collect();
+        assert_eq!(
+            times,
+            [
+                "2024-12-31T23:59:59.500Z",
+                "2025-01-01T00:00:00.500Z",
+                "2025-01-01T00:00:01.500Z"
+            ]
+        );
+        assert_eq!(out[1].1.tod_ns, NS_PER_S / 2);
+    }
+
+    #[test]
+    fn zda_ahead_of_the_fix_dates_it_across_midnight() {
+        // mr-350p style: the ZDA for the next second closes each cycle.
+        let mut asm = EpochAssembler::new();
+        let out = run(
+            &mut asm,
+            &[gga("235959"), nmea("GPZDA,000000.000,01,01,2025,,"), gga("000000")],
+        );
+        assert_eq!(out.len(), 1);
+        assert_eq!(format_rfc3339_ms(out[0].1.utc_ns), "2024-12-31T23:59:59.000Z");
+        assert_eq!(format_rfc3339_ms(flush(&mut asm)[0].utc_ns), "2025-01-01T00:00:00.000Z");
+    }
+
+    #[test]
+    fn epochs_before_the_first_date_have_time_of_day_only() {
+        let mut asm = EpochAssembler::new();
+        run(&mut asm, &[gga("101010")]);
+        let f = flush(&mut asm)[0];
+        assert_eq!((f.utc_ns, f.gps_ns), (i64::MIN, i64::MIN));
+        assert_eq!(f.tod_ns, 36_610 * NS_PER_S);
+    }
+
+    #[test]
+    fn zda_only_receiver_gives_time_only_epochs() {
+        let mut asm = EpochAssembler::new();
+        let out = run(
+            &mut asm,
+            &[
+                nmea("GPZDA,160012.71,11,03,2004,-1,00"),
+                nmea("GPZDA,160013.71,11,03,2004,-1,00"),
+            ],
+        );
+        assert_eq!(out.len(), 1);
+        let f = out[0].1;
+        assert_eq!(format_rfc3339_ms(f.utc_ns), "2004-03-11T16:00:12.710Z");
+        assert_eq!((f.mode, f.sentences), (FixMode::Unknown as u8, SENTENCE_ZDA));
+        assert!(f.lat_deg.is_nan());
+    }
+
+    #[test]
+    fn invalid_fixes_give_no_position() {
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[
+                nmea("GPRMC,001902.00,V,4807.0381,N,01131.0004,E,,,020211,,,N"),
+                nmea("GPGGA,001902.00,4807.0381,N,01131.0004,E,0,00,99.99,,,,,,"),
+                nmea("GPGSA,A,1,,,,,,,,,,,,,99.99,99.99,99.99"),
+            ],
+        );
+        let f = flush(&mut asm)[0];
+        assert_eq!(f.mode, FixMode::NoFix as u8);
+        assert!(f.lat_deg.is_nan() && f.hdop.is_nan() && f.pdop.is_nan());
+        assert_eq!(f.utc_ns, i64::MIN, "RMC with status V gives no date");
+        assert_eq!(f.quality, 0);
+    }
+
+    #[test]
+    fn mode_rules() {
+        // 3 satellites: altitude held, 2D even though GGA has one.
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[nmea("GPGGA,120000,4807.0381,N,01131.0004,E,1,03,2.0,545.4,M,46.9,M,,")],
+        );
+        assert_eq!(flush(&mut asm)[0].mode, 2);
+        // RMC alone after a 3D epoch keeps the dimension; a GSA claiming 2D with no
+        // satellite is ignored.
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[
+                gga("120000"),
+                rmc("120001", "010125"),
+                nmea("GPGSA,A,2,,,,,,,,,,,,,50.0,50.0,50.0"),
+            ],
+        );
+        let f = flush(&mut asm)[0];
+        assert_eq!((f.mode, f.pdop), (3, 50.0));
+        // GGA 3D then GSA mode 2 with 7 satellites and a VDOP (Quectel): stays 3D.
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[gga("120000"), nmea("GPGSA,A,2,06,07,11,19,22,28,30,,,,,,1.4,1.1,0.8,1")],
+        );
+        let f = flush(&mut asm)[0];
+        assert_eq!((f.mode, f.sats_used), (3, 8));
+        // PGRMZ: altitude in feet and explicit dimension.
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[nmea("GPGLL,4807.0381,N,01131.0004,E,120000,A"), nmea("PGRMZ,48,f,3")],
+        );
+        let f = flush(&mut asm)[0];
+        assert_eq!((f.mode, f.alt_msl_m), (3, 48.0 * 0.3048));
+    }
+
+    #[test]
+    fn gsa_counts_distinct_satellites_over_systems() {
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[
+                nmea("GNGNS,043539.00,4333.190206,N,00127.618380,E,AAAAN,,1.3,250.8,50.0,,,S"),
+                nmea("GNGSA,A,3,02,08,10,23,27,,,,,,,,1.6,1.3,0.9,1"),
+                nmea("GNGSA,A,3,65,66,73,81,82,,,,,,,,1.6,1.3,0.9,2"),
+                nmea("GNGSA,A,3,02,08,,,,,,,,,,,1.6,1.3,0.9,4"),
+                nmea("GNGSA,A,3,02,08,10,23,27,,,,,,,,1.6,1.3,0.9,1"),
+            ],
+        );
+        let f = flush(&mut asm)[0];
+        assert_eq!(f.sats_used, 12, "5 GPS + 5 GLONASS + 2 BeiDou, repeats not counted");
+        assert_eq!(f.mode, 3);
+        // A 24-PRN GSA (Navior CH-4701) would panic the nmea crate: decoded leniently.
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[nmea("GPGSA,A,3,27,23,13,07,25,,,,,,,,,,,,,,,,,,,,07.9,06.0,05.2")],
+        );
+        assert_eq!(asm.counters().lenient, 1);
+        let f = flush(&mut asm)[0];
+        assert_eq!((f.mode, f.sats_used, f.pdop, f.hdop, f.vdop), (3, 5, 7.9, 6.0, 5.2));
+    }
+
+    #[test]
+    fn vtg_gst_and_lenient_gga() {
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[
+                // Empty fix quality: the crate rejects it, gpsd reads the position anyway.
+                nmea("GPGGA,120000.00,4807.0381,N,01131.0004,E,,05,1.1,100.0,M,,M,,"),
+                nmea("GPVTG,,T,,M,,N,36.0,K,A"),
+                nmea("GPGST,120000.00,1.0,2.0,1.5,30.0,1.8,1.6,3.2"),
+                nmea("GPGST,115959.00,9.0,9.0,9.0,9.0,9.0,9.0,9.0"),
+            ],
+        );
+        let f = flush(&mut asm)[0];
+        assert_eq!(asm.counters().lenient, 1);
+        assert_eq!((f.lat_deg.is_finite(), f.quality), (true, u8::MAX));
+        assert_eq!(f.speed_mps, 10.0, "km/h used when knots are empty");
+        assert!(f.track_deg.is_nan() && f.vel_n_mps.is_nan());
+        assert_eq!(
+            (f.std_lat_m, f.std_lon_m, f.std_alt_m),
+            (1.8, 1.6, 3.2),
+            "GST of another time ignored"
+        );
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[gga("120000"), nmea("GPVTG,054.7,T,034.4,M,005.5,N,010.2,K,N")],
+        );
+        assert!(flush(&mut asm)[0].speed_mps.is_nan(), "VTG mode N not used");
+    }
+
+    #[test]
+    fn repeated_untimed_cycles_are_separate_epochs() {
+        // Quectel losing the fix: no time at all, one epoch per cycle.
+        let mut asm = EpochAssembler::new();
+        let cycle = [nmea("GPGGA,,,,,,0,,,,,,,,"), nmea("GPRMC,,V,,,,,,,,,,N")];
+        let out = run(
+            &mut asm,
+            &[cycle[0].clone(), cycle[1].clone(), cycle[0].clone(), cycle[1].clone()],
+        );
+        assert_eq!(out.len(), 1);
+        assert_eq!((out[0].1.mode, out[0].1.tod_ns), (FixMode::NoFix as u8, -1));
+        assert_eq!(asm.counters().repeats, 1);
+    }
+
+    #[test]
+    fn counter_names_fit_health_slots() {
+        for (name, _) in EpochCounters::default().named() {
+            assert!(name.len() <= 24, "{name}");
+        }
+    }
+
+    /// xorshift64 for reproducible pseudo-random input.
+    fn next(x: &mut u64) -> u64 {
+        *x ^= *x << 13;
+        *x ^= *x >> 7;
+        *x ^= *x << 17;
+        *x
+    }
+
+    #[test]
+    fn random_bytes_never_panic() {
+        let mut asm = EpochAssembler::new();
+        let mut x = 0x2545_F491_4F6C_DD1D_u64;
+        let alphabet = b"$!*,.0123456789ABCDEFGNPRSTVWZ-\x00\xff";
+        let mut buf = Vec::with_capacity(128);
+        for _ in 0..20_000 {
+            buf.clear();
+            let len = (next(&mut x) % 120) as usize;
+            for _ in 0..len {
+                let r = next(&mut x);
+                buf.push(if r.is_multiple_of(3) {
+                    (r >> 8) as u8
+                } else {
+                    alphabet[(r >> 8) as usize % alphabet.len()]
+                });
+            }
+            asm.push(&buf, 0, &mut |_| {});
+        }
+        assert_eq!(asm.counters().sentences, 20_000);
+    }
+
+    #[test]
+    fn mutated_sentences_with_valid_checksums_never_panic() {
+        // Valid checksums so that mutations reach the nmea crate and the field decoders.
+        let seeds = [
+            "GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,",
+            "GPRMC,225446.33,A,4916.45,N,12311.12,W,000.5,054.7,191194,020.3,E,A",
+            "GNGNS,224749.00,3333.4268304,N,11153.3538273,W,D,19,0.6,406.110,-26.294,6.0,0138,S,",
+            "GPVTG,054.7,T,034.4,M,005.5,N,010.2,K,A",
+            "GNGSA,A,3,13,12,22,19,08,21,,,,,,,1.05,0.64,0.83,4",
+            "GPGST,172814.0,0.006,0.023,0.020,273.6,0.023,0.020,0.031",
+            "GPZDA,160012.71,11,03,2004,-1,00",
+            "GPGLL,4916.45,N,12311.12,W,225444,A,A",
+            "PGRMZ,246,f,3",
+        ];
+        let junk = b",,,.-9AZNSEW*$0123456789";
+        let mut asm = EpochAssembler::new();
+        let mut x = 0x9E37_79B9_7F4A_7C15_u64;
+        let mut emitted = 0u64;
+        for round in 0..30_000 {
+            let mut body = seeds[round % seeds.len()].as_bytes().to_vec();
+            for _ in 0..=(next(&mut x) % 4) {
+                let r = next(&mut x);
+                let at = (r as usize >> 8) % (body.len() + 1);
+                let b = junk[(r >> 32) as usize % junk.len()];
+                match r % 4 {
+                    0 if at < body.len() => body[at] = b,
+                    1 => body.insert(at, b),
+                    2 if at < body.len() => {
+                        body.remove(at);
+                    }
+                    _ => body.extend(std::iter::repeat_n(b',', (r % 16) as usize)),
+                }
+            }
+            let body = String::from_utf8_lossy(&body).into_owned();
+            let s = nmea(&body);
+            asm.push(s.as_bytes(), round as i64, &mut |f| {
+                emitted += 1;
+                assert!(f.mode <= 3);
+                assert!(f.lat_deg.is_nan() || f.lat_deg.abs() <= 90.0);
+                assert!(f.lon_deg.is_nan() || f.lon_deg.abs() <= 180.0);
+            });
+        }
+        assert!(emitted > 0);
+        assert_eq!(asm.counters().bad_checksum, 0);
     }
 }

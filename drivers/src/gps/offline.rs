@@ -49,7 +49,9 @@ pub fn decode_capture(bytes: &[u8]) -> (Vec<GnssFix>, CaptureCounters) {
         // Between delay cookies gpsfake writes separately: replay them as separate reads.
         for chunk in line.split(|&b| Some(b) == cookie) {
             offset += chunk.len();
-            let read_ns = i64::try_from(offset).unwrap_or(i64::MAX).saturating_mul(REPLAY_NS_PER_BYTE);
+            let read_ns = i64::try_from(offset)
+                .unwrap_or(i64::MAX)
+                .saturating_mul(REPLAY_NS_PER_BYTE);
             framer.push(chunk, read_ns, REPLAY_NS_PER_BYTE, &mut |s| {
                 assembler.push(s.text, s.host_ns, &mut |fix| fixes.push(*fix));
             });
@@ -69,7 +71,10 @@ pub fn decode_capture(bytes: &[u8]) -> (Vec<GnssFix>, CaptureCounters) {
 /// the pieces, so `<c>` is not receiver output.
 fn delay_cookie(comment: &[u8]) -> Option<u8> {
     let text = core::str::from_utf8(comment).ok()?;
-    let rest = text.trim_start_matches('#').trim_start().strip_prefix("Delay-Cookie:")?;
+    let rest = text
+        .trim_start_matches('#')
+        .trim_start()
+        .strip_prefix("Delay-Cookie:")?;
     match rest.trim_start().as_bytes() {
         [c, ..] if !c.is_ascii_whitespace() => Some(*c),
         _ => None,
@@ -132,8 +137,9 @@ mod tests {
         assert_eq!(j["speed_mps"], Value::Null);
         assert!((j["lat"].as_f64().unwrap_or(0.0) - 48.1173).abs() < 1e-9);
         assert!((j["alt_msl"].as_f64().unwrap_or(0.0) - 545.4).abs() < 1e-9);
-        // First byte at offset 13 of a 92-byte file, read completing at its end.
-        assert_eq!(fixes[0].stamp.host_ns, 13 * REPLAY_NS_PER_BYTE);
+        // The `$` is byte 13 of the file (0-based); byte k has fully arrived k + 1 character
+        // times after the replay started.
+        assert_eq!(fixes[0].stamp.host_ns, 14 * REPLAY_NS_PER_BYTE);
     }
 
     #[test]
@@ -148,7 +154,7 @@ mod tests {
 
     #[test]
     fn json_time_is_rfc3339_ms() {
-        let cap = b"$GPRMC,225446.33,A,4916.45,N,12311.12,W,000.5,054.7,191194,020.3,E*6F\r\n";
+        let cap = b"$GPRMC,225446.33,A,4916.45,N,12311.12,W,000.5,054.7,191194,020.3,E*46\r\n";
         let (fixes, _) = decode_capture(cap);
         assert_eq!(fixes.len(), 1);
         let j = epoch_json(&fixes[0]);
