@@ -262,8 +262,9 @@ fn compare(gpsd: &Value, fix: &GnssFix) -> (Vec<Diff>, bool) {
     (diffs, derived)
 }
 
-/// Diagnostics: `NMEA_ALL=1` prints every unexplained mismatch; `NMEA_DUMP=NAME.log cargo test --test gpsd_conformance -- --nocapture` prints
-/// the decoder's epochs, its counters and gpsd's epochs for one capture.
+/// Diagnostics (`cargo test --test gpsd_conformance -- --nocapture` with): `NMEA_ALL=1`
+/// prints every unexplained mismatch, `NMEA_COUNTERS=1` the decoder's counters per capture,
+/// `NMEA_DUMP=NAME.log` the decoder's epochs, its counters and gpsd's epochs for one capture.
 fn dump(fixes: &[GnssFix], counters: &CaptureCounters, chk: &str) {
     for f in fixes {
         println!(
@@ -297,6 +298,9 @@ fn check_capture(name: &str, log: &[u8], chk: &str, used: &mut [usize]) -> Row {
     let (fixes, counters) = decode_capture(log);
     if std::env::var("NMEA_DUMP").is_ok_and(|d| d == name) {
         dump(&fixes, &counters, chk);
+    }
+    if std::env::var_os("NMEA_COUNTERS").is_some() {
+        println!("counters {name} {counters:?}");
     }
     // The last fix per time (the decoder emits an epoch again if late data complete it).
     let mut by_time: HashMap<String, &GnssFix> = HashMap::new();

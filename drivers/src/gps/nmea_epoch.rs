@@ -5,13 +5,22 @@
 //! decodes the ones that carry fix data, merges those of one time tag into one [`GnssFix`],
 //! and emits the fix when the epoch is complete:
 //!
-//! - as soon as the receiver's **last sentence of the cycle** arrives, once that sentence has
-//!   been learned from the stream (the sentence just before a time-tag change, seen at two
-//!   consecutive cycle boundaries);
-//! - otherwise when a sentence with a **new time tag** arrives (or a time-tagged sentence
-//!   repeats within the epoch: the receiver started a new cycle with the same time);
+//! - as soon as the receiver's **last data sentence of the cycle** arrives, once it has been
+//!   learned from the stream: at every time-tag change the last sentence that carried fix
+//!   data (address and occurrence, e.g. the 2nd `GNGSA`) is a candidate, trusted after two
+//!   consecutive cycle boundaries agree. Sentences without fix data (GSV, TXT, proprietary)
+//!   never count, so trailing satellite views do not delay the fix. The learned ender is
+//!   forgotten (and relearned) when data for the emitted epoch arrive after it — that epoch
+//!   is then reassembled with them and emitted again, same stamp, next sequence number — and
+//!   when the receiver gains or loses its fix (receivers change their cycle then);
+//! - otherwise when a fix sentence with a **new time tag** arrives, or a fix sentence
+//!   repeats within the epoch with the same or no time (a new cycle: e.g. a receiver without
+//!   fix sending `$GPGGA,,,,,,0,…` every second);
 //! - or on [`EpochAssembler::flush`] (the live driver calls it after a read timeout: the
 //!   line went idle, so the burst is over).
+//!
+//! Sentences without fix data in between epochs open no epoch; the stamp of an epoch is the
+//! host time of the first byte of its first data sentence.
 //!
 //! # Sources of each field (NMEA 0183 v4.11 field numbers, 1 = first field after the address)
 //!
@@ -25,6 +34,7 @@
 //! | GST | 1 UTC of the fix it refers to, 6/7/8 1-σ latitude/longitude/altitude error m |
 //! | ZDA | 1 UTC, 2 day, 3 month, 4 four-digit year |
 //! | GLL | 1–4 lat/lon, 5 UTC, 6 status A/V, 7 FAA mode |
+//! | PGRMZ | 1 altitude feet (Garmin; MSL as gpsd reads it), 3 fix dimension 1/2/3 |
 //!
 //! Decoding follows gpsd's `driver_nmea0183.c` where NMEA leaves room for interpretation, so
 //! that the decoder can be checked against gpsd's regression captures
@@ -32,9 +42,16 @@
 //! flags it valid; DOPs ≥ 99 are "unknown" sentinels; two-digit RMC years 80–99 are 19xx,
 //! 00–79 are 20xx; when two sentences of one epoch carry the same quantity, the later one
 //! wins. ZDA and GST carry a time of their own that need not be the epoch's (several
-//! receivers send ZDA for the next second), so they never open or close an epoch: ZDA
-//! supplies the date for its own time of day, GST sigmas are used only when GST's time
-//! matches the epoch.
+//! receivers send ZDA for the next second), so they never close an epoch tagged by a fix
+//! sentence: ZDA supplies the date for its own time of day, GST sigmas are used only when
+//! GST's time matches the epoch. A ZDA tags an epoch only when it comes first (and a
+//! ZDA-only receiver thus yields time-only epochs, mode 0).
+//!
+//! Fix mode: GSA states it and PGRMZ too; GGA/GNS imply it (3D with an altitude and ≥ 4
+//! satellites, else 2D; no fix when flagged invalid); RMC/GLL only say "valid position",
+//! which is 3D if the epoch has an altitude or > 3 satellites, else the dimension of the
+//! receiver's previous fix, else 2D. Within an epoch later claims win, except that a 2D claim
+//! does not undo a 3D one. Unlike gpsd, a fix from ≤ 3 satellites is never called 3D.
 //!
 //! Sentences are checked and split with the `nmea` crate, whose typed output is used for
 //! what it represents exactly (coordinates, fix quality, satellite counts, status and mode
@@ -931,12 +948,12 @@ impl Epoch {
     /// receiver's last fix, 0 when unknown.
     fn apply_mode(&mut self, hint: ModeHint, last_dim: u8) {
         match hint {
-            // A 2D claim does not downgrade a 3D one of the same epoch: GGA/GNS report 3D
-            // for an altitude from ≥ 4 satellites, and some receivers (Quectel) send GSA
-            // mode 2 alongside (gpsd keeps 3D too).
-            ModeHint::Mode(m) if m == FixMode::Fix2d as u8 && self.fix.mode == FixMode::Fix3d as u8 => {
-                self.mode_determined = true;
-            }
+            // A 2D claim does not downgrade a 3D one determined in the same epoch: GGA/GNS
+            // report 3D for an altitude from ≥ 4 satellites, and some receivers (Quectel)
+            // send GSA mode 2 alongside (gpsd keeps 3D too). A 3D only assumed from the
+            // previous fix (RMC first) does give way.
+            ModeHint::Mode(m)
+                if m == FixMode::Fix2d as u8 && self.fix.mode == FixMode::Fix3d as u8 && self.mode_determined => {}
             ModeHint::Mode(m) => {
                 self.fix.mode = m;
                 self.mode_determined = true;
@@ -1637,6 +1654,12 @@ mod tests {
         );
         let f = flush(&mut asm)[0];
         assert_eq!((f.mode, f.sats_used), (3, 8));
+        // 3D assumed for an RMC from the previous fix gives way to a GGA with 3 satellites.
+        let mut asm = EpochAssembler::new();
+        let three_sats = nmea("GPGGA,120001,4807.0381,N,01131.0004,E,1,03,2.0,545.4,M,46.9,M,,");
+        run(&mut asm, &[gga("120000"), rmc("120001", "010125"), three_sats]);
+        let f = flush(&mut asm)[0];
+        assert_eq!((f.mode, f.sats_used), (2, 3));
         // PGRMZ: altitude in feet and explicit dimension.
         let mut asm = EpochAssembler::new();
         run(
