@@ -23,7 +23,7 @@ pub const NODE_SPACING_S: f64 = 1.0;
 pub struct Oscillator {
     start_host_ns: i64,
     start_utc_ns: i64,
-    /// y at the nodes τ_j = j·Δ.
+    /// y at the nodes τ_j = j·Δ (at least two nodes, so `locate` always indexes a node).
     y: Vec<f64>,
     /// X(τ_j) = ∫₀^{τ_j} y ds, s.
     x: Vec<f64>,

@@ -988,6 +988,35 @@ mod tests {
     }
 
     #[test]
+    fn unknown_kind_missing_field_and_io_errors() {
+        let text = minimal("").replace("kind = \"static\"", "kind = \"hover\"");
+        let err = SimConfig::from_toml_str(&text, "k.toml").expect_err("bad kind");
+        let msg = err.to_string();
+        println!("{msg}");
+        assert!(
+            msg.starts_with("k.toml:8:") && msg.contains("hover") && msg.contains("static"),
+            "{msg}"
+        );
+        let text = minimal("\n[[trajectory.segment]]\nkind = \"cruise\"\n");
+        let msg = SimConfig::from_toml_str(&text, "m.toml")
+            .expect_err("missing")
+            .to_string();
+        println!("{msg}");
+        assert!(
+            msg.starts_with("m.toml:11:") && msg.contains("segment[1]") && msg.contains("duration_s"),
+            "{msg}"
+        );
+        let text = minimal("").replace("[trajectory.start]", "[imu]\nrate = 100\n\n[trajectory.start]");
+        let msg = SimConfig::from_toml_str(&text, "u.toml")
+            .expect_err("unknown")
+            .to_string();
+        println!("{msg}");
+        assert!(msg.starts_with("u.toml:2:") && msg.contains("rate"), "{msg}");
+        let err = SimConfig::from_file(Path::new("/nonexistent/scenario.toml")).expect_err("io");
+        assert!(matches!(err, SimError::Io { .. }) && err.to_string().starts_with("/nonexistent/scenario.toml"));
+    }
+
+    #[test]
     fn syntax_error_has_line() {
         let err = SimConfig::from_toml_str("seed = 1\n[x", "s.toml").expect_err("syntax");
         assert!(err.to_string().starts_with("s.toml:2:"), "{err}");

@@ -193,7 +193,9 @@ pub struct Trajectory {
 }
 
 impl Trajectory {
-    /// Builds the trajectory of a validated scenario with the default step.
+    /// Builds the trajectory of a validated scenario
+    /// ([`SimConfig::validate`](super::scenario::SimConfig::validate)) with the default step.
+    /// (An empty segment list gives 1 s of constant motion.)
     pub fn new(start: &StartConfig, segments: &[SegmentConfig]) -> Self {
         Self::with_step(start, segments, POSITION_STEP_S)
     }
@@ -343,6 +345,16 @@ fn segment_motions(start: &StartConfig, segments: &[SegmentConfig]) -> Vec<Segme
         v += dv;
         psi += dpsi;
         th += dth;
+    }
+    if out.is_empty() {
+        // Not reachable from a validated scenario; keeps the trajectory well defined.
+        out.push(SegmentMotion {
+            t0: 0.0,
+            duration: 1.0,
+            speed: (v, 0.0),
+            heading: (psi, 0.0),
+            pitch: (th, 0.0),
+        });
     }
     out
 }

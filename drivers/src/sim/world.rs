@@ -294,6 +294,13 @@ impl World {
         self.imus.len()
     }
 
+    /// True UTC of the end of IMU `index`'s sample `seq` (its data is the average over the
+    /// sample period ending there), ns; `None` for an unknown IMU.
+    pub fn imu_sample_utc_ns(&self, index: usize, seq: u64) -> Option<i64> {
+        let imu = self.imus.get(index)?;
+        Some(self.osc.utc_of_tau(imu.sample_time_s(seq)))
+    }
+
     /// IMU `index`'s generator (configuration, mount, drawn errors), for evaluation.
     pub fn imu(&self, index: usize) -> Option<&ImuStream> {
         self.imus.get(index)
@@ -585,6 +592,51 @@ mod tests {
             }
         }
         assert!(n >= 290);
+    }
+
+    #[test]
+    fn outage_without_pps_silences_edges_and_fix() {
+        let mut cfg = short_cfg(100.0);
+        cfg.gnss.outages = vec![
+            crate::sim::scenario::OutageConfig {
+                start_s: 50.0,
+                duration_s: 10.0,
+                pps_continues: false,
+            },
+            crate::sim::scenario::OutageConfig {
+                start_s: 70.0,
+                duration_s: 5.0,
+                pps_continues: true,
+            },
+        ];
+        let mut w = World::new(&cfg, H0, U0).expect("world");
+        let (mut edges, mut no_fix) = (Vec::new(), 0);
+        while let Some(e) = w.next_event() {
+            match e {
+                SimEvent::Pps(p) => edges.push((p.stamp.seq, w.utc_ns_at_host(p.stamp.host_ns))),
+                SimEvent::Nmea { bytes, .. } => no_fix += usize::from(parse_burst(&bytes)[2][6] == "0"),
+                _ => {}
+            }
+        }
+        let in_silence = |u: i64| {
+            let tau = (u - U0) as f64 * 1e-9;
+            (50.0..60.0).contains(&tau)
+        };
+        assert!(edges.iter().all(|&(_, u)| !in_silence(u)));
+        assert_eq!(edges.len(), 100 - 10);
+        assert!(
+            edges.iter().enumerate().all(|(i, &(s, _))| s == i as u64),
+            "seq counts edges"
+        );
+        assert_eq!(no_fix, 15);
+    }
+
+    #[test]
+    fn imu_sample_times_and_utc() {
+        let w = World::new(&short_cfg(10.0), H0, U0).expect("world");
+        // IMU 1: phase 1.1 ms, 200 Hz: sample 0 ends at 6.1 ms.
+        assert_eq!(w.imu_sample_utc_ns(1, 0), Some(U0 + 6_100_000));
+        assert_eq!(w.imu_sample_utc_ns(9, 0), None);
     }
 
     #[test]
