@@ -109,13 +109,14 @@ pub struct EpochCounters {
     /// Sentences without a `*hh` checksum, or not starting with `$`/`!`; dropped (gpsd
     /// drops them too).
     pub no_checksum: u64,
-    /// Supported sentences whose fields could not be decoded; dropped.
+    /// Supported sentences rejected by the `nmea` crate from which the lenient decoder could
+    /// read nothing either (or a GSA without a valid mode); dropped.
     pub unparsable: u64,
     /// Valid sentences of a type that carries no fix data for us (GSV, TXT, proprietary, AIS).
     pub unsupported: u64,
     /// Supported sentences the `nmea` crate rejected but the lenient field decoder accepted.
     pub lenient: u64,
-    /// Fix fields that were present but invalid (bad date, out-of-range coordinate); ignored.
+    /// Fields that were present but malformed (time, number, date); ignored.
     pub bad_fields: u64,
     /// Epochs emitted.
     pub epochs: u64,
@@ -1162,6 +1163,12 @@ impl EpochAssembler {
     /// Consumes one sentence (text from `$` to before CR/LF; `host_ns` the host time of its
     /// first byte) and calls `out` for every epoch it completes (0, 1 or 2: the previous
     /// epoch when this sentence starts a new one, this one if it is the cycle ender).
+    ///
+    /// Emitted fixes have `stamp = Stamp::host(first_byte_host_ns, seq, Receipt)` with `seq`
+    /// counting emissions from 0. When data for an epoch arrive after it was emitted on a
+    /// wrongly learned cycle ender, that epoch is emitted once more, complete: same
+    /// `utc_ns` and `stamp.host_ns`, next `seq` (consumers keep the later of two fixes with
+    /// the same time).
     pub fn push(&mut self, text: &[u8], host_ns: i64, out: &mut impl FnMut(&GnssFix)) {
         self.counters.sentences += 1;
         let s = match check(text) {
