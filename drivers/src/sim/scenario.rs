@@ -17,7 +17,7 @@ use std::path::Path;
 use navsync_shared::samples::MAX_IMUS;
 use serde::Deserialize;
 
-use super::error::SimError;
+pub use super::error::SimError;
 use super::imu_errors::ImuPreset;
 use super::source_map::SourceMap;
 
