@@ -8,6 +8,8 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use navsync::roles;
 use navsync_drivers::gps::driver::{Baud, GpsArgs};
+use navsync_drivers::sim::process::SimArgs;
+use navsync_shared::imu_spec::ImuPreset;
 use tracing::Level;
 use tracing_subscriber::filter::Targets;
 use tracing_subscriber::prelude::*;
@@ -19,23 +21,12 @@ struct Cli {
     cmd: Cmd,
 }
 
-/// Comma-separated ids, e.g. `0,1,2,3`.
-fn id_list(s: &str) -> Result<Vec<String>, String> {
-    let ids: Vec<String> = s
-        .split(',')
-        .map(str::trim)
-        .filter(|x| !x.is_empty())
-        .map(String::from)
-        .collect();
-    if ids
-        .iter()
-        .all(|i| i.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_'))
-    {
-        Ok(ids)
+/// A device id as used in service names: letters, digits, `-` and `_`.
+fn parse_id(s: &str) -> Result<String, String> {
+    if !s.is_empty() && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+        Ok(s.to_string())
     } else {
-        Err(format!(
-            "`{s}`: ids are letters, digits, `-` and `_`, separated by commas"
-        ))
+        Err(format!("`{s}`: an id is letters, digits, `-` and `_`"))
     }
 }
 
@@ -56,17 +47,62 @@ enum Cmd {
     /// The estimator: time mapping (and navigation filter) from the sensor services.
     Estimator {
         /// GNSS receiver ids.
-        #[arg(long, default_value = "0", value_parser = id_list)]
+        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
         gnss: Vec<String>,
         /// PPS source ids (empty: none).
-        #[arg(long, default_value = "0", value_parser = id_list)]
+        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
         pps: Vec<String>,
         /// IMU ids.
-        #[arg(long, default_value = "0", value_parser = id_list)]
+        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
         imus: Vec<String>,
         /// Ignore PPS: stamp fixes by receipt time (ms-level time).
         #[arg(long)]
         software_sync: bool,
+        /// IMU class for the filter's process noise: consumer, industrial.
+        #[arg(long, default_value = "industrial")]
+        imu_model: ImuPreset,
+        /// Do not estimate the GNSS delay Δ (for comparison runs).
+        #[arg(long)]
+        no_delay_state: bool,
+    },
+    /// The simulated sensor world: IMUs and PPS to their services, NMEA into a pseudo-terminal.
+    Sim {
+        /// Scenario file (TOML); default: the embedded ~10 minute drive.
+        #[arg(long)]
+        scenario: Option<PathBuf>,
+        /// Number of IMUs (overrides the scenario).
+        #[arg(long)]
+        imus: Option<usize>,
+        /// IMU error preset for all IMUs: consumer, industrial, perfect.
+        #[arg(long)]
+        imu_preset: Option<ImuPreset>,
+        /// Stamp offsets of the IMUs relative to the first, ms, comma-separated (e.g. 0,10,15,20).
+        #[arg(long, value_delimiter = ',')]
+        imu_offsets_ms: Option<Vec<f64>>,
+        /// GNSS rate, Hz (1 or 10).
+        #[arg(long)]
+        gnss_rate: Option<u32>,
+        /// NMEA output latency after the PPS edge, s.
+        #[arg(long)]
+        gnss_latency: Option<f64>,
+        /// Host oscillator frequency error, ppm.
+        #[arg(long)]
+        clock_ppm: Option<f64>,
+        /// PPS time-stamp jitter (1-sigma), ns.
+        #[arg(long)]
+        pps_jitter_ns: Option<f64>,
+        /// Random seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Create this symlink to the NMEA pseudo-terminal.
+        #[arg(long)]
+        pty_link: Option<PathBuf>,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Simulated GNSS time minus the system clock, s.
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        utc_offset: f64,
     },
     /// Runs sim, gps and estimator as child processes with a live status line.
     Demo {
@@ -133,14 +169,48 @@ fn main() -> Result<()> {
             pps,
             imus,
             software_sync,
+            imu_model,
+            no_delay_state,
         } => {
             roles::estimator::run(&roles::estimator::EstimatorArgs {
                 gnss_ids: gnss,
                 pps_ids: pps,
                 imu_ids: imus,
                 software_sync,
+                imu_model,
+                estimate_delay: !no_delay_state,
             })
             .context("estimator")?;
+        }
+        Cmd::Sim {
+            scenario,
+            imus,
+            imu_preset,
+            imu_offsets_ms,
+            gnss_rate,
+            gnss_latency,
+            clock_ppm,
+            pps_jitter_ns,
+            seed,
+            pty_link,
+            duration,
+            utc_offset,
+        } => {
+            let args = SimArgs {
+                scenario,
+                imus,
+                preset: imu_preset,
+                imu_offsets_ms,
+                gnss_rate_hz: gnss_rate,
+                gnss_latency_s: gnss_latency,
+                clock_ppm,
+                pps_jitter_ns,
+                seed,
+                pty_link,
+                duration_s: duration,
+                utc_offset_s: utc_offset,
+            };
+            navsync_drivers::sim::process::run(&args).context("simulator")?;
         }
         Cmd::Demo {
             duration,

@@ -20,9 +20,13 @@
 use core::fmt::Debug;
 use core::time::Duration;
 
+use core::sync::atomic::{AtomicBool, Ordering};
+
+use iceoryx2::node::NodeWaitFailure;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
 
 use crate::reflect::Reflect;
 use crate::services::{self, MAX_NODES, MAX_PUBLISHERS, MAX_SUBSCRIBERS, ServiceKind};
@@ -77,6 +81,9 @@ pub fn config_with_prefix(prefix: &str) -> Result<Config, IpcError> {
 /// One process's iceoryx2 node.
 pub struct IpcNode {
     node: Node<Transport>,
+    /// Latched termination request: iceoryx2 reports (and clears) the signal once, to whichever
+    /// wait sees it first; the latch keeps it for every later check.
+    terminated: AtomicBool,
 }
 
 impl IpcNode {
@@ -99,7 +106,10 @@ impl IpcNode {
             .map_err(|e| err("creating node", process, e))?;
         // Reclaim what processes that died without cleaning up (kill -9) left behind.
         let _ = node.try_cleanup_dead_nodes();
-        Ok(Self { node })
+        Ok(Self {
+            node,
+            terminated: AtomicBool::new(false),
+        })
     }
 
     /// The iceoryx2 node.
@@ -107,14 +117,31 @@ impl IpcNode {
         &self.node
     }
 
-    /// True once SIGINT or SIGTERM was received.
+    /// True once SIGINT or SIGTERM was received (latched).
     pub fn termination_requested(&self) -> bool {
-        self.node.wait(Duration::ZERO).is_err()
+        if let Err(NodeWaitFailure::TerminationRequest) = self.node.wait(Duration::ZERO) {
+            self.terminated.store(true, Ordering::Relaxed);
+        }
+        self.terminated.load(Ordering::Relaxed)
     }
 
-    /// Sleeps up to `d`; returns false when termination was requested.
+    /// Sleeps up to `d` (less when a signal arrives); returns false once termination was requested.
     pub fn sleep(&self, d: Duration) -> bool {
-        self.node.wait(d).is_ok()
+        if let Err(NodeWaitFailure::TerminationRequest) = self.node.wait(d) {
+            self.terminated.store(true, Ordering::Relaxed);
+        }
+        !self.terminated.load(Ordering::Relaxed)
+    }
+
+    /// Waits on `waitset` until an attachment fires or `timeout` passes; returns false once
+    /// termination was requested.
+    pub fn wait_on(&self, waitset: &WaitSet<Transport>, timeout: Duration) -> Result<bool, IpcError> {
+        match waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout) {
+            Ok(WaitSetRunResult::TerminationRequest) => self.terminated.store(true, Ordering::Relaxed),
+            Ok(_) => {}
+            Err(e) => return Err(err("waiting on waitset", "-", e)),
+        }
+        Ok(!self.termination_requested())
     }
 
     fn event_service(

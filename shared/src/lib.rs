@@ -19,6 +19,7 @@
 
 pub mod earth;
 pub mod health_reporter;
+pub mod imu_spec;
 pub mod ipc;
 pub mod json;
 pub mod reflect;

@@ -19,6 +19,7 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use navsync_shared::earth::{self, OMEGA_IE};
+use navsync_shared::imu_spec::ImuErrorSpec;
 
 use super::mechanization::{Pva, skew};
 
@@ -63,12 +64,45 @@ pub struct ProcessNoise {
     pub accel_scale_std: f64,
     /// Correlation time of the bias and scale Gauss–Markov processes, s.
     pub corr_time_s: f64,
+    /// Initial 1-sigma of the gyro bias (turn-on bias), rad/s.
+    pub gyro_bias_init_std: f64,
+    /// Initial 1-sigma of the accelerometer bias (turn-on bias), m/s².
+    pub accel_bias_init_std: f64,
+    /// Initial 1-sigma of the gyro scale factor.
+    pub gyro_scale_init_std: f64,
+    /// Initial 1-sigma of the accelerometer scale factor.
+    pub accel_scale_init_std: f64,
     /// Random walk of the GNSS delay, s/√s (lets Δ follow slow changes of the receiver).
     pub delay_rw: f64,
     /// Estimate scale factors (else their states are frozen at zero).
     pub estimate_scale: bool,
     /// Estimate the GNSS delay Δ (else frozen).
     pub estimate_delay: bool,
+}
+
+impl ProcessNoise {
+    /// Process noise of an IMU class: white noise from its noise densities, the bias
+    /// Gauss–Markov processes from its in-run stability, the initial uncertainties from its
+    /// turn-on bias and scale-factor spread. Scale factors are nearly constant: a Gauss–Markov
+    /// process with a tenth of their spread. Δ may wander by 1 ms/√s.
+    pub fn from_spec(spec: &ImuErrorSpec) -> Self {
+        Self {
+            arw: spec.gyro.noise_density,
+            vrw: spec.accel.noise_density,
+            gyro_bias_std: spec.gyro.bias_instability_sigma,
+            accel_bias_std: spec.accel.bias_instability_sigma,
+            gyro_scale_std: 0.1 * spec.gyro.scale_factor_sigma,
+            accel_scale_std: 0.1 * spec.accel.scale_factor_sigma,
+            corr_time_s: spec.gyro.bias_correlation_s,
+            gyro_bias_init_std: spec.gyro.bias_sigma.max(spec.gyro.bias_instability_sigma),
+            accel_bias_init_std: spec.accel.bias_sigma.max(spec.accel.bias_instability_sigma),
+            gyro_scale_init_std: spec.gyro.scale_factor_sigma,
+            accel_scale_init_std: spec.accel.scale_factor_sigma,
+            delay_rw: 1e-3,
+            estimate_scale: spec.gyro.scale_factor_sigma > 0.0,
+            estimate_delay: true,
+        }
+    }
 }
 
 /// Builds F (continuous-time error dynamics) at `pva` with bias-compensated specific force

@@ -20,4 +20,5 @@ pub mod imu_buffer;
 pub mod latency_stats;
 pub mod mechanization;
 pub mod navigator;
+pub mod pipeline;
 pub mod time_sync;

@@ -287,16 +287,15 @@ impl Navigator {
             p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
             p[(VEL + i, VEL + i)] = cfg.init_vel_std_mps.powi(2);
             p[(BG + i, BG + i)] = if a.levelled {
-                // Static average: noise over the static time plus the bias instability.
-                (cfg.noise.arw * cfg.noise.arw / a.static_s.max(1.0) + (0.3 * cfg.noise.gyro_bias_std).powi(2))
-                    .max(1e-12)
+                // Static average: white noise over the static time plus the bias instability.
+                cfg.noise.arw * cfg.noise.arw / a.static_s.max(1.0) + cfg.noise.gyro_bias_std.powi(2)
             } else {
-                cfg.noise.gyro_bias_std.powi(2)
+                cfg.noise.gyro_bias_init_std.powi(2)
             };
-            p[(BA + i, BA + i)] = cfg.noise.accel_bias_std.powi(2);
+            p[(BA + i, BA + i)] = cfg.noise.accel_bias_init_std.powi(2);
             if cfg.noise.estimate_scale {
-                p[(SG + i, SG + i)] = cfg.noise.gyro_scale_std.powi(2);
-                p[(SA + i, SA + i)] = cfg.noise.accel_scale_std.powi(2);
+                p[(SG + i, SG + i)] = cfg.noise.gyro_scale_init_std.powi(2);
+                p[(SA + i, SA + i)] = cfg.noise.accel_scale_init_std.powi(2);
             }
         }
         let level_std = if a.levelled {

@@ -284,6 +284,21 @@ impl TimeSync {
         updated
     }
 
+    /// Host time at which UTC read `utc_ns`, when the mapping is PPS-based (locked or in
+    /// holdover); `None` otherwise.
+    pub fn host_ns_at_utc(&self, utc_ns: i64) -> Option<i64> {
+        (self.clock.is_initialized() && matches!(self.status, TimeStatus::Locked | TimeStatus::Holdover))
+            .then(|| self.clock_host_ns_at(utc_ns))
+    }
+
+    /// UTC at host time `host_ns` by the current mapping (PPS-based or software), if any.
+    pub fn utc_ns_at_host(&self, host_ns: i64) -> Option<i64> {
+        if self.clock.is_initialized() && matches!(self.status, TimeStatus::Locked | TimeStatus::Holdover) {
+            return Some(self.clock.utc_ns_at(host_ns));
+        }
+        None
+    }
+
     fn clock_host_ns_at(&self, utc_ns: i64) -> i64 {
         // Invert utc(h) = h + base + x0 + x1·(h − h_s): one fixed-point step is exact to < 1 ns.
         let guess = utc_ns - (self.clock.utc_ns_at(self.clock.host_ns()) - self.clock.host_ns());

@@ -12,7 +12,6 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
-use iceoryx2::prelude::*;
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;
@@ -318,20 +317,11 @@ fn monitor_loop(
     let t0 = Instant::now();
     let mut last_line = Instant::now();
     let tty = std::io::stderr().is_terminal();
+    // The monitor is a display: it wakes every 100 ms and drains what arrived (every service
+    // buffers far more than 100 ms of samples) instead of waking for each of ~5000 samples/s.
     let waitset = node.waitset()?;
-    let _tick = waitset
-        .attach_interval(Duration::from_millis(50))
-        .map_err(|e| IpcError::Iceoryx {
-            what: "attaching interval",
-            service: "-".into(),
-            detail: format!("{e:?}"),
-        })?;
     loop {
-        if waitset
-            .wait_and_process_once(|_| CallbackProgression::Continue)
-            .is_err()
-            || node.termination_requested()
-        {
+        if !node.wait_on(&waitset, Duration::from_millis(100))? {
             break;
         }
         monitor.drain()?;

@@ -8,15 +8,19 @@
 
 use std::time::Duration;
 
-use iceoryx2::prelude::*;
 use navsync_shared::health_reporter::HealthReporter;
+use navsync_shared::imu_spec::ImuPreset;
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
-use navsync_shared::samples::{GnssFix, ImuSample, PpsEdge, TimeState};
+use navsync_shared::samples::{GnssFix, ImuSample, NavState, PpsEdge, TimeState};
 use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
 
-use crate::estimator::time_sync::{TimeSync, TimeSyncConfig};
+use crate::estimator::error_state::ProcessNoise;
+use crate::estimator::gnss_fusion::GnssAccuracy;
+use crate::estimator::navigator::NavConfig;
+use crate::estimator::pipeline::{Pipeline, PipelineConfig};
+use crate::estimator::time_sync::TimeSyncConfig;
 
 /// Command-line settings of the estimator process.
 #[derive(Debug, Clone)]
@@ -29,6 +33,29 @@ pub struct EstimatorArgs {
     pub imu_ids: Vec<String>,
     /// Ignore PPS: software synchronisation from NMEA receipt times.
     pub software_sync: bool,
+    /// IMU class (process noise of the filter).
+    pub imu_model: ImuPreset,
+    /// Estimate the GNSS delay Δ.
+    pub estimate_delay: bool,
+}
+
+impl EstimatorArgs {
+    /// The estimator configuration these arguments describe.
+    pub fn pipeline_config(&self) -> PipelineConfig {
+        let mut noise = ProcessNoise::from_spec(&self.imu_model.spec());
+        noise.estimate_delay = self.estimate_delay;
+        PipelineConfig {
+            time: TimeSyncConfig {
+                software_sync: self.software_sync,
+                ..Default::default()
+            },
+            nav: NavConfig::with_noise(noise),
+            gnss: GnssAccuracy::default(),
+            reference_imu: self.imu_ids.first().cloned().unwrap_or_else(|| "0".into()),
+            software_delay_prior: (0.0, 1.0),
+            hardware_delay_prior: (0.0, 0.02),
+        }
+    }
 }
 
 /// Errors of the estimator process.
@@ -83,26 +110,26 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
         })?);
     }
 
-    let mut sync = TimeSync::new(TimeSyncConfig {
-        software_sync: args.software_sync,
-        ..Default::default()
-    });
+    let mut est = Pipeline::new(args.pipeline_config());
+    let mut nav_pub = node.publisher::<NavState>(services::NAV_STATE)?;
+    let c_nav = health.counter("nav_states");
+    let c_fix_used = health.counter("fixes_used");
+    let c_fix_rej = health.counter("fixes_rejected");
+    let c_fix_old = health.counter("fixes_too_old");
     let mut last_imu_seq: Vec<Option<u64>> = vec![None; imus.len()];
     let mut last_state_ns = 0i64;
-    let mut last_status = sync.status();
+    let mut last_status = est.time().status();
     info!(pps = ?args.pps_ids, gnss = ?args.gnss_ids, imus = ?args.imu_ids, "estimator running");
 
     loop {
-        let res =
-            waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, Duration::from_millis(100));
-        if res.is_err() || node.termination_requested() {
+        if !node.wait_on(&waitset, Duration::from_millis(100))? {
             break;
         }
         let mut updated = false;
         for s in &pps {
             s.clear_events();
             while let Some(edge) = s.receive()? {
-                updated |= sync.on_pps(&edge);
+                updated |= est.on_pps(&edge);
             }
         }
         for s in &gnss {
@@ -110,12 +137,12 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
             while let Some(fix) = s.receive()? {
                 health.add(c_fixes, 1);
                 health.tick(r_fix);
-                updated |= sync.on_fix(&fix);
+                updated |= est.on_fix(&fix);
             }
         }
         for (s, last) in imus.iter().zip(last_imu_seq.iter_mut()) {
             s.clear_events();
-            s.for_each(|sample| {
+            while let Some(sample) = s.receive()? {
                 if let Some(prev) = *last
                     && sample.stamp.seq > prev + 1
                 {
@@ -124,23 +151,37 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
                 *last = Some(sample.stamp.seq);
                 health.add(c_imu, 1);
                 health.tick(r_imu);
-            })?;
+                if let Some(state) = est.on_imu(&sample) {
+                    if let Err(e) = nav_pub.publish(&state) {
+                        warn!("publishing nav state: {e}");
+                    }
+                    health.add(c_nav, 1);
+                }
+            }
         }
         let now = monotonic_now_ns();
-        sync.tick(now);
-        if sync.status() != last_status {
-            info!(from = last_status.name(), to = sync.status().name(), "time status");
-            last_status = sync.status();
+        if est.time().status() != last_status {
+            info!(
+                from = last_status.name(),
+                to = est.time().status().name(),
+                "time status"
+            );
+            last_status = est.time().status();
         }
         if updated || now - last_state_ns >= NS_PER_S {
-            let state = sync.time_state(now);
+            let state = est.time_state(now);
             if let Err(e) = time_pub.publish(&state) {
                 warn!("publishing time state: {e}");
             }
             last_state_ns = now;
         }
-        health.set(c_pps, sync.counters().pps_used);
-        health.set(c_pps_rej, sync.counters().rejected());
+        let tc = *est.time().counters();
+        health.set(c_pps, tc.pps_used);
+        health.set(c_pps_rej, tc.rejected());
+        let nc = *est.nav().counters();
+        health.set(c_fix_used, nc.fixes_used);
+        health.set(c_fix_rej, nc.fixes_rejected);
+        health.set(c_fix_old, nc.fixes_too_old);
         health.maybe_publish(now)?;
     }
     drop(guards);

@@ -8,6 +8,7 @@ pub mod inverse_mechanization;
 pub mod nmea;
 pub mod oscillator;
 pub mod pps;
+pub mod process;
 pub mod quadrature;
 pub mod rng;
 pub mod scenario;

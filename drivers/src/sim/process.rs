@@ -1,0 +1,284 @@
+//! `navsync sim`: the process shell around the simulated [`World`].
+//!
+//! It paces the world's time-ordered events against the host's `CLOCK_MONOTONIC`: IMU samples,
+//! PPS edges and the truth are published straight into their services (their time stamps come
+//! from the world's oscillator model, not from when they are published); each NMEA burst is
+//! written into a pseudo-terminal at the serial line rate, its first byte at the instant the
+//! world says it leaves the receiver, so the GPS driver reads it exactly as from a receiver.
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+
+use navsync_shared::health_reporter::HealthReporter;
+use navsync_shared::ipc::{IpcError, IpcNode, Publisher};
+use navsync_shared::samples::{ImuSample, PpsEdge, SimTruth};
+use navsync_shared::services;
+use navsync_shared::time::{NS_PER_S, monotonic_now_ns, realtime_now_ns};
+use tracing::{info, info_span, warn};
+
+use super::error::SimError;
+use super::imu_errors::ImuPreset;
+use super::scenario::SimConfig;
+use super::world::{SimEvent, World};
+use crate::pty::Pty;
+
+/// Command-line overrides of the scenario.
+#[derive(Debug, Clone, Default)]
+pub struct SimArgs {
+    /// Scenario file (default: the embedded drive).
+    pub scenario: Option<PathBuf>,
+    /// Number of IMUs.
+    pub imus: Option<usize>,
+    /// IMU error preset for all IMUs.
+    pub preset: Option<ImuPreset>,
+    /// Stamp offsets of the IMUs relative to the first, ms.
+    pub imu_offsets_ms: Option<Vec<f64>>,
+    /// GNSS rate, Hz (1 or 10).
+    pub gnss_rate_hz: Option<u32>,
+    /// NMEA output latency after the PPS edge, s.
+    pub gnss_latency_s: Option<f64>,
+    /// Host oscillator frequency error, ppm.
+    pub clock_ppm: Option<f64>,
+    /// PPS time-stamp jitter (1-sigma), ns.
+    pub pps_jitter_ns: Option<f64>,
+    /// Random seed.
+    pub seed: Option<u64>,
+    /// Symlink to create for the NMEA pseudo-terminal.
+    pub pty_link: Option<PathBuf>,
+    /// Stop after this many seconds of scenario.
+    pub duration_s: Option<f64>,
+    /// Simulated GNSS time minus the system clock, s (default 0: GNSS time ≈ system time).
+    pub utc_offset_s: f64,
+}
+
+/// Errors of the simulator process.
+#[derive(Debug, thiserror::Error)]
+pub enum SimProcessError {
+    /// Bad scenario or override.
+    #[error(transparent)]
+    Scenario(#[from] SimError),
+    /// IPC failure.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// The pseudo-terminal could not be created.
+    #[error("creating the NMEA pseudo-terminal: {0}")]
+    Pty(std::io::Error),
+}
+
+/// Loads the scenario and applies the command-line overrides.
+pub fn load_config(args: &SimArgs) -> Result<SimConfig, SimError> {
+    let mut cfg = match &args.scenario {
+        Some(p) => SimConfig::from_file(p)?,
+        None => SimConfig::default_drive(),
+    };
+    if let Some(n) = args.imus {
+        cfg.set_imu_count(n);
+    }
+    if let Some(p) = args.preset {
+        cfg.set_imu_preset(p);
+    }
+    if let Some(offsets) = &args.imu_offsets_ms {
+        let s: Vec<f64> = offsets.iter().map(|ms| ms * 1e-3).collect();
+        cfg.set_imu_offsets_s(&s);
+    }
+    if let Some(r) = args.gnss_rate_hz {
+        cfg.set_gnss_rate_hz(r);
+    }
+    if let Some(l) = args.gnss_latency_s {
+        cfg.set_nmea_latency_s(l);
+    }
+    if let Some(p) = args.clock_ppm {
+        cfg.set_clock_ppm(p);
+    }
+    if let Some(j) = args.pps_jitter_ns {
+        cfg.set_pps_jitter_s(j * 1e-9);
+    }
+    if let Some(s) = args.seed {
+        cfg.set_seed(s);
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// One NMEA burst being written at the line rate.
+struct Burst {
+    start_ns: i64,
+    bytes: Vec<u8>,
+    pos: usize,
+}
+
+/// Writes bursts into the pseudo-terminal at the serial line rate: byte j of a burst completes
+/// at `start + j·t_char`; the first byte is written alone at `start`, then chunks of up to 16
+/// bytes at the completion time of their last byte (what a UART delivers).
+struct LineWriter {
+    pty: Pty,
+    char_ns: i64,
+    queue: VecDeque<Burst>,
+    line_free_ns: i64,
+    shifted_bursts: u64,
+}
+
+const CHUNK: usize = 16;
+
+impl LineWriter {
+    fn push(&mut self, start_ns: i64, bytes: Vec<u8>) {
+        let start = if start_ns < self.line_free_ns {
+            // The previous burst still occupies the line (too many bytes for the baud rate).
+            self.shifted_bursts += 1;
+            self.line_free_ns
+        } else {
+            start_ns
+        };
+        self.line_free_ns = start + bytes.len() as i64 * self.char_ns;
+        self.queue.push_back(Burst {
+            start_ns: start,
+            bytes,
+            pos: 0,
+        });
+    }
+
+    fn chunk_len(b: &Burst) -> usize {
+        if b.pos == 0 {
+            1
+        } else {
+            CHUNK.min(b.bytes.len() - b.pos)
+        }
+    }
+
+    /// Host time at which the next chunk is due.
+    fn next_due(&self) -> Option<i64> {
+        let b = self.queue.front()?;
+        let last = b.pos + Self::chunk_len(b) - 1;
+        Some(b.start_ns + last as i64 * self.char_ns)
+    }
+
+    fn write_next(&mut self) {
+        let Some(b) = self.queue.front_mut() else { return };
+        let n = Self::chunk_len(b);
+        if let Err(e) = self.pty.write(&b.bytes[b.pos..b.pos + n]) {
+            warn!("writing NMEA: {e}");
+        }
+        b.pos += n;
+        if b.pos >= b.bytes.len() {
+            self.queue.pop_front();
+        }
+    }
+}
+
+/// Sleeps until `target` host ns: coarse sleep, then a short spin for the last 200 µs.
+fn sleep_until(target: i64) {
+    let spin_ns = 200_000;
+    let coarse = target - spin_ns;
+    if coarse > monotonic_now_ns() {
+        let ts = libc::timespec {
+            tv_sec: coarse / NS_PER_S,
+            tv_nsec: coarse % NS_PER_S,
+        };
+        // SAFETY: absolute sleep on CLOCK_MONOTONIC with a valid timespec.
+        unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) };
+    }
+    while monotonic_now_ns() < target {
+        std::hint::spin_loop();
+    }
+}
+
+/// Runs the simulator in real time until the scenario (or `--duration`) ends or SIGINT/SIGTERM.
+pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
+    let _span = info_span!("sim").entered();
+    let cfg = load_config(args)?;
+    // Wake-ups within µs of the requested time (the default timer slack is 50 µs).
+    // SAFETY: prctl with an integer argument.
+    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
+
+    let node = IpcNode::new("sim")?;
+    let mut imu_pubs: Vec<Publisher<ImuSample>> = (0..cfg.imu.count)
+        .map(|i| node.publisher(&services::imu_sample(&i.to_string())))
+        .collect::<Result<_, _>>()?;
+    let mut pps_pub = node.publisher::<PpsEdge>(&services::pps_edge("0"))?;
+    let mut truth_pub = node.publisher::<SimTruth>(services::SIM_TRUTH)?;
+    let mut health = HealthReporter::new(&node, "sim")?;
+    let c_late = health.counter("late_wakeups");
+    let c_shifted = health.counter("nmea_bursts_shifted");
+    let c_dropped = health.counter("nmea_bytes_dropped");
+    let r_imu = health.rate("imu_samples");
+
+    let pty = Pty::open(args.pty_link.as_deref()).map_err(SimProcessError::Pty)?;
+    println!(
+        "navsync sim: NMEA on {}{}",
+        pty.path().display(),
+        pty.link()
+            .map(|l| format!(" (link {})", l.display()))
+            .unwrap_or_default()
+    );
+    let mut line = LineWriter {
+        pty,
+        char_ns: 10 * NS_PER_S / cfg.gnss.baud as i64,
+        queue: VecDeque::new(),
+        line_free_ns: 0,
+        shifted_bursts: 0,
+    };
+
+    let start_host = monotonic_now_ns() + 300_000_000;
+    let start_utc = realtime_now_ns() + (args.utc_offset_s * 1e9) as i64 + 300_000_000;
+    let mut world = World::new(&cfg, start_host, start_utc)?;
+    let end_host = args.duration_s.map(|d| start_host + (d * 1e9) as i64);
+    info!(
+        imus = cfg.imu.count,
+        duration_s = world.duration_s(),
+        "simulation running"
+    );
+
+    let mut next = world.next_event();
+    loop {
+        if node.termination_requested() {
+            break;
+        }
+        let ev_time = next.as_ref().map(event_host_ns);
+        let due = match (ev_time, line.next_due()) {
+            (Some(e), Some(l)) => e.min(l),
+            (Some(e), None) => e,
+            (None, Some(l)) => l,
+            (None, None) => break,
+        };
+        if end_host.is_some_and(|end| due > end) {
+            break;
+        }
+        sleep_until(due.min(monotonic_now_ns() + 20_000_000));
+        let now = monotonic_now_ns();
+        if now < due {
+            continue; // woke early to check for termination
+        }
+        if now - due > 2_000_000 {
+            health.add(c_late, 1);
+        }
+        if line.next_due() == Some(due) {
+            line.write_next();
+        } else if let Some(ev) = next.take() {
+            match ev {
+                SimEvent::Imu { index, sample } => {
+                    imu_pubs[index].publish(&sample)?;
+                    health.tick(r_imu);
+                }
+                SimEvent::Pps(edge) => pps_pub.publish(&edge)?,
+                SimEvent::Nmea { host_ns, bytes, .. } => line.push(host_ns, bytes),
+                SimEvent::Truth(t) => truth_pub.publish(&t)?,
+            }
+            next = world.next_event();
+        }
+        health.set(c_shifted, line.shifted_bursts);
+        health.set(c_dropped, line.pty.dropped_bytes());
+        health.maybe_publish(now)?;
+    }
+    let _ = health.publish_final();
+    info!("simulation stopped");
+    Ok(())
+}
+
+fn event_host_ns(ev: &SimEvent) -> i64 {
+    match ev {
+        SimEvent::Imu { sample, .. } => sample.stamp.host_ns,
+        SimEvent::Pps(e) => e.stamp.host_ns,
+        SimEvent::Nmea { host_ns, .. } => *host_ns,
+        SimEvent::Truth(t) => t.host_ns,
+    }
+}
