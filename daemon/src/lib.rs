@@ -8,4 +8,6 @@
 //! model) and the process shells in [`roles`] that wire the core to the services.
 
 pub mod estimator;
+pub mod evaluation;
+pub mod offline;
 pub mod roles;

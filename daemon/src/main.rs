@@ -103,6 +103,24 @@ enum Cmd {
         /// Simulated GNSS time minus the system clock, s.
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
         utc_offset: f64,
+        /// Do not wait for real time: produce the samples as fast as the CPU allows (with --estimate).
+        #[arg(long)]
+        fast: bool,
+        /// Run the estimator offline over the simulated samples and print the accuracy report.
+        #[arg(long, requires = "fast")]
+        estimate: bool,
+        /// Write the accuracy report as JSON to this file.
+        #[arg(long, requires = "estimate")]
+        summary_json: Option<PathBuf>,
+        /// Estimator: ignore PPS (software sync).
+        #[arg(long)]
+        software_sync: bool,
+        /// Estimator: do not estimate the GNSS delay Δ.
+        #[arg(long)]
+        no_delay_state: bool,
+        /// Estimator: IMU class for the process noise (default: the simulated preset).
+        #[arg(long)]
+        imu_model: Option<ImuPreset>,
     },
     /// Runs sim, gps and estimator as child processes with a live status line.
     Demo {
@@ -195,6 +213,12 @@ fn main() -> Result<()> {
             pty_link,
             duration,
             utc_offset,
+            fast,
+            estimate,
+            summary_json,
+            software_sync,
+            no_delay_state,
+            imu_model,
         } => {
             let args = SimArgs {
                 scenario,
@@ -210,7 +234,24 @@ fn main() -> Result<()> {
                 duration_s: duration,
                 utc_offset_s: utc_offset,
             };
-            navsync_drivers::sim::process::run(&args).context("simulator")?;
+            if fast {
+                let est = roles::estimator::EstimatorArgs {
+                    gnss_ids: vec!["0".into()],
+                    pps_ids: vec!["0".into()],
+                    imu_ids: vec!["0".into()],
+                    software_sync,
+                    imu_model: imu_model.unwrap_or(ImuPreset::Industrial),
+                    estimate_delay: !no_delay_state,
+                };
+                anyhow::ensure!(
+                    estimate,
+                    "--fast needs --estimate (recording comes with `navsync record`)"
+                );
+                roles::sim_estimate::run(&args, &est, imu_model.is_none(), summary_json.as_deref())
+                    .context("offline simulation")?;
+            } else {
+                navsync_drivers::sim::process::run(&args).context("simulator")?;
+            }
         }
         Cmd::Demo {
             duration,

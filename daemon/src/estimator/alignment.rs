@@ -44,6 +44,9 @@ pub struct Alignment {
     pub levelled: bool,
     /// Static time averaged, s.
     pub static_s: f64,
+    /// NED acceleration at the fix, from the velocities of the last two fixes, m/s² (zero
+    /// when unknown); it couples the initial velocity error to the GNSS delay.
+    pub acc_ned: Vector3<f64>,
 }
 
 /// Accumulates the static period and produces the [`Alignment`].
@@ -54,6 +57,8 @@ pub struct Aligner {
     sum_w: Vector3<f64>,
     time_s: f64,
     in_static: bool,
+    /// Stamp (ns) and horizontal velocity of the previous fix.
+    prev_fix: Option<(i64, Vector3<f64>)>,
 }
 
 impl Aligner {
@@ -100,9 +105,16 @@ impl Aligner {
         })
     }
 
-    /// Aligns on a fix moving fast enough, or returns `None`.
-    pub fn try_align(&self, obs: &GnssObservation) -> Option<Alignment> {
+    /// Aligns on a fix moving fast enough, or returns `None` (and remembers the fix).
+    pub fn try_align(&mut self, obs: &GnssObservation) -> Option<Alignment> {
         let v = obs.vel_ned_mps;
+        let prev = self.prev_fix.replace((obs.stamp_host_ns, Vector3::new(v.x, v.y, 0.0)));
+        let acc_ned = match prev {
+            Some((t, pv)) if obs.stamp_host_ns > t && obs.stamp_host_ns - t <= 2_000_000_000 && v.x.is_finite() => {
+                (Vector3::new(v.x, v.y, 0.0) - pv) / ((obs.stamp_host_ns - t) as f64 * 1e-9)
+            }
+            _ => Vector3::zeros(),
+        };
         if !(obs.speed_mps >= self.cfg.min_speed_mps && obs.track_rad.is_finite() && v.x.is_finite() && v.y.is_finite())
         {
             return None;
@@ -130,6 +142,11 @@ impl Aligner {
             gyro_bias,
             levelled,
             static_s: self.time_s,
+            acc_ned: if acc_ned.iter().all(|a| a.is_finite()) {
+                acc_ned
+            } else {
+                Vector3::zeros()
+            },
         })
     }
 }

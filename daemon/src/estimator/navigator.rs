@@ -307,7 +307,24 @@ impl Navigator {
         p[(ATT + 1, ATT + 1)] = level_std.powi(2);
         p[(ATT + 2, ATT + 2)] = cfg.init_yaw_std_rad.powi(2);
         if cfg.noise.estimate_delay {
-            p[(DELAY, DELAY)] = cfg.delay_prior_std_s.powi(2);
+            // The initial position and velocity come from a fix whose epoch is only known to
+            // σ_Δ: δr = −v·δΔ and δv = −a·δΔ (see gnss_fusion), so they share that uncertainty.
+            let var_d = cfg.delay_prior_std_s.powi(2);
+            let v = a.pva.vel_ned_mps;
+            let acc = a.acc_ned;
+            p[(DELAY, DELAY)] = var_d;
+            for i in 0..3 {
+                p[(POS + i, DELAY)] = -v[i] * var_d;
+                p[(DELAY, POS + i)] = -v[i] * var_d;
+                p[(VEL + i, DELAY)] = -acc[i] * var_d;
+                p[(DELAY, VEL + i)] = -acc[i] * var_d;
+                for j in 0..3 {
+                    p[(POS + i, POS + j)] += v[i] * v[j] * var_d;
+                    p[(VEL + i, VEL + j)] += acc[i] * acc[j] * var_d;
+                    p[(POS + i, VEL + j)] += v[i] * acc[j] * var_d;
+                    p[(VEL + j, POS + i)] += v[i] * acc[j] * var_d;
+                }
+            }
         }
         let t_f = obs.stamp_host_ns - (cfg.delay_prior_s * 1e9) as i64;
         while self.buf.front().is_some_and(|r| r.host_ns <= t_f) {

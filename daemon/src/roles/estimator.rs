@@ -52,7 +52,7 @@ impl EstimatorArgs {
             nav: NavConfig::with_noise(noise),
             gnss: GnssAccuracy::default(),
             reference_imu: self.imu_ids.first().cloned().unwrap_or_else(|| "0".into()),
-            software_delay_prior: (0.0, 1.0),
+            software_delay_prior: (0.5, 0.5),
             hardware_delay_prior: (0.0, 0.02),
         }
     }

@@ -3,3 +3,4 @@
 pub mod demo;
 pub mod echo;
 pub mod estimator;
+pub mod sim_estimate;

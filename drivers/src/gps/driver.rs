@@ -30,7 +30,7 @@ pub const HUNT_BAUDS: [u32; 7] = [9600, 4800, 38_400, 115_200, 19_200, 57_600, 2
 const HUNT_DWELL: Duration = Duration::from_millis(2500);
 
 /// Read timeout; after this much silence the epoch being assembled is emitted.
-const IDLE_FLUSH: Duration = Duration::from_millis(50);
+pub const IDLE_FLUSH: Duration = Duration::from_millis(50);
 
 /// Serial line rate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

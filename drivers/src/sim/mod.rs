@@ -9,6 +9,7 @@ pub mod nmea;
 pub mod oscillator;
 pub mod pps;
 pub mod process;
+pub mod published;
 pub mod quadrature;
 pub mod rng;
 pub mod scenario;

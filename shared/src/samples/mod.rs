@@ -9,6 +9,7 @@
 //! - Navigation frame: local-level NED (north, east, down). Body frame: forward, right, down (FRD).
 //! - A float that is not known is NaN (written as JSON `null`).
 
+mod any_sample;
 mod gnss_fix;
 mod health;
 mod imu_sample;
@@ -18,6 +19,7 @@ mod sim_truth;
 mod stamp;
 mod time_state;
 
+pub use any_sample::AnySample;
 pub use gnss_fix::{
     FixMode, GnssFix, SENTENCE_GGA, SENTENCE_GLL, SENTENCE_GNS, SENTENCE_GSA, SENTENCE_GST, SENTENCE_RMC, SENTENCE_VTG,
     SENTENCE_ZDA,

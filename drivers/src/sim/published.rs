@@ -1,0 +1,139 @@
+//! The samples the drivers would publish for a simulated world, produced as fast as the CPU
+//! allows: IMU samples and PPS edges as the simulator publishes them, GNSS fixes decoded from
+//! the world's NMEA bytes by the GPS driver's own decoder ([`LineFramer`] → [`EpochAssembler`])
+//! with the same receipt stamps a UART at the configured baud rate would give, and the truth.
+//!
+//! Each item carries its service name and the host time at which it would be delivered
+//! (a fix is delivered when its burst has been read and the line has been idle for the
+//! driver's flush interval).
+
+use std::collections::VecDeque;
+use std::rc::Rc;
+
+use navsync_shared::samples::AnySample;
+use navsync_shared::services;
+use navsync_shared::time::NS_PER_S;
+
+use super::world::{SimEvent, World};
+use crate::gps::driver::IDLE_FLUSH;
+use crate::gps::nmea_epoch::EpochAssembler;
+use crate::gps::nmea_framer::LineFramer;
+
+/// One published sample.
+#[derive(Debug, Clone)]
+pub struct Published {
+    /// Service it would be published on.
+    pub service: Rc<str>,
+    /// Host time at which it would be delivered, ns.
+    pub delivered_ns: i64,
+    /// The sample.
+    pub sample: AnySample,
+}
+
+/// Iterator over the published samples of a [`World`], in delivery order.
+pub struct PublishedStream {
+    world: World,
+    framer: LineFramer,
+    assembler: EpochAssembler,
+    char_ns: i64,
+    gnss_service: Rc<str>,
+    pps_service: Rc<str>,
+    truth_service: Rc<str>,
+    imu_services: Vec<Rc<str>>,
+    fixes: VecDeque<Published>,
+    next_event: Option<SimEvent>,
+}
+
+impl PublishedStream {
+    /// The stream of `world` (GNSS and PPS id "0", IMU ids "0", "1", …).
+    pub fn new(mut world: World) -> Self {
+        let char_ns = 10 * NS_PER_S / world.baud() as i64;
+        let imu_services = (0..world.imu_count())
+            .map(|i| services::imu_sample(&i.to_string()).into())
+            .collect();
+        let next_event = world.next_event();
+        Self {
+            world,
+            framer: LineFramer::new(),
+            assembler: EpochAssembler::new(),
+            char_ns,
+            gnss_service: services::gnss_fix("0").into(),
+            pps_service: services::pps_edge("0").into(),
+            truth_service: services::SIM_TRUTH.into(),
+            imu_services,
+            fixes: VecDeque::new(),
+            next_event,
+        }
+    }
+
+    /// The world (for its truth and oscillator).
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    fn decode_burst(&mut self, host_ns: i64, bytes: &[u8]) {
+        let n = bytes.len() as i64;
+        let read_ns = host_ns + (n - 1) * self.char_ns;
+        let delivered_ns = read_ns + IDLE_FLUSH.as_nanos() as i64;
+        let Self {
+            framer,
+            assembler,
+            fixes,
+            gnss_service,
+            char_ns,
+            ..
+        } = self;
+        let mut push = |fix: &navsync_shared::samples::GnssFix| {
+            fixes.push_back(Published {
+                service: gnss_service.clone(),
+                delivered_ns,
+                sample: AnySample::GnssFix(*fix),
+            });
+        };
+        framer.push(bytes, read_ns, *char_ns, &mut |s| {
+            assembler.push(s.text, s.host_ns, &mut push)
+        });
+        assembler.flush(&mut push);
+    }
+}
+
+impl Iterator for PublishedStream {
+    type Item = Published;
+
+    fn next(&mut self) -> Option<Published> {
+        loop {
+            let ev_ns = self.next_event.as_ref().map(SimEvent::host_ns);
+            if let Some(f) = self.fixes.front()
+                && ev_ns.is_none_or(|e| f.delivered_ns <= e)
+            {
+                return self.fixes.pop_front();
+            }
+            let ev = self.next_event.take()?;
+            self.next_event = self.world.next_event();
+            match ev {
+                SimEvent::Imu { index, sample } => {
+                    return Some(Published {
+                        service: self.imu_services[index].clone(),
+                        delivered_ns: sample.stamp.host_ns,
+                        sample: AnySample::Imu(sample),
+                    });
+                }
+                SimEvent::Pps(e) => {
+                    return Some(Published {
+                        service: self.pps_service.clone(),
+                        delivered_ns: e.stamp.host_ns,
+                        sample: AnySample::PpsEdge(e),
+                    });
+                }
+                SimEvent::Truth(t) => {
+                    return Some(Published {
+                        service: self.truth_service.clone(),
+                        delivered_ns: t.host_ns,
+                        sample: AnySample::Truth(t),
+                    });
+                }
+                SimEvent::Nmea { host_ns, bytes, .. } => self.decode_burst(host_ns, &bytes),
+            }
+        }
+    }
+}

@@ -1,0 +1,51 @@
+//! Any navsync sample, tagged with its type: what a recording holds and a replay publishes.
+
+use super::{GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
+use crate::services::ServiceKind;
+
+/// A sample of any navsync type.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AnySample {
+    /// `navsync/gnss/{id}/fix`
+    GnssFix(GnssFix),
+    /// `navsync/pps/{id}/edge`
+    PpsEdge(PpsEdge),
+    /// `navsync/imu/{id}/sample`
+    Imu(ImuSample),
+    /// `navsync/time/state`
+    Time(TimeState),
+    /// `navsync/nav/state`
+    Nav(NavState),
+    /// `navsync/health/{process}`
+    Health(Health),
+    /// `navsync/sim/truth`
+    Truth(SimTruth),
+}
+
+impl AnySample {
+    /// The kind of service that carries it.
+    pub fn kind(&self) -> ServiceKind {
+        match self {
+            Self::GnssFix(_) => ServiceKind::GnssFix,
+            Self::PpsEdge(_) => ServiceKind::PpsEdge,
+            Self::Imu(_) => ServiceKind::ImuSample,
+            Self::Time(_) => ServiceKind::TimeState,
+            Self::Nav(_) => ServiceKind::NavState,
+            Self::Health(_) => ServiceKind::Health,
+            Self::Truth(_) => ServiceKind::SimTruth,
+        }
+    }
+
+    /// The host time the sample is stamped with, ns (`CLOCK_MONOTONIC`).
+    pub fn host_ns(&self) -> i64 {
+        match self {
+            Self::GnssFix(f) => f.stamp.host_ns,
+            Self::PpsEdge(e) => e.stamp.host_ns,
+            Self::Imu(s) => s.stamp.host_ns,
+            Self::Time(t) => t.computed_host_ns,
+            Self::Nav(n) => n.host_ns,
+            Self::Health(h) => h.host_ns,
+            Self::Truth(t) => t.host_ns,
+        }
+    }
+}
