@@ -317,11 +317,10 @@ fn monitor_loop(
     let t0 = Instant::now();
     let mut last_line = Instant::now();
     let tty = std::io::stderr().is_terminal();
-    // The monitor is a display: it wakes every 100 ms and drains what arrived (every service
-    // buffers far more than 100 ms of samples) instead of waking for each of ~5000 samples/s.
-    let waitset = node.waitset()?;
     loop {
-        if !node.wait_on(&waitset, Duration::from_millis(100))? {
+        // The monitor is a display: it wakes every 100 ms and drains what arrived (every service
+        // buffers far more than 100 ms of samples) instead of waking for each of ~5000 samples/s.
+        if !node.sleep(Duration::from_millis(100)) {
             break;
         }
         monitor.drain()?;

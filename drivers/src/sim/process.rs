@@ -165,9 +165,10 @@ impl LineWriter {
     }
 }
 
-/// Sleeps until `target` host ns: coarse sleep, then a short spin for the last 200 µs.
-fn sleep_until(target: i64) {
-    let spin_ns = 200_000;
+/// Sleeps until `target` host ns; with `spin`, sleeps to 200 µs before and spins the rest
+/// (used for the first byte of an NMEA burst, whose timing the GPS driver measures).
+fn sleep_until(target: i64, spin: bool) {
+    let spin_ns = if spin { 200_000 } else { 0 };
     let coarse = target - spin_ns;
     if coarse > monotonic_now_ns() {
         let ts = libc::timespec {
@@ -243,7 +244,8 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
         if end_host.is_some_and(|end| due > end) {
             break;
         }
-        sleep_until(due.min(monotonic_now_ns() + 20_000_000));
+        let first_byte = line.next_due() == Some(due) && line.queue.front().is_some_and(|b| b.pos == 0);
+        sleep_until(due.min(monotonic_now_ns() + 20_000_000), first_byte);
         let now = monotonic_now_ns();
         if now < due {
             continue; // woke early to check for termination

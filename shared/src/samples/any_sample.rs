@@ -3,7 +3,9 @@
 use super::{GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
 use crate::services::ServiceKind;
 
-/// A sample of any navsync type.
+/// A sample of any navsync type. Variants differ in size (a `Health` report is ~1.3 kB); the
+/// enum stays unboxed because boxing would allocate per sample on replay paths.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum AnySample {
     /// `navsync/gnss/{id}/fix`
