@@ -185,7 +185,10 @@ fn parse_gpsd_time(s: &str) -> Option<i64> {
 }
 
 fn corpus_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/corpora/gpsd-nmea")
+    // `$NAVSYNC_CORPUS_DIR` overrides the location beside the checkout.
+    std::env::var_os("NAVSYNC_CORPUS_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/corpora/gpsd-nmea"))
 }
 
 /// gpsd's last TPV per distinct `time`, in order of first appearance.
