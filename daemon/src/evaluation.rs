@@ -66,19 +66,23 @@ pub struct Summary {
     pub gnss_delay_true_s: Option<f64>,
     /// Fixes rejected by the innovation gate.
     pub rejected_fixes: u64,
-    /// Wall-clock time of the run, s.
+    /// Wall-clock time of the run, s (including producing or decoding the samples).
     pub wall_s: f64,
-    /// IMU samples processed per wall-clock second.
+    /// Wall-clock time spent inside the estimator, s.
+    pub estimator_s: f64,
+    /// IMU samples per second of estimator time (single thread).
     pub imu_samples_per_s: f64,
     /// Navigation states compared with the truth.
     pub compared_states: u64,
+    /// Horizontal error at the end of each GNSS outage (the last INS-only state), m.
+    pub outage_end_h_err_m: Vec<f64>,
     /// 1 Hz error series.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub series: Vec<SeriesPoint>,
 }
 
 /// Accumulates errors of navigation states against the truth.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Evaluator {
     truth: VecDeque<SimTruth>,
     pending: VecDeque<NavState>,
@@ -94,6 +98,31 @@ pub struct Evaluator {
     series: Vec<SeriesPoint>,
     last_delay: (f64, f64),
     true_latency_s: Option<f64>,
+    outage_last_err: Option<f64>,
+    outage_end_errs: Vec<f64>,
+}
+
+impl Default for Evaluator {
+    fn default() -> Self {
+        Self {
+            truth: VecDeque::new(),
+            pending: VecDeque::new(),
+            n: 0,
+            sum_h2: 0.0,
+            max_h: 0.0,
+            sum_alt2: 0.0,
+            sum_v2: [0.0; 3],
+            sum_att2: [0.0; 3],
+            first_ns: None,
+            last_ns: 0,
+            last_series_ns: 0,
+            series: Vec::new(),
+            last_delay: (f64::NAN, f64::NAN),
+            true_latency_s: None,
+            outage_last_err: None,
+            outage_end_errs: Vec::new(),
+        }
+    }
 }
 
 fn wrap_deg(a: f64) -> f64 {
@@ -162,6 +191,11 @@ impl Evaluator {
         let h = lerp(a.height_m, b.height_m, w);
         let d = earth::ned_between(lat, lon, h, s.lat_deg.to_radians(), s.lon_deg.to_radians(), s.height_m);
         let h_err = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        if s.status == NavStatus::InsOnly as u8 {
+            self.outage_last_err = Some(h_err);
+        } else if let Some(e) = self.outage_last_err.take() {
+            self.outage_end_errs.push(e);
+        }
         self.n += 1;
         self.sum_h2 += h_err * h_err;
         self.max_h = self.max_h.max(h_err);
@@ -184,8 +218,9 @@ impl Evaluator {
         }
     }
 
-    /// The summary; `counts` = (IMU samples, fixes, rejected fixes), `wall_s` the run's wall time.
-    pub fn summary(&self, counts: (u64, u64, u64), wall_s: f64, delay_truth: DelayTruth) -> Summary {
+    /// The summary; `counts` = (IMU samples, fixes, rejected fixes), `wall_s` the run's wall
+    /// time and `estimator_s` the part of it spent inside the estimator.
+    pub fn summary(&self, counts: (u64, u64, u64), wall_s: f64, estimator_s: f64, delay_truth: DelayTruth) -> Summary {
         let have = self.n > 0;
         let n = self.n.max(1) as f64;
         let rms = |s: f64| have.then(|| (s / n).sqrt());
@@ -207,8 +242,10 @@ impl Evaluator {
             }),
             rejected_fixes: counts.2,
             wall_s,
-            imu_samples_per_s: if wall_s > 0.0 { counts.0 as f64 / wall_s } else { 0.0 },
+            estimator_s,
+            imu_samples_per_s: if estimator_s > 0.0 { counts.0 as f64 / estimator_s } else { 0.0 },
             compared_states: self.n,
+            outage_end_h_err_m: self.outage_end_errs.iter().copied().chain(self.outage_last_err).collect(),
             series: self.series.clone(),
         }
     }
@@ -249,9 +286,12 @@ impl Summary {
             f(self.gnss_delay_std_s, "s"),
             f(self.gnss_delay_true_s, "s")
         ));
+        for (i, e) in self.outage_end_h_err_m.iter().enumerate() {
+            s.push_str(&format!("GNSS outage {}       horizontal error at its end {e:.2} m\n", i + 1));
+        }
         s.push_str(&format!(
-            "throughput          {:.0} IMU samples/s ({:.2} s wall)\n",
-            self.imu_samples_per_s, self.wall_s
+            "throughput          {:.0} IMU samples/s in the estimator ({:.2} s of {:.2} s wall)\n",
+            self.imu_samples_per_s, self.estimator_s, self.wall_s
         ));
         s
     }

@@ -21,6 +21,14 @@ struct Cli {
     cmd: Cmd,
 }
 
+/// `START:DURATION` in seconds.
+fn parse_outage(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s.split_once(':').ok_or_else(|| format!("`{s}`: expected START:DURATION in seconds"))?;
+    let start: f64 = a.trim().parse().map_err(|_| format!("`{a}` is not a start time in seconds"))?;
+    let dur: f64 = b.trim().parse().map_err(|_| format!("`{b}` is not a duration in seconds"))?;
+    Ok((start, dur))
+}
+
 /// A device id as used in service names: letters, digits, `-` and `_`.
 fn parse_id(s: &str) -> Result<String, String> {
     if !s.is_empty() && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
@@ -103,6 +111,9 @@ enum Cmd {
         /// Simulated GNSS time minus the system clock, s.
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
         utc_offset: f64,
+        /// A GNSS outage START:DURATION in seconds of scenario time (repeatable).
+        #[arg(long, value_parser = parse_outage)]
+        gnss_outage: Vec<(f64, f64)>,
         /// Do not wait for real time: produce the samples as fast as the CPU allows (with --estimate).
         #[arg(long)]
         fast: bool,
@@ -213,6 +224,7 @@ fn main() -> Result<()> {
             pty_link,
             duration,
             utc_offset,
+            gnss_outage,
             fast,
             estimate,
             summary_json,
@@ -233,6 +245,7 @@ fn main() -> Result<()> {
                 pty_link,
                 duration_s: duration,
                 utc_offset_s: utc_offset,
+                gnss_outages: gnss_outage,
             };
             if fast {
                 let est = roles::estimator::EstimatorArgs {

@@ -21,6 +21,8 @@ pub struct AlignConfig {
     pub static_gyro_rps: f64,
     /// Largest deviation of |f| from 1 g still counted as static, m/s².
     pub static_accel_mps2: f64,
+    /// Largest deviation of f from the static mean still counted as static, m/s².
+    pub static_accel_dev_mps2: f64,
 }
 
 impl Default for AlignConfig {
@@ -29,6 +31,7 @@ impl Default for AlignConfig {
             min_speed_mps: 3.0,
             static_gyro_rps: 0.05,
             static_accel_mps2: 0.3,
+            static_accel_dev_mps2: 0.15,
         }
     }
 }
@@ -47,6 +50,9 @@ pub struct Alignment {
     /// NED acceleration at the fix, from the velocities of the last two fixes, m/s² (zero
     /// when unknown); it couples the initial velocity error to the GNSS delay.
     pub acc_ned: Vector3<f64>,
+    /// The fix's stamp minus the instant the accelerometer-integrated speed reached the fix's
+    /// speed, s: a first estimate of the GNSS delay (None without a static start).
+    pub delay_from_onset_s: Option<f64>,
 }
 
 /// Accumulates the static period and produces the [`Alignment`].
@@ -59,6 +65,29 @@ pub struct Aligner {
     in_static: bool,
     /// Stamp (ns) and horizontal velocity of the previous fix.
     prev_fix: Option<(i64, Vector3<f64>)>,
+    /// Forward speed integrated from the accelerometers since the vehicle started moving.
+    onset: Option<Onset>,
+}
+
+/// Points kept of the speed profile after motion onset (10 s at 50 Hz).
+const ONSET_POINTS: usize = 500;
+/// Spacing of the speed-profile points, ns.
+const ONSET_STEP_NS: i64 = 20_000_000;
+
+/// The speed profile after motion onset, from the accelerometers alone.
+///
+/// While a car stands still its forward specific force is f̄_x = g·sin θ + b_x; when it drives off
+/// with the same pitch, f_x − f̄_x is its forward acceleration with the bias cancelled, so
+/// v(t) = ∫ (f_x − f̄_x) dt needs no alignment. Comparing v(t) with the speed of the first moving
+/// fix tells when that fix's epoch was: the GNSS delay before the filter has any estimate.
+#[derive(Debug, Clone)]
+struct Onset {
+    /// Mean specific force of the static period before the motion, m/s² (body axes).
+    f_ref: Vector3<f64>,
+    speed: f64,
+    last_point_ns: i64,
+    points: Box<[(i64, f64)]>,
+    len: usize,
 }
 
 impl Aligner {
@@ -72,17 +101,24 @@ impl Aligner {
 
     /// Adds one IMU interval. A new static period after motion restarts the average.
     pub fn on_imu(&mut self, r: &ImuRecord) {
-        // Normal gravity at 45° latitude: the static test's tolerance covers 9.78–9.83 m/s².
+        self.track_onset(r);
+        // Static: small rates, and |f| ≈ g (first second) or f close to the static mean so far
+        // (|f| alone changes only to second order with a horizontal acceleration). Normal
+        // gravity at 45° latitude: the |f| tolerance covers 9.78–9.83 m/s².
         let g = earth::normal_gravity(std::f64::consts::FRAC_PI_4, 0.0);
-        let still = r.gyro_rps.norm() < self.cfg.static_gyro_rps
-            && (r.accel_mps2.norm() - g).abs() < self.cfg.static_accel_mps2;
+        let accel_still = match self.onset.as_ref() {
+            Some(o) => (r.accel_mps2 - o.f_ref).norm() < self.cfg.static_accel_dev_mps2,
+            None => (r.accel_mps2.norm() - g).abs() < self.cfg.static_accel_mps2,
+        };
+        let still = r.gyro_rps.norm() < self.cfg.static_gyro_rps && accel_still;
         if still {
             if !self.in_static {
-                *self = Self {
-                    cfg: self.cfg,
-                    in_static: true,
-                    ..Default::default()
-                };
+                // A new static period: restart the averages (the onset profile is re-armed once
+                // the new period has lasted a second).
+                self.sum_f = Vector3::zeros();
+                self.sum_w = Vector3::zeros();
+                self.time_s = 0.0;
+                self.in_static = true;
             }
             self.sum_f += r.accel_mps2 * r.dt_s;
             self.sum_w += r.gyro_rps * r.dt_s;
@@ -90,6 +126,39 @@ impl Aligner {
         } else {
             self.in_static = false;
         }
+    }
+
+    fn track_onset(&mut self, r: &ImuRecord) {
+        if self.in_static && self.time_s > 1.0 {
+            // Still (or just starting): (re)arm the profile with the latest static mean.
+            self.onset = Some(Onset {
+                f_ref: self.sum_f / self.time_s,
+                speed: 0.0,
+                last_point_ns: r.host_ns,
+                points: self.onset.take().map_or_else(|| vec![(0, 0.0); ONSET_POINTS].into_boxed_slice(), |o| o.points),
+                len: 0,
+            });
+        }
+        if let Some(o) = &mut self.onset {
+            o.speed += (r.accel_mps2.x - o.f_ref.x) * r.dt_s;
+            if r.host_ns - o.last_point_ns >= ONSET_STEP_NS && o.len < ONSET_POINTS {
+                o.points[o.len] = (r.host_ns, o.speed);
+                o.len += 1;
+                o.last_point_ns = r.host_ns;
+            }
+        }
+    }
+
+    /// Host time (ns) at which the accelerometer-integrated speed first reached `speed_mps`.
+    fn onset_time_of(&self, speed_mps: f64) -> Option<i64> {
+        let o = self.onset.as_ref()?;
+        let pts = &o.points[..o.len];
+        let i = pts.iter().position(|p| p.1 >= speed_mps)?;
+        if i == 0 {
+            return None;
+        }
+        let ((t0, v0), (t1, v1)) = (pts[i - 1], pts[i]);
+        Some(t0 + ((speed_mps - v0) / (v1 - v0) * (t1 - t0) as f64) as i64)
     }
 
     /// Seconds of static data averaged so far.
@@ -142,11 +211,8 @@ impl Aligner {
             gyro_bias,
             levelled,
             static_s: self.time_s,
-            acc_ned: if acc_ned.iter().all(|a| a.is_finite()) {
-                acc_ned
-            } else {
-                Vector3::zeros()
-            },
+            acc_ned: if acc_ned.iter().all(|a| a.is_finite()) { acc_ned } else { Vector3::zeros() },
+            delay_from_onset_s: self.onset_time_of(obs.speed_mps).map(|t| (obs.stamp_host_ns - t) as f64 * 1e-9),
         })
     }
 }

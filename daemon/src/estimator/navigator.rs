@@ -24,6 +24,9 @@ use super::gnss_fusion::{self, GnssObservation};
 use super::imu_buffer::{ImuBuffer, ImuRecord};
 use super::mechanization::{ImuIncrement, Pva, propagate};
 
+/// 1-sigma of the motion-onset delay estimate, s.
+const ONSET_DELAY_STD_S: f64 = 0.05;
+
 /// Filter settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NavConfig {
@@ -93,7 +96,14 @@ pub struct NavCounters {
     pub imu_backwards: u64,
     /// Output replays after a correction.
     pub replays: u64,
+    /// Position/velocity resets to GNSS after persistent rejections.
+    pub gnss_resets: u64,
 }
+
+/// Consecutive rejected fixes after which the filter resets position and velocity to GNSS
+/// (a GNSS jump, or a filter that has lost consistency, must not keep it in dead reckoning
+/// forever; PX4's EKF2 does the same after its GPS rejection timeout).
+const RESET_AFTER_REJECTS: u32 = 5;
 
 #[derive(Debug, Clone)]
 struct Delayed {
@@ -156,6 +166,34 @@ impl Delayed {
         self.cov_dt = 0.0;
         self.cov_f = Vector3::zeros();
         self.cov_w = Vector3::zeros();
+    }
+
+    /// Resets position and horizontal velocity to a fix (extrapolated by ε to the filter time)
+    /// and their covariance to the fix's accuracy, decorrelated from the other states.
+    fn reset_to(&mut self, obs: &GnssObservation, cfg: &NavConfig, eps: f64) {
+        let c_bn = self.pva.q_nb.to_rotation_matrix().into_inner();
+        let lever_n = c_bn * cfg.lever_arm_b_m;
+        let (rm, rn) = earth::radii(obs.lat_rad);
+        let v = if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
+            Vector3::new(obs.vel_ned_mps.x, obs.vel_ned_mps.y, self.pva.vel_ned_mps.z)
+        } else {
+            self.pva.vel_ned_mps
+        };
+        let p_ned = v * eps - lever_n;
+        self.pva.lat_rad = obs.lat_rad + p_ned.x / (rm + obs.h_m);
+        self.pva.lon_rad = obs.lon_rad + p_ned.y / ((rn + obs.h_m) * obs.lat_rad.cos());
+        self.pva.h_m = obs.h_m - p_ned.z;
+        self.pva.vel_ned_mps = v;
+        for i in POS..ATT {
+            for j in 0..N {
+                self.eskf.p[(i, j)] = 0.0;
+                self.eskf.p[(j, i)] = 0.0;
+            }
+        }
+        for i in 0..3 {
+            self.eskf.p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
+            self.eskf.p[(VEL + i, VEL + i)] = obs.vel_std_mps.powi(2) + cfg.init_vel_std_mps.powi(2);
+        }
     }
 
     /// Closed-loop feedback of an error-state estimate (KF-GINS `stateFeedback`).
@@ -281,6 +319,16 @@ impl Navigator {
 
     fn try_align(&mut self, obs: &GnssObservation) {
         let Some(a) = self.aligner.try_align(obs) else { return };
+        // A loose delay prior (software sync) is replaced by the motion-onset estimate: the
+        // speed noise of a fix (~0.05 m/s) over a drive-off acceleration of ~1 m/s² puts it
+        // within ~50 ms.
+        if self.cfg.noise.estimate_delay
+            && self.cfg.delay_prior_std_s > ONSET_DELAY_STD_S
+            && let Some(d) = a.delay_from_onset_s.filter(|d| (-0.2..self.cfg.horizon_s - 0.1).contains(d))
+        {
+            self.cfg.delay_prior_s = d;
+            self.cfg.delay_prior_std_s = ONSET_DELAY_STD_S;
+        }
         let cfg = &self.cfg;
         let mut p = StateMat::zeros();
         for i in 0..3 {
@@ -546,6 +594,14 @@ fn fuse_due(
             Update::Rejected { .. } => {
                 counters.fixes_rejected += 1;
                 *consecutive_rejects += 1;
+                if *consecutive_rejects < RESET_AFTER_REJECTS {
+                    continue;
+                }
+                f.reset_to(&obs, cfg, eps);
+                counters.gnss_resets += 1;
+                *consecutive_rejects = 0;
+                *last_fused_ns = t_f;
+                corrected = true;
                 continue;
             }
         }

@@ -49,6 +49,8 @@ pub struct SimArgs {
     pub duration_s: Option<f64>,
     /// Simulated GNSS time minus the system clock, s (default 0: GNSS time ≈ system time).
     pub utc_offset_s: f64,
+    /// Extra GNSS outages (start s, duration s), added to the scenario's.
+    pub gnss_outages: Vec<(f64, f64)>,
 }
 
 /// Errors of the simulator process.
@@ -95,6 +97,9 @@ pub fn load_config(args: &SimArgs) -> Result<SimConfig, SimError> {
     }
     if let Some(s) = args.seed {
         cfg.set_seed(s);
+    }
+    for &(start_s, duration_s) in &args.gnss_outages {
+        cfg.gnss.outages.push(super::scenario::OutageConfig { start_s, duration_s, pps_continues: true });
     }
     cfg.validate()?;
     Ok(cfg)
