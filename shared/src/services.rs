@@ -9,6 +9,7 @@
 //! | `navsync/nav/state` | [`NavState`] | `navsync estimator` |
 //! | `navsync/health/{process}` | [`Health`] | every process |
 //! | `navsync/sim/truth` | [`SimTruth`] | `navsync sim` |
+//! | `navsync/sim/pps` | [`PpsEdge`] | `navsync sim` (raw edges for `navsync pps --source sim`) |
 //!
 //! Each publish-subscribe service has an event service of the same name through which
 //! publishers wake subscribers.
@@ -44,6 +45,9 @@ pub const TIME_STATE: &str = "navsync/time/state";
 pub const NAV_STATE: &str = "navsync/nav/state";
 /// Simulator ground truth.
 pub const SIM_TRUTH: &str = "navsync/sim/truth";
+/// Raw simulated PPS edges (simulator-private; `navsync pps --source sim` validates them and
+/// republishes on [`pps_edge`]).
+pub const SIM_PPS: &str = "navsync/sim/pps";
 
 /// The sample type carried by a service.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -87,6 +91,7 @@ impl ServiceKind {
             ["navsync", "nav", "state"] => Some(Self::NavState),
             ["navsync", "health", p] if !p.is_empty() => Some(Self::Health),
             ["navsync", "sim", "truth"] => Some(Self::SimTruth),
+            ["navsync", "sim", "pps"] => Some(Self::PpsEdge),
             _ => None,
         }
     }
@@ -154,6 +159,7 @@ mod tests {
         assert_eq!(ServiceKind::of(&imu_sample("3")), Some(ServiceKind::ImuSample));
         assert_eq!(ServiceKind::of(&health("gps-0")), Some(ServiceKind::Health));
         assert_eq!(ServiceKind::of(NAV_STATE), Some(ServiceKind::NavState));
+        assert_eq!(ServiceKind::of(SIM_PPS), Some(ServiceKind::PpsEdge));
         assert_eq!(ServiceKind::of("navsync/imu//sample"), None);
         assert_eq!(ServiceKind::of("other/thing"), None);
     }
