@@ -72,6 +72,9 @@ enum Cmd {
         /// Do not estimate the GNSS delay Δ (for comparison runs).
         #[arg(long)]
         no_delay_state: bool,
+        /// 1-sigma of the receiver's velocity per axis, m/s.
+        #[arg(long, default_value_t = 0.1)]
+        gnss_vel_std: f64,
     },
     /// The simulated sensor world: IMUs and PPS to their services, NMEA into a pseudo-terminal.
     Sim {
@@ -200,6 +203,7 @@ fn main() -> Result<()> {
             software_sync,
             imu_model,
             no_delay_state,
+            gnss_vel_std: gnss_vel_std_mps,
         } => {
             roles::estimator::run(&roles::estimator::EstimatorArgs {
                 gnss_ids: gnss,
@@ -208,6 +212,7 @@ fn main() -> Result<()> {
                 software_sync,
                 imu_model,
                 estimate_delay: !no_delay_state,
+                gnss_vel_std_mps,
             })
             .context("estimator")?;
         }
@@ -255,6 +260,7 @@ fn main() -> Result<()> {
                     software_sync,
                     imu_model: imu_model.unwrap_or(ImuPreset::Industrial),
                     estimate_delay: !no_delay_state,
+                    ..Default::default()
                 };
                 anyhow::ensure!(
                     estimate,

@@ -26,6 +26,7 @@ fn pps_time_mapping_is_within_5_us_after_30_s() {
         software_sync: false,
         imu_model: ImuPreset::Industrial,
         estimate_delay: true,
+        ..Default::default()
     };
     let mut p = Pipeline::new(args.pipeline_config());
     let (mut checked, mut worst, mut worst_sigmas) = (0u64, 0.0f64, 0.0f64);

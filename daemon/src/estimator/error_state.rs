@@ -84,7 +84,8 @@ impl ProcessNoise {
     /// Process noise of an IMU class: white noise from its noise densities, the bias
     /// Gauss–Markov processes from its in-run stability, the initial uncertainties from its
     /// turn-on bias and scale-factor spread. Scale factors are nearly constant: a Gauss–Markov
-    /// process with a tenth of their spread. Δ may wander by 1 ms/√s.
+    /// process with a tenth of their spread. Δ is a constant per session that may wander by
+    /// 0.1 ms/√s (a receiver firmware changing its output schedule).
     pub fn from_spec(spec: &ImuErrorSpec) -> Self {
         Self {
             arw: spec.gyro.noise_density,
@@ -98,7 +99,7 @@ impl ProcessNoise {
             accel_bias_init_std: spec.accel.bias_sigma.max(spec.accel.bias_instability_sigma),
             gyro_scale_init_std: spec.gyro.scale_factor_sigma,
             accel_scale_init_std: spec.accel.scale_factor_sigma,
-            delay_rw: 1e-3,
+            delay_rw: 1e-4,
             estimate_scale: spec.gyro.scale_factor_sigma > 0.0,
             estimate_delay: true,
         }

@@ -37,6 +37,23 @@ pub struct EstimatorArgs {
     pub imu_model: ImuPreset,
     /// Estimate the GNSS delay Δ.
     pub estimate_delay: bool,
+    /// 1-sigma of the receiver's velocity per axis, m/s (NMEA does not report it).
+    pub gnss_vel_std_mps: f64,
+}
+
+impl Default for EstimatorArgs {
+    /// One receiver, PPS source and IMU with id "0"; hardware sync; industrial IMU; Δ estimated.
+    fn default() -> Self {
+        Self {
+            gnss_ids: vec!["0".into()],
+            pps_ids: vec!["0".into()],
+            imu_ids: vec!["0".into()],
+            software_sync: false,
+            imu_model: ImuPreset::Industrial,
+            estimate_delay: true,
+            gnss_vel_std_mps: GnssAccuracy::default().vel_std_mps,
+        }
+    }
 }
 
 impl EstimatorArgs {
@@ -50,7 +67,7 @@ impl EstimatorArgs {
                 ..Default::default()
             },
             nav: NavConfig::with_noise(noise),
-            gnss: GnssAccuracy::default(),
+            gnss: GnssAccuracy { vel_std_mps: self.gnss_vel_std_mps, ..GnssAccuracy::default() },
             reference_imu: self.imu_ids.first().cloned().unwrap_or_else(|| "0".into()),
             software_delay_prior: (0.5, 0.5),
             hardware_delay_prior: (0.0, 0.02),

@@ -29,7 +29,7 @@ pub enum SimEstimateError {
 }
 
 /// Runs the world through the estimator and prints the summary (and writes it as JSON).
-/// `model_from_sim`: use the simulated IMU preset as the filter's IMU model.
+/// `model_from_sim`: tell the filter the simulated IMU preset and receiver velocity noise.
 pub fn run(
     sim: &SimArgs,
     est: &EstimatorArgs,
@@ -39,7 +39,9 @@ pub fn run(
     let cfg = load_config(sim)?;
     let mut est = est.clone();
     if model_from_sim {
+        // The filter is told what the simulated devices are: IMU class and receiver velocity noise.
         est.imu_model = cfg.imu.preset;
+        est.gnss_vel_std_mps = cfg.gnss.velocity_sigma_mps.max(0.01);
     }
     let start_utc = navsync_shared::time::realtime_now_ns() / 1_000_000_000 * 1_000_000_000;
     let world = World::new(&cfg, 1_000_000_000_000, start_utc)?;
