@@ -7,7 +7,11 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use navsync::roles;
+use navsync_drivers::feed::{FeedArgs, Speed};
 use navsync_drivers::gps::driver::{Baud, GpsArgs};
+use navsync_drivers::imu::axes::AxisMap;
+use navsync_drivers::imu::sim_device::SimImuOutput;
+use navsync_drivers::imu::{ImuArgs, ImuSource};
 use navsync_drivers::sim::process::SimArgs;
 use navsync_shared::imu_spec::ImuPreset;
 use tracing::Level;
@@ -51,6 +55,62 @@ enum Cmd {
         /// Receiver id.
         #[arg(long, default_value = "0")]
         id: String,
+    },
+    /// IMU driver: samples from an IIO device, an Xsens MTi or the simulator to `navsync/imu/{id}/sample`.
+    Imu {
+        /// `iio:DEVICE` (iio:deviceN, N or the device name), `xsens:PORT[:BAUD]` or `sim[:DIR]`.
+        #[arg(long)]
+        source: ImuSource,
+        /// IMU id.
+        #[arg(long, default_value = "0", value_parser = parse_id)]
+        id: String,
+        /// sysfs directory of IIO devices.
+        #[arg(long, default_value = navsync_drivers::imu::iio_device::SYSFS_ROOT)]
+        sysfs_root: PathBuf,
+        /// Directory of the IIO character devices.
+        #[arg(long, default_value = navsync_drivers::imu::iio_device::DEV_ROOT)]
+        dev_root: PathBuf,
+        /// Sampling frequency, Hz: set on an IIO device; the nominal rate of an Xsens device.
+        #[arg(long)]
+        rate: Option<f64>,
+        /// Device axes to forward-right-down, e.g. `x,-y,-z` (device z up) or `x,y,z`.
+        #[arg(long, default_value = "x,-y,-z")]
+        axes: AxisMap,
+        /// Gyroscope range, °/s (samples beyond it are rejected; default 2000 for Xsens/sim).
+        #[arg(long)]
+        gyro_range_dps: Option<f64>,
+        /// Accelerometer range, g (default 16 for Xsens/sim).
+        #[arg(long)]
+        accel_range_g: Option<f64>,
+        /// IIO buffer length, records.
+        #[arg(long, default_value_t = navsync_drivers::imu::IIO_BUFFER_LENGTH)]
+        buffer_length: u32,
+    },
+    /// Plays a capture (NMEA log or raw bytes) into a pseudo-terminal, as the device would send it.
+    Feed {
+        /// Capture file: a gpsd-style NMEA log (`#` comments skipped) or raw bytes.
+        capture: PathBuf,
+        /// Create a pseudo-terminal (the only output there is; required).
+        #[arg(long, required = true)]
+        pty: bool,
+        /// Symlink to create to the pseudo-terminal.
+        #[arg(long)]
+        link: Option<PathBuf>,
+        /// `realtime`, a factor such as 10, or `max`.
+        #[arg(long, default_value = "realtime")]
+        speed: Speed,
+        /// Start over at the end, until stopped.
+        #[arg(long = "loop")]
+        looped: bool,
+        /// Line rate of the emulated device: paces raw captures; a reader at another rate gets garbage.
+        #[arg(long)]
+        baud: Option<u32>,
+        /// Wait until a reader has opened the port (and flushed it) before sending.
+        #[arg(long)]
+        wait_reader: bool,
+        /// Seconds to keep the port open after the end.
+        #[arg(long, default_value_t = 1.0)]
+        hold: f64,
     },
     /// The estimator: time mapping (and navigation filter) from the sensor services.
     Estimator {
@@ -108,6 +168,12 @@ enum Cmd {
         /// Create this symlink to the NMEA pseudo-terminal.
         #[arg(long)]
         pty_link: Option<PathBuf>,
+        /// IMU samples: `direct` into the services, or `xsens` MTData2 into one pseudo-terminal per IMU.
+        #[arg(long, default_value = "direct")]
+        imu_output: SimImuOutput,
+        /// Directory of the IMU pseudo-terminal links (`imu0`, `imu1`, …) with `--imu-output xsens`.
+        #[arg(long)]
+        imu_pty_dir: Option<PathBuf>,
         /// Stop after this many seconds.
         #[arg(long)]
         duration: Option<f64>,
@@ -147,6 +213,9 @@ enum Cmd {
         /// Scenario file (TOML); default: the embedded ~10 minute drive.
         #[arg(long)]
         scenario: Option<PathBuf>,
+        /// IMU path: `xsens` (simulator → pseudo-terminals → `navsync imu` drivers) or `direct`.
+        #[arg(long, default_value = "xsens")]
+        imu_output: SimImuOutput,
     },
     /// Prints the samples of any navsync service, one per line.
     Echo {
@@ -196,6 +265,55 @@ fn main() -> Result<()> {
             })
             .with_context(|| format!("gps driver on {port}"))?;
         }
+        Cmd::Imu {
+            source,
+            id,
+            sysfs_root,
+            dev_root,
+            rate,
+            axes,
+            gyro_range_dps,
+            accel_range_g,
+            buffer_length,
+        } => {
+            navsync_drivers::imu::run(&ImuArgs {
+                source: source.clone(),
+                id,
+                sysfs_root,
+                dev_root,
+                rate_hz: rate,
+                axes,
+                gyro_range_dps,
+                accel_range_g,
+                buffer_length,
+            })
+            .with_context(|| format!("imu driver on {source:?}"))?;
+        }
+        Cmd::Feed {
+            capture,
+            pty: _,
+            link,
+            speed,
+            looped,
+            baud,
+            wait_reader,
+            hold,
+        } => {
+            let stats = navsync_drivers::feed::run(&FeedArgs {
+                capture: capture.clone(),
+                link,
+                speed,
+                looped,
+                baud,
+                wait_reader,
+                hold_s: hold,
+            })
+            .with_context(|| format!("feeding {}", capture.display()))?;
+            eprintln!(
+                "navsync feed: {} bytes in {} chunks, {} lap(s), {} chunk(s) garbled by a wrong reader rate",
+                stats.bytes, stats.chunks, stats.laps, stats.garbled_chunks
+            );
+        }
         Cmd::Estimator {
             gnss,
             pps,
@@ -227,6 +345,8 @@ fn main() -> Result<()> {
             pps_jitter_ns,
             seed,
             pty_link,
+            imu_output,
+            imu_pty_dir,
             duration,
             utc_offset,
             gnss_outage,
@@ -248,6 +368,8 @@ fn main() -> Result<()> {
                 pps_jitter_ns,
                 seed,
                 pty_link,
+                imu_output,
+                imu_pty_dir,
                 duration_s: duration,
                 utc_offset_s: utc_offset,
                 gnss_outages: gnss_outage,
@@ -276,11 +398,13 @@ fn main() -> Result<()> {
             duration,
             imus,
             scenario,
+            imu_output,
         } => {
             roles::demo::run(&roles::demo::DemoArgs {
                 duration_s: duration,
                 imus,
                 scenario,
+                imu_output,
                 sim_args: Vec::new(),
             })
             .context("demo")?;

@@ -5,6 +5,11 @@
 //! `navsync estimator` as child processes; shows a live status line with per-service rates
 //! and the time-mapping error against the simulated truth; stops them all on Ctrl-C/SIGTERM
 //! or at the end of `--duration`, and prints a summary.
+//!
+//! With `--imu-output xsens` (the default) the simulator does not publish IMU samples: it
+//! writes each IMU's samples as Xsens MTData2 messages into a pseudo-terminal of its own, and
+//! one `navsync imu --source xsens:…` driver per IMU reads them through the serial API and
+//! publishes them, as it would a real MTi. `--imu-output direct` keeps the shortcut.
 
 use std::collections::BTreeMap;
 use std::io::{IsTerminal, Write};
@@ -12,6 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
+use navsync_drivers::imu::sim_device::{SIM_BAUD, SimImuOutput, sim_port};
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;
@@ -27,9 +33,14 @@ pub struct DemoArgs {
     pub imus: usize,
     /// Scenario file (default: the embedded ~10 minute drive).
     pub scenario: Option<PathBuf>,
+    /// How the IMU samples travel: through `navsync imu` Xsens drivers, or published directly.
+    pub imu_output: SimImuOutput,
     /// Extra arguments passed to `navsync sim`.
     pub sim_args: Vec<String>,
 }
+
+/// Child names of the IMU drivers (one per IMU, at most `MAX_IMUS`).
+const IMU_PROCS: [&str; MAX_IMUS] = ["imu0", "imu1", "imu2", "imu3", "imu4", "imu5", "imu6", "imu7"];
 
 /// Errors of `navsync demo`.
 #[derive(Debug, thiserror::Error)]
@@ -276,6 +287,14 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
     if let Some(s) = &args.scenario {
         sim_args.extend(["--scenario".into(), s.display().to_string()]);
     }
+    let xsens = args.imu_output == SimImuOutput::Xsens;
+    if xsens {
+        sim_args.extend(["--imu-output".into(), "xsens".into(), "--imu-pty-dir".into(), dir.display().to_string()]);
+        for i in 0..args.imus.min(MAX_IMUS) {
+            let p = format!("imu-{i}");
+            monitor.healths.push((p.clone(), node.subscriber(&services::health(&p))?));
+        }
+    }
     sim_args.extend(args.sim_args.iter().cloned());
     let imu_list = (0..args.imus).map(|i| i.to_string()).collect::<Vec<_>>().join(",");
 
@@ -295,6 +314,14 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
             ]
             .map(String::from),
         )?);
+        if xsens {
+            for (i, name) in IMU_PROCS.iter().enumerate().take(args.imus) {
+                let port = sim_port(&dir, i);
+                wait_for_path(&port, &mut procs, Duration::from_secs(10))?;
+                let source = format!("xsens:{}:{SIM_BAUD}", port.display());
+                procs.push(spawn(name, &["imu", "--source", &source, "--id", &i.to_string()].map(String::from))?);
+            }
+        }
         procs.push(spawn(
             "estimator",
             &["estimator", "--gnss", "0", "--pps", "0", "--imus", &imu_list].map(String::from),

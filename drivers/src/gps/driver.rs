@@ -4,15 +4,33 @@
 //! returned, back-dated by the line rate for bytes that were already waiting) → decode
 //! ([`LineFramer`] → [`EpochAssembler`], pure) → publish `GnssFix` on `navsync/gnss/{id}/fix`.
 //!
-//! The port vanishing (USB unplug) is survived: the driver logs it once, reopens with
-//! exponential backoff (0.1 s → 5 s) and resumes; a wrong baud rate shows as noise and
-//! checksum counters, and `--baud auto` hunts the common rates like gpsd does.
+//! Robustness:
+//!
+//! - Malformed input (binary noise, bad or missing checksums, truncated, over-long or
+//!   non-ASCII sentences, unparsable fields) is dropped by the decoder and counted; every
+//!   counter is in the health report, and each kind is logged when it first occurs and then
+//!   at most every 10 s ([`RateLimitedLog`]).
+//! - The port vanishing (USB unplug: the device node or its symlink disappears, reads fail or
+//!   hang up) is survived: the epoch being assembled is emitted (its bytes all arrived), the
+//!   driver logs once, reopens with exponential backoff (0.1 s → 5 s), and resumes when the
+//!   port is back. A read of zero bytes (hang-up) counts as the port closing, so a dead line
+//!   cannot spin the process.
+//! - `--baud auto` hunts the common rates like gpsd does: at each rate it listens until
+//!   [`HUNT_DWELL`] has passed with at least [`HUNT_MIN_BYTES`] received and no sentence with
+//!   a valid checksum, then switches rate (the port stays open; only the line settings and
+//!   the input queue are reset). A rate that yields valid sentences is kept (and tried first
+//!   after a reconnection); if it later yields only garbage for [`HUNT_DWELL`], hunting
+//!   resumes. A silent line is not hunted (silence says nothing about the rate). A fixed
+//!   `--baud` never hunts: a wrong rate then shows as noise and checksum counters.
+//!
+//! Health counters besides the decoder's: `baud` (current rate), `baud_hunts`, `port_opens`,
+//! `port_open_failures`, `port_reopens` (read failures and hang-ups), `publish_errors`.
 
 use std::io::{ErrorKind, Read};
 use std::time::{Duration, Instant};
 
-use navsync_shared::health_reporter::HealthReporter;
-use navsync_shared::ipc::{IpcError, IpcNode, Publisher};
+use navsync_shared::health_reporter::{CounterId, HealthReporter};
+use navsync_shared::ipc::{IpcError, IpcNode};
 use navsync_shared::samples::GnssFix;
 use navsync_shared::services;
 use navsync_shared::time::monotonic_now_ns;
@@ -21,13 +39,17 @@ use tracing::{info, info_span, warn};
 
 use super::nmea_epoch::EpochAssembler;
 use super::nmea_framer::LineFramer;
+use crate::rate_log::RateLimitedLog;
 
 /// Baud rates tried by `--baud auto`, most common first (gpsd's hunt order differs; these
 /// are the rates NMEA receivers ship with).
 pub const HUNT_BAUDS: [u32; 7] = [9600, 4800, 38_400, 115_200, 19_200, 57_600, 230_400];
 
-/// How long one baud rate is tried before hunting on, when no valid sentence arrives.
-const HUNT_DWELL: Duration = Duration::from_millis(2500);
+/// How long one baud rate is tried before hunting on, when bytes but no valid sentence arrive.
+pub const HUNT_DWELL: Duration = Duration::from_millis(2500);
+
+/// Bytes that must have arrived at a rate without a valid sentence before it is abandoned.
+pub const HUNT_MIN_BYTES: u64 = 64;
 
 /// Read timeout; after this much silence the epoch being assembled is emitted.
 pub const IDLE_FLUSH: Duration = Duration::from_millis(50);
@@ -79,6 +101,105 @@ struct Decoder {
     assembler: EpochAssembler,
 }
 
+impl Decoder {
+    /// Sentences that passed the checksum so far.
+    fn valid_sentences(&self) -> u64 {
+        let c = self.assembler.counters();
+        c.sentences - c.bad_checksum - c.no_checksum
+    }
+}
+
+/// The baud-rate hunt of `--baud auto` (a pure state machine on counters and time).
+#[derive(Debug, Clone)]
+pub struct BaudHunt {
+    index: usize,
+    locked: Option<u32>,
+    /// When the current rate was set, with the byte and valid-sentence counts at that moment
+    /// or at the last valid sentence.
+    since: Instant,
+    bytes_at: u64,
+    valid_at: u64,
+    hunts: u64,
+}
+
+/// What the hunt decided after looking at the counters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HuntStep {
+    /// Keep listening at the current rate.
+    Stay,
+    /// Valid sentences arrive at this rate for the first time: it is now locked.
+    Locked(u32),
+    /// Switch to this rate.
+    Switch(u32),
+}
+
+impl BaudHunt {
+    /// A hunt starting at the first of [`HUNT_BAUDS`].
+    pub fn new(now: Instant) -> Self {
+        Self {
+            index: 0,
+            locked: None,
+            since: now,
+            bytes_at: 0,
+            valid_at: 0,
+            hunts: 0,
+        }
+    }
+
+    /// The rate to use now.
+    pub fn baud(&self) -> u32 {
+        HUNT_BAUDS[self.index % HUNT_BAUDS.len()]
+    }
+
+    /// Rate changes so far.
+    pub fn hunts(&self) -> u64 {
+        self.hunts
+    }
+
+    /// The rate that yielded valid sentences, if any.
+    pub fn locked(&self) -> Option<u32> {
+        self.locked
+    }
+
+    /// Restarts the dwell at the current rate (after the port was (re)opened).
+    pub fn restart(&mut self, now: Instant, bytes: u64, valid: u64) {
+        self.since = now;
+        self.bytes_at = bytes;
+        self.valid_at = valid;
+    }
+
+    /// Looks at the byte and valid-sentence counters at time `now`.
+    pub fn step(&mut self, now: Instant, bytes: u64, valid: u64) -> HuntStep {
+        if valid > self.valid_at {
+            self.restart(now, bytes, valid);
+            let b = self.baud();
+            if self.locked != Some(b) {
+                self.locked = Some(b);
+                return HuntStep::Locked(b);
+            }
+            return HuntStep::Stay;
+        }
+        if now.duration_since(self.since) < HUNT_DWELL || bytes - self.bytes_at < HUNT_MIN_BYTES {
+            return HuntStep::Stay;
+        }
+        self.locked = None;
+        self.index = (self.index + 1) % HUNT_BAUDS.len();
+        self.hunts += 1;
+        self.restart(now, bytes, valid);
+        HuntStep::Switch(self.baud())
+    }
+}
+
+/// Health counter ids of the port.
+struct PortCounters {
+    baud: CounterId,
+    hunts: CounterId,
+    opens: CounterId,
+    open_failures: CounterId,
+    reopens: CounterId,
+    publish_errors: CounterId,
+}
+
 /// Runs the driver until SIGINT/SIGTERM.
 pub fn run(args: &GpsArgs) -> Result<(), GpsError> {
     let process = format!("gps-{}", args.id);
@@ -87,23 +208,28 @@ pub fn run(args: &GpsArgs) -> Result<(), GpsError> {
     let mut publisher = node.publisher::<GnssFix>(&services::gnss_fix(&args.id))?;
     let mut health = HealthReporter::new(&node, &process)?;
     let r_fix = health.rate("fixes_out");
-    let c_reopen = health.counter("port_reopens");
-    let c_publish_err = health.counter("publish_errors");
+    let pc = PortCounters {
+        baud: health.counter("baud"),
+        hunts: health.counter("baud_hunts"),
+        opens: health.counter("port_opens"),
+        open_failures: health.counter("port_open_failures"),
+        reopens: health.counter("port_reopens"),
+        publish_errors: health.counter("publish_errors"),
+    };
     let mut dec = Decoder {
         framer: LineFramer::new(),
         assembler: EpochAssembler::new(),
     };
+    let mut log = RateLimitedLog::default();
+    let mut hunt = BaudHunt::new(Instant::now());
     let mut backoff = Duration::from_millis(100);
-    let mut hunt_index = 0usize;
     let mut warned_open = false;
-    let mut last_errors = 0u64;
-    let mut last_warn = Instant::now() - Duration::from_secs(60);
 
     info!("gps driver running");
     while !node.termination_requested() {
         let baud = match args.baud {
             Baud::Fixed(b) => b,
-            Baud::Auto => HUNT_BAUDS[hunt_index % HUNT_BAUDS.len()],
+            Baud::Auto => hunt.baud(),
         };
         let mut port = match open(&args.port, baud) {
             Ok(p) => {
@@ -111,7 +237,6 @@ pub fn run(args: &GpsArgs) -> Result<(), GpsError> {
                     info!(baud, "port is back");
                 }
                 warned_open = false;
-                backoff = Duration::from_millis(100);
                 p
             }
             Err(e) => {
@@ -119,7 +244,8 @@ pub fn run(args: &GpsArgs) -> Result<(), GpsError> {
                     warn!("cannot open {}: {e}; retrying with backoff", args.port);
                     warned_open = true;
                 }
-                publish_health(&mut health, &dec, monotonic_now_ns());
+                health.add(pc.open_failures, 1);
+                publish_health(&mut health, &dec, &mut log);
                 if !node.sleep(backoff) {
                     break;
                 }
@@ -127,76 +253,84 @@ pub fn run(args: &GpsArgs) -> Result<(), GpsError> {
                 continue;
             }
         };
+        health.add(pc.opens, 1);
+        health.set(pc.baud, u64::from(baud));
         info!(baud, "port open");
-        let ns_per_byte = 10_000_000_000 / baud as i64;
-        let valid_before = valid_sentences(&dec);
-        let opened = Instant::now();
+        let mut ns_per_byte = 10_000_000_000 / i64::from(baud);
+        hunt.restart(Instant::now(), dec.framer.counters().bytes, dec.valid_sentences());
         let mut buf = [0u8; 512];
+        let mut emit = |fix: &GnssFix, health: &mut HealthReporter| match publisher.publish(fix) {
+            Ok(()) => health.tick(r_fix),
+            Err(e) => {
+                health.add(pc.publish_errors, 1);
+                warn!("publishing fix: {e}");
+            }
+        };
         loop {
             if node.termination_requested() {
                 break;
             }
-            match port.read(&mut buf) {
-                Ok(0) => {}
+            let closed = match port.read(&mut buf) {
+                Ok(0) => Some("the port hung up".to_string()),
                 Ok(n) => {
+                    backoff = Duration::from_millis(100);
                     let t = monotonic_now_ns();
                     let Decoder { framer, assembler } = &mut dec;
                     framer.push(&buf[..n], t, ns_per_byte, &mut |s| {
-                        assembler.push(s.text, s.host_ns, &mut |fix| {
-                            if publisher_publish(&mut publisher, fix) {
-                                health.tick(r_fix);
-                            } else {
-                                health.add(c_publish_err, 1);
-                            }
-                        });
+                        assembler.push(s.text, s.host_ns, &mut |fix| emit(fix, &mut health));
                     });
+                    None
                 }
                 Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {
-                    let Decoder { assembler, .. } = &mut dec;
-                    assembler.flush(&mut |fix| {
-                        if publisher_publish(&mut publisher, fix) {
-                            health.tick(r_fix);
-                        }
-                    });
+                    dec.assembler.flush(&mut |fix| emit(fix, &mut health));
+                    None
                 }
-                Err(e) => {
-                    warn!("read from {} failed: {e}; reopening", args.port);
-                    health.add(c_reopen, 1);
-                    dec.framer.reset();
-                    break;
-                }
-            }
-            let now = monotonic_now_ns();
-            publish_health(&mut health, &dec, now);
-            let errors = error_count(&dec);
-            if errors > last_errors && last_warn.elapsed() > Duration::from_secs(10) {
-                warn!(
-                    new_errors = errors - last_errors,
-                    "malformed input skipped (see health counters)"
-                );
-                last_warn = Instant::now();
-                last_errors = errors;
-            }
-            if args.baud == Baud::Auto && valid_sentences(&dec) == valid_before && opened.elapsed() > HUNT_DWELL {
-                hunt_index += 1;
-                info!(baud, "no valid NMEA at this rate; hunting on");
+                Err(e) => Some(format!("read failed: {e}")),
+            };
+            if let Some(why) = closed {
+                // Everything of the epoch in progress has arrived: emit it, then reopen.
+                dec.assembler.flush(&mut |fix| emit(fix, &mut health));
+                dec.framer.reset();
+                warn!("{}: {why}; reopening with backoff", args.port);
+                health.add(pc.reopens, 1);
                 break;
             }
+            if args.baud == Baud::Auto {
+                match hunt.step(Instant::now(), dec.framer.counters().bytes, dec.valid_sentences()) {
+                    HuntStep::Stay => {}
+                    HuntStep::Locked(b) => info!(baud = b, "valid NMEA at this rate; keeping it"),
+                    HuntStep::Switch(b) => {
+                        info!(from = baud, to = b, "no valid NMEA at this rate; hunting on");
+                        health.set(pc.hunts, hunt.hunts());
+                        if port
+                            .set_baud_rate(b)
+                            .and_then(|()| port.clear(ClearBuffer::Input))
+                            .is_err()
+                        {
+                            break;
+                        }
+                        dec.framer.reset();
+                        health.set(pc.baud, u64::from(b));
+                        ns_per_byte = 10_000_000_000 / i64::from(b);
+                    }
+                }
+            }
+            publish_health(&mut health, &dec, &mut log);
         }
+        drop(port);
+        if node.termination_requested() {
+            break;
+        }
+        publish_health(&mut health, &dec, &mut log);
+        if !node.sleep(backoff) {
+            break;
+        }
+        backoff = (backoff * 2).min(Duration::from_secs(5));
     }
+    publish_health(&mut health, &dec, &mut log);
     let _ = health.publish_final();
     info!("gps driver stopped");
     Ok(())
-}
-
-fn publisher_publish(p: &mut Publisher<GnssFix>, fix: &GnssFix) -> bool {
-    match p.publish(fix) {
-        Ok(()) => true,
-        Err(e) => {
-            warn!("publishing fix: {e}");
-            false
-        }
-    }
 }
 
 /// Opens the port raw, with a short read timeout, and discards stale input.
@@ -208,27 +342,68 @@ fn open(path: &str, baud: u32) -> Result<TTYPort, serialport::Error> {
     Ok(port)
 }
 
-/// Sentences that passed the checksum so far.
-fn valid_sentences(d: &Decoder) -> u64 {
-    let c = d.assembler.counters();
-    c.sentences - c.bad_checksum - c.no_checksum
+/// Human description of the decoder's error counters, `None` for the others.
+fn describe(name: &str) -> Option<&'static str> {
+    Some(match name {
+        "nmea_noise_bytes" => "bytes outside NMEA sentences skipped (binary noise, wrong baud rate?)",
+        "nmea_truncated" => "NMEA sentences cut short by the next one dropped",
+        "nmea_overlong" => "over-long NMEA sentences dropped",
+        "nmea_non_ascii" => "NMEA sentences with non-ASCII bytes dropped",
+        "nmea_bad_checksum" => "NMEA sentences with a bad checksum dropped",
+        "nmea_no_checksum" => "NMEA sentences without a checksum dropped",
+        "nmea_unparsable" => "unparsable NMEA sentences dropped",
+        "nmea_bad_fields" => "malformed NMEA fields ignored",
+        _ => return None,
+    })
 }
 
-/// Malformed-input counters summed (for rate-limited logging).
-fn error_count(d: &Decoder) -> u64 {
-    let f = d.framer.counters();
-    let a = d.assembler.counters();
-    f.noise_bytes + f.truncated + f.overlong + f.non_ascii + a.bad_checksum + a.no_checksum + a.unparsable
-}
-
-fn publish_health(h: &mut HealthReporter, d: &Decoder, now: i64) {
-    for (name, v) in d.framer.counters().named() {
+/// Copies the decoder's counters into the report, logs growing error counters (once per
+/// kind, then rate-limited) and publishes the report when due.
+fn publish_health(h: &mut HealthReporter, d: &Decoder, log: &mut RateLimitedLog) {
+    let now = Instant::now();
+    let framer = d.framer.counters().named();
+    let assembler = d.assembler.counters().named();
+    for (name, v) in framer.into_iter().chain(assembler) {
         h.set_named(name, v);
+        if let Some(what) = describe(name) {
+            log.update(name, v, what, now);
+        }
     }
-    for (name, v) in d.assembler.counters().named() {
-        h.set_named(name, v);
-    }
-    if let Err(e) = h.maybe_publish(now) {
+    if let Err(e) = h.maybe_publish(monotonic_now_ns()) {
         warn!("publishing health: {e}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hunt_moves_on_only_after_garbage_for_the_dwell() {
+        let t0 = Instant::now();
+        let mut h = BaudHunt::new(t0);
+        assert_eq!(h.baud(), 9600);
+        // Silence: no hunting however long.
+        assert_eq!(h.step(t0 + HUNT_DWELL * 3, 0, 0), HuntStep::Stay);
+        // Garbage, but not yet for the dwell.
+        assert_eq!(h.step(t0 + HUNT_DWELL / 2, 1000, 0), HuntStep::Stay);
+        assert_eq!(h.step(t0 + HUNT_DWELL, 1000, 0), HuntStep::Switch(4800));
+        let t1 = t0 + HUNT_DWELL;
+        assert_eq!(h.step(t1 + HUNT_DWELL, 1010, 0), HuntStep::Stay, "too few bytes");
+        assert_eq!(h.step(t1 + HUNT_DWELL, 2000, 0), HuntStep::Switch(38_400));
+        let t2 = t1 + HUNT_DWELL;
+        assert_eq!(
+            h.step(t2 + Duration::from_millis(300), 2500, 3),
+            HuntStep::Locked(38_400)
+        );
+        assert_eq!(h.step(t2 + Duration::from_millis(600), 2600, 5), HuntStep::Stay);
+        assert_eq!(h.locked(), Some(38_400));
+        assert_eq!(h.hunts(), 2);
+        // Valid sentences keep the rate however much noise comes with them.
+        assert_eq!(h.step(t2 + HUNT_DWELL * 2, 90_000, 6), HuntStep::Stay);
+        // Only garbage for a whole dwell: the lock is lost and hunting resumes.
+        let t3 = t2 + HUNT_DWELL * 2;
+        assert_eq!(h.step(t3 + HUNT_DWELL, 99_000, 6), HuntStep::Switch(115_200));
+        assert_eq!(h.locked(), None);
     }
 }

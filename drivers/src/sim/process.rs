@@ -7,13 +7,17 @@
 //! come from the world's oscillator model, not from when they are published. Each NMEA burst is
 //! written into a pseudo-terminal at the serial line rate, its first byte at the instant the
 //! world says it leaves the receiver, so the GPS driver reads it exactly as from a receiver.
+//!
+//! With `--imu-output xsens` the IMU samples are not published: each becomes an Xsens MTData2
+//! message written into that IMU's pseudo-terminal at the sample's stamp time
+//! ([`crate::imu::sim_device`]), and `navsync imu --source xsens:…` drivers publish them.
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
 
 use navsync_shared::health_reporter::HealthReporter;
-use navsync_shared::ipc::{IpcError, IpcNode, Publisher};
-use navsync_shared::samples::{ImuSample, PpsEdge, SimTruth};
+use navsync_shared::ipc::{IpcError, IpcNode};
+use navsync_shared::samples::{PpsEdge, SimTruth};
 use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns, realtime_now_ns};
 use tracing::{info, info_span, warn};
@@ -22,6 +26,7 @@ use super::error::SimError;
 use super::imu_errors::ImuPreset;
 use super::scenario::SimConfig;
 use super::world::{SimEvent, World};
+use crate::imu::sim_device::{SimImuOutput, SimImuSink, SimImuSinkError};
 use crate::pty::Pty;
 
 /// Command-line overrides of the scenario.
@@ -47,6 +52,12 @@ pub struct SimArgs {
     pub seed: Option<u64>,
     /// Symlink to create for the NMEA pseudo-terminal.
     pub pty_link: Option<PathBuf>,
+    /// How IMU samples leave the simulator: published directly, or as Xsens MTData2 messages
+    /// into one pseudo-terminal per IMU for `navsync imu` drivers.
+    pub imu_output: SimImuOutput,
+    /// Directory of the IMU pseudo-terminal links `imu0`, `imu1`, … (xsens output; default
+    /// `/tmp/navsync`).
+    pub imu_pty_dir: Option<PathBuf>,
     /// Stop after this many seconds of scenario.
     pub duration_s: Option<f64>,
     /// Simulated GNSS time minus the system clock, s (default 0: GNSS time ≈ system time).
@@ -67,6 +78,9 @@ pub enum SimProcessError {
     /// The pseudo-terminal could not be created.
     #[error("creating the NMEA pseudo-terminal: {0}")]
     Pty(std::io::Error),
+    /// The IMU outputs could not be set up.
+    #[error(transparent)]
+    ImuOutput(#[from] SimImuSinkError),
 }
 
 /// Loads the scenario and applies the command-line overrides.
@@ -199,9 +213,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
     unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
 
     let node = IpcNode::new("sim")?;
-    let mut imu_pubs: Vec<Publisher<ImuSample>> = (0..cfg.imu.count)
-        .map(|i| node.publisher(&services::imu_sample(&i.to_string())))
-        .collect::<Result<_, _>>()?;
+    let mut imus = SimImuSink::open(&node, &cfg, args.imu_output, args.imu_pty_dir.as_deref())?;
     let mut pps_pub = node.publisher::<PpsEdge>(services::SIM_PPS)?;
     let mut truth_pub = node.publisher::<SimTruth>(services::SIM_TRUTH)?;
     let mut health = HealthReporter::new(&node, "sim")?;
@@ -209,6 +221,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
     let c_shifted = health.counter("nmea_bursts_shifted");
     let c_dropped = health.counter("nmea_bytes_dropped");
     let r_imu = health.rate("imu_samples");
+    let c_imu_dropped = health.counter("imu_bytes_dropped");
 
     let pty = Pty::open(args.pty_link.as_deref()).map_err(SimProcessError::Pty)?;
     println!(
@@ -265,7 +278,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
         } else if let Some(ev) = next.take() {
             match ev {
                 SimEvent::Imu { index, sample } => {
-                    imu_pubs[index].publish(&sample)?;
+                    imus.deliver(index, &sample)?;
                     health.tick(r_imu);
                 }
                 SimEvent::Pps(edge) => pps_pub.publish(&edge)?,
@@ -276,6 +289,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
         }
         health.set(c_shifted, line.shifted_bursts);
         health.set(c_dropped, line.pty.dropped_bytes());
+        health.set(c_imu_dropped, imus.dropped_bytes());
         health.maybe_publish(now)?;
     }
     let _ = health.publish_final();

@@ -1,0 +1,271 @@
+//! `navsync imu --source … --id ID`: IMU drivers, publishing `ImuSample` on
+//! `navsync/imu/{id}/sample` and `Health` on `navsync/health/imu-{id}`.
+//!
+//! Sources:
+//!
+//! - `iio:DEVICE` — any MEMS IMU with a Linux Industrial I/O driver and a buffer
+//!   (ADIS164xx, BMI160/BMI270, ICM-20xxx via inv_mpu6050, …): set up through sysfs, records
+//!   from `/dev/iio:deviceN`, stamped with the kernel's per-sample timestamp
+//!   ([`iio_driver`], [`iio_device`], [`iio_scan`], [`iio_record`]).
+//! - `xsens:PORT[:BAUD]` — an Xsens MTi sending MTData2 over a serial port (default
+//!   115200 Bd), stamped on receipt and carrying the device's SampleTimeFine clock
+//!   ([`xsens_driver`], [`xsens_frame`]).
+//! - `sim[:DIR]` — the simulator's IMU `ID` (`navsync sim --imu-output xsens`), which is an
+//!   Xsens device on the pseudo-terminal `DIR/imu{ID}` (default `/tmp/navsync`)
+//!   ([`sim_device`]).
+//!
+//! Every source ends in [`output::SampleOutput`]: checks ([`sample_checks`]: NaN, range,
+//! time going backwards, duplicates, sequence gaps and counter wraps), axis mapping to
+//! forward-right-down ([`axes`]), stamping and publishing. Device errors never stop the
+//! driver: it logs them (once per kind, then rate-limited), counts them in its health
+//! report and reopens the device with exponential backoff.
+
+pub mod axes;
+pub mod iio_device;
+pub mod iio_driver;
+pub mod iio_record;
+pub mod iio_scan;
+pub mod output;
+pub mod sample_checks;
+pub mod sim_device;
+pub mod xsens_driver;
+pub mod xsens_frame;
+
+use std::path::PathBuf;
+use std::str::FromStr;
+
+use navsync_shared::imu_spec::G0;
+use navsync_shared::ipc::{IpcError, IpcNode};
+use tracing::{info, info_span};
+
+use self::axes::AxisMap;
+use self::iio_device::IioSetup;
+use self::output::SampleOutput;
+use self::sample_checks::Limits;
+
+/// Default Xsens line rate (the MTi factory setting).
+pub const XSENS_DEFAULT_BAUD: u32 = 115_200;
+/// Default gyroscope range for Xsens devices (MTi 1-, 600-series: ±2000 °/s).
+pub const XSENS_GYRO_RANGE_DPS: f64 = 2000.0;
+/// Default accelerometer range for Xsens devices (MTi 1-series: ±16 g).
+pub const XSENS_ACCEL_RANGE_G: f64 = 16.0;
+/// Default IIO buffer length, records.
+pub const IIO_BUFFER_LENGTH: u32 = 512;
+
+/// Where the samples come from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ImuSource {
+    /// A Linux IIO device: `iio:deviceN`, `N`, or its `name`.
+    Iio {
+        /// The device.
+        device: String,
+    },
+    /// An Xsens MTi on a serial port.
+    Xsens {
+        /// Serial device.
+        port: String,
+        /// Line rate.
+        baud: u32,
+    },
+    /// The simulator's IMU of the same id, an Xsens device on `DIR/imu{id}`.
+    Sim {
+        /// Directory of the simulator's links.
+        dir: PathBuf,
+    },
+}
+
+impl FromStr for ImuSource {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let expected =
+            || format!("`{s}` is not an IMU source: expected `iio:DEVICE`, `xsens:PORT[:BAUD]` or `sim[:DIR]`");
+        let (kind, rest) = s.split_once(':').unwrap_or((s, ""));
+        match kind {
+            "iio" if !rest.is_empty() => Ok(Self::Iio {
+                device: rest.to_string(),
+            }),
+            "xsens" if !rest.is_empty() => {
+                let (port, baud) = match rest.rsplit_once(':') {
+                    Some((p, b)) if !p.is_empty() && b.chars().all(|c| c.is_ascii_digit()) => {
+                        let baud = b
+                            .parse::<u32>()
+                            .ok()
+                            .filter(|b| *b > 0)
+                            .ok_or_else(|| format!("`{b}` in `{s}` is not a baud rate (a positive integer)"))?;
+                        (p, baud)
+                    }
+                    _ => (rest, XSENS_DEFAULT_BAUD),
+                };
+                Ok(Self::Xsens {
+                    port: port.to_string(),
+                    baud,
+                })
+            }
+            "sim" => Ok(Self::Sim {
+                dir: PathBuf::from(if rest.is_empty() {
+                    sim_device::DEFAULT_SIM_DIR
+                } else {
+                    rest
+                }),
+            }),
+            _ => Err(expected()),
+        }
+    }
+}
+
+/// Settings of `navsync imu`.
+#[derive(Debug, Clone)]
+pub struct ImuArgs {
+    /// The source.
+    pub source: ImuSource,
+    /// IMU id (service `navsync/imu/{id}/sample`).
+    pub id: String,
+    /// sysfs directory of IIO devices (default `/sys/bus/iio/devices`).
+    pub sysfs_root: PathBuf,
+    /// Directory of device nodes (default `/dev`).
+    pub dev_root: PathBuf,
+    /// Sampling frequency: requested from an IIO device; the nominal output rate of an Xsens
+    /// device (otherwise learnt from its SampleTimeFine).
+    pub rate_hz: Option<f64>,
+    /// Device axes → published forward-right-down axes (default `x,-y,-z`: device z up).
+    pub axes: AxisMap,
+    /// Gyroscope full-scale range, °/s (default: 2000 for Xsens and the simulator, none for
+    /// IIO, whose integer outputs cannot exceed their range and are flagged at full scale).
+    pub gyro_range_dps: Option<f64>,
+    /// Accelerometer full-scale range, g (default: 16 for Xsens and the simulator, none for IIO).
+    pub accel_range_g: Option<f64>,
+    /// IIO buffer length, records.
+    pub buffer_length: u32,
+}
+
+/// Errors that stop the driver (device errors never do: it reopens).
+#[derive(Debug, thiserror::Error)]
+pub enum ImuError {
+    /// IPC failure.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// A setting is out of range.
+    #[error("{0}")]
+    Config(String),
+}
+
+/// Runs the driver until SIGINT/SIGTERM.
+pub fn run(args: &ImuArgs) -> Result<(), ImuError> {
+    let process = format!("imu-{}", args.id);
+    let _span = info_span!("imu", id = %args.id).entered();
+    if let Some(r) = args.rate_hz
+        && !(r.is_finite() && r > 1.0 && r <= 100_000.0)
+    {
+        return Err(ImuError::Config(format!(
+            "--rate {r}: expected a sampling frequency in Hz, 1 < rate ≤ 100000"
+        )));
+    }
+    let default_ranges = match args.source {
+        ImuSource::Iio { .. } => (f64::INFINITY, f64::INFINITY),
+        _ => (XSENS_GYRO_RANGE_DPS, XSENS_ACCEL_RANGE_G),
+    };
+    let limits = Limits {
+        gyro_rps: args.gyro_range_dps.unwrap_or(default_ranges.0).to_radians(),
+        accel_mps2: args.accel_range_g.unwrap_or(default_ranges.1) * G0,
+    };
+    let node = IpcNode::new(&process)?;
+    let mut out = SampleOutput::new(&node, &args.id, &process, limits, args.rate_hz.map(|f| 1.0 / f))?;
+    info!(source = ?args.source, axes = %args.axes, "imu driver running");
+    match &args.source {
+        ImuSource::Iio { device } => iio_driver::run(
+            &node,
+            &iio_driver::IioArgs {
+                device: device.clone(),
+                sysfs_root: args.sysfs_root.clone(),
+                dev_root: args.dev_root.clone(),
+                setup: IioSetup {
+                    rate_hz: args.rate_hz,
+                    buffer_length: args.buffer_length,
+                },
+                axes: args.axes,
+            },
+            &mut out,
+        ),
+        ImuSource::Xsens { port, baud } => xsens_driver::run(
+            &node,
+            &xsens_driver::XsensArgs {
+                port: port.clone(),
+                baud: *baud,
+                axes: args.axes,
+                rate_hz: args.rate_hz,
+            },
+            &mut out,
+        ),
+        ImuSource::Sim { dir } => {
+            let index: usize = args.id.parse().map_err(|_| {
+                ImuError::Config(format!(
+                    "--source sim needs a numeric --id (the simulator's IMU index), not `{}`",
+                    args.id
+                ))
+            })?;
+            xsens_driver::run(
+                &node,
+                &xsens_driver::XsensArgs {
+                    port: sim_device::sim_port(dir, index).display().to_string(),
+                    baud: sim_device::SIM_BAUD,
+                    axes: args.axes,
+                    rate_hz: args.rate_hz,
+                },
+                &mut out,
+            )
+        }
+    }
+    out.finish();
+    info!(published = out.published(), "imu driver stopped");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sources() {
+        assert_eq!(
+            "iio:iio:device3".parse::<ImuSource>(),
+            Ok(ImuSource::Iio {
+                device: "iio:device3".into()
+            })
+        );
+        assert_eq!(
+            "xsens:/dev/ttyUSB0".parse::<ImuSource>(),
+            Ok(ImuSource::Xsens {
+                port: "/dev/ttyUSB0".into(),
+                baud: 115_200
+            })
+        );
+        assert_eq!(
+            "xsens:/dev/ttyUSB0:921600".parse::<ImuSource>(),
+            Ok(ImuSource::Xsens {
+                port: "/dev/ttyUSB0".into(),
+                baud: 921_600
+            })
+        );
+        assert_eq!(
+            "sim".parse::<ImuSource>(),
+            Ok(ImuSource::Sim {
+                dir: "/tmp/navsync".into()
+            })
+        );
+        assert_eq!("sim:/x".parse::<ImuSource>(), Ok(ImuSource::Sim { dir: "/x".into() }));
+        for bad in ["", "iio", "iio:", "xsens:", "spi:0", "/dev/ttyUSB0"] {
+            let e = bad.parse::<ImuSource>().unwrap_err();
+            assert!(
+                e.contains("expected `iio:DEVICE`, `xsens:PORT[:BAUD]` or `sim[:DIR]`"),
+                "{e}"
+            );
+        }
+        assert!(
+            "xsens:/dev/x:0"
+                .parse::<ImuSource>()
+                .unwrap_err()
+                .contains("not a baud rate")
+        );
+    }
+}
