@@ -231,6 +231,27 @@ enum Cmd {
         #[arg(long)]
         timeout: Option<f64>,
     },
+    /// 1 PPS driver: edges from a kernel PPS device, a serial modem line or the simulator,
+    /// validated (missing/duplicate/early/late counted), to `navsync/pps/{id}/edge`.
+    Pps {
+        /// kernel:/dev/ppsN, serial-dcd:/dev/ttyX, serial-cts:/dev/ttyX, or sim.
+        #[arg(long)]
+        source: navsync_drivers::pps::SourceSpec,
+        /// PPS id.
+        #[arg(long, default_value = "0", value_parser = parse_id)]
+        id: String,
+    },
+    /// Exports GNSS time (`navsync/time/state`) to chrony/ntpd as an NTP shared-memory refclock.
+    Ntpshm {
+        /// SHM unit: segment key 0x4e545030 + unit (chrony: `refclock SHM <unit>`).
+        #[arg(long, default_value_t = 0)]
+        unit: u32,
+    },
+    /// Offline benchmarks with deterministic numbers (`timing`: clock model, holdover, d0).
+    Bench {
+        /// Which benchmark: timing.
+        what: String,
+    },
     /// Decodes an NMEA capture offline (same code as the live driver): one JSON object per epoch.
     Nmea {
         /// Capture file, or `-` for stdin.
@@ -422,6 +443,17 @@ fn main() -> Result<()> {
                 timeout: timeout.map(Duration::from_secs_f64),
             })
             .with_context(|| format!("echo {service}"))?;
+        }
+        Cmd::Pps { source, id } => {
+            let shown = source.to_string();
+            navsync_drivers::pps::run(&navsync_drivers::pps::PpsArgs { source, id })
+                .with_context(|| format!("pps driver on {shown}"))?;
+        }
+        Cmd::Ntpshm { unit } => {
+            roles::ntpshm::run(&roles::ntpshm::NtpShmArgs { unit }).context("ntpshm")?;
+        }
+        Cmd::Bench { what } => {
+            roles::bench_timing::run(&what).context("bench")?;
         }
         Cmd::Nmea { file } => {
             let bytes = if file == "-" {

@@ -21,17 +21,28 @@ use nalgebra::{Matrix2, Vector2};
 pub struct OscillatorNoise {
     /// White-frequency-noise intensity q_φ, ns²/s (σ_y(1 s) = 1e−10 → 1e−2).
     pub q_offset_ns2_per_s: f64,
-    /// Random-walk-frequency intensity q_f, 1/s (3e−22 → σ_y(100 s) = 1e−10).
+    /// Random-walk-frequency intensity q_f, 1/s (σ_y(1 s) = 1e−10 → 3e−20).
     pub q_rate_per_s: f64,
 }
 
-impl Default for OscillatorNoise {
-    /// A TCXO-class host oscillator: σ_y(1 s) ≈ 1e−10, random walk σ_y(100 s) ≈ 1e−10.
-    fn default() -> Self {
+impl OscillatorNoise {
+    /// Process noise from the oscillator's Allan deviations at τ = 1 s of its white-FM and
+    /// random-walk-FM components (a data sheet's or a measured Allan plot's figures):
+    /// σ_y²(τ) = q_φ/τ (white FM) and σ_y²(τ) = q_f·τ/3 (random-walk FM), so
+    /// q_φ = σ_wfm(1 s)²·1 s (in ns²/s: ×1e18) and q_f = 3·σ_rwfm(1 s)²/s.
+    pub fn from_allan(white_fm_adev_1s: f64, random_walk_fm_adev_1s: f64) -> Self {
         Self {
-            q_offset_ns2_per_s: 1e-2,
-            q_rate_per_s: 3e-22,
+            q_offset_ns2_per_s: white_fm_adev_1s * white_fm_adev_1s * 1e18,
+            q_rate_per_s: 3.0 * random_walk_fm_adev_1s * random_walk_fm_adev_1s,
         }
+    }
+}
+
+impl Default for OscillatorNoise {
+    /// A TCXO-class host oscillator: white FM σ_y(1 s) = 1e−10 and random-walk FM
+    /// σ_y(1 s) = 1e−10 (the simulator's default oscillator, `[clock] freq_rw_adev_1s`).
+    fn default() -> Self {
+        Self::from_allan(1e-10, 1e-10)
     }
 }
 
@@ -166,6 +177,21 @@ impl ClockModel {
     /// Covariance [[ns², ns], [ns, 1]] at the state's host time.
     pub fn covariance(&self) -> Matrix2<f64> {
         self.p
+    }
+
+    /// 1-sigma of [`utc_ns_at`](Self::utc_ns_at) at `host_ns`, ns: P propagated over
+    /// Δ = |host_ns − state time| with the process noise (the same expression as
+    /// `TimeState::utc_std_ns_at`), without changing the filter.
+    pub fn std_ns_at(&self, host_ns: i64) -> f64 {
+        let d = host_ns.saturating_sub(self.host_ns).unsigned_abs() as f64;
+        let dt = d * 1e-9;
+        let (q1, q2) = (self.noise.q_offset_ns2_per_s, self.noise.q_rate_per_s);
+        let var = self.p[(0, 0)]
+            + 2.0 * d * self.p[(0, 1)]
+            + d * d * self.p[(1, 1)]
+            + q1 * dt
+            + q2 * 1e18 * dt * dt * dt / 3.0;
+        var.max(0.0).sqrt()
     }
 }
 

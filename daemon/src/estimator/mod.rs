@@ -13,6 +13,7 @@
 
 pub mod alignment;
 pub mod clock_model;
+pub mod device_clock;
 pub mod error_state;
 pub mod eskf;
 pub mod gnss_fusion;

@@ -1,8 +1,9 @@
 //! `navsync demo`: the whole pipeline on one machine with no sensors.
 //!
-//! Starts `navsync sim` (simulated world: IMUs and PPS published directly, NMEA written into a
-//! pseudo-terminal), `navsync gps` (reads that pseudo-terminal through the serial API) and
-//! `navsync estimator` as child processes; shows a live status line with per-service rates
+//! Starts `navsync sim` (simulated world: IMUs published directly, raw PPS edges on
+//! `navsync/sim/pps`, NMEA written into a pseudo-terminal), `navsync gps` (reads that
+//! pseudo-terminal through the serial API), `navsync pps --source sim` (validates the edges as
+//! it would a kernel PPS device's) and `navsync estimator` as child processes; shows a live status line with per-service rates
 //! and the time-mapping error against the simulated truth; stops them all on Ctrl-C/SIGTERM
 //! or at the end of `--duration`, and prints a summary.
 //!
@@ -168,7 +169,7 @@ impl Monitor {
         let imus = (0..imus)
             .map(|i| node.subscriber(&services::imu_sample(&i.to_string())))
             .collect::<Result<_, _>>()?;
-        let healths = ["sim", "gps-0", "estimator"]
+        let healths = ["sim", "gps-0", "pps-0", "estimator"]
             .iter()
             .map(|p| Ok((p.to_string(), node.subscriber(&services::health(p))?)))
             .collect::<Result<_, IpcError>>()?;
@@ -322,6 +323,7 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
                 procs.push(spawn(name, &["imu", "--source", &source, "--id", &i.to_string()].map(String::from))?);
             }
         }
+        procs.push(spawn("pps", &["pps", "--source", "sim", "--id", "0"].map(String::from))?);
         procs.push(spawn(
             "estimator",
             &["estimator", "--gnss", "0", "--pps", "0", "--imus", &imu_list].map(String::from),

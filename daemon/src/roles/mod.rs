@@ -1,6 +1,8 @@
 //! Process shells: each role wires a functional core to its iceoryx2 services.
 
+pub mod bench_timing;
 pub mod demo;
 pub mod echo;
 pub mod estimator;
+pub mod ntpshm;
 pub mod sim_estimate;
