@@ -1,0 +1,231 @@
+//! navsync's channel conventions in MCAP: what recorders, replayers, clients and tests agree on.
+//!
+//! * One channel per service; the topic is the service name (`navsync/imu/0/sample`).
+//! * One schema per sample type: name = the type name with its layout version
+//!   (`navsync.ImuSample.v1`), encoding `jsonschema`, data = [`json::schema`] of the type
+//!   (JSON Schema draft 2020-12 with every field's units and frame as its description).
+//! * Message encoding `json`: the sample as [`json::to_json`] writes it (UTF-8, compact).
+//!   Foxglove and the `mcap` tools display and plot these without navsync.
+//! * Decoding is [`json::from_json`], exact to the bit for every field (floats are written in
+//!   the shortest form that parses back to the same `f64`, NaN as `null`).
+
+use core::fmt::Debug;
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use super::mcap_reader::{Channel, Schema};
+use crate::json::{from_json, schema, to_json};
+use crate::reflect::Reflect;
+use crate::samples::{AnySample, GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
+use crate::services::ServiceKind;
+
+/// Message encoding of every navsync channel.
+pub const MESSAGE_ENCODING: &str = "json";
+/// Schema encoding of every navsync schema.
+pub const SCHEMA_ENCODING: &str = "jsonschema";
+/// The MCAP profile navsync writes (none of the well-known ROS profiles applies).
+pub const PROFILE: &str = "";
+/// The library string in the Header of files navsync writes.
+pub const LIBRARY: &str = "navsync";
+
+/// A navsync sample type and its place in [`AnySample`].
+pub trait SampleType: Reflect + ZeroCopySend + Debug {
+    /// The kind of service that carries it.
+    const KIND: ServiceKind;
+    /// Wraps it.
+    fn wrap(self) -> AnySample;
+    /// Unwraps it, if `s` is of this type.
+    fn unwrap(s: &AnySample) -> Option<&Self>;
+}
+
+macro_rules! sample_type {
+    ($t:ty, $kind:ident, $variant:ident) => {
+        impl SampleType for $t {
+            const KIND: ServiceKind = ServiceKind::$kind;
+            fn wrap(self) -> AnySample {
+                AnySample::$variant(self)
+            }
+            fn unwrap(s: &AnySample) -> Option<&Self> {
+                match s {
+                    AnySample::$variant(x) => Some(x),
+                    _ => None,
+                }
+            }
+        }
+    };
+}
+sample_type!(GnssFix, GnssFix, GnssFix);
+sample_type!(PpsEdge, PpsEdge, PpsEdge);
+sample_type!(ImuSample, ImuSample, Imu);
+sample_type!(TimeState, TimeState, Time);
+sample_type!(NavState, NavState, Nav);
+sample_type!(Health, Health, Health);
+sample_type!(SimTruth, SimTruth, Truth);
+
+/// Evaluates `$body` with the type alias `$T` set to the sample type of `$kind`.
+#[macro_export]
+macro_rules! with_sample_type {
+    ($kind:expr, $T:ident => $body:expr) => {
+        match $kind {
+            $crate::services::ServiceKind::GnssFix => {
+                type $T = $crate::samples::GnssFix;
+                $body
+            }
+            $crate::services::ServiceKind::PpsEdge => {
+                type $T = $crate::samples::PpsEdge;
+                $body
+            }
+            $crate::services::ServiceKind::ImuSample => {
+                type $T = $crate::samples::ImuSample;
+                $body
+            }
+            $crate::services::ServiceKind::TimeState => {
+                type $T = $crate::samples::TimeState;
+                $body
+            }
+            $crate::services::ServiceKind::NavState => {
+                type $T = $crate::samples::NavState;
+                $body
+            }
+            $crate::services::ServiceKind::Health => {
+                type $T = $crate::samples::Health;
+                $body
+            }
+            $crate::services::ServiceKind::SimTruth => {
+                type $T = $crate::samples::SimTruth;
+                $body
+            }
+        }
+    };
+}
+
+/// The schema name of a kind: its type name, e.g. `navsync.ImuSample.v1`.
+pub fn schema_name(kind: ServiceKind) -> &'static str {
+    kind.type_name()
+}
+
+/// The JSON Schema of a kind, as the bytes of a Schema record.
+pub fn schema_data(kind: ServiceKind) -> Vec<u8> {
+    with_sample_type!(kind, T => serde_json::to_vec(&schema::<T>()).unwrap_or_default())
+}
+
+/// The JSON value of a sample.
+pub fn sample_json(sample: &AnySample) -> serde_json::Value {
+    match sample {
+        AnySample::GnssFix(x) => to_json(x),
+        AnySample::PpsEdge(x) => to_json(x),
+        AnySample::Imu(x) => to_json(x),
+        AnySample::Time(x) => to_json(x),
+        AnySample::Nav(x) => to_json(x),
+        AnySample::Health(x) => to_json(x),
+        AnySample::Truth(x) => to_json(x),
+    }
+}
+
+/// Encodes a sample as a message payload into `out` (cleared first; its capacity is reused).
+pub fn encode(sample: &AnySample, out: &mut Vec<u8>) {
+    out.clear();
+    // Writing a `Value` into a `Vec` cannot fail.
+    let _ = serde_json::to_writer(&mut *out, &sample_json(sample));
+}
+
+/// Decodes a message payload of a channel of `kind`.
+pub fn decode(kind: ServiceKind, data: &[u8]) -> Result<AnySample, String> {
+    let v: serde_json::Value = serde_json::from_slice(data).map_err(|e| format!("not JSON: {e}"))?;
+    with_sample_type!(kind, T => from_json::<T>(&v).map(T::wrap).map_err(|e| e.to_string()))
+}
+
+/// The sample kind of a channel, checked against navsync's conventions: a navsync service
+/// name as topic, `json` messages, and (when present) a `jsonschema` schema named after the
+/// service's type. An error says what does not match.
+pub fn channel_kind(channel: &Channel, schema: Option<&Schema>) -> Result<ServiceKind, String> {
+    let kind = ServiceKind::of(&channel.topic).ok_or_else(|| "not a navsync service name".to_string())?;
+    if channel.message_encoding != MESSAGE_ENCODING {
+        return Err(format!(
+            "message encoding `{}`, expected `{MESSAGE_ENCODING}`",
+            channel.message_encoding
+        ));
+    }
+    if let Some(s) = schema
+        && (s.name != kind.type_name() || s.encoding != SCHEMA_ENCODING)
+    {
+        return Err(format!(
+            "schema `{}` ({}), expected `{}` ({SCHEMA_ENCODING}): a recording of another layout version",
+            s.name,
+            s.encoding,
+            kind.type_name()
+        ));
+    }
+    Ok(kind)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::samples::{Stamp, StampSource};
+
+    #[test]
+    fn every_kind_has_a_schema_and_round_trips_bit_for_bit() {
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let mut buf = Vec::new();
+        for _ in 0..2000 {
+            let mut imu = ImuSample::zeroed();
+            imu.stamp = Stamp::host(next() as i64 >> 1, next(), StampSource::Simulated);
+            for v in imu.gyro_rps.iter_mut().chain(imu.accel_mps2.iter_mut()) {
+                // Typical magnitudes and arbitrary bit patterns.
+                *v = (next() >> 11) as f64 / (1u64 << 53) as f64 * 20.0 - 10.0;
+            }
+            imu.dt_s = f64::from_bits(next() & 0x7FEF_FFFF_FFFF_FFFF);
+            imu.temperature_c = f64::NAN;
+            let s = AnySample::Imu(imu);
+            encode(&s, &mut buf);
+            let back = decode(ServiceKind::ImuSample, &buf).unwrap();
+            let AnySample::Imu(b) = back else { panic!("wrong kind") };
+            assert_eq!(b.gyro_rps.map(f64::to_bits), imu.gyro_rps.map(f64::to_bits));
+            assert_eq!(b.accel_mps2.map(f64::to_bits), imu.accel_mps2.map(f64::to_bits));
+            assert_eq!(b.dt_s.to_bits(), imu.dt_s.to_bits());
+            assert!(b.temperature_c.is_nan());
+            assert_eq!(b.stamp, imu.stamp);
+        }
+        for kind in ServiceKind::ALL {
+            let v: serde_json::Value = serde_json::from_slice(&schema_data(kind)).unwrap();
+            assert_eq!(v["title"], kind.type_name());
+            assert_eq!(v["type"], "object");
+        }
+    }
+
+    #[test]
+    fn channels_are_checked() {
+        let ch = Channel {
+            id: 1,
+            schema_id: 1,
+            topic: "navsync/imu/0/sample".into(),
+            message_encoding: "json".into(),
+            metadata: vec![],
+        };
+        let good = Schema {
+            id: 1,
+            name: "navsync.ImuSample.v1".into(),
+            encoding: "jsonschema".into(),
+            data: vec![],
+        };
+        assert_eq!(channel_kind(&ch, Some(&good)), Ok(ServiceKind::ImuSample));
+        let old = Schema {
+            name: "navsync.ImuSample.v0".into(),
+            ..good.clone()
+        };
+        assert!(channel_kind(&ch, Some(&old)).unwrap_err().contains("layout version"));
+        let other = Channel {
+            topic: "/tf".into(),
+            ..ch.clone()
+        };
+        assert!(channel_kind(&other, None).is_err());
+        assert!(decode(ServiceKind::NavState, b"{").unwrap_err().starts_with("not JSON"));
+    }
+}

@@ -1,0 +1,51 @@
+//! Recordings: navsync samples in MCAP files (<https://mcap.dev/spec>), what `navsync record`,
+//! `navsync replay`, `navsync sim --fast --record`, clients and tests agree on.
+//!
+//! Read in this order:
+//! 1. [`channels`]: the conventions (topic = service name, `json` messages, one `jsonschema`
+//!    schema per sample type named `navsync.ImuSample.v1`, …).
+//! 2. [`sample_file`]: [`SampleRecorder`] and [`SampleReader`], samples in and out by service.
+//! 3. [`mcap_writer`], [`mcap_reader`], [`mcap_format`], [`crc32`]: the container format.
+//! 4. [`ports`], [`glob`], [`pacing`]: what the record and replay processes need besides.
+//!
+//! # Time stamps of the messages
+//!
+//! MCAP gives every message a `log_time` and a `publish_time` (ns, epoch chosen by the
+//! writer). navsync fills them so that `log_time` is always UTC-like (ns since 1970, what
+//! Foxglove puts on its time axis) and `publish_time` is always host `CLOCK_MONOTONIC`
+//! (what the samples themselves are stamped with, and what replay paces by):
+//!
+//! | writer | `log_time` | `publish_time` |
+//! |---|---|---|
+//! | `navsync record` (live) | `CLOCK_REALTIME` at receipt | `CLOCK_MONOTONIC` at receipt |
+//! | `navsync sim --fast --record` | simulated UTC of the delivery instant | simulated host time of the delivery instant |
+//! | `navsync replay --estimate --out` | `log_time` of the IMU sample the state is for | the state's `host_ns` |
+//!
+//! So in a simulated recording `publish_time` is exactly when the driver would have published
+//! the sample, and in a live one when the recorder received it. Samples keep their own
+//! stamps untouched; neither time replaces them.
+//!
+//! # Durability
+//!
+//! Recordings are chunked; the recorder closes a chunk at least every second and hands it to
+//! the operating system, so a crash or `kill -9` loses at most the last second. A clean stop
+//! writes the summary (schemas, channels, statistics, chunk indexes) and the footer.
+
+pub mod channels;
+pub mod crc32;
+mod error;
+pub mod glob;
+pub mod mcap_format;
+pub mod mcap_reader;
+pub mod mcap_writer;
+pub mod pacing;
+pub mod ports;
+pub mod sample_file;
+
+pub use error::RecordingError;
+pub use mcap_reader::McapReader;
+pub use mcap_writer::McapWriter;
+pub use sample_file::{RecordedSample, SampleReader, SampleRecorder};
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,44 @@
+//! Real-time pacing on the host clock: absolute sleeps on `CLOCK_MONOTONIC`, so that delays do
+//! not accumulate over thousands of waits (the simulator's event loop, `navsync replay`).
+
+use crate::time::{NS_PER_S, monotonic_now_ns};
+
+/// Sleeps until host time `target_ns` (`CLOCK_MONOTONIC`, ns) with an absolute
+/// `clock_nanosleep`, waking `spin_ns` early and spinning the rest (for wake-ups accurate to
+/// µs despite timer slack; 0 to not spin). Returns early, before `target_ns`, when a signal
+/// interrupts the sleep, so callers can check for a termination request; callers that must
+/// not wake early loop until `monotonic_now_ns() >= target_ns`.
+pub fn sleep_until(target_ns: i64, spin_ns: i64) {
+    let coarse = target_ns - spin_ns.max(0);
+    if coarse > monotonic_now_ns() {
+        let ts = libc::timespec {
+            tv_sec: coarse / NS_PER_S,
+            tv_nsec: coarse % NS_PER_S,
+        };
+        // SAFETY: absolute sleep on CLOCK_MONOTONIC with a valid timespec and no remainder.
+        let rc =
+            unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) };
+        if rc == libc::EINTR {
+            return;
+        }
+    }
+    while monotonic_now_ns() < target_ns {
+        std::hint::spin_loop();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wakes_after_the_target() {
+        for spin in [0, 200_000] {
+            let target = monotonic_now_ns() + 5_000_000;
+            sleep_until(target, spin);
+            assert!(monotonic_now_ns() >= target);
+        }
+        // A target in the past returns at once.
+        sleep_until(monotonic_now_ns() - NS_PER_S, 0);
+    }
+}

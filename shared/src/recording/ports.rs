@@ -1,0 +1,137 @@
+//! Publishers and subscribers for any navsync service, typed by the service's name: what a
+//! recorder subscribes with and a replayer publishes with.
+
+use iceoryx2::port::listener::Listener;
+
+use super::channels::SampleType;
+use crate::ipc::{IpcError, IpcNode, Publisher, Subscriber, Transport};
+use crate::samples::AnySample;
+use crate::services::ServiceKind;
+
+/// A subscriber of whatever type the service carries.
+pub enum AnySubscriber {
+    /// `navsync/gnss/{id}/fix`
+    GnssFix(Subscriber<crate::samples::GnssFix>),
+    /// `navsync/pps/{id}/edge`, `navsync/sim/pps`
+    PpsEdge(Subscriber<crate::samples::PpsEdge>),
+    /// `navsync/imu/{id}/sample`
+    Imu(Subscriber<crate::samples::ImuSample>),
+    /// `navsync/time/state`
+    Time(Subscriber<crate::samples::TimeState>),
+    /// `navsync/nav/state`
+    Nav(Subscriber<crate::samples::NavState>),
+    /// `navsync/health/{process}`
+    Health(Subscriber<crate::samples::Health>),
+    /// `navsync/sim/truth`
+    Truth(Subscriber<crate::samples::SimTruth>),
+}
+
+macro_rules! each_subscriber {
+    ($self:expr, $s:ident => $body:expr) => {
+        match $self {
+            AnySubscriber::GnssFix($s) => $body,
+            AnySubscriber::PpsEdge($s) => $body,
+            AnySubscriber::Imu($s) => $body,
+            AnySubscriber::Time($s) => $body,
+            AnySubscriber::Nav($s) => $body,
+            AnySubscriber::Health($s) => $body,
+            AnySubscriber::Truth($s) => $body,
+        }
+    };
+}
+
+fn unknown(service: &str) -> IpcError {
+    IpcError::InvalidName(format!("{service} (not a navsync service)"))
+}
+
+impl AnySubscriber {
+    /// Subscribes to `service` (creating it if it does not exist yet).
+    pub fn open(node: &IpcNode, service: &str) -> Result<Self, IpcError> {
+        Ok(match ServiceKind::of(service).ok_or_else(|| unknown(service))? {
+            ServiceKind::GnssFix => Self::GnssFix(node.subscriber(service)?),
+            ServiceKind::PpsEdge => Self::PpsEdge(node.subscriber(service)?),
+            ServiceKind::ImuSample => Self::Imu(node.subscriber(service)?),
+            ServiceKind::TimeState => Self::Time(node.subscriber(service)?),
+            ServiceKind::NavState => Self::Nav(node.subscriber(service)?),
+            ServiceKind::Health => Self::Health(node.subscriber(service)?),
+            ServiceKind::SimTruth => Self::Truth(node.subscriber(service)?),
+        })
+    }
+
+    /// The service name.
+    pub fn service(&self) -> &str {
+        each_subscriber!(self, s => s.service())
+    }
+
+    /// The listener to attach to a WaitSet.
+    pub fn listener(&self) -> &Listener<Transport> {
+        each_subscriber!(self, s => s.listener())
+    }
+
+    /// Consumes pending wake-up events (call before draining).
+    pub fn clear_events(&self) {
+        each_subscriber!(self, s => s.clear_events())
+    }
+
+    /// Calls `f` with every buffered sample (copied out of shared memory); returns how many.
+    pub fn drain(&self, mut f: impl FnMut(AnySample)) -> Result<usize, IpcError> {
+        each_subscriber!(self, s => s.for_each(|x| f(SampleType::wrap(*x))))
+    }
+}
+
+/// A publisher of whatever type the service carries.
+pub enum AnyPublisher {
+    /// `navsync/gnss/{id}/fix`
+    GnssFix(Publisher<crate::samples::GnssFix>),
+    /// `navsync/pps/{id}/edge`, `navsync/sim/pps`
+    PpsEdge(Publisher<crate::samples::PpsEdge>),
+    /// `navsync/imu/{id}/sample`
+    Imu(Publisher<crate::samples::ImuSample>),
+    /// `navsync/time/state`
+    Time(Publisher<crate::samples::TimeState>),
+    /// `navsync/nav/state`
+    Nav(Publisher<crate::samples::NavState>),
+    /// `navsync/health/{process}`
+    Health(Publisher<crate::samples::Health>),
+    /// `navsync/sim/truth`
+    Truth(Publisher<crate::samples::SimTruth>),
+}
+
+impl AnyPublisher {
+    /// A publisher on `service` (creating the service if it does not exist yet).
+    pub fn open(node: &IpcNode, service: &str) -> Result<Self, IpcError> {
+        Ok(match ServiceKind::of(service).ok_or_else(|| unknown(service))? {
+            ServiceKind::GnssFix => Self::GnssFix(node.publisher(service)?),
+            ServiceKind::PpsEdge => Self::PpsEdge(node.publisher(service)?),
+            ServiceKind::ImuSample => Self::Imu(node.publisher(service)?),
+            ServiceKind::TimeState => Self::Time(node.publisher(service)?),
+            ServiceKind::NavState => Self::Nav(node.publisher(service)?),
+            ServiceKind::Health => Self::Health(node.publisher(service)?),
+            ServiceKind::SimTruth => Self::Truth(node.publisher(service)?),
+        })
+    }
+
+    /// Publishes `sample`, which must be of the service's type.
+    pub fn publish(&mut self, sample: &AnySample) -> Result<(), IpcError> {
+        match self {
+            Self::GnssFix(p) => pub_as(p, sample),
+            Self::PpsEdge(p) => pub_as(p, sample),
+            Self::Imu(p) => pub_as(p, sample),
+            Self::Time(p) => pub_as(p, sample),
+            Self::Nav(p) => pub_as(p, sample),
+            Self::Health(p) => pub_as(p, sample),
+            Self::Truth(p) => pub_as(p, sample),
+        }
+    }
+}
+
+fn pub_as<T: SampleType>(p: &mut Publisher<T>, sample: &AnySample) -> Result<(), IpcError> {
+    match T::unwrap(sample) {
+        Some(x) => p.publish(x),
+        None => Err(IpcError::Iceoryx {
+            what: "publishing",
+            service: p.service().to_string(),
+            detail: format!("a {:?} sample on a {:?} service", sample.kind(), T::KIND),
+        }),
+    }
+}

@@ -1,0 +1,257 @@
+//! Recordings of navsync samples: [`SampleRecorder`] writes [`AnySample`]s by service name,
+//! [`SampleReader`] gives them back with their times, both following the
+//! [channel conventions](super::channels).
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Seek, Write};
+use std::path::{Path, PathBuf};
+
+use super::channels::{self, LIBRARY, MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING};
+use super::error::RecordingError;
+use super::mcap_reader::{McapReader, ScanEnd, Summary};
+use super::mcap_writer::{ChannelId, McapWriter, SchemaId};
+use crate::samples::AnySample;
+use crate::services::ServiceKind;
+
+/// Writes navsync samples into an MCAP file: one channel per service, one schema per type,
+/// created when a service is first seen.
+pub struct SampleRecorder<W: Write = BufWriter<File>> {
+    mcap: McapWriter<W>,
+    path: PathBuf,
+    schemas: [Option<SchemaId>; ServiceKind::ALL.len()],
+    channels: HashMap<String, (ChannelId, ServiceKind)>,
+    json: Vec<u8>,
+}
+
+impl SampleRecorder<BufWriter<File>> {
+    /// Creates (or truncates) `path` and writes the file header.
+    pub fn create(path: &Path) -> Result<Self, RecordingError> {
+        let f = File::create(path).map_err(|e| RecordingError::io(path, "creating", e))?;
+        Self::new(BufWriter::with_capacity(256 * 1024, f), path)
+    }
+
+    /// Closes the file properly (summary, footer) and syncs it to disk.
+    pub fn close(self) -> Result<(), RecordingError> {
+        let path = self.path.clone();
+        let w = self.finish()?;
+        let f = w
+            .into_inner()
+            .map_err(|e| RecordingError::io(&path, "flushing", e.into_error()))?;
+        f.sync_all().map_err(|e| RecordingError::io(&path, "syncing", e))
+    }
+}
+
+impl<W: Write> SampleRecorder<W> {
+    /// A recorder writing to `out`; `path` names it in errors.
+    pub fn new(out: W, path: &Path) -> Result<Self, RecordingError> {
+        Ok(Self {
+            mcap: McapWriter::new(out, path, PROFILE, LIBRARY)?,
+            path: path.to_path_buf(),
+            schemas: [None; ServiceKind::ALL.len()],
+            channels: HashMap::new(),
+            json: Vec::with_capacity(4096),
+        })
+    }
+
+    /// Closes chunks at `bytes` instead of the default.
+    pub fn with_chunk_size(mut self, bytes: usize) -> Self {
+        self.mcap = self.mcap.with_chunk_size(bytes);
+        self
+    }
+
+    /// The channel of `service`, created (with its type's schema) on first use.
+    pub fn channel(&mut self, service: &str) -> Result<ChannelId, RecordingError> {
+        if let Some(&(id, _)) = self.channels.get(service) {
+            return Ok(id);
+        }
+        let kind = ServiceKind::of(service).ok_or_else(|| RecordingError::Usage {
+            path: self.path.clone(),
+            problem: format!("`{service}` is not a navsync service"),
+        })?;
+        let slot = ServiceKind::ALL.iter().position(|k| *k == kind).unwrap_or(0);
+        let schema = match self.schemas[slot] {
+            Some(s) => s,
+            None => {
+                let s = self.mcap.add_schema(
+                    channels::schema_name(kind),
+                    SCHEMA_ENCODING,
+                    &channels::schema_data(kind),
+                )?;
+                self.schemas[slot] = Some(s);
+                s
+            }
+        };
+        let id = self.mcap.add_channel(schema, service, MESSAGE_ENCODING, &[])?;
+        self.channels.insert(service.to_string(), (id, kind));
+        Ok(id)
+    }
+
+    /// Writes `sample` on `service` with its log and publish times (ns; see the
+    /// [module docs](super) for what each navsync writer puts there).
+    pub fn write(
+        &mut self,
+        service: &str,
+        sample: &AnySample,
+        log_time: u64,
+        publish_time: u64,
+    ) -> Result<(), RecordingError> {
+        let (id, kind) = match self.channels.get(service) {
+            Some(&c) => c,
+            None => {
+                self.channel(service)?;
+                self.channels[service]
+            }
+        };
+        if kind != sample.kind() {
+            return Err(RecordingError::Usage {
+                path: self.path.clone(),
+                problem: format!("a {:?} sample on `{service}`, which carries {:?}", sample.kind(), kind),
+            });
+        }
+        channels::encode(sample, &mut self.json);
+        self.mcap.write_message(id, log_time, publish_time, &self.json)
+    }
+
+    /// Closes the open chunk and hands it to the operating system.
+    pub fn flush_chunk(&mut self) -> Result<(), RecordingError> {
+        self.mcap.flush_chunk()
+    }
+
+    /// Bytes written so far (including the open chunk).
+    pub fn bytes_written(&self) -> u64 {
+        self.mcap.bytes_written()
+    }
+
+    /// Messages written so far.
+    pub fn message_count(&self) -> u64 {
+        self.mcap.message_count()
+    }
+
+    /// Writes the summary and footer; returns the sink.
+    pub fn finish(self) -> Result<W, RecordingError> {
+        self.mcap.finish()
+    }
+}
+
+/// One recorded sample.
+#[derive(Debug, Clone, Copy)]
+pub struct RecordedSample<'a> {
+    /// The service (the channel's topic).
+    pub service: &'a str,
+    /// The channel id in the file.
+    pub channel_id: u16,
+    /// The sample.
+    pub sample: AnySample,
+    /// MCAP log time, ns.
+    pub log_time: u64,
+    /// MCAP publish time, ns.
+    pub publish_time: u64,
+}
+
+/// Reads the navsync samples of an MCAP file in file order. Channels that are not navsync
+/// channels (another topic, encoding or layout version) are skipped and listed in
+/// [`skipped_channels`](Self::skipped_channels).
+pub struct SampleReader<R: Read + Seek = BufReader<File>> {
+    mcap: McapReader<R>,
+    path: PathBuf,
+    /// Per channel id: its kind, or why it is skipped.
+    kinds: Vec<Option<Result<ServiceKind, String>>>,
+}
+
+impl SampleReader<BufReader<File>> {
+    /// Opens a recording.
+    pub fn open(path: &Path) -> Result<Self, RecordingError> {
+        Ok(Self::from_mcap(McapReader::open(path)?))
+    }
+}
+
+impl<R: Read + Seek> SampleReader<R> {
+    /// Reads samples through an open MCAP reader.
+    pub fn from_mcap(mcap: McapReader<R>) -> Self {
+        Self {
+            path: mcap.path().to_path_buf(),
+            mcap,
+            kinds: Vec::new(),
+        }
+    }
+
+    /// The MCAP reader (summary, position, how the scan ended).
+    pub fn mcap(&self) -> &McapReader<R> {
+        &self.mcap
+    }
+
+    /// The summary of a properly closed file.
+    pub fn summary(&self) -> Option<&Summary> {
+        self.mcap.summary()
+    }
+
+    /// How the scan ended, once [`next`](Self::next) returned `None`.
+    pub fn scan_end(&self) -> Option<&ScanEnd> {
+        self.mcap.scan_end()
+    }
+
+    /// Channels skipped so far: (topic, reason).
+    pub fn skipped_channels(&self) -> Vec<(String, String)> {
+        self.kinds
+            .iter()
+            .enumerate()
+            .filter_map(|(id, k)| match k {
+                Some(Err(why)) => Some((
+                    self.mcap
+                        .channel(id as u16)
+                        .map(|c| c.topic.clone())
+                        .unwrap_or_default(),
+                    why.clone(),
+                )),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The next navsync sample, `None` at the end of the data.
+    pub fn next(&mut self) -> Result<Option<RecordedSample<'_>>, RecordingError> {
+        let Some((channel_id, sample, log_time, publish_time)) = self.next_owned()? else {
+            return Ok(None);
+        };
+        let service = self.mcap.channel(channel_id).map(|c| c.topic.as_str()).unwrap_or("");
+        Ok(Some(RecordedSample {
+            service,
+            channel_id,
+            sample,
+            log_time,
+            publish_time,
+        }))
+    }
+
+    fn next_owned(&mut self) -> Result<Option<(u16, AnySample, u64, u64)>, RecordingError> {
+        loop {
+            let Some(m) = self.mcap.next_message()? else {
+                return Ok(None);
+            };
+            let id = usize::from(m.channel.id);
+            if self.kinds.len() <= id {
+                self.kinds.resize(id + 1, None);
+            }
+            let kind = match &self.kinds[id] {
+                Some(Ok(k)) => *k,
+                Some(Err(_)) => continue,
+                None => {
+                    let k = channels::channel_kind(m.channel, m.schema);
+                    self.kinds[id] = Some(k.clone());
+                    match k {
+                        Ok(k) => k,
+                        Err(_) => continue,
+                    }
+                }
+            };
+            let sample = channels::decode(kind, m.data).map_err(|problem| RecordingError::Decode {
+                path: self.path.clone(),
+                offset: m.offset,
+                topic: m.channel.topic.clone(),
+                problem,
+            })?;
+            return Ok(Some((m.channel.id, sample, m.log_time, m.publish_time)));
+        }
+    }
+}

@@ -1,0 +1,284 @@
+//! Writer and reader against each other: round trip, summary, truncation at every byte,
+//! corruption, foreign records.
+
+use std::io::Cursor;
+use std::path::Path;
+
+use super::mcap_reader::{McapReader, ScanEnd};
+use super::mcap_writer::McapWriter;
+use super::sample_file::{SampleReader, SampleRecorder};
+use super::{RecordingError, mcap_format};
+use crate::reflect::Reflect;
+use crate::samples::{AnySample, ImuSample, NavState, Stamp, StampSource};
+use crate::services;
+
+fn imu(i: u64) -> AnySample {
+    let mut s = ImuSample::zeroed();
+    s.stamp = Stamp::host(1_000_000_000 + i as i64 * 5_000_000, i, StampSource::Simulated);
+    s.gyro_rps = [0.1 * i as f64, -1e-7, 3.0f64.sqrt()];
+    s.accel_mps2 = [0.0, -0.0, -9.80665 + i as f64 * 1e-9];
+    s.dt_s = 0.005;
+    s.temperature_c = f64::NAN;
+    s.imu_id[0] = b'0';
+    AnySample::Imu(s)
+}
+
+fn nav(i: u64) -> AnySample {
+    let mut s = NavState::zeroed();
+    s.host_ns = 1_000_000_000 + i as i64 * 5_000_000;
+    s.seq = i + 1;
+    s.lat_deg = 48.137154 + i as f64 * 1e-9;
+    s.gnss_delay_s = f64::NAN;
+    AnySample::Nav(s)
+}
+
+/// A recording of `n` IMU samples and states, closed properly, in small chunks.
+fn recording(n: u64, chunk: usize) -> Vec<u8> {
+    let mut r = SampleRecorder::new(Vec::new(), Path::new("mem.mcap"))
+        .unwrap()
+        .with_chunk_size(chunk);
+    for i in 0..n {
+        r.write(
+            &services::imu_sample("0"),
+            &imu(i),
+            1_700_000_000_000_000_000 + i,
+            5 + i,
+        )
+        .unwrap();
+        r.write(services::NAV_STATE, &nav(i), 1_700_000_000_000_000_000 + i, 5 + i)
+            .unwrap();
+    }
+    r.finish().unwrap()
+}
+
+fn read_all(bytes: &[u8]) -> Result<(Vec<(String, AnySample, u64, u64)>, ScanEnd), RecordingError> {
+    let mcap = McapReader::new(Cursor::new(bytes), Path::new("mem.mcap"))?;
+    let mut r = SampleReader::from_mcap(mcap);
+    let mut out = Vec::new();
+    while let Some(s) = r.next()? {
+        out.push((s.service.to_string(), s.sample, s.log_time, s.publish_time));
+    }
+    Ok((out, r.scan_end().cloned().unwrap()))
+}
+
+#[test]
+fn samples_round_trip_with_summary() {
+    let bytes = recording(50, 2000);
+    assert_eq!(&bytes[..8], &mcap_format::MAGIC);
+    assert_eq!(&bytes[bytes.len() - 8..], &mcap_format::MAGIC);
+    let (msgs, end) = read_all(&bytes).unwrap();
+    assert_eq!(end, ScanEnd::Clean);
+    assert_eq!(msgs.len(), 100);
+    for (i, (svc, s, lt, pt)) in msgs.iter().enumerate() {
+        let k = (i / 2) as u64;
+        let (want_svc, want) = if i % 2 == 0 {
+            (services::imu_sample("0"), imu(k))
+        } else {
+            (services::NAV_STATE.to_string(), nav(k))
+        };
+        assert_eq!(svc, &want_svc);
+        assert_eq!(*lt, 1_700_000_000_000_000_000 + k);
+        assert_eq!(*pt, 5 + k);
+        // Bit for bit (NaN included): compare the JSON encodings and the float bits.
+        assert_eq!(super::channels::sample_json(s), super::channels::sample_json(&want));
+        if let (AnySample::Imu(a), AnySample::Imu(b)) = (s, &want) {
+            assert_eq!(a.accel_mps2.map(f64::to_bits), b.accel_mps2.map(f64::to_bits));
+        }
+    }
+    let mcap = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap")).unwrap();
+    let summary = mcap.summary().expect("summary");
+    let stats = summary.statistics.as_ref().unwrap();
+    assert_eq!(stats.message_count, 100);
+    assert_eq!(stats.schema_count, 2);
+    assert_eq!(stats.channel_count, 2);
+    assert_eq!(stats.channel_message_counts, vec![(1, 50), (2, 50)]);
+    assert_eq!(stats.message_start_time, 1_700_000_000_000_000_000);
+    assert_eq!(stats.message_end_time, 1_700_000_000_000_000_049);
+    assert!(stats.chunk_count > 3, "{} chunks", stats.chunk_count);
+    assert_eq!(summary.chunk_indexes.len() as u32, stats.chunk_count);
+    assert_eq!(summary.channels[0].topic, "navsync/imu/0/sample");
+    assert_eq!(summary.schemas[1].name, "navsync.NavState.v1");
+    // The chunk indexes point at Chunk records followed by their message indexes.
+    for ci in &summary.chunk_indexes {
+        let at = ci.chunk_start_offset as usize;
+        assert_eq!(bytes[at], mcap_format::Opcode::Chunk as u8);
+        let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap());
+        assert_eq!(ci.chunk_length, len + 9);
+        for &(_, off) in &ci.message_index_offsets {
+            assert_eq!(bytes[off as usize], mcap_format::Opcode::MessageIndex as u8);
+        }
+        let last_index = at as u64 + ci.chunk_length + ci.message_index_length;
+        assert!(last_index <= bytes.len() as u64);
+    }
+}
+
+/// Messages of a chunk, from its Message Index records.
+fn chunk_message_count(bytes: &[u8], ci: &super::mcap_reader::ChunkIndex) -> usize {
+    ci.message_index_offsets
+        .iter()
+        .map(|&(_, off)| {
+            let at = off as usize + 9 + 2;
+            u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize / 16
+        })
+        .sum()
+}
+
+fn keys(msgs: &[(String, AnySample, u64, u64)]) -> Vec<String> {
+    msgs.iter()
+        .map(|(s, x, lt, pt)| format!("{s} {lt} {pt} {}", super::channels::sample_json(x)))
+        .collect()
+}
+
+#[test]
+fn a_truncated_file_yields_every_complete_chunk() {
+    let full = recording(40, 1500);
+    let all = keys(&read_all(&full).unwrap().0);
+    let mcap = McapReader::new(Cursor::new(&full[..]), Path::new("mem.mcap")).unwrap();
+    let chunks = mcap.summary().unwrap().chunk_indexes.clone();
+    let header_end = 8 + 9 + u64::from_le_bytes(full[9..17].try_into().unwrap()) as usize;
+    // Every byte near the record boundaries that matter, and a spread in between.
+    let mut cuts: Vec<usize> = (0..full.len()).step_by(101).collect();
+    cuts.extend(0..header_end + 12);
+    for c in &chunks {
+        let (start, end) = (
+            c.chunk_start_offset as usize,
+            (c.chunk_start_offset + c.chunk_length) as usize,
+        );
+        let index_end = end + c.message_index_length as usize;
+        for edge in [start, end, index_end] {
+            cuts.extend(edge.saturating_sub(12)..(edge + 12).min(full.len()));
+        }
+    }
+    cuts.extend(full.len() - 200..full.len());
+    cuts.sort_unstable();
+    cuts.dedup();
+    let mut prev = 0;
+    for cut in cuts {
+        match read_all(&full[..cut]) {
+            Ok((msgs, end)) => {
+                assert!(cut >= header_end, "cut {cut} opened");
+                let got = keys(&msgs);
+                assert_eq!(got[..], all[..got.len()], "cut {cut}: not a prefix");
+                assert!(got.len() >= prev, "cut {cut}: fewer messages than a shorter cut");
+                prev = got.len();
+                let complete: usize = chunks
+                    .iter()
+                    .filter(|c| (c.chunk_start_offset + c.chunk_length) as usize <= cut)
+                    .map(|c| chunk_message_count(&full, c))
+                    .sum();
+                assert!(got.len() >= complete, "cut {cut}: {} < {complete}", got.len());
+                if got.len() < all.len() {
+                    assert!(matches!(end, ScanEnd::Truncated { .. }), "cut {cut}: {end:?}");
+                }
+            }
+            Err(RecordingError::NotMcap { .. }) => assert!(cut < 8, "cut {cut}"),
+            Err(RecordingError::Corrupt { record, .. }) => {
+                assert!(cut < header_end, "cut {cut}: {record}")
+            }
+            Err(e) => panic!("cut {cut}: {e}"),
+        }
+    }
+    assert_eq!(prev, all.len());
+}
+
+#[test]
+fn a_damaged_chunk_names_its_offset() {
+    let mut bytes = recording(20, 1000);
+    let mcap = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap")).unwrap();
+    let second = mcap.summary().unwrap().chunk_indexes[1].clone();
+    // Flip a byte inside the second chunk's records.
+    let at = (second.chunk_start_offset + second.chunk_length - 10) as usize;
+    bytes[at] ^= 0x55;
+    let err = read_all(&bytes).unwrap_err();
+    match &err {
+        RecordingError::Corrupt {
+            offset,
+            record,
+            problem,
+            ..
+        } => {
+            assert_eq!(*offset, second.chunk_start_offset);
+            assert_eq!(record, "Chunk");
+            assert!(problem.contains("CRC"), "{problem}");
+        }
+        e => panic!("{e}"),
+    }
+    assert!(
+        err.to_string()
+            .starts_with("mem.mcap: corrupt Chunk record at byte offset")
+    );
+    // A summary that does not match its CRC is an error at the footer.
+    let mut bytes = recording(5, 1000);
+    let n = bytes.len();
+    bytes[n - 60] ^= 1;
+    let err = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap"))
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("summary CRC"), "{err}");
+    // Not an MCAP file at all.
+    let err = McapReader::new(Cursor::new(&b"hello world, not mcap"[..]), Path::new("x.txt"))
+        .err()
+        .unwrap();
+    assert!(matches!(err, RecordingError::NotMcap { .. }), "{err}");
+}
+
+#[test]
+fn unknown_records_and_foreign_channels_are_skipped() {
+    let mut buf = Vec::new();
+    let mut w = McapWriter::new(&mut buf, Path::new("mem.mcap"), "", "test").unwrap();
+    let s = w.add_schema("foo.Bar", "protobuf", b"\x01\x02").unwrap();
+    let foreign = w.add_channel(s, "/tf", "protobuf", &[("k", "v")]).unwrap();
+    let kind = crate::services::ServiceKind::NavState;
+    let s = w
+        .add_schema(
+            super::channels::schema_name(kind),
+            super::channels::SCHEMA_ENCODING,
+            &super::channels::schema_data(kind),
+        )
+        .unwrap();
+    let ours = w.add_channel(s, services::NAV_STATE, "json", &[]).unwrap();
+    w.write_message(foreign, 1, 1, b"\x00\x01").unwrap();
+    let mut json = Vec::new();
+    super::channels::encode(&nav(3), &mut json);
+    w.write_message(ours, 2, 2, &json).unwrap();
+    w.finish().unwrap();
+    let first_chunk = McapReader::new(Cursor::new(&buf[..]), Path::new("mem.mcap"))
+        .unwrap()
+        .summary()
+        .unwrap()
+        .chunk_indexes[0]
+        .chunk_start_offset as usize;
+    // An unknown record type before the chunk (spec: readers skip unknown opcodes), and the
+    // file cut after the chunk (a writer that died).
+    let mut file = buf[..first_chunk].to_vec();
+    file.extend_from_slice(&[0x80, 3, 0, 0, 0, 0, 0, 0, 0, 1, 2, 3]);
+    let chunk_len = 9 + u64::from_le_bytes(buf[first_chunk + 1..first_chunk + 9].try_into().unwrap()) as usize;
+    file.extend_from_slice(&buf[first_chunk..first_chunk + chunk_len]);
+    let (msgs, end) = read_all(&file).unwrap();
+    assert_eq!(
+        end,
+        ScanEnd::Truncated {
+            offset: file.len() as u64,
+            record: "end of file".into()
+        }
+    );
+    assert_eq!(msgs.len(), 1);
+    assert_eq!(msgs[0].0, services::NAV_STATE);
+    assert_eq!(keys(&msgs)[0], keys(&[(services::NAV_STATE.into(), nav(3), 2, 2)])[0]);
+    let mcap = McapReader::new(Cursor::new(&file[..]), Path::new("mem.mcap")).unwrap();
+    let mut r = SampleReader::from_mcap(mcap);
+    while r.next().unwrap().is_some() {}
+    assert_eq!(
+        r.skipped_channels(),
+        vec![("/tf".to_string(), "not a navsync service name".to_string())]
+    );
+}
+
+#[test]
+fn wrong_types_and_names_are_refused() {
+    let mut r = SampleRecorder::new(Vec::new(), Path::new("x.mcap")).unwrap();
+    let e = r.write("navsync/imu/0/sample", &nav(0), 0, 0).unwrap_err();
+    assert!(e.to_string().contains("x.mcap: a Nav"), "{e}");
+    let e = r.write("/tf", &nav(0), 0, 0).unwrap_err();
+    assert!(e.to_string().contains("not a navsync service"), "{e}");
+}
