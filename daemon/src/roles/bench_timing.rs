@@ -203,7 +203,7 @@ pub fn run_case(case: &TimingCase) -> Result<TimingResult, SimError> {
             _ => false,
         };
         ts.tick(now);
-        if changed || now - last_publish >= NS_PER_S {
+        if changed || now.saturating_sub(last_publish) >= NS_PER_S {
             published = Some(ts.time_state(now));
             last_publish = now;
         }
