@@ -32,6 +32,8 @@ use tracing::{info, info_span, warn};
 
 /// Key of unit 0: "NTP0".
 pub const NTP_SHM_BASE_KEY: i32 = 0x4e54_5030;
+/// Consecutive failed waits (other than for a termination signal) before giving up.
+const MAX_IPC_ERRORS: u32 = 100;
 /// A `TimeState` older than this is not exported, ns.
 pub const STALE_AFTER_NS: i64 = 5 * NS_PER_S;
 
@@ -254,13 +256,25 @@ pub fn run(args: &NtpShmArgs) -> Result<(), NtpShmError> {
     let mut latest: Option<TimeState> = None;
     let mut next_write = monotonic_now_ns();
     let mut last_status = TimeStatus::None;
+    let mut ipc_errors = 0u32;
     loop {
         let now = monotonic_now_ns();
         let wait = Duration::from_nanos((next_write - now).clamp(1_000_000, NS_PER_S) as u64);
-        if let Some(s) = time.wait_next(wait)? {
-            latest = Some(s);
-            while let Some(s) = time.receive()? {
+        match time.wait_next(wait) {
+            Ok(Some(s)) => {
                 latest = Some(s);
+                while let Some(s) = time.receive()? {
+                    latest = Some(s);
+                }
+                ipc_errors = 0;
+            }
+            Ok(None) => {}
+            // A signal interrupts the wait: SIGTERM/SIGINT end the loop below; others are retried.
+            Err(e) => {
+                ipc_errors += 1;
+                if ipc_errors > MAX_IPC_ERRORS && !node.termination_requested() {
+                    return Err(e.into());
+                }
             }
         }
         if node.termination_requested() {

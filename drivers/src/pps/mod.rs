@@ -219,6 +219,8 @@ impl Source {
     }
 }
 
+/// Consecutive IPC failures (other than for a termination signal) before giving up.
+const MAX_IPC_ERRORS: u32 = 100;
 /// How long one wait for an edge lasts before termination is checked again.
 const WAIT: Duration = Duration::from_millis(250);
 
@@ -239,6 +241,7 @@ pub fn run(args: &PpsArgs) -> Result<(), PpsError> {
     let stamp_source = args.source.stamp_source();
     let mut backoff = Duration::from_millis(100);
     let mut warned = false;
+    let mut ipc_errors = 0u32;
     info!("pps driver running");
 
     'outer: while !node.termination_requested() {
@@ -273,6 +276,7 @@ pub fn run(args: &PpsArgs) -> Result<(), PpsError> {
             }
             match source.next_edge(WAIT) {
                 Ok(Some(raw)) => {
+                    ipc_errors = 0;
                     let verdict = validator.push(&raw);
                     let index = match verdict {
                         Verdict::Accepted { index, .. } | Verdict::Resynced { index } => Some(index),
@@ -295,7 +299,15 @@ pub fn run(args: &PpsArgs) -> Result<(), PpsError> {
                     }
                 }
                 Ok(None) => {}
-                Err(e @ PpsError::Ipc(_)) => return Err(e),
+                // A signal interrupts the sim source's wait: SIGTERM/SIGINT end the loop at the
+                // top; other interruptions are retried, a persistent failure is an error.
+                Err(e @ PpsError::Ipc(_)) => {
+                    ipc_errors += 1;
+                    if ipc_errors > MAX_IPC_ERRORS && !node.termination_requested() {
+                        return Err(e);
+                    }
+                    continue;
+                }
                 Err(e) => {
                     warn!("{e}; reopening");
                     health.add(c_reopen, 1);
