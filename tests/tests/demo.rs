@@ -32,7 +32,8 @@ fn demo_runs_twice_in_a_row_and_cleans_up() {
             let n: u64 = line.split_whitespace().last().and_then(|v| v.parse().ok()).unwrap_or(0);
             assert!(n > 0, "round {round}: no samples on {service}:\n{stdout}");
         }
-        for child in ["sim", "gps", "estimator"] {
+        // The IMUs run through the Xsens path by default: one `navsync imu` per IMU.
+        for child in ["sim", "gps", "estimator", "imu0", "imu1"] {
             assert!(
                 stdout.contains(&format!("{child}: exit status: 0")),
                 "round {round}: {child} did not exit cleanly:\n{stdout}"

@@ -30,12 +30,23 @@ fn every_service_carries_samples_and_time_maps_within_5_us() {
 
     let link = env.dir.join("gnss0");
     let link_s = link.display().to_string();
+    let dir_s = env.dir.display().to_string();
+    // The IMUs take the real Xsens path: simulator → pseudo-terminal → `navsync imu`.
     env.spawn(
         "sim",
-        &["sim", "--pty-link", &link_s, "--imus", "4", "--duration", "60"],
+        &[
+            "sim", "--pty-link", &link_s, "--imus", "4", "--duration", "60", "--imu-output", "xsens", "--imu-pty-dir",
+            &dir_s,
+        ],
     );
     env.wait_for_path(&link, Duration::from_secs(20));
     env.spawn("gps", &["gps", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+    for i in 0..4 {
+        let port = env.dir.join(format!("imu{i}"));
+        env.wait_for_path(&port, Duration::from_secs(20));
+        let source = format!("xsens:{}:921600", port.display());
+        env.spawn(&format!("imu{i}"), &["imu", "--source", &source, "--id", &i.to_string()]);
+    }
     env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
     env.spawn(
         "estimator",
@@ -44,13 +55,22 @@ fn every_service_carries_samples_and_time_maps_within_5_us() {
 
     let t0 = Instant::now();
     let mut counts = [0u64; 10];
+    let (mut last_seq, mut last_dev) = ([0u64; 4], [i64::MIN; 4]);
     let mut latest_time: Option<TimeState> = None;
     let (mut first_truth_host, mut checked, mut worst) = (None::<i64>, 0u64, 0.0f64);
     while t0.elapsed() < Duration::from_secs(55) {
         std::thread::sleep(Duration::from_millis(50));
         env.assert_running();
         for (i, s) in imus.iter().enumerate() {
-            counts[i] += s.for_each(|_| {}).unwrap() as u64;
+            counts[i] += s
+                .for_each(|x| {
+                    // Stamped on receipt, with the device's own clock, numbered by its counter.
+                    assert_eq!(x.stamp.source(), StampSource::Receipt);
+                    assert_eq!(x.stamp.has_device_time, 1);
+                    assert!(x.stamp.seq >= last_seq[i] && x.stamp.device_ns > last_dev[i], "imu {i}: {x:?}");
+                    (last_seq[i], last_dev[i]) = (x.stamp.seq + 1, x.stamp.device_ns);
+                })
+                .unwrap() as u64;
         }
         counts[4] += pps.for_each(|_| {}).unwrap() as u64;
         counts[5] += fix.for_each(|_| {}).unwrap() as u64;
