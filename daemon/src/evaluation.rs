@@ -243,9 +243,18 @@ impl Evaluator {
             rejected_fixes: counts.2,
             wall_s,
             estimator_s,
-            imu_samples_per_s: if estimator_s > 0.0 { counts.0 as f64 / estimator_s } else { 0.0 },
+            imu_samples_per_s: if estimator_s > 0.0 {
+                counts.0 as f64 / estimator_s
+            } else {
+                0.0
+            },
             compared_states: self.n,
-            outage_end_h_err_m: self.outage_end_errs.iter().copied().chain(self.outage_last_err).collect(),
+            outage_end_h_err_m: self
+                .outage_end_errs
+                .iter()
+                .copied()
+                .chain(self.outage_last_err)
+                .collect(),
             series: self.series.clone(),
         }
     }
@@ -287,12 +296,17 @@ impl Summary {
             f(self.gnss_delay_true_s, "s")
         ));
         for (i, e) in self.outage_end_h_err_m.iter().enumerate() {
-            s.push_str(&format!("GNSS outage {}       horizontal error at its end {e:.2} m\n", i + 1));
+            s.push_str(&format!(
+                "GNSS outage {}       horizontal error at its end {e:.2} m\n",
+                i + 1
+            ));
         }
-        s.push_str(&format!(
-            "throughput          {:.0} IMU samples/s in the estimator ({:.2} s of {:.2} s wall)\n",
-            self.imu_samples_per_s, self.estimator_s, self.wall_s
-        ));
+        if self.estimator_s > 0.0 {
+            s.push_str(&format!(
+                "throughput          {:.0} IMU samples/s in the estimator ({:.2} s of {:.2} s wall)\n",
+                self.imu_samples_per_s, self.estimator_s, self.wall_s
+            ));
+        }
         s
     }
 }

@@ -24,7 +24,11 @@ fn run(latency_s: f64, software_sync: bool, delay_state: bool, outage: Option<(f
     cfg.set_imu_preset(ImuPreset::Industrial);
     cfg.set_nmea_latency_s(latency_s);
     if let Some((start_s, duration_s)) = outage {
-        cfg.gnss.outages.push(OutageConfig { start_s, duration_s, pps_continues: true });
+        cfg.gnss.outages.push(OutageConfig {
+            start_s,
+            duration_s,
+            pps_continues: true,
+        });
     }
     let world = World::new(&cfg, 3_000_000_000, 1_790_000_000_000_000_000).expect("world");
     let args = EstimatorArgs {
@@ -37,10 +41,22 @@ fn run(latency_s: f64, software_sync: bool, delay_state: bool, outage: Option<(f
         gnss_vel_std_mps: 0.05,
     };
     let mut pipeline = Pipeline::new(args.pipeline_config());
-    let truth = if software_sync { DelayTruth::ReceiverLatency } else { DelayTruth::Zero };
+    let truth = if software_sync {
+        DelayTruth::ReceiverLatency
+    } else {
+        DelayTruth::Zero
+    };
     let mut states = Vec::new();
-    let r = offline::run(&mut pipeline, PublishedStream::new(world).map(|p| p.sample), truth, |s| states.push(*s));
-    Run { summary: r.summary, states }
+    let r = offline::run(
+        &mut pipeline,
+        PublishedStream::new(world).map(|p| p.sample),
+        truth,
+        |s| states.push(*s),
+    );
+    Run {
+        summary: r.summary,
+        states,
+    }
 }
 
 #[test]
@@ -66,14 +82,23 @@ fn software_sync_finds_a_1_1_s_delay_and_reports_an_honest_std() {
     assert!(late.len() > 400);
     for p in &late {
         let err = (p.delay_s - 1.1).abs();
-        assert!(err <= 3.0 * p.delay_std_s, "Δ̂ = {} ± {} s at {:.0} s", p.delay_s, p.delay_std_s, p.t_s);
+        assert!(
+            err <= 3.0 * p.delay_std_s,
+            "Δ̂ = {} ± {} s at {:.0} s",
+            p.delay_s,
+            p.delay_std_s,
+            p.t_s
+        );
         assert!(p.delay_std_s < 0.012, "σ_Δ = {} s at {:.0} s", p.delay_std_s, p.t_s);
         if p.t_s >= 300.0 {
             assert!(err <= 0.010, "Δ̂ = {} s at {:.0} s", p.delay_s, p.t_s);
         }
     }
     let (d, sd) = (s.gnss_delay_est_s.unwrap(), s.gnss_delay_std_s.unwrap());
-    assert!((d - 1.1).abs() <= 2.0 * sd, "final Δ̂ = {d} ± {sd} s does not cover 1.1 s");
+    assert!(
+        (d - 1.1).abs() <= 2.0 * sd,
+        "final Δ̂ = {d} ± {sd} s does not cover 1.1 s"
+    );
 }
 
 #[test]
@@ -83,7 +108,10 @@ fn the_delay_state_pays_for_itself() {
     let without = run(1.1, true, false, None).summary.pos_rms_m.unwrap();
     println!("horizontal RMS: Δ estimated {with:.3} m, zero latency {zero_latency:.3} m, Δ off {without:.3} m");
     assert!(with <= 1.1 * zero_latency, "{with} vs {zero_latency}");
-    assert!(without > 3.0 * with, "Δ off {without} m is not visibly worse than {with} m");
+    assert!(
+        without > 3.0 * with,
+        "Δ off {without} m is not visibly worse than {with} m"
+    );
 }
 
 #[test]
@@ -92,7 +120,11 @@ fn thirty_second_outage_in_a_turn_stays_within_10_m() {
     let s = run(0.6, false, true, Some((433.0, 30.0))).summary;
     println!("{}", s.table());
     assert_eq!(s.outage_end_h_err_m.len(), 1, "{:?}", s.outage_end_h_err_m);
-    assert!(s.outage_end_h_err_m[0] < 10.0, "error at the end of the outage {:?}", s.outage_end_h_err_m);
+    assert!(
+        s.outage_end_h_err_m[0] < 10.0,
+        "error at the end of the outage {:?}",
+        s.outage_end_h_err_m
+    );
 }
 
 #[test]

@@ -60,12 +60,19 @@ fn no_heap_allocation_per_sample_in_steady_state() {
         }
         _ => None,
     };
-    let split = samples.iter().position(|s| s.host_ns() - host0 > 120_000_000_000).expect("two minutes");
+    let split = samples
+        .iter()
+        .position(|s| s.host_ns() - host0 > 120_000_000_000)
+        .expect("two minutes");
     let mut last_status = None;
     for s in &samples[..split] {
         last_status = feed(&mut p, s).or(last_status);
     }
-    assert_eq!(last_status, Some(NavStatus::Aligned as u8), "aligned and aided before measuring");
+    assert_eq!(
+        last_status,
+        Some(NavStatus::Aligned as u8),
+        "aligned and aided before measuring"
+    );
     let (mut imu, mut fixes) = (0, 0);
     let before = ALLOCATIONS.load(Ordering::Relaxed);
     for s in &samples[split..] {
@@ -78,5 +85,8 @@ fn no_heap_allocation_per_sample_in_steady_state() {
     }
     let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
     assert!(imu > 10_000 && fixes > 50, "{imu} IMU samples, {fixes} fixes");
-    assert_eq!(allocations, 0, "{allocations} heap allocations over {imu} IMU samples and {fixes} fixes");
+    assert_eq!(
+        allocations, 0,
+        "{allocations} heap allocations over {imu} IMU samples and {fixes} fixes"
+    );
 }

@@ -22,6 +22,7 @@ pub mod health_reporter;
 pub mod imu_spec;
 pub mod ipc;
 pub mod json;
+pub mod latency_histogram;
 pub mod recording;
 pub mod reflect;
 pub mod samples;

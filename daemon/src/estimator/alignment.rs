@@ -135,7 +135,10 @@ impl Aligner {
                 f_ref: self.sum_f / self.time_s,
                 speed: 0.0,
                 last_point_ns: r.host_ns,
-                points: self.onset.take().map_or_else(|| vec![(0, 0.0); ONSET_POINTS].into_boxed_slice(), |o| o.points),
+                points: self
+                    .onset
+                    .take()
+                    .map_or_else(|| vec![(0, 0.0); ONSET_POINTS].into_boxed_slice(), |o| o.points),
                 len: 0,
             });
         }
@@ -211,8 +214,14 @@ impl Aligner {
             gyro_bias,
             levelled,
             static_s: self.time_s,
-            acc_ned: if acc_ned.iter().all(|a| a.is_finite()) { acc_ned } else { Vector3::zeros() },
-            delay_from_onset_s: self.onset_time_of(obs.speed_mps).map(|t| (obs.stamp_host_ns - t) as f64 * 1e-9),
+            acc_ned: if acc_ned.iter().all(|a| a.is_finite()) {
+                acc_ned
+            } else {
+                Vector3::zeros()
+            },
+            delay_from_onset_s: self
+                .onset_time_of(obs.speed_mps)
+                .map(|t| (obs.stamp_host_ns - t) as f64 * 1e-9),
         })
     }
 }

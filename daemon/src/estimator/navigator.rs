@@ -168,16 +168,19 @@ impl Delayed {
         self.cov_w = Vector3::zeros();
     }
 
-    /// Resets position and horizontal velocity to a fix (extrapolated by ε to the filter time)
-    /// and their covariance to the fix's accuracy, decorrelated from the other states.
+    /// Resets position and velocity to a fix (extrapolated by ε to the filter time; vertical
+    /// velocity 0 ± 2 m/s when the fix has none) and their covariance to the fix's accuracy,
+    /// decorrelated from the other states.
     fn reset_to(&mut self, obs: &GnssObservation, cfg: &NavConfig, eps: f64) {
         let c_bn = self.pva.q_nb.to_rotation_matrix().into_inner();
         let lever_n = c_bn * cfg.lever_arm_b_m;
         let (rm, rn) = earth::radii(obs.lat_rad);
+        // NMEA carries no vertical velocity: a land vehicle's is ~0, with 2 m/s of doubt.
+        let v_d = if obs.vel_ned_mps.z.is_finite() { obs.vel_ned_mps.z } else { 0.0 };
         let v = if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
-            Vector3::new(obs.vel_ned_mps.x, obs.vel_ned_mps.y, self.pva.vel_ned_mps.z)
+            Vector3::new(obs.vel_ned_mps.x, obs.vel_ned_mps.y, v_d)
         } else {
-            self.pva.vel_ned_mps
+            Vector3::new(self.pva.vel_ned_mps.x, self.pva.vel_ned_mps.y, v_d)
         };
         let p_ned = v * eps - lever_n;
         self.pva.lat_rad = obs.lat_rad + p_ned.x / (rm + obs.h_m);
@@ -193,6 +196,25 @@ impl Delayed {
         for i in 0..3 {
             self.eskf.p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
             self.eskf.p[(VEL + i, VEL + i)] = obs.vel_std_mps.powi(2) + cfg.init_vel_std_mps.powi(2);
+        }
+        if !obs.vel_ned_mps.z.is_finite() {
+            self.eskf.p[(VEL + 2, VEL + 2)] = 4.0;
+        }
+        // Persistent rejection means the filter was overconfident somewhere: reopen the
+        // attitude and sensor-error uncertainty to their initial values so it can re-converge.
+        let reopen = [
+            (ATT, cfg.init_level_std_rad),
+            (ATT + 1, cfg.init_level_std_rad),
+            (ATT + 2, cfg.init_yaw_std_rad),
+        ];
+        for (i, sd) in reopen {
+            self.eskf.p[(i, i)] = self.eskf.p[(i, i)].max(sd * sd);
+        }
+        for i in 0..3 {
+            let bg = cfg.noise.gyro_bias_init_std.powi(2);
+            let ba = cfg.noise.accel_bias_init_std.powi(2);
+            self.eskf.p[(BG + i, BG + i)] = self.eskf.p[(BG + i, BG + i)].max(bg);
+            self.eskf.p[(BA + i, BA + i)] = self.eskf.p[(BA + i, BA + i)].max(ba);
         }
     }
 
@@ -324,7 +346,9 @@ impl Navigator {
         // within ~50 ms.
         if self.cfg.noise.estimate_delay
             && self.cfg.delay_prior_std_s > ONSET_DELAY_STD_S
-            && let Some(d) = a.delay_from_onset_s.filter(|d| (-0.2..self.cfg.horizon_s - 0.1).contains(d))
+            && let Some(d) = a
+                .delay_from_onset_s
+                .filter(|d| (-0.2..self.cfg.horizon_s - 0.1).contains(d))
         {
             self.cfg.delay_prior_s = d;
             self.cfg.delay_prior_std_s = ONSET_DELAY_STD_S;

@@ -23,7 +23,10 @@ use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;
 use navsync_shared::services;
+use navsync_drivers::sim::process::{SimArgs, load_config};
 use tracing::info;
+
+use crate::evaluation::{DelayTruth, Evaluator};
 
 /// Settings of `navsync demo`.
 #[derive(Debug, Clone)]
@@ -162,6 +165,10 @@ struct Monitor {
     latest_health: BTreeMap<String, Health>,
     err_locked: ErrStats,
     last_fix: Option<GnssFix>,
+    nav: Subscriber<NavState>,
+    latest_nav: Option<NavState>,
+    eval: Evaluator,
+    started: Instant,
 }
 
 impl Monitor {
@@ -185,6 +192,10 @@ impl Monitor {
             latest_health: BTreeMap::new(),
             err_locked: ErrStats::default(),
             last_fix: None,
+            nav: node.subscriber(services::NAV_STATE)?,
+            latest_nav: None,
+            eval: Evaluator::default(),
+            started: Instant::now(),
         })
     }
 
@@ -195,6 +206,13 @@ impl Monitor {
     }
 
     fn drain(&mut self) -> Result<(), IpcError> {
+        let mut navs = 0;
+        while let Some(n) = self.nav.receive()? {
+            self.eval.add_nav(&n);
+            self.latest_nav = Some(n);
+            navs += 1;
+        }
+        self.count(services::NAV_STATE, navs);
         for i in 0..self.imus.len() {
             let n = self.imus[i].for_each(|_| {})?;
             let name = self.imus[i].service().to_string();
@@ -217,6 +235,7 @@ impl Monitor {
         let mut truths = 0;
         while let Some(tr) = self.truth.receive()? {
             truths += 1;
+            self.eval.add_truth(&tr);
             if let Some(ts) = &self.latest_time
                 && ts.status() == TimeStatus::Locked
             {
@@ -290,10 +309,17 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
     }
     let xsens = args.imu_output == SimImuOutput::Xsens;
     if xsens {
-        sim_args.extend(["--imu-output".into(), "xsens".into(), "--imu-pty-dir".into(), dir.display().to_string()]);
+        sim_args.extend([
+            "--imu-output".into(),
+            "xsens".into(),
+            "--imu-pty-dir".into(),
+            dir.display().to_string(),
+        ]);
         for i in 0..args.imus.min(MAX_IMUS) {
             let p = format!("imu-{i}");
-            monitor.healths.push((p.clone(), node.subscriber(&services::health(&p))?));
+            monitor
+                .healths
+                .push((p.clone(), node.subscriber(&services::health(&p))?));
         }
     }
     sim_args.extend(args.sim_args.iter().cloned());
@@ -320,13 +346,28 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
                 let port = sim_port(&dir, i);
                 wait_for_path(&port, &mut procs, Duration::from_secs(10))?;
                 let source = format!("xsens:{}:{SIM_BAUD}", port.display());
-                procs.push(spawn(name, &["imu", "--source", &source, "--id", &i.to_string()].map(String::from))?);
+                procs.push(spawn(
+                    name,
+                    &["imu", "--source", &source, "--id", &i.to_string()].map(String::from),
+                )?);
             }
         }
-        procs.push(spawn("pps", &["pps", "--source", "sim", "--id", "0"].map(String::from))?);
+        procs.push(spawn(
+            "pps",
+            &["pps", "--source", "sim", "--id", "0"].map(String::from),
+        )?);
+        // Tell the filter what the simulated devices are (IMU class, receiver velocity noise).
+        let sim_cfg = load_config(&SimArgs { scenario: args.scenario.clone(), ..Default::default() })
+            .map_err(|e| DemoError::Child(format!("scenario: {e}")))?;
+        let imu_model = sim_cfg.imu.preset.name().to_string();
+        let vel_std = sim_cfg.gnss.velocity_sigma_mps.max(0.01).to_string();
         procs.push(spawn(
             "estimator",
-            &["estimator", "--gnss", "0", "--pps", "0", "--imus", &imu_list].map(String::from),
+            &[
+                "estimator", "--gnss", "0", "--pps", "0", "--imus", &imu_list, "--imu-model", &imu_model,
+                "--gnss-vel-std", &vel_std,
+            ]
+            .map(String::from),
         )?);
         monitor_loop(&node, &mut monitor, &mut procs, args.duration_s)
     })();
@@ -430,6 +471,22 @@ fn print_summary(m: &mut Monitor, exits: &[(String, String)]) {
             .collect();
         let _ = writeln!(out, "health {p}: {}", counters.join(" "));
     }
+    // The accuracy report of the run against the simulated truth (the same as
+    // `navsync replay --estimate` prints).
+    let imu0 = m.counts.get(&services::imu_sample("0")).map_or(0, |c| c.total);
+    let fixes = m.counts.get(&services::gnss_fix("0")).map_or(0, |c| c.total);
+    let rejected = m.latest_nav.as_ref().map_or(0, |n| n.fixes_rejected as u64);
+    let summary = m.eval.summary(
+        (imu0, fixes, rejected),
+        m.started.elapsed().as_secs_f64(),
+        0.0,
+        DelayTruth::Zero,
+    );
+    let _ = writeln!(
+        out,
+        "\n--- accuracy against the simulated truth ---\n{}",
+        summary.table()
+    );
     for (name, st) in exits {
         let _ = writeln!(out, "{name}: {st}");
     }

@@ -3,15 +3,19 @@
 //! `navsync/nav/state`).
 //!
 //! The loop sleeps in a WaitSet on the subscribers' events; on every wake-up it drains the
-//! services in a fixed order (PPS, GNSS, IMUs), so the result depends only on the samples and
-//! the order in which they were received.
+//! services (IMUs first, then PPS and GNSS) into [`InputOrder`], which hands them to the
+//! pipeline in an order that depends on the samples alone (a PPS edge or fix goes in right
+//! before the first reference-IMU sample stamped a fixed hold after it; see
+//! [`crate::input_order`]), so the results are the same whatever the scheduling, and
+//! `navsync replay --estimate` of a recording of the same samples reproduces them bit for bit.
 
 use std::time::Duration;
 
 use navsync_shared::health_reporter::HealthReporter;
 use navsync_shared::imu_spec::ImuPreset;
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
-use navsync_shared::samples::{GnssFix, ImuSample, NavState, PpsEdge, TimeState};
+use navsync_shared::latency_histogram::LatencyHistogram;
+use navsync_shared::samples::{AnySample, GnssFix, ImuSample, NavState, PpsEdge, TimeState};
 use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
@@ -21,6 +25,7 @@ use crate::estimator::gnss_fusion::GnssAccuracy;
 use crate::estimator::navigator::NavConfig;
 use crate::estimator::pipeline::{Pipeline, PipelineConfig};
 use crate::estimator::time_sync::TimeSyncConfig;
+use crate::input_order::InputOrder;
 
 /// Command-line settings of the estimator process.
 #[derive(Debug, Clone)]
@@ -67,7 +72,10 @@ impl EstimatorArgs {
                 ..Default::default()
             },
             nav: NavConfig::with_noise(noise),
-            gnss: GnssAccuracy { vel_std_mps: self.gnss_vel_std_mps, ..GnssAccuracy::default() },
+            gnss: GnssAccuracy {
+                vel_std_mps: self.gnss_vel_std_mps,
+                ..GnssAccuracy::default()
+            },
             reference_imu: self.imu_ids.first().cloned().unwrap_or_else(|| "0".into()),
             software_delay_prior: (0.5, 0.5),
             hardware_delay_prior: (0.0, 0.02),
@@ -133,6 +141,12 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
     let c_fix_used = health.counter("fixes_used");
     let c_fix_rej = health.counter("fixes_rejected");
     let c_fix_old = health.counter("fixes_too_old");
+    let c_late = health.counter("inputs_late");
+    let mut order: InputOrder = InputOrder::new(args.imu_ids.first().map(String::as_str));
+    // Output latency: from taking an IMU sample off its queue to its NavState being published.
+    let c_lat_p99 = health.counter("nav_latency_p99_us");
+    let c_lat_max = health.counter("nav_latency_max_us");
+    let mut latency = LatencyHistogram::default();
     let mut last_imu_seq: Vec<Option<u64>> = vec![None; imus.len()];
     let mut last_state_ns = 0i64;
     let mut last_status = est.time().status();
@@ -143,20 +157,8 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
             break;
         }
         let mut updated = false;
-        for s in &pps {
-            s.clear_events();
-            while let Some(edge) = s.receive()? {
-                updated |= est.on_pps(&edge);
-            }
-        }
-        for s in &gnss {
-            s.clear_events();
-            while let Some(fix) = s.receive()? {
-                health.add(c_fixes, 1);
-                health.tick(r_fix);
-                updated |= est.on_fix(&fix);
-            }
-        }
+        // IMUs first: a PPS edge or fix published before the IMU sample that releases it is
+        // then always among what this wake-up drains.
         for (s, last) in imus.iter().zip(last_imu_seq.iter_mut()) {
             s.clear_events();
             while let Some(sample) = s.receive()? {
@@ -168,14 +170,43 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
                 *last = Some(sample.stamp.seq);
                 health.add(c_imu, 1);
                 health.tick(r_imu);
-                if let Some(state) = est.on_imu(&sample) {
-                    if let Err(e) = nav_pub.publish(&state) {
-                        warn!("publishing nav state: {e}");
-                    }
-                    health.add(c_nav, 1);
-                }
+                order.push(AnySample::Imu(sample), ());
             }
         }
+        for s in &pps {
+            s.clear_events();
+            while let Some(edge) = s.receive()? {
+                order.push(AnySample::PpsEdge(edge), ());
+            }
+        }
+        for s in &gnss {
+            s.clear_events();
+            while let Some(fix) = s.receive()? {
+                health.add(c_fixes, 1);
+                health.tick(r_fix);
+                order.push(AnySample::GnssFix(fix), ());
+            }
+        }
+        // Without IMUs (or with the reference IMU silent) nothing releases the waiting samples.
+        let release_all = imus.is_empty() || order.stalled(monotonic_now_ns());
+        while let Some((s, ())) = if release_all { order.pop_any() } else { order.pop() } {
+            match s {
+                AnySample::Imu(sample) => {
+                    let t_in = monotonic_now_ns();
+                    if let Some(state) = est.on_imu(&sample) {
+                        if let Err(e) = nav_pub.publish(&state) {
+                            warn!("publishing nav state: {e}");
+                        }
+                        latency.record(monotonic_now_ns() - t_in);
+                        health.add(c_nav, 1);
+                    }
+                }
+                AnySample::PpsEdge(edge) => updated |= est.on_pps(&edge),
+                AnySample::GnssFix(fix) => updated |= est.on_fix(&fix),
+                _ => {}
+            }
+        }
+        health.set(c_late, order.late());
         let now = monotonic_now_ns();
         if est.time().status() != last_status {
             info!(
@@ -199,7 +230,11 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
         health.set(c_fix_used, nc.fixes_used);
         health.set(c_fix_rej, nc.fixes_rejected);
         health.set(c_fix_old, nc.fixes_too_old);
-        health.maybe_publish(now)?;
+        health.set(c_lat_p99, latency.quantile_us(0.99) as u64);
+        health.set(c_lat_max, (latency.max_ns() as u64).div_ceil(1000));
+        if health.maybe_publish(now)? {
+            latency.clear();
+        }
     }
     drop(guards);
     health.publish_final()?;
