@@ -223,7 +223,7 @@ fn corpus_captures_through_feed_and_gps_match_the_offline_decoder() {
             }
         }
         // The decoder's error counters do not depend on how the bytes were cut into reads.
-        let h = r.latest.clone().expect("health");
+        let h = r.latest.expect("health");
         let c = &r.counters;
         for (name, want) in [
             ("nmea_noise_bytes", c.framer.noise_bytes),

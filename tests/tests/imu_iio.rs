@@ -289,7 +289,7 @@ fn iio_driver_on_a_fake_device_tree() {
         counter(&hsub, &mut latest, "samples_accepted", expected.len() as u64),
         expected.len() as u64
     );
-    let h = latest.clone().unwrap();
+    let h = latest.unwrap();
     assert_eq!(h.counter("samples_dropped"), Some(3));
     assert_eq!(h.counter("rejected_host_back"), Some(1));
     assert_eq!(h.counter("samples_at_range"), Some(0), "no range set for IIO");

@@ -296,7 +296,7 @@ fn xsens_driver_decodes_checks_and_survives_unplug() {
         wait_counter(&hsub, &mut latest, "samples_accepted", expected.len() as u64),
         expected.len() as u64
     );
-    let h = latest.clone().unwrap();
+    let h = latest.unwrap();
     let c = |n: &str| h.counter(n).unwrap_or(u64::MAX);
     assert_eq!(c("samples_dropped"), 2);
     assert_eq!(c("rejected_not_finite"), 1);
@@ -358,7 +358,7 @@ fn xsens_driver_decodes_checks_and_survives_unplug() {
         assert_eq!(s.stamp.seq, e.seq);
         assert_eq!(s.stamp.device_ns, e.device_ns);
     }
-    let h = latest.clone().unwrap();
+    let h = latest.unwrap();
     assert!(wait_counter(&hsub, &mut latest, "samples_dropped", 101) >= 101, "{h:?}");
     // Logged once per kind, not once per occurrence.
     let log = env.log("imu");

@@ -46,7 +46,7 @@ fn sample(bytes: &[u8], r: f64, out: &mut Vec<u8>) {
     let mut k = 0usize;
     while (k as f64) < end {
         let t = k as f64;
-        if !(level(bytes, t - 0.5) && !level(bytes, t)) {
+        if !level(bytes, t - 0.5) || level(bytes, t) {
             k += 1;
             continue;
         }

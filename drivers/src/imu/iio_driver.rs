@@ -208,7 +208,7 @@ fn capture(
         got = true;
         have += n;
         let whole = have / rec;
-        if have % rec != 0 {
+        if !have.is_multiple_of(rec) {
             c.short_reads += 1;
         }
         for k in 0..whole {
