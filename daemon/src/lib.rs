@@ -9,5 +9,6 @@
 
 pub mod estimator;
 pub mod evaluation;
+pub mod input_order;
 pub mod offline;
 pub mod roles;

@@ -183,7 +183,7 @@ enum Cmd {
         /// A GNSS outage START:DURATION in seconds of scenario time (repeatable).
         #[arg(long, value_parser = parse_outage)]
         gnss_outage: Vec<(f64, f64)>,
-        /// Do not wait for real time: produce the samples as fast as the CPU allows (with --estimate).
+        /// Do not wait for real time: produce the samples as fast as the CPU allows (with --estimate and/or --record).
         #[arg(long)]
         fast: bool,
         /// Run the estimator offline over the simulated samples and print the accuracy report.
@@ -192,6 +192,9 @@ enum Cmd {
         /// Write the accuracy report as JSON to this file.
         #[arg(long, requires = "estimate")]
         summary_json: Option<PathBuf>,
+        /// Write the samples the drivers would publish, and the truth, into this MCAP file (with --fast).
+        #[arg(long, requires = "fast")]
+        record: Option<PathBuf>,
         /// Estimator: ignore PPS (software sync).
         #[arg(long)]
         software_sync: bool,
@@ -251,6 +254,62 @@ enum Cmd {
     Bench {
         /// Which benchmark: timing.
         what: String,
+    },
+    /// Records navsync services into an MCAP file until Ctrl-C/SIGTERM or --duration.
+    Record {
+        /// Output file (MCAP).
+        out: PathBuf,
+        /// Services to record: names or patterns (`*` within a segment, `**` across); default `navsync/**`.
+        #[arg(long, num_args = 1..)]
+        services: Vec<String>,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+    },
+    /// Publishes a recording into the live services with its original timing, or runs the
+    /// estimator over it offline (--estimate).
+    Replay {
+        /// The recording (MCAP).
+        input: PathBuf,
+        /// `1` (real time), a factor such as 10, or `max`.
+        #[arg(long, default_value = "1")]
+        speed: roles::replay::Speed,
+        /// Start over at the end, until stopped.
+        #[arg(long = "loop")]
+        looped: bool,
+        /// Publish only these services: names or patterns (`*` within a segment, `**` across).
+        #[arg(long, num_args = 1..)]
+        services: Vec<String>,
+        /// Run the estimator over the recording as fast as the CPU allows instead of publishing.
+        #[arg(long)]
+        estimate: bool,
+        /// Write the estimator's NavState and TimeState into this MCAP file (with --estimate).
+        #[arg(long, requires = "estimate")]
+        out: Option<PathBuf>,
+        /// Write the accuracy summary as JSON to this file (with --estimate).
+        #[arg(long, requires = "estimate")]
+        summary_json: Option<PathBuf>,
+        /// Estimator: GNSS receiver ids.
+        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
+        gnss: Vec<String>,
+        /// Estimator: PPS source ids (empty: none).
+        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
+        pps: Vec<String>,
+        /// Estimator: IMU ids (the first drives the filter).
+        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
+        imus: Vec<String>,
+        /// Estimator: ignore PPS (software sync).
+        #[arg(long)]
+        software_sync: bool,
+        /// Estimator: IMU class for the process noise: consumer, industrial.
+        #[arg(long, default_value = "industrial")]
+        imu_model: ImuPreset,
+        /// Estimator: do not estimate the GNSS delay Δ.
+        #[arg(long)]
+        no_delay_state: bool,
+        /// Estimator: 1-sigma of the receiver's velocity per axis, m/s.
+        #[arg(long, default_value_t = 0.1)]
+        gnss_vel_std: f64,
     },
     /// Decodes an NMEA capture offline (same code as the live driver): one JSON object per epoch.
     Nmea {
@@ -374,6 +433,7 @@ fn main() -> Result<()> {
             fast,
             estimate,
             summary_json,
+            record,
             software_sync,
             no_delay_state,
             imu_model,
@@ -406,10 +466,15 @@ fn main() -> Result<()> {
                     ..Default::default()
                 };
                 anyhow::ensure!(
-                    estimate,
-                    "--fast needs --estimate (recording comes with `navsync record`)"
+                    estimate || record.is_some(),
+                    "--fast needs --estimate and/or --record OUT.mcap"
                 );
-                roles::sim_estimate::run(&args, &est, imu_model.is_none(), summary_json.as_deref())
+                let outputs = roles::sim_estimate::FastOutputs {
+                    estimate,
+                    summary_json: summary_json.as_deref(),
+                    record: record.as_deref(),
+                };
+                roles::sim_estimate::run_fast(&args, &est, imu_model.is_none(), outputs)
                     .context("offline simulation")?;
             } else {
                 navsync_drivers::sim::process::run(&args).context("simulator")?;
@@ -454,6 +519,63 @@ fn main() -> Result<()> {
         }
         Cmd::Bench { what } => {
             roles::bench_timing::run(&what).context("bench")?;
+        }
+        Cmd::Record {
+            out,
+            services,
+            duration,
+        } => {
+            roles::record::run(&roles::record::RecordArgs {
+                out: out.clone(),
+                services,
+                duration_s: duration,
+                progress: true,
+            })
+            .with_context(|| format!("recording {}", out.display()))?;
+        }
+        Cmd::Replay {
+            input,
+            speed,
+            looped,
+            services,
+            estimate,
+            out,
+            summary_json,
+            gnss,
+            pps,
+            imus,
+            software_sync,
+            imu_model,
+            no_delay_state,
+            gnss_vel_std,
+        } => {
+            if estimate {
+                let est = roles::estimator::EstimatorArgs {
+                    gnss_ids: gnss,
+                    pps_ids: pps,
+                    imu_ids: imus,
+                    software_sync,
+                    imu_model,
+                    estimate_delay: !no_delay_state,
+                    gnss_vel_std_mps: gnss_vel_std,
+                };
+                roles::replay::run_estimate(&roles::replay::EstimateArgs {
+                    input: input.clone(),
+                    est,
+                    out,
+                    summary_json,
+                })
+                .with_context(|| format!("estimating over {}", input.display()))?;
+            } else {
+                roles::replay::run(&roles::replay::ReplayArgs {
+                    input: input.clone(),
+                    speed,
+                    looped,
+                    services,
+                    progress: true,
+                })
+                .with_context(|| format!("replaying {}", input.display()))?;
+            }
         }
         Cmd::Nmea { file } => {
             let bytes = if file == "-" {

@@ -1,12 +1,19 @@
 //! Runs the estimator over a stream of recorded or simulated samples as fast as the CPU allows,
-//! in delivery order, and evaluates it against the truth in the stream.
+//! and evaluates it against the truth in the stream.
+//!
+//! The samples go through [`InputOrder`] exactly as in the live process, so the estimator
+//! consumes them in the same order as the live `navsync estimator` would have, whatever order
+//! they come in (delivery order from the simulator, receipt order from a recording): the
+//! navigation states are bit-identical to the live ones for the same samples.
 
 use std::time::{Duration, Instant};
 
-use navsync_shared::samples::{AnySample, NavState};
+use navsync_shared::samples::{AnySample, NavState, TimeState};
+use navsync_shared::time::NS_PER_S;
 
 use crate::estimator::pipeline::Pipeline;
 use crate::evaluation::{DelayTruth, Evaluator, Summary};
+use crate::input_order::InputOrder;
 
 /// What an offline run produced.
 pub struct OfflineRun {
@@ -14,46 +21,119 @@ pub struct OfflineRun {
     pub summary: Summary,
 }
 
-/// Feeds `samples` (in delivery order) to `pipeline`; every navigation state goes to `on_nav`.
+/// An output of the estimator.
+#[derive(Debug, Clone, Copy)]
+pub enum Output<'a> {
+    /// The navigation state for a reference-IMU sample.
+    Nav(&'a NavState),
+    /// The time state, after a PPS edge or fix changed the mapping and at least once per
+    /// second of sample time. Offline its `computed_host_ns` is the latest IMU sample's host
+    /// time (live: the host clock when published), so time states differ from the live ones
+    /// in that field and in how many there are; navigation states do not.
+    Time(&'a TimeState),
+}
+
+/// Feeds `samples` to `pipeline`; every navigation state goes to `on_nav`. The reference
+/// IMU is not known here, so every IMU sample releases the waiting PPS edges and fixes (the
+/// same order as the live process's for IMU stamp offsets below the holds of
+/// [`crate::input_order`]); [`run_ordered`] takes it explicitly.
 pub fn run<I: IntoIterator<Item = AnySample>>(
     pipeline: &mut Pipeline,
     samples: I,
     delay_truth: DelayTruth,
     mut on_nav: impl FnMut(&NavState),
 ) -> OfflineRun {
+    run_ordered(
+        pipeline,
+        None,
+        samples.into_iter().map(|s| (s, ())),
+        delay_truth,
+        false,
+        |o, _| {
+            if let Output::Nav(n) = o {
+                on_nav(n);
+            }
+        },
+    )
+}
+
+/// Feeds `samples`, each with a tag `T` (e.g. its recording time), to `pipeline` in the
+/// canonical input order released by the IMU `reference_imu` (the pipeline's reference IMU;
+/// `None`: any IMU). Every output goes to `on_output` with the tag of the sample that produced
+/// it (for a time state: of the PPS edge, fix or IMU sample after which it was computed);
+/// time states only with `time_states`.
+pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
+    pipeline: &mut Pipeline,
+    reference_imu: Option<&str>,
+    samples: I,
+    delay_truth: DelayTruth,
+    time_states: bool,
+    mut on_output: impl FnMut(Output<'_>, &T),
+) -> OfflineRun {
     let t0 = Instant::now();
     let mut eval = Evaluator::default();
+    let mut order: InputOrder<T> = InputOrder::new(reference_imu);
     let (mut imu, mut fixes) = (0u64, 0u64);
     // Time spent inside the estimator only (not producing or decoding the samples).
     let mut in_estimator = Duration::ZERO;
-    for s in samples {
-        match &s {
+    let mut latest_host_ns = i64::MIN;
+    let mut last_time_ns = i64::MIN;
+    let mut consume = |s: AnySample, tag: T| {
+        let updated = match &s {
             AnySample::Imu(x) => {
                 imu += 1;
                 let t = Instant::now();
                 let out = pipeline.on_imu(x);
                 in_estimator += t.elapsed();
+                latest_host_ns = latest_host_ns.max(x.stamp.host_ns);
                 if let Some(n) = out {
                     eval.add_nav(&n);
-                    on_nav(&n);
+                    on_output(Output::Nav(&n), &tag);
                 }
+                false
             }
             AnySample::GnssFix(f) => {
                 fixes += 1;
                 let t = Instant::now();
-                pipeline.on_fix(f);
+                let u = pipeline.on_fix(f);
                 in_estimator += t.elapsed();
+                u
             }
             AnySample::PpsEdge(e) => {
                 let t = Instant::now();
-                pipeline.on_pps(e);
+                let u = pipeline.on_pps(e);
                 in_estimator += t.elapsed();
+                u
             }
-            AnySample::Truth(t) => eval.add_truth(t),
-            AnySample::Time(_) | AnySample::Nav(_) | AnySample::Health(_) => {}
+            AnySample::Truth(t) => {
+                eval.add_truth(t);
+                false
+            }
+            AnySample::Time(_) | AnySample::Nav(_) | AnySample::Health(_) => false,
+        };
+        // Computing a time state does not change the navigation states (it only reads the
+        // filter's Δ into the time synchroniser's report).
+        if time_states
+            && latest_host_ns != i64::MIN
+            && (updated || latest_host_ns.saturating_sub(last_time_ns) >= NS_PER_S)
+        {
+            let ts = pipeline.time_state(latest_host_ns);
+            on_output(Output::Time(&ts), &tag);
+            last_time_ns = latest_host_ns;
         }
+    };
+    for (s, tag) in samples {
+        order.push(s, tag);
+        while let Some((s, tag)) = order.pop() {
+            consume(s, tag);
+        }
+    }
+    while let Some((s, tag)) = order.pop_any() {
+        consume(s, tag);
     }
     let wall = t0.elapsed().as_secs_f64();
     let rejected = pipeline.nav().counters().fixes_rejected;
-    OfflineRun { summary: eval.summary((imu, fixes, rejected), wall, in_estimator.as_secs_f64(), delay_truth) }
+    OfflineRun {
+        summary: eval.summary((imu, fixes, rejected), wall, in_estimator.as_secs_f64(), delay_truth),
+    }
 }

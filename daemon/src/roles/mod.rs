@@ -5,4 +5,6 @@ pub mod demo;
 pub mod echo;
 pub mod estimator;
 pub mod ntpshm;
+pub mod record;
+pub mod replay;
 pub mod sim_estimate;

@@ -1,11 +1,19 @@
-//! `navsync sim --fast --estimate`: the simulated world's published samples fed straight into
-//! the estimator library as fast as the CPU allows, and the accuracy report printed.
+//! `navsync sim --fast`: the simulated world's published samples, produced as fast as the CPU
+//! allows, fed straight into the estimator library (`--estimate`, prints the accuracy report)
+//! and/or written into an MCAP recording (`--record OUT.mcap`).
+//!
+//! The samples are exactly those the drivers would publish ([`PublishedStream`]: IMU samples
+//! and PPS edges as the simulator publishes them, fixes decoded from the world's NMEA by the
+//! GPS driver's own decoder, the truth), in delivery order. In the recording each message has
+//! `log_time` = the simulated UTC of its delivery instant and `publish_time` = its delivery
+//! host time (`World::utc_ns_at_host`), so `navsync replay` paces it as the drivers would have.
 
 use std::path::Path;
 
 use navsync_drivers::sim::process::{SimArgs, load_config};
 use navsync_drivers::sim::published::PublishedStream;
 use navsync_drivers::sim::world::World;
+use navsync_shared::recording::{RecordingError, SampleRecorder};
 
 use crate::estimator::pipeline::Pipeline;
 use crate::evaluation::DelayTruth;
@@ -26,6 +34,20 @@ pub enum SimEstimateError {
         /// Cause.
         source: std::io::Error,
     },
+    /// Writing the recording.
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+}
+
+/// What `navsync sim --fast` does with the samples.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FastOutputs<'a> {
+    /// Run the estimator and print the accuracy report.
+    pub estimate: bool,
+    /// Write the accuracy report as JSON here (with `estimate`).
+    pub summary_json: Option<&'a Path>,
+    /// Write the samples into this MCAP file.
+    pub record: Option<&'a Path>,
 }
 
 /// Runs the world through the estimator and prints the summary (and writes it as JSON).
@@ -36,6 +58,26 @@ pub fn run(
     model_from_sim: bool,
     summary_json: Option<&Path>,
 ) -> Result<(), SimEstimateError> {
+    run_fast(
+        sim,
+        est,
+        model_from_sim,
+        FastOutputs {
+            estimate: true,
+            summary_json,
+            record: None,
+        },
+    )
+}
+
+/// Produces the world's samples as fast as the CPU allows (up to `--duration` of scenario
+/// time when given) and estimates and/or records them.
+pub fn run_fast(
+    sim: &SimArgs,
+    est: &EstimatorArgs,
+    model_from_sim: bool,
+    outputs: FastOutputs<'_>,
+) -> Result<(), SimEstimateError> {
     let cfg = load_config(sim)?;
     let mut est = est.clone();
     if model_from_sim {
@@ -43,23 +85,67 @@ pub fn run(
         est.imu_model = cfg.imu.preset;
         est.gnss_vel_std_mps = cfg.gnss.velocity_sigma_mps.max(0.01);
     }
+    let start_host = 1_000_000_000_000;
     let start_utc = navsync_shared::time::realtime_now_ns() / 1_000_000_000 * 1_000_000_000;
-    let world = World::new(&cfg, 1_000_000_000_000, start_utc)?;
-    let stream = PublishedStream::new(world).map(|p| p.sample);
-    let mut pipeline = Pipeline::new(est.pipeline_config());
-    let truth = if est.software_sync {
-        DelayTruth::ReceiverLatency
-    } else {
-        DelayTruth::Zero
+    let world = World::new(&cfg, start_host, start_utc)?;
+    // The world's clock, for the UTC of each delivery instant (a pure function of the world).
+    let clock = world.clone();
+    let end_host = sim.duration_s.map(|d| start_host + (d * 1e9) as i64);
+    let mut recorder = match outputs.record {
+        Some(p) => Some(SampleRecorder::create(p)?),
+        None => None,
     };
-    let run = offline::run(&mut pipeline, stream, truth, |_| {});
-    println!("{}", run.summary.table());
-    if let Some(p) = summary_json {
-        let text = serde_json::to_string_pretty(&run.summary).unwrap_or_default();
-        std::fs::write(p, text).map_err(|source| SimEstimateError::Io {
-            path: p.display().to_string(),
-            source,
-        })?;
+    let mut write_err: Option<RecordingError> = None;
+    let stream = PublishedStream::new(world)
+        .take_while(|p| end_host.is_none_or(|end| p.delivered_ns <= end))
+        .inspect(|p| {
+            if let Some(r) = recorder.as_mut()
+                && write_err.is_none()
+            {
+                let log_time = clock.utc_ns_at_host(p.delivered_ns).max(0) as u64;
+                if let Err(e) = r.write(&p.service, &p.sample, log_time, p.delivered_ns.max(0) as u64) {
+                    write_err = Some(e);
+                }
+            }
+        })
+        .map(|p| p.sample);
+    if outputs.estimate {
+        let cfg = est.pipeline_config();
+        let reference = cfg.reference_imu.clone();
+        let mut pipeline = Pipeline::new(cfg);
+        let truth = if est.software_sync {
+            DelayTruth::ReceiverLatency
+        } else {
+            DelayTruth::Zero
+        };
+        let run = offline::run_ordered(
+            &mut pipeline,
+            Some(&reference),
+            stream.map(|s| (s, ())),
+            truth,
+            false,
+            |_, _| {},
+        );
+        println!("{}", run.summary.table());
+        if let Some(p) = outputs.summary_json {
+            let text = serde_json::to_string_pretty(&run.summary).unwrap_or_default();
+            std::fs::write(p, text).map_err(|source| SimEstimateError::Io {
+                path: p.display().to_string(),
+                source,
+            })?;
+        }
+    } else {
+        stream.for_each(drop);
+    }
+    if let Some(e) = write_err {
+        return Err(e.into());
+    }
+    if let Some(r) = recorder {
+        let messages = r.message_count();
+        r.close()?;
+        if let Some(p) = outputs.record {
+            eprintln!("navsync sim: {messages} samples recorded to {}", p.display());
+        }
     }
     Ok(())
 }

@@ -162,9 +162,6 @@ impl<'a> Dec<'a> {
     pub fn pos(&self) -> usize {
         self.pos
     }
-    pub fn rest(&self) -> &'a [u8] {
-        &self.data[self.pos..]
-    }
     fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], FieldError> {
         if self.data.len() - self.pos < n {
             return Err(FieldError {
@@ -178,9 +175,6 @@ impl<'a> Dec<'a> {
         let s = &self.data[self.pos..self.pos + n];
         self.pos += n;
         Ok(s)
-    }
-    pub fn u8(&mut self, what: &str) -> Result<u8, FieldError> {
-        Ok(self.take(1, what)?[0])
     }
     pub fn u16(&mut self, what: &str) -> Result<u16, FieldError> {
         let b = self.take(2, what)?;
@@ -281,9 +275,9 @@ mod tests {
         assert_eq!(d.u64("c").unwrap(), u64::MAX);
         assert_eq!(d.str("d").unwrap(), "navsync/nav/state");
         assert_eq!(d.str_map("e").unwrap(), vec![("k".to_string(), "v".to_string())]);
-        assert!(d.rest().is_empty());
-        let err = d.u8("f").unwrap_err();
-        assert!(err.problem.contains("f: needs 1 bytes"), "{err:?}");
+        assert_eq!(d.pos(), buf.len() - 9);
+        let err = d.u16("f").unwrap_err();
+        assert!(err.problem.contains("f: needs 2 bytes, 0 left"), "{err:?}");
     }
 
     #[test]

@@ -186,7 +186,7 @@ impl<R: Read + Seek> SampleReader<R> {
         self.mcap.summary()
     }
 
-    /// How the scan ended, once [`next`](Self::next) returned `None`.
+    /// How the scan ended, once [`next_sample`](Self::next_sample) returned `None`.
     pub fn scan_end(&self) -> Option<&ScanEnd> {
         self.mcap.scan_end()
     }
@@ -210,7 +210,7 @@ impl<R: Read + Seek> SampleReader<R> {
     }
 
     /// The next navsync sample, `None` at the end of the data.
-    pub fn next(&mut self) -> Result<Option<RecordedSample<'_>>, RecordingError> {
+    pub fn next_sample(&mut self) -> Result<Option<RecordedSample<'_>>, RecordingError> {
         let Some((channel_id, sample, log_time, publish_time)) = self.next_owned()? else {
             return Ok(None);
         };

@@ -51,11 +51,14 @@ fn recording(n: u64, chunk: usize) -> Vec<u8> {
     r.finish().unwrap()
 }
 
-fn read_all(bytes: &[u8]) -> Result<(Vec<(String, AnySample, u64, u64)>, ScanEnd), RecordingError> {
+/// (service, sample, log_time, publish_time)
+type Read = (String, AnySample, u64, u64);
+
+fn read_all(bytes: &[u8]) -> Result<(Vec<Read>, ScanEnd), RecordingError> {
     let mcap = McapReader::new(Cursor::new(bytes), Path::new("mem.mcap"))?;
     let mut r = SampleReader::from_mcap(mcap);
     let mut out = Vec::new();
-    while let Some(s) = r.next()? {
+    while let Some(s) = r.next_sample()? {
         out.push((s.service.to_string(), s.sample, s.log_time, s.publish_time));
     }
     Ok((out, r.scan_end().cloned().unwrap()))
@@ -123,7 +126,7 @@ fn chunk_message_count(bytes: &[u8], ci: &super::mcap_reader::ChunkIndex) -> usi
         .sum()
 }
 
-fn keys(msgs: &[(String, AnySample, u64, u64)]) -> Vec<String> {
+fn keys(msgs: &[Read]) -> Vec<String> {
     msgs.iter()
         .map(|(s, x, lt, pt)| format!("{s} {lt} {pt} {}", super::channels::sample_json(x)))
         .collect()
@@ -267,7 +270,7 @@ fn unknown_records_and_foreign_channels_are_skipped() {
     assert_eq!(keys(&msgs)[0], keys(&[(services::NAV_STATE.into(), nav(3), 2, 2)])[0]);
     let mcap = McapReader::new(Cursor::new(&file[..]), Path::new("mem.mcap")).unwrap();
     let mut r = SampleReader::from_mcap(mcap);
-    while r.next().unwrap().is_some() {}
+    while r.next_sample().unwrap().is_some() {}
     assert_eq!(
         r.skipped_channels(),
         vec![("/tf".to_string(), "not a navsync service name".to_string())]

@@ -1,0 +1,325 @@
+//! The order in which the estimator consumes its inputs, made a function of the samples alone.
+//!
+//! # Why
+//!
+//! The estimator's results depend on the order of its inputs across services: a PPS edge
+//! consumed before or after an IMU sample changes that sample's `NavState.utc_ns`; a fix
+//! consumed before or after it changes the alignment, the time-status transitions and the
+//! GNSS-outage status. Across iceoryx2 services there is no arrival order: a process that wakes
+//! up finds samples on several services and drains them in some order, and which samples one
+//! wake-up finds depends on scheduling. The simulator publishes PPS edges at the same instant
+//! as IMU samples (both on the whole second), so the live estimator and a recorder beside it
+//! disagreed about that order about once a second, and `navsync replay --estimate` of a live
+//! recording could not reproduce the live `NavState`s bit for bit.
+//!
+//! # The rule
+//!
+//! Every sample gets a key: its stamp plus a hold that covers the time its publisher needs
+//! to publish it after the stamp (host time, ns):
+//!
+//! | sample | key |
+//! |---|---|
+//! | reference IMU (the one that drives the filter), other IMUs, truth | `stamp.host_ns` |
+//! | PPS edge | `stamp.host_ns + PPS_HOLD_NS` (a driver republishes it µs–ms later) |
+//! | GNSS fix | `stamp.host_ns + FIX_HOLD_NS` (stamped at its first byte, published after the whole burst and the driver's idle flush) |
+//!
+//! and a sample is consumed once a reference-IMU sample with a key at least as large has
+//! arrived, in key order. So a PPS edge or a fix is applied right before the first reference
+//! IMU sample stamped `hold` after it, whenever it happened to arrive. The live process
+//! ([`crate::roles::estimator`]) and the offline runner ([`crate::offline`], used by
+//! `navsync replay --estimate` and `navsync sim --fast --estimate`) both go through
+//! [`InputOrder`], so they consume any recording of the same samples in the same order,
+//! whatever order it was recorded in.
+//!
+//! The live process drains the IMU services before PPS and GNSS on each wake-up: a PPS edge
+//! or fix published before the IMU sample that releases it is then always among the drained
+//! samples.
+//!
+//! What it costs: fixes reach the filter [`FIX_HOLD_NS`] later (they are fused at their epoch
+//! in the delayed filter, which runs `horizon_s` = 1.5 s behind, so fusion itself is
+//! unchanged as long as the receiver latency plus the hold stays below the horizon: d0 up to
+//! ~1.25 s); alignment and status changes happen that much later; PPS edges update the time
+//! mapping [`PPS_HOLD_NS`] later. `NavState`s are not delayed at all.
+//!
+//! What it cannot do: a sample that arrives after its slot has passed (a fix published more
+//! than [`FIX_HOLD_NS`] after its first byte: a 9600-baud receiver with long bursts, or a
+//! driver stalled that long) is consumed at once and counted in [`InputOrder::late`]; its
+//! effect then depends on when it arrived, as before. When the reference IMU is silent for
+//! [`STALL_NS`] of wall time the live process consumes what waits (time sync without IMUs).
+
+use std::cmp::{Ordering, Reverse};
+use std::collections::BinaryHeap;
+
+use navsync_shared::reflect::fixed_str;
+use navsync_shared::samples::AnySample;
+
+/// Hold of PPS edges after their stamp, ns.
+pub const PPS_HOLD_NS: i64 = 50_000_000;
+/// Hold of GNSS fixes after their stamp (first byte), ns.
+pub const FIX_HOLD_NS: i64 = 200_000_000;
+/// Wall time without a new reference-IMU sample after which a live process consumes the
+/// waiting samples anyway, ns.
+pub const STALL_NS: i64 = 500_000_000;
+
+/// Position of a sample in the canonical order: key time, then kind, then the source's own
+/// sequence number.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct OrderKey {
+    /// Stamp plus hold, host ns.
+    pub at_ns: i64,
+    rank: u8,
+    id: [u8; 8],
+    seq: u64,
+}
+
+/// The key of a sample.
+pub fn order_key(s: &AnySample) -> OrderKey {
+    let (at_ns, rank, id, seq) = match s {
+        AnySample::PpsEdge(e) => (e.stamp.host_ns.saturating_add(PPS_HOLD_NS), 0, [0; 8], e.stamp.seq),
+        AnySample::GnssFix(f) => (f.stamp.host_ns.saturating_add(FIX_HOLD_NS), 1, [0; 8], f.stamp.seq),
+        AnySample::Imu(x) => (x.stamp.host_ns, 2, x.imu_id, x.stamp.seq),
+        AnySample::Truth(t) => (t.host_ns, 3, [0; 8], t.seq),
+        AnySample::Nav(n) => (n.host_ns, 4, [0; 8], n.seq),
+        AnySample::Time(t) => (t.computed_host_ns, 5, [0; 8], t.seq),
+        AnySample::Health(h) => (h.host_ns, 6, [0; 8], 0),
+    };
+    OrderKey { at_ns, rank, id, seq }
+}
+
+struct Entry<T> {
+    key: OrderKey,
+    /// Arrival number: orders exact duplicates.
+    arrival: u64,
+    sample: AnySample,
+    tag: T,
+}
+
+impl<T> PartialEq for Entry<T> {
+    fn eq(&self, o: &Self) -> bool {
+        (self.key, self.arrival) == (o.key, o.arrival)
+    }
+}
+impl<T> Eq for Entry<T> {}
+impl<T> PartialOrd for Entry<T> {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl<T> Ord for Entry<T> {
+    fn cmp(&self, o: &Self) -> Ordering {
+        (self.key, self.arrival).cmp(&(o.key, o.arrival))
+    }
+}
+
+/// Puts samples into the canonical order (see the module docs). `T` is carried along with
+/// each sample (e.g. its recording time).
+pub struct InputOrder<T = ()> {
+    reference_imu: Option<[u8; 8]>,
+    heap: BinaryHeap<Reverse<Entry<T>>>,
+    watermark: i64,
+    arrivals: u64,
+    last_popped: Option<OrderKey>,
+    late: u64,
+    seen_watermark: i64,
+    progress_at_ns: Option<i64>,
+}
+
+impl<T> InputOrder<T> {
+    /// An empty order released by the IMU with id `reference_imu`; with `None` every sample is
+    /// due at once (no IMU: nothing to order against).
+    pub fn new(reference_imu: Option<&str>) -> Self {
+        Self {
+            reference_imu: reference_imu.map(fixed_str::<8>),
+            heap: BinaryHeap::new(),
+            watermark: i64::MIN,
+            arrivals: 0,
+            last_popped: None,
+            late: 0,
+            seen_watermark: i64::MIN,
+            progress_at_ns: None,
+        }
+    }
+
+    /// Adds a sample.
+    pub fn push(&mut self, sample: AnySample, tag: T) {
+        if let (AnySample::Imu(x), Some(r)) = (&sample, &self.reference_imu)
+            && x.imu_id == *r
+        {
+            self.watermark = self.watermark.max(x.stamp.host_ns);
+        }
+        let key = order_key(&sample);
+        self.arrivals += 1;
+        self.heap.push(Reverse(Entry {
+            key,
+            arrival: self.arrivals,
+            sample,
+            tag,
+        }));
+    }
+
+    /// The next sample whose turn has come, in order.
+    pub fn pop(&mut self) -> Option<(AnySample, T)> {
+        let due = match self.heap.peek() {
+            Some(Reverse(e)) => self.reference_imu.is_none() || e.key.at_ns <= self.watermark,
+            None => false,
+        };
+        if due { self.pop_any() } else { None }
+    }
+
+    /// The next sample in order, due or not (end of a stream, or a stalled reference IMU).
+    pub fn pop_any(&mut self) -> Option<(AnySample, T)> {
+        let Reverse(e) = self.heap.pop()?;
+        if self.last_popped.is_some_and(|k| e.key < k) {
+            if matches!(e.sample, AnySample::PpsEdge(_) | AnySample::GnssFix(_)) {
+                self.late += 1;
+            }
+        } else {
+            self.last_popped = Some(e.key);
+        }
+        Some((e.sample, e.tag))
+    }
+
+    /// Live processes, once per wake-up with the host clock (ns): true when samples wait and
+    /// the reference IMU has not advanced for [`STALL_NS`]; then consume them with
+    /// [`pop_any`](Self::pop_any).
+    pub fn stalled(&mut self, now_ns: i64) -> bool {
+        if self.heap.is_empty() || self.watermark != self.seen_watermark || self.progress_at_ns.is_none() {
+            self.seen_watermark = self.watermark;
+            self.progress_at_ns = Some(now_ns);
+            return false;
+        }
+        self.progress_at_ns.is_some_and(|t| now_ns - t > STALL_NS)
+    }
+
+    /// PPS edges and fixes that arrived after their slot (consumed out of order).
+    pub fn late(&self) -> u64 {
+        self.late
+    }
+
+    /// Samples waiting.
+    pub fn len(&self) -> usize {
+        self.heap.len()
+    }
+
+    /// True when no sample waits.
+    pub fn is_empty(&self) -> bool {
+        self.heap.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use navsync_shared::reflect::Reflect;
+    use navsync_shared::samples::{GnssFix, ImuSample, PpsEdge, Stamp, StampSource};
+
+    use super::*;
+
+    const MS: i64 = 1_000_000;
+
+    fn imu(id: &str, t_ms: i64) -> AnySample {
+        let mut s = ImuSample::zeroed();
+        s.stamp = Stamp::host(t_ms * MS, t_ms as u64, StampSource::Simulated);
+        s.imu_id = fixed_str(id);
+        AnySample::Imu(s)
+    }
+    fn pps(t_ms: i64) -> AnySample {
+        let mut e = PpsEdge::zeroed();
+        e.stamp = Stamp::host(t_ms * MS, 0, StampSource::Simulated);
+        AnySample::PpsEdge(e)
+    }
+    fn fix(t_ms: i64) -> AnySample {
+        AnySample::GnssFix(GnssFix::empty(Stamp::host(t_ms * MS, 0, StampSource::Receipt)))
+    }
+    fn name(s: &AnySample) -> String {
+        match s {
+            AnySample::Imu(x) => format!(
+                "imu{}@{}",
+                navsync_shared::reflect::str_of(&x.imu_id),
+                x.stamp.host_ns / MS
+            ),
+            AnySample::PpsEdge(e) => format!("pps@{}", e.stamp.host_ns / MS),
+            AnySample::GnssFix(f) => format!("fix@{}", f.stamp.host_ns / MS),
+            _ => "?".into(),
+        }
+    }
+
+    /// Consumes `batches` (each pushed at once, then drained) and returns the order.
+    fn consume(batches: &[Vec<AnySample>]) -> (Vec<String>, u64) {
+        let mut o = InputOrder::new(Some("0"));
+        let mut out = Vec::new();
+        for b in batches {
+            for s in b {
+                o.push(*s, ());
+            }
+            while let Some((s, ())) = o.pop() {
+                out.push(name(&s));
+            }
+        }
+        while let Some((s, ())) = o.pop_any() {
+            out.push(name(&s));
+        }
+        (out, o.late())
+    }
+
+    #[test]
+    fn the_order_does_not_depend_on_how_samples_were_batched() {
+        // IMU every 5 ms, a PPS edge at 1000 ms (with the IMU sample of the same instant), a
+        // fix stamped at 600 ms and published at 690 ms.
+        let mut published: Vec<AnySample> = Vec::new();
+        for t in (900..1300).step_by(5) {
+            if t == 1000 {
+                published.push(pps(1000));
+            }
+            if t == 690 + 300 {
+                published.push(fix(600 + 300));
+            }
+            published.push(imu("0", t));
+            published.push(imu("1", t + 2));
+        }
+        let one_by_one: Vec<Vec<AnySample>> = published.iter().map(|s| vec![*s]).collect();
+        let (reference, late) = consume(&one_by_one);
+        assert_eq!(late, 0);
+        // The edge right before the first IMU sample at or after 1050 ms; the fix before 1100 ms.
+        let at = |n: &str| reference.iter().position(|x| x == n).unwrap();
+        assert_eq!(at("pps@1000") + 1, at("imu0@1050"));
+        assert_eq!(at("fix@900") + 1, at("imu0@1100"));
+        // Any batching of the same publication order, and any drain order within a batch
+        // (IMU services first, as the live process does, or reversed), gives the same order.
+        for size in [2, 3, 7, 20, 64, 500] {
+            for reversed in [false, true] {
+                let batches: Vec<Vec<AnySample>> = published
+                    .chunks(size)
+                    .map(|c| {
+                        let mut v = c.to_vec();
+                        v.sort_by_key(|s| !matches!(s, AnySample::Imu(_)));
+                        if reversed {
+                            v.reverse();
+                        }
+                        v
+                    })
+                    .collect();
+                assert_eq!(consume(&batches), (reference.clone(), 0), "batches of {size}");
+            }
+        }
+    }
+
+    #[test]
+    fn late_samples_are_counted_and_stalls_detected() {
+        let mut o = InputOrder::new(Some("0"));
+        o.push(imu("0", 1000), ());
+        while o.pop().is_some() {}
+        o.push(fix(500), ()); // due at 700 ms, arrives after 1000 ms was consumed
+        assert!(o.pop().is_some());
+        assert_eq!(o.late(), 1);
+        o.push(pps(1100), ());
+        assert!(o.pop().is_none(), "waits for the IMU");
+        assert!(!o.stalled(0));
+        assert!(!o.stalled(STALL_NS));
+        assert!(o.stalled(STALL_NS + 1));
+        assert!(o.pop_any().is_some());
+        // Without a reference IMU everything is due at once.
+        let mut o = InputOrder::new(None);
+        o.push(fix(5), ());
+        assert!(o.pop().is_some());
+    }
+}
