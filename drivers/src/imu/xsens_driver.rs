@@ -25,13 +25,18 @@
 //!   tick. It is exact in the device's time scale but that scale drifts against the host
 //!   clock (crystal tolerance, tens of ppm, and temperature).
 //!
-//! The estimator maps device time to host time (its `device_clock` model): it fits
-//! `host = a + (1 + r)·device` per device over a sliding window, using the lower envelope of
-//! `host_ns − device_ns` (receipt delays are never negative, so the earliest receipts are the
-//! ones closest to the true transmission instant), estimating the rate error `r` rather than
-//! assuming it zero, and re-anchoring when the sequence shows a device restart. The mapped
-//! device time then stamps the sample with the device's sample-to-sample precision and a
-//! constant offset (the device's fixed latency) that the time-offset estimation absorbs.
+//! The estimator maps device time to GNSS time with its device clock model
+//! (`daemon/src/estimator/device_clock.rs`): a two-state Kalman filter of the device clock's
+//! offset and fractional frequency against GNSS time (the same model as the host clock's,
+//! process noise from the device oscillator's Allan deviation), fed with (device time,
+//! receipt stamp mapped through the host → GNSS `TimeState`) pairs whose noise is the
+//! receipt jitter, or with PPS captures where the device latches them (SyncIn). The
+//! frequency is estimated, not assumed zero: over 10 minutes a 20 ppm crystal drifts 12 ms
+//! against the host. The mapped device time then stamps each sample with the device's
+//! sample-to-sample precision (µs) instead of the receipt's jitter (ms on USB); a constant
+//! transport latency left in the pairs is absorbed by the IMU's time-offset estimation.
+//! Until the filter has converged the receipt stamp is the fallback, which is why it is
+//! published as the host stamp.
 //!
 //! Sequence numbers come from PacketCounter (wrapping at 2¹⁶): a counter step of n means
 //! n − 1 lost messages. Without PacketCounter, samples are numbered consecutively.

@@ -7,7 +7,7 @@
 //! Xsens, *MT Low Level Communication Protocol Documentation* (document MT0101P), and the
 //! Xsens Device API headers it is implemented by (`xsprotocol.h`, `xsmessage.c`,
 //! `xsdataidentifier.h`, `xsstatusflag.h` in `lib/xspublic/xstypes/` of Xsens' ROS driver
-//! `xsens_mti_driver`):
+//! `xsens_mti_driver`, e.g. <https://github.com/nobleo/xsens_mti_driver>):
 //!
 //! - A message is `PREAMBLE 0xFA | BID | MID | LEN | DATA[LEN] | CHECKSUM`. `LEN` = 0xFF
 //!   announces the extended length: two more bytes `LENH LENL` follow, and the data may be up
