@@ -35,7 +35,16 @@ fn every_service_carries_samples_and_time_maps_within_5_us() {
     env.spawn(
         "sim",
         &[
-            "sim", "--pty-link", &link_s, "--imus", "4", "--duration", "60", "--imu-output", "xsens", "--imu-pty-dir",
+            "sim",
+            "--pty-link",
+            &link_s,
+            "--imus",
+            "4",
+            "--duration",
+            "60",
+            "--imu-output",
+            "xsens",
+            "--imu-pty-dir",
             &dir_s,
         ],
     );
@@ -45,7 +54,10 @@ fn every_service_carries_samples_and_time_maps_within_5_us() {
         let port = env.dir.join(format!("imu{i}"));
         env.wait_for_path(&port, Duration::from_secs(20));
         let source = format!("xsens:{}:921600", port.display());
-        env.spawn(&format!("imu{i}"), &["imu", "--source", &source, "--id", &i.to_string()]);
+        env.spawn(
+            &format!("imu{i}"),
+            &["imu", "--source", &source, "--id", &i.to_string()],
+        );
     }
     env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
     env.spawn(
@@ -67,7 +79,10 @@ fn every_service_carries_samples_and_time_maps_within_5_us() {
                     // Stamped on receipt, with the device's own clock, numbered by its counter.
                     assert_eq!(x.stamp.source(), StampSource::Receipt);
                     assert_eq!(x.stamp.has_device_time, 1);
-                    assert!(x.stamp.seq >= last_seq[i] && x.stamp.device_ns > last_dev[i], "imu {i}: {x:?}");
+                    assert!(
+                        x.stamp.seq >= last_seq[i] && x.stamp.device_ns > last_dev[i],
+                        "imu {i}: {x:?}"
+                    );
                     (last_seq[i], last_dev[i]) = (x.stamp.seq + 1, x.stamp.device_ns);
                 })
                 .unwrap() as u64;

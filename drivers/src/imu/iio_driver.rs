@@ -83,7 +83,14 @@ pub fn run(node: &IpcNode, args: &IioArgs, out: &mut SampleOutput) {
     while !node.termination_requested() {
         let dev = iio_device::resolve(&args.sysfs_root, &args.device)
             .and_then(|dir| iio_device::configure(&dir, &args.dev_root, &args.setup))
-            .and_then(|d| open(&d).map(|f| (d, f)));
+            .and_then(|d| match open(&d) {
+                Ok(f) => Ok((d, f)),
+                Err(e) => {
+                    // Set up but not readable: do not leave it capturing into a full buffer.
+                    iio_device::disable(&d.dir);
+                    Err(e)
+                }
+            });
         let (dev, file) = match dev {
             Ok(x) => x,
             Err(e) => {
