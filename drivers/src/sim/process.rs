@@ -239,6 +239,17 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
         shifted_bursts: 0,
     };
 
+    // The pseudo-terminal delivers a byte to a reader that sleeps in poll() some tens of µs
+    // after it is written (flip-buffer work item, wake-up); a UART's byte is there when the
+    // line says. Measure that latency (first at start, then on every burst) and write every
+    // NMEA burst that much early, so that its first byte reaches the GPS driver at the instant
+    // the world says it leaves the receiver (residual: the latency's jitter; README "## Timing").
+    let pty_lead_ns = pty_wakeup_latency_ns(41).unwrap_or(0);
+    info!(
+        pty_lead_ns,
+        "pseudo-terminal wake-up latency measured; NMEA written that much early"
+    );
+    let mut lead = PtyLead::new(pty_lead_ns, line.pty.path());
     let start_host = monotonic_now_ns() + 300_000_000;
     let start_utc = realtime_now_ns() + (args.utc_offset_s * 1e9) as i64 + 300_000_000;
     let mut world = World::new(&cfg, start_host, start_utc)?;
@@ -254,7 +265,11 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
         if node.termination_requested() {
             break;
         }
-        let ev_time = next.as_ref().map(event_host_ns);
+        let ev_time = next.as_ref().map(|e| match e {
+            // Queued 1 ms ahead, so that the first byte is written by the spinning wait.
+            SimEvent::Nmea { host_ns, .. } => host_ns - lead.ns() - 1_000_000,
+            other => event_host_ns(other),
+        });
         let due = match (ev_time, line.next_due()) {
             (Some(e), Some(l)) => e.min(l),
             (Some(e), None) => e,
@@ -274,7 +289,12 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
             health.add(c_late, 1);
         }
         if line.next_due() == Some(due) {
+            let first_of_burst = line.queue.front().is_some_and(|b| b.pos == 0);
+            let written = monotonic_now_ns();
             line.write_next();
+            if first_of_burst {
+                lead.observe(written);
+            }
         } else if let Some(ev) = next.take() {
             match ev {
                 SimEvent::Imu { index, sample } => {
@@ -282,7 +302,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
                     health.tick(r_imu);
                 }
                 SimEvent::Pps(edge) => pps_pub.publish(&edge)?,
-                SimEvent::Nmea { host_ns, bytes, .. } => line.push(host_ns, bytes),
+                SimEvent::Nmea { host_ns, bytes, .. } => line.push(host_ns - lead.ns(), bytes),
                 SimEvent::Truth(t) => truth_pub.publish(&t)?,
             }
             next = world.next_event();
@@ -295,6 +315,118 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
     let _ = health.publish_final();
     info!("simulation stopped");
     Ok(())
+}
+
+/// How early NMEA bursts are written so that their first byte reaches the reader on time and
+/// (almost) never before: the smallest latency seen so far from writing a first byte to the
+/// reader taking it (the slave's input queue, `FIONREAD`, filling and emptying again, watched
+/// by spinning for at most 2 ms; the start-up calibration's minimum before), less 5 µs.
+/// A UART's byte cannot be read before it arrives, so the residual stays ≥ 0 as on a real
+/// receive path; what remains is the latency's spread above its minimum.
+struct PtyLead {
+    probe: Option<std::fs::File>,
+    min_ns: i64,
+}
+
+impl PtyLead {
+    fn new(initial_ns: i64, slave: &std::path::Path) -> Self {
+        use std::os::unix::fs::OpenOptionsExt;
+        let probe = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NOCTTY | libc::O_NONBLOCK)
+            .open(slave)
+            .ok();
+        Self {
+            probe,
+            min_ns: initial_ns,
+        }
+    }
+
+    fn ns(&self) -> i64 {
+        (self.min_ns - 5_000).clamp(0, 2_000_000)
+    }
+
+    /// Watches the first byte of a burst, written at `written_ns`, until the reader took it.
+    fn observe(&mut self, written_ns: i64) {
+        use std::os::fd::AsRawFd;
+        let Some(probe) = &self.probe else { return };
+        let queued = || {
+            let mut n: libc::c_int = 0;
+            // SAFETY: FIONREAD writes one int.
+            let rc = unsafe { libc::ioctl(probe.as_raw_fd(), libc::FIONREAD, &mut n) };
+            if rc == 0 { n } else { -1 }
+        };
+        let mut seen = false;
+        loop {
+            let n = queued();
+            let now = monotonic_now_ns();
+            if n < 0 || now - written_ns > 2_000_000 {
+                return;
+            }
+            if n > 0 {
+                seen = true;
+            } else if seen {
+                self.min_ns = self.min_ns.min(now - written_ns);
+                return;
+            }
+            std::hint::spin_loop();
+        }
+    }
+}
+
+/// Smallest latency from writing one byte into a fresh pseudo-terminal to a reader sleeping in
+/// `poll()` on its slave side waking up, ns, over `samples` bytes (5 ms apart); `None` if the
+/// measurement could not be made. Clamped to [0, 2 ms].
+pub fn pty_wakeup_latency_ns(samples: usize) -> Option<i64> {
+    use std::os::fd::AsRawFd;
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut pty = Pty::open(None).ok()?;
+    let reader = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOCTTY)
+        .open(pty.path())
+        .ok()?;
+    let (tx, rx) = std::sync::mpsc::channel::<i64>();
+    let handle = std::thread::spawn(move || {
+        let fd = reader.as_raw_fd();
+        let mut buf = [0u8; 64];
+        loop {
+            let mut p = libc::pollfd {
+                fd,
+                events: libc::POLLIN,
+                revents: 0,
+            };
+            // SAFETY: one valid pollfd.
+            let rc = unsafe { libc::poll(&mut p, 1, 200) };
+            if rc == 0 {
+                return; // the writer is done
+            }
+            let t = monotonic_now_ns();
+            // SAFETY: reading into a local buffer from our descriptor.
+            let n = unsafe { libc::read(fd, buf.as_mut_ptr().cast(), buf.len()) };
+            if rc < 0 || n <= 0 || tx.send(t).is_err() {
+                return;
+            }
+        }
+    });
+    let mut lat = Vec::with_capacity(samples);
+    for _ in 0..samples {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+        let t = monotonic_now_ns();
+        if pty.write(b"x").ok()? != 1 {
+            break;
+        }
+        match rx.recv_timeout(std::time::Duration::from_millis(100)) {
+            Ok(r) => lat.push(r - t),
+            Err(_) => break,
+        }
+    }
+    drop(pty);
+    let _ = handle.join();
+    if lat.len() < samples / 2 {
+        return None;
+    }
+    lat.iter().copied().min().map(|m| m.clamp(0, 2_000_000))
 }
 
 fn event_host_ns(ev: &SimEvent) -> i64 {
