@@ -23,7 +23,6 @@ const ACCEL_SCALE: f64 = 0.019_154; // m/s² per LSB of the 12-bit value
 const TEMP_SCALE: f64 = 125.0; // m°C per LSB
 const TEMP_OFFSET: f64 = 2_000.0; // LSB
 const PERIOD_NS: i64 = 5_000_000; // 200 Hz
-const T0: i64 = 7_000_000_000_000;
 
 fn write(path: &Path, text: &str) {
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
@@ -259,18 +258,24 @@ fn iio_driver_on_a_fake_device_tree() {
     ] {
         assert_eq!(read(&devdir.join(format!("scan_elements/in_{ch}_en"))), "1", "{ch}");
     }
+    // Kernel stamps are CLOCK_MONOTONIC and lie before the read that returns them.
+    let t0_ns = navsync_shared::time::monotonic_now_ns() - 5_000_000_000;
     let mut expected: Vec<(Rec, u64)> = Vec::new();
     let mut bytes = Vec::new();
     for k in 0..30i64 {
         if (10..13).contains(&k) {
             continue;
         }
-        let r = rec(k, T0 + k * PERIOD_NS + (k % 3) * 40_000);
+        let r = rec(k, t0_ns + k * PERIOD_NS + (k % 3) * 40_000);
         bytes.extend_from_slice(&r.raw);
         expected.push((r, k as u64));
         if k == 20 {
             // A record stamped before its predecessor: rejected.
-            bytes.extend_from_slice(&rec(99, T0 + 15 * PERIOD_NS).raw);
+            bytes.extend_from_slice(&rec(99, t0_ns + 15 * PERIOD_NS).raw);
+        }
+        if k == 25 {
+            // A corrupt stamp far in the future: dropped before the checks.
+            bytes.extend_from_slice(&rec(98, t0_ns + 1_000_000 * PERIOD_NS).raw);
         }
     }
     for piece in bytes.chunks(50) {
@@ -292,6 +297,7 @@ fn iio_driver_on_a_fake_device_tree() {
     let h = latest.unwrap();
     assert_eq!(h.counter("samples_dropped"), Some(3));
     assert_eq!(h.counter("rejected_host_back"), Some(1));
+    assert_eq!(h.counter("iio_bad_stamps"), Some(1));
     assert_eq!(h.counter("samples_at_range"), Some(0), "no range set for IIO");
     assert!(
         h.counter("iio_short_reads").unwrap_or(0) >= 1,
@@ -313,7 +319,7 @@ fn iio_driver_on_a_fake_device_tree() {
     assert_eq!(read(&devdir.join("buffer/enable")), "1", "set up again");
     let mut expected2 = Vec::new();
     for k in 230..240i64 {
-        let r = rec(k, T0 + k * PERIOD_NS);
+        let r = rec(k, t0_ns + k * PERIOD_NS);
         w.write_all(&r.raw).unwrap();
         expected2.push((r, k as u64));
     }

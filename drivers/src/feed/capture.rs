@@ -74,10 +74,10 @@ pub fn fix_time_tag_s(sentence: &[u8]) -> Option<f64> {
     if address.len() < 5 {
         return None;
     }
-    let kind = &address[address.len() - 3..];
+    let kind = &address.as_bytes()[address.len() - 3..];
     let field = match kind {
-        "GGA" | "RMC" | "GNS" => fields.next()?,
-        "GLL" => fields.nth(4)?,
+        b"GGA" | b"RMC" | b"GNS" => fields.next()?,
+        b"GLL" => fields.nth(4)?,
         _ => return None,
     };
     parse_hhmmss(field)
@@ -210,6 +210,11 @@ mod tests {
         assert_eq!(fix_time_tag_s(b"$GPGGA,,,,*00"), None);
         assert_eq!(fix_time_tag_s(b"$GPGSV,3,1,11*00"), None);
         assert_eq!(fix_time_tag_s(b"\xff\xfe"), None);
+        assert_eq!(
+            fix_time_tag_s("$GPGé,1".as_bytes()),
+            None,
+            "no panic inside a UTF-8 character"
+        );
     }
 
     #[test]

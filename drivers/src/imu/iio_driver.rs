@@ -7,7 +7,9 @@
 //! Stamps: the kernel's per-record `timestamp` channel (`current_timestamp_clock` =
 //! `monotonic`, so it is `CLOCK_MONOTONIC`; taken by the driver at the data-ready interrupt or
 //! FIFO read) as `StampSource::KernelEvent`. Without a timestamp channel the read time is
-//! used (`Receipt`, later records of one read back-dated by the nominal period).
+//! used (`Receipt`, later records of one read back-dated by the nominal period). A record
+//! whose stamp lies after the read that returned it, or more than a minute before, is corrupt
+//! and dropped (`iio_bad_stamps`).
 //! Sequence numbers come from the stamps: a step of n nominal periods means n − 1 lost
 //! records (IIO has no sample counter; the kernel drops the oldest records when the buffer
 //! overflows).
@@ -36,6 +38,10 @@ use super::sample_checks::{Candidate, Sequence};
 const RECORDS_PER_READ: usize = 64;
 /// Largest record accepted (the kernel's records are far smaller).
 const MAX_RECORD: usize = 256;
+/// How far a kernel stamp may lie after the read that returned it (clock granularity), ns.
+const STAMP_FUTURE_NS: i64 = 1_000_000;
+/// How old a kernel stamp may be when read (a full buffer at a low rate), ns.
+const STAMP_MAX_AGE_NS: i64 = 60_000_000_000;
 
 /// Settings of the IIO driver.
 #[derive(Debug, Clone)]
@@ -60,16 +66,18 @@ struct Counters {
     reopens: u64,
     records: u64,
     short_reads: u64,
+    bad_stamps: u64,
 }
 
 impl Counters {
-    fn named(&self) -> [(&'static str, u64); 5] {
+    fn named(&self) -> [(&'static str, u64); 6] {
         [
             ("device_opens", self.opens),
             ("device_open_failures", self.open_failures),
             ("device_reopens", self.reopens),
             ("iio_records", self.records),
             ("iio_short_reads", self.short_reads),
+            ("iio_bad_stamps", self.bad_stamps),
         ]
     }
 }
@@ -222,6 +230,14 @@ fn capture(
             let r = dev.decoder.decode(&buf[k * rec..(k + 1) * rec]);
             c.records += 1;
             let (host_ns, source) = match r.timestamp_ns {
+                // A kernel stamp is taken before the read returns, and a record does not wait
+                // in the buffer for minutes: anything else is a corrupt record.
+                Some(t)
+                    if t > read_ns.saturating_add(STAMP_FUTURE_NS) || t < read_ns.saturating_sub(STAMP_MAX_AGE_NS) =>
+                {
+                    c.bad_stamps += 1;
+                    continue;
+                }
                 Some(t) => (t, StampSource::KernelEvent),
                 None => {
                     let back = (whole - 1 - k) as i64 * period_ns.unwrap_or(0);

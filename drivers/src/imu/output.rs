@@ -99,7 +99,7 @@ impl SampleOutput {
         let a = self.checks.check(c)?;
         let host_interval_s = self
             .last_host_ns
-            .map(|(t, seq)| (c.host_ns - t) as f64 * 1e-9 / (a.seq.saturating_sub(seq).max(1)) as f64);
+            .map(|(t, seq)| (c.host_ns as f64 - t as f64) * 1e-9 / (a.seq.saturating_sub(seq).max(1)) as f64);
         self.last_host_ns = Some((c.host_ns, a.seq));
         let valid = |d: &f64| d.is_finite() && *d > 0.0 && *d < 1.0;
         let dt_s = x
@@ -195,6 +195,7 @@ fn describe(name: &str) -> Option<&'static str> {
         "mtdata2_bad_items" => "MTData2 messages with malformed items dropped",
         "mtdata2_no_inertial" => "MTData2 messages without rate of turn or acceleration ignored",
         "iio_short_reads" => "IIO reads that ended inside a record",
+        "iio_bad_stamps" => "IIO records with a time stamp in the future or over a minute old dropped",
         _ => return None,
     })
 }

@@ -211,9 +211,10 @@ impl SampleChecks {
         match self.step(&last, c) {
             Ok((gap, device_ticks)) => {
                 self.backwards_run = 0;
-                let seq = last.seq + 1 + gap;
+                let seq = last.seq.saturating_add(1).saturating_add(gap);
+                let intervals = i64::try_from(gap).unwrap_or(i64::MAX).saturating_add(1);
                 let device_interval_ns = match (device_ticks, c.device) {
-                    (Some(t), Some(d)) => Some((t - last.device_ticks) * d.ns_per_tick / (gap as i64 + 1)),
+                    (Some(t), Some(d)) => Some((t - last.device_ticks).saturating_mul(d.ns_per_tick) / intervals),
                     _ => None,
                 };
                 self.last = Some(Last {
@@ -224,13 +225,13 @@ impl SampleChecks {
                     device_ticks: device_ticks.unwrap_or(0),
                 });
                 self.counters.accepted += 1;
-                self.counters.dropped += gap;
+                self.counters.dropped = self.counters.dropped.saturating_add(gap);
                 self.counters.gaps += u64::from(gap > 0);
                 self.counters.at_range += u64::from(at_range);
                 Ok(Accepted {
                     seq,
                     dropped: gap,
-                    device_ns: device_ticks.zip(c.device).map(|(t, d)| t * d.ns_per_tick),
+                    device_ns: device_ticks.zip(c.device).map(|(t, d)| t.saturating_mul(d.ns_per_tick)),
                     device_interval_ns,
                     at_range,
                 })
@@ -246,7 +247,7 @@ impl SampleChecks {
                     // The device restarted (or its clock was reset): follow the new timeline.
                     self.counters.resyncs += 1;
                     self.backwards_run = 0;
-                    return Ok(self.accept_first(c, at_range, last.seq + 1));
+                    return Ok(self.accept_first(c, at_range, last.seq.saturating_add(1)));
                 }
                 Err(r)
             }
@@ -267,7 +268,7 @@ impl SampleChecks {
         Accepted {
             seq,
             dropped: 0,
-            device_ns: device_ticks.zip(c.device).map(|(t, d)| t * d.ns_per_tick),
+            device_ns: device_ticks.zip(c.device).map(|(t, d)| t.saturating_mul(d.ns_per_tick)),
             device_interval_ns: None,
             at_range,
         }
@@ -287,7 +288,7 @@ impl SampleChecks {
                 if d.modulus > 0 && delta > d.modulus / 2 {
                     return Err(Rejection::DeviceTimeBackwards);
                 }
-                Some(last.device_ticks + delta as i64)
+                Some(last.device_ticks.saturating_add(delta as i64))
             }
             (Some(d), None) => Some((d.ticks % d.modulus.max(1)) as i64),
             (None, _) => None,
@@ -301,7 +302,7 @@ impl SampleChecks {
                 d - 1
             }
             (Sequence::Period { period_ns }, _) if period_ns > 0 => {
-                let n = ((c.host_ns - last.host_ns) as f64 / period_ns as f64).round();
+                let n = ((c.host_ns as f64 - last.host_ns as f64) / period_ns as f64).round();
                 (n.max(1.0) as u64) - 1
             }
             _ => 0,
