@@ -241,15 +241,16 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
 
     // The pseudo-terminal delivers a byte to a reader that sleeps in poll() some tens of µs
     // after it is written (flip-buffer work item, wake-up); a UART's byte is there when the
-    // line says. Measure that latency (first at start, then on every burst) and write every
-    // NMEA burst that much early, so that its first byte reaches the GPS driver at the instant
-    // the world says it leaves the receiver (residual: the latency's jitter; README "## Timing").
+    // line says. Measure that latency's minimum at start and write every NMEA burst that much
+    // early, so that its first byte reaches the GPS driver at the instant the world says it
+    // leaves the receiver, never before (residual: the latency above its minimum; README
+    // "## Timing"). Watching every burst's delivery instead would compete with the very work
+    // item that delivers it.
     let pty_lead_ns = pty_wakeup_latency_ns(41).unwrap_or(0);
     info!(
         pty_lead_ns,
         "pseudo-terminal wake-up latency measured; NMEA written that much early"
     );
-    let mut lead = PtyLead::new(pty_lead_ns, line.pty.path());
     let start_host = monotonic_now_ns() + 300_000_000;
     let start_utc = realtime_now_ns() + (args.utc_offset_s * 1e9) as i64 + 300_000_000;
     let mut world = World::new(&cfg, start_host, start_utc)?;
@@ -267,7 +268,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
         }
         let ev_time = next.as_ref().map(|e| match e {
             // Queued 1 ms ahead, so that the first byte is written by the spinning wait.
-            SimEvent::Nmea { host_ns, .. } => host_ns - lead.ns() - 1_000_000,
+            SimEvent::Nmea { host_ns, .. } => host_ns - pty_lead_ns - 1_000_000,
             other => event_host_ns(other),
         });
         let due = match (ev_time, line.next_due()) {
@@ -289,12 +290,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
             health.add(c_late, 1);
         }
         if line.next_due() == Some(due) {
-            let first_of_burst = line.queue.front().is_some_and(|b| b.pos == 0);
-            let written = monotonic_now_ns();
             line.write_next();
-            if first_of_burst {
-                lead.observe(written);
-            }
         } else if let Some(ev) = next.take() {
             match ev {
                 SimEvent::Imu { index, sample } => {
@@ -302,7 +298,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
                     health.tick(r_imu);
                 }
                 SimEvent::Pps(edge) => pps_pub.publish(&edge)?,
-                SimEvent::Nmea { host_ns, bytes, .. } => line.push(host_ns - lead.ns(), bytes),
+                SimEvent::Nmea { host_ns, bytes, .. } => line.push(host_ns - pty_lead_ns, bytes),
                 SimEvent::Truth(t) => truth_pub.publish(&t)?,
             }
             next = world.next_event();
@@ -315,63 +311,6 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
     let _ = health.publish_final();
     info!("simulation stopped");
     Ok(())
-}
-
-/// How early NMEA bursts are written so that their first byte reaches the reader on time and
-/// (almost) never before: the smallest latency seen so far from writing a first byte to the
-/// reader taking it (the slave's input queue, `FIONREAD`, filling and emptying again, watched
-/// by spinning for at most 2 ms; the start-up calibration's minimum before), less 5 µs.
-/// A UART's byte cannot be read before it arrives, so the residual stays ≥ 0 as on a real
-/// receive path; what remains is the latency's spread above its minimum.
-struct PtyLead {
-    probe: Option<std::fs::File>,
-    min_ns: i64,
-}
-
-impl PtyLead {
-    fn new(initial_ns: i64, slave: &std::path::Path) -> Self {
-        use std::os::unix::fs::OpenOptionsExt;
-        let probe = std::fs::OpenOptions::new()
-            .read(true)
-            .custom_flags(libc::O_NOCTTY | libc::O_NONBLOCK)
-            .open(slave)
-            .ok();
-        Self {
-            probe,
-            min_ns: initial_ns,
-        }
-    }
-
-    fn ns(&self) -> i64 {
-        (self.min_ns - 5_000).clamp(0, 2_000_000)
-    }
-
-    /// Watches the first byte of a burst, written at `written_ns`, until the reader took it.
-    fn observe(&mut self, written_ns: i64) {
-        use std::os::fd::AsRawFd;
-        let Some(probe) = &self.probe else { return };
-        let queued = || {
-            let mut n: libc::c_int = 0;
-            // SAFETY: FIONREAD writes one int.
-            let rc = unsafe { libc::ioctl(probe.as_raw_fd(), libc::FIONREAD, &mut n) };
-            if rc == 0 { n } else { -1 }
-        };
-        let mut seen = false;
-        loop {
-            let n = queued();
-            let now = monotonic_now_ns();
-            if n < 0 || now - written_ns > 2_000_000 {
-                return;
-            }
-            if n > 0 {
-                seen = true;
-            } else if seen {
-                self.min_ns = self.min_ns.min(now - written_ns);
-                return;
-            }
-            std::hint::spin_loop();
-        }
-    }
 }
 
 /// Smallest latency from writing one byte into a fresh pseudo-terminal to a reader sleeping in
