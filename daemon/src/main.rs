@@ -58,7 +58,7 @@ enum Cmd {
     },
     /// IMU driver: samples from an IIO device, an Xsens MTi or the simulator to `navsync/imu/{id}/sample`.
     Imu {
-        /// `iio:DEVICE` (iio:deviceN, N or the device name), `xsens:PORT[:BAUD]` or `sim[:DIR]`.
+        /// `iio:DEVICE` (iio:deviceN, N or the device name; `GYRO+ACCEL` for a split IMU), `xsens:PORT[:BAUD]` or `sim[:DIR]`.
         #[arg(long)]
         source: ImuSource,
         /// IMU id.

@@ -347,3 +347,111 @@ fn iio_driver_on_a_fake_device_tree() {
     drop((sub, hsub, node));
     env.finish();
 }
+
+/// A split IMU: the gyroscope and the accelerometer as two devices with a buffer each (as
+/// `inv_icm42600` and `st_lsm6dsx` register them), joined by the driver by kernel stamp.
+#[test]
+fn a_split_imu_is_joined_by_stamp() {
+    let mut env = TestEnv::new("iiosplit");
+    let sys = env.dir.join("sys");
+    let dev_root = env.dir.join("dev");
+    std::fs::create_dir_all(&dev_root).unwrap();
+    for (n, name, kind) in [(1, "fake-gyro", "anglvel"), (2, "fake-accel", "accel")] {
+        let dev = sys.join(format!("iio:device{n}"));
+        write(&dev.join("name"), name);
+        write(&dev.join("sampling_frequency"), "200");
+        write(&dev.join("current_timestamp_clock"), "realtime");
+        write(
+            &dev.join(format!("in_{kind}_scale")),
+            if kind == "accel" { "0.01" } else { "0.001" },
+        );
+        write(&dev.join("in_temp_scale"), "1000");
+        write(&dev.join("buffer/enable"), "0");
+        write(&dev.join("buffer/length"), "1");
+        let se = dev.join("scan_elements");
+        let chans = [
+            (format!("{kind}_x"), 0),
+            (format!("{kind}_y"), 1),
+            (format!("{kind}_z"), 2),
+            ("temp".to_string(), 3),
+            ("timestamp".to_string(), 4),
+        ];
+        for (ch, index) in chans {
+            let ty = if ch == "timestamp" {
+                "le:s64/64>>0"
+            } else {
+                "le:s16/16>>0"
+            };
+            write(&se.join(format!("in_{ch}_en")), "0");
+            write(&se.join(format!("in_{ch}_index")), &index.to_string());
+            write(&se.join(format!("in_{ch}_type")), ty);
+        }
+        mkfifo(&dev_root.join(format!("iio:device{n}")));
+    }
+    let node = env.node("observer");
+    let sub = node.subscriber::<ImuSample>(&services::imu_sample("5")).unwrap();
+    let hsub = node.subscriber::<Health>(&services::health("imu-5")).unwrap();
+    env.spawn(
+        "imu",
+        &[
+            "imu",
+            "--source",
+            "iio:fake-gyro+fake-accel",
+            "--id",
+            "5",
+            "--sysfs-root",
+            &sys.display().to_string(),
+            "--dev-root",
+            &dev_root.display().to_string(),
+            "--axes",
+            "x,y,z",
+        ],
+    );
+    let mut wg = open_writer(&dev_root.join("iio:device1"));
+    let mut wa = open_writer(&dev_root.join("iio:device2"));
+    // Records: three s16 values, s16 temperature, padding to 8, s64 stamp.
+    let rec = |v: [i16; 3], temp: i16, ts: i64| {
+        let mut r = [0u8; 16];
+        for (k, x) in v.iter().enumerate() {
+            r[2 * k..2 * k + 2].copy_from_slice(&x.to_le_bytes());
+        }
+        r[6..8].copy_from_slice(&temp.to_le_bytes());
+        r[8..16].copy_from_slice(&ts.to_le_bytes());
+        r
+    };
+    let t0_ns = navsync_shared::time::monotonic_now_ns() - 5_000_000_000;
+    let mut gyro_bytes = Vec::new();
+    let mut accel_bytes = Vec::new();
+    for k in 0..20i64 {
+        let ts = t0_ns + k * PERIOD_NS;
+        gyro_bytes.extend_from_slice(&rec([k as i16, 2, 3], 25, ts));
+        // The accelerometer's record 7 is lost; its stamps lag the gyroscope's by 30 µs.
+        if k != 7 {
+            accel_bytes.extend_from_slice(&rec([100 + k as i16, -200, -981], 26, ts + 30_000));
+        }
+    }
+    wg.write_all(&gyro_bytes).unwrap();
+    wa.write_all(&accel_bytes).unwrap();
+    let mut got = Vec::new();
+    collect(&sub, 19, &mut got);
+    assert_eq!(got.len(), 19, "{}", env.log("imu"));
+    let ks: Vec<i64> = (0..20).filter(|k| *k != 7).collect();
+    for (s, k) in got.iter().zip(ks) {
+        assert_eq!(s.stamp.host_ns, t0_ns + k * PERIOD_NS, "the gyroscope's stamp");
+        assert_eq!(s.stamp.seq, k as u64);
+        assert_eq!(s.stamp.source(), StampSource::KernelEvent);
+        assert!((s.gyro_rps[0] - 0.001 * k as f64).abs() < 1e-12);
+        assert!((s.accel_mps2[0] - 0.01 * (100 + k) as f64).abs() < 1e-12);
+        assert!((s.accel_mps2[2] + 9.81).abs() < 1e-12);
+        assert_eq!(s.temperature_c, 25.0, "the gyroscope's temperature");
+    }
+    let mut latest = None;
+    assert_eq!(counter(&hsub, &mut latest, "iio_pairs", 19), 19);
+    assert_eq!(counter(&hsub, &mut latest, "samples_dropped", 1), 1);
+    assert!(counter(&hsub, &mut latest, "iio_unpaired", 1) >= 1);
+    for n in [1, 2] {
+        assert_eq!(read(&sys.join(format!("iio:device{n}/buffer/enable"))), "1");
+    }
+    drop((wg, wa, sub, hsub, node));
+    env.finish();
+}

@@ -73,6 +73,14 @@ pub enum IioError {
         /// Which channel.
         source: MissingChannel,
     },
+    /// The devices' channels do not make one IMU.
+    #[error("{}: {what}", dir.display())]
+    Layout {
+        /// The (first) device directory.
+        dir: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
     /// The kernel kept another time-stamp clock.
     #[error("{}: the kernel time stamps use `{clock}`, not `monotonic` (writing it failed); they would not be CLOCK_MONOTONIC", path.display())]
     Clock {

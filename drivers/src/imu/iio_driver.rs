@@ -1,15 +1,21 @@
-//! `navsync imu --source iio:DEVICE`: the process shell around an IIO buffered device.
+//! `navsync imu --source iio:DEVICE[+DEVICE]`: the process shell around IIO buffered devices.
 //!
 //! set up through sysfs ([`iio_device::configure`]) → read whole records from the character
-//! device (poll, non-blocking read, partial records carried over) → decode
-//! ([`RecordDecoder`], pure) → axis map → checks and publish ([`SampleOutput`]).
+//! devices (poll, non-blocking reads, partial records carried over) → decode
+//! ([`RecordDecoder`], pure) → for a split IMU, join gyroscope and accelerometer records by
+//! stamp ([`Pairer`], pure) → axis map → checks and publish ([`SampleOutput`]).
+//!
+//! One device must carry both angular rate and acceleration (ADIS164xx, BMI160/270,
+//! `inv_mpu6050`); a chip whose kernel driver registers two devices (`inv_icm42600`,
+//! `st_lsm6dsx`, BMI088) is given as both, `iio:icm42600-gyro+icm42600-accel`, one with the
+//! gyroscope and one with the accelerometer.
 //!
 //! Stamps: the kernel's per-record `timestamp` channel (`current_timestamp_clock` =
 //! `monotonic`, so it is `CLOCK_MONOTONIC`; taken by the driver at the data-ready interrupt or
-//! FIFO read) as `StampSource::KernelEvent`. Without a timestamp channel the read time is
-//! used (`Receipt`, later records of one read back-dated by the nominal period). A record
-//! whose stamp lies after the read that returned it, or more than a minute before, is corrupt
-//! and dropped (`iio_bad_stamps`).
+//! FIFO read) as `StampSource::KernelEvent`. Without a timestamp channel (single device only)
+//! the read time is used (`Receipt`, later records of one read back-dated by the nominal
+//! period). A record whose stamp lies after the read that returned it, or more than a minute
+//! before, is corrupt and dropped (`iio_bad_stamps`).
 //! Sequence numbers come from the stamps: a step of n nominal periods means n − 1 lost
 //! records (IIO has no sample counter; the kernel drops the oldest records when the buffer
 //! overflows).
@@ -30,7 +36,9 @@ use navsync_shared::time::monotonic_now_ns;
 use tracing::{info, warn};
 
 use super::axes::AxisMap;
-use super::iio_device::{self, IioDevice, IioSetup};
+use super::iio_device::{self, IioDevice, IioError, IioSetup};
+use super::iio_pair::{Half, Pairer};
+use super::iio_record::ImuRecord;
 use super::output::{Extras, SampleOutput};
 use super::sample_checks::{Candidate, Sequence};
 
@@ -42,12 +50,14 @@ const MAX_RECORD: usize = 256;
 const STAMP_FUTURE_NS: i64 = 1_000_000;
 /// How old a kernel stamp may be when read (a full buffer at a low rate), ns.
 const STAMP_MAX_AGE_NS: i64 = 60_000_000_000;
+/// Pairing tolerance when the sampling frequency is not known, ns.
+const DEFAULT_PAIR_TOL_NS: i64 = 1_000_000;
 
 /// Settings of the IIO driver.
 #[derive(Debug, Clone)]
 pub struct IioArgs {
-    /// Device: `iio:deviceN`, `N` or its name.
-    pub device: String,
+    /// One device (`iio:deviceN`, `N` or its name), or two: the halves of a split IMU.
+    pub devices: Vec<String>,
     /// sysfs directory of IIO devices.
     pub sysfs_root: PathBuf,
     /// Directory of the character devices.
@@ -67,10 +77,12 @@ struct Counters {
     records: u64,
     short_reads: u64,
     bad_stamps: u64,
+    pairs: u64,
+    unpaired: u64,
 }
 
 impl Counters {
-    fn named(&self) -> [(&'static str, u64); 6] {
+    fn named(&self) -> [(&'static str, u64); 8] {
         [
             ("device_opens", self.opens),
             ("device_open_failures", self.open_failures),
@@ -78,7 +90,100 @@ impl Counters {
             ("iio_records", self.records),
             ("iio_short_reads", self.short_reads),
             ("iio_bad_stamps", self.bad_stamps),
+            ("iio_pairs", self.pairs),
+            ("iio_unpaired", self.unpaired),
         ]
+    }
+}
+
+/// One opened device and its read buffer.
+struct Stream {
+    dev: IioDevice,
+    file: File,
+    buf: Box<[u8; RECORDS_PER_READ * MAX_RECORD]>,
+    have: usize,
+}
+
+/// Sets up and opens every device; on failure, what was set up is disabled again.
+fn open_all(args: &IioArgs) -> Result<Vec<Stream>, IioError> {
+    let mut streams: Vec<Stream> = Vec::with_capacity(args.devices.len());
+    let result = (|| {
+        for name in &args.devices {
+            let dir = iio_device::resolve(&args.sysfs_root, name)?;
+            let dev = iio_device::configure(&dir, &args.dev_root, &args.setup)?;
+            let file = std::fs::OpenOptions::new()
+                .read(true)
+                .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC)
+                .open(&dev.dev_node);
+            let file = match file {
+                Ok(f) => f,
+                Err(source) => {
+                    // Set up but not readable: do not leave it capturing into a full buffer.
+                    iio_device::disable(&dev.dir);
+                    return Err(IioError::Io {
+                        path: dev.dev_node.clone(),
+                        source,
+                    });
+                }
+            };
+            streams.push(Stream {
+                dev,
+                file,
+                buf: Box::new([0; RECORDS_PER_READ * MAX_RECORD]),
+                have: 0,
+            });
+        }
+        check_roles(&streams)
+    })();
+    if let Err(e) = result {
+        for s in &streams {
+            iio_device::disable(&s.dev.dir);
+        }
+        return Err(e);
+    }
+    Ok(streams)
+}
+
+/// One device with both triads, or two with one triad each, all with usable records.
+fn check_roles(streams: &[Stream]) -> Result<(), IioError> {
+    let bad = |what: String| {
+        Err(IioError::Layout {
+            dir: streams[0].dev.dir.clone(),
+            what,
+        })
+    };
+    for s in streams {
+        let rec = s.dev.decoder.record_bytes();
+        if rec == 0 || rec > MAX_RECORD {
+            return bad(format!("{}: records of {rec} bytes", s.dev.dir.display()));
+        }
+    }
+    match streams {
+        [one] if one.dev.decoder.has_gyro() && one.dev.decoder.has_accel() => Ok(()),
+        [one] => bad(format!(
+            "{} has only {}; give its other half too (`iio:GYRO+ACCEL`)",
+            one.dev.dir.display(),
+            if one.dev.decoder.has_gyro() {
+                "a gyroscope"
+            } else {
+                "an accelerometer"
+            }
+        )),
+        [a, b] => {
+            let (da, db) = (&a.dev.decoder, &b.dev.decoder);
+            if !(da.has_timestamp() && db.has_timestamp()) {
+                return bad("both halves of a split IMU need their timestamp channel".into());
+            }
+            if da.has_gyro() != db.has_gyro() && da.has_accel() != db.has_accel() && da.has_gyro() != da.has_accel() {
+                Ok(())
+            } else {
+                bad("of two devices, one must have only the gyroscope and the other only the accelerometer".into())
+            }
+        }
+        _ => bad(format!(
+            "{} devices: expected one, or two halves of one IMU",
+            streams.len()
+        )),
     }
 }
 
@@ -87,20 +192,10 @@ pub fn run(node: &IpcNode, args: &IioArgs, out: &mut SampleOutput) {
     let mut c = Counters::default();
     let mut backoff = Duration::from_millis(100);
     let mut last_error = String::new();
-    let mut configured: Option<PathBuf> = None;
+    let mut configured: Vec<PathBuf> = Vec::new();
     while !node.termination_requested() {
-        let dev = iio_device::resolve(&args.sysfs_root, &args.device)
-            .and_then(|dir| iio_device::configure(&dir, &args.dev_root, &args.setup))
-            .and_then(|d| match open(&d) {
-                Ok(f) => Ok((d, f)),
-                Err(e) => {
-                    // Set up but not readable: do not leave it capturing into a full buffer.
-                    iio_device::disable(&d.dir);
-                    Err(e)
-                }
-            });
-        let (dev, file) = match dev {
-            Ok(x) => x,
+        let mut streams = match open_all(args) {
+            Ok(s) => s,
             Err(e) => {
                 c.open_failures += 1;
                 let msg = e.to_string();
@@ -121,21 +216,26 @@ pub fn run(node: &IpcNode, args: &IioArgs, out: &mut SampleOutput) {
             info!("device is back");
         }
         last_error.clear();
-        info!(
-            device = %dev.dir.display(),
-            name = %dev.name,
-            rate_hz = dev.sampling_hz.unwrap_or(f64::NAN),
-            record_bytes = dev.decoder.record_bytes(),
-            timestamps = dev.decoder.has_timestamp(),
-            "capturing"
-        );
-        if !dev.decoder.has_timestamp() {
-            warn!("the device has no timestamp channel: samples are stamped when read (ms-level)");
+        for s in &streams {
+            info!(
+                device = %s.dev.dir.display(),
+                name = %s.dev.name,
+                rate_hz = s.dev.sampling_hz.unwrap_or(f64::NAN),
+                record_bytes = s.dev.decoder.record_bytes(),
+                timestamps = s.dev.decoder.has_timestamp(),
+                "capturing"
+            );
+            if !s.dev.decoder.has_timestamp() {
+                warn!("the device has no timestamp channel: samples are stamped when read (ms-level)");
+            }
         }
-        out.set_nominal_dt_s(dev.sampling_hz.map(|f| 1.0 / f));
-        configured = Some(dev.dir.clone());
-        let got_data = capture(node, &dev, file, args, out, &mut c);
-        iio_device::disable(&dev.dir);
+        let sampling_hz = streams.iter().find_map(|s| s.dev.sampling_hz);
+        out.set_nominal_dt_s(sampling_hz.map(|f| 1.0 / f));
+        configured = streams.iter().map(|s| s.dev.dir.clone()).collect();
+        let got_data = capture(node, &mut streams, sampling_hz, args.axes, out, &mut c);
+        for s in &streams {
+            iio_device::disable(&s.dev.dir);
+        }
         if node.termination_requested() {
             break;
         }
@@ -149,119 +249,147 @@ pub fn run(node: &IpcNode, args: &IioArgs, out: &mut SampleOutput) {
         }
         backoff = (backoff * 2).min(Duration::from_secs(5));
     }
-    if let Some(dir) = configured {
-        iio_device::disable(&dir);
+    for dir in &configured {
+        iio_device::disable(dir);
     }
     out.tick(c.named());
 }
 
-fn open(dev: &IioDevice) -> Result<File, iio_device::IioError> {
-    std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC)
-        .open(&dev.dev_node)
-        .map_err(|source| iio_device::IioError::Io {
-            path: dev.dev_node.clone(),
-            source,
-        })
-}
-
-/// Waits up to `timeout` for the descriptor to become readable (or hung up).
-fn wait_readable(file: &File, timeout: Duration) -> bool {
-    let mut pfd = libc::pollfd {
-        fd: file.as_raw_fd(),
+/// Waits up to `timeout` for any of the streams to become readable (or hang up); returns a
+/// bit set of the ready ones.
+fn wait_readable(streams: &[Stream], timeout: Duration) -> u32 {
+    let mut pfds = [libc::pollfd {
+        fd: -1,
         events: libc::POLLIN,
         revents: 0,
-    };
-    // SAFETY: one valid pollfd for the duration of the call.
-    let n = unsafe { libc::poll(&mut pfd, 1, timeout.as_millis() as libc::c_int) };
-    n > 0 && pfd.revents != 0
+    }; 2];
+    for (p, s) in pfds.iter_mut().zip(streams) {
+        p.fd = s.file.as_raw_fd();
+    }
+    let n = streams.len().min(2);
+    // SAFETY: `n` valid pollfds for the duration of the call.
+    let rc = unsafe { libc::poll(pfds.as_mut_ptr(), n as libc::nfds_t, timeout.as_millis() as libc::c_int) };
+    if rc <= 0 {
+        return 0;
+    }
+    pfds[..n]
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.revents != 0)
+        .fold(0, |m, (i, _)| m | 1 << i)
 }
 
-/// Reads and publishes until the device goes away or termination is requested; returns
+/// Reads and publishes until a device goes away or termination is requested; returns
 /// whether any record arrived.
 fn capture(
     node: &IpcNode,
-    dev: &IioDevice,
-    mut file: File,
-    args: &IioArgs,
+    streams: &mut [Stream],
+    sampling_hz: Option<f64>,
+    axes: AxisMap,
     out: &mut SampleOutput,
     c: &mut Counters,
 ) -> bool {
-    let rec = dev.decoder.record_bytes();
-    if rec == 0 || rec > MAX_RECORD {
-        warn!(record_bytes = rec, "unusable record size");
-        return false;
-    }
-    let period_ns = dev.sampling_hz.map(|f| (1e9 / f).round() as i64).filter(|p| *p > 0);
+    let period_ns = sampling_hz.map(|f| (1e9 / f).round() as i64).filter(|p| *p > 0);
     let sequence = period_ns.map_or(Sequence::Consecutive, |period_ns| Sequence::Period { period_ns });
-    let mut buf = [0u8; RECORDS_PER_READ * MAX_RECORD];
-    let cap = RECORDS_PER_READ * rec;
-    let mut have = 0usize;
+    let mut pairer = Pairer::new(period_ns.map_or(DEFAULT_PAIR_TOL_NS, |p| p / 2));
     let mut got = false;
-    loop {
-        if node.termination_requested() {
-            return got;
-        }
-        out.tick(c.named());
-        if !wait_readable(&file, Duration::from_millis(100)) {
-            continue;
-        }
-        let n = match file.read(&mut buf[have..cap]) {
-            Ok(0) => {
-                info!("end of data from {}: the device went away", dev.dev_node.display());
-                return got;
-            }
-            Ok(n) => n,
-            Err(e) if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::Interrupted => continue,
-            Err(e) => {
-                warn!("reading {}: {e}; reopening", dev.dev_node.display());
-                return got;
-            }
+    let publish = |out: &mut SampleOutput, host_ns: i64, source, gyro, accel, temperature_c, saturated| {
+        let candidate = Candidate {
+            host_ns,
+            device: None,
+            sequence,
+            gyro_rps: axes.apply(gyro),
+            accel_mps2: axes.apply(accel),
         };
-        let read_ns = monotonic_now_ns();
-        got = true;
-        have += n;
-        let whole = have / rec;
-        if !have.is_multiple_of(rec) {
-            c.short_reads += 1;
+        let _ = out.offer(
+            &candidate,
+            &Extras {
+                source,
+                temperature_c,
+                saturated,
+                dt_s: None,
+            },
+        );
+    };
+    'capture: loop {
+        if node.termination_requested() {
+            break;
         }
-        for k in 0..whole {
-            let r = dev.decoder.decode(&buf[k * rec..(k + 1) * rec]);
-            c.records += 1;
-            let (host_ns, source) = match r.timestamp_ns {
-                // A kernel stamp is taken before the read returns, and a record does not wait
-                // in the buffer for minutes: anything else is a corrupt record.
-                Some(t)
-                    if t > read_ns.saturating_add(STAMP_FUTURE_NS) || t < read_ns.saturating_sub(STAMP_MAX_AGE_NS) =>
-                {
-                    c.bad_stamps += 1;
-                    continue;
+        let pc = pairer.counters();
+        c.pairs = pc.pairs;
+        c.unpaired = pc.unpaired_gyro + pc.unpaired_accel;
+        out.tick(c.named());
+        let ready = wait_readable(streams, Duration::from_millis(100));
+        for (i, s) in streams.iter_mut().enumerate() {
+            if ready & (1 << i) == 0 {
+                continue;
+            }
+            let rec = s.dev.decoder.record_bytes();
+            let cap = RECORDS_PER_READ * rec;
+            let n = match s.file.read(&mut s.buf[s.have..cap]) {
+                Ok(0) => {
+                    info!("end of data from {}: the device went away", s.dev.dev_node.display());
+                    break 'capture;
                 }
-                Some(t) => (t, StampSource::KernelEvent),
-                None => {
-                    let back = (whole - 1 - k) as i64 * period_ns.unwrap_or(0);
-                    (read_ns - back, StampSource::Receipt)
+                Ok(n) => n,
+                Err(e) if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    warn!("reading {}: {e}; reopening", s.dev.dev_node.display());
+                    break 'capture;
                 }
             };
-            let candidate = Candidate {
-                host_ns,
-                device: None,
-                sequence,
-                gyro_rps: args.axes.apply(r.gyro_rps),
-                accel_mps2: args.axes.apply(r.accel_mps2),
-            };
-            let _ = out.offer(
-                &candidate,
-                &Extras {
-                    source,
+            let read_ns = monotonic_now_ns();
+            got = true;
+            s.have += n;
+            let whole = s.have / rec;
+            if !s.have.is_multiple_of(rec) {
+                c.short_reads += 1;
+            }
+            for k in 0..whole {
+                let r: ImuRecord = s.dev.decoder.decode(&s.buf[k * rec..(k + 1) * rec]);
+                c.records += 1;
+                let (host_ns, source) = match r.timestamp_ns {
+                    // A kernel stamp is taken before the read returns, and a record does not
+                    // wait in the buffer for minutes: anything else is a corrupt record.
+                    Some(t)
+                        if t > read_ns.saturating_add(STAMP_FUTURE_NS)
+                            || t < read_ns.saturating_sub(STAMP_MAX_AGE_NS) =>
+                    {
+                        c.bad_stamps += 1;
+                        continue;
+                    }
+                    Some(t) => (t, StampSource::KernelEvent),
+                    None => {
+                        let back = (whole - 1 - k) as i64 * period_ns.unwrap_or(0);
+                        (read_ns - back, StampSource::Receipt)
+                    }
+                };
+                let half = |v| Half {
+                    ts: host_ns,
+                    v,
                     temperature_c: r.temperature_c,
-                    saturated: r.at_full_scale,
-                    dt_s: None,
-                },
-            );
+                    at_full_scale: r.at_full_scale,
+                };
+                let pair = match (r.gyro_rps, r.accel_mps2) {
+                    (Some(g), Some(a)) => {
+                        publish(out, host_ns, source, g, a, r.temperature_c, r.at_full_scale);
+                        None
+                    }
+                    (Some(g), None) => pairer.push_gyro(half(g)),
+                    (None, Some(a)) => pairer.push_accel(half(a)),
+                    (None, None) => None,
+                };
+                if let Some(p) = pair {
+                    publish(out, p.ts, source, p.gyro, p.accel, p.temperature_c, p.at_full_scale);
+                }
+            }
+            s.buf.copy_within(whole * rec..s.have, 0);
+            s.have -= whole * rec;
         }
-        buf.copy_within(whole * rec..have, 0);
-        have -= whole * rec;
     }
+    pairer.clear();
+    let pc = pairer.counters();
+    c.pairs = pc.pairs;
+    c.unpaired = pc.unpaired_gyro + pc.unpaired_accel;
+    got
 }

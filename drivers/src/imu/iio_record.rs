@@ -159,10 +159,10 @@ impl Conversion {
 /// A record converted to physical values, in the device's axes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ImuRecord {
-    /// Angular rate, rad/s.
-    pub gyro_rps: [f64; 3],
-    /// Acceleration, m/s².
-    pub accel_mps2: [f64; 3],
+    /// Angular rate, rad/s (`None` when the device has no gyroscope channels).
+    pub gyro_rps: Option<[f64; 3]>,
+    /// Acceleration, m/s² (`None` when the device has no accelerometer channels).
+    pub accel_mps2: Option<[f64; 3]>,
     /// Temperature, °C (NaN without a temperature channel).
     pub temperature_c: f64,
     /// The kernel time stamp, ns (`None` without a timestamp channel).
@@ -173,44 +173,51 @@ pub struct ImuRecord {
 
 /// A channel the driver needs is not enabled in the layout.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("channel `in_{0}` is not in the scan (an IMU needs anglvel_x/y/z and accel_x/y/z)")]
+#[error("channel `in_{0}` is not in the scan (an IMU device needs anglvel_x/y/z and/or accel_x/y/z)")]
 pub struct MissingChannel(pub String);
+
+type Triad = [(Slot, Conversion); 3];
 
 /// Decodes records of one layout.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecordDecoder {
     record_bytes: usize,
-    gyro: [(Slot, Conversion); 3],
-    accel: [(Slot, Conversion); 3],
+    gyro: Option<Triad>,
+    accel: Option<Triad>,
     temp: Option<(Slot, Conversion)>,
     timestamp: Option<Slot>,
 }
 
 impl RecordDecoder {
     /// A decoder for `layout`; `conversion(name, role)` gives each channel's scale and offset
-    /// (temperature already in °C per LSB).
+    /// (temperature already in °C per LSB). A triad (gyroscope or accelerometer) is used when
+    /// any of its axes is in the scan, and then all three must be; at least one triad must be.
     pub fn new(
         layout: &RecordLayout,
         mut conversion: impl FnMut(&str, Role) -> Conversion,
     ) -> Result<Self, MissingChannel> {
-        let mut find = |name: String, role: Role| -> Result<(Slot, Conversion), MissingChannel> {
-            let slot = layout.slot(&name).ok_or(MissingChannel(name.clone()))?;
-            Ok((slot, conversion(&name, role)))
+        let mut triad = |kind: &str, role: fn(usize) -> Role| -> Result<Option<Triad>, MissingChannel> {
+            let names = ["x", "y", "z"].map(|a| format!("{kind}_{a}"));
+            if names.iter().all(|n| layout.slot(n).is_none()) {
+                return Ok(None);
+            }
+            let mut out = Vec::with_capacity(3);
+            for (i, n) in names.iter().enumerate() {
+                let slot = layout.slot(n).ok_or_else(|| MissingChannel(n.clone()))?;
+                out.push((slot, conversion(n, role(i))));
+            }
+            Ok(Some([out[0], out[1], out[2]]))
         };
-        let gyro = [
-            find("anglvel_x".into(), Role::Gyro(0))?,
-            find("anglvel_y".into(), Role::Gyro(1))?,
-            find("anglvel_z".into(), Role::Gyro(2))?,
-        ];
-        let accel = [
-            find("accel_x".into(), Role::Accel(0))?,
-            find("accel_y".into(), Role::Accel(1))?,
-            find("accel_z".into(), Role::Accel(2))?,
-        ];
-        let temp = match layout.slots.iter().find(|(n, _)| Role::of(n) == Some(Role::Temp)) {
-            Some((n, _)) => Some(find(n.clone(), Role::Temp)?),
-            None => None,
-        };
+        let gyro = triad("anglvel", Role::Gyro)?;
+        let accel = triad("accel", Role::Accel)?;
+        if gyro.is_none() && accel.is_none() {
+            return Err(MissingChannel("anglvel_x".into()));
+        }
+        let temp = layout
+            .slots
+            .iter()
+            .find(|(n, _)| Role::of(n) == Some(Role::Temp))
+            .map(|(n, s)| (*s, conversion(n, Role::Temp)));
         Ok(Self {
             record_bytes: layout.record_bytes,
             gyro,
@@ -230,16 +237,28 @@ impl RecordDecoder {
         self.timestamp.is_some()
     }
 
+    /// True when the records carry angular rate.
+    pub fn has_gyro(&self) -> bool {
+        self.gyro.is_some()
+    }
+
+    /// True when the records carry acceleration.
+    pub fn has_accel(&self) -> bool {
+        self.accel.is_some()
+    }
+
     /// Converts one record (exactly [`record_bytes`](Self::record_bytes) long).
     pub fn decode(&self, record: &[u8]) -> ImuRecord {
         let mut full = false;
-        let mut axis = |(slot, conv): &(Slot, Conversion)| {
-            let raw = read_raw(record, slot, 0);
-            full |= at_full_scale(raw, &slot.ty);
-            conv.apply(raw)
+        let mut triad = |t: &Triad| {
+            t.map(|(slot, conv)| {
+                let raw = read_raw(record, &slot, 0);
+                full |= at_full_scale(raw, &slot.ty);
+                conv.apply(raw)
+            })
         };
-        let gyro_rps = [axis(&self.gyro[0]), axis(&self.gyro[1]), axis(&self.gyro[2])];
-        let accel_mps2 = [axis(&self.accel[0]), axis(&self.accel[1]), axis(&self.accel[2])];
+        let gyro_rps = self.gyro.as_ref().map(&mut triad);
+        let accel_mps2 = self.accel.as_ref().map(&mut triad);
         let temperature_c = self
             .temp
             .as_ref()
@@ -371,22 +390,34 @@ mod tests {
         rec[20..22].copy_from_slice(&(-981i16).to_le_bytes());
         rec[24..32].copy_from_slice(&77_000i64.to_le_bytes());
         let r = d.decode(&rec);
-        assert_eq!(r.gyro_rps[..2], [1.0, -2.0]);
-        assert_eq!(r.accel_mps2, [1.0, -0.5, -9.81]);
+        assert_eq!(r.gyro_rps.unwrap()[..2], [1.0, -2.0]);
+        assert_eq!(r.accel_mps2, Some([1.0, -0.5, -9.81]));
         assert_eq!(r.temperature_c, 25.0);
         assert_eq!(r.timestamp_ns, Some(77_000));
         assert!(r.at_full_scale, "gyro z at i32::MAX");
     }
 
     #[test]
-    fn a_missing_axis_is_named() {
-        let l = layout(&[el("anglvel_x", 0, "le:s16/16>>0")]);
-        let e = RecordDecoder::new(&l, |_, _| Conversion {
+    fn a_missing_axis_is_named_and_one_triad_is_enough() {
+        let unit = |_: &str, _| Conversion {
             scale: 1.0,
             offset: 0.0,
-        })
-        .unwrap_err();
+        };
+        let l = layout(&[el("anglvel_x", 0, "le:s16/16>>0")]);
+        let e = RecordDecoder::new(&l, unit).unwrap_err();
         assert_eq!(e, MissingChannel("anglvel_y".into()));
         assert!(e.to_string().contains("in_anglvel_y"));
+        let e = RecordDecoder::new(&layout(&[el("temp", 0, "le:s16/16>>0")]), unit).unwrap_err();
+        assert!(e.to_string().contains("and/or accel"), "{e}");
+        // An accelerometer-only device (one half of a split IMU).
+        let l = layout(&[
+            el("accel_x", 0, "le:s16/16>>0"),
+            el("accel_y", 1, "le:s16/16>>0"),
+            el("accel_z", 2, "le:s16/16>>0"),
+        ]);
+        let d = RecordDecoder::new(&l, unit).unwrap();
+        assert!(d.has_accel() && !d.has_gyro() && !d.has_timestamp());
+        let r = d.decode(&[1, 0, 2, 0, 3, 0]);
+        assert_eq!((r.gyro_rps, r.accel_mps2), (None, Some([1.0, 2.0, 3.0])));
     }
 }

@@ -3,10 +3,12 @@
 //!
 //! Sources:
 //!
-//! - `iio:DEVICE` — any MEMS IMU with a Linux Industrial I/O driver and a buffer
-//!   (ADIS164xx, BMI160/BMI270, ICM-20xxx via inv_mpu6050, …): set up through sysfs, records
-//!   from `/dev/iio:deviceN`, stamped with the kernel's per-sample timestamp
-//!   ([`iio_driver`], [`iio_device`], [`iio_scan`], [`iio_record`]).
+//! - `iio:DEVICE[+DEVICE]` — any MEMS IMU with a Linux Industrial I/O driver and a buffer
+//!   (ADIS164xx, BMI160/BMI270, ICM-20xxx via inv_mpu6050, …; chips whose driver registers
+//!   the gyroscope and the accelerometer as two devices, such as ICM-42xxx, LSM6DSx or
+//!   BMI088, as `GYRO+ACCEL`): set up through sysfs, records from `/dev/iio:deviceN`, stamped
+//!   with the kernel's per-sample timestamp ([`iio_driver`], [`iio_device`], [`iio_scan`],
+//!   [`iio_record`], [`iio_pair`]).
 //! - `xsens:PORT[:BAUD]` — an Xsens MTi sending MTData2 over a serial port (default
 //!   115200 Bd), stamped on receipt and carrying the device's SampleTimeFine clock
 //!   ([`xsens_driver`], [`xsens_frame`]).
@@ -23,6 +25,7 @@
 pub mod axes;
 pub mod iio_device;
 pub mod iio_driver;
+pub mod iio_pair;
 pub mod iio_record;
 pub mod iio_scan;
 pub mod output;
@@ -55,10 +58,11 @@ pub const IIO_BUFFER_LENGTH: u32 = 512;
 /// Where the samples come from.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum ImuSource {
-    /// A Linux IIO device: `iio:deviceN`, `N`, or its `name`.
+    /// A Linux IIO device (`iio:deviceN`, `N`, or its `name`), or the two devices of a split
+    /// IMU (gyroscope and accelerometer), joined by `+`.
     Iio {
-        /// The device.
-        device: String,
+        /// The device(s).
+        devices: Vec<String>,
     },
     /// An Xsens MTi on a serial port.
     Xsens {
@@ -82,9 +86,13 @@ impl FromStr for ImuSource {
             || format!("`{s}` is not an IMU source: expected `iio:DEVICE`, `xsens:PORT[:BAUD]` or `sim[:DIR]`");
         let (kind, rest) = s.split_once(':').unwrap_or((s, ""));
         match kind {
-            "iio" if !rest.is_empty() => Ok(Self::Iio {
-                device: rest.to_string(),
-            }),
+            "iio" if !rest.is_empty() => {
+                let devices: Vec<String> = rest.split('+').map(str::to_string).collect();
+                if devices.len() > 2 || devices.iter().any(String::is_empty) {
+                    return Err(expected());
+                }
+                Ok(Self::Iio { devices })
+            }
             "xsens" if !rest.is_empty() => {
                 let (port, baud) = match rest.rsplit_once(':') {
                     Some((p, b)) if !p.is_empty() && b.chars().all(|c| c.is_ascii_digit()) => {
@@ -173,10 +181,10 @@ pub fn run(args: &ImuArgs) -> Result<(), ImuError> {
     let mut out = SampleOutput::new(&node, &args.id, &process, limits, args.rate_hz.map(|f| 1.0 / f))?;
     info!(source = ?args.source, axes = %args.axes, "imu driver running");
     match &args.source {
-        ImuSource::Iio { device } => iio_driver::run(
+        ImuSource::Iio { devices } => iio_driver::run(
             &node,
             &iio_driver::IioArgs {
-                device: device.clone(),
+                devices: devices.clone(),
                 sysfs_root: args.sysfs_root.clone(),
                 dev_root: args.dev_root.clone(),
                 setup: IioSetup {
@@ -230,7 +238,13 @@ mod tests {
         assert_eq!(
             "iio:iio:device3".parse::<ImuSource>(),
             Ok(ImuSource::Iio {
-                device: "iio:device3".into()
+                devices: vec!["iio:device3".into()]
+            })
+        );
+        assert_eq!(
+            "iio:icm42600-gyro+icm42600-accel".parse::<ImuSource>(),
+            Ok(ImuSource::Iio {
+                devices: vec!["icm42600-gyro".into(), "icm42600-accel".into()]
             })
         );
         assert_eq!(
