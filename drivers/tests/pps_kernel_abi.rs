@@ -115,8 +115,8 @@ fn rust_definitions_match_linux_pps_h() {
         ("PPS_TSFMT_TSPEC", PPS_TSFMT_TSPEC as u64),
         ("PPS_TIME_INVALID", PPS_TIME_INVALID as u64),
         ("PPS_API_VERS_1", PPS_API_VERS_1 as u64),
-        ("TIOCMIWAIT", libc::TIOCMIWAIT as u64),
-        ("TIOCGICOUNT", libc::TIOCGICOUNT as u64),
+        ("TIOCMIWAIT", libc::TIOCMIWAIT),
+        ("TIOCGICOUNT", libc::TIOCGICOUNT),
     ];
     let mismatches: Vec<String> = rust
         .iter()

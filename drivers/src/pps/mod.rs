@@ -180,7 +180,7 @@ pub fn jitter_to_publish(spec: &SourceSpec, measured: Option<f64>, stated: Optio
 enum Source {
     Kernel(kernel::KernelPps),
     Serial(serial_dcd::SerialDcd),
-    Sim(sim_source::SimSource),
+    Sim(Box<sim_source::SimSource>),
 }
 
 impl Source {
@@ -188,7 +188,7 @@ impl Source {
         Ok(match spec {
             SourceSpec::Kernel(p) => Self::Kernel(kernel::KernelPps::open(p)?),
             SourceSpec::Serial(p, line) => Self::Serial(serial_dcd::SerialDcd::open(p, *line)?),
-            SourceSpec::Sim => Self::Sim(sim_source::SimSource::open(node)?),
+            SourceSpec::Sim => Self::Sim(Box::new(sim_source::SimSource::open(node)?)),
         })
     }
 
