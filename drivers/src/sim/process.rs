@@ -17,6 +17,7 @@ use std::path::PathBuf;
 
 use navsync_shared::health_reporter::HealthReporter;
 use navsync_shared::ipc::{IpcError, IpcNode};
+use navsync_shared::recording::pacing;
 use navsync_shared::samples::{PpsEdge, SimTruth};
 use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns, realtime_now_ns};
@@ -186,22 +187,11 @@ impl LineWriter {
     }
 }
 
-/// Sleeps until `target` host ns; with `spin`, sleeps to 200 µs before and spins the rest
-/// (used for the first byte of an NMEA burst, whose timing the GPS driver measures).
+/// Sleeps until `target` host ns (absolute, [`pacing::sleep_until`]); with `spin`, sleeps to
+/// 200 µs before and spins the rest (used for the first byte of an NMEA burst, whose timing
+/// the GPS driver measures). A signal ends the sleep early; the caller's loop checks.
 fn sleep_until(target: i64, spin: bool) {
-    let spin_ns = if spin { 200_000 } else { 0 };
-    let coarse = target - spin_ns;
-    if coarse > monotonic_now_ns() {
-        let ts = libc::timespec {
-            tv_sec: coarse / NS_PER_S,
-            tv_nsec: coarse % NS_PER_S,
-        };
-        // SAFETY: absolute sleep on CLOCK_MONOTONIC with a valid timespec.
-        unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) };
-    }
-    while monotonic_now_ns() < target {
-        std::hint::spin_loop();
-    }
+    pacing::sleep_until(target, if spin { 200_000 } else { 0 });
 }
 
 /// Runs the simulator in real time until the scenario (or `--duration`) ends or SIGINT/SIGTERM.
