@@ -6,10 +6,11 @@
 //! dynamics). Only states after alignment count. Position errors are NED metres through ECEF
 //! ([`earth::ned_between`]); attitude errors are differences of roll, pitch and yaw wrapped to ±180°.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 
 use navsync_shared::earth;
-use navsync_shared::samples::{NavState, NavStatus, SimTruth};
+use navsync_shared::reflect::str_of;
+use navsync_shared::samples::{ImuSync, MAX_IMUS, NavState, NavStatus, SimTruth};
 use serde::Serialize;
 
 /// Which delay the filter should find: under software sync the fixes are stamped at receipt,
@@ -76,6 +77,12 @@ pub struct Summary {
     pub compared_states: u64,
     /// Horizontal error at the end of each GNSS outage (the last INS-only state), m.
     pub outage_end_h_err_m: Vec<f64>,
+    /// Final estimated IMU offsets Td relative to the reference IMU, s, by IMU id.
+    pub imu_offset_est_s: BTreeMap<String, f64>,
+    /// Their 1-sigma, s.
+    pub imu_offset_std_s: BTreeMap<String, f64>,
+    /// The true offsets, s (empty without truth).
+    pub imu_offset_true_s: BTreeMap<String, f64>,
     /// 1 Hz error series.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub series: Vec<SeriesPoint>,
@@ -100,6 +107,8 @@ pub struct Evaluator {
     true_latency_s: Option<f64>,
     outage_last_err: Option<f64>,
     outage_end_errs: Vec<f64>,
+    last_imu_table: Option<([ImuSync; MAX_IMUS], u8)>,
+    true_imu_offsets: Option<([f64; MAX_IMUS], u8)>,
 }
 
 impl Default for Evaluator {
@@ -121,6 +130,8 @@ impl Default for Evaluator {
             true_latency_s: None,
             outage_last_err: None,
             outage_end_errs: Vec::new(),
+            last_imu_table: None,
+            true_imu_offsets: None,
         }
     }
 }
@@ -142,6 +153,7 @@ impl Evaluator {
     /// Adds a truth sample (in host-time order).
     pub fn add_truth(&mut self, t: &SimTruth) {
         self.true_latency_s = Some(t.gnss_latency_s);
+        self.true_imu_offsets = Some((t.imu_offset_s, t.imu_count));
         self.truth.push_back(*t);
         while self.truth.len() > 2 && self.truth[1].host_ns <= self.pending.front().map_or(t.host_ns, |n| n.host_ns) {
             self.truth.pop_front();
@@ -152,6 +164,7 @@ impl Evaluator {
     /// Adds a navigation state (compared once the truth after it has arrived).
     pub fn add_nav(&mut self, s: &NavState) {
         self.first_ns.get_or_insert(s.host_ns);
+        self.last_imu_table = Some((s.imu, s.imu_count));
         self.last_ns = s.host_ns;
         if s.gnss_delay_s.is_finite() {
             self.last_delay = (s.gnss_delay_s, s.gnss_delay_std_s);
@@ -255,8 +268,32 @@ impl Evaluator {
                 .copied()
                 .chain(self.outage_last_err)
                 .collect(),
+            imu_offset_est_s: self.imu_map(|e| e.offset_s),
+            imu_offset_std_s: self.imu_map(|e| e.offset_std_s),
+            imu_offset_true_s: match (&self.last_imu_table, &self.true_imu_offsets) {
+                (Some((t, n)), Some((truth, m))) => t[..(*n).min(*m) as usize]
+                    .iter()
+                    .zip(truth)
+                    .map(|(e, v)| (str_of(&e.imu_id).to_string(), *v))
+                    .collect(),
+                _ => BTreeMap::new(),
+            },
             series: self.series.clone(),
         }
+    }
+}
+
+impl Evaluator {
+    fn imu_map(&self, f: impl Fn(&ImuSync) -> f64) -> BTreeMap<String, f64> {
+        self.last_imu_table
+            .as_ref()
+            .map(|(t, n)| {
+                t[..*n as usize]
+                    .iter()
+                    .map(|e| (str_of(&e.imu_id).to_string(), f(e)))
+                    .collect()
+            })
+            .unwrap_or_default()
     }
 }
 
@@ -299,6 +336,18 @@ impl Summary {
             s.push_str(&format!(
                 "GNSS outage {}       horizontal error at its end {e:.2} m\n",
                 i + 1
+            ));
+        }
+        for (id, est) in &self.imu_offset_est_s {
+            let sd = self.imu_offset_std_s.get(id).copied().unwrap_or(f64::NAN);
+            let truth = self
+                .imu_offset_true_s
+                .get(id)
+                .map_or("n/a".to_string(), |t| format!("{:.4} ms", t * 1e3));
+            s.push_str(&format!(
+                "IMU {id:<3} offset Td   {:.4} ± {:.4} ms (true {truth})\n",
+                est * 1e3,
+                sd * 1e3
             ));
         }
         if self.estimator_s > 0.0 {

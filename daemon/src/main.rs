@@ -27,9 +27,17 @@ struct Cli {
 
 /// `START:DURATION` in seconds.
 fn parse_outage(s: &str) -> Result<(f64, f64), String> {
-    let (a, b) = s.split_once(':').ok_or_else(|| format!("`{s}`: expected START:DURATION in seconds"))?;
-    let start: f64 = a.trim().parse().map_err(|_| format!("`{a}` is not a start time in seconds"))?;
-    let dur: f64 = b.trim().parse().map_err(|_| format!("`{b}` is not a duration in seconds"))?;
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}`: expected START:DURATION in seconds"))?;
+    let start: f64 = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{a}` is not a start time in seconds"))?;
+    let dur: f64 = b
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{b}` is not a duration in seconds"))?;
     Ok((start, dur))
 }
 

@@ -10,14 +10,19 @@
 //! - [`gnss_fusion`]: GNSS position/velocity aiding with lever arm and the Δ Jacobians.
 //! - [`alignment`]: levelling and GNSS-course heading.
 //! - [`imu_buffer`], [`navigator`]: the fusion horizon (delayed filter + output predictor).
+//! - [`imu_array`], [`imu_offset`], [`fractional_delay`]: several IMUs: online offset estimation,
+//!   Lagrange fractional-delay alignment and fusion into one virtual IMU.
 
 pub mod alignment;
 pub mod clock_model;
 pub mod device_clock;
 pub mod error_state;
 pub mod eskf;
+pub mod fractional_delay;
 pub mod gnss_fusion;
+pub mod imu_array;
 pub mod imu_buffer;
+pub mod imu_offset;
 pub mod latency_stats;
 pub mod mechanization;
 pub mod navigator;

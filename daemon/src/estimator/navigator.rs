@@ -176,7 +176,11 @@ impl Delayed {
         let lever_n = c_bn * cfg.lever_arm_b_m;
         let (rm, rn) = earth::radii(obs.lat_rad);
         // NMEA carries no vertical velocity: a land vehicle's is ~0, with 2 m/s of doubt.
-        let v_d = if obs.vel_ned_mps.z.is_finite() { obs.vel_ned_mps.z } else { 0.0 };
+        let v_d = if obs.vel_ned_mps.z.is_finite() {
+            obs.vel_ned_mps.z
+        } else {
+            0.0
+        };
         let v = if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
             Vector3::new(obs.vel_ned_mps.x, obs.vel_ned_mps.y, v_d)
         } else {
@@ -242,7 +246,11 @@ pub struct Navigator {
     buf: ImuBuffer,
     aligner: Aligner,
     filt: Option<Delayed>,
-    out: Option<(Pva, ImuIncrement)>,
+    /// The present-time state, the last increment and the host time it is for.
+    out: Option<(Pva, ImuIncrement, i64)>,
+    /// Output-stream intervals newer than the newest filter-stream interval.
+    out_tail: ImuBuffer,
+    last_output_ns: Option<i64>,
     out_w: Vector3<f64>,
     out_f: Vector3<f64>,
     pending: [Option<GnssObservation>; 8],
@@ -262,6 +270,8 @@ impl Navigator {
             aligner: Aligner::new(cfg.align),
             filt: None,
             out: None,
+            out_tail: ImuBuffer::default(),
+            last_output_ns: None,
             out_w: Vector3::zeros(),
             out_f: Vector3::zeros(),
             pending: [None; 8],
@@ -316,7 +326,7 @@ impl Navigator {
 
     /// The present output state, if aligned.
     pub fn output(&self) -> Option<&Pva> {
-        self.out.as_ref().map(|(p, _)| p)
+        self.out.as_ref().map(|(p, _, _)| p)
     }
 
     /// Queues a fix for fusion at its epoch (receipt host time `rx_ns` only marks GNSS as alive).
@@ -423,7 +433,8 @@ impl Navigator {
     }
 
     /// Feeds one IMU interval (host time of its end, ns; nominal length, s; average rate and
-    /// specific force in the body frame). Returns true when a present-time state is available.
+    /// specific force in the body frame) to both the filter and the output predictor (single
+    /// IMU). Returns true when a present-time state is available.
     pub fn on_imu(
         &mut self,
         host_ns: i64,
@@ -431,16 +442,29 @@ impl Navigator {
         gyro_rps: Vector3<f64>,
         accel_mps2: Vector3<f64>,
     ) -> bool {
-        let dt_s = match self.last_imu_ns {
+        self.on_filter_imu(host_ns, nominal_dt_s, gyro_rps, accel_mps2);
+        self.on_output_imu(host_ns, nominal_dt_s, gyro_rps, accel_mps2)
+    }
+
+    /// Makes a record of one stream's interval: rejects time going backwards and bridges gaps
+    /// of dropped samples (up to 0.1 s, assuming constant rates).
+    fn record(
+        last: &mut Option<i64>,
+        counters: &mut NavCounters,
+        host_ns: i64,
+        nominal_dt_s: f64,
+        gyro_rps: Vector3<f64>,
+        accel_mps2: Vector3<f64>,
+    ) -> Option<ImuRecord> {
+        let dt_s = match *last {
             Some(prev) if host_ns <= prev => {
-                self.counters.imu_backwards += 1;
-                return self.out.is_some();
+                counters.imu_backwards += 1;
+                return None;
             }
             Some(prev) => {
                 let gap = (host_ns - prev) as f64 * 1e-9;
                 if gap > 1.5 * nominal_dt_s {
-                    // Dropped samples: bridge the gap assuming constant rates (at most 0.1 s).
-                    self.counters.imu_gaps += 1;
+                    counters.imu_gaps += 1;
                     gap.min(0.1)
                 } else {
                     nominal_dt_s
@@ -448,23 +472,41 @@ impl Navigator {
             }
             None => nominal_dt_s,
         };
-        self.last_imu_ns = Some(host_ns);
-        let rec = ImuRecord {
+        *last = Some(host_ns);
+        Some(ImuRecord {
             host_ns,
             dt_s,
             gyro_rps,
             accel_mps2,
+        })
+    }
+
+    /// Feeds one interval of the filter stream (the fused virtual IMU, or the single IMU): it
+    /// enters the fusion horizon and the delayed filter consumes what is older than the horizon.
+    pub fn on_filter_imu(&mut self, host_ns: i64, nominal_dt_s: f64, gyro_rps: Vector3<f64>, accel_mps2: Vector3<f64>) {
+        let Some(rec) = Self::record(
+            &mut self.last_imu_ns,
+            &mut self.counters,
+            host_ns,
+            nominal_dt_s,
+            gyro_rps,
+            accel_mps2,
+        ) else {
+            return;
         };
         if self.filt.is_none() {
             self.aligner.on_imu(&rec);
         }
         self.buf.push(rec);
+        while self.out_tail.front().is_some_and(|r| r.host_ns <= host_ns) {
+            self.out_tail.pop();
+        }
         let horizon_ns = (self.cfg.horizon_s * 1e9) as i64;
         let Some(filt) = &mut self.filt else {
             while self.buf.front().is_some_and(|r| r.host_ns < host_ns - horizon_ns) {
                 self.buf.pop();
             }
-            return false;
+            return;
         };
         let mut corrected = false;
         while let Some(r) = self.buf.front().copied() {
@@ -485,30 +527,68 @@ impl Navigator {
         if corrected {
             self.counters.replays += 1;
             self.replay();
-        } else if let Some((pva, pre)) = &mut self.out {
+        }
+    }
+
+    /// Feeds one interval of the output stream (the reference IMU at the present): advances the
+    /// present-time state by one mechanization step. Returns true when a state is available.
+    pub fn on_output_imu(
+        &mut self,
+        host_ns: i64,
+        nominal_dt_s: f64,
+        gyro_rps: Vector3<f64>,
+        accel_mps2: Vector3<f64>,
+    ) -> bool {
+        let Some(rec) = Self::record(
+            &mut self.last_output_ns,
+            &mut self.counters,
+            host_ns,
+            nominal_dt_s,
+            gyro_rps,
+            accel_mps2,
+        ) else {
+            return self.out.is_some();
+        };
+        if self.last_imu_ns.is_none_or(|f| rec.host_ns > f) {
+            // Newer than the filter stream: the replay after a correction needs it.
+            self.out_tail.push(rec);
+        }
+        let (Some(filt), Some((pva, pre, t))) = (&self.filt, &mut self.out) else {
+            return false;
+        };
+        if rec.host_ns > *t {
             let (w, f) = filt.compensate(&rec);
             let inc = ImuIncrement::from_rates(rec.dt_s, w, f);
             *pva = propagate(pva, pre, &inc);
             *pre = inc;
+            *t = rec.host_ns;
             self.out_w = w;
             self.out_f = f;
         }
         true
     }
 
-    /// Recomputes the output state from the delayed state through the buffered intervals.
+    /// Recomputes the output state from the delayed state through the buffered filter-stream
+    /// intervals, then the output-stream intervals that are newer still.
     fn replay(&mut self) {
         let Some(filt) = &self.filt else { return };
         let mut pva = filt.pva;
         let mut pre = filt.pre;
+        let mut t = filt.t_ns;
         let (mut w, mut f) = (filt.last_w, Vector3::zeros());
-        for r in self.buf.iter() {
+        let newest_filter = self.buf.iter().last().map_or(filt.t_ns, |r| r.host_ns);
+        for r in self
+            .buf
+            .iter()
+            .chain(self.out_tail.iter().filter(|r| r.host_ns > newest_filter))
+        {
             (w, f) = filt.compensate(r);
             let inc = ImuIncrement::from_rates(r.dt_s, w, f);
             pva = propagate(&pva, &pre, &inc);
             pre = inc;
+            t = r.host_ns;
         }
-        self.out = Some((pva, pre));
+        self.out = Some((pva, pre, t));
         self.out_w = w;
         self.out_f = f;
     }
@@ -537,7 +617,7 @@ impl Navigator {
         s.fixes_used = self.counters.fixes_used as u32;
         s.fixes_rejected = self.counters.fixes_rejected as u32;
         s.last_fix_host_ns = self.last_fused_ns;
-        let (Some((pva, _)), Some(filt)) = (&self.out, &self.filt) else {
+        let (Some((pva, _, _)), Some(filt)) = (&self.out, &self.filt) else {
             for v in [
                 &mut s.lat_deg,
                 &mut s.lon_deg,

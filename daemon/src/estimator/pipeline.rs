@@ -13,6 +13,7 @@ use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{GnssFix, ImuSample, NavState, PpsEdge, TimeState, TimeStatus};
 
 use super::gnss_fusion::{self, GnssAccuracy};
+use super::imu_array::{ArrayConfig, ImuArray};
 use super::navigator::{NavConfig, Navigator};
 use super::time_sync::{TimeSync, TimeSyncConfig};
 
@@ -25,8 +26,10 @@ pub struct PipelineConfig {
     pub nav: NavConfig,
     /// Default GNSS accuracy.
     pub gnss: GnssAccuracy,
-    /// Id of the IMU that drives the filter.
+    /// Id of the reference IMU: it defines the array's time grid and drives the output.
     pub reference_imu: String,
+    /// The IMUs (one or an array); `array.reference` is set from `reference_imu`.
+    pub array: ArrayConfig,
     /// Prior of Δ under software sync, s, and its 1-sigma.
     pub software_delay_prior: (f64, f64),
     /// Prior of Δ under hardware sync, s, and its 1-sigma.
@@ -61,6 +64,7 @@ pub struct Pipeline {
     cfg: PipelineConfig,
     time: TimeSync,
     nav: Navigator,
+    array: ImuArray,
     stamping: Option<FixStamping>,
     counters: PipelineCounters,
     nav_seq: u64,
@@ -71,10 +75,18 @@ impl Pipeline {
     pub fn new(cfg: PipelineConfig) -> Self {
         let time = TimeSync::new(cfg.time);
         let nav = Navigator::new(cfg.nav);
+        let mut array_cfg = cfg.array.clone();
+        array_cfg.reference = array_cfg
+            .units
+            .iter()
+            .position(|u| u.id == cfg.reference_imu)
+            .unwrap_or(0);
+        let array = ImuArray::new(array_cfg);
         Self {
             cfg,
             time,
             nav,
+            array,
             stamping: None,
             counters: PipelineCounters::default(),
             nav_seq: 0,
@@ -136,21 +148,37 @@ impl Pipeline {
     }
 
     /// Feeds an IMU sample; returns the navigation state for it when it is the reference IMU.
+    /// Feeds an IMU sample of any IMU of the array. The array aligns and fuses the IMUs into the
+    /// virtual IMU that drives the delayed filter; a sample of the reference IMU also advances
+    /// the present-time output, and its navigation state is returned.
     pub fn on_imu(&mut self, s: &ImuSample) -> Option<NavState> {
-        if navsync_shared::reflect::str_of(&s.imu_id) != self.cfg.reference_imu {
+        let id = navsync_shared::reflect::str_of(&s.imu_id);
+        let Some(index) = self.array.index_of(id) else {
             self.counters.imu_other += 1;
             return None;
-        }
-        let g = Vector3::from(s.gyro_rps);
-        let a = Vector3::from(s.accel_mps2);
-        if !(g.iter().chain(a.iter()).all(|v| v.is_finite()) && s.dt_s > 0.0 && s.dt_s < 1.0) {
+        };
+        let nav = &mut self.nav;
+        let accepted = self.array.push(index, s, &mut |v| {
+            nav.on_filter_imu(v.host_ns, v.dt_s, v.gyro_rps, v.accel_mps2)
+        });
+        if !accepted {
             self.counters.imu_invalid += 1;
             return None;
         }
         self.counters.imu_used += 1;
+        if index != self.array.reference() {
+            return None;
+        }
         self.time.tick(s.stamp.host_ns);
-        self.nav.on_imu(s.stamp.host_ns, s.dt_s, g, a);
+        let c = self.array.c_b_s(index);
+        let (g, a) = (c * Vector3::from(s.gyro_rps), c * Vector3::from(s.accel_mps2));
+        self.nav.on_output_imu(s.stamp.host_ns, s.dt_s, g, a);
         Some(self.nav_state(s.stamp.host_ns))
+    }
+
+    /// The IMU array.
+    pub fn array(&self) -> &ImuArray {
+        &self.array
     }
 
     /// The navigation state for host time `now_ns` (the latest IMU sample's).
@@ -161,6 +189,7 @@ impl Pipeline {
         s.seq = self.nav_seq;
         s.utc_ns = self.time.utc_ns_at_host(now_ns).unwrap_or(i64::MIN);
         s.time_status = self.time.status() as u8;
+        (s.imu, s.imu_count) = self.array.table();
         s
     }
 
@@ -168,6 +197,8 @@ impl Pipeline {
     pub fn time_state(&mut self, now_ns: i64) -> TimeState {
         let (d, ds) = self.nav.gnss_delay();
         self.time.set_gnss_delay(d, ds);
-        self.time.time_state(now_ns)
+        let mut t = self.time.time_state(now_ns);
+        (t.imu, t.imu_count) = self.array.table();
+        t
     }
 }

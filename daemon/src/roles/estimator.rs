@@ -22,10 +22,13 @@ use tracing::{info, info_span, warn};
 
 use crate::estimator::error_state::ProcessNoise;
 use crate::estimator::gnss_fusion::GnssAccuracy;
+use crate::estimator::imu_array::{ArrayConfig, UnitConfig};
+use crate::estimator::imu_offset::OffsetConfig;
 use crate::estimator::navigator::NavConfig;
 use crate::estimator::pipeline::{Pipeline, PipelineConfig};
 use crate::estimator::time_sync::TimeSyncConfig;
 use crate::input_order::InputOrder;
+use nalgebra::{Matrix3, Vector3};
 
 /// Command-line settings of the estimator process.
 #[derive(Debug, Clone)]
@@ -62,6 +65,47 @@ impl Default for EstimatorArgs {
 }
 
 impl EstimatorArgs {
+    /// The IMU array: every IMU of `imu_ids` with the IMU class's noise, mounted as the body
+    /// frame at its origin (mountings and lever arms come with the configuration file).
+    pub fn array_config(&self) -> ArrayConfig {
+        let spec = self.imu_model.spec();
+        let (bg, ba) = (spec.gyro.bias_sigma.max(1e-6), spec.accel.bias_sigma.max(1e-5));
+        let gm_rw = |sigma: f64, tau: f64| (2.0 * 2.0 * sigma * sigma / tau).sqrt();
+        ArrayConfig {
+            units: self
+                .imu_ids
+                .iter()
+                .map(|id| UnitConfig {
+                    id: id.clone(),
+                    c_b_s: Matrix3::identity(),
+                    lever_b_m: Vector3::zeros(),
+                    gyro_noise_density: spec.gyro.noise_density.max(1e-7),
+                    accel_noise_density: spec.accel.noise_density.max(1e-6),
+                })
+                .collect(),
+            reference: 0,
+            order: 3,
+            offset: OffsetConfig {
+                td_prior_s: 0.0,
+                td_prior_std_s: 0.1,
+                td_rw: 1e-6,
+                // Relative biases of two IMUs: √2 times one IMU's spread.
+                gyro_bias_std: std::f64::consts::SQRT_2 * bg,
+                accel_bias_std: std::f64::consts::SQRT_2 * ba,
+                gyro_bias_rw: gm_rw(spec.gyro.bias_instability_sigma, spec.gyro.bias_correlation_s).max(1e-9),
+                accel_bias_rw: gm_rw(spec.accel.bias_instability_sigma, spec.accel.bias_correlation_s).max(1e-8),
+                gyro_scale_std: std::f64::consts::SQRT_2 * spec.gyro.scale_factor_sigma.max(1e-5),
+                accel_scale_std: std::f64::consts::SQRT_2 * spec.accel.scale_factor_sigma.max(1e-5),
+                min_information_ratio: 4.0,
+            },
+            admit_td_std_s: 3e-4,
+            stale_after_s: 0.05,
+            disagree_after: 20,
+            agree_after: 400,
+            derivative_half_width: 20,
+        }
+    }
+
     /// The estimator configuration these arguments describe.
     pub fn pipeline_config(&self) -> PipelineConfig {
         let mut noise = ProcessNoise::from_spec(&self.imu_model.spec());
@@ -77,6 +121,7 @@ impl EstimatorArgs {
                 ..GnssAccuracy::default()
             },
             reference_imu: self.imu_ids.first().cloned().unwrap_or_else(|| "0".into()),
+            array: self.array_config(),
             software_delay_prior: (0.5, 0.5),
             hardware_delay_prior: (0.0, 0.02),
         }

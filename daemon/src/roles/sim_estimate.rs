@@ -80,6 +80,8 @@ pub fn run_fast(
 ) -> Result<(), SimEstimateError> {
     let cfg = load_config(sim)?;
     let mut est = est.clone();
+    // Every simulated IMU is fused (ids "0", "1", …; the first is the reference).
+    est.imu_ids = (0..cfg.imu.count).map(|i| i.to_string()).collect();
     if model_from_sim {
         // The filter is told what the simulated devices are: IMU class and receiver velocity noise.
         est.imu_model = cfg.imu.preset;

@@ -1,0 +1,587 @@
+//! An inertial sensor array: several IMUs with unknown, nearly constant stamp offsets relative
+//! to a reference IMU, aligned onto the reference's time grid and fused into one virtual IMU.
+//!
+//! Per sample of the reference IMU (instant τ, the centre of its averaging interval):
+//! 1. every other IMU in the array is interpolated at τ + T̂d_i by an order-N Lagrange
+//!    fractional-delay filter ([`fractional_delay`]) over its own samples (any rate: this is
+//!    also the resampling to the reference rate);
+//! 2. the aligned rates are compared with the reference's: the residuals drive each IMU's
+//!    [`OffsetFilter`] (Td, relative biases), and a persistent disagreement beyond the gate drops
+//!    the IMU from the array;
+//! 3. the aligned, mounting-rotated, lever-arm- and relative-bias-corrected rates are averaged
+//!    with weights 1/σ² (each IMU's white-noise variance per sample): the virtual IMU, which
+//!    has the reference IMU's biases, position and time grid and less noise (σ/√n for n equal
+//!    IMUs).
+//!
+//! Stamps are smoothed per IMU by an α–β tracker of stamp = t₀ + k·T (sample counter k), which
+//! removes the stamp jitter without assuming the nominal rate. An IMU whose samples stop (stale),
+//! saturate, are invalid, disagree or whose offset has not converged is out of the array, with
+//! its reason in the per-IMU table; it is re-admitted when healthy again.
+//!
+//! Fixed memory: every ring buffer is allocated at construction; nothing per sample.
+
+use nalgebra::{Matrix3, SVector, Vector3};
+use navsync_shared::reflect::{fixed_str, str_of};
+use navsync_shared::samples::{IMU_FLAG_SATURATED, ImuSample, ImuSync, ImuSyncReason, MAX_IMUS};
+
+use super::fractional_delay::{MAX_ORDER, lagrange_coefficients, span};
+use super::imu_offset::{OffsetConfig, OffsetFilter, OffsetUpdate};
+
+/// Samples kept per IMU (1.28 s at 200 Hz): more than the largest offset plus the filter span.
+pub const RING: usize = 256;
+
+/// One IMU of the array as configured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UnitConfig {
+    /// IMU id (as in `navsync/imu/{id}/sample`).
+    pub id: String,
+    /// Rotation sensor → body (FRD): x_body = C_b^s · x_sensor.
+    pub c_b_s: Matrix3<f64>,
+    /// Position of the IMU in the body frame, m.
+    pub lever_b_m: Vector3<f64>,
+    /// Gyro white-noise density, rad/s/√Hz (= ARW in rad/√s).
+    pub gyro_noise_density: f64,
+    /// Accelerometer white-noise density, m/s²/√Hz.
+    pub accel_noise_density: f64,
+}
+
+/// Settings of the array.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArrayConfig {
+    /// The IMUs; the one at `reference` defines the time grid.
+    pub units: Vec<UnitConfig>,
+    /// Index of the reference IMU in `units`.
+    pub reference: usize,
+    /// Lagrange filter order N (default 3).
+    pub order: usize,
+    /// Offset filter settings (priors, random walks, observability threshold).
+    pub offset: OffsetConfig,
+    /// An IMU is in the array only once its offset 1-sigma is below this, s.
+    pub admit_td_std_s: f64,
+    /// No sample for this long (plus its own offset) makes an IMU stale, s.
+    pub stale_after_s: f64,
+    /// Consecutive gated comparisons that drop an IMU as disagreeing.
+    pub disagree_after: u32,
+    /// Consecutive accepted comparisons that re-admit a disagreeing IMU.
+    pub agree_after: u32,
+    /// Half-width K of the Savitzky–Golay differentiator of the reference's rates (samples).
+    pub derivative_half_width: usize,
+}
+
+/// One sample of the fused virtual IMU (body frame FRD, reference IMU's position and biases).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VirtualSample {
+    /// Host time of the end of the interval (the reference sample's stamp), ns.
+    pub host_ns: i64,
+    /// Interval length, s.
+    pub dt_s: f64,
+    /// Average angular rate, rad/s.
+    pub gyro_rps: Vector3<f64>,
+    /// Average specific force, m/s².
+    pub accel_mps2: Vector3<f64>,
+    /// IMUs that contributed.
+    pub contributors: u8,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct Entry {
+    seq: u64,
+    /// Smoothed centre time of the averaging interval, ns since the array's epoch.
+    center: f64,
+    end_host_ns: i64,
+    dt_s: f64,
+    gyro: Vector3<f64>,
+    accel: Vector3<f64>,
+    saturated: bool,
+}
+
+/// α–β tracker of stamp = t₀ + k·T.
+#[derive(Debug, Clone, Copy, Default)]
+struct Grid {
+    t: f64,
+    period: f64,
+    seq: u64,
+    init: bool,
+}
+
+impl Grid {
+    const ALPHA: f64 = 0.02;
+    const BETA: f64 = 2e-4;
+
+    /// Smoothed stamp (ns since epoch) of sample `seq` stamped at `stamp`.
+    fn update(&mut self, seq: u64, stamp: f64, nominal_period: f64) -> f64 {
+        if !self.init || seq <= self.seq || seq - self.seq > 1000 {
+            *self = Grid {
+                t: stamp,
+                period: nominal_period,
+                seq,
+                init: true,
+            };
+            return stamp;
+        }
+        let steps = (seq - self.seq) as f64;
+        let predicted = self.t + steps * self.period;
+        let e = stamp - predicted;
+        // Residuals beyond 1/4 period mean a jump (reset), not jitter.
+        if e.abs() > 0.25 * self.period * steps {
+            *self = Grid {
+                t: stamp,
+                period: self.period,
+                seq,
+                init: true,
+            };
+            return stamp;
+        }
+        self.t = predicted + Self::ALPHA * e;
+        self.period += Self::BETA * e / steps;
+        self.seq = seq;
+        self.t
+    }
+}
+
+#[derive(Debug, Clone)]
+struct Unit {
+    cfg: UnitConfig,
+    ring: Box<[Entry]>,
+    head: usize,
+    len: usize,
+    grid: Grid,
+    filter: Option<OffsetFilter>,
+    last_host_ns: Option<i64>,
+    in_array: bool,
+    reason: ImuSyncReason,
+    disagree_run: u32,
+    agree_run: u32,
+    sigma_gyro: f64,
+    sigma_accel: f64,
+}
+
+impl Unit {
+    fn entry(&self, i: usize) -> &Entry {
+        &self.ring[(self.head + i) % RING]
+    }
+
+    fn push(&mut self, e: Entry) {
+        if self.len == RING {
+            self.head = (self.head + 1) % RING;
+            self.len -= 1;
+        }
+        self.ring[(self.head + self.len) % RING] = e;
+        self.len += 1;
+    }
+
+    /// Lagrange interpolation of gyro and accel at centre time `t` (ns since epoch); `None`
+    /// when the span is not available, not contiguous or saturated.
+    fn interpolate(&self, order: usize, t: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        if self.len < order + 1 {
+            return None;
+        }
+        let first = self.entry(0);
+        let period = (self.entry(self.len - 1).center - first.center) / (self.len - 1).max(1) as f64;
+        if period <= 0.0 {
+            return None;
+        }
+        let x = (t - first.center) / period;
+        let (i0, d) = span(order, x, self.len)?;
+        let e0 = self.entry(i0);
+        if self.entry(i0 + order).seq != e0.seq + order as u64 {
+            return None; // a gap inside the span
+        }
+        // Refine the position with the span's own spacing (robust to rate drift along the ring).
+        let local = (self.entry(i0 + order).center - e0.center) / order as f64;
+        let d = if local > 0.0 { (t - e0.center) / local } else { d };
+        let mut h = [0.0; MAX_ORDER + 1];
+        lagrange_coefficients(order, d, &mut h);
+        let (mut g, mut a) = (Vector3::zeros(), Vector3::zeros());
+        for (n, hn) in h.iter().enumerate().take(order + 1) {
+            let e = self.entry(i0 + n);
+            if e.saturated {
+                return None;
+            }
+            g += e.gyro * *hn;
+            a += e.accel * *hn;
+        }
+        Some((g, a))
+    }
+
+    /// Newest centre time, ns since epoch.
+    fn newest_center(&self) -> Option<f64> {
+        (self.len > 0).then(|| self.entry(self.len - 1).center)
+    }
+}
+
+/// First derivative of the reference's rates at ring index `j` by the least-squares slope over
+/// the 2K + 1 samples j−K … j+K (Savitzky & Golay 1964): ẋ_j = Σ m·x_{j+m} / (T·Σ m²),
+/// Σ m² = K(K+1)(2K+1)/3.
+///
+/// Choice of K: a noisy regressor attenuates the offset estimate towards its prior (errors in
+/// variables: the update scales by Σẋ²/(Σẋ² + Σσ_ẋ²)), so the differentiator must keep its
+/// noise well below the signal's rate changes. A band-limited derivative stays unbiased: it
+/// correlates only with the band it passes, and what lies above it merely adds noise to the
+/// residual. K = 20 at 200 Hz (a 0.2 s window, response down by half near 3 Hz) keeps a
+/// consumer gyro's derivative noise near 2e−3 rad/s² and passes manoeuvres and the body modes
+/// of a car; with strong vibration above that band a smaller K extracts more.
+fn savitzky_golay_slope(u: &Unit, j: usize, k: usize) -> (Vector3<f64>, Vector3<f64>) {
+    let (mut sg, mut sa) = (Vector3::zeros(), Vector3::zeros());
+    for m in 1..=k {
+        let (a, b) = (u.entry(j + m), u.entry(j - m));
+        sg += (a.gyro - b.gyro) * m as f64;
+        sa += (a.accel - b.accel) * m as f64;
+    }
+    let kf = k as f64;
+    let t = (u.entry(j + k).center - u.entry(j - k).center) * 1e-9 / (2.0 * kf);
+    let denom = t * kf * (kf + 1.0) * (2.0 * kf + 1.0) / 3.0;
+    (sg / denom, sa / denom)
+}
+
+/// Counters of the array.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ArrayCounters {
+    /// Samples accepted.
+    pub samples: u64,
+    /// Samples with non-finite values or a non-positive interval (rejected).
+    pub invalid: u64,
+    /// Samples older than the previous one of the same IMU (rejected).
+    pub backwards: u64,
+    /// Samples from an id not in the configuration (ignored).
+    pub unknown_id: u64,
+    /// Virtual samples produced.
+    pub virtual_samples: u64,
+    /// Offset comparisons rejected by the gate.
+    pub disagreements: u64,
+}
+
+/// The IMU array.
+#[derive(Debug, Clone)]
+pub struct ImuArray {
+    cfg: ArrayConfig,
+    units: Vec<Unit>,
+    epoch_ns: Option<i64>,
+    next_ref_seq: Option<u64>,
+    latest_host_ns: i64,
+    counters: ArrayCounters,
+}
+
+impl ImuArray {
+    /// An array with nothing received yet.
+    pub fn new(cfg: ArrayConfig) -> Self {
+        let units = cfg
+            .units
+            .iter()
+            .enumerate()
+            .map(|(i, u)| Unit {
+                cfg: u.clone(),
+                ring: vec![Entry::default(); RING].into_boxed_slice(),
+                head: 0,
+                len: 0,
+                grid: Grid::default(),
+                filter: (i != cfg.reference).then(|| OffsetFilter::new(cfg.offset)),
+                last_host_ns: None,
+                in_array: i == cfg.reference,
+                reason: if i == cfg.reference {
+                    ImuSyncReason::InArray
+                } else {
+                    ImuSyncReason::Absent
+                },
+                disagree_run: 0,
+                agree_run: 0,
+                sigma_gyro: 0.0,
+                sigma_accel: 0.0,
+            })
+            .collect();
+        Self {
+            cfg,
+            units,
+            epoch_ns: None,
+            next_ref_seq: None,
+            latest_host_ns: 0,
+            counters: ArrayCounters::default(),
+        }
+    }
+
+    /// Index of the IMU with this id.
+    pub fn index_of(&self, id: &str) -> Option<usize> {
+        self.units.iter().position(|u| u.cfg.id == id)
+    }
+
+    /// Index of the reference IMU.
+    pub fn reference(&self) -> usize {
+        self.cfg.reference
+    }
+
+    /// Counters so far.
+    pub fn counters(&self) -> &ArrayCounters {
+        &self.counters
+    }
+
+    /// Rotation sensor → body of IMU `index`.
+    pub fn c_b_s(&self, index: usize) -> Matrix3<f64> {
+        self.units[index].cfg.c_b_s
+    }
+
+    /// Estimated offset and its 1-sigma of IMU `index`, s (the reference: 0 ± 0).
+    pub fn offset(&self, index: usize) -> (f64, f64) {
+        self.units[index]
+            .filter
+            .as_ref()
+            .map_or((0.0, 0.0), |f| (f.td_s(), f.td_std_s()))
+    }
+
+    /// The per-IMU table for `NavState`/`TimeState`.
+    pub fn table(&self) -> ([ImuSync; MAX_IMUS], u8) {
+        let mut t = [<ImuSync as navsync_shared::reflect::Reflect>::zeroed(); MAX_IMUS];
+        for (slot, u) in t.iter_mut().zip(&self.units) {
+            slot.imu_id = fixed_str(&u.cfg.id);
+            let (td, sd) = u.filter.as_ref().map_or((0.0, 0.0), |f| (f.td_s(), f.td_std_s()));
+            slot.offset_s = td;
+            slot.offset_std_s = sd;
+            slot.in_array = u8::from(u.in_array);
+            slot.reason = u.reason as u8;
+            slot.observable = u.filter.as_ref().map_or(1, |f| u8::from(f.observable()));
+        }
+        (t, self.units.len().min(MAX_IMUS) as u8)
+    }
+
+    /// Feeds one sample (sensor frame) of the IMU with index `index`; calls `out` for every
+    /// virtual sample that becomes complete. Returns false when the sample was rejected.
+    pub fn push(&mut self, index: usize, s: &ImuSample, out: &mut impl FnMut(&VirtualSample)) -> bool {
+        let Some(unit) = self.units.get_mut(index) else {
+            self.counters.unknown_id += 1;
+            return false;
+        };
+        let g = Vector3::from(s.gyro_rps);
+        let a = Vector3::from(s.accel_mps2);
+        if !(g.iter().chain(a.iter()).all(|v| v.is_finite()) && s.dt_s > 0.0 && s.dt_s < 1.0) {
+            self.counters.invalid += 1;
+            return false;
+        }
+        if unit.last_host_ns.is_some_and(|t| s.stamp.host_ns <= t) {
+            self.counters.backwards += 1;
+            return false;
+        }
+        let epoch = *self.epoch_ns.get_or_insert(s.stamp.host_ns);
+        let period_ns = s.dt_s * 1e9;
+        let end = unit
+            .grid
+            .update(s.stamp.seq, (s.stamp.host_ns - epoch) as f64, period_ns);
+        unit.sigma_gyro = unit.cfg.gyro_noise_density / s.dt_s.sqrt();
+        unit.sigma_accel = unit.cfg.accel_noise_density / s.dt_s.sqrt();
+        unit.push(Entry {
+            seq: s.stamp.seq,
+            center: end - period_ns / 2.0,
+            end_host_ns: s.stamp.host_ns,
+            dt_s: s.dt_s,
+            gyro: unit.cfg.c_b_s * g,
+            accel: unit.cfg.c_b_s * a,
+            saturated: s.flags & IMU_FLAG_SATURATED != 0,
+        });
+        unit.last_host_ns = Some(s.stamp.host_ns);
+        if unit.reason == ImuSyncReason::Absent || unit.reason == ImuSyncReason::Stale {
+            unit.reason = if index == self.cfg.reference {
+                ImuSyncReason::InArray
+            } else {
+                ImuSyncReason::Converging
+            };
+            unit.in_array = index == self.cfg.reference;
+        }
+        self.latest_host_ns = self.latest_host_ns.max(s.stamp.host_ns);
+        self.counters.samples += 1;
+        self.emit(out);
+        true
+    }
+
+    fn mark_stale(&mut self) {
+        let stale_ns = (self.cfg.stale_after_s * 1e9) as i64;
+        for u in &mut self.units {
+            let td_ns = u.filter.as_ref().map_or(0.0, |f| f.td_s().max(0.0) * 1e9) as i64;
+            if u.last_host_ns
+                .is_some_and(|t| self.latest_host_ns - t > stale_ns + td_ns)
+            {
+                u.in_array = false;
+                u.reason = ImuSyncReason::Stale;
+            }
+        }
+    }
+
+    fn emit(&mut self, out: &mut impl FnMut(&VirtualSample)) {
+        self.mark_stale();
+        let r = self.cfg.reference;
+        if self.units.len() == 1 {
+            let u = &self.units[r];
+            let e = *u.entry(u.len - 1);
+            self.counters.virtual_samples += 1;
+            out(&VirtualSample {
+                host_ns: e.end_host_ns,
+                dt_s: e.dt_s,
+                gyro_rps: e.gyro,
+                accel_mps2: e.accel,
+                contributors: 1,
+            });
+            return;
+        }
+        loop {
+            let reference = &self.units[r];
+            if reference.len < 3 {
+                return;
+            }
+            let k = self.cfg.derivative_half_width;
+            let first_seq = reference.entry(0).seq;
+            let next = *self.next_ref_seq.get_or_insert(first_seq + k as u64);
+            // Position of instant j in the reference ring; the derivative needs j−K … j+K.
+            if next < first_seq + k as u64 {
+                self.next_ref_seq = Some(first_seq + k as u64);
+                continue;
+            }
+            let j = (next - first_seq) as usize;
+            if j + k >= reference.len {
+                return;
+            }
+            let cur = *reference.entry(j);
+            if reference.entry(j - k).seq + k as u64 != cur.seq || cur.seq + k as u64 != reference.entry(j + k).seq {
+                self.next_ref_seq = Some(next + 1);
+                continue;
+            }
+            let (w_dot, f_dot) = savitzky_golay_slope(reference, j, k);
+            // Wait until every live IMU has the samples its interpolation at τ + T̂d needs.
+            let half_span = (self.cfg.order as f64 / 2.0 + 1.0) * cur.dt_s * 1e9;
+            let waiting = self.units.iter().enumerate().any(|(i, u)| {
+                i != r
+                    && u.reason != ImuSyncReason::Stale
+                    && u.reason != ImuSyncReason::Absent
+                    && u.filter.as_ref().is_some_and(|f| {
+                        u.newest_center()
+                            .is_some_and(|c| c < cur.center + f.td_s() * 1e9 + half_span)
+                    })
+            });
+            if waiting {
+                return;
+            }
+            self.fuse_instant(&cur, &w_dot, &f_dot, out);
+            self.next_ref_seq = Some(next + 1);
+        }
+    }
+
+    fn fuse_instant(
+        &mut self,
+        cur: &Entry,
+        w_dot: &Vector3<f64>,
+        f_dot: &Vector3<f64>,
+        out: &mut impl FnMut(&VirtualSample),
+    ) {
+        let r = self.cfg.reference;
+        let (w_dot, f_dot) = (*w_dot, *f_dot);
+        let w = cur.gyro;
+        let ref_lever = self.units[r].cfg.lever_b_m;
+        let ref_sigma = (self.units[r].sigma_gyro, self.units[r].sigma_accel);
+        // Minimum-variance combination per axis: the reference with its sample variance, every
+        // other IMU converted into the reference's terms by subtracting the predicted residual
+        // (relative bias and scale, alignment error), with its sample variance plus the
+        // variance of that prediction. An IMU whose offset, bias or scale is still uncertain for
+        // the current motion weighs little, so membership changes do not step the output.
+        let inv = |v: f64| 1.0 / v.max(1e-30);
+        let mut wsum = SVector::<f64, 6>::from_fn(|k, _| inv(if k < 3 { ref_sigma.0 } else { ref_sigma.1 }.powi(2)));
+        let mut acc = SVector::<f64, 6>::new(
+            cur.gyro.x,
+            cur.gyro.y,
+            cur.gyro.z,
+            cur.accel.x,
+            cur.accel.y,
+            cur.accel.z,
+        )
+        .component_mul(&wsum);
+        let w_ref = wsum;
+        let mut contributors = 1u8;
+        let order = self.cfg.order;
+        let k = self.cfg.derivative_half_width;
+        let (admit_std, disagree_after, agree_after) =
+            (self.cfg.admit_td_std_s, self.cfg.disagree_after, self.cfg.agree_after);
+        for (i, u) in self.units.iter_mut().enumerate() {
+            if i == r || matches!(u.reason, ImuSyncReason::Stale | ImuSyncReason::Absent) {
+                continue;
+            }
+            let Some(td) = u.filter.as_ref().map(OffsetFilter::td_s) else {
+                continue;
+            };
+            let Some((g_u, a_u)) = u.interpolate(order, cur.center + td * 1e9) else {
+                u.in_array = false;
+                continue;
+            };
+            let Some(f) = u.filter.as_mut() else { continue };
+            // Rigid body: remove the lever-arm specific force, ω̇ × ρ + ω × (ω × ρ), ρ = r_i − r_0.
+            let rho = u.cfg.lever_b_m - ref_lever;
+            let a_u = a_u - (w_dot.cross(&rho) + w.cross(&w.cross(&rho)));
+            f.predict(cur.dt_s);
+            let sg = (u.sigma_gyro.powi(2) + ref_sigma.0.powi(2)).sqrt();
+            let sa = (u.sigma_accel.powi(2) + ref_sigma.1.powi(2)).sqrt();
+            // Noise of the differentiator per axis: σ_ẋ² = σ_0² / (T² Σm²).
+            let sum_m2 = (k * (k + 1) * (2 * k + 1)) as f64 / 3.0;
+            let t2 = cur.dt_s * cur.dt_s * sum_m2;
+            let (wd_var, fd_var) = (ref_sigma.0.powi(2) / t2, ref_sigma.1.powi(2) / t2);
+            match f.update(
+                &(g_u - cur.gyro),
+                &w,
+                &w_dot,
+                sg,
+                &(a_u - cur.accel),
+                &cur.accel,
+                &f_dot,
+                sa,
+                wd_var,
+                fd_var,
+            ) {
+                OffsetUpdate::Accepted(_) => {
+                    u.disagree_run = 0;
+                    u.agree_run += 1;
+                }
+                OffsetUpdate::Rejected(_) => {
+                    u.agree_run = 0;
+                    u.disagree_run += 1;
+                    self.counters.disagreements += 1;
+                }
+            }
+            // Membership: a disagreeing IMU stays out until it agrees again for a while.
+            if u.disagree_run >= disagree_after {
+                u.reason = ImuSyncReason::Disagrees;
+            } else if u.reason != ImuSyncReason::Disagrees || u.agree_run >= agree_after {
+                u.reason = if f.td_std_s() < admit_std {
+                    ImuSyncReason::InArray
+                } else {
+                    ImuSyncReason::Converging
+                };
+            }
+            if u.reason == ImuSyncReason::Disagrees || u.disagree_run > 0 {
+                u.in_array = false;
+                continue;
+            }
+            let (r_hat, var) = f.predicted_residual(&w, &cur.accel, &w_dot, &f_dot);
+            let x_u = SVector::<f64, 6>::new(g_u.x, g_u.y, g_u.z, a_u.x, a_u.y, a_u.z) - r_hat;
+            let wt = SVector::<f64, 6>::from_fn(|c, _| {
+                inv(if c < 3 { u.sigma_gyro } else { u.sigma_accel }.powi(2) + var[c])
+            });
+            acc += x_u.component_mul(&wt);
+            wsum += wt;
+            // In the array when it carries at least a tenth of the reference's weight.
+            u.in_array = (0..6).all(|c| wt[c] >= 0.1 * w_ref[c]);
+            contributors += u8::from(u.in_array);
+        }
+        let fused = acc.component_div(&wsum);
+        self.counters.virtual_samples += 1;
+        out(&VirtualSample {
+            host_ns: cur.end_host_ns,
+            dt_s: cur.dt_s,
+            gyro_rps: Vector3::new(fused[0], fused[1], fused[2]),
+            accel_mps2: Vector3::new(fused[3], fused[4], fused[5]),
+            contributors,
+        });
+    }
+
+    /// Ids of the configured IMUs.
+    pub fn ids(&self) -> impl Iterator<Item = &str> {
+        self.units.iter().map(|u| u.cfg.id.as_str())
+    }
+
+    /// Id of IMU `index` as stored in samples.
+    pub fn id_matches(&self, index: usize, raw: &[u8]) -> bool {
+        self.units.get(index).is_some_and(|u| u.cfg.id == str_of(raw))
+    }
+}
