@@ -212,6 +212,9 @@ enum Cmd {
         /// Estimator: IMU class for the process noise (default: the simulated preset).
         #[arg(long)]
         imu_model: Option<ImuPreset>,
+        /// Estimator: fuse the IMUs without estimating their time offsets (for comparison runs).
+        #[arg(long)]
+        no_imu_offsets: bool,
     },
     /// Runs sim, gps and estimator as child processes with a live status line.
     Demo {
@@ -419,6 +422,7 @@ fn main() -> Result<()> {
                 imu_model,
                 estimate_delay: !no_delay_state,
                 gnss_vel_std_mps,
+                estimate_imu_offsets: true,
             })
             .context("estimator")?;
         }
@@ -445,6 +449,7 @@ fn main() -> Result<()> {
             software_sync,
             no_delay_state,
             imu_model,
+            no_imu_offsets,
         } => {
             let args = SimArgs {
                 scenario,
@@ -471,6 +476,7 @@ fn main() -> Result<()> {
                     software_sync,
                     imu_model: imu_model.unwrap_or(ImuPreset::Industrial),
                     estimate_delay: !no_delay_state,
+                    estimate_imu_offsets: !no_imu_offsets,
                     ..Default::default()
                 };
                 anyhow::ensure!(
@@ -566,6 +572,7 @@ fn main() -> Result<()> {
                     imu_model,
                     estimate_delay: !no_delay_state,
                     gnss_vel_std_mps: gnss_vel_std,
+                    ..Default::default()
                 };
                 roles::replay::run_estimate(&roles::replay::EstimateArgs {
                     input: input.clone(),

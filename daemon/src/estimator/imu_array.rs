@@ -24,7 +24,7 @@ use nalgebra::{Matrix3, SVector, Vector3};
 use navsync_shared::reflect::{fixed_str, str_of};
 use navsync_shared::samples::{IMU_FLAG_SATURATED, ImuSample, ImuSync, ImuSyncReason, MAX_IMUS};
 
-use super::fractional_delay::{MAX_ORDER, lagrange_coefficients, span};
+use super::fractional_delay::{MAX_ORDER, lagrange_coefficients};
 use super::imu_offset::{OffsetConfig, OffsetFilter, OffsetUpdate};
 
 /// Samples kept per IMU (1.28 s at 200 Hz): more than the largest offset plus the filter span.
@@ -171,25 +171,34 @@ impl Unit {
     }
 
     /// Lagrange interpolation of gyro and accel at centre time `t` (ns since epoch); `None`
-    /// when the span is not available, not contiguous or saturated.
+    /// when the span is not available, not contiguous (a gap of dropped samples) or saturated.
     fn interpolate(&self, order: usize, t: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
-        if self.len < order + 1 {
+        if self.len < order + 1 || self.grid.period <= 0.0 {
             return None;
         }
-        let first = self.entry(0);
-        let period = (self.entry(self.len - 1).center - first.center) / (self.len - 1).max(1) as f64;
-        if period <= 0.0 {
+        // Position of t in sample counts, from the newest sample (robust to older gaps).
+        let newest = self.entry(self.len - 1);
+        let x = newest.seq as f64 + (t - newest.center) / self.grid.period;
+        let first_seq = (x - (order as f64 - 1.0) / 2.0).floor();
+        if first_seq < 0.0 || first_seq as u64 + order as u64 > newest.seq {
             return None;
         }
-        let x = (t - first.center) / period;
-        let (i0, d) = span(order, x, self.len)?;
+        let first_seq = first_seq as u64;
+        let back = (newest.seq - first_seq) as usize;
+        if back >= self.len {
+            return None;
+        }
+        let i0 = self.len - 1 - back;
         let e0 = self.entry(i0);
-        if self.entry(i0 + order).seq != e0.seq + order as u64 {
+        if e0.seq != first_seq || self.entry(i0 + order).seq != first_seq + order as u64 {
             return None; // a gap inside the span
         }
-        // Refine the position with the span's own spacing (robust to rate drift along the ring).
+        // Delay within the span from the span's own spacing.
         let local = (self.entry(i0 + order).center - e0.center) / order as f64;
-        let d = if local > 0.0 { (t - e0.center) / local } else { d };
+        if local <= 0.0 {
+            return None;
+        }
+        let d = (t - e0.center) / local;
         let mut h = [0.0; MAX_ORDER + 1];
         lagrange_coefficients(order, d, &mut h);
         let (mut g, mut a) = (Vector3::zeros(), Vector3::zeros());

@@ -47,6 +47,8 @@ pub struct EstimatorArgs {
     pub estimate_delay: bool,
     /// 1-sigma of the receiver's velocity per axis, m/s (NMEA does not report it).
     pub gnss_vel_std_mps: f64,
+    /// Estimate the IMUs' time offsets (else they are taken as zero: an uncompensated array).
+    pub estimate_imu_offsets: bool,
 }
 
 impl Default for EstimatorArgs {
@@ -60,6 +62,7 @@ impl Default for EstimatorArgs {
             imu_model: ImuPreset::Industrial,
             estimate_delay: true,
             gnss_vel_std_mps: GnssAccuracy::default().vel_std_mps,
+            estimate_imu_offsets: true,
         }
     }
 }
@@ -87,8 +90,9 @@ impl EstimatorArgs {
             order: 3,
             offset: OffsetConfig {
                 td_prior_s: 0.0,
-                td_prior_std_s: 0.1,
-                td_rw: 1e-6,
+                // Uncompensated: the offsets are held at zero (a vanishing prior, no random walk).
+                td_prior_std_s: if self.estimate_imu_offsets { 0.1 } else { 1e-12 },
+                td_rw: if self.estimate_imu_offsets { 1e-6 } else { 0.0 },
                 // Relative biases of two IMUs: √2 times one IMU's spread.
                 gyro_bias_std: std::f64::consts::SQRT_2 * bg,
                 accel_bias_std: std::f64::consts::SQRT_2 * ba,
