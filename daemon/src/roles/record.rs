@@ -97,7 +97,8 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
     for p in patterns.iter().filter(|p| p.is_literal()) {
         subscribe(&node, &mut subs, p.as_str())?;
     }
-    discover(&node, &patterns, &mut subs, &mut refused)?;
+    let found = new_services(&patterns, &subs, &refused)?;
+    subscribe_all(&node, &mut subs, &mut refused, found);
     // Messages per subscriber (kept apart: the WaitSet guards borrow the subscribers).
     let mut counts: Vec<u64> = vec![0; subs.len()];
     let mut health = HealthReporter::new(&node, "record")?;
@@ -181,14 +182,17 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
             }
             if now - last_discovery >= ns(DISCOVERY_INTERVAL) {
                 last_discovery = now;
-                let before = subs.len();
-                drop(guards);
-                discover(&node, &patterns, &mut subs, &mut refused)?;
-                for s in &subs[before..] {
-                    rec.channel(s.service())?;
+                let found = new_services(&patterns, &subs, &refused)?;
+                if !found.is_empty() {
+                    drop(guards);
+                    let before = subs.len();
+                    subscribe_all(&node, &mut subs, &mut refused, found);
+                    for s in &subs[before..] {
+                        rec.channel(s.service())?;
+                    }
+                    counts.resize(subs.len(), 0);
+                    break; // rebuild the WaitSet with the new subscribers
                 }
-                counts.resize(subs.len(), 0);
-                break; // rebuild the WaitSet (the guards were dropped)
             }
         }
     }
@@ -224,27 +228,36 @@ fn subscribe(node: &IpcNode, subs: &mut Vec<AnySubscriber>, service: &str) -> Re
     Ok(())
 }
 
-/// Subscribes to the existing services that match a wildcard pattern (once: a service that
-/// refused is not tried again).
-fn discover(
-    node: &IpcNode,
+/// Existing services that match a wildcard pattern and are not subscribed yet (nor refused).
+fn new_services(
     patterns: &[ServiceGlob],
-    subs: &mut Vec<AnySubscriber>,
-    refused: &mut HashSet<String>,
-) -> Result<(), IpcError> {
+    subs: &[AnySubscriber],
+    refused: &HashSet<String>,
+) -> Result<Vec<String>, IpcError> {
     let wild: Vec<ServiceGlob> = patterns.iter().filter(|p| !p.is_literal()).cloned().collect();
     if wild.is_empty() {
-        return Ok(());
+        return Ok(Vec::new());
     }
-    for name in ipc::list_services()? {
-        let wanted = ServiceKind::of(&name).is_some() && any_matches(&wild, &name) && !refused.contains(&name);
-        if wanted && let Err(e) = subscribe(node, subs, &name) {
-            // A service of another layout version, or one at its subscriber limit.
+    Ok(ipc::list_services()?
+        .into_iter()
+        .filter(|name| {
+            ServiceKind::of(name).is_some()
+                && any_matches(&wild, name)
+                && !refused.contains(name)
+                && !subs.iter().any(|s| s.service() == name)
+        })
+        .collect())
+}
+
+/// Subscribes to `names`; a service that refuses (another layout version, or at its subscriber
+/// limit) is logged once and not tried again.
+fn subscribe_all(node: &IpcNode, subs: &mut Vec<AnySubscriber>, refused: &mut HashSet<String>, names: Vec<String>) {
+    for name in names {
+        if let Err(e) = subscribe(node, subs, &name) {
             warn!("not recording {name}: {e}");
             refused.insert(name);
         }
     }
-    Ok(())
 }
 
 fn is_tty() -> bool {
