@@ -285,3 +285,37 @@ fn wrong_types_and_names_are_refused() {
     let e = r.write("/tf", &nav(0), 0, 0).unwrap_err();
     assert!(e.to_string().contains("not a navsync service"), "{e}");
 }
+
+#[test]
+fn damaged_files_give_errors_not_panics() {
+    let good = recording(30, 1200);
+    let mut x: u64 = 0x2545_F491_4F6C_DD1D;
+    let mut rand = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    let (mut ok, mut errors) = (0, 0);
+    for round in 0..400 {
+        let mut bytes = good.clone();
+        // A few random bytes changed (lengths, opcodes, CRCs, JSON) and sometimes a cut.
+        for _ in 0..1 + round % 4 {
+            let at = (rand() as usize) % bytes.len();
+            bytes[at] = rand() as u8;
+        }
+        if round % 3 == 0 {
+            let cut = (rand() as usize) % bytes.len();
+            bytes.truncate(cut);
+        }
+        match read_all(&bytes) {
+            Ok(_) => ok += 1,
+            Err(e) => {
+                // Every error names the file.
+                assert!(e.to_string().starts_with("mem.mcap"), "{e}");
+                errors += 1;
+            }
+        }
+    }
+    assert!(ok > 0 && errors > 0, "{ok} read, {errors} errors");
+}
