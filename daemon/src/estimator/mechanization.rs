@@ -75,14 +75,45 @@ struct EarthAt {
     g: Vector3<f64>,
 }
 
-fn earth_at(lat: f64, h: f64, v: &Vector3<f64>) -> EarthAt {
-    let (rm, rn) = earth::radii(lat);
-    EarthAt {
-        rm,
-        rn,
-        w_ie: Vector3::from(earth::omega_ie_n(lat)),
-        w_en: Vector3::from(earth::omega_en_n(lat, h, [v.x, v.y, v.z])),
-        g: Vector3::new(0.0, 0.0, earth::normal_gravity(lat, h)),
+/// The position-dependent earth quantities of one step, evaluated once at the step's start.
+/// Within a step (≤ 10 ms) latitude and height change by < 1e−7 rad and a few cm, which moves
+/// radii, earth rate and gravity by < 1e−9 relative; only the velocity-dependent transport rate
+/// is re-evaluated at the mid-points the algorithm asks for.
+struct EarthCache {
+    lat: f64,
+    h: f64,
+    tan_lat: f64,
+    rm: f64,
+    rn: f64,
+    w_ie: Vector3<f64>,
+    g: Vector3<f64>,
+}
+
+impl EarthCache {
+    fn new(lat: f64, h: f64) -> Self {
+        let (rm, rn) = earth::radii(lat);
+        let (sl, cl) = lat.sin_cos();
+        Self {
+            lat,
+            h,
+            tan_lat: sl / cl,
+            rm,
+            rn,
+            w_ie: Vector3::new(earth::OMEGA_IE * cl, 0.0, -earth::OMEGA_IE * sl),
+            g: Vector3::new(0.0, 0.0, earth::normal_gravity(lat, h)),
+        }
+    }
+
+    /// Earth quantities with the transport rate for velocity `v` (Groves eq. 5.44).
+    fn at(&self, v: &Vector3<f64>) -> EarthAt {
+        let (rmh, rnh) = (self.rm + self.h, self.rn + self.h);
+        EarthAt {
+            rm: self.rm,
+            rn: self.rn,
+            w_ie: self.w_ie,
+            w_en: Vector3::new(v.y / rnh, -v.x / rmh, -v.y * self.tan_lat / rnh),
+            g: self.g,
+        }
     }
 }
 
@@ -118,23 +149,22 @@ pub fn propagate(prev: &Pva, pre: &ImuIncrement, cur: &ImuIncrement) -> Pva {
         + cur.dtheta_rad.cross(&cur.dvel_mps) * 0.5
         + (pre.dtheta_rad.cross(&cur.dvel_mps) + pre.dvel_mps.cross(&cur.dtheta_rad)) / 12.0;
 
-    // --- velocity: predict with k−1 earth quantities, then redo at the extrapolated mid-point.
-    let e0 = earth_at(prev.lat_rad, prev.h_m, &prev.vel_ned_mps);
+    // --- velocity: predict with k−1 earth quantities, then redo with the mid-point velocity.
+    let earth = EarthCache::new(prev.lat_rad, prev.h_m);
+    let e0 = earth.at(&prev.vel_ned_mps);
     let v_mid0 = prev.vel_ned_mps + velocity_change(&c_bn, &dv_sf, &e0, &prev.vel_ned_mps, dt) * 0.5;
-    let (lat_m, _, h_m) = advance_position(prev, &prev.vel_ned_mps, &v_mid0, dt * 0.5, &e0);
-    let e_mid = earth_at(lat_m, h_m, &v_mid0);
+    let e_mid = earth.at(&v_mid0);
     let vel = prev.vel_ned_mps + velocity_change(&c_bn, &dv_sf, &e_mid, &v_mid0, dt);
 
-    // --- position: trapezoidal velocity, radii at the mid-point (KF-GINS `posUpdate`).
-    let (lat_h, _, h_h) = advance_position(prev, &prev.vel_ned_mps, &vel, dt * 0.5, &e0);
-    let e_half = earth_at(lat_h, h_h, &((prev.vel_ned_mps + vel) * 0.5));
-    let (lat, lon, h) = advance_position(prev, &prev.vel_ned_mps, &vel, dt, &e_half);
+    // --- position: trapezoidal velocity (KF-GINS `posUpdate`).
+    let (lat, lon, h) = advance_position(prev, &prev.vel_ned_mps, &vel, dt, &e0);
+    debug_assert!((lat - earth.lat).abs() < 1e-5);
 
     // --- attitude: q_nb(k) = q_nn · q_nb(k−1) · q_bb (KF-GINS `attUpdate`), with the two-sample
     // coning correction φ = Δθ + (Δθ_{k−1} × Δθ)/12 and the navigation-frame rotation
-    // ζ = (ω_ie^n + ω_en^n) Δt at the mid-point.
+    // ζ = (ω_ie^n + ω_en^n) Δt with the mid-point velocity.
     let v_half = (prev.vel_ned_mps + vel) * 0.5;
-    let e_att = earth_at(0.5 * (prev.lat_rad + lat), 0.5 * (prev.h_m + h), &v_half);
+    let e_att = earth.at(&v_half);
     let phi = cur.dtheta_rad + pre.dtheta_rad.cross(&cur.dtheta_rad) / 12.0;
     let q_bb = UnitQuaternion::from_scaled_axis(phi);
     let q_nn = UnitQuaternion::from_scaled_axis(-(e_att.w_ie + e_att.w_en) * dt);
