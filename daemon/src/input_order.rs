@@ -41,11 +41,17 @@
 //! ~1.25 s); alignment and status changes happen that much later; PPS edges update the time
 //! mapping [`PPS_HOLD_NS`] later. `NavState`s are not delayed at all.
 //!
+//! Other IMUs of an array have no hold: their samples go in in stamp order, which is the
+//! order the simulator publishes them in. IMUs read by separate driver processes can be
+//! published out of that order by a scheduling hiccup of a millisecond; such a sample is late.
+//!
 //! What it cannot do: a sample that arrives after its slot has passed (a fix published more
 //! than [`FIX_HOLD_NS`] after its first byte: a 9600-baud receiver with long bursts, or a
-//! driver stalled that long) is consumed at once and counted in [`InputOrder::late`]; its
-//! effect then depends on when it arrived, as before. When the reference IMU is silent for
-//! [`STALL_NS`] of wall time the live process consumes what waits (time sync without IMUs).
+//! driver stalled that long; a non-reference IMU sample published after a later reference
+//! sample) is consumed at once and counted in [`InputOrder::late`] (health counter
+//! `inputs_late` of the estimator); its effect then depends on when it arrived, as before.
+//! When the reference IMU is silent for [`STALL_NS`] of wall time the live process consumes
+//! what waits (time sync without IMUs).
 
 use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
@@ -170,7 +176,12 @@ impl<T> InputOrder<T> {
     pub fn pop_any(&mut self) -> Option<(AnySample, T)> {
         let Reverse(e) = self.heap.pop()?;
         if self.last_popped.is_some_and(|k| e.key < k) {
-            if matches!(e.sample, AnySample::PpsEdge(_) | AnySample::GnssFix(_)) {
+            let counts = match &e.sample {
+                AnySample::PpsEdge(_) | AnySample::GnssFix(_) => true,
+                AnySample::Imu(x) => self.reference_imu.is_none_or(|r| x.imu_id != r),
+                _ => false,
+            };
+            if counts {
                 self.late += 1;
             }
         } else {
@@ -191,7 +202,8 @@ impl<T> InputOrder<T> {
         self.progress_at_ns.is_some_and(|t| now_ns - t > STALL_NS)
     }
 
-    /// PPS edges and fixes that arrived after their slot (consumed out of order).
+    /// PPS edges, fixes and samples of non-reference IMUs that arrived after their slot
+    /// (consumed out of order).
     pub fn late(&self) -> u64 {
         self.late
     }
