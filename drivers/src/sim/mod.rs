@@ -16,4 +16,5 @@ pub mod scenario;
 pub mod source_map;
 pub mod trajectory;
 pub mod truth;
+pub mod vibration;
 pub mod world;

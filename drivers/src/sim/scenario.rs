@@ -71,6 +71,48 @@ pub struct TrajectoryConfig {
     /// Motion segments, run in order (TOML `[[trajectory.segment]]`).
     #[serde(rename = "segment", default)]
     pub segments: Vec<SegmentConfig>,
+    /// Body vibration superposed on the smooth path (TOML `[trajectory.vibration]`; on by
+    /// default with the nominal figures of [`VibrationConfig::default`]).
+    #[serde(default)]
+    pub vibration: VibrationConfig,
+}
+
+/// Road- and engine-induced body vibration, superposed on the smooth segment motion
+/// (model, spectra and sources in [`vibration`](super::vibration)).
+///
+/// Roll and pitch of the body and its vertical (heave) displacement are each a sum of
+/// sinusoids in the 1–20 Hz band with seed-drawn phases, scaled by a smooth speed envelope
+/// that is 0 at standstill, 1 at `reference_speed_mps` and grows like √(v/v_ref) above it
+/// (the ISO 8608 road input at a fixed temporal frequency grows with speed). The RMS figures
+/// are those of a steady drive at the reference speed.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VibrationConfig {
+    /// Whether the body vibrates (default true).
+    pub enabled: bool,
+    /// Speed at which the RMS figures below apply, m/s (default 20 = 72 km/h).
+    pub reference_speed_mps: f64,
+    /// RMS of the body roll angle at the reference speed, degrees (default 0.065: with the
+    /// built-in spectrum a roll rate of ≈ 0.9 °/s RMS).
+    pub roll_rms_deg: f64,
+    /// RMS of the body pitch angle at the reference speed, degrees (default 0.08: a pitch
+    /// rate of ≈ 0.9 °/s RMS).
+    pub pitch_rms_deg: f64,
+    /// RMS of the vertical (heave) displacement of the body at the reference speed, m
+    /// (default 0.003: a vertical acceleration of ≈ 0.25 m/s² RMS, a good road).
+    pub heave_rms_m: f64,
+}
+
+impl Default for VibrationConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            reference_speed_mps: 20.0,
+            roll_rms_deg: 0.065,
+            pitch_rms_deg: 0.08,
+            heave_rms_m: 0.003,
+        }
+    }
 }
 
 /// The vehicle's state at scenario time 0.
@@ -541,6 +583,12 @@ impl SimConfig {
         self.mark("gnss.outage");
     }
 
+    /// Switches the body vibration on or off (`[trajectory.vibration] enabled`).
+    pub fn set_vibration(&mut self, enabled: bool) {
+        self.trajectory.vibration.enabled = enabled;
+        self.mark("trajectory.vibration.enabled");
+    }
+
     /// Makes the world noise-free and exactly synchronous: `perfect` IMUs, zero stamp offsets
     /// and jitter, zero PPS and latency jitter, zero GNSS noise, no frequency wander
     /// (the constant frequency error is kept).
@@ -563,6 +611,7 @@ impl SimConfig {
     /// Checks every value; the error names the origin, line and field.
     pub fn validate(&self) -> Result<(), SimError> {
         self.validate_trajectory()?;
+        self.validate_vibration()?;
         self.validate_imus()?;
         self.validate_gnss()?;
         self.validate_clock()
@@ -750,6 +799,20 @@ impl SimConfig {
             }
             _ => Ok(()),
         }
+    }
+
+    fn validate_vibration(&self) -> Result<(), SimError> {
+        let v = &self.trajectory.vibration;
+        self.check_range(
+            "trajectory.vibration.reference_speed_mps",
+            v.reference_speed_mps,
+            0.5,
+            MAX_SPEED_MPS,
+            "m/s",
+        )?;
+        self.check_range("trajectory.vibration.roll_rms_deg", v.roll_rms_deg, 0.0, 2.0, "deg")?;
+        self.check_range("trajectory.vibration.pitch_rms_deg", v.pitch_rms_deg, 0.0, 2.0, "deg")?;
+        self.check_range("trajectory.vibration.heave_rms_m", v.heave_rms_m, 0.0, 0.05, "m")
     }
 
     fn validate_imus(&self) -> Result<(), SimError> {

@@ -106,7 +106,7 @@ impl World {
     /// `start_host_ns` and UTC `start_utc_ns` (both ns).
     pub fn new(cfg: &SimConfig, start_host_ns: i64, start_utc_ns: i64) -> Result<Self, SimError> {
         cfg.validate()?;
-        let traj = Trajectory::new(&cfg.trajectory.start, &cfg.trajectory.segments);
+        let traj = Trajectory::from_config(&cfg.trajectory, cfg.seed);
         let duration_s = traj.duration_s();
         let osc = Oscillator::new(
             start_host_ns,
