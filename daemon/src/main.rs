@@ -25,19 +25,19 @@ struct Cli {
     cmd: Cmd,
 }
 
-/// `START:DURATION` in seconds.
-fn parse_outage(s: &str) -> Result<(f64, f64), String> {
+/// Two numbers `A:B` (seconds).
+fn parse_pair(s: &str) -> Result<(f64, f64), String> {
     let (a, b) = s
         .split_once(':')
-        .ok_or_else(|| format!("`{s}`: expected START:DURATION in seconds"))?;
+        .ok_or_else(|| format!("`{s}`: expected A:B, two numbers of seconds"))?;
     let start: f64 = a
         .trim()
         .parse()
-        .map_err(|_| format!("`{a}` is not a start time in seconds"))?;
+        .map_err(|_| format!("`{a}` is not a number of seconds"))?;
     let dur: f64 = b
         .trim()
         .parse()
-        .map_err(|_| format!("`{b}` is not a duration in seconds"))?;
+        .map_err(|_| format!("`{b}` is not a number of seconds"))?;
     Ok((start, dur))
 }
 
@@ -48,6 +48,28 @@ fn parse_id(s: &str) -> Result<String, String> {
     } else {
         Err(format!("`{s}`: an id is letters, digits, `-` and `_`"))
     }
+}
+
+#[derive(Subcommand)]
+enum AnalyzeCmd {
+    /// The GNSS delay by least squares per segment (ΔV = ΔV₀ + a·Δ, east and north) beside the
+    /// online estimate, like Table 1 of the GPS/SINS time-synchronisation literature.
+    GnssDelay {
+        /// The recording (MCAP).
+        recording: PathBuf,
+        /// Segments START:END in seconds since the first sample, comma-separated (default: all).
+        #[arg(long, value_delimiter = ',', value_parser = parse_pair)]
+        segments: Vec<(f64, f64)>,
+        /// IMU ids (the first is the reference).
+        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
+        imus: Vec<String>,
+        /// IMU class for the filter's process noise.
+        #[arg(long, default_value = "industrial")]
+        imu_model: ImuPreset,
+        /// 1-sigma of the receiver's velocity per axis, m/s.
+        #[arg(long, default_value_t = 0.1)]
+        gnss_vel_std: f64,
+    },
 }
 
 #[derive(Subcommand)]
@@ -189,7 +211,7 @@ enum Cmd {
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
         utc_offset: f64,
         /// A GNSS outage START:DURATION in seconds of scenario time (repeatable).
-        #[arg(long, value_parser = parse_outage)]
+        #[arg(long, value_parser = parse_pair)]
         gnss_outage: Vec<(f64, f64)>,
         /// Do not wait for real time: produce the samples as fast as the CPU allows (with --estimate and/or --record).
         #[arg(long)]
@@ -321,6 +343,11 @@ enum Cmd {
         /// Estimator: 1-sigma of the receiver's velocity per axis, m/s.
         #[arg(long, default_value_t = 0.1)]
         gnss_vel_std: f64,
+    },
+    /// Offline analyses of a recording.
+    Analyze {
+        #[command(subcommand)]
+        what: AnalyzeCmd,
     },
     /// Decodes an NMEA capture offline (same code as the live driver): one JSON object per epoch.
     Nmea {
@@ -591,6 +618,30 @@ fn main() -> Result<()> {
                 })
                 .with_context(|| format!("replaying {}", input.display()))?;
             }
+        }
+        Cmd::Analyze {
+            what:
+                AnalyzeCmd::GnssDelay {
+                    recording,
+                    segments,
+                    imus,
+                    imu_model,
+                    gnss_vel_std,
+                },
+        } => {
+            let args = roles::analyze::GnssDelayArgs {
+                recording: recording.clone(),
+                segments,
+                est: roles::estimator::EstimatorArgs {
+                    imu_ids: imus,
+                    imu_model,
+                    gnss_vel_std_mps: gnss_vel_std,
+                    ..Default::default()
+                },
+            };
+            let rows =
+                roles::analyze::gnss_delay(&args).with_context(|| format!("analysing {}", recording.display()))?;
+            print!("{}", roles::analyze::table(&rows));
         }
         Cmd::Nmea { file } => {
             let bytes = if file == "-" {
