@@ -213,6 +213,9 @@ enum Cmd {
         /// A GNSS outage START:DURATION in seconds of scenario time (repeatable).
         #[arg(long, value_parser = parse_pair)]
         gnss_outage: Vec<(f64, f64)>,
+        /// Switch the simulated body vibration off (a perfectly smooth drive).
+        #[arg(long)]
+        no_vibration: bool,
         /// Do not wait for real time: produce the samples as fast as the CPU allows (with --estimate and/or --record).
         #[arg(long)]
         fast: bool,
@@ -469,6 +472,7 @@ fn main() -> Result<()> {
             duration,
             utc_offset,
             gnss_outage,
+            no_vibration,
             fast,
             estimate,
             summary_json,
@@ -494,6 +498,7 @@ fn main() -> Result<()> {
                 duration_s: duration,
                 utc_offset_s: utc_offset,
                 gnss_outages: gnss_outage,
+                no_vibration,
             };
             if fast {
                 let est = roles::estimator::EstimatorArgs {

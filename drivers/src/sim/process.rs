@@ -65,6 +65,8 @@ pub struct SimArgs {
     pub utc_offset_s: f64,
     /// Extra GNSS outages (start s, duration s), added to the scenario's.
     pub gnss_outages: Vec<(f64, f64)>,
+    /// Switch the body vibration off (`[trajectory.vibration] enabled = false`).
+    pub no_vibration: bool,
 }
 
 /// Errors of the simulator process.
@@ -117,6 +119,9 @@ pub fn load_config(args: &SimArgs) -> Result<SimConfig, SimError> {
     }
     for &(start_s, duration_s) in &args.gnss_outages {
         cfg.gnss.outages.push(super::scenario::OutageConfig { start_s, duration_s, pps_continues: true });
+    }
+    if args.no_vibration {
+        cfg.set_vibration(false);
     }
     cfg.validate()?;
     Ok(cfg)

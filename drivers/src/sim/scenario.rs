@@ -1145,4 +1145,79 @@ mod tests {
         cfg.set_gnss_rate_hz(3);
         assert!(cfg.validate().is_err());
     }
+
+    #[test]
+    fn vibration_defaults_and_switch() {
+        let cfg = SimConfig::default_drive();
+        let v = &cfg.trajectory.vibration;
+        assert!(v.enabled && v.heave_rms_m > 0.0 && v.roll_rms_deg > 0.0 && v.pitch_rms_deg > 0.0);
+        // A scenario without the table vibrates with the defaults.
+        let m = SimConfig::from_toml_str(&minimal(""), "m.toml").expect("valid");
+        let d = VibrationConfig::default();
+        assert!(m.trajectory.vibration.enabled);
+        assert_eq!(
+            (m.trajectory.vibration.roll_rms_deg, m.trajectory.vibration.heave_rms_m),
+            (d.roll_rms_deg, d.heave_rms_m)
+        );
+        // The embedded file writes the defaults.
+        assert_eq!(
+            (v.reference_speed_mps, v.roll_rms_deg, v.pitch_rms_deg, v.heave_rms_m),
+            (d.reference_speed_mps, d.roll_rms_deg, d.pitch_rms_deg, d.heave_rms_m)
+        );
+        let mut off = cfg.clone();
+        off.set_vibration(false);
+        off.validate().expect("valid");
+        assert!(!off.trajectory.vibration.enabled);
+        let text = minimal("\n[trajectory.vibration]\nenabled = false\n");
+        let cfg = SimConfig::from_toml_str(&text, "v.toml").expect("valid");
+        assert!(!cfg.trajectory.vibration.enabled && cfg.trajectory.vibration.heave_rms_m == d.heave_rms_m);
+    }
+
+    #[test]
+    fn vibration_errors_name_file_line_and_field() {
+        let base = minimal("\n[trajectory.vibration]\nroll_rms_deg = 0.1\nheave_rms_m = 0.004\n");
+        SimConfig::from_toml_str(&base, "v.toml").expect("valid");
+        // Unknown field (line 13).
+        let text = base.replace("heave_rms_m = 0.004", "heave_rms = 0.004");
+        let msg = SimConfig::from_toml_str(&text, "v.toml")
+            .expect_err("unknown")
+            .to_string();
+        assert!(msg.starts_with("v.toml:13:") && msg.contains("heave_rms"), "{msg}");
+        // Wrong type.
+        let text = base.replace("roll_rms_deg = 0.1", "roll_rms_deg = \"big\"");
+        match SimConfig::from_toml_str(&text, "v.toml").expect_err("type") {
+            SimError::Parse { line, field, .. } => {
+                assert_eq!((line, field.as_str()), (12, "trajectory.vibration.roll_rms_deg"));
+            }
+            other => panic!("unexpected {other}"),
+        }
+        // Out of range: negative, too large, not finite.
+        for (from, to, field, line) in [
+            ("roll_rms_deg = 0.1", "roll_rms_deg = -0.1", "roll_rms_deg", 12),
+            ("heave_rms_m = 0.004", "heave_rms_m = 0.5", "heave_rms_m", 13),
+            ("heave_rms_m = 0.004", "heave_rms_m = nan", "heave_rms_m", 13),
+            (
+                "heave_rms_m = 0.004",
+                "heave_rms_m = 0.004\npitch_rms_deg = 9.0",
+                "pitch_rms_deg",
+                14,
+            ),
+            (
+                "heave_rms_m = 0.004",
+                "heave_rms_m = 0.004\nreference_speed_mps = 0.0",
+                "reference_speed_mps",
+                14,
+            ),
+        ] {
+            let text = base.replace(from, to);
+            let err = SimConfig::from_toml_str(&text, "v.toml").expect_err("range");
+            let msg = err.to_string();
+            println!("{msg}");
+            assert!(msg.starts_with(&format!("v.toml:{line}:")), "{msg}");
+            assert!(
+                msg.contains(&format!("trajectory.vibration.{field}")) && msg.contains("expected"),
+                "{msg}"
+            );
+        }
+    }
 }
