@@ -39,6 +39,7 @@ fn run(latency_s: f64, software_sync: bool, delay_state: bool, outage: Option<(f
         imu_model: ImuPreset::Industrial,
         estimate_delay: delay_state,
         gnss_vel_std_mps: 0.05,
+        ..Default::default()
     };
     let mut pipeline = Pipeline::new(args.pipeline_config());
     let truth = if software_sync {
