@@ -17,6 +17,7 @@
 //! Frames: navigation frame NED (north-east-down), body frame FRD (forward-right-down).
 //! Times: integer nanoseconds; `host_ns` is `CLOCK_MONOTONIC`.
 
+pub mod config;
 pub mod earth;
 pub mod health_reporter;
 pub mod imu_spec;
@@ -26,5 +27,6 @@ pub mod latency_histogram;
 pub mod recording;
 pub mod reflect;
 pub mod samples;
+pub mod sd_notify;
 pub mod services;
 pub mod time;
