@@ -170,7 +170,8 @@ impl Vibration {
 
     /// The vibration of a validated configuration and seed ([`Vibration::none`] when disabled).
     pub fn new(cfg: &VibrationConfig, seed: u64) -> Self {
-        if !cfg.enabled || !(cfg.reference_speed_mps > 0.0) {
+        // (A NaN or non-positive reference speed, never from a validated scenario: no vibration.)
+        if !cfg.enabled || cfg.reference_speed_mps.is_nan() || cfg.reference_speed_mps <= 0.0 {
             return Self::none();
         }
         let mut rng = Rng::stream(seed, VIBRATION_STREAM);
