@@ -24,7 +24,10 @@ fn consumer_args() -> EstimatorArgs {
     }
 }
 
-fn drive(offsets_ms: [f64; 4]) -> (Summary, Vec<(f64, [f64; 4], [f64; 4])>) {
+/// (time since start in s, per-IMU offset estimates in s, their stds in s).
+type OffsetTrack = Vec<(f64, [f64; 4], [f64; 4])>;
+
+fn drive(offsets_ms: [f64; 4]) -> (Summary, OffsetTrack) {
     let mut cfg = SimConfig::default_drive();
     cfg.set_imu_preset(ImuPreset::Consumer);
     cfg.set_imu_offsets_s(&offsets_ms.map(|o| o * 1e-3));
@@ -76,6 +79,12 @@ fn offsets_converge_with_an_honest_std() {
                     std[i]
                 );
             }
+        }
+        if let Some((t, est, std)) = track.iter().find(|(t, ..)| *t >= 70.0) {
+            let errs: Vec<String> = (1..4)
+                .map(|i| format!("{:+.4}±{:.4} ms", (est[i] - offsets[i] * 1e-3) * 1e3, std[i] * 1e3))
+                .collect();
+            println!("offset errors after 30 s of motion (t = {t:.0} s): {}", errs.join(", "));
         }
         let (_, est, _) = track.last().expect("states");
         for i in 1..4 {

@@ -64,8 +64,12 @@ pub struct ArrayConfig {
     pub disagree_after: u32,
     /// Consecutive accepted comparisons that re-admit a disagreeing IMU.
     pub agree_after: u32,
-    /// Half-width K of the Savitzky–Golay differentiator of the reference's rates (samples).
+    /// Half-width K of the Savitzky–Golay differentiator of the reference's rates (samples):
+    /// the low-noise one, used unless the fast one is clearly above its noise.
     pub derivative_half_width: usize,
+    /// Half-width of the fast (wide-band) differentiator, used per sensor triad while its
+    /// output exceeds its own noise by a signal-to-noise power ratio of 25.
+    pub derivative_half_width_fast: usize,
 }
 
 /// One sample of the fused virtual IMU (body frame FRD, reference IMU's position and biases).
@@ -241,6 +245,39 @@ fn savitzky_golay_slope(u: &Unit, j: usize, k: usize) -> (Vector3<f64>, Vector3<
     let t = (u.entry(j + k).center - u.entry(j - k).center) * 1e-9 / (2.0 * kf);
     let denom = t * kf * (kf + 1.0) * (2.0 * kf + 1.0) / 3.0;
     (sg / denom, sa / denom)
+}
+
+/// Variance of one component of a Savitzky–Golay slope over 2K + 1 samples of noise `sigma`
+/// spaced `t` s: σ² / (t² Σm²).
+fn slope_variance(sigma: f64, t: f64, k: usize) -> f64 {
+    let sum_m2 = (k * (k + 1) * (2 * k + 1)) as f64 / 3.0;
+    sigma * sigma / (t * t * sum_m2)
+}
+
+/// The reference's rate derivatives at ring index `j` and their noise variances per component,
+/// per sensor triad from the fast differentiator when its output stands well above its noise
+/// (vibration, sharp manoeuvres: more information), else from the low-noise one.
+fn choose_derivative(u: &Unit, j: usize, k: usize, k_fast: usize) -> (Vector3<f64>, Vector3<f64>, f64, f64) {
+    let t = u.entry(j).dt_s;
+    let (wl, fl) = savitzky_golay_slope(u, j, k);
+    let (ws, fs) = savitzky_golay_slope(u, j, k_fast.min(k));
+    let (vgl, val) = (slope_variance(u.sigma_gyro, t, k), slope_variance(u.sigma_accel, t, k));
+    let (vgs, vas) = (
+        slope_variance(u.sigma_gyro, t, k_fast.min(k)),
+        slope_variance(u.sigma_accel, t, k_fast.min(k)),
+    );
+    const SNR: f64 = 25.0;
+    let (w_dot, wd_var) = if ws.norm_squared() >= SNR * 3.0 * vgs {
+        (ws, vgs)
+    } else {
+        (wl, vgl)
+    };
+    let (f_dot, fd_var) = if fs.norm_squared() >= SNR * 3.0 * vas {
+        (fs, vas)
+    } else {
+        (fl, val)
+    };
+    (w_dot, f_dot, wd_var, fd_var)
 }
 
 /// Counters of the array.
@@ -450,7 +487,8 @@ impl ImuArray {
                 self.next_ref_seq = Some(next + 1);
                 continue;
             }
-            let (w_dot, f_dot) = savitzky_golay_slope(reference, j, k);
+            let (w_dot, f_dot, wd_var, fd_var) =
+                choose_derivative(reference, j, k, self.cfg.derivative_half_width_fast);
             // Wait until every live IMU has the samples its interpolation at τ + T̂d needs.
             let half_span = (self.cfg.order as f64 / 2.0 + 1.0) * cur.dt_s * 1e9;
             let waiting = self.units.iter().enumerate().any(|(i, u)| {
@@ -465,7 +503,7 @@ impl ImuArray {
             if waiting {
                 return;
             }
-            self.fuse_instant(&cur, &w_dot, &f_dot, out);
+            self.fuse_instant(&cur, &w_dot, &f_dot, (wd_var, fd_var), out);
             self.next_ref_seq = Some(next + 1);
         }
     }
@@ -475,6 +513,7 @@ impl ImuArray {
         cur: &Entry,
         w_dot: &Vector3<f64>,
         f_dot: &Vector3<f64>,
+        (wd_var, fd_var): (f64, f64),
         out: &mut impl FnMut(&VirtualSample),
     ) {
         let r = self.cfg.reference;
@@ -501,7 +540,6 @@ impl ImuArray {
         let w_ref = wsum;
         let mut contributors = 1u8;
         let order = self.cfg.order;
-        let k = self.cfg.derivative_half_width;
         let (admit_std, disagree_after, agree_after) =
             (self.cfg.admit_td_std_s, self.cfg.disagree_after, self.cfg.agree_after);
         for (i, u) in self.units.iter_mut().enumerate() {
@@ -522,10 +560,6 @@ impl ImuArray {
             f.predict(cur.dt_s);
             let sg = (u.sigma_gyro.powi(2) + ref_sigma.0.powi(2)).sqrt();
             let sa = (u.sigma_accel.powi(2) + ref_sigma.1.powi(2)).sqrt();
-            // Noise of the differentiator per axis: σ_ẋ² = σ_0² / (T² Σm²).
-            let sum_m2 = (k * (k + 1) * (2 * k + 1)) as f64 / 3.0;
-            let t2 = cur.dt_s * cur.dt_s * sum_m2;
-            let (wd_var, fd_var) = (ref_sigma.0.powi(2) / t2, ref_sigma.1.powi(2) / t2);
             match f.update(
                 &(g_u - cur.gyro),
                 &w,
