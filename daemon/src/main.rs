@@ -5,10 +5,10 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use navsync::roles;
 use navsync_drivers::feed::{FeedArgs, Speed};
-use navsync_drivers::gps::driver::{Baud, GpsArgs};
+use navsync_drivers::gps::driver::Baud;
 use navsync_drivers::imu::axes::AxisMap;
 use navsync_drivers::imu::sim_device::SimImuOutput;
 use navsync_drivers::imu::{ImuArgs, ImuSource};
@@ -21,6 +21,9 @@ use tracing_subscriber::prelude::*;
 #[derive(Parser)]
 #[command(name = "navsync", version, about = "GNSS/INS time-synchronisation daemon")]
 struct Cli {
+    /// Configuration file (default /etc/navsync/navsync.toml when it exists); flags override it.
+    #[arg(long, global = true, value_name = "FILE")]
+    config: Option<PathBuf>,
     #[command(subcommand)]
     cmd: Cmd,
 }
@@ -73,12 +76,46 @@ enum AnalyzeCmd {
 }
 
 #[derive(Subcommand)]
+enum ImportCmd {
+    /// KF-GINS text files (IMU increments, GNSS positions, optional reference trajectory).
+    KfGins {
+        /// IMU file: seconds of week, 3 angle increments (rad), 3 velocity increments (m/s), FRD.
+        #[arg(long)]
+        imu: PathBuf,
+        /// GNSS file: seconds of week, lat, lon (deg), height (m), STD north/east/down (m).
+        #[arg(long)]
+        gnss: PathBuf,
+        /// Reference trajectory: week, seconds of week, lat, lon, h, vN, vE, vD, roll, pitch, yaw (deg).
+        #[arg(long)]
+        truth: Option<PathBuf>,
+        /// IMU rate, Hz (default: from the time tags).
+        #[arg(long)]
+        imu_rate: Option<f64>,
+        /// GPS week of the data (default: the truth file's, else 2200).
+        #[arg(long)]
+        week: Option<i64>,
+        /// The output recording (MCAP).
+        #[arg(short, long)]
+        out: PathBuf,
+    },
+}
+
+/// Output format of `replay --estimate --out`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum EstimateFormat {
+    /// NavState and TimeState in an MCAP file.
+    Mcap,
+    /// KF-GINS's navigation result (11 columns; a directory gets its IMU_ERR and STD files too).
+    KfGins,
+}
+
+#[derive(Subcommand)]
 enum Cmd {
     /// GNSS receiver driver: NMEA 0183 from a serial port to `navsync/gnss/{id}/fix`.
     Gps {
-        /// Serial device (e.g. /dev/ttyUSB0, or a pseudo-terminal).
+        /// Serial device (e.g. /dev/ttyUSB0, or a pseudo-terminal); default `[gps.ID].port`.
         #[arg(long)]
-        port: String,
+        port: Option<String>,
         /// Line rate, or `auto` to hunt the common rates.
         #[arg(long, default_value = "9600")]
         baud: Baud,
@@ -90,7 +127,7 @@ enum Cmd {
     Imu {
         /// `iio:DEVICE` (iio:deviceN, N or the device name; `GYRO+ACCEL` for a split IMU), `xsens:PORT[:BAUD]` or `sim[:DIR]`.
         #[arg(long)]
-        source: ImuSource,
+        source: Option<ImuSource>,
         /// IMU id.
         #[arg(long, default_value = "0", value_parser = parse_id)]
         id: String,
@@ -269,13 +306,22 @@ enum Cmd {
         /// Fail if no sample arrives for this many seconds.
         #[arg(long)]
         timeout: Option<f64>,
+        /// Print at most N lines per second (the newest sample when a line is due).
+        #[arg(long, value_name = "N")]
+        rate: Option<f64>,
+        /// Print the measured rate (once per second) instead of the samples.
+        #[arg(long, conflicts_with_all = ["rate", "fields"])]
+        hz: bool,
+        /// Print only these fields, e.g. `lat_deg,lon_deg,stamp.host_ns,vel_ned_mps[2]`.
+        #[arg(long, value_delimiter = ',')]
+        fields: Vec<String>,
     },
     /// 1 PPS driver: edges from a kernel PPS device, a serial modem line or the simulator,
     /// validated (missing/duplicate/early/late counted), to `navsync/pps/{id}/edge`.
     Pps {
-        /// kernel:/dev/ppsN, serial-dcd:/dev/ttyX, serial-cts:/dev/ttyX, or sim.
+        /// kernel:/dev/ppsN, serial-dcd:/dev/ttyX, serial-cts:/dev/ttyX, or sim; default `[pps.ID].source`.
         #[arg(long)]
-        source: navsync_drivers::pps::SourceSpec,
+        source: Option<navsync_drivers::pps::SourceSpec>,
         /// PPS id.
         #[arg(long, default_value = "0", value_parser = parse_id)]
         id: String,
@@ -286,15 +332,21 @@ enum Cmd {
         #[arg(long, default_value_t = 0)]
         unit: u32,
     },
-    /// Offline benchmarks with deterministic numbers (`timing`: clock model, holdover, d0).
+    /// Benchmarks: `timing` (clock model, offline), `ipc`, `e2e`, `throughput` (README "## Performance").
     Bench {
-        /// Which benchmark: timing.
-        what: String,
+        #[command(subcommand)]
+        what: roles::bench_cli::BenchCmd,
+    },
+    /// The processes the benchmarks start (publishers and subscribers).
+    #[command(hide = true)]
+    BenchHelper {
+        #[command(subcommand)]
+        what: roles::bench_cli::HelperCmd,
     },
     /// Records navsync services into an MCAP file until Ctrl-C/SIGTERM or --duration.
     Record {
-        /// Output file (MCAP).
-        out: PathBuf,
+        /// Output file (MCAP); default `[outputs.record].path`.
+        out: Option<PathBuf>,
         /// Services to record: names or patterns (`*` within a segment, `**` across); default `navsync/**`.
         #[arg(long, num_args = 1..)]
         services: Vec<String>,
@@ -322,6 +374,10 @@ enum Cmd {
         /// Write the estimator's NavState and TimeState into this MCAP file (with --estimate).
         #[arg(long, requires = "estimate")]
         out: Option<PathBuf>,
+        /// Format of --out: `mcap`, or `kf-gins` (KF-GINS's result layout; a directory gets
+        /// KF_GINS_Navresult.nav, KF_GINS_IMU_ERR.txt and KF_GINS_STD.txt).
+        #[arg(long, default_value = "mcap", requires = "out")]
+        format: EstimateFormat,
         /// Write the accuracy summary as JSON to this file (with --estimate).
         #[arg(long, requires = "estimate")]
         summary_json: Option<PathBuf>,
@@ -352,39 +408,147 @@ enum Cmd {
         #[command(subcommand)]
         what: AnalyzeCmd,
     },
+    /// Every navsync process and service on this host: rates, last-sample ages, subscribers,
+    /// health counters, time-sync state, receiver latency d0, GNSS delay and IMU offsets.
+    Status {
+        /// One JSON document (one line per refresh with --watch).
+        #[arg(long)]
+        json: bool,
+        /// Refresh every S seconds until Ctrl-C.
+        #[arg(long, value_name = "S", num_args = 0..=1, default_missing_value = "1")]
+        watch: Option<f64>,
+        /// Measurement window of a single report, s.
+        #[arg(long, default_value_t = 2.0)]
+        window: f64,
+        /// With --watch: stop after N refreshes.
+        #[arg(long)]
+        count: Option<u64>,
+    },
+    /// Prints the sample layouts as Python ctypes structures (shared/python/navsync_types.py).
+    PythonTypes,
+    /// Serves the fused state to gpsd clients (gpsd JSON protocol: VERSION, DEVICES, WATCH,
+    /// POLL, TPV, SKY, ATT, IMU).
+    GpsdServer {
+        /// Address to listen on (localhost by default; port 0: any free port, printed on stderr).
+        #[arg(long, default_value = "127.0.0.1:2947")]
+        listen: std::net::SocketAddr,
+        /// Most clients at once.
+        #[arg(long, default_value_t = 32)]
+        max_clients: usize,
+        /// Reports (TPV, ATT, IMU, SKY) per second.
+        #[arg(long, default_value_t = 1.0)]
+        rate: f64,
+    },
+    /// One self-contained HTML page with SVG plots of a recording: trajectory, errors against
+    /// the truth, GNSS delay and IMU offsets with ±2σ, clock offset and drift, receiver latency.
+    Report {
+        /// The recording (MCAP).
+        input: PathBuf,
+        /// The HTML file (default: the recording's name with .html).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Run the estimator over the recording even when it has navigation states.
+        #[arg(long)]
+        estimate: bool,
+        /// Estimator (when it runs): IMU ids (the first is the reference).
+        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
+        imus: Vec<String>,
+        /// Estimator (when it runs): ignore PPS (software sync).
+        #[arg(long)]
+        software_sync: bool,
+        /// Estimator (when it runs): IMU class for the process noise.
+        #[arg(long, default_value = "industrial")]
+        imu_model: ImuPreset,
+    },
+    /// Imports another system's data files into a navsync recording.
+    Import {
+        #[command(subcommand)]
+        what: ImportCmd,
+    },
+    /// Position, velocity and attitude error statistics of a trajectory against a reference
+    /// (KF-GINS result/truth files or navsync recordings).
+    Eval {
+        /// Reference trajectory.
+        #[arg(long)]
+        truth: PathBuf,
+        /// Trajectory to evaluate.
+        #[arg(long)]
+        solution: PathBuf,
+        /// Leave out the solution's first S seconds.
+        #[arg(long, default_value_t = 0.0)]
+        skip: f64,
+        /// JSON instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Decodes an NMEA capture offline (same code as the live driver): one JSON object per epoch.
     Nmea {
         /// Capture file, or `-` for stdin.
         file: String,
     },
+    /// Checks the configuration file (--config, default /etc/navsync/navsync.toml) without
+    /// starting anything: errors name the file, line, field and what was expected.
+    CheckConfig,
+    /// Installs the binary, the systemd units, sysusers/tmpfiles/udev files and the example
+    /// configuration (README "## Running as a service").
+    Install {
+        /// Installation prefix: the binary goes to PREFIX/bin/navsync, which the units run.
+        #[arg(long, default_value = "/usr/local")]
+        prefix: PathBuf,
+        /// Staging root (an image or package tree): every file goes below it.
+        #[arg(long, default_value = "/")]
+        root: PathBuf,
+    },
 }
 
-fn init_logging() {
+/// Logs to stderr: the level from `$RUST_LOG`, else the configuration's `[logging].level`,
+/// else info. Under systemd (`$JOURNAL_STREAM` set: stderr is the journal) without colours and
+/// time stamps (the journal stamps every line); on a terminal with colours.
+fn init_logging(config_level: Option<&str>) {
     let filter: Targets = std::env::var("RUST_LOG")
         .ok()
         .and_then(|s| s.parse().ok())
+        .or_else(|| config_level.and_then(|s| s.parse().ok()))
         .unwrap_or_else(|| Targets::new().with_default(Level::INFO));
-    let _ = tracing_subscriber::registry()
-        .with(
-            tracing_subscriber::fmt::layer()
-                .with_writer(std::io::stderr)
-                .with_target(false),
-        )
-        .with(filter)
-        .try_init();
+    let journal = std::env::var_os("JOURNAL_STREAM").is_some();
+    let tty = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let layer = tracing_subscriber::fmt::layer()
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .with_ansi(tty && !journal);
+    let registry = tracing_subscriber::registry().with(filter);
+    let _ = if journal {
+        registry.with(layer.without_time()).try_init()
+    } else {
+        registry.with(layer).try_init()
+    };
 }
 
 fn main() -> Result<()> {
-    let cli = Cli::parse();
-    init_logging();
+    let matches = Cli::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    // The subcommand's flags, to tell flags given on the command line from defaults.
+    let sub = matches.subcommand().map(|(_, m)| m);
+    if matches!(cli.cmd, Cmd::CheckConfig) {
+        return roles::service::check_config(cli.config.as_deref());
+    }
+    let cfg = roles::service::load(cli.config.as_deref())?;
+    init_logging(cfg.config.logging.level.as_deref());
     match cli.cmd {
+        Cmd::CheckConfig => {}
+        Cmd::Install { prefix, root } => {
+            let done = roles::service::install(&prefix, &root)?;
+            for f in &done.files {
+                println!("{}", f.display());
+            }
+            eprintln!(
+                "then: systemd-sysusers; systemd-tmpfiles --create; udevadm control --reload; systemctl daemon-reload; \
+                 edit /etc/navsync/navsync.toml; navsync check-config; systemctl enable --now navsync.target"
+            );
+        }
         Cmd::Gps { port, baud, id } => {
-            navsync_drivers::gps::driver::run(&GpsArgs {
-                port: port.clone(),
-                baud,
-                id,
-            })
-            .with_context(|| format!("gps driver on {port}"))?;
+            let args = roles::service::gps_args(&cfg, sub, port, baud, id)?;
+            navsync_drivers::gps::driver::run(&args).with_context(|| format!("gps driver on {}", args.port))?;
         }
         Cmd::Imu {
             source,
@@ -397,8 +561,8 @@ fn main() -> Result<()> {
             accel_range_g,
             buffer_length,
         } => {
-            navsync_drivers::imu::run(&ImuArgs {
-                source: source.clone(),
+            let args = roles::service::imu_args(&cfg, sub, &id.clone(), source, |source| ImuArgs {
+                source,
                 id,
                 sysfs_root,
                 dev_root,
@@ -407,8 +571,8 @@ fn main() -> Result<()> {
                 gyro_range_dps,
                 accel_range_g,
                 buffer_length,
-            })
-            .with_context(|| format!("imu driver on {source:?}"))?;
+            })?;
+            navsync_drivers::imu::run(&args).with_context(|| format!("imu driver on {:?}", args.source))?;
         }
         Cmd::Feed {
             capture,
@@ -444,17 +608,21 @@ fn main() -> Result<()> {
             no_delay_state,
             gnss_vel_std: gnss_vel_std_mps,
         } => {
-            roles::estimator::run(&roles::estimator::EstimatorArgs {
-                gnss_ids: gnss,
-                pps_ids: pps,
-                imu_ids: imus,
-                software_sync,
-                imu_model,
-                estimate_delay: !no_delay_state,
-                gnss_vel_std_mps,
-                estimate_imu_offsets: true,
-            })
-            .context("estimator")?;
+            let args = roles::service::estimator_args(
+                &cfg,
+                sub,
+                roles::estimator::EstimatorArgs {
+                    gnss_ids: gnss,
+                    pps_ids: pps,
+                    imu_ids: imus,
+                    software_sync,
+                    imu_model,
+                    estimate_delay: !no_delay_state,
+                    gnss_vel_std_mps,
+                    ..Default::default()
+                },
+            )?;
+            roles::estimator::run(&args).context("estimator")?;
         }
         Cmd::Sim {
             scenario,
@@ -546,31 +714,42 @@ fn main() -> Result<()> {
             count,
             json,
             timeout,
+            rate,
+            hz,
+            fields,
         } => {
             roles::echo::run(&roles::echo::EchoArgs {
                 service: service.clone(),
                 count,
                 json,
                 timeout: timeout.map(Duration::from_secs_f64),
+                max_rate_hz: rate,
+                measure_rate: hz,
+                fields,
             })
             .with_context(|| format!("echo {service}"))?;
         }
         Cmd::Pps { source, id } => {
-            let shown = source.to_string();
-            navsync_drivers::pps::run(&navsync_drivers::pps::PpsArgs { source, id })
-                .with_context(|| format!("pps driver on {shown}"))?;
+            let args = roles::service::pps_args(&cfg, source, id)?;
+            let shown = args.source.to_string();
+            navsync_drivers::pps::run(&args).with_context(|| format!("pps driver on {shown}"))?;
         }
         Cmd::Ntpshm { unit } => {
+            let unit = roles::service::ntpshm_unit(&cfg, sub, unit);
             roles::ntpshm::run(&roles::ntpshm::NtpShmArgs { unit }).context("ntpshm")?;
         }
         Cmd::Bench { what } => {
-            roles::bench_timing::run(&what).context("bench")?;
+            roles::bench_cli::run(what).context("bench")?;
+        }
+        Cmd::BenchHelper { what } => {
+            roles::bench_cli::run_helper(what).context("bench helper")?;
         }
         Cmd::Record {
             out,
             services,
             duration,
         } => {
+            let (out, services) = roles::service::record_target(&cfg, out, services)?;
             roles::record::run(&roles::record::RecordArgs {
                 out: out.clone(),
                 services,
@@ -586,6 +765,7 @@ fn main() -> Result<()> {
             services,
             estimate,
             out,
+            format,
             summary_json,
             gnss,
             pps,
@@ -610,6 +790,7 @@ fn main() -> Result<()> {
                     input: input.clone(),
                     est,
                     out,
+                    kf_gins_format: format == EstimateFormat::KfGins,
                     summary_json,
                 })
                 .with_context(|| format!("estimating over {}", input.display()))?;
@@ -647,6 +828,111 @@ fn main() -> Result<()> {
             let rows =
                 roles::analyze::gnss_delay(&args).with_context(|| format!("analysing {}", recording.display()))?;
             print!("{}", roles::analyze::table(&rows));
+        }
+        Cmd::Status {
+            json,
+            watch,
+            window,
+            count,
+        } => {
+            anyhow::ensure!(
+                window > 0.0 && watch.is_none_or(|w| w > 0.0),
+                "--window and --watch take a positive number of seconds"
+            );
+            roles::status::run(&roles::status::StatusArgs {
+                json,
+                watch: watch.map(Duration::from_secs_f64),
+                window: Duration::from_secs_f64(window),
+                count,
+            })
+            .context("status")?;
+        }
+        Cmd::PythonTypes => roles::python_types::run().context("writing stdout")?,
+        Cmd::GpsdServer {
+            listen,
+            max_clients,
+            rate,
+        } => {
+            anyhow::ensure!(max_clients > 0, "--max-clients must be at least 1");
+            anyhow::ensure!(
+                rate > 0.0 && rate <= 1000.0,
+                "--rate must be in (0, 1000] reports per second"
+            );
+            roles::gpsd_server::run(&roles::gpsd_server::GpsdArgs {
+                listen,
+                max_clients,
+                rate_hz: rate,
+            })
+            .context("gpsd-server")?;
+        }
+        Cmd::Import {
+            what:
+                ImportCmd::KfGins {
+                    imu,
+                    gnss,
+                    truth,
+                    imu_rate,
+                    week,
+                    out,
+                },
+        } => {
+            let stats = roles::kf_gins::import(&roles::kf_gins::ImportArgs {
+                imu,
+                gnss,
+                truth,
+                imu_rate_hz: imu_rate,
+                week,
+                imu_id: "0".into(),
+                out: out.clone(),
+            })
+            .with_context(|| format!("importing into {}", out.display()))?;
+            eprintln!(
+                "{}: {} IMU samples ({:.1} Hz), {} GNSS fixes, {} PPS edges, {} truth samples (GPS week {})",
+                out.display(),
+                stats.imu,
+                stats.imu_rate_hz,
+                stats.fixes,
+                stats.pps,
+                stats.truth,
+                stats.week
+            );
+        }
+        Cmd::Report {
+            input,
+            out,
+            estimate,
+            imus,
+            software_sync,
+            imu_model,
+        } => {
+            let out = out.unwrap_or_else(|| roles::report::default_out(&input));
+            let plots = roles::report::run(&roles::report::ReportArgs {
+                input: input.clone(),
+                out: out.clone(),
+                estimate,
+                est: roles::estimator::EstimatorArgs {
+                    imu_ids: imus,
+                    software_sync,
+                    imu_model,
+                    ..Default::default()
+                },
+            })
+            .with_context(|| format!("report of {}", input.display()))?;
+            eprintln!("{}: {plots} plots", out.display());
+        }
+        Cmd::Eval {
+            truth,
+            solution,
+            skip,
+            json,
+        } => {
+            roles::eval::run(&roles::eval::EvalArgs {
+                truth,
+                solution,
+                skip_s: skip,
+                json,
+            })
+            .context("eval")?;
         }
         Cmd::Nmea { file } => {
             let bytes = if file == "-" {

@@ -110,6 +110,12 @@ impl HealthReporter {
         self.publisher.publish(&self.health)
     }
 
+    /// Publishes now, whatever the interval (a state change subscribers must see at once, e.g.
+    /// an input going stale); the next periodic report follows a full interval later.
+    pub fn publish_now(&mut self, now_ns: i64) -> Result<(), IpcError> {
+        self.publish_at(now_ns)
+    }
+
     /// Publishes a last report with `alive = 0` (call before a clean exit).
     pub fn publish_final(&mut self) -> Result<(), IpcError> {
         self.health.alive = 0;

@@ -71,11 +71,45 @@ pub fn config() -> Result<Config, IpcError> {
     config_with_prefix(&prefix())
 }
 
+/// Environment variable naming a dedicated iceoryx2 root directory (default `/tmp/iceoryx2/`);
+/// the systemd units use `/run/navsync/iceoryx2/` (README "## Running as a service").
+pub const ROOT_ENV: &str = "NAVSYNC_IPC_ROOT";
+
 /// iceoryx2 configuration with an explicit resource prefix.
 pub fn config_with_prefix(prefix: &str) -> Result<Config, IpcError> {
     let mut config = Config::default();
     config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|_| IpcError::InvalidName(prefix.to_string()))?;
+    if let Ok(root) = std::env::var(ROOT_ENV)
+        && !root.is_empty()
+    {
+        let root = if root.ends_with('/') { root } else { format!("{root}/") };
+        config
+            .global
+            .set_root_path(&Path::new(root.as_bytes()).map_err(|_| IpcError::InvalidName(root.clone()))?);
+    }
     Ok(config)
+}
+
+/// iceoryx2 creates its per-prefix node counter (`/dev/shm/<prefix>…global_mgmt`) world-
+/// writable (0666) on purpose; every other resource is owner-only. Tighten ours to 0660 so
+/// that only the owner's group can create nodes under this prefix.
+fn restrict_global_segment(prefix: &str) {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let Ok(dir) = std::fs::read_dir("/dev/shm") else { return };
+    // SAFETY: geteuid has no preconditions.
+    let me = unsafe { libc::geteuid() };
+    for e in dir.flatten() {
+        let name = e.file_name();
+        let name = name.to_string_lossy();
+        if name.starts_with(prefix)
+            && name.ends_with(".global_mgmt")
+            && let Ok(m) = e.metadata()
+            && m.uid() == me
+            && m.mode() & 0o007 != 0
+        {
+            let _ = std::fs::set_permissions(e.path(), std::fs::Permissions::from_mode(0o660));
+        }
+    }
 }
 
 /// One process's iceoryx2 node.
@@ -106,6 +140,7 @@ impl IpcNode {
             .map_err(|e| err("creating node", process, e))?;
         // Reclaim what processes that died without cleaning up (kill -9) left behind.
         let _ = node.try_cleanup_dead_nodes();
+        restrict_global_segment(prefix);
         Ok(Self {
             node,
             terminated: AtomicBool::new(false),

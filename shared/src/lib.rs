@@ -13,10 +13,12 @@
 //! 4. [`time`]: host monotonic time, UTC, GPS time, leap seconds.
 //! 5. [`earth`]: the WGS-84 model (radii, normal gravity, earth rate, transport rate).
 //! 6. [`reflect`] and [`json`]: the field tables behind the layout contract and the JSON codec.
+//! 7. [`client`]: subscribing from other programs (`NavClient::connect()?.next(timeout)`).
 //!
 //! Frames: navigation frame NED (north-east-down), body frame FRD (forward-right-down).
 //! Times: integer nanoseconds; `host_ns` is `CLOCK_MONOTONIC`.
 
+pub mod client;
 pub mod config;
 pub mod earth;
 pub mod health_reporter;

@@ -19,11 +19,11 @@ use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
 use navsync_drivers::imu::sim_device::{SIM_BAUD, SimImuOutput, sim_port};
+use navsync_drivers::sim::process::{SimArgs, load_config};
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;
 use navsync_shared::services;
-use navsync_drivers::sim::process::{SimArgs, load_config};
 use tracing::info;
 
 use crate::evaluation::{DelayTruth, Evaluator};
@@ -357,15 +357,27 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
             &["pps", "--source", "sim", "--id", "0"].map(String::from),
         )?);
         // Tell the filter what the simulated devices are (IMU class, receiver velocity noise).
-        let sim_cfg = load_config(&SimArgs { scenario: args.scenario.clone(), ..Default::default() })
-            .map_err(|e| DemoError::Child(format!("scenario: {e}")))?;
+        let sim_cfg = load_config(&SimArgs {
+            scenario: args.scenario.clone(),
+            ..Default::default()
+        })
+        .map_err(|e| DemoError::Child(format!("scenario: {e}")))?;
         let imu_model = sim_cfg.imu.preset.name().to_string();
         let vel_std = sim_cfg.gnss.velocity_sigma_mps.max(0.01).to_string();
         procs.push(spawn(
             "estimator",
             &[
-                "estimator", "--gnss", "0", "--pps", "0", "--imus", &imu_list, "--imu-model", &imu_model,
-                "--gnss-vel-std", &vel_std,
+                "estimator",
+                "--gnss",
+                "0",
+                "--pps",
+                "0",
+                "--imus",
+                &imu_list,
+                "--imu-model",
+                &imu_model,
+                "--gnss-vel-std",
+                &vel_std,
             ]
             .map(String::from),
         )?);

@@ -1,5 +1,13 @@
 //! `navsync echo SERVICE`: prints every sample of any navsync service, one line each,
 //! human-readable by default or as JSON (`--json`, the same encoding as the recordings).
+//!
+//! * `--fields lat_deg,lon_deg,stamp.host_ns` prints only those fields (dotted paths into
+//!   nested structs, `[i]` into arrays: `vel_ned_mps[2]`, `imu[1].offset_s`); unknown paths
+//!   are rejected before anything is received.
+//! * `--rate N` prints at most N lines per second (the newest sample when a line is due;
+//!   the others are skipped).
+//! * `--hz` prints, once per second, the measured rate instead of the samples: samples per
+//!   second of wall time, the mean/min/max spacing of their host stamps, and sequence gaps.
 
 use std::io::Write;
 use std::time::{Duration, Instant};
@@ -10,19 +18,25 @@ use navsync_shared::json::to_json;
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::*;
 use navsync_shared::services::ServiceKind;
-use serde_json::Value;
+use serde_json::{Map, Value};
 
 /// Settings of `navsync echo`.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct EchoArgs {
     /// Service name, e.g. `navsync/imu/0/sample`.
     pub service: String,
-    /// Stop after this many samples.
+    /// Stop after this many printed lines.
     pub count: Option<u64>,
     /// Print JSON instead of text.
     pub json: bool,
     /// Give up after this long without a sample.
     pub timeout: Option<Duration>,
+    /// Print at most this many lines per second.
+    pub max_rate_hz: Option<f64>,
+    /// Print the measured rate once per second instead of the samples.
+    pub measure_rate: bool,
+    /// Print only these fields (dotted paths).
+    pub fields: Vec<String>,
 }
 
 /// Errors of `navsync echo`.
@@ -31,6 +45,19 @@ pub enum EchoError {
     /// Not a navsync service name.
     #[error("`{0}` is not a navsync service (expected e.g. navsync/imu/0/sample, navsync/nav/state)")]
     UnknownService(String),
+    /// A `--fields` path that the service's type does not have.
+    #[error("{type_name} has no field `{path}` (fields: {known})")]
+    UnknownField {
+        /// The type.
+        type_name: &'static str,
+        /// The path asked for.
+        path: String,
+        /// The top-level fields.
+        known: String,
+    },
+    /// A `--rate` that is not a positive number.
+    #[error("--rate must be a positive number of lines per second")]
+    BadRate,
     /// IPC failure.
     #[error(transparent)]
     Ipc(#[from] IpcError),
@@ -46,39 +73,243 @@ pub enum EchoError {
 pub fn run(args: &EchoArgs) -> Result<(), EchoError> {
     let kind = ServiceKind::of(&args.service).ok_or_else(|| EchoError::UnknownService(args.service.clone()))?;
     match kind {
-        ServiceKind::GnssFix => echo::<GnssFix>(args),
-        ServiceKind::PpsEdge => echo::<PpsEdge>(args),
-        ServiceKind::ImuSample => echo::<ImuSample>(args),
-        ServiceKind::TimeState => echo::<TimeState>(args),
-        ServiceKind::NavState => echo::<NavState>(args),
-        ServiceKind::Health => echo::<Health>(args),
-        ServiceKind::SimTruth => echo::<SimTruth>(args),
+        ServiceKind::GnssFix => echo::<GnssFix>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
+        ServiceKind::PpsEdge => echo::<PpsEdge>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
+        ServiceKind::ImuSample => echo::<ImuSample>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
+        ServiceKind::TimeState => echo::<TimeState>(args, |s| (s.computed_host_ns, Some(s.seq))),
+        ServiceKind::NavState => echo::<NavState>(args, |s| (s.host_ns, Some(s.seq))),
+        ServiceKind::Health => echo::<Health>(args, |s| (s.host_ns, Some(s.seq))),
+        ServiceKind::SimTruth => echo::<SimTruth>(args, |s| (s.host_ns, Some(s.seq))),
     }
 }
 
-fn echo<T: Reflect + ZeroCopySend + core::fmt::Debug>(args: &EchoArgs) -> Result<(), EchoError> {
+/// One `--fields` path: keys and array indices.
+#[derive(Debug, Clone, PartialEq)]
+enum Step {
+    Key(String),
+    Index(usize),
+}
+
+/// Parses `a.b[2].c` into steps; `None` when malformed.
+fn parse_path(path: &str) -> Option<Vec<Step>> {
+    let mut steps = Vec::new();
+    for part in path.split('.') {
+        let (name, mut rest) = match part.find('[') {
+            Some(i) => (&part[..i], &part[i..]),
+            None => (part, ""),
+        };
+        if name.is_empty() {
+            return None;
+        }
+        steps.push(Step::Key(name.to_string()));
+        while !rest.is_empty() {
+            let close = rest.find(']')?;
+            steps.push(Step::Index(rest[1..close].parse().ok()?));
+            rest = &rest[close + 1..];
+            if !rest.is_empty() && !rest.starts_with('[') {
+                return None;
+            }
+        }
+    }
+    Some(steps)
+}
+
+fn lookup<'a>(v: &'a Value, steps: &[Step]) -> Option<&'a Value> {
+    steps.iter().try_fold(v, |v, s| match s {
+        Step::Key(k) => v.get(k.as_str()),
+        Step::Index(i) => v.get(*i),
+    })
+}
+
+/// The selected fields of a sample as one JSON object keyed by the paths as given.
+fn select(v: &Value, fields: &[(String, Vec<Step>)]) -> Value {
+    let mut m = Map::new();
+    for (name, steps) in fields {
+        m.insert(name.clone(), lookup(v, steps).cloned().unwrap_or(Value::Null));
+    }
+    Value::Object(m)
+}
+
+/// Checks `--fields` against the type's field table.
+fn field_paths<T: Reflect>(fields: &[String]) -> Result<Vec<(String, Vec<Step>)>, EchoError> {
+    let template = to_json(&T::zeroed());
+    let unknown = |path: &str| EchoError::UnknownField {
+        type_name: T::TYPE_NAME,
+        path: path.to_string(),
+        known: T::FIELDS
+            .iter()
+            .map(|f| f.name)
+            .filter(|n| *n != "reserved")
+            .collect::<Vec<_>>()
+            .join(", "),
+    };
+    fields
+        .iter()
+        .map(|f| f.trim())
+        .filter(|f| !f.is_empty())
+        .map(|f| {
+            let steps = parse_path(f).ok_or_else(|| unknown(f))?;
+            lookup(&template, &steps).ok_or_else(|| unknown(f))?;
+            Ok((f.to_string(), steps))
+        })
+        .collect()
+}
+
+/// Rate measurement over one reporting interval.
+#[derive(Debug, Default)]
+struct RateWindow {
+    n: u64,
+    first_host: Option<i64>,
+    last_host: i64,
+    min_dt: i64,
+    max_dt: i64,
+    gaps: u64,
+    last_seq: Option<u64>,
+}
+
+impl RateWindow {
+    fn add(&mut self, host_ns: i64, seq: Option<u64>) {
+        if self.n > 0 {
+            let dt = host_ns - self.last_host;
+            if self.n == 1 {
+                (self.min_dt, self.max_dt) = (dt, dt);
+            } else {
+                self.min_dt = self.min_dt.min(dt);
+                self.max_dt = self.max_dt.max(dt);
+            }
+        }
+        if let (Some(prev), Some(s)) = (self.last_seq, seq)
+            && s > prev + 1
+        {
+            self.gaps += s - prev - 1;
+        }
+        self.last_seq = seq;
+        self.first_host.get_or_insert(host_ns);
+        self.last_host = host_ns;
+        self.n += 1;
+    }
+
+    /// The report as JSON and resets the window (the sequence carries over).
+    fn report(&mut self, service: &str, wall_s: f64) -> Value {
+        let span_ns = self.last_host - self.first_host.unwrap_or(self.last_host);
+        let mean_ms = (self.n > 1).then(|| span_ns as f64 * 1e-6 / (self.n - 1) as f64);
+        let v = serde_json::json!({
+            "service": service,
+            "rate_hz": self.n as f64 / wall_s.max(1e-9),
+            "samples": self.n,
+            "stamp_rate_hz": mean_ms.map(|m| 1e3 / m),
+            "period_mean_ms": mean_ms,
+            "period_min_ms": (self.n > 1).then_some(self.min_dt as f64 * 1e-6),
+            "period_max_ms": (self.n > 1).then_some(self.max_dt as f64 * 1e-6),
+            "seq_gaps": self.gaps,
+        });
+        let last_seq = self.last_seq;
+        *self = Self {
+            last_seq,
+            ..Self::default()
+        };
+        v
+    }
+}
+
+fn rate_line(v: &Value) -> String {
+    let f = |k: &str, d: usize| v[k].as_f64().map_or("-".to_string(), |x| format!("{x:.d$}"));
+    format!(
+        "{}: {} Hz ({} samples)  stamps: {} Hz, period mean {} ms, min {} ms, max {} ms  seq gaps {}",
+        v["service"].as_str().unwrap_or(""),
+        f("rate_hz", 2),
+        v["samples"],
+        f("stamp_rate_hz", 2),
+        f("period_mean_ms", 3),
+        f("period_min_ms", 3),
+        f("period_max_ms", 3),
+        v["seq_gaps"]
+    )
+}
+
+fn echo<T: Reflect + ZeroCopySend + core::fmt::Debug>(
+    args: &EchoArgs,
+    stamp: impl Fn(&T) -> (i64, Option<u64>),
+) -> Result<(), EchoError> {
+    let fields = field_paths::<T>(&args.fields)?;
+    let min_interval = match args.max_rate_hz {
+        Some(r) if r.is_finite() && r > 0.0 => Some(Duration::from_secs_f64(1.0 / r)),
+        Some(_) => return Err(EchoError::BadRate),
+        None => None,
+    };
     let node = IpcNode::new(&format!("echo-{}", std::process::id()))?;
     let sub = node.subscriber::<T>(&args.service)?;
     let mut out = std::io::stdout().lock();
-    let mut n = 0u64;
+    let mut printed = 0u64;
     let mut last = Instant::now();
-    while args.count.is_none_or(|c| n < c) && !node.termination_requested() {
-        match sub.wait_next(Duration::from_millis(200))? {
-            Some(sample) => {
-                let v = to_json(&sample);
+    let mut last_print: Option<Instant> = None;
+    // A sample held back by --rate, printed when its line is due.
+    let mut pending: Option<T> = None;
+    let mut window = RateWindow::default();
+    let mut window_start = Instant::now();
+    let print = |out: &mut std::io::StdoutLock, sample: &T| -> Result<(), EchoError> {
+        let mut v = to_json(sample);
+        if !fields.is_empty() {
+            v = select(&v, &fields);
+        }
+        if args.json {
+            writeln!(out, "{v}")?;
+        } else {
+            writeln!(out, "{}", human(&v))?;
+        }
+        Ok(())
+    };
+    while args.count.is_none_or(|c| printed < c) && !node.termination_requested() {
+        let wait = match (args.measure_rate, min_interval, last_print, pending.is_some()) {
+            (true, _, _, _) => Duration::from_secs(1).saturating_sub(window_start.elapsed()),
+            (false, Some(iv), Some(t), true) => iv.saturating_sub(t.elapsed()),
+            _ => Duration::from_millis(200),
+        };
+        let got = sub.wait_next(wait.max(Duration::from_millis(1)))?;
+        if let Some(sample) = got {
+            last = Instant::now();
+            if args.measure_rate {
+                let (h, seq) = stamp(&sample);
+                window.add(h, seq);
+                // Drain what is buffered right away: the window counts every sample.
+                while let Some(s) = sub.receive()? {
+                    let (h, seq) = stamp(&s);
+                    window.add(h, seq);
+                }
+            } else {
+                pending = Some(sample);
+                if min_interval.is_some() {
+                    // Only the newest buffered sample can be printed next.
+                    while let Some(s) = sub.receive()? {
+                        pending = Some(s);
+                    }
+                }
+            }
+        } else if args.timeout.is_some_and(|t| last.elapsed() > t) {
+            return Err(EchoError::Timeout(args.service.clone()));
+        }
+        if args.measure_rate {
+            let wall = window_start.elapsed();
+            if wall >= Duration::from_secs(1) {
+                let v = window.report(&args.service, wall.as_secs_f64());
+                window_start = Instant::now();
                 if args.json {
                     writeln!(out, "{v}")?;
                 } else {
-                    writeln!(out, "{}", human(&v))?;
+                    writeln!(out, "{}", rate_line(&v))?;
                 }
-                n += 1;
-                last = Instant::now();
+                printed += 1;
             }
-            None => {
-                if args.timeout.is_some_and(|t| last.elapsed() > t) {
-                    return Err(EchoError::Timeout(args.service.clone()));
-                }
-            }
+            continue;
+        }
+        let due = match (min_interval, last_print) {
+            (Some(iv), Some(t)) => t.elapsed() >= iv,
+            _ => true,
+        };
+        if due && let Some(sample) = pending.take() {
+            print(&mut out, &sample)?;
+            printed += 1;
+            last_print = Some(Instant::now());
         }
     }
     Ok(())
@@ -170,5 +401,43 @@ mod tests {
         let line = human(&to_json(&fix));
         assert!(line.starts_with("stamp.host_ns=5"), "{line}");
         assert!(!line.contains("lat_deg"), "{line}");
+    }
+
+    #[test]
+    fn field_paths_select_nested_and_indexed_fields() {
+        let paths =
+            field_paths::<NavState>(&["lat_deg".into(), "vel_ned_mps[2]".into(), "imu[1].offset_s".into()]).unwrap();
+        let mut n = NavState::zeroed();
+        n.lat_deg = 48.5;
+        n.vel_ned_mps[2] = -0.25;
+        n.imu[1].offset_s = 0.01;
+        let v = select(&to_json(&n), &paths);
+        assert_eq!(
+            v.to_string(),
+            r#"{"lat_deg":48.5,"vel_ned_mps[2]":-0.25,"imu[1].offset_s":0.01}"#
+        );
+        assert_eq!(human(&v), "lat_deg=48.5 vel_ned_mps[2]=-0.25 imu[1].offset_s=0.01");
+        let paths = field_paths::<ImuSample>(&["stamp.host_ns".into()]).unwrap();
+        assert_eq!(paths[0].1, vec![Step::Key("stamp".into()), Step::Key("host_ns".into())]);
+        for bad in ["lat", "stamp.nope", "vel_ned_mps[3]", "vel_ned_mps[x]", "a..b"] {
+            assert!(field_paths::<NavState>(&[bad.into()]).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn rate_window_measures_spacing_and_gaps() {
+        let mut w = RateWindow::default();
+        for (i, seq) in [0u64, 1, 2, 5, 6].iter().enumerate() {
+            w.add(1_000_000_000 + i as i64 * 10_000_000, Some(*seq));
+        }
+        let v = w.report("s", 0.5);
+        assert_eq!(v["samples"], 5);
+        assert_eq!(v["seq_gaps"], 2);
+        assert!((v["rate_hz"].as_f64().unwrap() - 10.0).abs() < 1e-9);
+        assert!((v["period_mean_ms"].as_f64().unwrap() - 10.0).abs() < 1e-9);
+        assert!((v["stamp_rate_hz"].as_f64().unwrap() - 100.0).abs() < 1e-6);
+        // The next window continues the sequence.
+        w.add(2_000_000_000, Some(8));
+        assert_eq!(w.report("s", 1.0)["seq_gaps"], 1);
     }
 }

@@ -20,6 +20,7 @@ use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
 
+use super::liveness::{Change, Liveness, STALE_MARGIN_NS};
 use crate::estimator::error_state::ProcessNoise;
 use crate::estimator::gnss_fusion::GnssAccuracy;
 use crate::estimator::imu_array::{ArrayConfig, UnitConfig};
@@ -49,6 +50,22 @@ pub struct EstimatorArgs {
     pub gnss_vel_std_mps: f64,
     /// Estimate the IMUs' time offsets (else they are taken as zero: an uncompensated array).
     pub estimate_imu_offsets: bool,
+    /// Mountings by IMU id (the configuration file's `[imu.ID].mounting`); an IMU without one
+    /// is mounted as the body frame at its origin.
+    pub imu_mountings: std::collections::BTreeMap<String, ImuMounting>,
+    /// GNSS antenna position in the body frame (FRD), m.
+    pub gnss_lever_arm_m: [f64; 3],
+    /// Host oscillator Allan deviations at 1 s (white FM, random-walk FM); default a TCXO.
+    pub oscillator_adev_1s: Option<(f64, f64)>,
+}
+
+/// Where one IMU sits in the body frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuMounting {
+    /// Rotation IMU axes → body (FRD): x_body = C_b^s · x_imu.
+    pub c_b_s: [[f64; 3]; 3],
+    /// Position of the IMU in the body frame, m.
+    pub lever_b_m: [f64; 3],
 }
 
 impl Default for EstimatorArgs {
@@ -63,6 +80,9 @@ impl Default for EstimatorArgs {
             estimate_delay: true,
             gnss_vel_std_mps: GnssAccuracy::default().vel_std_mps,
             estimate_imu_offsets: true,
+            imu_mountings: Default::default(),
+            gnss_lever_arm_m: [0.0; 3],
+            oscillator_adev_1s: None,
         }
     }
 }
@@ -80,8 +100,14 @@ impl EstimatorArgs {
                 .iter()
                 .map(|id| UnitConfig {
                     id: id.clone(),
-                    c_b_s: Matrix3::identity(),
-                    lever_b_m: Vector3::zeros(),
+                    c_b_s: self
+                        .imu_mountings
+                        .get(id)
+                        .map_or_else(Matrix3::identity, |m| Matrix3::from_fn(|r, c| m.c_b_s[r][c])),
+                    lever_b_m: self
+                        .imu_mountings
+                        .get(id)
+                        .map_or_else(Vector3::zeros, |m| Vector3::from(m.lever_b_m)),
                     gyro_noise_density: spec.gyro.noise_density.max(1e-7),
                     accel_noise_density: spec.accel.noise_density.max(1e-6),
                 })
@@ -107,6 +133,7 @@ impl EstimatorArgs {
             disagree_after: 20,
             agree_after: 400,
             derivative_half_width: 20,
+            derivative_half_width_fast: 3,
         }
     }
 
@@ -117,9 +144,15 @@ impl EstimatorArgs {
         PipelineConfig {
             time: TimeSyncConfig {
                 software_sync: self.software_sync,
+                noise: self.oscillator_adev_1s.map_or_else(Default::default, |(w, r)| {
+                    crate::estimator::clock_model::OscillatorNoise::from_allan(w, r)
+                }),
                 ..Default::default()
             },
-            nav: NavConfig::with_noise(noise),
+            nav: NavConfig {
+                lever_arm_b_m: Vector3::from(self.gnss_lever_arm_m),
+                ..NavConfig::with_noise(noise)
+            },
             gnss: GnssAccuracy {
                 vel_std_mps: self.gnss_vel_std_mps,
                 ..GnssAccuracy::default()
@@ -129,6 +162,17 @@ impl EstimatorArgs {
             software_delay_prior: (0.5, 0.5),
             hardware_delay_prior: (0.0, 0.02),
         }
+    }
+}
+
+/// Notes a sample of input `i`; true (and logged) when the input was stale until now.
+fn resumed(live: &mut Liveness, i: usize, stamp_ns: i64, rx_ns: i64) -> bool {
+    match live.seen(i, stamp_ns, rx_ns) {
+        Some(Change::Resumed { stale_ns }) => {
+            info!(input = %live.inputs()[i].name, stale_ms = stale_ns / 1_000_000, "input back");
+            true
+        }
+        _ => false,
     }
 }
 
@@ -199,18 +243,48 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
     let mut last_imu_seq: Vec<Option<u64>> = vec![None; imus.len()];
     let mut last_state_ns = 0i64;
     let mut last_status = est.time().status();
+    // Staleness of every input (roles/liveness.rs): IMUs first, then PPS, then GNSS, as
+    // drained below; flagged in Health at once (`stale_<kind>_<id>`: host ns when declared).
+    let mut live = Liveness::default();
+    let mut c_stale = Vec::new();
+    for (kind, ids, nominal_ns) in [
+        ("imu", &args.imu_ids, 10_000_000),
+        ("pps", &args.pps_ids, NS_PER_S),
+        ("gnss", &args.gnss_ids, NS_PER_S),
+    ] {
+        for id in ids {
+            live.add(&format!("{kind}_{id}"), nominal_ns);
+            c_stale.push(health.counter(&format!("stale_{kind}_{id}")));
+        }
+    }
+    let c_stale_n = health.counter("stale_inputs");
+    let c_stale_events = health.counter("stale_events");
+    let (n_imu, n_pps) = (imus.len(), pps.len());
     info!(pps = ?args.pps_ids, gnss = ?args.gnss_ids, imus = ?args.imu_ids, "estimator running");
+    navsync_shared::sd_notify::ready(&format!(
+        "estimator: gnss {:?}, pps {:?}, imus {:?}",
+        args.gnss_ids, args.pps_ids, args.imu_ids
+    ));
 
     loop {
-        if !node.wait_on(&waitset, Duration::from_millis(100))? {
+        navsync_shared::sd_notify::watchdog();
+        // Wake at the nearest staleness deadline at the latest.
+        let now = monotonic_now_ns();
+        let wait_ns = live
+            .next_deadline()
+            .map_or(100_000_000, |d| (d - now).clamp(1_000_000, 100_000_000));
+        if !node.wait_on(&waitset, Duration::from_nanos(wait_ns as u64))? {
             break;
         }
         let mut updated = false;
+        let rx_ns = monotonic_now_ns();
+        let mut liveness_changed = false;
         // IMUs first: a PPS edge or fix published before the IMU sample that releases it is
         // then always among what this wake-up drains.
-        for (s, last) in imus.iter().zip(last_imu_seq.iter_mut()) {
+        for (i, (s, last)) in imus.iter().zip(last_imu_seq.iter_mut()).enumerate() {
             s.clear_events();
             while let Some(sample) = s.receive()? {
+                liveness_changed |= resumed(&mut live, i, sample.stamp.host_ns, rx_ns);
                 if let Some(prev) = *last
                     && sample.stamp.seq > prev + 1
                 {
@@ -222,15 +296,17 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
                 order.push(AnySample::Imu(sample), ());
             }
         }
-        for s in &pps {
+        for (j, s) in pps.iter().enumerate() {
             s.clear_events();
             while let Some(edge) = s.receive()? {
+                liveness_changed |= resumed(&mut live, n_imu + j, edge.stamp.host_ns, rx_ns);
                 order.push(AnySample::PpsEdge(edge), ());
             }
         }
-        for s in &gnss {
+        for (k, s) in gnss.iter().enumerate() {
             s.clear_events();
             while let Some(fix) = s.receive()? {
+                liveness_changed |= resumed(&mut live, n_imu + n_pps + k, fix.stamp.host_ns, rx_ns);
                 health.add(c_fixes, 1);
                 health.tick(r_fix);
                 order.push(AnySample::GnssFix(fix), ());
@@ -257,6 +333,24 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
         }
         health.set(c_late, order.late());
         let now = monotonic_now_ns();
+        live.check(now, |_, x, _| {
+            warn!(
+                input = %x.name,
+                silent_ms = (x.interval_ns() * 1e-6 + (STALE_MARGIN_NS / 1_000_000) as f64).round(),
+                "input stale: nothing for its interval plus the margin"
+            );
+            health.add(c_stale_events, 1);
+            liveness_changed = true;
+        });
+        if liveness_changed {
+            for (c, x) in c_stale.iter().zip(live.inputs()) {
+                health.set(*c, x.stale_since_ns().map_or(0, |t| t.max(1) as u64));
+            }
+            health.set(c_stale_n, live.stale_count() as u64);
+            if let Err(e) = health.publish_now(now) {
+                warn!("publishing health: {e}");
+            }
+        }
         if est.time().status() != last_status {
             info!(
                 from = last_status.name(),
@@ -285,6 +379,7 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
             latency.clear();
         }
     }
+    navsync_shared::sd_notify::stopping();
     drop(guards);
     health.publish_final()?;
     info!("estimator stopped");

@@ -1,11 +1,24 @@
 //! Process shells: each role wires a functional core to its iceoryx2 services.
 
-pub mod bench_timing;
 pub mod analyze;
+pub mod bench_cli;
+pub mod bench_e2e;
+pub mod bench_ipc;
+pub mod bench_throughput;
+pub mod bench_timing;
+pub mod bench_util;
 pub mod demo;
 pub mod echo;
 pub mod estimator;
+pub mod eval;
+pub mod gpsd_server;
+pub mod kf_gins;
+pub mod liveness;
 pub mod ntpshm;
+pub mod python_types;
 pub mod record;
 pub mod replay;
+pub mod report;
+pub mod service;
 pub mod sim_estimate;
+pub mod status;

@@ -257,7 +257,9 @@ pub fn run(args: &NtpShmArgs) -> Result<(), NtpShmError> {
     let mut next_write = monotonic_now_ns();
     let mut last_status = TimeStatus::None;
     let mut ipc_errors = 0u32;
+    navsync_shared::sd_notify::ready(&format!("NTP SHM unit {}", args.unit));
     loop {
+        navsync_shared::sd_notify::watchdog();
         let now = monotonic_now_ns();
         let wait = Duration::from_nanos((next_write - now).clamp(1_000_000, NS_PER_S) as u64);
         match time.wait_next(wait) {
@@ -307,6 +309,7 @@ pub fn run(args: &NtpShmArgs) -> Result<(), NtpShmError> {
             warn!("publishing health: {e}");
         }
     }
+    navsync_shared::sd_notify::stopping();
     let _ = health.publish_final();
     info!("NTP SHM exporter stopped");
     Ok(())

@@ -114,6 +114,7 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
         rec.channel(s.service())?;
     }
     info!(file = %args.out.display(), services = subs.len(), "recording");
+    navsync_shared::sd_notify::ready(&format!("recording to {}", args.out.display()));
 
     let t0 = monotonic_now_ns();
     let end = args.duration_s.map(|d| t0 + (d * 1e9) as i64);
@@ -178,6 +179,7 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
             health.set(c_bytes, rec.bytes_written());
             health.set(c_services, subs.len() as u64);
             health.maybe_publish(now)?;
+            navsync_shared::sd_notify::watchdog();
             if args.progress && now - last_progress >= if tty { NS_PER_S / 5 } else { 5 * NS_PER_S } {
                 progress(tty, now - t0, rec.bytes_written(), &subs, &counts);
                 last_progress = now;
@@ -202,6 +204,7 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
             }
         }
     }
+    navsync_shared::sd_notify::stopping();
     let _ = health.publish_final();
     let bytes = rec.bytes_written();
     let stats = RecordStats {

@@ -83,6 +83,9 @@ pub enum ReplayError {
     /// Reading the recording or writing the output.
     #[error(transparent)]
     Recording(#[from] RecordingError),
+    /// Writing the KF-GINS result.
+    #[error(transparent)]
+    KfGins(#[from] crate::roles::kf_gins::KfGinsError),
     /// Writing the summary.
     #[error("writing {path}: {source}")]
     Io {
@@ -241,6 +244,8 @@ pub struct EstimateArgs {
     pub est: EstimatorArgs,
     /// Write NavState and TimeState here.
     pub out: Option<PathBuf>,
+    /// Write `out` in KF-GINS's result layout instead of MCAP ([`crate::roles::kf_gins::ResultWriter`]).
+    pub kf_gins_format: bool,
     /// Write the accuracy summary here as JSON.
     pub summary_json: Option<PathBuf>,
 }
@@ -271,9 +276,14 @@ pub fn run_estimate(args: &EstimateArgs) -> Result<Summary, ReplayError> {
         }
     });
     let mut out = match &args.out {
-        Some(p) => Some(SampleRecorder::create(p)?),
-        None => None,
+        Some(p) if !args.kf_gins_format => Some(SampleRecorder::create(p)?),
+        _ => None,
     };
+    let mut kf_gins = match &args.out {
+        Some(p) if args.kf_gins_format => Some(crate::roles::kf_gins::ResultWriter::create(p)?),
+        _ => None,
+    };
+    let mut kf_gins_err: Option<crate::roles::kf_gins::KfGinsError> = None;
     let mut write_err: Option<RecordingError> = None;
     let cfg = args.est.pipeline_config();
     let reference = cfg.reference_imu.clone();
@@ -290,6 +300,11 @@ pub fn run_estimate(args: &EstimateArgs) -> Result<Summary, ReplayError> {
         truth,
         out.is_some(),
         |o, &log_time| {
+            if kf_gins_err.is_none()
+                && let (Some(w), Output::Nav(n)) = (kf_gins.as_mut(), o)
+            {
+                kf_gins_err = w.write(n).err();
+            }
             let Some(rec) = out.as_mut() else { return };
             if write_err.is_some() {
                 return;
@@ -324,6 +339,12 @@ pub fn run_estimate(args: &EstimateArgs) -> Result<Summary, ReplayError> {
     }
     if let Some(rec) = out {
         rec.close()?;
+    }
+    if let Some(e) = kf_gins_err {
+        return Err(e.into());
+    }
+    if let Some(w) = kf_gins {
+        w.finish()?;
     }
     println!("{}", run.summary.table());
     if let Some(p) = &args.summary_json {

@@ -227,6 +227,8 @@ pub fn run(args: &GpsArgs) -> Result<(), GpsError> {
 
     info!("gps driver running");
     while !node.termination_requested() {
+        // Serving: the services exist and the device is being read (or waited for, with backoff).
+        navsync_shared::sd_notify::ready(&format!("gps {}: reading {}", args.id, args.port));
         let baud = match args.baud {
             Baud::Fixed(b) => b,
             Baud::Auto => hunt.baud(),
@@ -327,6 +329,7 @@ pub fn run(args: &GpsArgs) -> Result<(), GpsError> {
         }
         backoff = (backoff * 2).min(Duration::from_secs(5));
     }
+    navsync_shared::sd_notify::stopping();
     publish_health(&mut health, &dec, &mut log);
     let _ = health.publish_final();
     info!("gps driver stopped");
@@ -360,6 +363,8 @@ fn describe(name: &str) -> Option<&'static str> {
 /// Copies the decoder's counters into the report, logs growing error counters (once per
 /// kind, then rate-limited) and publishes the report when due.
 fn publish_health(h: &mut HealthReporter, d: &Decoder, log: &mut RateLimitedLog) {
+    // Called on every turn of the read loop and of the reopen backoff: the systemd watchdog.
+    navsync_shared::sd_notify::watchdog();
     let now = Instant::now();
     let framer = d.framer.counters().named();
     let assembler = d.assembler.counters().named();

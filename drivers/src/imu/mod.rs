@@ -180,6 +180,8 @@ pub fn run(args: &ImuArgs) -> Result<(), ImuError> {
     let node = IpcNode::new(&process)?;
     let mut out = SampleOutput::new(&node, &args.id, &process, limits, args.rate_hz.map(|f| 1.0 / f))?;
     info!(source = ?args.source, axes = %args.axes, "imu driver running");
+    // Serving: the services exist; the device is read (or waited for, with backoff) from here.
+    navsync_shared::sd_notify::ready(&format!("imu {}: {:?}", args.id, args.source));
     match &args.source {
         ImuSource::Iio { devices } => iio_driver::run(
             &node,
@@ -224,6 +226,7 @@ pub fn run(args: &ImuArgs) -> Result<(), ImuError> {
             )
         }
     }
+    navsync_shared::sd_notify::stopping();
     out.finish();
     info!(published = out.published(), "imu driver stopped");
     Ok(())

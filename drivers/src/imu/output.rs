@@ -159,6 +159,8 @@ impl SampleOutput {
     /// Copies the check counters and `extra` counters into the health report, logs the
     /// growing error counters (rate-limited per kind) and publishes the report when due.
     pub fn tick(&mut self, extra: impl IntoIterator<Item = (&'static str, u64)>) {
+        // Every source's loop (reads and reopen backoff) ticks: the systemd watchdog.
+        navsync_shared::sd_notify::watchdog();
         let now = Instant::now();
         let counters = *self.checks.counters();
         for (name, v) in counters.named().into_iter().chain(extra) {

@@ -243,8 +243,10 @@ pub fn run(args: &PpsArgs) -> Result<(), PpsError> {
     let mut warned = false;
     let mut ipc_errors = 0u32;
     info!("pps driver running");
+    navsync_shared::sd_notify::ready(&format!("pps {}: {}", args.id, args.source));
 
     'outer: while !node.termination_requested() {
+        navsync_shared::sd_notify::watchdog();
         let mut source = match Source::open(&args.source, &node) {
             Ok(s) => {
                 if warned {
@@ -329,8 +331,10 @@ pub fn run(args: &PpsArgs) -> Result<(), PpsError> {
             if let Err(e) = health.maybe_publish(monotonic_now_ns()) {
                 warn!("publishing health: {e}");
             }
+            navsync_shared::sd_notify::watchdog();
         }
     }
+    navsync_shared::sd_notify::stopping();
     let _ = health.publish_final();
     info!("pps driver stopped");
     Ok(())

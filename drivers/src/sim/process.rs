@@ -118,7 +118,11 @@ pub fn load_config(args: &SimArgs) -> Result<SimConfig, SimError> {
         cfg.set_seed(s);
     }
     for &(start_s, duration_s) in &args.gnss_outages {
-        cfg.gnss.outages.push(super::scenario::OutageConfig { start_s, duration_s, pps_continues: true });
+        cfg.gnss.outages.push(super::scenario::OutageConfig {
+            start_s,
+            duration_s,
+            pps_continues: true,
+        });
     }
     if args.no_vibration {
         cfg.set_vibration(false);

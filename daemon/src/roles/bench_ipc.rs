@@ -1,0 +1,648 @@
+//! `navsync bench ipc`: publisher → subscriber latency between separate processes, iceoryx2
+//! (navsync's services: shared-memory sample + event notification, the subscriber asleep in a
+//! WaitSet as the estimator is) against a Unix-domain socket carrying the same bytes
+//! (SOCK_SEQPACKET, the subscriber asleep in a blocking `recv`), for `ImuSample` and
+//! `NavState`, paced at a fixed rate and unpaced.
+//!
+//! Every case starts its own processes (hidden `navsync bench-helper ipc-pub|ipc-sub`) under a
+//! fresh iceoryx2 prefix: the subscribers first (they print `ready` once listening), then the
+//! publisher. The publisher writes `CLOCK_MONOTONIC` into the payload (`stamp.host_ns`,
+//! `host_ns`) right before publishing and a sequence number; each subscriber takes
+//! `CLOCK_MONOTONIC` when it has the sample in hand and keeps every difference (exact
+//! percentiles, nothing binned). Lost samples (iceoryx2's publisher never blocks: a full
+//! subscriber buffer loses its oldest sample) are counted from the sequence numbers; the
+//! socket's sender blocks instead.
+
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use navsync_shared::ipc::{IpcError, IpcNode};
+use navsync_shared::recording::pacing;
+use navsync_shared::reflect::Reflect;
+use navsync_shared::samples::{ImuSample, NavState};
+use navsync_shared::services;
+use navsync_shared::time::monotonic_now_ns;
+use serde::Serialize;
+
+use super::bench_util::{self, BenchEnv, Machine, Percentiles};
+
+/// Which sample type a case carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    /// `ImuSample` (112 bytes) on `navsync/imu/bench/sample`.
+    Imu,
+    /// `NavState` on `navsync/nav/state`.
+    Nav,
+}
+
+/// The transport of a case.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Transport {
+    /// navsync's iceoryx2 services.
+    Iceoryx2,
+    /// A Unix-domain SOCK_SEQPACKET socket per subscriber.
+    Socket,
+}
+
+/// A publishing rate: Hz, or `max` (back to back, no pacing).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Rate {
+    /// Paced at this many samples per second.
+    Hz(f64),
+    /// Unpaced.
+    Max,
+}
+
+impl std::str::FromStr for Rate {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "max" {
+            return Ok(Self::Max);
+        }
+        match s.parse::<f64>() {
+            Ok(r) if r.is_finite() && r > 0.0 && r <= 1e6 => Ok(Self::Hz(r)),
+            _ => Err(format!("`{s}`: a rate is a number of Hz (0 < r ≤ 1e6) or `max`")),
+        }
+    }
+}
+
+impl std::fmt::Display for Rate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Hz(r) => write!(f, "{r}"),
+            Self::Max => f.write_str("max"),
+        }
+    }
+}
+
+impl Serialize for Rate {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&self.to_string())
+    }
+}
+
+/// A sample type the benchmark can carry: where its time stamp and sequence number live.
+trait Payload: Reflect + iceoryx2::prelude::ZeroCopySend + std::fmt::Debug + Copy {
+    fn service() -> String;
+    fn make(host_ns: i64, seq: u64) -> Self;
+    fn stamp(&self) -> (i64, u64);
+}
+
+impl Payload for ImuSample {
+    fn service() -> String {
+        services::imu_sample("bench")
+    }
+    fn make(host_ns: i64, seq: u64) -> Self {
+        let mut s = Self::zeroed();
+        s.stamp.host_ns = host_ns;
+        s.stamp.seq = seq;
+        s.gyro_rps = [0.01, -0.02, 0.03];
+        s.accel_mps2 = [0.1, 0.2, -9.8];
+        s.dt_s = 1e-3;
+        s.imu_id = *b"bench\0\0\0";
+        s
+    }
+    fn stamp(&self) -> (i64, u64) {
+        (self.stamp.host_ns, self.stamp.seq)
+    }
+}
+
+impl Payload for NavState {
+    fn service() -> String {
+        services::NAV_STATE.to_string()
+    }
+    fn make(host_ns: i64, seq: u64) -> Self {
+        let mut s = Self::zeroed();
+        s.host_ns = host_ns;
+        s.seq = seq;
+        s.lat_deg = 48.137154;
+        s.lon_deg = 11.576124;
+        s.q_nb = [1.0, 0.0, 0.0, 0.0];
+        s
+    }
+    fn stamp(&self) -> (i64, u64) {
+        (self.host_ns, self.seq)
+    }
+}
+
+/// The payload's bytes, as the socket sends them.
+fn bytes_of<T: Payload>(v: &T) -> &[u8] {
+    // SAFETY: every navsync sample is #[repr(C)] of integers and floats without padding
+    // (shared/tests/layout.rs), so all its bytes are initialised.
+    unsafe { std::slice::from_raw_parts((v as *const T).cast::<u8>(), size_of::<T>()) }
+}
+
+/// Settings of `navsync bench ipc`.
+#[derive(Debug, Clone)]
+pub struct IpcBenchArgs {
+    /// Samples per case.
+    pub samples: u64,
+    /// Sample types.
+    pub kinds: Vec<Kind>,
+    /// Publishing rates.
+    pub rates: Vec<Rate>,
+    /// Subscriber counts.
+    pub subscribers: Vec<usize>,
+    /// Transports.
+    pub transports: Vec<Transport>,
+    /// Write the results as JSON here.
+    pub json: Option<PathBuf>,
+}
+
+/// One case's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct IpcCase {
+    /// Transport.
+    pub transport: Transport,
+    /// Sample type.
+    pub kind: Kind,
+    /// Payload size, bytes.
+    pub payload_bytes: usize,
+    /// Requested rate.
+    pub rate: Rate,
+    /// Subscriber processes.
+    pub subscribers: usize,
+    /// Samples published.
+    pub sent: u64,
+    /// Samples received, summed over the subscribers.
+    pub received: u64,
+    /// Samples lost (sent × subscribers − received).
+    pub lost: u64,
+    /// Publish errors.
+    pub publish_errors: u64,
+    /// Achieved publishing rate, samples/s.
+    pub achieved_rate_hz: f64,
+    /// Latency over every received sample of every subscriber.
+    pub latency: Percentiles,
+    /// Publisher CPU per sample, µs.
+    pub publisher_cpu_us_per_sample: f64,
+    /// Subscriber CPU per received sample, µs (mean over the subscribers).
+    pub subscriber_cpu_us_per_sample: f64,
+}
+
+/// Everything `navsync bench ipc` measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct IpcReport {
+    /// The machine and its load.
+    pub machine: Machine,
+    /// The cases in the order they ran.
+    pub cases: Vec<IpcCase>,
+}
+
+/// Errors of the benchmark.
+#[derive(Debug, thiserror::Error)]
+pub enum IpcBenchError {
+    /// Starting or talking to a child failed.
+    #[error("{0}")]
+    Child(String),
+    /// I/O.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// IPC.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+}
+
+fn child_err(e: impl std::fmt::Display) -> IpcBenchError {
+    IpcBenchError::Child(e.to_string())
+}
+
+/// Runs every case of `args` and prints the table; returns the report.
+pub fn run(args: &IpcBenchArgs) -> Result<IpcReport, IpcBenchError> {
+    let mut report = IpcReport {
+        machine: Machine::now(),
+        cases: Vec::new(),
+    };
+    for &kind in &args.kinds {
+        for &rate in &args.rates {
+            for &subs in &args.subscribers {
+                // Transports alternate case by case, so that both see the same load.
+                for &transport in &args.transports {
+                    let case = run_case(transport, kind, rate, subs, args.samples)?;
+                    eprintln!("{}", row(&case));
+                    report.cases.push(case);
+                }
+            }
+        }
+    }
+    report.machine.finish();
+    println!("{}", table(&report));
+    if let Some(p) = &args.json {
+        bench_util::write_json(p, &report)?;
+    }
+    Ok(report)
+}
+
+fn arg<T: ToString>(v: T) -> String {
+    v.to_string()
+}
+
+fn kind_name(k: Kind) -> &'static str {
+    match k {
+        Kind::Imu => "imu",
+        Kind::Nav => "nav",
+    }
+}
+
+fn transport_name(t: Transport) -> &'static str {
+    match t {
+        Transport::Iceoryx2 => "iceoryx2",
+        Transport::Socket => "socket",
+    }
+}
+
+/// Runs one case in fresh processes.
+pub fn run_case(
+    transport: Transport,
+    kind: Kind,
+    rate: Rate,
+    subscribers: usize,
+    samples: u64,
+) -> Result<IpcCase, IpcBenchError> {
+    let mut env = BenchEnv::new("ipc")?;
+    let mut outs = Vec::new();
+    let mut sockets = Vec::new();
+    for i in 0..subscribers {
+        let lat = env.dir.join(format!("lat-{i}.bin"));
+        let sock = env.dir.join(format!("sock-{i}"));
+        let mut a = vec![
+            arg("bench-helper"),
+            arg("ipc-sub"),
+            arg("--transport"),
+            arg(transport_name(transport)),
+            arg("--kind"),
+            arg(kind_name(kind)),
+            arg("--count"),
+            arg(samples),
+            arg("--index"),
+            arg(i),
+            arg("--out"),
+            lat.display().to_string(),
+        ];
+        if transport == Transport::Socket {
+            a.extend([arg("--socket"), sock.display().to_string()]);
+        }
+        let name = format!("sub-{i}");
+        let (_, out) = env.spawn(&name, &a, true)?;
+        let mut out = BufReader::new(out.ok_or_else(|| child_err("no stdout"))?);
+        if !bench_util::wait_for_line(&mut out, "ready", Duration::from_secs(20)) {
+            return Err(child_err(format!("{name} did not get ready:\n{}", env.log(&name))));
+        }
+        outs.push((name, lat, out));
+        sockets.push(sock.display().to_string());
+    }
+    let mut a = vec![
+        arg("bench-helper"),
+        arg("ipc-pub"),
+        arg("--transport"),
+        arg(transport_name(transport)),
+        arg("--kind"),
+        arg(kind_name(kind)),
+        arg("--count"),
+        arg(samples),
+        arg("--rate"),
+        arg(rate),
+    ];
+    if transport == Transport::Socket {
+        a.push(arg("--sockets"));
+        a.push(sockets.join(","));
+    }
+    let (_, pub_out) = env.spawn("pub", &a, true)?;
+    let mut pub_out = BufReader::new(pub_out.ok_or_else(|| child_err("no stdout"))?);
+    let expected = match rate {
+        Rate::Hz(r) => samples as f64 / r,
+        Rate::Max => 0.0,
+    };
+    let limit = Duration::from_secs_f64(expected * 1.5 + 60.0);
+    let st = env
+        .wait_exit("pub", limit)
+        .ok_or_else(|| child_err(format!("publisher did not finish within {limit:?}")))?;
+    if !st.success() {
+        return Err(child_err(format!("publisher failed ({st}):\n{}", env.log("pub"))));
+    }
+    let pub_summary = bench_util::last_json_line(&mut pub_out).unwrap_or_default();
+    // Subscribers stop at the last sequence number; one that lost it is told to stop.
+    let mut all = Vec::new();
+    let mut sub_cpu = 0.0;
+    let mut received = 0u64;
+    for (name, lat, out) in &mut outs {
+        if env.wait_exit(name, Duration::from_millis(1000)).is_none() {
+            env.terminate(name);
+        }
+        let st = env
+            .wait_exit(name, Duration::from_secs(10))
+            .ok_or_else(|| child_err(format!("{name} did not stop")))?;
+        if !st.success() {
+            return Err(child_err(format!("{name} failed ({st}):\n{}", env.log(name))));
+        }
+        let s = bench_util::last_json_line(out).unwrap_or_default();
+        sub_cpu += s["cpu_s"].as_f64().unwrap_or(f64::NAN);
+        let v = bench_util::read_latencies(lat)?;
+        received += v.len() as u64;
+        all.extend(v);
+    }
+    let sent = pub_summary["sent"].as_u64().unwrap_or(0);
+    let wall = pub_summary["wall_s"].as_f64().unwrap_or(f64::NAN);
+    let case = IpcCase {
+        transport,
+        kind,
+        payload_bytes: match kind {
+            Kind::Imu => size_of::<ImuSample>(),
+            Kind::Nav => size_of::<NavState>(),
+        },
+        rate,
+        subscribers,
+        sent,
+        received,
+        lost: (sent * subscribers as u64).saturating_sub(received),
+        publish_errors: pub_summary["errors"].as_u64().unwrap_or(0),
+        achieved_rate_hz: sent as f64 / wall,
+        latency: Percentiles::from_ns(&mut all),
+        publisher_cpu_us_per_sample: pub_summary["cpu_s"].as_f64().unwrap_or(f64::NAN) / sent.max(1) as f64 * 1e6,
+        subscriber_cpu_us_per_sample: sub_cpu / received.max(1) as f64 * 1e6,
+    };
+    let bad = env.stop_all();
+    if !bad.is_empty() {
+        return Err(child_err(format!("did not exit cleanly: {bad:?}")));
+    }
+    Ok(case)
+}
+
+fn row(c: &IpcCase) -> String {
+    let rate = match c.rate {
+        Rate::Hz(r) => format!("{r} Hz"),
+        Rate::Max => format!("max ({:.0}/s)", c.achieved_rate_hz),
+    };
+    format!(
+        "| {} | {} ({} B) | {} | {} | {}/{} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} / {:.2} |",
+        transport_name(c.transport),
+        match c.kind {
+            Kind::Imu => "ImuSample",
+            Kind::Nav => "NavState",
+        },
+        c.payload_bytes,
+        rate,
+        c.subscribers,
+        c.received,
+        c.sent * c.subscribers as u64,
+        c.latency.p50_us,
+        c.latency.p99_us,
+        c.latency.p999_us,
+        c.latency.max_us,
+        c.publisher_cpu_us_per_sample,
+        c.subscriber_cpu_us_per_sample,
+    )
+}
+
+/// The Markdown table of a report.
+pub fn table(r: &IpcReport) -> String {
+    let mut s = String::from(
+        "| transport | payload | rate | subscribers | received | p50 µs | p99 µs | p99.9 µs | max µs | CPU µs/sample pub / sub |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for c in &r.cases {
+        s.push_str(&row(c));
+        s.push('\n');
+    }
+    s.push_str(&r.machine.line());
+    s
+}
+
+// ---------------------------------------------------------------- helper processes
+
+/// Settings of `navsync bench-helper ipc-pub`.
+#[derive(Debug, Clone)]
+pub struct PubArgs {
+    /// Transport.
+    pub transport: Transport,
+    /// Sample type.
+    pub kind: Kind,
+    /// Samples to send (sequence numbers 0..count).
+    pub count: u64,
+    /// Rate.
+    pub rate: Rate,
+    /// Socket paths of the subscribers (socket transport).
+    pub sockets: Vec<PathBuf>,
+}
+
+/// Settings of `navsync bench-helper ipc-sub`.
+#[derive(Debug, Clone)]
+pub struct SubArgs {
+    /// Transport.
+    pub transport: Transport,
+    /// Sample type.
+    pub kind: Kind,
+    /// Samples the publisher sends.
+    pub count: u64,
+    /// Subscriber index (node name).
+    pub index: usize,
+    /// Where to write the latencies.
+    pub out: PathBuf,
+    /// Socket path to listen on (socket transport).
+    pub socket: Option<PathBuf>,
+}
+
+/// `navsync bench-helper ipc-pub`: publishes `count` samples and prints a JSON summary.
+pub fn helper_pub(a: &PubArgs) -> Result<(), IpcBenchError> {
+    match a.kind {
+        Kind::Imu => publish::<ImuSample>(a),
+        Kind::Nav => publish::<NavState>(a),
+    }
+}
+
+/// `navsync bench-helper ipc-sub`: receives until the last sequence number (or SIGTERM),
+/// writes the latencies and prints a JSON summary.
+pub fn helper_sub(a: &SubArgs) -> Result<(), IpcBenchError> {
+    match a.kind {
+        Kind::Imu => subscribe::<ImuSample>(a),
+        Kind::Nav => subscribe::<NavState>(a),
+    }
+}
+
+fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
+    // The event wake-ups are what is measured; the pacing sleep must not add timer slack.
+    // SAFETY: prctl with an integer argument.
+    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
+    let period_ns = match a.rate {
+        Rate::Hz(r) => Some(1e9 / r),
+        Rate::Max => None,
+    };
+    let mut errors = 0u64;
+    let (cpu0, t0);
+    match a.transport {
+        Transport::Iceoryx2 => {
+            let node = IpcNode::new("bench-pub")?;
+            let mut p = node.publisher::<T>(&T::service())?;
+            // Let the subscribers' ports settle before the first sample.
+            std::thread::sleep(Duration::from_millis(100));
+            cpu0 = bench_util::own_cpu_time_s();
+            t0 = monotonic_now_ns();
+            for i in 0..a.count {
+                if let Some(p) = period_ns {
+                    pacing::sleep_until(t0 + (i as f64 * p) as i64, 0);
+                }
+                if p.publish(&T::make(monotonic_now_ns(), i)).is_err() {
+                    errors += 1;
+                }
+            }
+        }
+        Transport::Socket => {
+            let fds: Vec<Fd> = a.sockets.iter().map(|p| connect(p)).collect::<Result<_, _>>()?;
+            std::thread::sleep(Duration::from_millis(100));
+            cpu0 = bench_util::own_cpu_time_s();
+            t0 = monotonic_now_ns();
+            for i in 0..a.count {
+                if let Some(p) = period_ns {
+                    pacing::sleep_until(t0 + (i as f64 * p) as i64, 0);
+                }
+                let v = T::make(monotonic_now_ns(), i);
+                let b = bytes_of(&v);
+                for fd in &fds {
+                    // SAFETY: sending our buffer on our socket.
+                    let n = unsafe { libc::send(fd.0, b.as_ptr().cast(), b.len(), libc::MSG_NOSIGNAL) };
+                    if n != b.len() as isize {
+                        errors += 1;
+                    }
+                }
+            }
+        }
+    }
+    let wall = (monotonic_now_ns() - t0) as f64 * 1e-9;
+    let cpu = bench_util::own_cpu_time_s() - cpu0;
+    println!(
+        "{}",
+        serde_json::json!({ "sent": a.count, "errors": errors, "wall_s": wall, "cpu_s": cpu })
+    );
+    Ok(())
+}
+
+fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
+    let mut lat: Vec<i64> = Vec::with_capacity(a.count as usize);
+    let last = a.count.saturating_sub(1);
+    let cpu0;
+    match a.transport {
+        Transport::Iceoryx2 => {
+            let node = IpcNode::new(&format!("bench-sub-{}", a.index))?;
+            let sub = node.subscriber::<T>(&T::service())?;
+            let waitset = node.waitset()?;
+            let _guard = waitset
+                .attach_notification(sub.listener())
+                .map_err(|e| child_err(format!("attaching to waitset: {e:?}")))?;
+            ready();
+            cpu0 = bench_util::own_cpu_time_s();
+            'outer: while node.wait_on(&waitset, Duration::from_secs(1))? {
+                sub.clear_events();
+                while let Some(s) = sub.receive()? {
+                    let now = monotonic_now_ns();
+                    let (host_ns, seq) = s.stamp();
+                    lat.push(now - host_ns);
+                    if seq >= last {
+                        break 'outer;
+                    }
+                }
+            }
+        }
+        Transport::Socket => {
+            let path = a.socket.as_deref().ok_or_else(|| child_err("--socket needed"))?;
+            let listener = listen(path)?;
+            ready();
+            // SAFETY: accepting on our listening socket.
+            let conn = Fd(unsafe { libc::accept(listener.0, std::ptr::null_mut(), std::ptr::null_mut()) });
+            if conn.0 < 0 {
+                return Err(std::io::Error::last_os_error().into());
+            }
+            cpu0 = bench_util::own_cpu_time_s();
+            let mut v = T::zeroed();
+            loop {
+                // SAFETY: receiving at most size_of::<T>() bytes into a T (any bytes are valid).
+                let n = unsafe { libc::recv(conn.0, (&mut v as *mut T).cast(), size_of::<T>(), 0) };
+                let now = monotonic_now_ns();
+                if n <= 0 {
+                    if n < 0 && std::io::Error::last_os_error().kind() == std::io::ErrorKind::Interrupted {
+                        continue;
+                    }
+                    break; // the publisher closed the connection
+                }
+                let (host_ns, seq) = v.stamp();
+                lat.push(now - host_ns);
+                if seq >= last {
+                    break;
+                }
+            }
+        }
+    }
+    let cpu = bench_util::own_cpu_time_s() - cpu0;
+    bench_util::write_latencies(&a.out, &lat)?;
+    println!("{}", serde_json::json!({ "received": lat.len(), "cpu_s": cpu }));
+    Ok(())
+}
+
+fn ready() {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    let _ = writeln!(o, "ready");
+    let _ = o.flush();
+}
+
+/// An owned file descriptor, closed on drop.
+struct Fd(i32);
+
+impl Drop for Fd {
+    fn drop(&mut self) {
+        if self.0 >= 0 {
+            // SAFETY: closing our own descriptor once.
+            unsafe { libc::close(self.0) };
+        }
+    }
+}
+
+fn sockaddr(path: &Path) -> Result<(libc::sockaddr_un, libc::socklen_t), IpcBenchError> {
+    use std::os::unix::ffi::OsStrExt;
+    // SAFETY: an all-zero sockaddr_un is valid.
+    let mut addr: libc::sockaddr_un = unsafe { std::mem::zeroed() };
+    addr.sun_family = libc::AF_UNIX as libc::sa_family_t;
+    let b = path.as_os_str().as_bytes();
+    if b.len() >= addr.sun_path.len() {
+        return Err(child_err(format!("socket path too long: {}", path.display())));
+    }
+    for (d, s) in addr.sun_path.iter_mut().zip(b) {
+        *d = *s as libc::c_char;
+    }
+    Ok((addr, size_of::<libc::sockaddr_un>() as libc::socklen_t))
+}
+
+fn seqpacket() -> Result<Fd, IpcBenchError> {
+    // SAFETY: plain socket creation.
+    let fd = unsafe { libc::socket(libc::AF_UNIX, libc::SOCK_SEQPACKET | libc::SOCK_CLOEXEC, 0) };
+    if fd < 0 {
+        return Err(std::io::Error::last_os_error().into());
+    }
+    Ok(Fd(fd))
+}
+
+fn listen(path: &Path) -> Result<Fd, IpcBenchError> {
+    let fd = seqpacket()?;
+    let (addr, len) = sockaddr(path)?;
+    let _ = std::fs::remove_file(path);
+    // SAFETY: binding our socket to a valid address.
+    if unsafe { libc::bind(fd.0, (&addr as *const libc::sockaddr_un).cast(), len) } != 0
+        // SAFETY: listening on our bound socket.
+        || unsafe { libc::listen(fd.0, 4) } != 0
+    {
+        return Err(std::io::Error::last_os_error().into());
+    }
+    Ok(fd)
+}
+
+fn connect(path: &Path) -> Result<Fd, IpcBenchError> {
+    let fd = seqpacket()?;
+    let (addr, len) = sockaddr(path)?;
+    // SAFETY: connecting our socket to a valid address.
+    if unsafe { libc::connect(fd.0, (&addr as *const libc::sockaddr_un).cast(), len) } != 0 {
+        return Err(std::io::Error::last_os_error().into());
+    }
+    Ok(fd)
+}

@@ -1,0 +1,406 @@
+//! What the `navsync bench` benchmarks share: exact percentiles, the machine and its load,
+//! per-process CPU time and memory from `/proc`, child processes with their own iceoryx2
+//! prefix, and the JSON output.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdout, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+/// Percentiles of a set of latencies, µs (exact: computed from every value).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Percentiles {
+    /// Number of values.
+    pub count: u64,
+    /// Median, µs.
+    pub p50_us: f64,
+    /// 99th percentile, µs.
+    pub p99_us: f64,
+    /// 99.9th percentile, µs.
+    pub p999_us: f64,
+    /// Largest value, µs.
+    pub max_us: f64,
+    /// Mean, µs.
+    pub mean_us: f64,
+}
+
+impl Percentiles {
+    /// From latencies in ns (sorted in place). Nearest-rank percentiles; all zero when empty.
+    pub fn from_ns(values: &mut [i64]) -> Self {
+        if values.is_empty() {
+            return Self::default();
+        }
+        values.sort_unstable();
+        let n = values.len();
+        let rank = |q: f64| values[((q * n as f64).ceil() as usize).clamp(1, n) - 1] as f64 * 1e-3;
+        let sum: i128 = values.iter().map(|&v| i128::from(v)).sum();
+        Self {
+            count: n as u64,
+            p50_us: rank(0.5),
+            p99_us: rank(0.99),
+            p999_us: rank(0.999),
+            max_us: values[n - 1] as f64 * 1e-3,
+            mean_us: sum as f64 / n as f64 * 1e-3,
+        }
+    }
+
+    /// True when the figures are finite, non-negative and ordered p50 ≤ p99 ≤ p99.9 ≤ max.
+    pub fn is_sane(&self) -> bool {
+        let v = [self.p50_us, self.p99_us, self.p999_us, self.max_us, self.mean_us];
+        v.iter().all(|x| x.is_finite() && *x >= 0.0)
+            && self.p50_us <= self.p99_us
+            && self.p99_us <= self.p999_us
+            && self.p999_us <= self.max_us
+    }
+}
+
+/// The machine a benchmark ran on and how busy it was.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Machine {
+    /// CPU model (`/proc/cpuinfo`).
+    pub cpu: String,
+    /// Online CPUs.
+    pub cpus: usize,
+    /// Kernel release.
+    pub kernel: String,
+    /// 1-minute load average at the start.
+    pub load_start: f64,
+    /// 1-minute load average at the end.
+    pub load_end: f64,
+}
+
+impl Machine {
+    /// The machine now (`load_end` = `load_start` until [`finish`](Self::finish)).
+    pub fn now() -> Self {
+        let cpu = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .and_then(|l| l.split_once(':'))
+                    .map(|(_, v)| v.trim().to_string())
+            })
+            .unwrap_or_else(|| "unknown".into());
+        let kernel = std::fs::read_to_string("/proc/sys/kernel/osrelease")
+            .map(|s| s.trim().to_string())
+            .unwrap_or_default();
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let load = load_average();
+        Self {
+            cpu,
+            cpus,
+            kernel,
+            load_start: load,
+            load_end: load,
+        }
+    }
+
+    /// Records the load at the end.
+    pub fn finish(&mut self) {
+        self.load_end = load_average();
+    }
+
+    /// One line for the tables.
+    pub fn line(&self) -> String {
+        format!(
+            "machine: {} × {}, Linux {}; load average {:.2} at start, {:.2} at end",
+            self.cpus, self.cpu, self.kernel, self.load_start, self.load_end
+        )
+    }
+}
+
+/// 1-minute load average.
+pub fn load_average() -> f64 {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|s| s.split_whitespace().next().and_then(|v| v.parse().ok()))
+        .unwrap_or(f64::NAN)
+}
+
+/// CPU time (user + system) of a process so far, s (`/proc/PID/stat` utime + stime).
+pub fn cpu_time_s(pid: u32) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name is in parentheses and may contain spaces: fields start after the last ')'.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // After the name: state(3) ... utime(14) stime(15), i.e. indices 11 and 12 here.
+    let utime: f64 = f.get(11)?.parse().ok()?;
+    let stime: f64 = f.get(12)?.parse().ok()?;
+    // SAFETY: sysconf with a valid name.
+    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as f64;
+    Some((utime + stime) / hz)
+}
+
+/// CPU time of the calling process so far, s (getrusage: µs resolution).
+pub fn own_cpu_time_s() -> f64 {
+    // SAFETY: getrusage fills a zeroed struct.
+    let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: valid pointer to a rusage.
+    unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut ru) };
+    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    tv(ru.ru_utime) + tv(ru.ru_stime)
+}
+
+/// Peak resident set size of a process, KiB (`VmHWM` in `/proc/PID/status`).
+pub fn peak_rss_kib(pid: u32) -> Option<u64> {
+    status_field_kib(pid, "VmHWM:")
+}
+
+/// Current resident set size of a process, KiB (`VmRSS`).
+pub fn rss_kib(pid: u32) -> Option<u64> {
+    status_field_kib(pid, "VmRSS:")
+}
+
+fn status_field_kib(pid: u32, field: &str) -> Option<u64> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    s.lines()
+        .find(|l| l.starts_with(field))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()
+}
+
+/// A unique iceoryx2 resource prefix and scratch directory for one benchmark run.
+pub struct BenchEnv {
+    /// iceoryx2 resource prefix (passed to every child as `$NAVSYNC_IPC_PREFIX`).
+    pub prefix: String,
+    /// Scratch directory, removed on drop.
+    pub dir: PathBuf,
+    children: Vec<(String, Child)>,
+}
+
+impl BenchEnv {
+    /// A fresh environment tagged `tag`.
+    pub fn new(tag: &str) -> std::io::Result<Self> {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.subsec_nanos());
+        let prefix = format!("nsb{}_{tag}_{nanos:x}_", std::process::id());
+        let dir = std::env::temp_dir().join(format!("navsync-bench-{prefix}"));
+        std::fs::create_dir_all(&dir)?;
+        Ok(Self {
+            prefix,
+            dir,
+            children: Vec::new(),
+        })
+    }
+
+    /// A `navsync ARGS` command in this environment (same executable as the caller).
+    pub fn command(&self, args: &[String]) -> std::io::Result<Command> {
+        let mut c = Command::new(std::env::current_exe()?);
+        c.args(args)
+            .env(navsync_shared::services::PREFIX_ENV, &self.prefix)
+            .env("RUST_LOG", "warn");
+        Ok(c)
+    }
+
+    /// Starts `navsync ARGS` as a child named `name`; stdout is piped when `pipe_stdout`
+    /// (returned), stderr goes to `<dir>/<name>.log`. Returns the pid.
+    pub fn spawn(
+        &mut self,
+        name: &str,
+        args: &[String],
+        pipe_stdout: bool,
+    ) -> std::io::Result<(u32, Option<ChildStdout>)> {
+        let log = std::fs::File::create(self.dir.join(format!("{name}.log")))?;
+        let mut child = self
+            .command(args)?
+            .stdout(if pipe_stdout { Stdio::piped() } else { Stdio::null() })
+            .stderr(log)
+            .spawn()?;
+        let out = child.stdout.take();
+        let pid = child.id();
+        self.children.push((name.to_string(), child));
+        Ok((pid, out))
+    }
+
+    /// The stderr log of a child.
+    pub fn log(&self, name: &str) -> String {
+        std::fs::read_to_string(self.dir.join(format!("{name}.log"))).unwrap_or_default()
+    }
+
+    /// Fails if a child has exited (with the end of its log).
+    pub fn check_running(&mut self) -> Result<(), String> {
+        for (name, c) in &mut self.children {
+            if let Ok(Some(st)) = c.try_wait() {
+                let log = std::fs::read_to_string(self.dir.join(format!("{name}.log"))).unwrap_or_default();
+                let tail: String = log
+                    .lines()
+                    .rev()
+                    .take(8)
+                    .collect::<Vec<_>>()
+                    .into_iter()
+                    .rev()
+                    .collect::<Vec<_>>()
+                    .join("\n");
+                return Err(format!("{name} exited early ({st}):\n{tail}"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Waits until the child `name` exits by itself (up to `timeout`); its exit status.
+    pub fn wait_exit(&mut self, name: &str, timeout: Duration) -> Option<std::process::ExitStatus> {
+        let t0 = Instant::now();
+        let c = &mut self.children.iter_mut().find(|(n, _)| n == name)?.1;
+        loop {
+            if let Ok(Some(st)) = c.try_wait() {
+                return Some(st);
+            }
+            if t0.elapsed() > timeout {
+                return None;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// Sends SIGTERM to the child `name`.
+    pub fn terminate(&self, name: &str) {
+        if let Some((_, c)) = self.children.iter().find(|(n, _)| n == name) {
+            // SAFETY: signalling our own child by pid.
+            unsafe { libc::kill(c.id() as libc::pid_t, libc::SIGTERM) };
+        }
+    }
+
+    /// Stops every child (SIGTERM, last started first; SIGKILL after 5 s) and returns the names
+    /// of those that did not exit cleanly.
+    pub fn stop_all(&mut self) -> Vec<String> {
+        for (_, c) in self.children.iter().rev() {
+            // SAFETY: signalling our own child by pid.
+            unsafe { libc::kill(c.id() as libc::pid_t, libc::SIGTERM) };
+        }
+        let t0 = Instant::now();
+        let mut bad = Vec::new();
+        for (name, c) in self.children.iter_mut().rev() {
+            let ok = loop {
+                match c.try_wait() {
+                    Ok(Some(st)) => break st.success(),
+                    Ok(None) if t0.elapsed() < Duration::from_secs(5) => std::thread::sleep(Duration::from_millis(5)),
+                    _ => {
+                        let _ = c.kill();
+                        let _ = c.wait();
+                        break false;
+                    }
+                }
+            };
+            if !ok {
+                bad.push(name.clone());
+            }
+        }
+        self.children.clear();
+        bad
+    }
+}
+
+impl Drop for BenchEnv {
+    fn drop(&mut self) {
+        if !self.children.is_empty() {
+            self.stop_all();
+        }
+        let _ = std::fs::remove_dir_all(&self.dir);
+        // What iceoryx2 leaves of a prefix once every process is gone: its node counter.
+        for d in ["/dev/shm", "/tmp/iceoryx2"] {
+            remove_prefixed(Path::new(d), &self.prefix);
+        }
+    }
+}
+
+fn remove_prefixed(dir: &Path, prefix: &str) {
+    let Ok(rd) = std::fs::read_dir(dir) else { return };
+    for e in rd.flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            remove_prefixed(&p, prefix);
+        } else if e.file_name().to_string_lossy().starts_with(prefix) {
+            let _ = std::fs::remove_file(p);
+        }
+    }
+}
+
+/// Reads lines from a child's stdout until one equals `line` (or the pipe closes / `timeout`).
+pub fn wait_for_line(out: &mut BufReader<ChildStdout>, line: &str, timeout: Duration) -> bool {
+    // The child prints the line right after it set up; a blocking read is enough, the timeout
+    // guards against a child that hangs before printing (it is then killed by the caller).
+    let t0 = Instant::now();
+    let mut buf = String::new();
+    while t0.elapsed() < timeout {
+        buf.clear();
+        match out.read_line(&mut buf) {
+            Ok(0) | Err(_) => return false,
+            Ok(_) if buf.trim_end() == line => return true,
+            Ok(_) => {}
+        }
+    }
+    false
+}
+
+/// Reads the rest of a child's stdout and returns the last line that parses as JSON.
+pub fn last_json_line(out: &mut BufReader<ChildStdout>) -> Option<serde_json::Value> {
+    let mut last = None;
+    let mut buf = String::new();
+    loop {
+        buf.clear();
+        match out.read_line(&mut buf) {
+            Ok(0) | Err(_) => return last,
+            Ok(_) => {
+                if let Ok(v) = serde_json::from_str::<serde_json::Value>(buf.trim()) {
+                    last = Some(v);
+                }
+            }
+        }
+    }
+}
+
+/// Writes `value` as pretty JSON to `path`.
+pub fn write_json<T: Serialize>(path: &Path, value: &T) -> std::io::Result<()> {
+    let text = serde_json::to_string_pretty(value).map_err(std::io::Error::other)?;
+    std::fs::write(path, text + "\n")
+}
+
+/// Writes latencies (ns) as little-endian i64 to `path`.
+pub fn write_latencies(path: &Path, values: &[i64]) -> std::io::Result<()> {
+    let mut bytes = Vec::with_capacity(values.len() * 8);
+    for v in values {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(path, bytes)
+}
+
+/// Reads latencies written by [`write_latencies`].
+pub fn read_latencies(path: &Path) -> std::io::Result<Vec<i64>> {
+    let bytes = std::fs::read(path)?;
+    Ok(bytes
+        .chunks_exact(8)
+        .map(|c| i64::from_le_bytes(c.try_into().unwrap_or([0; 8])))
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_exact() {
+        let mut v: Vec<i64> = (1..=1000).rev().map(|us| us * 1000).collect();
+        let p = Percentiles::from_ns(&mut v);
+        assert_eq!(p.count, 1000);
+        assert_eq!(p.p50_us, 500.0);
+        assert_eq!(p.p99_us, 990.0);
+        assert_eq!(p.p999_us, 999.0);
+        assert_eq!(p.max_us, 1000.0);
+        assert!(p.is_sane());
+        assert_eq!(Percentiles::from_ns(&mut []), Percentiles::default());
+    }
+
+    #[test]
+    fn own_process_figures() {
+        let pid = std::process::id();
+        assert!(cpu_time_s(pid).is_some_and(|t| t >= 0.0));
+        assert!(peak_rss_kib(pid).is_some_and(|k| k > 0));
+        assert!(rss_kib(pid).is_some_and(|k| k > 0));
+        assert!(load_average() >= 0.0);
+    }
+}
