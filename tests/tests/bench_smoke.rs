@@ -1,0 +1,79 @@
+//! The benchmarks run briefly (`--quick`) and produce sane output: every case has figures,
+//! percentiles are ordered, nothing is lost that is not counted, and the JSON file is written.
+//! Never an assertion on absolute time (README "## Performance" has the figures).
+
+use std::path::Path;
+
+use navsync_tests::TestEnv;
+use serde_json::Value;
+
+fn run_json(env: &TestEnv, args: &[&str], json: &Path) -> Value {
+    let mut a: Vec<&str> = args.to_vec();
+    let j = json.display().to_string();
+    a.extend(["--quick", "--json", &j]);
+    let o = env.command(&a).output().unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "navsync {a:?}: {}\n{out}\n{}",
+        o.status,
+        String::from_utf8_lossy(&o.stderr)
+    );
+    println!("{out}");
+    serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap()
+}
+
+fn percentiles_sane(p: &Value, what: &str) {
+    let f = |k: &str| p[k].as_f64().unwrap_or_else(|| panic!("{what}: {k} in {p}"));
+    assert!(p["count"].as_u64().unwrap() > 0, "{what}: {p}");
+    assert!(
+        0.0 < f("p50_us") && f("p50_us") <= f("p99_us") && f("p99_us") <= f("p999_us") && f("p999_us") <= f("max_us"),
+        "{what}: {p}"
+    );
+}
+
+#[test]
+fn benchmarks_run_and_report_sane_figures() {
+    let env = TestEnv::new("bench");
+
+    let ipc = run_json(&env, &["bench", "ipc"], &env.dir.join("ipc.json"));
+    let cases = ipc["cases"].as_array().unwrap();
+    // imu, nav × 1000 Hz, max × iceoryx2, socket.
+    assert_eq!(cases.len(), 8, "{ipc}");
+    for c in cases {
+        let sent = c["sent"].as_u64().unwrap();
+        let subs = c["subscribers"].as_u64().unwrap();
+        assert!(sent > 0);
+        assert_eq!(
+            c["received"].as_u64().unwrap() + c["lost"].as_u64().unwrap(),
+            sent * subs,
+            "{c}"
+        );
+        percentiles_sane(&c["latency"], "ipc");
+        assert_eq!(c["latency"]["count"].as_u64(), c["received"].as_u64(), "{c}");
+    }
+
+    let e2e = run_json(&env, &["bench", "e2e"], &env.dir.join("e2e.json"));
+    for c in e2e["cases"].as_array().unwrap() {
+        assert!(c["nav_states"].as_u64().unwrap() > 100, "{c}");
+        assert!(c["matched"].as_u64().unwrap() > 0, "{c}");
+        percentiles_sane(&c["end_to_end"], "e2e");
+        let procs = c["processes"].as_array().unwrap();
+        let est = procs
+            .iter()
+            .find(|p| p["name"] == "estimator")
+            .expect("estimator figures");
+        assert!(est["peak_rss_mib"].as_f64().unwrap() > 0.0, "{est}");
+        assert!(est["cpu_percent"].as_f64().unwrap() > 0.0, "{est}");
+    }
+
+    let thr = run_json(&env, &["bench", "throughput"], &env.dir.join("throughput.json"));
+    let cases = thr["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 2, "{thr}");
+    for c in cases {
+        assert!(c["imu_samples"].as_u64().unwrap() > 0);
+        assert!(c["imu_samples_per_s"].as_f64().unwrap() > 0.0);
+        assert!(!c["blocks"].as_array().unwrap().is_empty(), "{c}");
+    }
+    env.finish();
+}
