@@ -97,6 +97,21 @@ struct Client {
 }
 
 impl Client {
+    /// A freshly accepted connection: non-blocking, no Nagle delay, a bounded send buffer.
+    fn accepted(stream: TcpStream, peer: SocketAddr) -> Self {
+        let _ = stream.set_nonblocking(true);
+        let _ = stream.set_nodelay(true);
+        set_send_buffer(&stream, SEND_BUFFER_BYTES);
+        Self {
+            stream,
+            peer,
+            inbuf: Vec::new(),
+            out: VecDeque::new(),
+            watch: Watch::default(),
+            closing: false,
+        }
+    }
+
     fn queue(&mut self, line: &str) {
         self.out.extend(line.as_bytes());
         self.out.push_back(b'\n');
@@ -117,6 +132,33 @@ impl Client {
             }
         }
         true
+    }
+}
+
+/// What became of a client after a report was queued to it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Delivery {
+    /// Written, or queued within the bound.
+    Kept,
+    /// The peer closed or the socket failed.
+    Gone,
+    /// More than `max_pending_bytes` wait for a reader that does not read: drop it rather
+    /// than buffer without bound or block the other clients.
+    Slow,
+}
+
+/// Queues `lines` to `c`, writes what its socket takes now (never blocks) and applies the
+/// slow-client bound.
+fn deliver(c: &mut Client, lines: &[String], max_pending_bytes: usize) -> Delivery {
+    for l in lines {
+        c.queue(l);
+    }
+    if !c.flush() {
+        Delivery::Gone
+    } else if c.out.len() > max_pending_bytes {
+        Delivery::Slow
+    } else {
+        Delivery::Kept
     }
 }
 
@@ -493,17 +535,7 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
             loop {
                 match listener.accept() {
                     Ok((stream, peer)) => {
-                        let _ = stream.set_nonblocking(true);
-                        let _ = stream.set_nodelay(true);
-                        set_send_buffer(&stream, SEND_BUFFER_BYTES);
-                        let mut c = Client {
-                            stream,
-                            peer,
-                            inbuf: Vec::new(),
-                            out: VecDeque::new(),
-                            watch: Watch::default(),
-                            closing: false,
-                        };
+                        let mut c = Client::accepted(stream, peer);
                         if clients.len() >= args.max_clients {
                             health.add(c_rejected, 1);
                             c.queue(&error("too many clients").to_string());
@@ -592,17 +624,15 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
                 .iter_mut()
                 .filter(|c| c.watch.enable && c.watch.json && !c.closing)
             {
-                for l in &lines {
-                    c.queue(l);
-                }
                 health.add(c_reports, 1);
-                if !c.flush() {
-                    c.closing = true;
-                } else if c.out.len() > MAX_PENDING_BYTES {
-                    // A slow reader: drop it rather than buffer without bound or block the others.
-                    warn!(peer = %c.peer, pending = c.out.len(), "dropping a slow client");
-                    health.add(c_slow, 1);
-                    c.closing = true;
+                match deliver(c, &lines, MAX_PENDING_BYTES) {
+                    Delivery::Kept => {}
+                    Delivery::Gone => c.closing = true,
+                    Delivery::Slow => {
+                        warn!(peer = %c.peer, pending = c.out.len(), "dropping a slow client");
+                        health.add(c_slow, 1);
+                        c.closing = true;
+                    }
                 }
             }
         }
@@ -623,6 +653,86 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
 mod tests {
     use super::*;
     use navsync_shared::reflect::Reflect;
+
+    /// A real loopback TCP connection: the server side as the run loop accepts it, and the
+    /// peer's socket.
+    fn connected_pair() -> (Client, TcpStream) {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let peer = TcpStream::connect(listener.local_addr().unwrap()).unwrap();
+        let (stream, addr) = listener.accept().unwrap();
+        (Client::accepted(stream, addr), peer)
+    }
+
+    /// One report's worth of lines, about 1.5 KiB like TPV + ATT + IMU + SKY.
+    fn report() -> Vec<String> {
+        (0..4)
+            .map(|i| format!("{{\"class\":\"X{i}\",\"pad\":\"{}\"}}", "x".repeat(370)))
+            .collect()
+    }
+
+    #[test]
+    fn a_client_that_stops_reading_is_dropped_once_its_queue_passes_the_bound() {
+        let (mut c, peer) = connected_pair();
+        let lines = report();
+        let per_report: usize = lines.iter().map(|l| l.len() + 1).sum();
+        // The peer never reads: the kernel's buffers fill (a few MiB at most on loopback), then
+        // the queue grows until the bound is passed. Never blocks: each call returns at once.
+        let mut reports = 0usize;
+        let verdict = loop {
+            match deliver(&mut c, &lines, MAX_PENDING_BYTES) {
+                Delivery::Kept => reports += 1,
+                other => break other,
+            }
+            assert!(
+                reports < 100_000,
+                "never dropped after {} MiB",
+                (reports * per_report) >> 20
+            );
+        };
+        assert_eq!(verdict, Delivery::Slow);
+        assert!(c.out.len() > MAX_PENDING_BYTES);
+        assert!(
+            c.out.len() <= MAX_PENDING_BYTES + per_report,
+            "the bound is checked per report"
+        );
+        println!(
+            "dropped after {reports} reports ({} KiB sent, {} KiB in the kernel's buffers)",
+            (reports * per_report) >> 10,
+            (reports * per_report - c.out.len()) >> 10
+        );
+        drop(peer);
+    }
+
+    #[test]
+    fn a_client_that_reads_is_kept_and_gets_every_byte() {
+        let (mut c, mut peer) = connected_pair();
+        let lines = report();
+        let per_report: usize = lines.iter().map(|l| l.len() + 1).sum();
+        let mut buf = vec![0u8; per_report];
+        // Twice the volume that drops a silent client, read as it comes.
+        let n = 2 * (MAX_PENDING_BYTES + (8 << 20)) / per_report;
+        for _ in 0..n {
+            assert_eq!(deliver(&mut c, &lines, MAX_PENDING_BYTES), Delivery::Kept);
+            // Drain what was queued (the socket may hold part of it back until read).
+            let mut got = 0;
+            while got < per_report {
+                got += peer.read(&mut buf[got..]).unwrap();
+                assert!(c.flush());
+            }
+            assert_eq!(&buf[..lines[0].len()], lines[0].as_bytes());
+        }
+        assert!(c.out.is_empty());
+    }
+
+    #[test]
+    fn a_client_that_closed_is_gone() {
+        let (mut c, peer) = connected_pair();
+        drop(peer);
+        let lines = report();
+        // The first write may still succeed (the peer's RST arrives after it); the next fail.
+        let verdicts: Vec<Delivery> = (0..50).map(|_| deliver(&mut c, &lines, MAX_PENDING_BYTES)).collect();
+        assert!(verdicts.contains(&Delivery::Gone), "{verdicts:?}");
+    }
 
     #[test]
     fn commands_are_split_and_incomplete_ones_kept() {
