@@ -13,7 +13,6 @@ pub mod published;
 pub mod quadrature;
 pub mod rng;
 pub mod scenario;
-pub mod source_map;
 pub mod trajectory;
 pub mod truth;
 pub mod vibration;

@@ -10,7 +10,7 @@
 //! Errors name the file, the line and the dotted field (`trajectory.segment[3].to_speed_mps`)
 //! and say what was expected: type errors and unknown fields through toml's spans and
 //! `deny_unknown_fields`, semantic errors (e.g. a static segment entered at speed) through
-//! [`SourceMap`](super::source_map::SourceMap).
+//! [`SourceMap`](navsync_shared::config::SourceMap).
 
 use std::path::Path;
 
@@ -19,7 +19,7 @@ use serde::Deserialize;
 
 pub use super::error::SimError;
 use super::imu_errors::ImuPreset;
-use super::source_map::SourceMap;
+use navsync_shared::config::SourceMap;
 
 /// Origin label of the embedded default scenario.
 pub const DEFAULT_DRIVE_ORIGIN: &str = "drivers/scenarios/default_drive.toml";
@@ -53,6 +53,9 @@ pub struct SimConfig {
     /// Where the fields were in the text (for error messages).
     #[serde(skip)]
     source: Option<SourceMap>,
+    /// Where the text came from (file path or a label such as `<embedded default_drive.toml>`).
+    #[serde(skip)]
+    origin: String,
     /// Dotted paths set through override setters (errors on them name [`OVERRIDES_ORIGIN`]).
     #[serde(skip)]
     overridden: Vec<&'static str>,
@@ -424,9 +427,10 @@ impl Default for TruthConfig {
 impl SimConfig {
     /// Parses and validates a scenario. `origin` (usually the file path) is named in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, SimError> {
-        let source = SourceMap::build(text, origin);
-        let mut cfg: SimConfig = toml::from_str(text).map_err(|e| parse_error(&e, &source))?;
+        let source = SourceMap::build(text);
+        let mut cfg: SimConfig = toml::from_str(text).map_err(|e| parse_error(&e, &source, origin))?;
         cfg.source = Some(source);
+        cfg.origin = origin.to_owned();
         cfg.validate()?;
         Ok(cfg)
     }
@@ -625,7 +629,7 @@ impl SimConfig {
             .any(|p| path == *p || path.starts_with(&format!("{p}.")));
         let overridden = overridden || self.overridden.iter().any(|p| path.starts_with(&format!("{p}[")));
         let (origin, line) = match (&self.source, overridden) {
-            (Some(src), false) => (src.origin.clone(), src.line_of(path)),
+            (Some(src), false) => (self.origin.clone(), src.locate(path).map(|(line, _)| line)),
             (Some(_), true) => (OVERRIDES_ORIGIN.to_owned(), None),
             (None, _) => ("<config>".to_owned(), None),
         };
@@ -938,7 +942,7 @@ pub const MAX_DURATION_S: f64 = 6.0 * 3600.0;
 pub const MAX_BURST_BYTES: usize = 560;
 
 /// A toml deserialization error as a [`SimError::Parse`] naming file, line, column and field.
-fn parse_error(e: &toml::de::Error, source: &SourceMap) -> SimError {
+fn parse_error(e: &toml::de::Error, source: &SourceMap, origin: &str) -> SimError {
     let pos = e.span().map_or(0, |s| s.start);
     let (line, column) = source.line_col(pos);
     let field = e
@@ -947,7 +951,7 @@ fn parse_error(e: &toml::de::Error, source: &SourceMap) -> SimError {
         .unwrap_or("(document)")
         .to_owned();
     SimError::Parse {
-        origin: source.origin.clone(),
+        origin: origin.to_owned(),
         line,
         column,
         field,

@@ -112,4 +112,21 @@ mod tests {
         let pos = doc.find("200").unwrap();
         assert_eq!(m.field_at(pos), Some("imu.0.rate_hz"));
     }
+
+    #[test]
+    fn array_of_tables_elements_and_absent_fields() {
+        let doc = "seed = 3\n\n[trajectory.start]\nlat_deg = 1.0\n\n[[trajectory.segment]]\nkind = \"static\"\nduration_s = 5.0\n\n[[trajectory.segment]]\nkind = \"cruise\"\nduration_s = 7.0\n";
+        let m = SourceMap::build(doc);
+        let line = |p: &str| m.locate(p).map(|(l, _)| l);
+        assert_eq!(line("seed"), Some(1));
+        assert_eq!(line("trajectory.start.lat_deg"), Some(4));
+        assert_eq!(line("trajectory.segment[1].duration_s"), Some(12));
+        assert_eq!(line("trajectory.segment[0].kind"), Some(7));
+        // A field that is absent falls back to its array element.
+        let seg1 = line("trajectory.segment[1].to_speed_mps").expect("segment line");
+        assert!((10..=12).contains(&seg1), "segment 1 at line {seg1}");
+        let pos = doc.find("7.0").expect("present");
+        assert_eq!(m.field_at(pos), Some("trajectory.segment[1].duration_s"));
+        assert_eq!(m.line_col(pos).0, 12);
+    }
 }
