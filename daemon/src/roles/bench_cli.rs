@@ -49,6 +49,11 @@ pub enum BenchCmd {
         /// How the IMU samples reach the services: xsens (simulator → pseudo-terminal → driver) or direct.
         #[arg(long, default_value = "xsens")]
         imu_path: super::bench_e2e::ImuPath,
+        /// Run the latency chain (IMU drivers, estimator, subscriber) under SCHED_FIFO with this
+        /// priority (1–99; needs CAP_SYS_NICE), as a deployment would with
+        /// `CPUSchedulingPolicy=fifo`; the simulator (the "hardware") stays SCHED_OTHER.
+        #[arg(long, value_name = "PRIO", value_parser = clap::value_parser!(u8).range(1..=99))]
+        realtime: Option<u8>,
         /// A short run (2 IMUs, 3 s warm-up, 5 s measured) for smoke tests.
         #[arg(long)]
         quick: bool,
@@ -192,6 +197,7 @@ pub fn run(cmd: BenchCmd) -> Result<(), BenchCliError> {
             duration,
             warmup,
             imu_path,
+            realtime,
             quick,
             json,
         } => {
@@ -206,6 +212,7 @@ pub fn run(cmd: BenchCmd) -> Result<(), BenchCliError> {
                 duration_s: if quick { 5.0 } else { duration },
                 warmup_s: if quick { 3.0 } else { warmup },
                 imu_path,
+                realtime,
                 json,
             })?;
         }

@@ -63,6 +63,8 @@ pub struct E2eArgs {
     pub warmup_s: f64,
     /// IMU path.
     pub imu_path: ImuPath,
+    /// SCHED_FIFO priority of the latency chain (IMU drivers, estimator, subscriber), if any.
+    pub realtime: Option<u8>,
     /// Write the results as JSON here.
     pub json: Option<PathBuf>,
 }
@@ -85,6 +87,8 @@ pub struct E2eCase {
     pub imus: usize,
     /// IMU path.
     pub imu_path: ImuPath,
+    /// SCHED_FIFO priority of the latency chain, if it ran under it.
+    pub realtime: Option<u8>,
     /// Measured window, s.
     pub window_s: f64,
     /// NavStates received in the window.
@@ -277,6 +281,18 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
         false,
     )?;
     pids.push(("estimator".into(), pid));
+    if let Some(prio) = args.realtime {
+        // Drivers above the estimator above the subscriber: each stage preempts the next.
+        for (name, pid) in &pids {
+            let p = match name.as_str() {
+                n if n.starts_with("imu-") || n == "gps" || n == "pps" => prio,
+                "estimator" => prio.saturating_sub(1).max(1),
+                "subscriber" => prio.saturating_sub(2).max(1),
+                _ => continue,
+            };
+            set_fifo(*pid, p).map_err(|e| E2eError::Child(format!("SCHED_FIFO {p} for {name}: {e}")))?;
+        }
+    }
 
     wait_line(
         &lines,
@@ -314,6 +330,7 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
     Ok(E2eCase {
         imus,
         imu_path: args.imu_path,
+        realtime: args.realtime,
         window_s: v["window_s"].as_f64().unwrap_or(f64::NAN),
         nav_states: v["nav_states"].as_u64().unwrap_or(0),
         matched: v["matched"].as_u64().unwrap_or(0),
@@ -323,6 +340,23 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
         imu_to_nav: pct("imu_to_nav"),
         processes,
     })
+}
+
+/// Puts every thread of process `pid` under SCHED_FIFO with priority `prio`.
+fn set_fifo(pid: u32, prio: u8) -> std::io::Result<()> {
+    for t in std::fs::read_dir(format!("/proc/{pid}/task"))? {
+        let Some(tid) = t?.file_name().to_str().and_then(|s| s.parse::<libc::pid_t>().ok()) else {
+            continue;
+        };
+        let param = libc::sched_param {
+            sched_priority: i32::from(prio),
+        };
+        // SAFETY: sched_setscheduler with a valid sched_param for the call's duration.
+        if unsafe { libc::sched_setscheduler(tid, libc::SCHED_FIFO, &param) } != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+    }
+    Ok(())
 }
 
 /// Runs every IMU count, prints the tables, writes the JSON.
@@ -360,9 +394,11 @@ fn latency_row(c: &E2eCase) -> String {
     format!(
         "| {} × 1 kHz ({}) | {} | {:.0} / {:.0} / {:.0} | {:.0} / {:.0} / {:.0} | {:.0} / {:.0} / {:.0} | {:.1} % | {:.1} % | {:.1} % |",
         c.imus,
-        match c.imu_path {
-            ImuPath::Xsens => "xsens",
-            ImuPath::Direct => "direct",
+        match (c.imu_path, c.realtime) {
+            (ImuPath::Xsens, None) => "xsens".to_string(),
+            (ImuPath::Direct, None) => "direct".to_string(),
+            (ImuPath::Xsens, Some(p)) => format!("xsens, FIFO {p}"),
+            (ImuPath::Direct, Some(p)) => format!("direct, FIFO {p}"),
         },
         c.nav_states,
         c.end_to_end.p50_us,
