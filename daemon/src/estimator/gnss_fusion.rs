@@ -63,6 +63,10 @@ impl Default for GnssAccuracy {
     }
 }
 
+/// 1-sigma given to an altitude the receiver holds ([`GnssFix::altitude_held`]), m: large
+/// enough that the update carries no vertical information.
+pub const HELD_ALTITUDE_STD_M: f64 = 1.0e3;
+
 /// Prepares a fix for fusion; `None` when it has no usable position. Accuracy from GST when
 /// present, else from the DOPs (VDOP unknown: 1.5·HDOP; HDOP unknown: 2).
 pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Option<GnssObservation> {
@@ -72,12 +76,16 @@ pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Opt
     let hdop = if fix.hdop.is_finite() { fix.hdop } else { 2.0 };
     let vdop = if fix.vdop.is_finite() { fix.vdop } else { 1.5 * hdop };
     let gst = [fix.std_lat_m, fix.std_lon_m, fix.std_alt_m];
-    let pos_std = if gst.iter().all(|s| s.is_finite() && *s > 0.0) {
+    let mut pos_std = if gst.iter().all(|s| s.is_finite() && *s > 0.0) {
         Vector3::from(gst)
     } else {
         let h = hdop * acc.uere_m / std::f64::consts::SQRT_2;
         Vector3::new(h, h, vdop * acc.uere_m)
     };
+    if fix.altitude_held() {
+        // From ≤ 3 satellites the altitude is the receiver's assumption: no vertical information.
+        pos_std.z = pos_std.z.max(HELD_ALTITUDE_STD_M);
+    }
     Some(GnssObservation {
         stamp_host_ns,
         lat_rad: fix.lat_deg.to_radians(),
@@ -141,4 +149,34 @@ pub fn velocity_terms(
     let h = h3.fixed_rows::<2>(0).into_owned();
     let r = nalgebra::Matrix2::identity() * (obs.vel_std_mps * obs.vel_std_mps);
     (dz, h, r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use navsync_shared::samples::{FixMode, Stamp, StampSource};
+
+    fn fix(sats_used: u16) -> GnssFix {
+        let mut f = GnssFix::empty(Stamp::host(0, 0, StampSource::Receipt));
+        f.lat_deg = 48.1;
+        f.lon_deg = 11.5;
+        f.alt_msl_m = 520.0;
+        f.hdop = 1.0;
+        f.vdop = 1.5;
+        f.sats_used = sats_used;
+        f.mode = FixMode::Fix3d as u8;
+        f
+    }
+
+    #[test]
+    fn a_held_altitude_carries_no_vertical_weight() {
+        let acc = GnssAccuracy::default();
+        let measured = observation(&fix(7), 0, &acc).expect("usable");
+        assert!((measured.pos_std_m.z - 1.5 * acc.uere_m).abs() < 1e-12);
+        let held = observation(&fix(3), 0, &acc).expect("usable");
+        assert_eq!(held.pos_std_m.z, HELD_ALTITUDE_STD_M);
+        assert_eq!(held.pos_std_m.x, measured.pos_std_m.x, "horizontal unchanged");
+        // Unknown satellite count: the altitude counts as measured.
+        assert!(observation(&fix(u16::MAX), 0, &acc).unwrap().pos_std_m.z < 10.0);
+    }
 }

@@ -48,10 +48,13 @@
 //! ZDA-only receiver thus yields time-only epochs, mode 0).
 //!
 //! Fix mode: GSA states it and PGRMZ too; GGA/GNS imply it (3D with an altitude and ≥ 4
-//! satellites, else 2D; no fix when flagged invalid); RMC/GLL only say "valid position",
-//! which is 3D if the epoch has an altitude or > 3 satellites, else the dimension of the
-//! receiver's previous fix, else 2D. Within an epoch later claims win, except that a 2D claim
-//! does not undo a 3D one. Unlike gpsd, a fix from ≤ 3 satellites is never called 3D.
+//! satellites; with an altitude from ≤ 3 satellites 3D if the previous epoch had a fix, else
+//! 2D, as gpsd; 2D without an altitude; no fix when flagged invalid); RMC/GLL only say "valid
+//! position", which is 3D if the epoch has an altitude or > 3 satellites, else the dimension
+//! of the receiver's previous fix, else 2D. Within an epoch later claims win, except that a
+//! 2D claim does not undo a 3D one. `mode` thus means what it means to gpsd clients; that an
+//! altitude from ≤ 3 satellites is held, not measured, is in `sats_used`
+//! ([`GnssFix::altitude_held`]), which the estimator uses.
 //!
 //! Sentences are checked and split with the `nmea` crate, whose typed output is used for
 //! what it represents exactly (coordinates, fix quality, satellite counts, status and mode
@@ -408,6 +411,12 @@ enum ModeHint {
     /// A mode the sentence determines: GSA and PGRMZ state it, GGA/GNS imply it (altitude
     /// with ≥ 4 satellites: 3D), and any sentence flagging its fix invalid means no fix.
     Mode(u8),
+    /// A valid position with an altitude from at most 3 satellites (GGA, GNS): too few to
+    /// solve altitude, which the receiver holds. gpsd's convention, followed here so that
+    /// `mode` means what it means to gpsd clients: 3D when the receiver's previous epoch had a
+    /// fix (its no-downgrade rule), 2D on the first epoch of a fix. The fix's `sats_used` tells
+    /// a navigation filter that the altitude is not measured ([`GnssFix::altitude_held`]).
+    AltitudeFewSats,
     /// A valid position from a sentence that says nothing about the dimension (RMC, GLL).
     /// It does not override a mode determined in the same epoch; otherwise it is 3D when the
     /// epoch has an altitude or more than 3 satellites used, else the dimension of the
@@ -535,13 +544,18 @@ fn decode_gga(d: &str, parsed: Option<&nmea::sentences::GgaData>) -> Update {
     u.lat_lon = Some(lat_lon);
     u.alt_msl_m = u.opt_num(field(d, 9), num);
     u.geoid_sep_m = u.opt_num(field(d, 11), num);
-    let mode = if u.alt_msl_m.is_some() && sats.unwrap_or(0) >= 4 {
-        FixMode::Fix3d
-    } else {
-        FixMode::Fix2d
-    };
-    u.mode = Some(ModeHint::Mode(mode as u8));
+    u.mode = Some(altitude_mode(u.alt_msl_m.is_some(), sats));
     u
+}
+
+/// The mode a GGA/GNS position implies: 3D with an altitude from ≥ 4 satellites, gpsd's
+/// rule for an altitude from fewer ([`ModeHint::AltitudeFewSats`]), 2D without an altitude.
+fn altitude_mode(has_altitude: bool, sats: Option<u16>) -> ModeHint {
+    match (has_altitude, sats.unwrap_or(0)) {
+        (false, _) => ModeHint::Mode(FixMode::Fix2d as u8),
+        (true, n) if n >= 4 => ModeHint::Mode(FixMode::Fix3d as u8),
+        (true, _) => ModeHint::AltitudeFewSats,
+    }
 }
 
 /// RMC. Time, date, position, speed and track are used only when the status is A or D
@@ -618,12 +632,7 @@ fn decode_gns(d: &str, parsed: Option<&nmea::sentences::GnsData>) -> Update {
     u.lat_lon = Some(lat_lon);
     u.alt_msl_m = u.opt_num(field(d, 9), num);
     u.geoid_sep_m = u.opt_num(field(d, 10), num);
-    let mode = if u.alt_msl_m.is_some() && sats.unwrap_or(0) > 3 {
-        FixMode::Fix3d
-    } else {
-        FixMode::Fix2d
-    };
-    u.mode = Some(ModeHint::Mode(mode as u8));
+    u.mode = Some(altitude_mode(u.alt_msl_m.is_some(), sats));
     u
 }
 
@@ -959,6 +968,10 @@ impl Epoch {
                 self.fix.mode = m;
                 self.mode_determined = true;
             }
+            ModeHint::AltitudeFewSats => {
+                let m = if last_dim != 0 { FixMode::Fix3d } else { FixMode::Fix2d };
+                self.apply_mode(ModeHint::Mode(m as u8), last_dim);
+            }
             ModeHint::Position if !self.mode_determined => {
                 let three_d = self.fix.alt_msl_m.is_finite()
                     || self.sats_used().unwrap_or(0) > 3
@@ -968,6 +981,11 @@ impl Epoch {
                 } else {
                     FixMode::Fix2d as u8
                 };
+            }
+            // gpsd's "probably 3D": a valid position after a 2D claim in an epoch that has an
+            // altitude is 3D (a u-blox sends GLL after its GSA mode 2).
+            ModeHint::Position if self.fix.mode == FixMode::Fix2d as u8 && self.fix.alt_msl_m.is_finite() => {
+                self.fix.mode = FixMode::Fix3d as u8;
             }
             ModeHint::Position => {}
         }
@@ -1661,12 +1679,28 @@ mod tests {
         );
         let f = flush(&mut asm)[0];
         assert_eq!((f.mode, f.sats_used), (3, 8));
-        // 3D assumed for an RMC from the previous fix gives way to a GGA with 3 satellites.
+        // An altitude from 3 satellites after a fix: 3D as gpsd says, the altitude held.
         let mut asm = EpochAssembler::new();
-        let three_sats = nmea("GPGGA,120001,4807.0381,N,01131.0004,E,1,03,2.0,545.4,M,46.9,M,,");
-        run(&mut asm, &[gga("120000"), rmc("120001", "010125"), three_sats]);
+        let three_sats = |t: &str| nmea(&format!("GPGGA,{t},4807.0381,N,01131.0004,E,1,03,2.0,545.4,M,46.9,M,,"));
+        run(
+            &mut asm,
+            &[gga("120000"), rmc("120001", "010125"), three_sats("120001")],
+        );
         let f = flush(&mut asm)[0];
-        assert_eq!((f.mode, f.sats_used), (2, 3));
+        assert_eq!((f.mode, f.sats_used, f.altitude_held()), (3, 3, true));
+        // ... and on the first epoch of a fix (after no fix) 2D, then 3D (gpsd's no-downgrade).
+        let mut asm = EpochAssembler::new();
+        let no_fix = nmea("GPGGA,120000,4807.0381,N,01131.0004,E,0,00,,,M,,M,,");
+        let out = run(
+            &mut asm,
+            &[no_fix, three_sats("120001"), three_sats("120002"), gga("120003")],
+        );
+        let modes: Vec<u8> = out
+            .iter()
+            .map(|o| o.1.mode)
+            .chain(flush(&mut asm).iter().map(|f| f.mode))
+            .collect();
+        assert_eq!(modes, vec![1, 2, 3, 3]);
         // PGRMZ: altitude in feet and explicit dimension.
         let mut asm = EpochAssembler::new();
         run(

@@ -126,6 +126,13 @@ impl GnssFix {
         self.mode >= FixMode::Fix2d as u8 && self.lat_deg.is_finite() && self.lon_deg.is_finite()
     }
 
+    /// The altitude is held by the receiver, not measured: a position from at most 3
+    /// satellites (4 unknowns with the receiver clock) solves latitude and longitude only.
+    /// gpsd, and `mode`, may still call such a fix 3D.
+    pub fn altitude_held(&self) -> bool {
+        (1..=3).contains(&self.sats_used)
+    }
+
     /// Ellipsoidal height (WGS-84), m: MSL altitude plus geoid separation (separation 0 when unknown).
     pub fn height_m(&self) -> f64 {
         let sep = if self.geoid_sep_m.is_finite() {
