@@ -27,6 +27,9 @@ pub enum BenchCmd {
         /// Transports, comma-separated: iceoryx2, socket.
         #[arg(long, value_delimiter = ',', default_value = "iceoryx2,socket")]
         transports: Vec<Transport>,
+        /// Run publisher (PRIO) and subscribers (PRIO − 1) under SCHED_FIFO (needs CAP_SYS_NICE).
+        #[arg(long, value_name = "PRIO", value_parser = clap::value_parser!(u8).range(1..=99))]
+        realtime: Option<u8>,
         /// A short run (2000 samples per case) for smoke tests.
         #[arg(long)]
         quick: bool,
@@ -171,6 +174,7 @@ pub fn run(cmd: BenchCmd) -> Result<(), BenchCliError> {
             rates,
             subscribers,
             transports,
+            realtime,
             quick,
             json,
         } => {
@@ -189,6 +193,7 @@ pub fn run(cmd: BenchCmd) -> Result<(), BenchCliError> {
                 rates,
                 subscribers,
                 transports,
+                realtime,
                 json,
             })?;
         }

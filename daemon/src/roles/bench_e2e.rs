@@ -290,7 +290,7 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
                 "subscriber" => prio.saturating_sub(2).max(1),
                 _ => continue,
             };
-            set_fifo(*pid, p).map_err(|e| E2eError::Child(format!("SCHED_FIFO {p} for {name}: {e}")))?;
+            bench_util::set_fifo(*pid, p).map_err(|e| E2eError::Child(format!("SCHED_FIFO {p} for {name}: {e}")))?;
         }
     }
 
@@ -340,23 +340,6 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
         imu_to_nav: pct("imu_to_nav"),
         processes,
     })
-}
-
-/// Puts every thread of process `pid` under SCHED_FIFO with priority `prio`.
-fn set_fifo(pid: u32, prio: u8) -> std::io::Result<()> {
-    for t in std::fs::read_dir(format!("/proc/{pid}/task"))? {
-        let Some(tid) = t?.file_name().to_str().and_then(|s| s.parse::<libc::pid_t>().ok()) else {
-            continue;
-        };
-        let param = libc::sched_param {
-            sched_priority: i32::from(prio),
-        };
-        // SAFETY: sched_setscheduler with a valid sched_param for the call's duration.
-        if unsafe { libc::sched_setscheduler(tid, libc::SCHED_FIFO, &param) } != 0 {
-            return Err(std::io::Error::last_os_error());
-        }
-    }
-    Ok(())
 }
 
 /// Runs every IMU count, prints the tables, writes the JSON.

@@ -148,6 +148,8 @@ pub struct IpcBenchArgs {
     pub subscribers: Vec<usize>,
     /// Transports.
     pub transports: Vec<Transport>,
+    /// SCHED_FIFO priority of the publisher and subscribers, if any.
+    pub realtime: Option<u8>,
     /// Write the results as JSON here.
     pub json: Option<PathBuf>,
 }
@@ -165,6 +167,8 @@ pub struct IpcCase {
     pub rate: Rate,
     /// Subscriber processes.
     pub subscribers: usize,
+    /// SCHED_FIFO priority of publisher and subscribers, if they ran under it.
+    pub realtime: Option<u8>,
     /// Samples published.
     pub sent: u64,
     /// Samples received, summed over the subscribers.
@@ -221,7 +225,7 @@ pub fn run(args: &IpcBenchArgs) -> Result<IpcReport, IpcBenchError> {
             for &subs in &args.subscribers {
                 // Transports alternate case by case, so that both see the same load.
                 for &transport in &args.transports {
-                    let case = run_case(transport, kind, rate, subs, args.samples)?;
+                    let case = run_case(transport, kind, rate, subs, args.samples, args.realtime)?;
                     eprintln!("{}", row(&case));
                     report.cases.push(case);
                 }
@@ -261,6 +265,7 @@ pub fn run_case(
     rate: Rate,
     subscribers: usize,
     samples: u64,
+    realtime: Option<u8>,
 ) -> Result<IpcCase, IpcBenchError> {
     let mut env = BenchEnv::new("ipc")?;
     let mut outs = Vec::new();
@@ -286,7 +291,10 @@ pub fn run_case(
             a.extend([arg("--socket"), sock.display().to_string()]);
         }
         let name = format!("sub-{i}");
-        let (_, out) = env.spawn(&name, &a, true)?;
+        let (pid, out) = env.spawn(&name, &a, true)?;
+        if let Some(p) = realtime {
+            bench_util::set_fifo(pid, p.saturating_sub(1).max(1)).map_err(child_err)?;
+        }
         let mut out = BufReader::new(out.ok_or_else(|| child_err("no stdout"))?);
         if !bench_util::wait_for_line(&mut out, "ready", Duration::from_secs(20)) {
             return Err(child_err(format!("{name} did not get ready:\n{}", env.log(&name))));
@@ -310,7 +318,11 @@ pub fn run_case(
         a.push(arg("--sockets"));
         a.push(sockets.join(","));
     }
-    let (_, pub_out) = env.spawn("pub", &a, true)?;
+    let (pid, pub_out) = env.spawn("pub", &a, true)?;
+    if let Some(p) = realtime {
+        // The publisher above its subscribers, as a driver above the estimator.
+        bench_util::set_fifo(pid, p).map_err(child_err)?;
+    }
     let mut pub_out = BufReader::new(pub_out.ok_or_else(|| child_err("no stdout"))?);
     let expected = match rate {
         Rate::Hz(r) => samples as f64 / r,
@@ -355,6 +367,7 @@ pub fn run_case(
         },
         rate,
         subscribers,
+        realtime,
         sent,
         received,
         lost: (sent * subscribers as u64).saturating_sub(received),
@@ -378,7 +391,10 @@ fn row(c: &IpcCase) -> String {
     };
     format!(
         "| {} | {} ({} B) | {} | {} | {}/{} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} / {:.2} |",
-        transport_name(c.transport),
+        match c.realtime {
+            Some(p) => format!("{}, FIFO {p}", transport_name(c.transport)),
+            None => transport_name(c.transport).to_string(),
+        },
         match c.kind {
             Kind::Imu => "ImuSample",
             Kind::Nav => "NavState",
