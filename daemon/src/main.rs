@@ -109,6 +109,49 @@ enum EstimateFormat {
     KfGins,
 }
 
+/// The estimator's settings on the command line, shared by `estimator` and
+/// `replay --estimate`.
+#[derive(clap::Args, Debug)]
+struct EstimatorFlags {
+    /// GNSS receiver ids.
+    #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
+    gnss: Vec<String>,
+    /// PPS source ids (empty: none).
+    #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
+    pps: Vec<String>,
+    /// IMU ids (the first drives the filter).
+    #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
+    imus: Vec<String>,
+    /// Ignore PPS: stamp fixes by receipt time (software sync, ms-level time).
+    #[arg(long)]
+    software_sync: bool,
+    /// IMU class for the filter's process noise: consumer, industrial.
+    #[arg(long, default_value = "industrial")]
+    imu_model: ImuPreset,
+    /// Do not estimate the GNSS delay Δ (for comparison runs).
+    #[arg(long)]
+    no_delay_state: bool,
+    /// 1-sigma of the receiver's velocity per axis, m/s.
+    #[arg(long, default_value_t = 0.1)]
+    gnss_vel_std: f64,
+}
+
+impl EstimatorFlags {
+    /// The estimator's arguments (defaults for what the command line does not set).
+    fn args(self) -> roles::estimator::EstimatorArgs {
+        roles::estimator::EstimatorArgs {
+            gnss_ids: self.gnss,
+            pps_ids: self.pps,
+            imu_ids: self.imus,
+            software_sync: self.software_sync,
+            imu_model: self.imu_model,
+            estimate_delay: !self.no_delay_state,
+            gnss_vel_std_mps: self.gnss_vel_std,
+            ..Default::default()
+        }
+    }
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// GNSS receiver driver: NMEA 0183 from a serial port to `navsync/gnss/{id}/fix`.
@@ -181,27 +224,8 @@ enum Cmd {
     },
     /// The estimator: time mapping (and navigation filter) from the sensor services.
     Estimator {
-        /// GNSS receiver ids.
-        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
-        gnss: Vec<String>,
-        /// PPS source ids (empty: none).
-        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
-        pps: Vec<String>,
-        /// IMU ids.
-        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
-        imus: Vec<String>,
-        /// Ignore PPS: stamp fixes by receipt time (ms-level time).
-        #[arg(long)]
-        software_sync: bool,
-        /// IMU class for the filter's process noise: consumer, industrial.
-        #[arg(long, default_value = "industrial")]
-        imu_model: ImuPreset,
-        /// Do not estimate the GNSS delay Δ (for comparison runs).
-        #[arg(long)]
-        no_delay_state: bool,
-        /// 1-sigma of the receiver's velocity per axis, m/s.
-        #[arg(long, default_value_t = 0.1)]
-        gnss_vel_std: f64,
+        #[command(flatten)]
+        est: EstimatorFlags,
     },
     /// The simulated sensor world: IMUs and PPS to their services, NMEA into a pseudo-terminal.
     Sim {
@@ -381,27 +405,9 @@ enum Cmd {
         /// Write the accuracy summary as JSON to this file (with --estimate).
         #[arg(long, requires = "estimate")]
         summary_json: Option<PathBuf>,
-        /// Estimator: GNSS receiver ids.
-        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
-        gnss: Vec<String>,
-        /// Estimator: PPS source ids (empty: none).
-        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
-        pps: Vec<String>,
-        /// Estimator: IMU ids (the first drives the filter).
-        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
-        imus: Vec<String>,
-        /// Estimator: ignore PPS (software sync).
-        #[arg(long)]
-        software_sync: bool,
-        /// Estimator: IMU class for the process noise: consumer, industrial.
-        #[arg(long, default_value = "industrial")]
-        imu_model: ImuPreset,
-        /// Estimator: do not estimate the GNSS delay Δ.
-        #[arg(long)]
-        no_delay_state: bool,
-        /// Estimator: 1-sigma of the receiver's velocity per axis, m/s.
-        #[arg(long, default_value_t = 0.1)]
-        gnss_vel_std: f64,
+        /// The estimator's settings (with --estimate).
+        #[command(flatten)]
+        est: EstimatorFlags,
     },
     /// Offline analyses of a recording.
     Analyze {
@@ -599,29 +605,8 @@ fn main() -> Result<()> {
                 stats.bytes, stats.chunks, stats.laps, stats.garbled_chunks
             );
         }
-        Cmd::Estimator {
-            gnss,
-            pps,
-            imus,
-            software_sync,
-            imu_model,
-            no_delay_state,
-            gnss_vel_std: gnss_vel_std_mps,
-        } => {
-            let args = roles::service::estimator_args(
-                &cfg,
-                sub,
-                roles::estimator::EstimatorArgs {
-                    gnss_ids: gnss,
-                    pps_ids: pps,
-                    imu_ids: imus,
-                    software_sync,
-                    imu_model,
-                    estimate_delay: !no_delay_state,
-                    gnss_vel_std_mps,
-                    ..Default::default()
-                },
-            )?;
+        Cmd::Estimator { est } => {
+            let args = roles::service::estimator_args(&cfg, sub, est.args())?;
             roles::estimator::run(&args).context("estimator")?;
         }
         Cmd::Sim {
@@ -767,28 +752,12 @@ fn main() -> Result<()> {
             out,
             format,
             summary_json,
-            gnss,
-            pps,
-            imus,
-            software_sync,
-            imu_model,
-            no_delay_state,
-            gnss_vel_std,
+            est,
         } => {
             if estimate {
-                let est = roles::estimator::EstimatorArgs {
-                    gnss_ids: gnss,
-                    pps_ids: pps,
-                    imu_ids: imus,
-                    software_sync,
-                    imu_model,
-                    estimate_delay: !no_delay_state,
-                    gnss_vel_std_mps: gnss_vel_std,
-                    ..Default::default()
-                };
                 roles::replay::run_estimate(&roles::replay::EstimateArgs {
                     input: input.clone(),
-                    est,
+                    est: est.args(),
                     out,
                     kf_gins_format: format == EstimateFormat::KfGins,
                     summary_json,
