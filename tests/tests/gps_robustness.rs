@@ -305,12 +305,26 @@ fn the_port_vanishing_and_returning_is_survived() {
     assert!(!link.exists());
     assert!(w.wait(None, |w| w.counter("port_reopens") >= 1
         && w.counter("port_open_failures") >= 2));
+    // Detection is what the once-per-second health report shows.
+    let detected_s = t0.elapsed().as_secs_f64();
     let before = w.got.len();
 
     // Plug back in on the same link.
+    let t1 = Instant::now();
     spawn_feed(&mut env, "feed2", &path, &link, &["--speed", "5", "--loop"]);
+    assert!(w.wait(None, |w| w.got.len() > before), "{}", env.log("gps"));
+    let first_fix_s = t1.elapsed().as_secs_f64();
     assert!(w.wait(None, |w| w.got.len() >= before + 3), "{}", env.log("gps"));
+    println!(
+        "unplug: reopen and {} failed opens in health after {detected_s:.2} s; replug: first fix after {first_fix_s:.2} s (reopen backoff 0.1 s → 5 s)",
+        w.counter("port_open_failures")
+    );
     assert_eq!(w.counter("port_opens"), 2);
+    // The backoff never exceeds 5 s; with the feeder's start-up this bounds the recovery.
+    assert!(
+        first_fix_s < 15.0,
+        "first fix {first_fix_s} s after the device returned"
+    );
     let log = env.log("gps");
     assert_eq!(log.matches("cannot open").count(), 1, "one line per outage:\n{log}");
     assert!(log.lines().count() < 10, "log flood:\n{log}");

@@ -68,6 +68,24 @@ impl Eskf {
         Update::Accepted { dx, nis }
     }
 
+    /// The normalised innovation squared of a measurement (terms as for
+    /// [`update`](Self::update)) and whether it passes the same gate, without fusing it.
+    pub fn gate<const M: usize>(
+        &self,
+        dz: &SVector<f64, M>,
+        h: &SMatrix<f64, M, N>,
+        r: &SMatrix<f64, M, M>,
+        gate_scale: f64,
+    ) -> (bool, f64) {
+        let s = h * self.p * h.transpose() + r;
+        let Some(s_inv) = s.try_inverse() else {
+            return (false, f64::INFINITY);
+        };
+        let nis = (dz.transpose() * s_inv * dz)[(0, 0)];
+        let gate = CHI2_999[(M - 1).min(CHI2_999.len() - 1)] * gate_scale;
+        (nis.is_finite() && nis <= gate, nis)
+    }
+
     /// 1-sigma of state `i`.
     pub fn std(&self, i: usize) -> f64 {
         self.p[(i, i)].max(0.0).sqrt()

@@ -96,7 +96,6 @@ struct Entry {
     dt_s: f64,
     gyro: Vector3<f64>,
     accel: Vector3<f64>,
-    saturated: bool,
 }
 
 /// α–β tracker of stamp = t₀ + k·T.
@@ -175,7 +174,7 @@ impl Unit {
     }
 
     /// Lagrange interpolation of gyro and accel at centre time `t` (ns since epoch); `None`
-    /// when the span is not available, not contiguous (a gap of dropped samples) or saturated.
+    /// when the span is not available or not contiguous (a gap of dropped or rejected samples).
     fn interpolate(&self, order: usize, t: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
         if self.len < order + 1 || self.grid.period <= 0.0 {
             return None;
@@ -208,9 +207,6 @@ impl Unit {
         let (mut g, mut a) = (Vector3::zeros(), Vector3::zeros());
         for (n, hn) in h.iter().enumerate().take(order + 1) {
             let e = self.entry(i0 + n);
-            if e.saturated {
-                return None;
-            }
             g += e.gyro * *hn;
             a += e.accel * *hn;
         }
@@ -289,6 +285,10 @@ pub struct ArrayCounters {
     pub invalid: u64,
     /// Samples older than the previous one of the same IMU (rejected).
     pub backwards: u64,
+    /// Samples flagged saturated ([`IMU_FLAG_SATURATED`]: an axis at the sensor's full-scale
+    /// range, so the true value is unknown), rejected: the interval is bridged by the next
+    /// sample like a dropped one.
+    pub saturated: u64,
     /// Samples from an id not in the configuration (ignored).
     pub unknown_id: u64,
     /// Virtual samples produced.
@@ -405,6 +405,10 @@ impl ImuArray {
             self.counters.backwards += 1;
             return false;
         }
+        if s.flags & IMU_FLAG_SATURATED != 0 {
+            self.counters.saturated += 1;
+            return false;
+        }
         let epoch = *self.epoch_ns.get_or_insert(s.stamp.host_ns);
         let period_ns = s.dt_s * 1e9;
         let end = unit
@@ -419,7 +423,6 @@ impl ImuArray {
             dt_s: s.dt_s,
             gyro: unit.cfg.c_b_s * g,
             accel: unit.cfg.c_b_s * a,
-            saturated: s.flags & IMU_FLAG_SATURATED != 0,
         });
         unit.last_host_ns = Some(s.stamp.host_ns);
         if unit.reason == ImuSyncReason::Absent || unit.reason == ImuSyncReason::Stale {

@@ -96,14 +96,21 @@ pub struct NavCounters {
     pub imu_backwards: u64,
     /// Output replays after a correction.
     pub replays: u64,
-    /// Position/velocity resets to GNSS after persistent rejections.
+    /// Resets to GNSS after [`RESET_AFTER_REJECTS`] consecutive rejected fixes.
     pub gnss_resets: u64,
+    /// Of those, full resets: the fix's velocity disagreed with the filter too (the filter had
+    /// lost consistency), so velocity was reset as well and the attitude and sensor-error
+    /// uncertainty reopened. The others moved only the position (the GNSS position jumped).
+    pub gnss_resets_full: u64,
 }
 
-/// Consecutive rejected fixes after which the filter resets position and velocity to GNSS
-/// (a GNSS jump, or a filter that has lost consistency, must not keep it in dead reckoning
-/// forever; PX4's EKF2 does the same after its GPS rejection timeout).
-const RESET_AFTER_REJECTS: u32 = 5;
+/// Consecutive rejected fixes after which the filter resets to GNSS (a GNSS jump, or a filter
+/// that has lost consistency, must not keep it in dead reckoning forever; PX4's EKF2 does the
+/// same after its GPS rejection timeout). When the fix's velocity passes the gate the inertial
+/// solution is sound and the position jumped (a receiver reset, a spoofer): only the position
+/// is reset. Otherwise position and velocity are, and the attitude and sensor-error
+/// uncertainty reopened.
+pub const RESET_AFTER_REJECTS: u32 = 5;
 
 #[derive(Debug, Clone)]
 struct Delayed {
@@ -166,6 +173,29 @@ impl Delayed {
         self.cov_dt = 0.0;
         self.cov_f = Vector3::zeros();
         self.cov_w = Vector3::zeros();
+    }
+
+    /// Resets the position to a fix (extrapolated by ε to the filter time along the filter's
+    /// velocity) and its covariance to the fix's accuracy, decorrelated from the other states;
+    /// velocity, attitude and sensor errors are kept: for a GNSS position that jumped while
+    /// its velocity still agrees with the inertial solution.
+    fn reset_position_to(&mut self, obs: &GnssObservation, cfg: &NavConfig, eps: f64) {
+        let c_bn = self.pva.q_nb.to_rotation_matrix().into_inner();
+        let lever_n = c_bn * cfg.lever_arm_b_m;
+        let (rm, rn) = earth::radii(obs.lat_rad);
+        let p_ned = self.pva.vel_ned_mps * eps - lever_n;
+        self.pva.lat_rad = obs.lat_rad + p_ned.x / (rm + obs.h_m);
+        self.pva.lon_rad = obs.lon_rad + p_ned.y / ((rn + obs.h_m) * obs.lat_rad.cos());
+        self.pva.h_m = obs.h_m - p_ned.z;
+        for i in POS..POS + 3 {
+            for j in 0..N {
+                self.eskf.p[(i, j)] = 0.0;
+                self.eskf.p[(j, i)] = 0.0;
+            }
+        }
+        for i in 0..3 {
+            self.eskf.p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
+        }
     }
 
     /// Resets position and velocity to a fix (extrapolated by ε to the filter time; vertical
@@ -701,12 +731,23 @@ fn fuse_due(
                 if *consecutive_rejects < RESET_AFTER_REJECTS {
                     continue;
                 }
-                f.reset_to(&obs, cfg, eps);
+                // Persistently rejected: did the GNSS position jump, or has the filter lost
+                // consistency? The fix's velocity against the filter's tells.
+                let vel_agrees = obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() && {
+                    let (dz, h, r) =
+                        gnss_fusion::velocity_terms(&f.pva, &cfg.lever_arm_b_m, &f.last_w, &f.acc_ned, &obs, eps);
+                    f.eskf.gate(&dz, &h, &r, cfg.gate_scale).0
+                };
                 counters.gnss_resets += 1;
                 *consecutive_rejects = 0;
                 *last_fused_ns = t_f;
                 corrected = true;
-                continue;
+                if !vel_agrees {
+                    f.reset_to(&obs, cfg, eps);
+                    counters.gnss_resets_full += 1;
+                    continue;
+                }
+                f.reset_position_to(&obs, cfg, eps);
             }
         }
         if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {

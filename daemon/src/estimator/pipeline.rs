@@ -54,7 +54,9 @@ pub struct PipelineCounters {
     pub imu_other: u64,
     /// Fixes held back while the PPS clock was acquiring.
     pub fixes_waiting_for_time: u64,
-    /// IMU samples with non-finite values (rejected).
+    /// IMU samples rejected by the array (non-finite values or interval, time going backwards,
+    /// saturated: [`ArrayCounters`](super::imu_array::ArrayCounters) says which). A rejected
+    /// sample yields no `NavState`; the next accepted one bridges its interval.
     pub imu_invalid: u64,
 }
 

@@ -67,6 +67,11 @@ pub struct TimeSyncCounters {
     pub pps_unlabelled: u64,
     /// Times the mapping was re-initialised after persistent rejections.
     pub resyncs: u64,
+    /// Times the status went from locked to holdover (no accepted edge for
+    /// [`HOLDOVER_AFTER_NS`]: the PPS went silent or untrusted).
+    pub holdovers: u64,
+    /// Times the status came back to locked after a holdover (edges accepted again).
+    pub relocks: u64,
 }
 
 impl TimeSyncCounters {
@@ -93,6 +98,8 @@ pub struct TimeSync {
     last_used_host_ns: Option<i64>,
     last_valid_fix_host_ns: Option<i64>,
     consecutive_rejects: u32,
+    /// A holdover began and the mapping has not been locked since (a relock is pending).
+    relock_pending: bool,
     latency: LatencyStats,
     counters: TimeSyncCounters,
     status: TimeStatus,
@@ -115,6 +122,7 @@ impl TimeSync {
             last_used_host_ns: None,
             last_valid_fix_host_ns: None,
             consecutive_rejects: 0,
+            relock_pending: false,
             latency: LatencyStats::default(),
             counters: TimeSyncCounters::default(),
             status: TimeStatus::None,
@@ -212,6 +220,10 @@ impl TimeSync {
         let p = self.clock.covariance();
         if self.clock.updates() >= LOCK_UPDATES && p[(0, 0)].sqrt() < LOCK_SIGMA_NS {
             self.status = TimeStatus::Locked;
+            if self.relock_pending {
+                self.relock_pending = false;
+                self.counters.relocks += 1;
+            }
         } else if self.status != TimeStatus::Locked {
             self.status = TimeStatus::Acquiring;
         }
@@ -313,6 +325,8 @@ impl TimeSync {
                 .is_some_and(|h| now_host_ns - h > HOLDOVER_AFTER_NS)
         {
             self.status = TimeStatus::Holdover;
+            self.counters.holdovers += 1;
+            self.relock_pending = true;
         }
         if self.status == TimeStatus::None && !self.clock.is_initialized() && self.last_fix_label.is_some() {
             let last_edge_recent = self.last_edge_host_ns.is_some_and(|e| now_host_ns - e < 3 * NS_PER_S);

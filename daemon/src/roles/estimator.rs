@@ -235,6 +235,15 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
     let c_fix_rej = health.counter("fixes_rejected");
     let c_fix_old = health.counter("fixes_too_old");
     let c_late = health.counter("inputs_late");
+    // Faults in the data (issue 8): GNSS resets after persistent rejections, PPS holdovers and
+    // relocks, IMU samples rejected by the estimator (non-finite, time-reversed, saturated).
+    let c_gnss_resets = health.counter("gnss_resets");
+    let c_gnss_resets_full = health.counter("gnss_resets_full");
+    let c_holdovers = health.counter("time_holdovers");
+    let c_relocks = health.counter("time_relocks");
+    let c_imu_invalid = health.counter("imu_rejected_invalid");
+    let c_imu_back = health.counter("imu_rejected_backwards");
+    let c_imu_sat = health.counter("imu_rejected_saturated");
     let mut order: InputOrder = InputOrder::new(args.imu_ids.first().map(String::as_str));
     // Output latency: from taking an IMU sample off its queue to its NavState being published.
     let c_lat_p99 = health.counter("nav_latency_p99_us");
@@ -369,10 +378,18 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
         let tc = *est.time().counters();
         health.set(c_pps, tc.pps_used);
         health.set(c_pps_rej, tc.rejected());
+        health.set(c_holdovers, tc.holdovers);
+        health.set(c_relocks, tc.relocks);
         let nc = *est.nav().counters();
         health.set(c_fix_used, nc.fixes_used);
         health.set(c_fix_rej, nc.fixes_rejected);
         health.set(c_fix_old, nc.fixes_too_old);
+        health.set(c_gnss_resets, nc.gnss_resets);
+        health.set(c_gnss_resets_full, nc.gnss_resets_full);
+        let ac = *est.array().counters();
+        health.set(c_imu_invalid, ac.invalid);
+        health.set(c_imu_back, ac.backwards);
+        health.set(c_imu_sat, ac.saturated);
         health.set(c_lat_p99, latency.quantile_us(0.99) as u64);
         health.set(c_lat_max, (latency.max_ns() as u64).div_ceil(1000));
         if health.maybe_publish(now)? {

@@ -52,7 +52,7 @@ use tracing::{info, warn};
 
 use super::axes::AxisMap;
 use super::output::{Extras, SampleOutput};
-use super::sample_checks::{Candidate, DeviceClock, Sequence};
+use super::sample_checks::{Candidate, DeviceClock, RESYNC_AFTER, Sequence};
 use super::xsens_frame::{
     MID_MTDATA2, Message, MtData2, NS_PER_SAMPLE_TIME_FINE_TICK, STATUS_CLIP_ACC, STATUS_CLIP_GYR, XbusFramer,
     decode_mtdata2,
@@ -110,26 +110,49 @@ struct Decoder {
     nominal_dt_s: Option<f64>,
     prev_stf: Option<u32>,
     prev_pc: Option<u16>,
+    /// Consecutive messages whose SampleTimeFine lies behind `prev_stf`.
+    stf_back_run: u32,
     last_host_ns: i64,
     c: Counters,
 }
 
 impl Decoder {
+    /// A decoder with nothing received yet.
+    fn new(axes: AxisMap, nominal_dt_s: Option<f64>) -> Self {
+        Self {
+            axes,
+            nominal_dt_s,
+            prev_stf: None,
+            prev_pc: None,
+            stf_back_run: 0,
+            last_host_ns: i64::MIN,
+            c: Counters::default(),
+        }
+    }
+
     /// Turns one message into a sample offered to `out`.
     fn on_message(&mut self, msg: Message<'_>, out: &mut SampleOutput) {
+        if let Some((candidate, extras)) = self.decode(msg) {
+            let _ = out.offer(&candidate, &extras);
+        }
+    }
+
+    /// Turns one message into a candidate sample for the checks (pure: no I/O), or counts
+    /// why it carries none.
+    fn decode(&mut self, msg: Message<'_>) -> Option<(Candidate, Extras)> {
         if msg.mid != MID_MTDATA2 {
             self.c.other_messages += 1;
             if msg.mid == MID_ERROR {
                 self.c.device_errors += 1;
             }
-            return;
+            return None;
         }
         self.c.mtdata2 += 1;
         let m = match decode_mtdata2(msg.data) {
             Ok(m) => m,
             Err(_) => {
                 self.c.bad_items += 1;
-                return;
+                return None;
             }
         };
         // The interval this message covers: from the device clock if it has one.
@@ -147,15 +170,27 @@ impl Decoder {
             }
             _ => None,
         };
-        if m.sample_time_fine.is_some() {
-            self.prev_stf = m.sample_time_fine;
-        }
-        if m.packet_counter.is_some() {
-            self.prev_pc = m.packet_counter;
+        // A message whose device time lies behind the previous one (corrupt, or the device
+        // restarted) is not the start of the next interval until that persists (as in the
+        // sample checks): otherwise the sample after one bad message would get a wrong
+        // interval, and with increments (DeltaQ/DeltaV) wrong rates.
+        let stf_backwards = match (m.sample_time_fine, self.prev_stf) {
+            (Some(now), Some(before)) => now.wrapping_sub(before) > u32::MAX / 2,
+            _ => false,
+        };
+        self.stf_back_run = if stf_backwards { self.stf_back_run + 1 } else { 0 };
+        if !stf_backwards || self.stf_back_run >= RESYNC_AFTER {
+            self.stf_back_run = 0;
+            if m.sample_time_fine.is_some() {
+                self.prev_stf = m.sample_time_fine;
+            }
+            if m.packet_counter.is_some() {
+                self.prev_pc = m.packet_counter;
+            }
         }
         let Some((gyro, accel)) = inertial(&m, stf_dt_s.or(self.nominal_dt_s)) else {
             self.c.no_inertial += 1;
-            return;
+            return None;
         };
         let host_ns = msg.host_ns.max(self.last_host_ns);
         self.last_host_ns = host_ns;
@@ -181,15 +216,13 @@ impl Decoder {
             gyro_rps: self.axes.apply(gyro),
             accel_mps2: self.axes.apply(accel),
         };
-        let _ = out.offer(
-            &candidate,
-            &Extras {
-                source: StampSource::Receipt,
-                temperature_c: m.temperature_c.unwrap_or(f64::NAN),
-                saturated: clipped,
-                dt_s: None,
-            },
-        );
+        let extras = Extras {
+            source: StampSource::Receipt,
+            temperature_c: m.temperature_c.unwrap_or(f64::NAN),
+            saturated: clipped,
+            dt_s: None,
+        };
+        Some((candidate, extras))
     }
 }
 
@@ -224,14 +257,7 @@ pub fn rotation_vector(q: [f64; 4]) -> [f64; 3] {
 /// Runs the driver until SIGINT/SIGTERM.
 pub fn run(node: &IpcNode, args: &XsensArgs, out: &mut SampleOutput) {
     let mut framer = XbusFramer::new();
-    let mut dec = Decoder {
-        axes: args.axes,
-        nominal_dt_s: args.rate_hz.map(|f| 1.0 / f),
-        prev_stf: None,
-        prev_pc: None,
-        last_host_ns: i64::MIN,
-        c: Counters::default(),
-    };
+    let mut dec = Decoder::new(args.axes, args.rate_hz.map(|f| 1.0 / f));
     let ns_per_byte = 10_000_000_000 / i64::from(args.baud.max(1));
     let mut backoff = Duration::from_millis(100);
     let mut warned_open = false;
@@ -333,5 +359,128 @@ mod tests {
         let (g, a) = inertial(&m, Some(0.005)).unwrap();
         assert!((g[0] - 0.4).abs() < 1e-12, "{g:?}");
         assert!((a[0] - 2.0).abs() < 1e-12 && (a[2] + 9.8).abs() < 1e-12, "{a:?}");
+    }
+
+    /// A 200 Hz MTData2 stream carrying NaN, infinite, full-scale, clipped, out-of-range,
+    /// time-reversed and repeated samples, as bytes through the framer, the decoder and the
+    /// sample checks, in both output formats (calibrated rates, and increments with `--rate`):
+    /// every bad sample is rejected and counted by kind, a full-scale or clipped one is kept
+    /// and flagged saturated, the good ones come through unchanged and numbered by the packet
+    /// counter (the rejected ones are gaps), and the sample after a time-reversed one gets its
+    /// true interval.
+    #[test]
+    fn bad_samples_in_the_byte_stream_are_rejected_flagged_and_counted() {
+        use super::super::sample_checks::{Limits, Rejection, SampleChecks};
+        use super::super::xsens_frame::{RealFormat, encode_mtdata2};
+        use super::super::{XSENS_ACCEL_RANGE_G, XSENS_GYRO_RANGE_DPS};
+
+        const DT_S: f64 = 0.005;
+        let fs = XSENS_GYRO_RANGE_DPS.to_radians();
+        let limits = Limits {
+            gyro_rps: fs,
+            accel_mps2: XSENS_ACCEL_RANGE_G * navsync_shared::imu_spec::G0,
+        };
+        let good_w = [0.1, -0.2, 0.3];
+        let good_a = [0.5, -0.4, 9.8];
+        // (what is wrong, rate, specific force, status word, SampleTimeFine shift in ticks).
+        type Msg = (&'static str, [f64; 3], [f64; 3], u32, i64);
+        let ok: Msg = ("good", good_w, good_a, 0, 0);
+        let script: [Msg; 16] = [
+            ok,
+            ok,
+            ok,
+            ok,
+            ("nan", [0.1, f64::NAN, 0.3], good_a, 0, 0),
+            ("inf", good_w, [0.5, -0.4, f64::INFINITY], 0, 0),
+            ("full scale", [fs, -0.2, 0.3], good_a, 0, 0),
+            ("clipped", good_w, good_a, STATUS_CLIP_ACC[2], 0),
+            ("beyond range", [0.1, -0.2, 1.3 * fs], good_a, 0, 0),
+            ("time reversed", good_w, good_a, 0, -1000),
+            ok,
+            ("repeated", good_w, good_a, 0, 0),
+            ok,
+            ok,
+            ok,
+            ok,
+        ];
+        for increments in [false, true] {
+            let mut dec = Decoder::new(AxisMap::IDENTITY, increments.then_some(DT_S));
+            let mut framer = XbusFramer::new();
+            let mut checks = SampleChecks::new(limits);
+            let mut bytes = Vec::new();
+            let mut got = Vec::new();
+            let stf0: u32 = 4_294_960_000; // wraps within the stream
+            for (i, (what, w, a, status, shift)) in script.iter().enumerate() {
+                // The repeated message is the previous one again.
+                let k = if *what == "repeated" { i - 1 } else { i };
+                let stf = stf0.wrapping_add(50 * k as u32).wrapping_add(*shift as u32);
+                let mut m = MtData2 {
+                    packet_counter: Some(k as u16),
+                    sample_time_fine: Some(stf),
+                    status_word: Some(*status),
+                    ..Default::default()
+                };
+                if increments {
+                    let angle = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt() * DT_S;
+                    let axis = w.map(|x| x * DT_S / angle);
+                    let (c, s) = ((angle / 2.0).cos(), (angle / 2.0).sin());
+                    m.delta_q = Some([c, axis[0] * s, axis[1] * s, axis[2] * s]);
+                    m.delta_v = Some(a.map(|x| x * DT_S));
+                } else {
+                    m.rate_of_turn = Some(*w);
+                    m.acceleration = Some(*a);
+                }
+                encode_mtdata2(&m, RealFormat::Float32, &mut bytes);
+                let t = 1_000_000_000 + i as i64 * 5_000_000;
+                framer.push(&bytes, t, 1_000, &mut |msg| {
+                    let (c, x) = dec.decode(msg).expect("a sample");
+                    got.push((i, c, x, checks.check(&c)));
+                });
+            }
+            let mode = if increments { "increments" } else { "rates" };
+            assert_eq!(got.len(), script.len(), "{mode}: every message decoded");
+            for (i, c, x, r) in &got {
+                let (what, w, a, ..) = script[*i];
+                match (what, r) {
+                    ("good", Ok(acc)) => {
+                        assert_eq!(acc.seq, *i as u64, "{mode} #{i}: numbered by the counter");
+                        assert!(!acc.at_range && !x.saturated, "{mode} #{i}");
+                        for k in 0..3 {
+                            assert!(
+                                (c.gyro_rps[k] - w[k]).abs() < 1e-5,
+                                "{mode} #{i}: rate {:?}",
+                                c.gyro_rps
+                            );
+                            assert!((c.accel_mps2[k] - a[k]).abs() < 1e-5, "{mode} #{i}: {:?}", c.accel_mps2);
+                        }
+                        assert_eq!(acc.device_interval_ns, (*i > 0).then_some(5_000_000), "{mode} #{i}");
+                    }
+                    ("full scale", Ok(acc)) => assert!(acc.at_range, "{mode}: full scale flagged"),
+                    ("clipped", Ok(acc)) => assert!(x.saturated && !acc.at_range, "{mode}: clip flag"),
+                    ("nan" | "inf", Err(e)) => assert_eq!(*e, Rejection::NotFinite, "{mode} #{i}"),
+                    ("beyond range", Err(e)) => assert_eq!(*e, Rejection::OutOfRange, "{mode}"),
+                    ("time reversed", Err(e)) => assert_eq!(*e, Rejection::DeviceTimeBackwards, "{mode}"),
+                    ("repeated", Err(e)) => assert_eq!(*e, Rejection::Duplicate, "{mode}"),
+                    _ => panic!("{mode} #{i} ({what}): {r:?}"),
+                }
+            }
+            let k = checks.counters();
+            println!("{mode}: {k:?}");
+            assert_eq!(
+                (
+                    k.accepted,
+                    k.rejected_not_finite,
+                    k.rejected_range,
+                    k.rejected_device_back,
+                    k.rejected_duplicate,
+                    k.at_range
+                ),
+                (11, 2, 1, 1, 1, 1),
+                "{mode}"
+            );
+            // The rejected messages are gaps in the published numbering: 4 and 5, 8 and 9, 11.
+            assert_eq!((k.dropped, k.gaps, k.resyncs), (5, 3, 0), "{mode}");
+            assert_eq!((dec.c.bad_items, dec.c.no_inertial), (0, 0), "{mode}");
+        }
     }
 }
