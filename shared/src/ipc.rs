@@ -23,7 +23,7 @@ use core::time::Duration;
 use core::sync::atomic::{AtomicBool, Ordering};
 
 use iceoryx2::node::NodeWaitFailure;
-use iceoryx2::port::listener::Listener;
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
@@ -138,13 +138,23 @@ impl IpcNode {
             .config(&config)
             .create::<Transport>()
             .map_err(|e| err("creating node", process, e))?;
-        // Reclaim what processes that died without cleaning up (kill -9) left behind.
-        let _ = node.try_cleanup_dead_nodes();
-        restrict_global_segment(prefix);
-        Ok(Self {
+        let node = Self {
             node,
             terminated: AtomicBool::new(false),
-        })
+        };
+        // Reclaim what processes that died without cleaning up (kill -9) left behind.
+        node.reclaim_dead_nodes();
+        restrict_global_segment(prefix);
+        Ok(node)
+    }
+
+    /// Removes the resources of every dead node under this prefix (a process that died without
+    /// cleaning up, e.g. `kill -9`): its shared memory and files go, and its ports leave every
+    /// service, so [`Subscriber::publisher_count`] no longer counts them. Returns how many dead
+    /// nodes were reclaimed. Every node does it once when created; it costs one directory scan
+    /// and a lock test per node, cheap enough for a few calls per second.
+    pub fn reclaim_dead_nodes(&self) -> u64 {
+        self.node.try_cleanup_dead_nodes().cleanups
     }
 
     /// The iceoryx2 node.
@@ -263,6 +273,7 @@ impl IpcNode {
             subscriber,
             listener,
             service: service.to_string(),
+            port_factory: ps,
         })
     }
 
@@ -316,6 +327,7 @@ pub struct Subscriber<T: Reflect + ZeroCopySend + Debug> {
     subscriber: iceoryx2::port::subscriber::Subscriber<Transport, T, ()>,
     listener: Listener<Transport>,
     service: String,
+    port_factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, T, ()>,
 }
 
 impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
@@ -347,8 +359,10 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
         let _ = self.listener.try_wait(|_| {});
     }
 
-    /// Blocks until a sample is available or `timeout` passes; `Ok(None)` on timeout or on a
-    /// termination request.
+    /// Blocks until a sample is available or `timeout` passes; `Ok(None)` on timeout, or
+    /// earlier when a signal interrupts the wait: a termination request (the caller checks
+    /// [`IpcNode::termination_requested`]) or SIGCONT after the process was stopped, which must
+    /// not end a subscriber.
     pub fn wait_next(&self, timeout: Duration) -> Result<Option<T>, IpcError> {
         if let Some(s) = self.receive()? {
             return Ok(Some(s));
@@ -359,13 +373,21 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
             if now >= deadline {
                 return Ok(None);
             }
-            self.listener
-                .timed_wait(|_| {}, deadline - now)
-                .map_err(|e| err("waiting on", &self.service, e))?;
+            match self.listener.timed_wait(|_| {}, deadline - now) {
+                Ok(_) => {}
+                Err(ListenerWaitError::InterruptSignal) => return self.receive(),
+                Err(e) => return Err(err("waiting on", &self.service, e)),
+            }
             if let Some(s) = self.receive()? {
                 return Ok(Some(s));
             }
         }
+    }
+
+    /// Publishers on the service now. A publisher whose process was killed is counted until
+    /// some node reclaims the dead node ([`IpcNode::reclaim_dead_nodes`]).
+    pub fn publisher_count(&self) -> usize {
+        self.port_factory.dynamic_config().number_of_publishers()
     }
 
     /// The listener to attach to a WaitSet.

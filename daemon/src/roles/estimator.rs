@@ -15,7 +15,7 @@ use navsync_shared::health_reporter::HealthReporter;
 use navsync_shared::imu_spec::ImuPreset;
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::latency_histogram::LatencyHistogram;
-use navsync_shared::samples::{AnySample, GnssFix, ImuSample, NavState, PpsEdge, TimeState};
+use navsync_shared::samples::{AnySample, GnssFix, ImuSample, NavState, NavStatus, PpsEdge, TimeState};
 use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
@@ -165,6 +165,21 @@ impl EstimatorArgs {
     }
 }
 
+/// How often the estimator looks for inputs whose publishing process is gone (reclaiming dead
+/// nodes first, so a killed driver's publisher no longer counts), ns. With the wake-up latency
+/// this bounds the time from a driver's death to its stale flag, whatever the input's rate.
+const PUBLISHER_CHECK_INTERVAL_NS: i64 = 50_000_000;
+
+/// The published navigation status while every GNSS input is gone: an aligned (or degraded)
+/// filter is inertial-only from that moment, not only after the navigator's outage time.
+fn status_without_gnss(status: u8) -> u8 {
+    if status == NavStatus::Aligned as u8 || status == NavStatus::Degraded as u8 {
+        NavStatus::InsOnly as u8
+    } else {
+        status
+    }
+}
+
 /// Notes a sample of input `i`; true (and logged) when the input was stale until now.
 fn resumed(live: &mut Liveness, i: usize, stamp_ns: i64, rx_ns: i64) -> bool {
     match live.seen(i, stamp_ns, rx_ns) {
@@ -269,6 +284,7 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
     let c_stale_n = health.counter("stale_inputs");
     let c_stale_events = health.counter("stale_events");
     let (n_imu, n_pps) = (imus.len(), pps.len());
+    let mut next_publisher_check_ns = monotonic_now_ns();
     info!(pps = ?args.pps_ids, gnss = ?args.gnss_ids, imus = ?args.imu_ids, "estimator running");
     navsync_shared::sd_notify::ready(&format!(
         "estimator: gnss {:?}, pps {:?}, imus {:?}",
@@ -281,7 +297,9 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
         let now = monotonic_now_ns();
         let wait_ns = live
             .next_deadline()
-            .map_or(100_000_000, |d| (d - now).clamp(1_000_000, 100_000_000));
+            .map_or(next_publisher_check_ns, |d| d.min(next_publisher_check_ns))
+            .saturating_sub(now)
+            .clamp(1_000_000, 100_000_000);
         if !node.wait_on(&waitset, Duration::from_nanos(wait_ns as u64))? {
             break;
         }
@@ -321,13 +339,18 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
                 order.push(AnySample::GnssFix(fix), ());
             }
         }
+        // NavStates say inertial-only at once when every receiver's driver is gone.
+        let gnss_gone = !gnss.is_empty() && live.inputs()[n_imu + n_pps..].iter().all(|x| x.is_gone());
         // Without IMUs (or with the reference IMU silent) nothing releases the waiting samples.
         let release_all = imus.is_empty() || order.stalled(monotonic_now_ns());
         while let Some((s, ())) = if release_all { order.pop_any() } else { order.pop() } {
             match s {
                 AnySample::Imu(sample) => {
                     let t_in = monotonic_now_ns();
-                    if let Some(state) = est.on_imu(&sample) {
+                    if let Some(mut state) = est.on_imu(&sample) {
+                        if gnss_gone {
+                            state.status = status_without_gnss(state.status);
+                        }
                         if let Err(e) = nav_pub.publish(&state) {
                             warn!("publishing nav state: {e}");
                         }
@@ -351,6 +374,22 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
             health.add(c_stale_events, 1);
             liveness_changed = true;
         });
+        if now >= next_publisher_check_ns {
+            next_publisher_check_ns = now + PUBLISHER_CHECK_INTERVAL_NS;
+            node.reclaim_dead_nodes();
+            let publishers = imus
+                .iter()
+                .map(Subscriber::publisher_count)
+                .chain(pps.iter().map(Subscriber::publisher_count))
+                .chain(gnss.iter().map(Subscriber::publisher_count));
+            for (i, n) in publishers.enumerate() {
+                if n == 0 && live.gone(i, now).is_some() {
+                    warn!(input = %live.inputs()[i].name, "input stale: its publisher is gone");
+                    health.add(c_stale_events, 1);
+                    liveness_changed = true;
+                }
+            }
+        }
         if liveness_changed {
             for (c, x) in c_stale.iter().zip(live.inputs()) {
                 health.set(*c, x.stale_since_ns().map_or(0, |t| t.max(1) as u64));

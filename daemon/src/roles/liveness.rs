@@ -2,8 +2,10 @@
 //! when nothing arrived for its learned sample interval plus [`STALE_MARGIN_NS`]. The
 //! estimator process wakes at the nearest deadline (not only on samples), flags the input in
 //! its Health at once (counter `stale_<kind>_<id>`: 0 while fresh, else the host time in ns
-//! at which it was declared stale) and clears the flag with the next sample. Pure: the caller
-//! passes the times.
+//! at which it was declared stale) and clears the flag with the next sample. An input whose
+//! publishing process is gone (no live publisher left on its service, e.g. after `kill -9`) is
+//! declared stale at once, without waiting for its interval: [`Liveness::gone`]. Pure: the
+//! caller passes the times and what it found.
 
 /// How long past its expected next sample an input is declared stale, ns.
 pub const STALE_MARGIN_NS: i64 = 100_000_000;
@@ -17,6 +19,7 @@ pub struct Input {
     last_stamp_ns: Option<i64>,
     interval_ns: f64,
     stale_since_ns: Option<i64>,
+    gone: bool,
 }
 
 impl Input {
@@ -28,6 +31,11 @@ impl Input {
     /// The learned sample interval, ns.
     pub fn interval_ns(&self) -> f64 {
         self.interval_ns
+    }
+
+    /// True while its publisher is gone (from [`Liveness::gone`] until its next sample).
+    pub fn is_gone(&self) -> bool {
+        self.gone
     }
 
     fn deadline(&self) -> Option<i64> {
@@ -65,6 +73,7 @@ impl Liveness {
             last_stamp_ns: None,
             interval_ns: nominal_interval_ns as f64,
             stale_since_ns: None,
+            gone: false,
         });
         self.inputs.len() - 1
     }
@@ -92,9 +101,24 @@ impl Liveness {
         }
         x.last_stamp_ns = Some(stamp_ns);
         x.last_rx_ns = Some(now_ns);
+        x.gone = false;
         x.stale_since_ns
             .take()
             .map(|t| Change::Resumed { stale_ns: now_ns - t })
+    }
+
+    /// Input `i` has no live publisher at `now_ns` (its process exited or was killed). An input
+    /// that had samples is declared stale now (`Some(Stale)`) unless it already is; one that
+    /// never had any is left alone (its driver may not have started yet).
+    pub fn gone(&mut self, i: usize, now_ns: i64) -> Option<Change> {
+        let x = &mut self.inputs[i];
+        x.last_rx_ns?;
+        x.gone = true;
+        if x.stale_since_ns.is_some() {
+            return None;
+        }
+        x.stale_since_ns = Some(now_ns);
+        Some(Change::Stale)
     }
 
     /// Marks inputs whose deadline passed; calls `f(index, change)` for each.
@@ -151,5 +175,39 @@ mod tests {
             (l.inputs()[imu].interval_ns() - 5e6).abs() < 1e3,
             "the gap did not teach a longer interval"
         );
+    }
+
+    #[test]
+    fn gone_publisher_is_stale_at_once_until_the_next_sample() {
+        let mut l = Liveness::default();
+        let gnss = l.add("gnss_0", 1_000_000_000);
+        let pps = l.add("pps_0", 1_000_000_000);
+        // Never seen: its driver may not be up yet.
+        assert_eq!(l.gone(gnss, 5), None);
+        assert!(!l.inputs()[gnss].is_gone());
+        l.seen(gnss, 0, 10);
+        l.seen(pps, 0, 10);
+        // 20 ms after the last fix, far before interval + margin.
+        assert_eq!(l.gone(gnss, 20_000_010), Some(Change::Stale));
+        assert_eq!(l.inputs()[gnss].stale_since_ns(), Some(20_000_010));
+        assert!(l.inputs()[gnss].is_gone());
+        // Once only; no deadline while stale.
+        assert_eq!(l.gone(gnss, 30_000_000), None);
+        assert_eq!(l.next_deadline(), Some(10 + 1_000_000_000 + STALE_MARGIN_NS));
+        // Already stale from silence: marked gone, not declared again.
+        let mut changes = Vec::new();
+        l.check(2_000_000_000, |i, _, c| changes.push((i, c)));
+        assert_eq!(changes, vec![(pps, Change::Stale)]);
+        assert_eq!(l.gone(pps, 2_100_000_000), None);
+        assert!(l.inputs()[pps].is_gone());
+        // The restarted driver's first sample brings it back.
+        assert_eq!(
+            l.seen(gnss, 3_000_000_000, 3_000_000_000),
+            Some(Change::Resumed {
+                stale_ns: 3_000_000_000 - 20_000_010
+            })
+        );
+        assert!(!l.inputs()[gnss].is_gone());
+        assert_eq!(l.stale_count(), 1);
     }
 }
