@@ -2,7 +2,8 @@
 //!
 //! An assert edge at every integer UTC second T within the scenario, stamped
 //! host(T) + N(0, σ²) (σ = `clock.pps_jitter_s`), never earlier than the previous stamp.
-//! During an outage whose `pps_continues` is false there is no edge. `stamp.seq` counts the
+//! During a GNSS outage whose `pps_continues` is false, and during a PPS outage
+//! (`[[clock.pps_outage]]`), there is no edge. `stamp.seq` counts the
 //! edges emitted from 0; `source_seq` is the kernel-style assert counter starting at 1.
 
 use navsync_shared::samples::{PpsEdge, Stamp, StampSource};
@@ -10,7 +11,7 @@ use navsync_shared::time::NS_PER_S;
 
 use super::oscillator::Oscillator;
 use super::rng::{Rng, streams};
-use super::scenario::OutageConfig;
+use super::scenario::{OutageConfig, PpsOutageConfig};
 
 /// The PPS edge generator.
 #[derive(Debug, Clone)]
@@ -25,8 +26,16 @@ pub struct PpsGenerator {
 }
 
 impl PpsGenerator {
-    /// Edges at whole UTC seconds in [`start_utc_ns`, `start_utc_ns` + `duration_s`].
-    pub fn new(seed: u64, start_utc_ns: i64, duration_s: f64, jitter_s: f64, outages: &[OutageConfig]) -> Self {
+    /// Edges at whole UTC seconds in [`start_utc_ns`, `start_utc_ns` + `duration_s`], silent
+    /// during the GNSS `outages` without PPS and the `pps_outages`.
+    pub fn new(
+        seed: u64,
+        start_utc_ns: i64,
+        duration_s: f64,
+        jitter_s: f64,
+        outages: &[OutageConfig],
+        pps_outages: &[PpsOutageConfig],
+    ) -> Self {
         let first = start_utc_ns.div_euclid(NS_PER_S) * NS_PER_S;
         let first = if first < start_utc_ns { first + NS_PER_S } else { first };
         Self {
@@ -37,6 +46,7 @@ impl PpsGenerator {
                 .iter()
                 .filter(|o| !o.pps_continues)
                 .map(|o| (o.start_s, o.start_s + o.duration_s))
+                .chain(pps_outages.iter().map(|o| (o.start_s, o.start_s + o.duration_s)))
                 .collect(),
             seq: 0,
             last_host_ns: i64::MIN,

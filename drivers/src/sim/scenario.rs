@@ -398,6 +398,10 @@ pub struct ClockConfig {
     pub freq_rw_adev_1s: f64,
     /// 1-σ jitter of the PPS edge's host time stamp, s (default 1 µs, kernel PPS).
     pub pps_jitter_s: f64,
+    /// PPS outages (TOML `[[clock.pps_outage]]`): no edges while the fixes go on (a cut PPS
+    /// line, a receiver that stops its time pulse). Default none.
+    #[serde(rename = "pps_outage")]
+    pub pps_outages: Vec<PpsOutageConfig>,
 }
 
 impl Default for ClockConfig {
@@ -406,8 +410,19 @@ impl Default for ClockConfig {
             freq_error_ppm: 0.5,
             freq_rw_adev_1s: 1e-10,
             pps_jitter_s: 1e-6,
+            pps_outages: Vec::new(),
         }
     }
+}
+
+/// A PPS outage: the receiver's PPS output is silent, its NMEA and fixes are not.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PpsOutageConfig {
+    /// Start, s of scenario time.
+    pub start_s: f64,
+    /// Length, s (> 0). Edges of true seconds in [start, start + duration) are not emitted.
+    pub duration_s: f64,
 }
 
 /// Ground-truth events.
@@ -924,6 +939,22 @@ impl SimConfig {
         self.check_range("clock.freq_error_ppm", c.freq_error_ppm, -1000.0, 1000.0, "ppm")?;
         self.check_range("clock.freq_rw_adev_1s", c.freq_rw_adev_1s, 0.0, 1e-6, "")?;
         self.check_range("clock.pps_jitter_s", c.pps_jitter_s, 0.0, 0.01, "s")?;
+        for (i, o) in c.pps_outages.iter().enumerate() {
+            self.check_range(
+                &format!("clock.pps_outage[{i}].start_s"),
+                o.start_s,
+                0.0,
+                MAX_DURATION_S,
+                "s",
+            )?;
+            self.check_range(
+                &format!("clock.pps_outage[{i}].duration_s"),
+                o.duration_s,
+                1e-3,
+                MAX_DURATION_S,
+                "s",
+            )?;
+        }
         self.check_range("truth.rate_hz", self.truth.rate_hz, 1.0, 1000.0, "Hz")
     }
 }
@@ -1021,6 +1052,25 @@ mod tests {
         let u3 = cfg.imu_unit(3);
         assert!((u3.offset_s - 0.020).abs() < 1e-15);
         assert!((u3.phase_s - 3.3e-3).abs() < 1e-12);
+    }
+
+    #[test]
+    fn pps_outages_are_read_and_validated() {
+        let text = format!(
+            "{}\n[[clock.pps_outage]]\nstart_s = 4.0\nduration_s = 3.0\n",
+            minimal("")
+        );
+        let cfg = SimConfig::from_toml_str(&text, "p.toml").expect("valid");
+        assert_eq!(cfg.clock.pps_outages.len(), 1);
+        assert_eq!(
+            (cfg.clock.pps_outages[0].start_s, cfg.clock.pps_outages[0].duration_s),
+            (4.0, 3.0)
+        );
+        assert!(SimConfig::default_drive().clock.pps_outages.is_empty());
+        let msg = SimConfig::from_toml_str(&text.replace("duration_s = 3.0", "duration_s = 0.0"), "p.toml")
+            .expect_err("empty outage")
+            .to_string();
+        assert!(msg.contains("clock.pps_outage[0].duration_s"), "{msg}");
     }
 
     #[test]

@@ -142,6 +142,7 @@ impl World {
                 duration_s,
                 cfg.clock.pps_jitter_s,
                 &cfg.gnss.outages,
+                &cfg.clock.pps_outages,
             ),
             pps_head: None,
             gnss: GnssReceiver::new(&cfg.gnss, cfg.seed, start_utc_ns, duration_s),
@@ -629,6 +630,31 @@ mod tests {
             "seq counts edges"
         );
         assert_eq!(no_fix, 15);
+    }
+
+    #[test]
+    fn pps_outage_silences_edges_only() {
+        let mut cfg = short_cfg(60.0);
+        cfg.clock.pps_outages = vec![crate::sim::scenario::PpsOutageConfig {
+            start_s: 20.0,
+            duration_s: 15.0,
+        }];
+        let mut w = World::new(&cfg, H0, U0).expect("world");
+        let (mut edges, mut no_fix, mut bursts) = (Vec::new(), 0, 0);
+        while let Some(e) = w.next_event() {
+            match e {
+                SimEvent::Pps(p) => edges.push(w.utc_ns_at_host(p.stamp.host_ns)),
+                SimEvent::Nmea { bytes, .. } => {
+                    bursts += 1;
+                    no_fix += usize::from(parse_burst(&bytes)[2][6] == "0");
+                }
+                _ => {}
+            }
+        }
+        let tau = |u: i64| (u - U0) as f64 * 1e-9;
+        assert!(edges.iter().all(|&u| !(20.0..35.0).contains(&tau(u))));
+        assert_eq!(edges.len(), 60 - 15);
+        assert!(bursts >= 59 && no_fix == 0, "{bursts} bursts, {no_fix} without a fix");
     }
 
     #[test]
