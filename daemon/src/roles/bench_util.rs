@@ -378,6 +378,23 @@ pub fn read_latencies(path: &Path) -> std::io::Result<Vec<i64>> {
         .collect())
 }
 
+/// Puts every thread of process `pid` under SCHED_FIFO with priority `prio`.
+pub fn set_fifo(pid: u32, prio: u8) -> std::io::Result<()> {
+    for t in std::fs::read_dir(format!("/proc/{pid}/task"))? {
+        let Some(tid) = t?.file_name().to_str().and_then(|s| s.parse::<libc::pid_t>().ok()) else {
+            continue;
+        };
+        let param = libc::sched_param {
+            sched_priority: i32::from(prio),
+        };
+        // SAFETY: sched_setscheduler with a valid sched_param for the call's duration.
+        if unsafe { libc::sched_setscheduler(tid, libc::SCHED_FIFO, &param) } != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -403,21 +420,4 @@ mod tests {
         assert!(rss_kib(pid).is_some_and(|k| k > 0));
         assert!(load_average() >= 0.0);
     }
-}
-
-/// Puts every thread of process `pid` under SCHED_FIFO with priority `prio`.
-pub fn set_fifo(pid: u32, prio: u8) -> std::io::Result<()> {
-    for t in std::fs::read_dir(format!("/proc/{pid}/task"))? {
-        let Some(tid) = t?.file_name().to_str().and_then(|s| s.parse::<libc::pid_t>().ok()) else {
-            continue;
-        };
-        let param = libc::sched_param {
-            sched_priority: i32::from(prio),
-        };
-        // SAFETY: sched_setscheduler with a valid sched_param for the call's duration.
-        if unsafe { libc::sched_setscheduler(tid, libc::SCHED_FIFO, &param) } != 0 {
-            return Err(std::io::Error::last_os_error());
-        }
-    }
-    Ok(())
 }
