@@ -8,12 +8,17 @@
 //! The `navsync` binary is the one cargo built next to the test executable
 //! (`target/<profile>/navsync`; `cargo test --workspace` builds it), or `$NAVSYNC_BIN`.
 
+use std::collections::HashMap;
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
-use navsync_shared::ipc::IpcNode;
+use navsync_shared::ipc::{IpcNode, Subscriber};
+use navsync_shared::samples::Health;
+use navsync_shared::services;
+use navsync_shared::time::monotonic_now_ns;
 
 /// Path of the `navsync` executable under test.
 pub fn navsync_bin() -> PathBuf {
@@ -49,6 +54,8 @@ pub struct TestEnv {
     /// Scratch directory, removed at the end.
     pub dir: PathBuf,
     children: Vec<(String, Child)>,
+    /// The arguments each child name was last started with (for [`TestEnv::respawn`]).
+    args: HashMap<String, Vec<String>>,
 }
 
 impl TestEnv {
@@ -63,6 +70,7 @@ impl TestEnv {
             prefix,
             dir,
             children: Vec::new(),
+            args: HashMap::new(),
         }
     }
 
@@ -75,18 +83,90 @@ impl TestEnv {
         c
     }
 
-    /// Starts `navsync ARGS` as a child; its stderr goes to `<dir>/<name>.log`.
+    /// Starts `navsync ARGS` as a child; its stderr goes to `<dir>/<name>.log` (appended to,
+    /// so a restarted child's log follows its predecessor's).
     pub fn spawn(&mut self, name: &str, args: &[&str]) -> u32 {
-        let log = std::fs::File::create(self.dir.join(format!("{name}.log"))).expect("log file");
+        self.spawn_inner(name, args, false)
+    }
+
+    /// Like [`spawn`](Self::spawn), with the child's stdout in `<dir>/<name>.out`
+    /// ([`TestEnv::stdout_len`]).
+    pub fn spawn_capturing(&mut self, name: &str, args: &[&str]) -> u32 {
+        self.spawn_inner(name, args, true)
+    }
+
+    fn spawn_inner(&mut self, name: &str, args: &[&str], capture: bool) -> u32 {
+        let append = |file: String| {
+            std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(self.dir.join(file))
+                .expect("log file")
+        };
+        let stdout = if capture {
+            Stdio::from(append(format!("{name}.out")))
+        } else {
+            Stdio::null()
+        };
         let child = self
             .command(args)
-            .stdout(Stdio::null())
-            .stderr(log)
+            .stdout(stdout)
+            .stderr(append(format!("{name}.log")))
             .spawn()
             .unwrap_or_else(|e| panic!("starting navsync {args:?}: {e}"));
         let pid = child.id();
         self.children.push((name.to_string(), child));
+        self.args
+            .insert(name.to_string(), args.iter().map(|a| a.to_string()).collect());
         pid
+    }
+
+    /// Starts `name` again with the arguments it was last started with (after
+    /// [`kill9`](Self::kill9)); its new pid.
+    pub fn respawn(&mut self, name: &str) -> u32 {
+        let args = self
+            .args
+            .get(name)
+            .cloned()
+            .unwrap_or_else(|| panic!("{name} was never started"));
+        let a: Vec<&str> = args.iter().map(String::as_str).collect();
+        let capture = self.dir.join(format!("{name}.out")).exists();
+        self.spawn_inner(name, &a, capture)
+    }
+
+    /// `kill -9` of a running child: sends SIGKILL, reaps it and forgets it. Returns the host
+    /// `CLOCK_MONOTONIC` time (ns) taken right before the signal.
+    pub fn kill9(&mut self, name: &str) -> i64 {
+        let i = self
+            .children
+            .iter()
+            .position(|(n, _)| n == name)
+            .unwrap_or_else(|| panic!("no child {name}"));
+        let (_, mut c) = self.children.remove(i);
+        if let Ok(Some(st)) = c.try_wait() {
+            panic!("{name} had already exited ({st}); log:\n{}", self.log(name));
+        }
+        let t = monotonic_now_ns();
+        // SAFETY: signalling our own child by pid.
+        unsafe { libc::kill(c.id() as libc::pid_t, libc::SIGKILL) };
+        let _ = c.wait();
+        t
+    }
+
+    /// Pid of a child by name.
+    pub fn pid(&self, name: &str) -> Option<u32> {
+        self.children.iter().find(|(n, _)| n == name).map(|(_, c)| c.id())
+    }
+
+    /// Names and pids of the children.
+    pub fn pids(&self) -> Vec<(String, u32)> {
+        self.children.iter().map(|(n, c)| (n.clone(), c.id())).collect()
+    }
+
+    /// Bytes the child wrote to stdout so far (children started with
+    /// [`spawn_capturing`](Self::spawn_capturing)).
+    pub fn stdout_len(&self, name: &str) -> u64 {
+        std::fs::metadata(self.dir.join(format!("{name}.out"))).map_or(0, |m| m.len())
     }
 
     /// The stderr log of a child so far.
@@ -214,10 +294,239 @@ fn list_prefixed(prefix: &str) -> Vec<PathBuf> {
     out
 }
 
+/// Every shared-memory and iceoryx2 file of this prefix (in `/dev/shm` and `/tmp/iceoryx2`),
+/// the persistent node counter included.
+pub fn prefixed_files(prefix: &str) -> Vec<PathBuf> {
+    list_prefixed(prefix)
+}
+
 /// Shared-memory and iceoryx2 files of this prefix other than the persistent node counter.
 pub fn leftovers(prefix: &str) -> Vec<PathBuf> {
     list_prefixed(prefix)
         .into_iter()
         .filter(|p| !p.to_string_lossy().ends_with(".global_mgmt"))
         .collect()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Live pipelines, fault injection and soak measurements.
+
+/// Writes a drive scenario for live tests lasting at least `duration_s` of scenario time: 8 s
+/// standing still (levelling), a drive-off and a turn (the filter aligns after ~15 s), then
+/// 60° turns alternating with 12 s cruises to the end, so the IMU offsets stay observable and
+/// the filter keeps being aided; `imus` industrial IMUs at `imu_rate_hz` (the second and later
+/// late by the simulator's default offsets), GNSS at 1 Hz, truth at 10 Hz.
+pub fn write_drive_scenario(path: &Path, duration_s: f64, imus: usize, imu_rate_hz: f64) {
+    let mut s = String::from(
+        "# Written by navsync_tests::write_drive_scenario.\nseed = 23\n\n[trajectory.start]\n\
+         lat_deg = 48.137154\nlon_deg = 11.576124\nheight_m = 567.0\nheading_deg = 75.0\nspeed_mps = 0.0\n\n\
+         [[trajectory.segment]]\nkind = \"static\"\nduration_s = 8.0\n\n\
+         [[trajectory.segment]]\nkind = \"accelerate\"\nduration_s = 6.0\nto_speed_mps = 10.0\n",
+    );
+    let (mut t, mut sign) = (14.0, 1.0);
+    while t < duration_s + 10.0 {
+        let _ = write!(
+            s,
+            "\n[[trajectory.segment]]\nkind = \"turn\"\nduration_s = 8.0\nheading_change_deg = {:.1}\n\n\
+             [[trajectory.segment]]\nkind = \"cruise\"\nduration_s = 12.0\n",
+            60.0 * sign
+        );
+        t += 20.0;
+        sign = -sign;
+    }
+    let _ = write!(
+        s,
+        "\n[imu]\ncount = {imus}\npreset = \"industrial\"\nrate_hz = {imu_rate_hz:.1}\n\n[truth]\nrate_hz = 10.0\n"
+    );
+    std::fs::write(path, s).expect("writing the scenario");
+}
+
+impl TestEnv {
+    /// Starts the live pipeline as separate processes, as `navsync demo` does with xsens IMUs:
+    /// `estimator` (first, so it sees every sample from the start), `pps` (`--source sim`),
+    /// `sim` (on `scenario`, NMEA into a pseudo-terminal, each IMU as Xsens messages into its
+    /// own), `gps` on the NMEA pseudo-terminal and `imu0`…`imu{n-1}` on theirs.
+    pub fn spawn_pipeline(&mut self, scenario: &Path, imus: usize) {
+        let ids: Vec<String> = (0..imus).map(|i| i.to_string()).collect();
+        let ids = ids.join(",");
+        self.spawn("estimator", &["estimator", "--gnss", "0", "--pps", "0", "--imus", &ids]);
+        self.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
+        let link = self.dir.join("gnss0");
+        let (link_s, dir_s) = (link.display().to_string(), self.dir.display().to_string());
+        let (scen, n) = (scenario.display().to_string(), imus.to_string());
+        self.spawn(
+            "sim",
+            &[
+                "sim",
+                "--scenario",
+                &scen,
+                "--imus",
+                &n,
+                "--pty-link",
+                &link_s,
+                "--imu-output",
+                "xsens",
+                "--imu-pty-dir",
+                &dir_s,
+            ],
+        );
+        self.wait_for_path(&link, Duration::from_secs(30));
+        self.spawn("gps", &["gps", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+        for i in 0..imus {
+            let port = self.dir.join(format!("imu{i}"));
+            self.wait_for_path(&port, Duration::from_secs(30));
+            let source = format!("xsens:{}:921600", port.display());
+            self.spawn(
+                &format!("imu{i}"),
+                &["imu", "--source", &source, "--id", &i.to_string()],
+            );
+        }
+    }
+
+    /// True while the child `name` runs.
+    pub fn is_running(&mut self, name: &str) -> bool {
+        self.children
+            .iter_mut()
+            .find(|(n, _)| n == name)
+            .is_some_and(|(_, c)| matches!(c.try_wait(), Ok(None)))
+    }
+}
+
+/// The latest `Health` of some processes, by process name (`estimator`, `gps-0`, `imu-1`, …).
+pub struct HealthWatch {
+    subs: Vec<(String, Subscriber<Health>)>,
+    latest: HashMap<String, Health>,
+}
+
+impl HealthWatch {
+    /// Subscribes to `navsync/health/{process}` for each process.
+    pub fn new(node: &IpcNode, processes: &[&str]) -> Self {
+        Self {
+            subs: processes
+                .iter()
+                .map(|p| {
+                    (
+                        p.to_string(),
+                        node.subscriber(&services::health(p)).expect("health subscriber"),
+                    )
+                })
+                .collect(),
+            latest: HashMap::new(),
+        }
+    }
+
+    /// Takes every pending report; true if there was one.
+    pub fn poll(&mut self) -> bool {
+        let mut any = false;
+        for (p, s) in &self.subs {
+            while let Some(h) = s.receive().expect("receiving health") {
+                self.latest.insert(p.clone(), h);
+                any = true;
+            }
+        }
+        any
+    }
+
+    /// The latest report of `process`.
+    pub fn latest(&self, process: &str) -> Option<&Health> {
+        self.latest.get(process)
+    }
+
+    /// A counter of the latest report of `process` (None before the first report).
+    pub fn counter(&self, process: &str, name: &str) -> Option<u64> {
+        self.latest.get(process).and_then(|h| h.counter(name))
+    }
+
+    /// Waits up to `timeout` for the next report of any watched process (sleeping on the
+    /// first subscriber's event, polling the others every 5 ms); true if one came.
+    pub fn wait(&mut self, timeout: Duration) -> bool {
+        let t0 = Instant::now();
+        loop {
+            if self.poll() {
+                return true;
+            }
+            if t0.elapsed() >= timeout {
+                return false;
+            }
+            let step = Duration::from_millis(5).min(timeout.saturating_sub(t0.elapsed()));
+            if let Some((p, s)) = self.subs.first()
+                && let Some(h) = s.wait_next(step).expect("waiting for health")
+            {
+                self.latest.insert(p.clone(), h);
+                return true;
+            }
+        }
+    }
+}
+
+/// Resident set size of a process, KiB (`VmRSS` of `/proc/<pid>/status`); None once it is gone.
+pub fn rss_kib(pid: u32) -> Option<u64> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    s.lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+}
+
+/// The state letter of a process (`R`, `S`, `T` when stopped, …; `/proc/<pid>/stat`).
+pub fn process_state(pid: u32) -> Option<char> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // pid (comm) state …: comm may hold spaces and parentheses; the state follows the last ')'.
+    s.rsplit_once(')')
+        .and_then(|(_, rest)| rest.trim_start().chars().next())
+}
+
+/// The `q` quantile (0…1, nearest rank) of `values` (sorted in place); NaN when empty.
+pub fn quantile(values: &mut [f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values.sort_by(f64::total_cmp);
+    let k = ((q * values.len() as f64).ceil() as usize).clamp(1, values.len()) - 1;
+    values[k]
+}
+
+/// Least-squares slope of `y` over `x`; 0 with fewer than two distinct `x`.
+pub fn slope(points: &[(f64, f64)]) -> f64 {
+    let n = points.len() as f64;
+    if points.len() < 2 {
+        return 0.0;
+    }
+    let (mx, my) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
+    let (sxy, sxx) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| {
+        (a + (x - mx) * (y - my), b + (x - mx) * (x - mx))
+    });
+    if sxx > 0.0 { sxy / sxx } else { 0.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantile_and_slope() {
+        let mut v: Vec<f64> = (1..=100).map(f64::from).collect();
+        assert_eq!(quantile(&mut v, 0.99), 99.0);
+        assert_eq!(quantile(&mut v, 0.5), 50.0);
+        assert_eq!(quantile(&mut v, 1.0), 100.0);
+        assert!(quantile(&mut [], 0.5).is_nan());
+        let pts: Vec<(f64, f64)> = (0..10).map(|i| (f64::from(i), 3.0 + 2.0 * f64::from(i))).collect();
+        assert!((slope(&pts) - 2.0).abs() < 1e-12);
+        assert_eq!(slope(&pts[..1]), 0.0);
+    }
+
+    #[test]
+    fn scenario_lasts_long_enough() {
+        let dir = std::env::temp_dir().join(format!("navsync-scen-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("s.toml");
+        write_drive_scenario(&p, 3600.0, 2, 100.0);
+        let s = std::fs::read_to_string(&p).unwrap();
+        let total: f64 = s
+            .lines()
+            .filter_map(|l| l.strip_prefix("duration_s = "))
+            .map(|v| v.parse::<f64>().unwrap())
+            .sum();
+        assert!(total >= 3600.0, "{total}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
