@@ -17,32 +17,10 @@ use std::time::{Duration, Instant};
 
 use navsync_shared::samples::ImuSample;
 use navsync_shared::services;
-use navsync_tests::{TestEnv, navsync_bin};
+use navsync_tests::{TestEnv, navsync_bin, prefixed_files};
 
 /// uid and gid of `nobody` / `nogroup` on Debian.
 const OUTSIDER_ID: &str = "65534";
-
-/// Every file of this prefix in `/dev/shm` and under `/tmp/iceoryx2`, the persistent node
-/// counter included.
-fn prefixed_files(prefix: &str) -> Vec<std::path::PathBuf> {
-    let mut out = Vec::new();
-    let mut visit = vec![
-        std::path::PathBuf::from("/dev/shm"),
-        std::path::PathBuf::from("/tmp/iceoryx2"),
-    ];
-    while let Some(d) = visit.pop() {
-        let Ok(rd) = std::fs::read_dir(&d) else { continue };
-        for e in rd.flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                visit.push(p);
-            } else if e.file_name().to_string_lossy().starts_with(prefix) {
-                out.push(p);
-            }
-        }
-    }
-    out
-}
 
 /// Runs a command to its end, killing it after `timeout`.
 fn run_with_timeout(mut cmd: Command, timeout: Duration) -> Output {
