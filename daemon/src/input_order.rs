@@ -52,6 +52,13 @@
 //! `inputs_late` of the estimator); its effect then depends on when it arrived, as before.
 //! When the reference IMU is silent for [`STALL_NS`] of wall time the live process consumes
 //! what waits (time sync without IMUs).
+//!
+//! A reference IMU that stops while others go on (its driver died): once another IMU's
+//! samples are [`REFERENCE_SILENT_NS`] ahead of the last reference sample, samples are due up
+//! to that lag behind the newest IMU sample, so the estimator sees the reference go stale and
+//! hands the reference over to a live IMU ([`crate::estimator::imu_array`]); the consumer then
+//! tells the order the new reference ([`InputOrder::set_reference`]) and it releases samples
+//! with no lag again. Both rules depend on the samples only.
 
 use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
@@ -66,6 +73,9 @@ pub const FIX_HOLD_NS: i64 = 200_000_000;
 /// Wall time without a new reference-IMU sample after which a live process consumes the
 /// waiting samples anyway, ns.
 pub const STALL_NS: i64 = 500_000_000;
+/// Lead of another IMU over the reference (host ns of their newest samples) after which
+/// samples are released without the reference, ns.
+pub const REFERENCE_SILENT_NS: i64 = 100_000_000;
 
 /// Position of a sample in the canonical order: key time, then kind, then the source's own
 /// sequence number.
@@ -123,6 +133,8 @@ pub struct InputOrder<T = ()> {
     reference_imu: Option<[u8; 8]>,
     heap: BinaryHeap<Reverse<Entry<T>>>,
     watermark: i64,
+    /// Newest stamp of any IMU, host ns.
+    newest_imu_ns: i64,
     arrivals: u64,
     last_popped: Option<OrderKey>,
     late: u64,
@@ -138,6 +150,7 @@ impl<T> InputOrder<T> {
             reference_imu: reference_imu.map(fixed_str::<8>),
             heap: BinaryHeap::new(),
             watermark: i64::MIN,
+            newest_imu_ns: i64::MIN,
             arrivals: 0,
             last_popped: None,
             late: 0,
@@ -148,10 +161,11 @@ impl<T> InputOrder<T> {
 
     /// Adds a sample.
     pub fn push(&mut self, sample: AnySample, tag: T) {
-        if let (AnySample::Imu(x), Some(r)) = (&sample, &self.reference_imu)
-            && x.imu_id == *r
-        {
-            self.watermark = self.watermark.max(x.stamp.host_ns);
+        if let AnySample::Imu(x) = &sample {
+            self.newest_imu_ns = self.newest_imu_ns.max(x.stamp.host_ns);
+            if self.reference_imu.is_some_and(|r| x.imu_id == r) {
+                self.watermark = self.watermark.max(x.stamp.host_ns);
+            }
         }
         let key = order_key(&sample);
         self.arrivals += 1;
@@ -166,7 +180,13 @@ impl<T> InputOrder<T> {
     /// The next sample whose turn has come, in order.
     pub fn pop(&mut self) -> Option<(AnySample, T)> {
         let due = match self.heap.peek() {
-            Some(Reverse(e)) => self.reference_imu.is_none() || e.key.at_ns <= self.watermark,
+            Some(Reverse(e)) => {
+                self.reference_imu.is_none()
+                    || e.key.at_ns
+                        <= self
+                            .watermark
+                            .max(self.newest_imu_ns.saturating_sub(REFERENCE_SILENT_NS))
+            }
             None => false,
         };
         if due { self.pop_any() } else { None }
@@ -188,6 +208,23 @@ impl<T> InputOrder<T> {
             self.last_popped = Some(e.key);
         }
         Some((e.sample, e.tag))
+    }
+
+    /// The consumer's reference IMU changed (handover): its samples release the others from
+    /// now on. No-op when it is already the reference, or with no reference.
+    pub fn set_reference(&mut self, id: [u8; 8]) {
+        let Some(r) = &mut self.reference_imu else { return };
+        if *r == id {
+            return;
+        }
+        *r = id;
+        // The new reference's newest sample so far (waiting, or consumed) is the watermark.
+        let waiting = self.heap.iter().filter_map(|Reverse(e)| match &e.sample {
+            AnySample::Imu(x) if x.imu_id == id => Some(x.stamp.host_ns),
+            _ => None,
+        });
+        let consumed = self.last_popped.map_or(i64::MIN, |k| k.at_ns);
+        self.watermark = waiting.fold(self.watermark.max(consumed), i64::max);
     }
 
     /// Live processes, once per wake-up with the host clock (ns): true when samples wait and
@@ -333,5 +370,49 @@ mod tests {
         let mut o = InputOrder::new(None);
         o.push(fix(5), ());
         assert!(o.pop().is_some());
+    }
+
+    #[test]
+    fn a_silent_reference_releases_the_others_after_a_lag_and_a_new_one_without() {
+        let mut o = InputOrder::new(Some("0"));
+        let mut out = Vec::new();
+        let drain = |o: &mut InputOrder, out: &mut Vec<String>| {
+            while let Some((s, ())) = o.pop() {
+                out.push(name(&s));
+            }
+        };
+        // Both IMUs every 5 ms up to 1000 ms; then only IMU 1.
+        for t in (900..=1000).step_by(5) {
+            o.push(imu("0", t), ());
+            o.push(imu("1", t + 1), ());
+            drain(&mut o, &mut out);
+        }
+        assert_eq!(out.last().map(String::as_str), Some("imu0@1000"), "{out:?}");
+        for t in (1005..1100).step_by(5) {
+            o.push(imu("1", t + 1), ());
+            drain(&mut o, &mut out);
+        }
+        assert_eq!(
+            out.last().map(String::as_str),
+            Some("imu0@1000"),
+            "waits while the lead is short"
+        );
+        o.push(imu("1", 1151), ());
+        drain(&mut o, &mut out);
+        // Everything up to 100 ms behind IMU 1's newest sample is due.
+        assert_eq!(out.last().map(String::as_str), Some("imu1@1051"), "{out:?}");
+        // The consumer hands over to IMU 1: no lag from then on.
+        o.set_reference(fixed_str("1"));
+        drain(&mut o, &mut out);
+        assert_eq!(out.last().map(String::as_str), Some("imu1@1151"));
+        o.push(pps(1110), ());
+        o.push(imu("1", 1156), ());
+        o.push(imu("1", 1161), ());
+        drain(&mut o, &mut out);
+        assert_eq!(
+            out[out.len() - 3..],
+            ["imu1@1156", "pps@1110", "imu1@1161"].map(String::from)
+        );
+        assert_eq!(o.late(), 0);
     }
 }

@@ -78,7 +78,9 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
     let mut in_estimator = Duration::ZERO;
     let mut latest_host_ns = i64::MIN;
     let mut last_time_ns = i64::MIN;
-    let mut consume = |s: AnySample, tag: T| {
+    // Returns the pipeline's reference IMU after an IMU sample (it moves on a handover).
+    let mut consume = |s: AnySample, tag: T| -> Option<[u8; 8]> {
+        let mut reference = None;
         let updated = match &s {
             AnySample::Imu(x) => {
                 imu += 1;
@@ -90,6 +92,7 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
                     eval.add_nav(&n);
                     on_output(Output::Nav(&n), &tag);
                 }
+                reference = Some(pipeline.reference_imu_id());
                 false
             }
             AnySample::GnssFix(f) => {
@@ -121,11 +124,14 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
             on_output(Output::Time(&ts), &tag);
             last_time_ns = latest_host_ns;
         }
+        reference
     };
     for (s, tag) in samples {
         order.push(s, tag);
         while let Some((s, tag)) = order.pop() {
-            consume(s, tag);
+            if let Some(r) = consume(s, tag) {
+                order.set_reference(r);
+            }
         }
     }
     while let Some((s, tag)) = order.pop_any() {

@@ -188,3 +188,107 @@ fn a_stopped_imu_leaves_the_array_and_returns() {
     assert_eq!(at(21.0).3, ImuSyncReason::Disagrees as u8, "IMU 3 after its fault");
     assert_eq!(at(21.0).4, 0);
 }
+
+/// Runs the default drive for `end_s` with 4 consumer IMUs (offsets 0, 10, 15, 20 ms), in the
+/// live process's input order (released by IMU "0"), leaving out the samples of IMU `id` in
+/// each `(id, gap)` (its driver dead); a restarted driver numbers its samples from 0 again.
+/// Returns the summary, the NavStates' host times and, per NavState, the time and IMU 0's
+/// table row (reason, in array).
+fn drive_with_gaps(end_s: f64, gaps: &[(u8, std::ops::Range<f64>)]) -> (Summary, Vec<i64>, Vec<(f64, u8, u8)>) {
+    let mut cfg = SimConfig::default_drive();
+    cfg.set_imu_preset(ImuPreset::Consumer);
+    cfg.set_imu_offsets_s(&[0.0, 0.010, 0.015, 0.020]);
+    let world = World::new(&cfg, HOST0, 1_790_000_000_000_000_000).expect("world");
+    let mut p = Pipeline::new(consumer_args().pipeline_config());
+    let t_of = |host_ns: i64| (host_ns - HOST0) as f64 * 1e-9;
+    let mut restarted_at: [Option<u64>; 4] = [None; 4];
+    let samples = PublishedStream::new(world)
+        .map(|x| x.sample)
+        .take_while(|s| match s {
+            AnySample::Imu(x) => t_of(x.stamp.host_ns) < end_s,
+            _ => true,
+        })
+        .filter_map(move |mut s| {
+            if let AnySample::Imu(x) = &mut s {
+                let (id, t) = (x.imu_id[0] - b'0', t_of(x.stamp.host_ns));
+                for (g_id, gap) in gaps {
+                    if *g_id == id && gap.contains(&t) {
+                        return None;
+                    }
+                    if *g_id == id && t >= gap.end {
+                        let first = *restarted_at[usize::from(id)].get_or_insert(x.stamp.seq);
+                        x.stamp.seq -= first;
+                    }
+                }
+            }
+            Some(s)
+        });
+    let (mut stamps, mut imu0) = (Vec::new(), Vec::new());
+    let r = offline::run_ordered(
+        &mut p,
+        Some("0"),
+        samples.map(|s| (s, ())),
+        DelayTruth::Zero,
+        false,
+        |o, _| {
+            if let offline::Output::Nav(n) = o {
+                stamps.push(n.host_ns);
+                imu0.push((t_of(n.host_ns), n.imu[0].reason, n.imu[0].in_array));
+            }
+        },
+    );
+    let handovers = gaps.iter().filter(|(id, _)| *id == 0).count() as u64;
+    assert_eq!(p.array().counters().handovers, handovers, "handovers");
+    // The fused stream that drives the filter goes on too (one virtual sample per reference
+    // sample at 200 Hz).
+    let virtual_samples = p.array().counters().virtual_samples;
+    assert!(
+        virtual_samples as f64 > 0.98 * end_s * 200.0,
+        "{virtual_samples} virtual samples in {end_s} s"
+    );
+    (r.summary, stamps, imu0)
+}
+
+#[test]
+fn the_reference_imu_stopping_hands_the_array_over_and_navigation_goes_on() {
+    let (base, _, _) = drive_with_gaps(200.0, &[]);
+    // The drivers of IMUs 1–3 restart at 99.5 s (their samples numbered from 0 again, their
+    // rings still holding samples from before); IMU 0 (the configured reference) is dead from
+    // 100 s to 130 s of the drive (moving): one of the others takes over.
+    let (run, stamps, imu0) = drive_with_gaps(
+        200.0,
+        &[(1, 97.0..99.5), (2, 97.0..99.5), (3, 97.0..99.5), (0, 100.0..130.0)],
+    );
+    println!(
+        "without the gap:\n{}\nIMU 0 dead 100–130 s:\n{}",
+        base.table(),
+        run.table()
+    );
+    // NavStates go on: the longest pause is the order's reference-silent lag plus the stale
+    // time (100 + 50 ms), and they come at the IMU rate otherwise.
+    let gaps: Vec<i64> = stamps.windows(2).map(|w| w[1] - w[0]).collect();
+    let longest_ms = *gaps.iter().max().unwrap() as f64 * 1e-6;
+    println!(
+        "longest pause between NavStates {longest_ms:.1} ms; {} NavStates",
+        stamps.len()
+    );
+    assert!(longest_ms < 200.0, "NavStates paused {longest_ms} ms");
+    assert!(
+        gaps.iter().all(|&g| g > 0),
+        "NavState host times go backwards across the handover"
+    );
+    let n_expected = (200.0 - 0.2) * 200.0;
+    assert!(stamps.len() as f64 > 0.98 * n_expected, "{} NavStates", stamps.len());
+    // IMU 0 is shown stale while dead and joins the array again as a member after it returns.
+    let at = |t0: f64| imu0.iter().find(|r| r.0 >= t0).copied().expect("time");
+    assert_eq!(at(101.0).1, ImuSyncReason::Stale as u8, "IMU 0 while dead");
+    assert_eq!(at(101.0).2, 0);
+    let back = imu0.iter().find(|r| r.0 >= 130.0 && r.2 == 1).map(|r| r.0 - 130.0);
+    println!("IMU 0 back in the array {back:?} s after it returned");
+    assert!(back.is_some_and(|s| s < 10.0), "IMU 0 not back in the array: {back:?}");
+    // The handover does not hurt the solution: the same accuracy as without the gap.
+    let (p0, p1) = (base.pos_rms_m.unwrap(), run.pos_rms_m.unwrap());
+    let (a0, a1) = (base.att_rms_deg.unwrap(), run.att_rms_deg.unwrap());
+    assert!(p1 <= 1.2 * p0 + 0.05, "position RMS {p1} m vs {p0} m without the gap");
+    assert!(a1[2] <= 1.2 * a0[2] + 0.05, "yaw RMS {} deg vs {} deg", a1[2], a0[2]);
+}

@@ -3,14 +3,16 @@
 //! pseudo-terminal, raw PPS), `navsync gps`, `navsync pps --source sim`, `navsync imu` × 2 and
 //! `navsync estimator`, observed from this test process.
 //!
-//! * A killed driver (gps, pps, the second IMU): the estimator flags the input stale in its
+//! * A killed driver (gps, pps, the second IMU, the first IMU): the estimator flags the input stale in its
 //!   `Health` (`stale_<kind>_<id>`) within 200 ms of the SIGKILL as seen here (and in
 //!   `NavState`: inertial-only status without the receiver, the IMU out of the array), keeps
 //!   publishing NavStates without a gap, and uses the sensor again within 2 s of the driver's
 //!   restart (GNSS: a fix of the restarted driver taken in, NavStates GNSS-aided again; the
 //!   filter fuses it when its delayed state reaches the fix's epoch, checked within 2 s plus
 //!   that 1.5 s horizon; PPS: an edge used in the time mapping; IMU: back in the array); no
-//!   other process restarts.
+//!   other process restarts. The first IMU is the configured reference, whose samples pace
+//!   the NavStates: the estimator hands the reference over to the second IMU (NavStates go on
+//!   at its rate) and the first returns as an ordinary member of the array.
 //! * A killed estimator, 20 times: the drivers keep publishing, the restarted estimator
 //!   publishes NavStates again without manual cleanup, and the number of shared-memory and
 //!   iceoryx2 files of the test's prefix does not grow.
@@ -154,6 +156,9 @@ enum Sensor {
     Pps,
     /// The second IMU (not the reference, whose samples pace the NavStates).
     Imu1,
+    /// The first IMU, the configured reference: the array hands the reference over to IMU 1
+    /// and IMU 0 returns as an ordinary member.
+    Imu0,
 }
 
 impl Sensor {
@@ -162,6 +167,7 @@ impl Sensor {
             Sensor::Gnss => "gps",
             Sensor::Pps => "pps",
             Sensor::Imu1 => "imu1",
+            Sensor::Imu0 => "imu0",
         }
     }
 
@@ -170,6 +176,7 @@ impl Sensor {
             Sensor::Gnss => "gnss_0",
             Sensor::Pps => "pps_0",
             Sensor::Imu1 => "imu_1",
+            Sensor::Imu0 => "imu_0",
         }
     }
 
@@ -179,10 +186,14 @@ impl Sensor {
         match self {
             Sensor::Gnss => Some(n.status == NavStatus::InsOnly as u8),
             Sensor::Pps => None,
-            Sensor::Imu1 => {
-                Some(imu_slot(n, "1").is_some_and(|s| s.in_array == 0 && s.reason == ImuSyncReason::Stale as u8))
-            }
+            Sensor::Imu1 | Sensor::Imu0 => Some(
+                imu_slot(n, self.imu_id()).is_some_and(|s| s.in_array == 0 && s.reason == ImuSyncReason::Stale as u8),
+            ),
         }
+    }
+
+    fn imu_id(self) -> &'static str {
+        if self == Sensor::Imu0 { "0" } else { "1" }
     }
 }
 
@@ -265,7 +276,7 @@ fn kill_and_restart(env: &mut TestEnv, obs: &mut Observer, sensor: Sensor) -> Ki
             let again = match sensor {
                 Sensor::Gnss => gnss_aided(n),
                 Sensor::Pps => false,
-                Sensor::Imu1 => imu_slot(n, "1").is_some_and(|s| s.in_array == 1),
+                Sensor::Imu1 | Sensor::Imu0 => imu_slot(n, sensor.imu_id()).is_some_and(|s| s.in_array == 1),
             };
             if again && used.is_none() {
                 used = Some(rx);
@@ -294,7 +305,7 @@ fn kill_and_restart(env: &mut TestEnv, obs: &mut Observer, sensor: Sensor) -> Ki
             ms(waited),
             obs.last_nav
                 .as_ref()
-                .map(|n| (nav_status(n), n.fixes_used, imu_slot(n, "1"))),
+                .map(|n| (nav_status(n), n.fixes_used, imu_slot(n, "0"), imu_slot(n, "1"))),
             env.log(child),
             env.log("estimator")
         );
@@ -334,7 +345,7 @@ fn killed_driver_is_flagged_within_200_ms_and_used_again_within_2_s_of_restart()
     wait_healthy(&mut env, &mut obs, &inputs, Duration::from_secs(120));
 
     let mut figures = Vec::new();
-    for sensor in [Sensor::Gnss, Sensor::Pps, Sensor::Imu1] {
+    for sensor in [Sensor::Gnss, Sensor::Pps, Sensor::Imu1, Sensor::Imu0] {
         let f = kill_and_restart(&mut env, &mut obs, sensor);
         println!(
             "kill -9 {:<4}: stale in Health after {:6.1} ms (declared at {:6.1} ms), in NavState after {}; \

@@ -18,6 +18,20 @@
 //! saturate, are invalid, disagree or whose offset has not converged is out of the array, with
 //! its reason in the per-IMU table; it is re-admitted when healthy again.
 //!
+//! Reference handover. When the reference IMU goes stale (its driver died) while another IMU
+//! is live, the live IMU with the best-known offset (in the array first, then the smallest Td
+//! 1-sigma) becomes the reference, so the array and the `NavState`s it drives go on. Its own
+//! offset filter is frozen at that moment and its samples are put into the terms of the IMU it
+//! replaces: stamps moved by −T̂d, and x₀ = (x_i − Δb̂) ⊘ (1 + Δŝ) per sensor triad (the inverse
+//! of the residual model of [`OffsetFilter`], r = Δb + diag(x₀)·Δs). So the virtual IMU keeps
+//! the time base, biases and scale factors the navigation filter has estimated, and the other
+//! IMUs' offset filters stay valid. What changes is its position (the new reference's): the
+//! pipeline moves the GNSS lever arm by the difference. The old reference, when it returns,
+//! joins as an ordinary member; its offset filter starts where it stands relative to those
+//! terms (zero: it defined them) with the frozen filter's covariance added. The reference does
+//! not move back.
+//! The choice depends only on the samples, so a replay makes the same handover.
+//!
 //! Fixed memory: every ring buffer is allocated at construction; nothing per sample.
 
 use nalgebra::{Matrix3, SVector, Vector3};
@@ -148,6 +162,9 @@ struct Unit {
     ring: Box<[Entry]>,
     head: usize,
     len: usize,
+    /// Samples pushed so far: entry `i` of the ring is push number `pushed − len + i`
+    /// (contiguous whatever the driver's sequence numbers do, e.g. restart from 0).
+    pushed: u64,
     grid: Grid,
     filter: Option<OffsetFilter>,
     last_host_ns: Option<i64>,
@@ -164,6 +181,10 @@ impl Unit {
         &self.ring[(self.head + i) % RING]
     }
 
+    fn entry_mut(&mut self, i: usize) -> &mut Entry {
+        &mut self.ring[(self.head + i) % RING]
+    }
+
     fn push(&mut self, e: Entry) {
         if self.len == RING {
             self.head = (self.head + 1) % RING;
@@ -171,6 +192,7 @@ impl Unit {
         }
         self.ring[(self.head + self.len) % RING] = e;
         self.len += 1;
+        self.pushed += 1;
     }
 
     /// Lagrange interpolation of gyro and accel at centre time `t` (ns since epoch); `None`
@@ -295,6 +317,8 @@ pub struct ArrayCounters {
     pub virtual_samples: u64,
     /// Offset comparisons rejected by the gate.
     pub disagreements: u64,
+    /// Times the reference moved to another IMU because it went stale.
+    pub handovers: u64,
 }
 
 /// The IMU array.
@@ -303,9 +327,23 @@ pub struct ImuArray {
     cfg: ArrayConfig,
     units: Vec<Unit>,
     epoch_ns: Option<i64>,
-    next_ref_seq: Option<u64>,
+    /// Push number (see `Unit::pushed`) of the reference's next instant to fuse.
+    next_ref_index: Option<u64>,
     latest_host_ns: i64,
+    /// End time of the last virtual sample (handover: the new reference continues after it).
+    last_virtual_ns: i64,
     counters: ArrayCounters,
+}
+
+/// Puts a sample of a promoted reference IMU (one whose offset filter was frozen at the
+/// handover) into the terms of the reference it replaced: stamp − T̂d and
+/// x₀ = (x_i − Δb̂) ⊘ (1 + Δŝ) per triad (see the module docs).
+fn into_reference_terms(f: &OffsetFilter, e: &mut Entry) {
+    let td_ns = f.td_s() * 1e9;
+    e.center -= td_ns;
+    e.end_host_ns -= td_ns.round() as i64;
+    e.gyro = (e.gyro - f.gyro_bias()).component_div(&(Vector3::repeat(1.0) + f.gyro_scale()));
+    e.accel = (e.accel - f.accel_bias()).component_div(&(Vector3::repeat(1.0) + f.accel_scale()));
 }
 
 impl ImuArray {
@@ -320,6 +358,7 @@ impl ImuArray {
                 ring: vec![Entry::default(); RING].into_boxed_slice(),
                 head: 0,
                 len: 0,
+                pushed: 0,
                 grid: Grid::default(),
                 filter: (i != cfg.reference).then(|| OffsetFilter::new(cfg.offset)),
                 last_host_ns: None,
@@ -339,8 +378,9 @@ impl ImuArray {
             cfg,
             units,
             epoch_ns: None,
-            next_ref_seq: None,
+            next_ref_index: None,
             latest_host_ns: 0,
+            last_virtual_ns: i64::MIN,
             counters: ArrayCounters::default(),
         }
     }
@@ -360,9 +400,33 @@ impl ImuArray {
         &self.counters
     }
 
-    /// Rotation sensor → body of IMU `index`.
-    pub fn c_b_s(&self, index: usize) -> Matrix3<f64> {
-        self.units[index].cfg.c_b_s
+    /// Id of the reference IMU as stored in samples.
+    pub fn reference_id(&self) -> [u8; 8] {
+        fixed_str(&self.units[self.cfg.reference].cfg.id)
+    }
+
+    /// Position of IMU `index` in the body frame (FRD), m.
+    pub fn lever_b_m(&self, index: usize) -> Vector3<f64> {
+        self.units[index].cfg.lever_b_m
+    }
+
+    /// Sample `s` of IMU `index` in the body frame (FRD) for the present-time output: host time
+    /// (ns), angular rate (rad/s) and specific force (m/s²), mounting-rotated and, for a
+    /// promoted reference, in the terms of the reference it replaced.
+    pub fn output_sample(&self, index: usize, s: &ImuSample) -> (i64, Vector3<f64>, Vector3<f64>) {
+        let u = &self.units[index];
+        let mut e = Entry {
+            end_host_ns: s.stamp.host_ns,
+            gyro: u.cfg.c_b_s * Vector3::from(s.gyro_rps),
+            accel: u.cfg.c_b_s * Vector3::from(s.accel_mps2),
+            ..Entry::default()
+        };
+        if index == self.cfg.reference
+            && let Some(f) = &u.filter
+        {
+            into_reference_terms(f, &mut e);
+        }
+        (e.end_host_ns, e.gyro, e.accel)
     }
 
     /// Estimated offset and its 1-sigma of IMU `index`, s (the reference: 0 ± 0).
@@ -416,14 +480,20 @@ impl ImuArray {
             .update(s.stamp.seq, (s.stamp.host_ns - epoch) as f64, period_ns);
         unit.sigma_gyro = unit.cfg.gyro_noise_density / s.dt_s.sqrt();
         unit.sigma_accel = unit.cfg.accel_noise_density / s.dt_s.sqrt();
-        unit.push(Entry {
+        let mut e = Entry {
             seq: s.stamp.seq,
             center: end - period_ns / 2.0,
             end_host_ns: s.stamp.host_ns,
             dt_s: s.dt_s,
             gyro: unit.cfg.c_b_s * g,
             accel: unit.cfg.c_b_s * a,
-        });
+        };
+        if index == self.cfg.reference
+            && let Some(f) = &unit.filter
+        {
+            into_reference_terms(f, &mut e);
+        }
+        unit.push(e);
         unit.last_host_ns = Some(s.stamp.host_ns);
         if unit.reason == ImuSyncReason::Absent || unit.reason == ImuSyncReason::Stale {
             unit.reason = if index == self.cfg.reference {
@@ -450,6 +520,42 @@ impl ImuArray {
                 u.reason = ImuSyncReason::Stale;
             }
         }
+        if self.units[self.cfg.reference].reason == ImuSyncReason::Stale {
+            self.hand_over();
+        }
+    }
+
+    /// Makes the best live IMU the reference (see the module docs): in the array before
+    /// converging, then the smallest offset 1-sigma; none live: nothing changes.
+    fn hand_over(&mut self) {
+        let r = self.cfg.reference;
+        let td_std = |u: &Unit| u.filter.as_ref().map_or(f64::INFINITY, OffsetFilter::td_std_s);
+        let Some(n) = self
+            .units
+            .iter()
+            .enumerate()
+            .filter(|(i, u)| {
+                *i != r && u.len > 0 && matches!(u.reason, ImuSyncReason::InArray | ImuSyncReason::Converging)
+            })
+            .min_by(|(_, a), (_, b)| (!a.in_array).cmp(&!b.in_array).then(td_std(a).total_cmp(&td_std(b))))
+            .map(|(i, _)| i)
+        else {
+            return;
+        };
+        let new = &mut self.units[n];
+        let frozen = new.filter.clone().unwrap_or_else(|| OffsetFilter::new(self.cfg.offset));
+        for i in 0..new.len {
+            into_reference_terms(&frozen, new.entry_mut(i));
+        }
+        new.reason = ImuSyncReason::InArray;
+        new.in_array = true;
+        (new.disagree_run, new.agree_run) = (0, 0);
+        let old = &mut self.units[r];
+        old.filter = Some(frozen.for_replaced_reference(old.filter.as_ref()));
+        (old.disagree_run, old.agree_run) = (0, 0);
+        self.cfg.reference = n;
+        self.next_ref_index = None;
+        self.counters.handovers += 1;
     }
 
     fn emit(&mut self, out: &mut impl FnMut(&VirtualSample)) {
@@ -458,6 +564,7 @@ impl ImuArray {
         if self.units.len() == 1 {
             let u = &self.units[r];
             let e = *u.entry(u.len - 1);
+            self.last_virtual_ns = e.end_host_ns;
             self.counters.virtual_samples += 1;
             out(&VirtualSample {
                 host_ns: e.end_host_ns,
@@ -474,20 +581,25 @@ impl ImuArray {
                 return;
             }
             let k = self.cfg.derivative_half_width;
-            let first_seq = reference.entry(0).seq;
-            let next = *self.next_ref_seq.get_or_insert(first_seq + k as u64);
+            let first = reference.pushed - reference.len as u64;
+            let next = *self.next_ref_index.get_or_insert(first + k as u64);
             // Position of instant j in the reference ring; the derivative needs j−K … j+K.
-            if next < first_seq + k as u64 {
-                self.next_ref_seq = Some(first_seq + k as u64);
+            if next < first + k as u64 {
+                self.next_ref_index = Some(first + k as u64);
                 continue;
             }
-            let j = (next - first_seq) as usize;
+            let j = (next - first) as usize;
             if j + k >= reference.len {
                 return;
             }
             let cur = *reference.entry(j);
+            if cur.end_host_ns <= self.last_virtual_ns {
+                // After a handover: the new reference continues where the old one ended.
+                self.next_ref_index = Some(next + 1);
+                continue;
+            }
             if reference.entry(j - k).seq + k as u64 != cur.seq || cur.seq + k as u64 != reference.entry(j + k).seq {
-                self.next_ref_seq = Some(next + 1);
+                self.next_ref_index = Some(next + 1);
                 continue;
             }
             let (w_dot, f_dot, wd_var, fd_var) =
@@ -507,7 +619,7 @@ impl ImuArray {
                 return;
             }
             self.fuse_instant(&cur, &w_dot, &f_dot, (wd_var, fd_var), out);
-            self.next_ref_seq = Some(next + 1);
+            self.next_ref_index = Some(next + 1);
         }
     }
 
@@ -611,6 +723,7 @@ impl ImuArray {
             contributors += u8::from(u.in_array);
         }
         let fused = acc.component_div(&wsum);
+        self.last_virtual_ns = cur.end_host_ns;
         self.counters.virtual_samples += 1;
         out(&VirtualSample {
             host_ns: cur.end_host_ns,

@@ -104,6 +104,24 @@ impl OffsetFilter {
         }
     }
 
+    /// The filter of a reference that was replaced by this filter's IMU (array handover). The
+    /// promoted IMU's samples are put into the array's reference terms with this filter's
+    /// estimates, so the replaced IMU relative to them has the state it has relative to the
+    /// terms: zero when it defined them (`own` = None), else its own frozen estimates `own`;
+    /// uncertain by its own covariance plus this filter's (the correction's error).
+    pub fn for_replaced_reference(&self, own: Option<&Self>) -> Self {
+        match own {
+            Some(o) => Self {
+                p: o.p + self.p,
+                ..o.clone()
+            },
+            None => Self {
+                x: Vec7::zeros(),
+                ..self.clone()
+            },
+        }
+    }
+
     /// Estimated offset Td, s.
     pub fn td_s(&self) -> f64 {
         self.x[0]

@@ -511,6 +511,12 @@ impl Navigator {
         })
     }
 
+    /// Moves the GNSS antenna lever arm (body frame FRD, m, antenna − navigation point): the
+    /// IMU that defines the navigation point changed (array reference handover).
+    pub fn set_lever_arm(&mut self, lever_arm_b_m: Vector3<f64>) {
+        self.cfg.lever_arm_b_m = lever_arm_b_m;
+    }
+
     /// Feeds one interval of the filter stream (the fused virtual IMU, or the single IMU): it
     /// enters the fusion horizon and the delayed filter consumes what is older than the horizon.
     pub fn on_filter_imu(&mut self, host_ns: i64, nominal_dt_s: f64, gyro_rps: Vector3<f64>, accel_mps2: Vector3<f64>) {

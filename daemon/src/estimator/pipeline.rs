@@ -8,7 +8,6 @@
 //! PPS) with the receipt time of its first byte, and the navigation filter's Δ state absorbs
 //! the receiver latency. When the stamping switches, Δ is re-initialised to the new mode's prior.
 
-use nalgebra::Vector3;
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{GnssFix, ImuSample, NavState, PpsEdge, TimeState, TimeStatus};
 
@@ -160,6 +159,7 @@ impl Pipeline {
             return None;
         };
         let nav = &mut self.nav;
+        let reference = self.array.reference();
         let accepted = self.array.push(index, s, &mut |v| {
             nav.on_filter_imu(v.host_ns, v.dt_s, v.gyro_rps, v.accel_mps2)
         });
@@ -167,15 +167,33 @@ impl Pipeline {
             self.counters.imu_invalid += 1;
             return None;
         }
+        if self.array.reference() != reference {
+            self.on_handover();
+        }
         self.counters.imu_used += 1;
         if index != self.array.reference() {
             return None;
         }
         self.time.tick(s.stamp.host_ns);
-        let c = self.array.c_b_s(index);
-        let (g, a) = (c * Vector3::from(s.gyro_rps), c * Vector3::from(s.accel_mps2));
-        self.nav.on_output_imu(s.stamp.host_ns, s.dt_s, g, a);
-        Some(self.nav_state(s.stamp.host_ns))
+        let (host_ns, g, a) = self.array.output_sample(index, s);
+        self.nav.on_output_imu(host_ns, s.dt_s, g, a);
+        Some(self.nav_state(host_ns))
+    }
+
+    /// The array moved its reference to another IMU (the old one went stale): the navigation
+    /// point is now that IMU's position, so the GNSS lever arm (antenna − IMU, body frame) moves
+    /// by the difference of the two positions. The position state itself is not shifted: the
+    /// few centimetres are taken up by the next GNSS updates.
+    fn on_handover(&mut self) {
+        let configured = self.array.index_of(&self.cfg.reference_imu).unwrap_or(0);
+        let moved_b_m = self.array.lever_b_m(self.array.reference()) - self.array.lever_b_m(configured);
+        self.nav.set_lever_arm(self.cfg.nav.lever_arm_b_m - moved_b_m);
+    }
+
+    /// Id of the IMU whose samples currently drive the output, as stored in samples (the
+    /// configured reference until it goes stale; see [`ImuArray`]'s handover).
+    pub fn reference_imu_id(&self) -> [u8; 8] {
+        self.array.reference_id()
     }
 
     /// The IMU array.
