@@ -91,6 +91,9 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
                 if let Some(n) = out {
                     eval.add_nav(&n);
                     on_output(Output::Nav(&n), &tag);
+                    let t = Instant::now();
+                    pipeline.catch_up();
+                    in_estimator += t.elapsed();
                 }
                 reference = Some(pipeline.reference_imu_id());
                 false

@@ -297,11 +297,18 @@ impl<T: Reflect + ZeroCopySend + Debug> Publisher<T> {
     /// Writes `value` into a loaned shared-memory slot, sends it and notifies listeners.
     /// Never blocks: a subscriber with a full buffer loses its oldest sample.
     pub fn publish(&mut self, value: &T) -> Result<(), IpcError> {
+        self.publish_with(|| *value)
+    }
+
+    /// Loans a slot in shared memory, then writes `make()` into it and publishes it: what
+    /// `make` stamps (e.g. the publish time of a latency probe) is taken with the slot already
+    /// in hand, as a zero-copy publisher that fills a loaned slot would.
+    pub fn publish_with(&mut self, make: impl FnOnce() -> T) -> Result<(), IpcError> {
         let slot = self
             .publisher
             .loan_uninit()
             .map_err(|e| err("loaning sample on", &self.service, e))?;
-        slot.write_payload(*value)
+        slot.write_payload(make())
             .send()
             .map_err(|e| err("sending on", &self.service, e))?;
         self.notifier
@@ -350,6 +357,27 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
         {
             f(sample.payload());
             n += 1;
+        }
+        Ok(n)
+    }
+
+    /// After a wake-up: hands every buffered sample to `f` (by value), consumes the wake-up
+    /// events, then hands over what arrived meanwhile. Samples before events, so the first
+    /// sample is in hand right after the wake-up, with no event syscalls in between; a sample
+    /// published while the events were consumed is not left waiting for the next wake-up.
+    /// `f` returns false to stop early (the events are then left for the next wait).
+    pub fn drain(&self, mut f: impl FnMut(T) -> bool) -> Result<usize, IpcError> {
+        let mut n = 0;
+        for clear in [true, false] {
+            while let Some(s) = self.receive()? {
+                n += 1;
+                if !f(s) {
+                    return Ok(n);
+                }
+            }
+            if clear {
+                self.clear_events();
+            }
         }
         Ok(n)
     }

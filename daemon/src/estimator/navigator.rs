@@ -269,6 +269,17 @@ impl Delayed {
     }
 }
 
+/// Output re-propagation after a correction: the state, last increment, host time (ns) and
+/// last compensated rates of the records integrated so far.
+#[derive(Debug, Clone, Copy)]
+struct CatchUp {
+    pva: Pva,
+    pre: ImuIncrement,
+    t: i64,
+    w: Vector3<f64>,
+    f: Vector3<f64>,
+}
+
 /// The navigation filter.
 #[derive(Debug, Clone)]
 pub struct Navigator {
@@ -283,6 +294,9 @@ pub struct Navigator {
     last_output_ns: Option<i64>,
     out_w: Vector3<f64>,
     out_f: Vector3<f64>,
+    /// The output re-propagated from a corrected delayed state, in progress (see
+    /// [`Navigator::catch_up`]).
+    catchup: Option<CatchUp>,
     pending: [Option<GnssObservation>; 8],
     counters: NavCounters,
     last_imu_ns: Option<i64>,
@@ -304,6 +318,7 @@ impl Navigator {
             last_output_ns: None,
             out_w: Vector3::zeros(),
             out_f: Vector3::zeros(),
+            catchup: None,
             pending: [None; 8],
             counters: NavCounters::default(),
             last_imu_ns: None,
@@ -473,6 +488,8 @@ impl Navigator {
         accel_mps2: Vector3<f64>,
     ) -> bool {
         self.on_filter_imu(host_ns, nominal_dt_s, gyro_rps, accel_mps2);
+        // A correction reaches the output at once here (no deferred catch-up).
+        self.catch_up(usize::MAX);
         self.on_output_imu(host_ns, nominal_dt_s, gyro_rps, accel_mps2)
     }
 
@@ -562,7 +579,13 @@ impl Navigator {
         }
         if corrected {
             self.counters.replays += 1;
-            self.replay();
+            self.catchup = self.filt.as_ref().map(|filt| CatchUp {
+                pva: filt.pva,
+                pre: filt.pre,
+                t: filt.t_ns,
+                w: filt.last_w,
+                f: Vector3::zeros(),
+            });
         }
     }
 
@@ -604,9 +627,47 @@ impl Navigator {
         true
     }
 
+    /// Brings a correction of the delayed state forward to the present by at most `max_steps`
+    /// mechanization steps: the output is re-propagated from the corrected delayed state
+    /// through the buffered filter-stream intervals, then the output-stream intervals newer
+    /// still (the same integration as [`replay`](Self::replay)), and replaces the present-time
+    /// state once it has reached it. Meanwhile the output goes on from the uncorrected state.
+    /// So no single IMU sample pays for the whole fusion horizon (1.5 s: 1500 steps at 1 kHz,
+    /// ~0.6 ms); with `max_steps` per output sample a correction reaches the output
+    /// horizon / (max_steps − 1) samples later. Returns true while a catch-up is in progress.
+    pub fn catch_up(&mut self, max_steps: usize) -> bool {
+        let (Some(c), Some(filt)) = (&mut self.catchup, &self.filt) else {
+            return false;
+        };
+        let newest_filter = self.buf.iter().last().map_or(filt.t_ns, |r| r.host_ns);
+        let from_ns = c.t;
+        let mut records = self
+            .buf
+            .iter()
+            .chain(self.out_tail.iter().filter(|r| r.host_ns > newest_filter))
+            .filter(|r| r.host_ns > from_ns);
+        for r in records.by_ref().take(max_steps) {
+            (c.w, c.f) = filt.compensate(r);
+            let inc = ImuIncrement::from_rates(r.dt_s, c.w, c.f);
+            c.pva = propagate(&c.pva, &c.pre, &inc);
+            c.pre = inc;
+            c.t = r.host_ns;
+        }
+        if records.next().is_some() {
+            return true;
+        }
+        let c = *c;
+        self.out = Some((c.pva, c.pre, c.t));
+        self.out_w = c.w;
+        self.out_f = c.f;
+        self.catchup = None;
+        false
+    }
+
     /// Recomputes the output state from the delayed state through the buffered filter-stream
     /// intervals, then the output-stream intervals that are newer still.
     fn replay(&mut self) {
+        self.catchup = None;
         let Some(filt) = &self.filt else { return };
         let mut pva = filt.pva;
         let mut pre = filt.pre;

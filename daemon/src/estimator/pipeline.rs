@@ -16,6 +16,11 @@ use super::imu_array::{ArrayConfig, ImuArray};
 use super::navigator::{NavConfig, Navigator};
 use super::time_sync::{TimeSync, TimeSyncConfig};
 
+/// Mechanization steps of the output catch-up after a correction done per `NavState`
+/// ([`Pipeline::catch_up`]): a 1.5 s horizon at 1 kHz (1500 steps) reaches the output 8
+/// samples after the correction, at ~0.1 ms per sample instead of ~0.6 ms on one.
+pub const CATCH_UP_STEPS: usize = 200;
+
 /// Settings of the whole estimator.
 #[derive(Debug, Clone)]
 pub struct PipelineConfig {
@@ -69,6 +74,8 @@ pub struct Pipeline {
     stamping: Option<FixStamping>,
     counters: PipelineCounters,
     nav_seq: u64,
+    /// A `NavState` was produced and the output catch-up step after it is not done yet.
+    catch_up_due: bool,
 }
 
 impl Pipeline {
@@ -91,6 +98,7 @@ impl Pipeline {
             stamping: None,
             counters: PipelineCounters::default(),
             nav_seq: 0,
+            catch_up_due: false,
         }
     }
 
@@ -109,13 +117,26 @@ impl Pipeline {
         &self.counters
     }
 
+    /// The work deferred after a `NavState`: one step of bringing the latest correction of the
+    /// delayed filter forward to the output ([`CATCH_UP_STEPS`] mechanization steps). A live
+    /// process calls it right after publishing the `NavState`, so the sample's latency does
+    /// not include it; every `on_*` call first does it when it is still due, so the results
+    /// are the same whoever calls it (replays stay bit-identical).
+    pub fn catch_up(&mut self) {
+        if std::mem::take(&mut self.catch_up_due) {
+            self.nav.catch_up(CATCH_UP_STEPS);
+        }
+    }
+
     /// Feeds a PPS edge; true when the time mapping changed.
     pub fn on_pps(&mut self, edge: &PpsEdge) -> bool {
+        self.catch_up();
         self.time.on_pps(edge)
     }
 
     /// Feeds a GNSS fix; true when the time mapping changed.
     pub fn on_fix(&mut self, fix: &GnssFix) -> bool {
+        self.catch_up();
         let changed = self.time.on_fix(fix);
         self.time.tick(fix.stamp.host_ns);
         let stamping = match self.time.status() {
@@ -153,6 +174,7 @@ impl Pipeline {
     /// virtual IMU that drives the delayed filter; a sample of the reference IMU also advances
     /// the present-time output, and its navigation state is returned.
     pub fn on_imu(&mut self, s: &ImuSample) -> Option<NavState> {
+        self.catch_up();
         let id = navsync_shared::reflect::str_of(&s.imu_id);
         let Some(index) = self.array.index_of(id) else {
             self.counters.imu_other += 1;
@@ -177,6 +199,7 @@ impl Pipeline {
         self.time.tick(s.stamp.host_ns);
         let (host_ns, g, a) = self.array.output_sample(index, s);
         self.nav.on_output_imu(host_ns, s.dt_s, g, a);
+        self.catch_up_due = true;
         Some(self.nav_state(host_ns))
     }
 

@@ -282,12 +282,16 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
     )?;
     pids.push(("estimator".into(), pid));
     if let Some(prio) = args.realtime {
-        // Drivers above the estimator above the subscriber: each stage preempts the next.
+        // The latency chain on top, each stage above the next: the reference IMU's driver,
+        // the estimator, the subscriber; below them the other drivers, whose samples the
+        // array uses tens of ms later anyway (derivative window), so their wake-ups do not
+        // preempt the chain.
         for (name, pid) in &pids {
             let p = match name.as_str() {
-                n if n.starts_with("imu-") || n == "gps" || n == "pps" => prio,
+                "imu-0" => prio,
                 "estimator" => prio.saturating_sub(1).max(1),
                 "subscriber" => prio.saturating_sub(2).max(1),
+                n if n.starts_with("imu-") || n == "gps" || n == "pps" => prio.saturating_sub(3).max(1),
                 _ => continue,
             };
             bench_util::set_fifo(*pid, p).map_err(|e| E2eError::Child(format!("SCHED_FIFO {p} for {name}: {e}")))?;
@@ -348,6 +352,7 @@ pub fn run(args: &E2eArgs) -> Result<E2eReport, E2eError> {
         machine: Machine::now(),
         cases: Vec::new(),
     };
+    let _wakeup = bench_util::CpuWakeupHold::for_realtime(args.realtime, &mut report.machine);
     for &n in &args.imus {
         let c = run_case(args, n)?;
         eprintln!("{}", latency_row(&c));
@@ -460,19 +465,18 @@ pub fn helper_sub(warmup_s: f64, duration_s: f64) -> Result<(), E2eError> {
     let (mut navs, mut gaps, mut last_seq) = (0u64, 0u64, None::<u64>);
     let mut measuring_since = 0i64;
     while node.wait_on(&waitset, Duration::from_millis(100))? {
-        imu.clear_events();
-        while let Some(x) = imu.receive()? {
+        imu.drain(|x| {
             let now = monotonic_now_ns();
             ring[x.stamp.seq as usize % RING] = (x.stamp.host_ns, now);
-        }
-        nav.clear_events();
-        while let Some(n) = nav.receive()? {
+            true
+        })?;
+        nav.drain(|n| {
             let now = monotonic_now_ns();
             if start.is_none() {
                 start = Some(now + (warmup_s * 1e9) as i64);
             }
             if now < start.unwrap_or(i64::MAX) {
-                continue;
+                return true;
             }
             if end.is_none() {
                 end = Some(now + (duration_s * 1e9) as i64);
@@ -492,7 +496,8 @@ pub fn helper_sub(warmup_s: f64, duration_s: f64) -> Result<(), E2eError> {
                 hop.push(t - h);
                 rest.push(now - t);
             }
-        }
+            true
+        })?;
         if end.is_some_and(|e| monotonic_now_ns() >= e) {
             break;
         }

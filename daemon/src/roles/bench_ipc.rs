@@ -220,6 +220,7 @@ pub fn run(args: &IpcBenchArgs) -> Result<IpcReport, IpcBenchError> {
         machine: Machine::now(),
         cases: Vec::new(),
     };
+    let _wakeup = bench_util::CpuWakeupHold::for_realtime(args.realtime, &mut report.machine);
     for &kind in &args.kinds {
         for &rate in &args.rates {
             for &subs in &args.subscribers {
@@ -500,7 +501,7 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
                 if let Some(p) = period_ns {
                     pacing::sleep_until(t0 + (i as f64 * p) as i64, 0);
                 }
-                if p.publish(&T::make(monotonic_now_ns(), i)).is_err() {
+                if p.publish_with(|| T::make(monotonic_now_ns(), i)).is_err() {
                     errors += 1;
                 }
             }
@@ -549,16 +550,16 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
                 .map_err(|e| child_err(format!("attaching to waitset: {e:?}")))?;
             ready();
             cpu0 = bench_util::own_cpu_time_s();
-            'outer: while node.wait_on(&waitset, Duration::from_secs(1))? {
-                sub.clear_events();
-                while let Some(s) = sub.receive()? {
+            let mut done = false;
+            while !done && node.wait_on(&waitset, Duration::from_secs(1))? {
+                // Samples first, then the wake-up events (as the estimator drains its inputs).
+                sub.drain(|s| {
                     let now = monotonic_now_ns();
                     let (host_ns, seq) = s.stamp();
                     lat.push(now - host_ns);
-                    if seq >= last {
-                        break 'outer;
-                    }
-                }
+                    done = seq >= last;
+                    !done
+                })?;
             }
         }
         Transport::Socket => {

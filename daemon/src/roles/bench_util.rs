@@ -69,6 +69,10 @@ pub struct Machine {
     pub load_start: f64,
     /// 1-minute load average at the end.
     pub load_end: f64,
+    /// The cpuidle driver (`/sys/devices/system/cpu/cpuidle/current_driver`).
+    pub cpuidle: String,
+    /// True while the run held the CPU wake-up latency request at 0 ([`CpuWakeupHold`]).
+    pub idle_polling: bool,
 }
 
 impl Machine {
@@ -88,12 +92,17 @@ impl Machine {
             .unwrap_or_default();
         let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
         let load = load_average();
+        let cpuidle = std::fs::read_to_string("/sys/devices/system/cpu/cpuidle/current_driver")
+            .map(|s| s.trim().to_string())
+            .unwrap_or_else(|_| "none".into());
         Self {
             cpu,
             cpus,
             kernel,
             load_start: load,
             load_end: load,
+            cpuidle,
+            idle_polling: false,
         }
     }
 
@@ -105,8 +114,18 @@ impl Machine {
     /// One line for the tables.
     pub fn line(&self) -> String {
         format!(
-            "machine: {} × {}, Linux {}; load average {:.2} at start, {:.2} at end",
-            self.cpus, self.cpu, self.kernel, self.load_start, self.load_end
+            "machine: {} × {}, Linux {}, cpuidle {}{}; load average {:.2} at start, {:.2} at end",
+            self.cpus,
+            self.cpu,
+            self.kernel,
+            self.cpuidle,
+            if self.idle_polling {
+                " (held at 0 µs wake-up latency: idle CPUs poll)"
+            } else {
+                ""
+            },
+            self.load_start,
+            self.load_end
         )
     }
 }
@@ -376,6 +395,38 @@ pub fn read_latencies(path: &Path) -> std::io::Result<Vec<i64>> {
         .chunks_exact(8)
         .map(|c| i64::from_le_bytes(c.try_into().unwrap_or([0; 8])))
         .collect())
+}
+
+/// While alive, requests a CPU wake-up latency of 0 µs from the kernel's PM QoS
+/// (`/dev/cpu_dma_latency`, held open with the value 0, as `cyclictest` does): idle CPUs poll
+/// instead of halting, so waking a sleeping process costs no exit from a halted CPU (on a
+/// virtual machine a halted vCPU is woken through the hypervisor: tens of µs). It costs an
+/// idle core's power; `--realtime` benchmark runs take it together with SCHED_FIFO.
+pub struct CpuWakeupHold(#[allow(dead_code)] std::fs::File);
+
+impl CpuWakeupHold {
+    /// Takes the hold (needs write access to `/dev/cpu_dma_latency`, i.e. root).
+    pub fn take() -> std::io::Result<Self> {
+        use std::io::Write;
+        let mut f = std::fs::OpenOptions::new().write(true).open("/dev/cpu_dma_latency")?;
+        f.write_all(&0i32.to_ne_bytes())?;
+        Ok(Self(f))
+    }
+
+    /// [`take`](Self::take) for a `--realtime` run: `None` (with a warning) when not allowed.
+    pub fn for_realtime(realtime: Option<u8>, machine: &mut Machine) -> Option<Self> {
+        realtime?;
+        match Self::take() {
+            Ok(h) => {
+                machine.idle_polling = true;
+                Some(h)
+            }
+            Err(e) => {
+                eprintln!("note: CPU wake-up latency not held (/dev/cpu_dma_latency: {e}); idle CPUs may halt");
+                None
+            }
+        }
+    }
 }
 
 /// Puts every thread of process `pid` under SCHED_FIFO with priority `prio`.

@@ -310,8 +310,7 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
         // IMUs first: a PPS edge or fix published before the IMU sample that releases it is
         // then always among what this wake-up drains.
         for (i, (s, last)) in imus.iter().zip(last_imu_seq.iter_mut()).enumerate() {
-            s.clear_events();
-            while let Some(sample) = s.receive()? {
+            s.drain(|sample| {
                 liveness_changed |= resumed(&mut live, i, sample.stamp.host_ns, rx_ns);
                 if let Some(prev) = *last
                     && sample.stamp.seq > prev + 1
@@ -322,23 +321,24 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
                 health.add(c_imu, 1);
                 health.tick(r_imu);
                 order.push(AnySample::Imu(sample), ());
-            }
+                true
+            })?;
         }
         for (j, s) in pps.iter().enumerate() {
-            s.clear_events();
-            while let Some(edge) = s.receive()? {
+            s.drain(|edge| {
                 liveness_changed |= resumed(&mut live, n_imu + j, edge.stamp.host_ns, rx_ns);
                 order.push(AnySample::PpsEdge(edge), ());
-            }
+                true
+            })?;
         }
         for (k, s) in gnss.iter().enumerate() {
-            s.clear_events();
-            while let Some(fix) = s.receive()? {
+            s.drain(|fix| {
                 liveness_changed |= resumed(&mut live, n_imu + n_pps + k, fix.stamp.host_ns, rx_ns);
                 health.add(c_fixes, 1);
                 health.tick(r_fix);
                 order.push(AnySample::GnssFix(fix), ());
-            }
+                true
+            })?;
         }
         // NavStates say inertial-only at once when every receiver's driver is gone.
         let gnss_gone = !gnss.is_empty() && live.inputs()[n_imu + n_pps..].iter().all(|x| x.is_gone());
@@ -357,6 +357,7 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
                         }
                         latency.record(monotonic_now_ns() - t_in);
                         health.add(c_nav, 1);
+                        est.catch_up();
                     }
                     let reference = est.reference_imu_id();
                     if reference != order_reference {
