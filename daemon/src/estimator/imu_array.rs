@@ -455,6 +455,17 @@ impl ImuArray {
     /// Feeds one sample (sensor frame) of the IMU with index `index`; calls `out` for every
     /// virtual sample that becomes complete. Returns false when the sample was rejected.
     pub fn push(&mut self, index: usize, s: &ImuSample, out: &mut impl FnMut(&VirtualSample)) -> bool {
+        let accepted = self.accept(index, s);
+        if accepted {
+            self.emit(out);
+        }
+        accepted
+    }
+
+    /// Takes one sample (sensor frame) of the IMU with index `index` into its ring and updates
+    /// the membership (stale IMUs, reference handover), without fusing: [`emit`](Self::emit)
+    /// does that. Returns false when the sample was rejected.
+    pub fn accept(&mut self, index: usize, s: &ImuSample) -> bool {
         let Some(unit) = self.units.get_mut(index) else {
             self.counters.unknown_id += 1;
             return false;
@@ -505,7 +516,7 @@ impl ImuArray {
         }
         self.latest_host_ns = self.latest_host_ns.max(s.stamp.host_ns);
         self.counters.samples += 1;
-        self.emit(out);
+        self.mark_stale();
         true
     }
 
@@ -558,11 +569,15 @@ impl ImuArray {
         self.counters.handovers += 1;
     }
 
-    fn emit(&mut self, out: &mut impl FnMut(&VirtualSample)) {
-        self.mark_stale();
+    /// Fuses every reference instant whose samples are complete, in time order, and calls
+    /// `out` with each virtual sample (single IMU: its newest sample, once).
+    pub fn emit(&mut self, out: &mut impl FnMut(&VirtualSample)) {
         let r = self.cfg.reference;
         if self.units.len() == 1 {
             let u = &self.units[r];
+            if u.len == 0 || u.entry(u.len - 1).end_host_ns <= self.last_virtual_ns {
+                return;
+            }
             let e = *u.entry(u.len - 1);
             self.last_virtual_ns = e.end_host_ns;
             self.counters.virtual_samples += 1;

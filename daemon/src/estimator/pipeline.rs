@@ -117,13 +117,18 @@ impl Pipeline {
         &self.counters
     }
 
-    /// The work deferred after a `NavState`: one step of bringing the latest correction of the
-    /// delayed filter forward to the output ([`CATCH_UP_STEPS`] mechanization steps). A live
+    /// The work deferred after a `NavState`: the IMU array fuses the instants now complete
+    /// and the delayed filter consumes them (fusing the fixes they reach), then one step of
+    /// bringing the latest correction forward to the output ([`CATCH_UP_STEPS`] mechanization
+    /// steps). So a `NavState` waits only for its own sample's output step. A live
     /// process calls it right after publishing the `NavState`, so the sample's latency does
     /// not include it; every `on_*` call first does it when it is still due, so the results
     /// are the same whoever calls it (replays stay bit-identical).
     pub fn catch_up(&mut self) {
         if std::mem::take(&mut self.catch_up_due) {
+            let nav = &mut self.nav;
+            self.array
+                .emit(&mut |v| nav.on_filter_imu(v.host_ns, v.dt_s, v.gyro_rps, v.accel_mps2));
             self.nav.catch_up(CATCH_UP_STEPS);
         }
     }
@@ -169,10 +174,10 @@ impl Pipeline {
         changed
     }
 
-    /// Feeds an IMU sample; returns the navigation state for it when it is the reference IMU.
-    /// Feeds an IMU sample of any IMU of the array. The array aligns and fuses the IMUs into the
-    /// virtual IMU that drives the delayed filter; a sample of the reference IMU also advances
-    /// the present-time output, and its navigation state is returned.
+    /// Feeds an IMU sample of any IMU of the array; returns the navigation state for it when it
+    /// is the reference IMU. A sample of the reference IMU advances the present-time output at
+    /// once; the array's fusion into the virtual IMU that drives the delayed filter follows
+    /// in [`catch_up`](Self::catch_up), after the `NavState`.
     pub fn on_imu(&mut self, s: &ImuSample) -> Option<NavState> {
         self.catch_up();
         let id = navsync_shared::reflect::str_of(&s.imu_id);
@@ -180,11 +185,8 @@ impl Pipeline {
             self.counters.imu_other += 1;
             return None;
         };
-        let nav = &mut self.nav;
         let reference = self.array.reference();
-        let accepted = self.array.push(index, s, &mut |v| {
-            nav.on_filter_imu(v.host_ns, v.dt_s, v.gyro_rps, v.accel_mps2)
-        });
+        let accepted = self.array.accept(index, s);
         if !accepted {
             self.counters.imu_invalid += 1;
             return None;

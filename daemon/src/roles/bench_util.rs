@@ -429,19 +429,16 @@ impl CpuWakeupHold {
     }
 }
 
-/// Puts every thread of process `pid` under SCHED_FIFO with priority `prio`.
+/// Puts the main thread of process `pid` under SCHED_FIFO with priority `prio` (threads it
+/// starts later inherit it; helper threads such as the estimator's dead-node reclaimer stay
+/// under SCHED_OTHER).
 pub fn set_fifo(pid: u32, prio: u8) -> std::io::Result<()> {
-    for t in std::fs::read_dir(format!("/proc/{pid}/task"))? {
-        let Some(tid) = t?.file_name().to_str().and_then(|s| s.parse::<libc::pid_t>().ok()) else {
-            continue;
-        };
-        let param = libc::sched_param {
-            sched_priority: i32::from(prio),
-        };
-        // SAFETY: sched_setscheduler with a valid sched_param for the call's duration.
-        if unsafe { libc::sched_setscheduler(tid, libc::SCHED_FIFO, &param) } != 0 {
-            return Err(std::io::Error::last_os_error());
-        }
+    let param = libc::sched_param {
+        sched_priority: i32::from(prio),
+    };
+    // SAFETY: sched_setscheduler with a valid sched_param for the call's duration.
+    if unsafe { libc::sched_setscheduler(pid as libc::pid_t, libc::SCHED_FIFO, &param) } != 0 {
+        return Err(std::io::Error::last_os_error());
     }
     Ok(())
 }

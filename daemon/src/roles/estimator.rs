@@ -165,10 +165,15 @@ impl EstimatorArgs {
     }
 }
 
-/// How often the estimator looks for inputs whose publishing process is gone (reclaiming dead
-/// nodes first, so a killed driver's publisher no longer counts), ns. With the wake-up latency
-/// this bounds the time from a driver's death to its stale flag, whatever the input's rate.
-const PUBLISHER_CHECK_INTERVAL_NS: i64 = 50_000_000;
+/// How often the estimator's reclaimer thread ([`super::reclaimer`]) removes dead nodes, so a
+/// killed driver's publisher no longer counts.
+const RECLAIM_INTERVAL: std::time::Duration = std::time::Duration::from_millis(40);
+
+/// How often the estimator's loop looks for inputs whose publishing process is gone (a
+/// publisher count of 0 on the input's service), ns. With [`RECLAIM_INTERVAL`] and the
+/// wake-up latency this bounds the time from a driver's death to its stale flag, whatever the
+/// input's rate.
+const PUBLISHER_CHECK_INTERVAL_NS: i64 = 20_000_000;
 
 /// The published navigation status while every GNSS input is gone: an aligned (or degraded)
 /// filter is inertial-only from that moment, not only after the navigator's outage time.
@@ -197,12 +202,17 @@ pub enum EstimatorError {
     /// IPC failure.
     #[error(transparent)]
     Ipc(#[from] IpcError),
+    /// The dead-node reclaimer thread could not be started.
+    #[error("starting the dead-node reclaimer thread: {0}")]
+    Reclaimer(#[from] std::io::Error),
 }
 
 /// Runs the estimator until SIGINT/SIGTERM.
 pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
     let _span = info_span!("estimator").entered();
     let node = IpcNode::new("estimator")?;
+    // Dead drivers' publishers stop counting once their node is reclaimed: off this loop.
+    let _reclaimer = super::reclaimer::Reclaimer::start("estimator-reclaim", RECLAIM_INTERVAL)?;
     let pps: Vec<Subscriber<PpsEdge>> = args
         .pps_ids
         .iter()
@@ -388,7 +398,6 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
         });
         if now >= next_publisher_check_ns {
             next_publisher_check_ns = now + PUBLISHER_CHECK_INTERVAL_NS;
-            node.reclaim_dead_nodes();
             let publishers = imus
                 .iter()
                 .map(Subscriber::publisher_count)

@@ -16,6 +16,7 @@ pub mod kf_gins;
 pub mod liveness;
 pub mod ntpshm;
 pub mod python_types;
+pub mod reclaimer;
 pub mod record;
 pub mod replay;
 pub mod report;
