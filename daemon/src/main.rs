@@ -226,6 +226,11 @@ enum Cmd {
     Estimator {
         #[command(flatten)]
         est: EstimatorFlags,
+        /// Hold the CPU wake-up latency at 0 µs while running (`/dev/cpu_dma_latency`, as
+        /// cyclictest does): idle CPUs poll, so waking the estimator costs no exit from a
+        /// halted CPU. For low-latency deployments, with SCHED_FIFO; costs an idle core's power.
+        #[arg(long)]
+        idle_polling: bool,
     },
     /// The simulated sensor world: IMUs and PPS to their services, NMEA into a pseudo-terminal.
     Sim {
@@ -605,8 +610,12 @@ fn main() -> Result<()> {
                 stats.bytes, stats.chunks, stats.laps, stats.garbled_chunks
             );
         }
-        Cmd::Estimator { est } => {
+        Cmd::Estimator { est, idle_polling } => {
             let args = roles::service::estimator_args(&cfg, sub, est.args())?;
+            let _hold = idle_polling
+                .then(roles::cpu_wakeup::CpuWakeupHold::take)
+                .transpose()
+                .context("--idle-polling: holding /dev/cpu_dma_latency at 0")?;
             roles::estimator::run(&args).context("estimator")?;
         }
         Cmd::Sim {

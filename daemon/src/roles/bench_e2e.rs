@@ -352,7 +352,7 @@ pub fn run(args: &E2eArgs) -> Result<E2eReport, E2eError> {
         machine: Machine::now(),
         cases: Vec::new(),
     };
-    let _wakeup = bench_util::CpuWakeupHold::for_realtime(args.realtime, &mut report.machine);
+    let _wakeup = bench_util::wakeup_hold_for_realtime(args.realtime, &mut report.machine);
     for &n in &args.imus {
         let c = run_case(args, n)?;
         eprintln!("{}", latency_row(&c));

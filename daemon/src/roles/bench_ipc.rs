@@ -220,7 +220,7 @@ pub fn run(args: &IpcBenchArgs) -> Result<IpcReport, IpcBenchError> {
         machine: Machine::now(),
         cases: Vec::new(),
     };
-    let _wakeup = bench_util::CpuWakeupHold::for_realtime(args.realtime, &mut report.machine);
+    let _wakeup = bench_util::wakeup_hold_for_realtime(args.realtime, &mut report.machine);
     for &kind in &args.kinds {
         for &rate in &args.rates {
             for &subs in &args.subscribers {

@@ -9,6 +9,8 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
+use super::cpu_wakeup::CpuWakeupHold;
+
 /// Percentiles of a set of latencies, µs (exact: computed from every value).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Percentiles {
@@ -397,34 +399,18 @@ pub fn read_latencies(path: &Path) -> std::io::Result<Vec<i64>> {
         .collect())
 }
 
-/// While alive, requests a CPU wake-up latency of 0 µs from the kernel's PM QoS
-/// (`/dev/cpu_dma_latency`, held open with the value 0, as `cyclictest` does): idle CPUs poll
-/// instead of halting, so waking a sleeping process costs no exit from a halted CPU (on a
-/// virtual machine a halted vCPU is woken through the hypervisor: tens of µs). It costs an
-/// idle core's power; `--realtime` benchmark runs take it together with SCHED_FIFO.
-pub struct CpuWakeupHold(#[allow(dead_code)] std::fs::File);
-
-impl CpuWakeupHold {
-    /// Takes the hold (needs write access to `/dev/cpu_dma_latency`, i.e. root).
-    pub fn take() -> std::io::Result<Self> {
-        use std::io::Write;
-        let mut f = std::fs::OpenOptions::new().write(true).open("/dev/cpu_dma_latency")?;
-        f.write_all(&0i32.to_ne_bytes())?;
-        Ok(Self(f))
-    }
-
-    /// [`take`](Self::take) for a `--realtime` run: `None` (with a warning) when not allowed.
-    pub fn for_realtime(realtime: Option<u8>, machine: &mut Machine) -> Option<Self> {
-        realtime?;
-        match Self::take() {
-            Ok(h) => {
-                machine.idle_polling = true;
-                Some(h)
-            }
-            Err(e) => {
-                eprintln!("note: CPU wake-up latency not held (/dev/cpu_dma_latency: {e}); idle CPUs may halt");
-                None
-            }
+/// Takes the [`CpuWakeupHold`] for a `--realtime` run: `None` (with a warning) when not
+/// allowed; records in `machine` whether it is held.
+pub fn wakeup_hold_for_realtime(realtime: Option<u8>, machine: &mut Machine) -> Option<CpuWakeupHold> {
+    realtime?;
+    match CpuWakeupHold::take() {
+        Ok(h) => {
+            machine.idle_polling = true;
+            Some(h)
+        }
+        Err(e) => {
+            eprintln!("note: CPU wake-up latency not held (/dev/cpu_dma_latency: {e}); idle CPUs may halt");
+            None
         }
     }
 }

@@ -7,6 +7,7 @@ pub mod bench_ipc;
 pub mod bench_throughput;
 pub mod bench_timing;
 pub mod bench_util;
+pub mod cpu_wakeup;
 pub mod demo;
 pub mod echo;
 pub mod estimator;
