@@ -211,12 +211,14 @@ impl<T> InputOrder<T> {
     }
 
     /// The consumer's reference IMU changed (handover): its samples release the others from
-    /// now on. No-op when it is already the reference, or with no reference.
-    pub fn set_reference(&mut self, id: [u8; 8]) {
-        let Some(r) = &mut self.reference_imu else { return };
+    /// now on. Returns the previous reference when it changed (`None`: already the reference,
+    /// or no reference).
+    pub fn set_reference(&mut self, id: [u8; 8]) -> Option<[u8; 8]> {
+        let r = self.reference_imu.as_mut()?;
         if *r == id {
-            return;
+            return None;
         }
+        let previous = *r;
         *r = id;
         // The new reference's newest sample so far (waiting, or consumed) is the watermark.
         let waiting = self.heap.iter().filter_map(|Reverse(e)| match &e.sample {
@@ -225,6 +227,7 @@ impl<T> InputOrder<T> {
         });
         let consumed = self.last_popped.map_or(i64::MIN, |k| k.at_ns);
         self.watermark = waiting.fold(self.watermark.max(consumed), i64::max);
+        Some(previous)
     }
 
     /// Live processes, once per wake-up with the host clock (ns): true when samples wait and
@@ -402,7 +405,7 @@ mod tests {
         // Everything up to 100 ms behind IMU 1's newest sample is due.
         assert_eq!(out.last().map(String::as_str), Some("imu1@1051"), "{out:?}");
         // The consumer hands over to IMU 1: no lag from then on.
-        o.set_reference(fixed_str("1"));
+        assert_eq!(o.set_reference(fixed_str("1")), Some(fixed_str("0")));
         drain(&mut o, &mut out);
         assert_eq!(out.last().map(String::as_str), Some("imu1@1151"));
         o.push(pps(1110), ());

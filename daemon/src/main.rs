@@ -109,8 +109,8 @@ enum EstimateFormat {
     KfGins,
 }
 
-/// The estimator's settings on the command line, shared by `estimator` and
-/// `replay --estimate`.
+/// The estimator's settings on the command line, shared by `estimator`, `replay --estimate`
+/// and `report --estimate`.
 #[derive(clap::Args, Debug)]
 struct EstimatorFlags {
     /// GNSS receiver ids.
@@ -461,15 +461,9 @@ enum Cmd {
         /// Run the estimator over the recording even when it has navigation states.
         #[arg(long)]
         estimate: bool,
-        /// Estimator (when it runs): IMU ids (the first is the reference).
-        #[arg(long, default_value = "0", value_delimiter = ',', value_parser = parse_id)]
-        imus: Vec<String>,
-        /// Estimator (when it runs): ignore PPS (software sync).
-        #[arg(long)]
-        software_sync: bool,
-        /// Estimator (when it runs): IMU class for the process noise.
-        #[arg(long, default_value = "industrial")]
-        imu_model: ImuPreset,
+        /// The estimator's settings (when it runs).
+        #[command(flatten)]
+        est: EstimatorFlags,
     },
     /// Imports another system's data files into a navsync recording.
     Import {
@@ -879,21 +873,14 @@ fn main() -> Result<()> {
             input,
             out,
             estimate,
-            imus,
-            software_sync,
-            imu_model,
+            est,
         } => {
             let out = out.unwrap_or_else(|| roles::report::default_out(&input));
             let plots = roles::report::run(&roles::report::ReportArgs {
                 input: input.clone(),
                 out: out.clone(),
                 estimate,
-                est: roles::estimator::EstimatorArgs {
-                    imu_ids: imus,
-                    software_sync,
-                    imu_model,
-                    ..Default::default()
-                },
+                est: est.args(),
             })
             .with_context(|| format!("report of {}", input.display()))?;
             eprintln!("{}: {plots} plots", out.display());

@@ -185,6 +185,14 @@ impl Unit {
         &mut self.ring[(self.head + i) % RING]
     }
 
+    /// A promoted reference (one whose offset filter was frozen at the handover; the
+    /// configured reference has none) puts `e` into the terms of the reference it replaced.
+    fn correct_if_promoted(&self, is_reference: bool, e: &mut Entry) {
+        if is_reference && let Some(f) = &self.filter {
+            into_reference_terms(f, e);
+        }
+    }
+
     fn push(&mut self, e: Entry) {
         if self.len == RING {
             self.head = (self.head + 1) % RING;
@@ -421,15 +429,12 @@ impl ImuArray {
             accel: u.cfg.c_b_s * Vector3::from(s.accel_mps2),
             ..Entry::default()
         };
-        if index == self.cfg.reference
-            && let Some(f) = &u.filter
-        {
-            into_reference_terms(f, &mut e);
-        }
+        u.correct_if_promoted(index == self.cfg.reference, &mut e);
         (e.end_host_ns, e.gyro, e.accel)
     }
 
-    /// Estimated offset and its 1-sigma of IMU `index`, s (the reference: 0 ± 0).
+    /// Estimated offset and its 1-sigma of IMU `index`, s (the configured reference: 0 ± 0; a
+    /// promoted one: its offset frozen at the handover).
     pub fn offset(&self, index: usize) -> (f64, f64) {
         self.units[index]
             .filter
@@ -499,11 +504,7 @@ impl ImuArray {
             gyro: unit.cfg.c_b_s * g,
             accel: unit.cfg.c_b_s * a,
         };
-        if index == self.cfg.reference
-            && let Some(f) = &unit.filter
-        {
-            into_reference_terms(f, &mut e);
-        }
+        unit.correct_if_promoted(index == self.cfg.reference, &mut e);
         unit.push(e);
         unit.last_host_ns = Some(s.stamp.host_ns);
         if unit.reason == ImuSyncReason::Absent || unit.reason == ImuSyncReason::Stale {

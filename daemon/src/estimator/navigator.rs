@@ -579,13 +579,7 @@ impl Navigator {
         }
         if corrected {
             self.counters.replays += 1;
-            self.catchup = self.filt.as_ref().map(|filt| CatchUp {
-                pva: filt.pva,
-                pre: filt.pre,
-                t: filt.t_ns,
-                w: filt.last_w,
-                f: Vector3::zeros(),
-            });
+            self.start_catch_up();
         }
     }
 
@@ -627,13 +621,25 @@ impl Navigator {
         true
     }
 
+    /// Starts re-propagating the output from the (corrected) delayed state; see
+    /// [`catch_up`](Self::catch_up).
+    fn start_catch_up(&mut self) {
+        self.catchup = self.filt.as_ref().map(|filt| CatchUp {
+            pva: filt.pva,
+            pre: filt.pre,
+            t: filt.t_ns,
+            w: filt.last_w,
+            f: Vector3::zeros(),
+        });
+    }
+
     /// Brings a correction of the delayed state forward to the present by at most `max_steps`
     /// mechanization steps: the output is re-propagated from the corrected delayed state
-    /// through the buffered filter-stream intervals, then the output-stream intervals newer
-    /// still (the same integration as [`replay`](Self::replay)), and replaces the present-time
-    /// state once it has reached it. Meanwhile the output goes on from the uncorrected state.
-    /// So no single IMU sample pays for the whole fusion horizon (1.5 s: 1500 steps at 1 kHz,
-    /// ~0.6 ms); with `max_steps` per output sample a correction reaches the output
+    /// through the buffered filter-stream intervals (all newer than the delayed state), then
+    /// the output-stream intervals newer still, and replaces the present-time state once it
+    /// has reached it. Meanwhile the output goes on from the uncorrected state. So no single
+    /// IMU sample pays for the whole fusion horizon (1.5 s: 1500 steps at 1 kHz, ~0.6 ms); with
+    /// `max_steps` per output sample a correction reaches the output
     /// horizon / (max_steps − 1) samples later. Returns true while a catch-up is in progress.
     pub fn catch_up(&mut self, max_steps: usize) -> bool {
         let (Some(c), Some(filt)) = (&mut self.catchup, &self.filt) else {
@@ -664,30 +670,10 @@ impl Navigator {
         false
     }
 
-    /// Recomputes the output state from the delayed state through the buffered filter-stream
-    /// intervals, then the output-stream intervals that are newer still.
+    /// Recomputes the output state from the delayed state at once (the whole catch-up).
     fn replay(&mut self) {
-        self.catchup = None;
-        let Some(filt) = &self.filt else { return };
-        let mut pva = filt.pva;
-        let mut pre = filt.pre;
-        let mut t = filt.t_ns;
-        let (mut w, mut f) = (filt.last_w, Vector3::zeros());
-        let newest_filter = self.buf.iter().last().map_or(filt.t_ns, |r| r.host_ns);
-        for r in self
-            .buf
-            .iter()
-            .chain(self.out_tail.iter().filter(|r| r.host_ns > newest_filter))
-        {
-            (w, f) = filt.compensate(r);
-            let inc = ImuIncrement::from_rates(r.dt_s, w, f);
-            pva = propagate(&pva, &pre, &inc);
-            pre = inc;
-            t = r.host_ns;
-        }
-        self.out = Some((pva, pre, t));
-        self.out_w = w;
-        self.out_f = f;
+        self.start_catch_up();
+        self.catch_up(usize::MAX);
     }
 
     /// Filter status at host time `now_ns`.

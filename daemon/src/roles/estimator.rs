@@ -270,7 +270,6 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
     let c_imu_back = health.counter("imu_rejected_backwards");
     let c_imu_sat = health.counter("imu_rejected_saturated");
     let mut order: InputOrder = InputOrder::new(args.imu_ids.first().map(String::as_str));
-    let mut order_reference = est.reference_imu_id();
     // Output latency: from taking an IMU sample off its queue to its NavState being published.
     let c_lat_p99 = health.counter("nav_latency_p99_us");
     let c_lat_max = health.counter("nav_latency_max_us");
@@ -370,14 +369,12 @@ pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
                         est.catch_up();
                     }
                     let reference = est.reference_imu_id();
-                    if reference != order_reference {
+                    if let Some(previous) = order.set_reference(reference) {
                         warn!(
-                            from = navsync_shared::reflect::str_of(&order_reference),
+                            from = navsync_shared::reflect::str_of(&previous),
                             to = navsync_shared::reflect::str_of(&reference),
                             "reference IMU stale: handed over to a live IMU"
                         );
-                        order.set_reference(reference);
-                        order_reference = reference;
                     }
                 }
                 AnySample::PpsEdge(edge) => updated |= est.on_pps(&edge),

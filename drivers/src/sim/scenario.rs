@@ -916,22 +916,16 @@ impl SimConfig {
             ));
         }
         for (i, o) in g.outages.iter().enumerate() {
-            self.check_range(
-                &format!("gnss.outage[{i}].start_s"),
-                o.start_s,
-                0.0,
-                MAX_DURATION_S,
-                "s",
-            )?;
-            self.check_range(
-                &format!("gnss.outage[{i}].duration_s"),
-                o.duration_s,
-                1e-3,
-                MAX_DURATION_S,
-                "s",
-            )?;
+            self.check_window(&format!("gnss.outage[{i}]"), o.start_s, o.duration_s)?;
         }
         Ok(())
+    }
+
+    /// An outage window `key` (`start_s`, `duration_s`): within the longest scenario, at least
+    /// 1 ms long.
+    fn check_window(&self, key: &str, start_s: f64, duration_s: f64) -> Result<(), SimError> {
+        self.check_range(&format!("{key}.start_s"), start_s, 0.0, MAX_DURATION_S, "s")?;
+        self.check_range(&format!("{key}.duration_s"), duration_s, 1e-3, MAX_DURATION_S, "s")
     }
 
     fn validate_clock(&self) -> Result<(), SimError> {
@@ -940,20 +934,7 @@ impl SimConfig {
         self.check_range("clock.freq_rw_adev_1s", c.freq_rw_adev_1s, 0.0, 1e-6, "")?;
         self.check_range("clock.pps_jitter_s", c.pps_jitter_s, 0.0, 0.01, "s")?;
         for (i, o) in c.pps_outages.iter().enumerate() {
-            self.check_range(
-                &format!("clock.pps_outage[{i}].start_s"),
-                o.start_s,
-                0.0,
-                MAX_DURATION_S,
-                "s",
-            )?;
-            self.check_range(
-                &format!("clock.pps_outage[{i}].duration_s"),
-                o.duration_s,
-                1e-3,
-                MAX_DURATION_S,
-                "s",
-            )?;
+            self.check_window(&format!("clock.pps_outage[{i}]"), o.start_s, o.duration_s)?;
         }
         self.check_range("truth.rate_hz", self.truth.rate_hz, 1.0, 1000.0, "Hz")
     }
