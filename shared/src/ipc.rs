@@ -142,6 +142,9 @@ impl IpcNode {
             node,
             terminated: AtomicBool::new(false),
         };
+        // iceoryx2 installs its SIGINT/SIGTERM handler on the first wait; do it now, so a
+        // termination request that arrives before the first wait is latched, not fatal.
+        node.termination_requested();
         // Reclaim what processes that died without cleaning up (kill -9) left behind.
         node.reclaim_dead_nodes();
         restrict_global_segment(prefix);

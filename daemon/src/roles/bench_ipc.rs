@@ -27,6 +27,10 @@ use serde::Serialize;
 
 use super::bench_util::{self, BenchEnv, Machine, Percentiles};
 
+/// How long a bench publisher stays after its last sample unless stopped earlier: longer than
+/// the bench waits for its subscribers.
+const PUBLISHER_LINGER: Duration = Duration::from_secs(30);
+
 /// Which sample type a case carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
@@ -325,18 +329,21 @@ pub fn run_case(
         bench_util::set_fifo(pid, p).map_err(child_err)?;
     }
     let mut pub_out = BufReader::new(pub_out.ok_or_else(|| child_err("no stdout"))?);
-    let expected = match rate {
-        Rate::Hz(r) => samples as f64 / r,
-        Rate::Max => 0.0,
+    // The publisher prints its summary after the last sample and stays until stopped (below).
+    let Some(pub_summary) = bench_util::next_json_line(&mut pub_out) else {
+        let st = env.wait_exit("pub", Duration::from_secs(5));
+        return Err(child_err(format!(
+            "publisher ended without a summary ({st:?}):\n{}",
+            env.log("pub")
+        )));
     };
-    let limit = Duration::from_secs_f64(expected * 1.5 + 60.0);
-    let st = env
-        .wait_exit("pub", limit)
-        .ok_or_else(|| child_err(format!("publisher did not finish within {limit:?}")))?;
-    if !st.success() {
-        return Err(child_err(format!("publisher failed ({st}):\n{}", env.log("pub"))));
+    if transport == Transport::Socket {
+        // Nothing to stay for: it closes its connections (ending the subscribers) and exits.
+        let st = env.wait_exit("pub", Duration::from_secs(10));
+        if !st.is_some_and(|st| st.success()) {
+            return Err(child_err(format!("publisher failed ({st:?}):\n{}", env.log("pub"))));
+        }
     }
-    let pub_summary = bench_util::last_json_line(&mut pub_out).unwrap_or_default();
     // Subscribers stop at the last sequence number; one that lost it is told to stop.
     let mut all = Vec::new();
     let mut sub_cpu = 0.0;
@@ -488,15 +495,26 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
         Rate::Max => None,
     };
     let mut errors = 0u64;
-    let (cpu0, t0);
+    // The summary goes out as soon as the last sample is sent; the publisher then stays until
+    // the bench stops it, as a driver does: a subscriber woken only after the burst (at `max`
+    // rate) still finds the publisher's data segment to connect to. A publisher that left
+    // first would take its unread samples with it.
+    let summary = |errors: u64, t0: i64, cpu0: f64| {
+        let wall = (monotonic_now_ns() - t0) as f64 * 1e-9;
+        let cpu = bench_util::own_cpu_time_s() - cpu0;
+        println!(
+            "{}",
+            serde_json::json!({ "sent": a.count, "errors": errors, "wall_s": wall, "cpu_s": cpu })
+        );
+    };
     match a.transport {
         Transport::Iceoryx2 => {
             let node = IpcNode::new("bench-pub")?;
             let mut p = node.publisher::<T>(&T::service())?;
             // Let the subscribers' ports settle before the first sample.
             std::thread::sleep(Duration::from_millis(100));
-            cpu0 = bench_util::own_cpu_time_s();
-            t0 = monotonic_now_ns();
+            let cpu0 = bench_util::own_cpu_time_s();
+            let t0 = monotonic_now_ns();
             for i in 0..a.count {
                 if let Some(p) = period_ns {
                     pacing::sleep_until(t0 + (i as f64 * p) as i64, 0);
@@ -505,12 +523,16 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
                     errors += 1;
                 }
             }
+            summary(errors, t0, cpu0);
+            let t_end = std::time::Instant::now();
+            while t_end.elapsed() < PUBLISHER_LINGER && node.sleep(Duration::from_millis(50)) {}
         }
         Transport::Socket => {
+            // The sent bytes stay in the subscribers' socket buffers: closing ends their loops.
             let fds: Vec<Fd> = a.sockets.iter().map(|p| connect(p)).collect::<Result<_, _>>()?;
             std::thread::sleep(Duration::from_millis(100));
-            cpu0 = bench_util::own_cpu_time_s();
-            t0 = monotonic_now_ns();
+            let cpu0 = bench_util::own_cpu_time_s();
+            let t0 = monotonic_now_ns();
             for i in 0..a.count {
                 if let Some(p) = period_ns {
                     pacing::sleep_until(t0 + (i as f64 * p) as i64, 0);
@@ -525,14 +547,9 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
                     }
                 }
             }
+            summary(errors, t0, cpu0);
         }
     }
-    let wall = (monotonic_now_ns() - t0) as f64 * 1e-9;
-    let cpu = bench_util::own_cpu_time_s() - cpu0;
-    println!(
-        "{}",
-        serde_json::json!({ "sent": a.count, "errors": errors, "wall_s": wall, "cpu_s": cpu })
-    );
     Ok(())
 }
 

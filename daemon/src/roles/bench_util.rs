@@ -358,21 +358,29 @@ pub fn wait_for_line(out: &mut BufReader<ChildStdout>, line: &str, timeout: Dura
     false
 }
 
-/// Reads the rest of a child's stdout and returns the last line that parses as JSON.
-pub fn last_json_line(out: &mut BufReader<ChildStdout>) -> Option<serde_json::Value> {
-    let mut last = None;
+/// Reads `out` up to and including its next JSON line; None at end of output.
+pub fn next_json_line(out: &mut BufReader<ChildStdout>) -> Option<serde_json::Value> {
     let mut buf = String::new();
     loop {
         buf.clear();
         match out.read_line(&mut buf) {
-            Ok(0) | Err(_) => return last,
+            Ok(0) | Err(_) => return None,
             Ok(_) => {
                 if let Ok(v) = serde_json::from_str::<serde_json::Value>(buf.trim()) {
-                    last = Some(v);
+                    return Some(v);
                 }
             }
         }
     }
+}
+
+/// Reads the rest of a child's stdout and returns the last line that parses as JSON.
+pub fn last_json_line(out: &mut BufReader<ChildStdout>) -> Option<serde_json::Value> {
+    let mut last = None;
+    while let Some(v) = next_json_line(out) {
+        last = Some(v);
+    }
+    last
 }
 
 /// Writes `value` as pretty JSON to `path`.
