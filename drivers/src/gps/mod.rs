@@ -2,10 +2,12 @@
 //!
 //! Pipeline (each stage a pure state machine, testable on bytes):
 //! bytes → [`nmea_framer::LineFramer`] (sentences, each stamped with the host time of its
-//! first byte) → [`nmea_epoch::EpochAssembler`] (sentences of one time tag merged into one
-//! `GnssFix`) → publish.
+//! first byte) → [`nmea_sentence`] (checksum, fields decoded into an update in SI units) →
+//! [`nmea_epoch::EpochAssembler`] (the updates of one time tag merged into one `GnssFix`) →
+//! publish.
 
 pub mod driver;
 pub mod nmea_epoch;
 pub mod nmea_framer;
+pub mod nmea_sentence;
 pub mod offline;
