@@ -3,7 +3,7 @@
 //!
 //! Per sample of the reference IMU (instant τ, the centre of its averaging interval):
 //! 1. every other IMU in the array is interpolated at τ + T̂d_i by an order-N Lagrange
-//!    fractional-delay filter ([`fractional_delay`]) over its own samples (any rate: this is
+//!    fractional-delay filter ([`fractional_delay`](super::fractional_delay)) over its own samples (any rate: this is
 //!    also the resampling to the reference rate);
 //! 2. the aligned rates are compared with the reference's: the residuals drive each IMU's
 //!    [`OffsetFilter`] (Td, relative biases), and a persistent disagreement beyond the gate drops

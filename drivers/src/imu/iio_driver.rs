@@ -2,7 +2,7 @@
 //!
 //! set up through sysfs ([`iio_device::configure`]) → read whole records from the character
 //! devices (poll, non-blocking reads, partial records carried over) → decode
-//! ([`RecordDecoder`], pure) → for a split IMU, join gyroscope and accelerometer records by
+//! ([`RecordDecoder`](super::iio_record::RecordDecoder), pure) → for a split IMU, join gyroscope and accelerometer records by
 //! stamp ([`Pairer`], pure) → axis map → checks and publish ([`SampleOutput`]).
 //!
 //! One device must carry both angular rate and acceleration (ADIS164xx, BMI160/270,

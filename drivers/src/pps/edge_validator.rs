@@ -173,7 +173,7 @@ impl EdgeValidator {
         self.period_ns
     }
 
-    /// Measured 1-sigma stamp jitter, ns, once at least [`LEARNED_AFTER`] one-second intervals
+    /// Measured 1-sigma stamp jitter, ns, once at least 8 (`LEARNED_AFTER`) one-second intervals
     /// were seen.
     pub fn measured_jitter_ns(&self) -> Option<f64> {
         (self.intervals >= LEARNED_AFTER).then(|| (self.mean_r2 / 2.0).sqrt())

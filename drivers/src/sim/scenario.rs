@@ -10,7 +10,7 @@
 //! Errors name the file, the line and the dotted field (`trajectory.segment[3].to_speed_mps`)
 //! and say what was expected: type errors and unknown fields through toml's spans and
 //! `deny_unknown_fields`, semantic errors (e.g. a static segment entered at speed) through
-//! [`SourceMap`](navsync_shared::config::SourceMap).
+//! [`navsync_shared::config::SourceMap`].
 
 use std::path::Path;
 

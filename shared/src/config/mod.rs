@@ -27,9 +27,9 @@
 //!
 //! Errors name the file, the line, the column and the field, and say what was expected
 //! (`navsync.toml:12:11: imu.0.rate_hz: invalid type: string "fast", expected f64`); keys the
-//! file does not know are errors, not silently ignored. [`Config::load`] checks what can be
+//! file does not know are errors, not silently ignored. [`Loaded::load`] checks what can be
 //! checked here (ranges, ids, cross references); the roles check their device strings
-//! (`source`, `axes`) with their own parsers and report through [`Config::error_at`].
+//! (`source`, `axes`) with their own parsers and report through [`Loaded::error_at`].
 //!
 //! The annotated example is `systemd/navsync.toml.example`.
 

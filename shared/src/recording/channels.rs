@@ -2,11 +2,11 @@
 //!
 //! * One channel per service; the topic is the service name (`navsync/imu/0/sample`).
 //! * One schema per sample type: name = the type name with its layout version
-//!   (`navsync.ImuSample.v1`), encoding `jsonschema`, data = [`json::schema`] of the type
+//!   (`navsync.ImuSample.v1`), encoding `jsonschema`, data = [`json::schema`](crate::json::schema) of the type
 //!   (JSON Schema draft 2020-12 with every field's units and frame as its description).
-//! * Message encoding `json`: the sample as [`json::to_json`] writes it (UTF-8, compact).
+//! * Message encoding `json`: the sample as [`json::to_json`](crate::json::to_json) writes it (UTF-8, compact).
 //!   Foxglove and the `mcap` tools display and plot these without navsync.
-//! * Decoding is [`json::from_json`], exact to the bit for every field (floats are written in
+//! * Decoding is [`json::from_json`](crate::json::from_json), exact to the bit for every field (floats are written in
 //!   the shortest form that parses back to the same `f64`, NaN as `null`).
 
 use core::fmt::Debug;
