@@ -120,7 +120,8 @@ fn software_sync_finds_a_1_1_s_delay_and_reports_an_honest_std() {
     let s = run(1.1, true, true, None).summary;
     println!("{}", s.table());
     // The drive starts moving at 40 s of scenario time. With 1 Hz fixes of 0.05 m/s velocity
-    // noise, this drive carries ~9 ms (1σ) of delay information after 120 s of driving (the
+    // noise, this drive carries 6 ms (1σ, perfect IMU: `ideal_delay_bound_s`) of delay
+    // information after 120 s of driving, 9 ms for the filter with the industrial IMU (the
     // README lists the spread over seeds); the estimate must be consistent with its std from
     // then on and within 10 ms once the drive has turned a few more corners (300 s).
     let bound = ideal_delay_bound_s(&SimConfig::default_drive());
