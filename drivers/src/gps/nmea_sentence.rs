@@ -424,15 +424,24 @@ fn decode_gga(d: &str, parsed: Option<&nmea::sentences::GgaData>) -> Update {
         u.mode = Some(ModeHint::Mode(FixMode::NoFix as u8));
         return u;
     }
-    let Some(lat_lon) = lat_lon else {
-        u.mode = Some(ModeHint::Mode(FixMode::NoFix as u8));
-        return u;
-    };
-    u.lat_lon = Some(lat_lon);
-    u.alt_msl_m = u.opt_num(field(d, 9), num);
-    u.geoid_sep_m = u.opt_num(field(d, 11), num);
-    u.mode = Some(altitude_mode(u.alt_msl_m.is_some(), sats));
-    u
+    u.with_position(d, lat_lon, 11, sats)
+}
+
+impl Update {
+    /// The position part GGA and GNS share: no fix without a valid position, else the
+    /// position, the MSL altitude (field 9), the geoid separation (field `geoid_field`: 11 in
+    /// GGA, 10 in GNS) and the mode they imply.
+    fn with_position(mut self, d: &str, lat_lon: Option<(f64, f64)>, geoid_field: usize, sats: Option<u16>) -> Self {
+        let Some(lat_lon) = lat_lon else {
+            self.mode = Some(ModeHint::Mode(FixMode::NoFix as u8));
+            return self;
+        };
+        self.lat_lon = Some(lat_lon);
+        self.alt_msl_m = self.opt_num(field(d, 9), num);
+        self.geoid_sep_m = self.opt_num(field(d, geoid_field), num);
+        self.mode = Some(altitude_mode(self.alt_msl_m.is_some(), sats));
+        self
+    }
 }
 
 /// The mode a GGA/GNS position implies: 3D with an altitude from ≥ 4 satellites, gpsd's
@@ -512,15 +521,7 @@ fn decode_gns(d: &str, parsed: Option<&nmea::sentences::GnsData>) -> Update {
     }
     u.sats_used = sats;
     u.hdop = u.opt_num(field(d, 8), dop);
-    let Some(lat_lon) = lat_lon else {
-        u.mode = Some(ModeHint::Mode(FixMode::NoFix as u8));
-        return u;
-    };
-    u.lat_lon = Some(lat_lon);
-    u.alt_msl_m = u.opt_num(field(d, 9), num);
-    u.geoid_sep_m = u.opt_num(field(d, 10), num);
-    u.mode = Some(altitude_mode(u.alt_msl_m.is_some(), sats));
-    u
+    u.with_position(d, lat_lon, 10, sats)
 }
 
 /// VTG. Speed and track are used unless the FAA mode says estimated or not valid.
