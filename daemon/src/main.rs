@@ -10,10 +10,10 @@ use navsync::roles;
 use navsync_drivers::feed::{FeedArgs, Speed};
 use navsync_drivers::gps::driver::Baud;
 use navsync_drivers::imu::axes::AxisMap;
-use navsync_drivers::imu::sim_device::SimImuOutput;
 use navsync_drivers::imu::{ImuArgs, ImuSource};
-use navsync_drivers::sim::process::SimArgs;
 use navsync_shared::imu_spec::ImuPreset;
+use navsync_sim::process::SimArgs;
+use navsync_sim::xsens_imus::SimImuOutput;
 use tracing::Level;
 use tracing_subscriber::filter::Targets;
 use tracing_subscriber::prelude::*;
@@ -679,7 +679,7 @@ fn main() -> Result<()> {
                 roles::sim_estimate::run_fast(&args, &est, imu_model.is_none(), outputs)
                     .context("offline simulation")?;
             } else {
-                navsync_drivers::sim::process::run(&args).context("simulator")?;
+                navsync_sim::process::run(&args).context("simulator")?;
             }
         }
         Cmd::Demo {

@@ -7,12 +7,12 @@ use navsync::estimator::pipeline::Pipeline;
 use navsync::evaluation::{DelayTruth, Summary};
 use navsync::offline;
 use navsync::roles::estimator::EstimatorArgs;
-use navsync_drivers::sim::imu_errors::ImuPreset;
-use navsync_drivers::sim::published::PublishedStream;
-use navsync_drivers::sim::scenario::{OutageConfig, SimConfig};
-use navsync_drivers::sim::trajectory::Trajectory;
-use navsync_drivers::sim::world::World;
 use navsync_shared::samples::NavState;
+use navsync_sim::imu_errors::ImuPreset;
+use navsync_sim::published::PublishedStream;
+use navsync_sim::scenario::{OutageConfig, SimConfig};
+use navsync_sim::trajectory::Trajectory;
+use navsync_sim::world::World;
 
 struct Run {
     summary: Summary,

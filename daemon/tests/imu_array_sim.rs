@@ -7,11 +7,11 @@ use navsync::estimator::pipeline::Pipeline;
 use navsync::evaluation::{DelayTruth, Summary};
 use navsync::offline;
 use navsync::roles::estimator::EstimatorArgs;
-use navsync_drivers::sim::imu_errors::ImuPreset;
-use navsync_drivers::sim::published::PublishedStream;
-use navsync_drivers::sim::scenario::{SegmentConfig, SegmentKind, SimConfig};
-use navsync_drivers::sim::world::World;
 use navsync_shared::samples::{AnySample, ImuSample, ImuSyncReason};
+use navsync_sim::imu_errors::ImuPreset;
+use navsync_sim::published::PublishedStream;
+use navsync_sim::scenario::{SegmentConfig, SegmentKind, SimConfig};
+use navsync_sim::world::World;
 
 const HOST0: i64 = 3_000_000_000;
 

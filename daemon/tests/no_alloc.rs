@@ -7,11 +7,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use navsync::estimator::pipeline::Pipeline;
 use navsync::roles::estimator::EstimatorArgs;
-use navsync_drivers::sim::imu_errors::ImuPreset;
-use navsync_drivers::sim::published::PublishedStream;
-use navsync_drivers::sim::scenario::SimConfig;
-use navsync_drivers::sim::world::World;
 use navsync_shared::samples::{AnySample, NavStatus};
+use navsync_sim::imu_errors::ImuPreset;
+use navsync_sim::published::PublishedStream;
+use navsync_sim::scenario::SimConfig;
+use navsync_sim::world::World;
 
 struct Counting;
 

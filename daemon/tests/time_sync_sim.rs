@@ -5,11 +5,11 @@
 
 use navsync::estimator::pipeline::Pipeline;
 use navsync::roles::estimator::EstimatorArgs;
-use navsync_drivers::sim::imu_errors::ImuPreset;
-use navsync_drivers::sim::published::PublishedStream;
-use navsync_drivers::sim::scenario::SimConfig;
-use navsync_drivers::sim::world::World;
 use navsync_shared::samples::{AnySample, TimeStatus};
+use navsync_sim::imu_errors::ImuPreset;
+use navsync_sim::published::PublishedStream;
+use navsync_sim::scenario::SimConfig;
+use navsync_sim::world::World;
 
 #[test]
 fn pps_time_mapping_is_within_5_us_after_30_s() {

@@ -23,12 +23,12 @@ use navsync_drivers::gps::nmea_epoch::EpochAssembler;
 use navsync_drivers::gps::nmea_framer::LineFramer;
 use navsync_drivers::imu::output::{Extras, SampleOutput};
 use navsync_drivers::imu::sample_checks::{Candidate, DeviceClock, Limits, Sequence};
-use navsync_drivers::imu::sim_device::SimXsensImu;
 use navsync_drivers::imu::xsens_frame::{NS_PER_SAMPLE_TIME_FINE_TICK, XbusFramer, decode_mtdata2};
-use navsync_drivers::sim::nmea::{EpochReport, FixReport, write_burst};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{GnssFix, ImuSample, StampSource};
 use navsync_shared::services;
+use navsync_sim::nmea::{EpochReport, FixReport, write_burst};
+use navsync_sim::xsens_imus::SimXsensImu;
 use navsync_tests::TestEnv;
 
 struct Counting;

@@ -76,7 +76,7 @@ pub enum BenchCmd {
         /// Seconds of scenario to run (default: all of it).
         #[arg(long)]
         duration: Option<f64>,
-        /// The one-hour drive (drivers/scenarios/long_drive_1h.toml, embedded), one IMU, cost per 10 minutes.
+        /// The one-hour drive (sim/scenarios/long_drive_1h.toml, embedded), one IMU, cost per 10 minutes.
         #[arg(long, conflicts_with_all = ["scenario", "imus"])]
         hour: bool,
         /// A short run (60 s of scenario, 1 and 4 IMUs) for smoke tests.
@@ -271,7 +271,7 @@ pub fn run(cmd: BenchCmd) -> Result<(), BenchCliError> {
 }
 
 /// The one-hour drive of `navsync bench throughput --hour`.
-pub const LONG_DRIVE_1H: &str = include_str!("../../../drivers/scenarios/long_drive_1h.toml");
+pub const LONG_DRIVE_1H: &str = include_str!("../../../sim/scenarios/long_drive_1h.toml");
 
 /// Runs `navsync bench-helper WHAT`.
 pub fn run_helper(cmd: HelperCmd) -> Result<(), BenchCliError> {

@@ -2,7 +2,7 @@
 //! process, under a 1 kHz load.
 //!
 //! Processes, as `navsync demo` runs them (each under the benchmark's own iceoryx2 prefix):
-//! `navsync sim` (the embedded `drivers/scenarios/bench_1khz.toml`: every IMU at 1 kHz, GNSS at
+//! `navsync sim` (the embedded `sim/scenarios/bench_1khz.toml`: every IMU at 1 kHz, GNSS at
 //! 10 Hz at 460800 Bd) writing each IMU's Xsens MTData2 messages into a pseudo-terminal and
 //! NMEA into another, one `navsync imu --source xsens:…` driver per IMU, `navsync gps`,
 //! `navsync pps --source sim`, `navsync estimator` over all IMUs, and an independent
@@ -38,7 +38,7 @@ use serde::Serialize;
 use super::bench_util::{self, BenchEnv, Machine, Percentiles};
 
 /// The scenario of the benchmark (IMUs at 1 kHz, GNSS at 10 Hz).
-pub const BENCH_SCENARIO: &str = include_str!("../../../drivers/scenarios/bench_1khz.toml");
+pub const BENCH_SCENARIO: &str = include_str!("../../../sim/scenarios/bench_1khz.toml");
 /// Line rate of the simulated GNSS receiver in [`BENCH_SCENARIO`].
 const GNSS_BAUD: &str = "460800";
 

@@ -11,12 +11,12 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use navsync_drivers::sim::error::SimError;
-use navsync_drivers::sim::process::{SimArgs, load_config};
-use navsync_drivers::sim::published::PublishedStream;
-use navsync_drivers::sim::world::World;
 use navsync_shared::samples::AnySample;
 use navsync_shared::time::NS_PER_S;
+use navsync_sim::error::SimError;
+use navsync_sim::process::{SimArgs, load_config};
+use navsync_sim::published::PublishedStream;
+use navsync_sim::world::World;
 use serde::Serialize;
 
 use super::bench_util::{self, Machine};

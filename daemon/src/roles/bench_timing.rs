@@ -10,12 +10,12 @@
 //! and GNSS are lost (with its reported σ), the jump of the mapping when the PPS comes back
 //! (with the σ just before), and the measured receiver latency d0 against the simulated one.
 
-use navsync_drivers::sim::error::SimError;
-use navsync_drivers::sim::published::PublishedStream;
-use navsync_drivers::sim::scenario::{OutageConfig, SimConfig};
-use navsync_drivers::sim::world::World;
 use navsync_shared::samples::{AnySample, TimeState, TimeStatus};
 use navsync_shared::time::NS_PER_S;
+use navsync_sim::error::SimError;
+use navsync_sim::published::PublishedStream;
+use navsync_sim::scenario::{OutageConfig, SimConfig};
+use navsync_sim::world::World;
 
 use crate::estimator::clock_model::OscillatorNoise;
 use crate::estimator::time_sync::{TimeSync, TimeSyncConfig};

@@ -18,12 +18,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
-use navsync_drivers::imu::sim_device::{SIM_BAUD, SimImuOutput, sim_port};
-use navsync_drivers::sim::process::{SimArgs, load_config};
+use navsync_drivers::imu::sim_device::{SIM_BAUD, sim_port};
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;
 use navsync_shared::services;
+use navsync_sim::process::{SimArgs, load_config};
+use navsync_sim::xsens_imus::SimImuOutput;
 use tracing::info;
 
 use crate::evaluation::{DelayTruth, Evaluator};

@@ -10,10 +10,10 @@
 
 use std::path::Path;
 
-use navsync_drivers::sim::process::{SimArgs, load_config};
-use navsync_drivers::sim::published::PublishedStream;
-use navsync_drivers::sim::world::World;
 use navsync_shared::recording::{RecordingError, SampleRecorder};
+use navsync_sim::process::{SimArgs, load_config};
+use navsync_sim::published::PublishedStream;
+use navsync_sim::world::World;
 
 use crate::estimator::pipeline::Pipeline;
 use crate::evaluation::DelayTruth;
@@ -25,7 +25,7 @@ use crate::roles::estimator::EstimatorArgs;
 pub enum SimEstimateError {
     /// Bad scenario.
     #[error(transparent)]
-    Scenario(#[from] navsync_drivers::sim::error::SimError),
+    Scenario(#[from] navsync_sim::error::SimError),
     /// Writing the summary.
     #[error("writing {path}: {source}")]
     Io {

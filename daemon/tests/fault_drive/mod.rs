@@ -13,12 +13,12 @@
 use navsync::estimator::pipeline::Pipeline;
 use navsync::input_order::InputOrder;
 use navsync::roles::estimator::EstimatorArgs;
-use navsync_drivers::sim::imu_errors::ImuPreset;
-use navsync_drivers::sim::published::PublishedStream;
-use navsync_drivers::sim::scenario::SimConfig;
-use navsync_drivers::sim::world::World;
 use navsync_shared::earth;
 use navsync_shared::samples::{AnySample, GnssFix, NavState, NavStatus, SimTruth};
+use navsync_sim::imu_errors::ImuPreset;
+use navsync_sim::published::PublishedStream;
+use navsync_sim::scenario::SimConfig;
+use navsync_sim::world::World;
 
 /// Host time (`CLOCK_MONOTONIC`, ns) of scenario time 0.
 pub const HOST0: i64 = 3_000_000_000;

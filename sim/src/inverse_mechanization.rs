@@ -218,11 +218,11 @@ pub fn increments_split(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::quadrature::GL8;
-    use crate::sim::scenario::VibrationConfig;
-    use crate::sim::scenario::{SegmentConfig, SegmentKind, StartConfig};
-    use crate::sim::trajectory::tests::vibrating_traj as default_traj;
-    use crate::sim::vibration::Vibration;
+    use crate::quadrature::GL8;
+    use crate::scenario::VibrationConfig;
+    use crate::scenario::{SegmentConfig, SegmentKind, StartConfig};
+    use crate::trajectory::tests::vibrating_traj as default_traj;
+    use crate::vibration::Vibration;
 
     /// 4th-order central difference (error h⁴ f⁽⁵⁾/30).
     fn fd4<T>(f: impl Fn(f64) -> T, t: f64, h: f64) -> T
@@ -254,7 +254,7 @@ mod tests {
             &start,
             &[seg],
             Vibration::new(&VibrationConfig::default(), 3),
-            crate::sim::trajectory::POSITION_STEP_S,
+            crate::trajectory::POSITION_STEP_S,
         )
     }
 

@@ -328,8 +328,8 @@ fn oscillator_span_s(cfg: &SimConfig, duration_s: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::imu_errors::ImuPreset;
-    use crate::sim::nmea::tests::parse_burst;
+    use crate::imu_errors::ImuPreset;
+    use crate::nmea::tests::parse_burst;
     use nalgebra::Vector3;
     use navsync_shared::earth;
     use navsync_shared::samples::StampSource;
@@ -599,12 +599,12 @@ mod tests {
     fn outage_without_pps_silences_edges_and_fix() {
         let mut cfg = short_cfg(100.0);
         cfg.gnss.outages = vec![
-            crate::sim::scenario::OutageConfig {
+            crate::scenario::OutageConfig {
                 start_s: 50.0,
                 duration_s: 10.0,
                 pps_continues: false,
             },
-            crate::sim::scenario::OutageConfig {
+            crate::scenario::OutageConfig {
                 start_s: 70.0,
                 duration_s: 5.0,
                 pps_continues: true,
@@ -635,7 +635,7 @@ mod tests {
     #[test]
     fn pps_outage_silences_edges_only() {
         let mut cfg = short_cfg(60.0);
-        cfg.clock.pps_outages = vec![crate::sim::scenario::PpsOutageConfig {
+        cfg.clock.pps_outages = vec![crate::scenario::PpsOutageConfig {
             start_s: 20.0,
             duration_s: 15.0,
         }];

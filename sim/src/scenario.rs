@@ -4,7 +4,7 @@
 //!
 //! Units are SI throughout (s, m, m/s, Hz) except angles in configuration files, which are
 //! in degrees (`*_deg`). The layout of a scenario file is documented in
-//! `drivers/scenarios/default_drive.toml`, which is also the embedded default
+//! `sim/scenarios/default_drive.toml`, which is also the embedded default
 //! ([`SimConfig::default_drive`]).
 //!
 //! Errors name the file, the line and the dotted field (`trajectory.segment[3].to_speed_mps`)
@@ -22,12 +22,12 @@ use super::imu_errors::ImuPreset;
 use navsync_shared::config::SourceMap;
 
 /// Origin label of the embedded default scenario.
-pub const DEFAULT_DRIVE_ORIGIN: &str = "drivers/scenarios/default_drive.toml";
+pub const DEFAULT_DRIVE_ORIGIN: &str = "sim/scenarios/default_drive.toml";
 
 /// Origin reported for values set through the override setters.
 pub const OVERRIDES_ORIGIN: &str = "overrides";
 
-const DEFAULT_DRIVE_TOML: &str = include_str!("../../scenarios/default_drive.toml");
+const DEFAULT_DRIVE_TOML: &str = include_str!("../scenarios/default_drive.toml");
 
 /// The complete description of a simulated world. Same configuration and seed, same world.
 #[derive(Debug, Clone, Deserialize)]
@@ -460,7 +460,7 @@ impl SimConfig {
         Self::from_toml_str(&text, &origin)
     }
 
-    /// The embedded default scenario (`drivers/scenarios/default_drive.toml`): a ~10 minute
+    /// The embedded default scenario (`sim/scenarios/default_drive.toml`): a ~10 minute
     /// car drive with a static start, stops, turns both ways, speed changes and a gentle
     /// climb and descent.
     ///

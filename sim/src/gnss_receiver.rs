@@ -182,9 +182,9 @@ fn ceil_to(x: i64, step: i64) -> i64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::nmea::tests::{parse_angle, parse_burst};
-    use crate::sim::scenario::{OutageConfig, SimConfig};
-    use crate::sim::trajectory::tests::default_traj;
+    use crate::nmea::tests::{parse_angle, parse_burst};
+    use crate::scenario::{OutageConfig, SimConfig};
+    use crate::trajectory::tests::default_traj;
 
     const U0: i64 = 1_790_000_000_250_000_000;
 

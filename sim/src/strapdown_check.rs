@@ -9,7 +9,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use navsync_shared::earth;
 
 use super::{SimEvent, World};
-use crate::sim::scenario::SimConfig;
+use crate::scenario::SimConfig;
 
 #[derive(Debug, Clone, Copy)]
 struct Nav {

@@ -520,7 +520,7 @@ fn hermite(a: &Node, b: &Node, h: f64, u: f64) -> [f64; 3] {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::sim::scenario::{SegmentKind, SimConfig};
+    use crate::scenario::{SegmentKind, SimConfig};
 
     /// The default drive's smooth path (no vibration).
     pub(crate) fn default_traj() -> Trajectory {

@@ -15,9 +15,9 @@ use navsync_shared::services;
 use navsync_shared::time::NS_PER_S;
 
 use super::world::{SimEvent, World};
-use crate::gps::driver::IDLE_FLUSH;
-use crate::gps::nmea_epoch::EpochAssembler;
-use crate::gps::nmea_framer::LineFramer;
+use navsync_drivers::gps::driver::IDLE_FLUSH;
+use navsync_drivers::gps::nmea_epoch::EpochAssembler;
+use navsync_drivers::gps::nmea_framer::LineFramer;
 
 /// One published sample.
 #[derive(Debug, Clone)]

@@ -10,7 +10,7 @@
 //!
 //! With `--imu-output xsens` the IMU samples are not published: each becomes an Xsens MTData2
 //! message written into that IMU's pseudo-terminal at the sample's stamp time
-//! ([`crate::imu::sim_device`]), and `navsync imu --source xsens:…` drivers publish them.
+//! ([`crate::xsens_imus`]), and `navsync imu --source xsens:…` drivers publish them.
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -27,8 +27,8 @@ use super::error::SimError;
 use super::imu_errors::ImuPreset;
 use super::scenario::SimConfig;
 use super::world::{SimEvent, World};
-use crate::imu::sim_device::{SimImuOutput, SimImuSink, SimImuSinkError};
-use crate::pty::Pty;
+use crate::xsens_imus::{SimImuOutput, SimImuSink, SimImuSinkError};
+use navsync_drivers::pty::Pty;
 
 /// Command-line overrides of the scenario.
 #[derive(Debug, Clone, Default)]
