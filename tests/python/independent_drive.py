@@ -635,7 +635,7 @@ def main(argv=None):
         return "./" + name if args.yaml_relative else os.path.abspath(os.path.join(out, name))
 
     def vec(x, f="%.6f"):
-        return "[ " + ", ".join(f % v for v in x) + " ]"
+        return "[ " + ", ".join(f % (v + 0.0) for v in x) + " ]"  # no "-0.0"
 
     bg0 = math.hypot(p["gyro_bias"], p["gyro_bias_instab"])
     ba0 = math.hypot(p["accel_bias"], p["accel_bias_instab"])
