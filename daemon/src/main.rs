@@ -138,8 +138,8 @@ struct EstimatorFlags {
 
 impl EstimatorFlags {
     /// The estimator's arguments (defaults for what the command line does not set).
-    fn args(self) -> roles::estimator::EstimatorArgs {
-        roles::estimator::EstimatorArgs {
+    fn args(self) -> navsync_estimator::settings::Settings {
+        navsync_estimator::settings::Settings {
             gnss_ids: self.gnss,
             pps_ids: self.pps,
             imu_ids: self.imus,
@@ -657,7 +657,7 @@ fn main() -> Result<()> {
                 no_vibration,
             };
             if fast {
-                let est = roles::estimator::EstimatorArgs {
+                let est = navsync_estimator::settings::Settings {
                     gnss_ids: vec!["0".into()],
                     pps_ids: vec!["0".into()],
                     imu_ids: vec!["0".into()],
@@ -790,7 +790,7 @@ fn main() -> Result<()> {
             let args = roles::analyze::GnssDelayArgs {
                 recording: recording.clone(),
                 segments,
-                est: roles::estimator::EstimatorArgs {
+                est: navsync_estimator::settings::Settings {
                     imu_ids: imus,
                     imu_model,
                     gnss_vel_std_mps: gnss_vel_std,

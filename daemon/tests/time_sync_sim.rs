@@ -3,8 +3,8 @@
 //! time of every truth instant is within 5 µs of the true UTC, and the reported 1-sigma is
 //! honest (the error stays within 4 sigma).
 
-use navsync::estimator::pipeline::Pipeline;
-use navsync::roles::estimator::EstimatorArgs;
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 use navsync_shared::samples::{AnySample, TimeStatus};
 use navsync_sim::imu_errors::ImuPreset;
 use navsync_sim::published::PublishedStream;
@@ -19,7 +19,7 @@ fn pps_time_mapping_is_within_5_us_after_30_s() {
     cfg.set_pps_jitter_s(1e-6);
     let host0 = 7_000_000_000i64;
     let world = World::new(&cfg, host0, 1_790_000_000_000_000_000).expect("world");
-    let args = EstimatorArgs {
+    let args = Settings {
         gnss_ids: vec!["0".into()],
         pps_ids: vec!["0".into()],
         imu_ids: vec!["0".into()],

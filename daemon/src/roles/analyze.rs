@@ -15,10 +15,10 @@ use navsync_shared::recording::sample_file::SampleReader;
 use navsync_shared::samples::AnySample;
 use navsync_shared::services;
 
-use crate::estimator::pipeline::Pipeline;
-use crate::evaluation::DelayTruth;
-use crate::offline::{self, Output};
-use crate::roles::estimator::EstimatorArgs;
+use navsync_estimator::evaluation::DelayTruth;
+use navsync_estimator::offline::{self, Output};
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 
 /// Settings of `navsync analyze gnss-delay`.
 #[derive(Debug, Clone)]
@@ -28,7 +28,7 @@ pub struct GnssDelayArgs {
     /// Segments (start, end) in seconds since the first sample; empty: the whole recording.
     pub segments: Vec<(f64, f64)>,
     /// Estimator settings (software sync is forced).
-    pub est: EstimatorArgs,
+    pub est: Settings,
 }
 
 /// Errors of the analysis.

@@ -20,9 +20,9 @@ use navsync_sim::world::World;
 use serde::Serialize;
 
 use super::bench_util::{self, Machine};
-use crate::estimator::pipeline::Pipeline;
-use crate::input_order::InputOrder;
-use crate::roles::estimator::EstimatorArgs;
+use navsync_estimator::input_order::InputOrder;
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 
 /// Default length of a cost block, s of scenario time.
 pub const BLOCK_S: f64 = 600.0;
@@ -102,7 +102,7 @@ pub fn run_case(args: &ThroughputArgs, imus: usize) -> Result<ThroughputCase, Si
         imus: Some(imus),
         ..Default::default()
     })?;
-    let est = EstimatorArgs {
+    let est = Settings {
         imu_ids: (0..cfg.imu.count).map(|i| i.to_string()).collect(),
         imu_model: cfg.imu.preset,
         gnss_vel_std_mps: cfg.gnss.velocity_sigma_mps.max(0.01),

@@ -17,8 +17,8 @@ use navsync_sim::published::PublishedStream;
 use navsync_sim::scenario::{OutageConfig, SimConfig};
 use navsync_sim::world::World;
 
-use crate::estimator::clock_model::OscillatorNoise;
-use crate::estimator::time_sync::{TimeSync, TimeSyncConfig};
+use navsync_estimator::time::clock_model::OscillatorNoise;
+use navsync_estimator::time::time_sync::{TimeSync, TimeSyncConfig};
 
 /// One benchmark case.
 #[derive(Debug, Clone)]

@@ -27,7 +27,7 @@ use navsync_sim::process::{SimArgs, load_config};
 use navsync_sim::xsens_imus::SimImuOutput;
 use tracing::info;
 
-use crate::evaluation::{DelayTruth, Evaluator};
+use navsync_estimator::evaluation::{DelayTruth, Evaluator};
 
 /// Settings of `navsync demo`.
 #[derive(Debug, Clone)]

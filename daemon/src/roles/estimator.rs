@@ -6,13 +6,12 @@
 //! services (IMUs first, then PPS and GNSS) into [`InputOrder`], which hands them to the
 //! pipeline in an order that depends on the samples alone (a PPS edge or fix goes in right
 //! before the first reference-IMU sample stamped a fixed hold after it; see
-//! [`crate::input_order`]), so the results are the same whatever the scheduling, and
+//! [`navsync_estimator::input_order`]), so the results are the same whatever the scheduling, and
 //! `navsync replay --estimate` of a recording of the same samples reproduces them bit for bit.
 
 use std::time::Duration;
 
 use navsync_shared::health_reporter::HealthReporter;
-use navsync_shared::imu_spec::ImuPreset;
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::latency_histogram::LatencyHistogram;
 use navsync_shared::samples::{AnySample, GnssFix, ImuSample, NavState, NavStatus, PpsEdge, TimeState};
@@ -21,149 +20,9 @@ use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
 
 use super::liveness::{Change, Liveness, STALE_MARGIN_NS};
-use crate::estimator::error_state::ProcessNoise;
-use crate::estimator::gnss_fusion::GnssAccuracy;
-use crate::estimator::imu_array::{ArrayConfig, UnitConfig};
-use crate::estimator::imu_offset::OffsetConfig;
-use crate::estimator::navigator::NavConfig;
-use crate::estimator::pipeline::{Pipeline, PipelineConfig};
-use crate::estimator::time_sync::TimeSyncConfig;
-use crate::input_order::InputOrder;
-use nalgebra::{Matrix3, Vector3};
-
-/// Command-line settings of the estimator process.
-#[derive(Debug, Clone)]
-pub struct EstimatorArgs {
-    /// GNSS receiver ids to subscribe to.
-    pub gnss_ids: Vec<String>,
-    /// PPS source ids.
-    pub pps_ids: Vec<String>,
-    /// IMU ids.
-    pub imu_ids: Vec<String>,
-    /// Ignore PPS: software synchronisation from NMEA receipt times.
-    pub software_sync: bool,
-    /// IMU class (process noise of the filter).
-    pub imu_model: ImuPreset,
-    /// Estimate the GNSS delay Δ.
-    pub estimate_delay: bool,
-    /// 1-sigma of the receiver's velocity per axis, m/s (NMEA does not report it).
-    pub gnss_vel_std_mps: f64,
-    /// Estimate the IMUs' time offsets (else they are taken as zero: an uncompensated array).
-    pub estimate_imu_offsets: bool,
-    /// Mountings by IMU id (the configuration file's `[imu.ID].mounting`); an IMU without one
-    /// is mounted as the body frame at its origin.
-    pub imu_mountings: std::collections::BTreeMap<String, ImuMounting>,
-    /// GNSS antenna position in the body frame (FRD), m.
-    pub gnss_lever_arm_m: [f64; 3],
-    /// Host oscillator Allan deviations at 1 s (white FM, random-walk FM); default a TCXO.
-    pub oscillator_adev_1s: Option<(f64, f64)>,
-}
-
-/// Where one IMU sits in the body frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ImuMounting {
-    /// Rotation IMU axes → body (FRD): x_body = C_b^s · x_imu.
-    pub c_b_s: [[f64; 3]; 3],
-    /// Position of the IMU in the body frame, m.
-    pub lever_b_m: [f64; 3],
-}
-
-impl Default for EstimatorArgs {
-    /// One receiver, PPS source and IMU with id "0"; hardware sync; industrial IMU; Δ estimated.
-    fn default() -> Self {
-        Self {
-            gnss_ids: vec!["0".into()],
-            pps_ids: vec!["0".into()],
-            imu_ids: vec!["0".into()],
-            software_sync: false,
-            imu_model: ImuPreset::Industrial,
-            estimate_delay: true,
-            gnss_vel_std_mps: GnssAccuracy::default().vel_std_mps,
-            estimate_imu_offsets: true,
-            imu_mountings: Default::default(),
-            gnss_lever_arm_m: [0.0; 3],
-            oscillator_adev_1s: None,
-        }
-    }
-}
-
-impl EstimatorArgs {
-    /// The IMU array: every IMU of `imu_ids` with the IMU class's noise, mounted as the body
-    /// frame at its origin (mountings and lever arms come with the configuration file).
-    pub fn array_config(&self) -> ArrayConfig {
-        let spec = self.imu_model.spec();
-        let (bg, ba) = (spec.gyro.bias_sigma.max(1e-6), spec.accel.bias_sigma.max(1e-5));
-        let gm_rw = |sigma: f64, tau: f64| (2.0 * 2.0 * sigma * sigma / tau).sqrt();
-        ArrayConfig {
-            units: self
-                .imu_ids
-                .iter()
-                .map(|id| UnitConfig {
-                    id: id.clone(),
-                    c_b_s: self
-                        .imu_mountings
-                        .get(id)
-                        .map_or_else(Matrix3::identity, |m| Matrix3::from_fn(|r, c| m.c_b_s[r][c])),
-                    lever_b_m: self
-                        .imu_mountings
-                        .get(id)
-                        .map_or_else(Vector3::zeros, |m| Vector3::from(m.lever_b_m)),
-                    gyro_noise_density: spec.gyro.noise_density.max(1e-7),
-                    accel_noise_density: spec.accel.noise_density.max(1e-6),
-                })
-                .collect(),
-            reference: 0,
-            order: 3,
-            offset: OffsetConfig {
-                td_prior_s: 0.0,
-                // Uncompensated: the offsets are held at zero (a vanishing prior, no random walk).
-                td_prior_std_s: if self.estimate_imu_offsets { 0.1 } else { 1e-12 },
-                td_rw: if self.estimate_imu_offsets { 1e-6 } else { 0.0 },
-                // Relative biases of two IMUs: √2 times one IMU's spread.
-                gyro_bias_std: std::f64::consts::SQRT_2 * bg,
-                accel_bias_std: std::f64::consts::SQRT_2 * ba,
-                gyro_bias_rw: gm_rw(spec.gyro.bias_instability_sigma, spec.gyro.bias_correlation_s).max(1e-9),
-                accel_bias_rw: gm_rw(spec.accel.bias_instability_sigma, spec.accel.bias_correlation_s).max(1e-8),
-                gyro_scale_std: std::f64::consts::SQRT_2 * spec.gyro.scale_factor_sigma.max(1e-5),
-                accel_scale_std: std::f64::consts::SQRT_2 * spec.accel.scale_factor_sigma.max(1e-5),
-                min_information_ratio: 4.0,
-            },
-            admit_td_std_s: 3e-4,
-            stale_after_s: 0.05,
-            disagree_after: 20,
-            agree_after: 400,
-            derivative_half_width: 20,
-            derivative_half_width_fast: 3,
-        }
-    }
-
-    /// The estimator configuration these arguments describe.
-    pub fn pipeline_config(&self) -> PipelineConfig {
-        let mut noise = ProcessNoise::from_spec(&self.imu_model.spec());
-        noise.estimate_delay = self.estimate_delay;
-        PipelineConfig {
-            time: TimeSyncConfig {
-                software_sync: self.software_sync,
-                noise: self.oscillator_adev_1s.map_or_else(Default::default, |(w, r)| {
-                    crate::estimator::clock_model::OscillatorNoise::from_allan(w, r)
-                }),
-                ..Default::default()
-            },
-            nav: NavConfig {
-                lever_arm_b_m: Vector3::from(self.gnss_lever_arm_m),
-                ..NavConfig::with_noise(noise)
-            },
-            gnss: GnssAccuracy {
-                vel_std_mps: self.gnss_vel_std_mps,
-                ..GnssAccuracy::default()
-            },
-            reference_imu: self.imu_ids.first().cloned().unwrap_or_else(|| "0".into()),
-            array: self.array_config(),
-            software_delay_prior: (0.5, 0.5),
-            hardware_delay_prior: (0.0, 0.02),
-        }
-    }
-}
+use navsync_estimator::input_order::InputOrder;
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 
 /// How often the estimator's reclaimer thread ([`super::reclaimer`]) removes dead nodes, so a
 /// killed driver's publisher no longer counts.
@@ -208,7 +67,7 @@ pub enum EstimatorError {
 }
 
 /// Runs the estimator until SIGINT/SIGTERM.
-pub fn run(args: &EstimatorArgs) -> Result<(), EstimatorError> {
+pub fn run(args: &Settings) -> Result<(), EstimatorError> {
     let _span = info_span!("estimator").entered();
     let node = IpcNode::new("estimator")?;
     // Dead drivers' publishers stop counting once their node is reclaimed: off this loop.

@@ -12,8 +12,8 @@
 //!
 //! `--estimate` feeds the samples the live estimator subscribes to (`--gnss`, `--pps`,
 //! `--imus` ids) in recorded order through [`offline::run_ordered`] with the pipeline the live
-//! process builds from the same flags (`EstimatorArgs::pipeline_config`), as fast as the CPU
-//! allows. Both go through [`crate::input_order`], so the `NavState`s are bit-identical to the
+//! process builds from the same flags (`Settings::pipeline_config`), as fast as the CPU
+//! allows. Both go through [`navsync_estimator::input_order`], so the `NavState`s are bit-identical to the
 //! live process's for the same samples, and bit-identical from run to run.
 
 use std::collections::HashSet;
@@ -32,10 +32,10 @@ use navsync_shared::services::{self, ServiceKind};
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
 
-use crate::estimator::pipeline::Pipeline;
-use crate::evaluation::{DelayTruth, Summary};
-use crate::offline::{self, Output};
-use crate::roles::estimator::EstimatorArgs;
+use navsync_estimator::evaluation::{DelayTruth, Summary};
+use navsync_estimator::offline::{self, Output};
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 
 /// Replay speed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -241,7 +241,7 @@ pub struct EstimateArgs {
     /// The recording.
     pub input: PathBuf,
     /// The estimator's settings, as for the live process.
-    pub est: EstimatorArgs,
+    pub est: Settings,
     /// Write NavState and TimeState here.
     pub out: Option<PathBuf>,
     /// Write `out` in KF-GINS's result layout instead of MCAP ([`crate::roles::kf_gins::ResultWriter`]).

@@ -20,11 +20,11 @@ use navsync_shared::recording::{RecordingError, SampleReader};
 use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;
 
-use crate::estimator::pipeline::Pipeline;
-use crate::evaluation::DelayTruth;
-use crate::offline::{self, Output};
-use crate::roles::estimator::EstimatorArgs;
 use crate::roles::eval::{self, TrajPoint, Trajectory};
+use navsync_estimator::evaluation::DelayTruth;
+use navsync_estimator::offline::{self, Output};
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 
 /// Settings of `navsync report`.
 #[derive(Debug, Clone)]
@@ -36,7 +36,7 @@ pub struct ReportArgs {
     /// Run the estimator even when the recording has navigation states.
     pub estimate: bool,
     /// Estimator settings when it runs.
-    pub est: EstimatorArgs,
+    pub est: Settings,
 }
 
 /// Errors of `navsync report`.

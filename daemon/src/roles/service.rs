@@ -20,7 +20,7 @@ use navsync_drivers::pps::{PpsArgs, SourceSpec};
 use navsync_shared::config::{BaudSetting, ConfigError, Loaded};
 use navsync_shared::imu_spec::ImuPreset;
 
-use super::estimator::{EstimatorArgs, ImuMounting};
+use navsync_estimator::settings::{ImuMounting, Settings};
 
 /// Whether the flag `id` was given on the command line (or by an environment variable), as
 /// opposed to taking its default.
@@ -136,7 +136,7 @@ pub fn imu_args(
 
 /// `navsync estimator`: flags, else `[estimator]`/`[timing]`; mountings and the antenna lever
 /// arm always come from the file (there are no flags for them).
-pub fn estimator_args(cfg: &Loaded, m: Option<&ArgMatches>, mut a: EstimatorArgs) -> Result<EstimatorArgs> {
+pub fn estimator_args(cfg: &Loaded, m: Option<&ArgMatches>, mut a: Settings) -> Result<Settings> {
     let c = &cfg.config;
     let e = &c.estimator;
     if !given(m, "gnss")
@@ -255,7 +255,7 @@ pub fn check_config(explicit: Option<&Path>) -> Result<()> {
             imu_axes(&cfg, id, axes)?;
         }
     }
-    let est = estimator_args(&cfg, None, EstimatorArgs::default())?;
+    let est = estimator_args(&cfg, None, Settings::default())?;
     let mut warnings = Vec::new();
     for (kind, ids, known) in [
         ("gnss", &est.gnss_ids, c.gps.keys().collect::<Vec<_>>()),
@@ -419,7 +419,7 @@ mod tests {
         let g = gps_args(&cfg, None, Some("/dev/b".into()), Baud::Fixed(9600), "0".into()).unwrap();
         assert_eq!(g.port, "/dev/b");
         assert!(gps_args(&cfg, None, None, Baud::Fixed(9600), "1".into()).is_err());
-        let e = estimator_args(&cfg, None, EstimatorArgs::default()).unwrap();
+        let e = estimator_args(&cfg, None, Settings::default()).unwrap();
         assert_eq!(e.imu_model, ImuPreset::Consumer);
         assert_eq!(e.gnss_lever_arm_m, [1.0, 2.0, 3.0]);
         assert_eq!(e.imu_mountings["0"].lever_b_m, [0.5, 0.0, 0.0]);

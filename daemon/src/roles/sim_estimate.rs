@@ -15,10 +15,10 @@ use navsync_sim::process::{SimArgs, load_config};
 use navsync_sim::published::PublishedStream;
 use navsync_sim::world::World;
 
-use crate::estimator::pipeline::Pipeline;
-use crate::evaluation::DelayTruth;
-use crate::offline;
-use crate::roles::estimator::EstimatorArgs;
+use navsync_estimator::evaluation::DelayTruth;
+use navsync_estimator::offline;
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 
 /// Errors of the offline simulation.
 #[derive(Debug, thiserror::Error)]
@@ -54,7 +54,7 @@ pub struct FastOutputs<'a> {
 /// `model_from_sim`: tell the filter the simulated IMU preset and receiver velocity noise.
 pub fn run(
     sim: &SimArgs,
-    est: &EstimatorArgs,
+    est: &Settings,
     model_from_sim: bool,
     summary_json: Option<&Path>,
 ) -> Result<(), SimEstimateError> {
@@ -74,7 +74,7 @@ pub fn run(
 /// time when given) and estimates and/or records them.
 pub fn run_fast(
     sim: &SimArgs,
-    est: &EstimatorArgs,
+    est: &Settings,
     model_from_sim: bool,
     outputs: FastOutputs<'_>,
 ) -> Result<(), SimEstimateError> {

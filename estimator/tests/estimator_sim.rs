@@ -3,10 +3,10 @@
 //! Δ state is worth, a 30 s GNSS outage in a turn, and bit-identical reruns. The bounds are
 //! looser than the README's benchmark figures but still fail on a real regression.
 
-use navsync::estimator::pipeline::Pipeline;
-use navsync::evaluation::{DelayTruth, Summary};
-use navsync::offline;
-use navsync::roles::estimator::EstimatorArgs;
+use navsync_estimator::evaluation::{DelayTruth, Summary};
+use navsync_estimator::offline;
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 use navsync_shared::samples::NavState;
 use navsync_sim::imu_errors::ImuPreset;
 use navsync_sim::published::PublishedStream;
@@ -42,7 +42,7 @@ fn run_with(
         });
     }
     let world = World::new(&cfg, 3_000_000_000, 1_790_000_000_000_000_000).expect("world");
-    let args = EstimatorArgs {
+    let args = Settings {
         gnss_ids: vec!["0".into()],
         pps_ids: vec!["0".into()],
         imu_ids: vec!["0".into()],

@@ -11,7 +11,7 @@
 mod fault_drive;
 
 use fault_drive::{ErrorTrack, Event, UTC0, displace_fix, drive, estimator_args, scenario, t_s};
-use navsync::estimator::navigator::RESET_AFTER_REJECTS;
+use navsync_estimator::nav::navigator::RESET_AFTER_REJECTS;
 use navsync_shared::samples::{AnySample, NavStatus};
 use navsync_shared::time::NS_PER_S;
 use std::sync::OnceLock;

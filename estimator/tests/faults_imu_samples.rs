@@ -75,7 +75,7 @@ struct Injected {
     gaps: u64,
 }
 
-fn run(end_s: f64, inject: bool) -> (ErrorTrack, Injected, navsync::estimator::pipeline::Pipeline) {
+fn run(end_s: f64, inject: bool) -> (ErrorTrack, Injected, navsync_estimator::pipeline::Pipeline) {
     let spec = ImuPreset::Industrial.spec();
     let (gyro_fs, accel_fs) = (spec.gyro.range, spec.accel.range);
     let mut n = Injected::default();

@@ -9,7 +9,7 @@
 //! drive, plus the vertical channel's instability (time constant ≈ 570 s) acting on it.
 
 use nalgebra::Vector3;
-use navsync::estimator::mechanization::{ImuIncrement, Pva, propagate};
+use navsync_estimator::nav::mechanization::{ImuIncrement, Pva, propagate};
 use navsync_shared::earth;
 use navsync_sim::imu_errors::ImuPreset;
 use navsync_sim::scenario::SimConfig;

@@ -10,9 +10,9 @@
 
 #![allow(dead_code)]
 
-use navsync::estimator::pipeline::Pipeline;
-use navsync::input_order::InputOrder;
-use navsync::roles::estimator::EstimatorArgs;
+use navsync_estimator::input_order::InputOrder;
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 use navsync_shared::earth;
 use navsync_shared::samples::{AnySample, GnssFix, NavState, NavStatus, SimTruth};
 use navsync_sim::imu_errors::ImuPreset;
@@ -43,8 +43,8 @@ pub fn scenario() -> SimConfig {
 
 /// The estimator of `navsync estimator` for [`scenario`]: hardware sync, industrial IMU model,
 /// Δ estimated, the simulated receiver's velocity noise.
-pub fn estimator_args() -> EstimatorArgs {
-    EstimatorArgs {
+pub fn estimator_args() -> Settings {
+    Settings {
         imu_model: ImuPreset::Industrial,
         gnss_vel_std_mps: 0.05,
         ..Default::default()
@@ -65,7 +65,7 @@ pub enum Event<'a> {
 /// navigation states and truth instants with the pipeline. Returns the pipeline (counters).
 pub fn drive(
     cfg: &SimConfig,
-    args: &EstimatorArgs,
+    args: &Settings,
     end_s: f64,
     mut edit: impl FnMut(AnySample, &mut Vec<AnySample>),
     mut observe: impl FnMut(&mut Pipeline, Event<'_>),

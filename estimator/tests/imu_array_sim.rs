@@ -2,11 +2,11 @@
 //! the fused virtual IMU has the noise of four IMUs averaged, and an IMU that stops or
 //! disagrees leaves the array with its reason and comes back when healthy.
 
-use navsync::estimator::imu_array::{ImuArray, VirtualSample};
-use navsync::estimator::pipeline::Pipeline;
-use navsync::evaluation::{DelayTruth, Summary};
-use navsync::offline;
-use navsync::roles::estimator::EstimatorArgs;
+use navsync_estimator::array::imu_array::{ImuArray, VirtualSample};
+use navsync_estimator::evaluation::{DelayTruth, Summary};
+use navsync_estimator::offline;
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 use navsync_shared::samples::{AnySample, ImuSample, ImuSyncReason};
 use navsync_sim::imu_errors::ImuPreset;
 use navsync_sim::published::PublishedStream;
@@ -15,8 +15,8 @@ use navsync_sim::world::World;
 
 const HOST0: i64 = 3_000_000_000;
 
-fn consumer_args() -> EstimatorArgs {
-    EstimatorArgs {
+fn consumer_args() -> Settings {
+    Settings {
         imu_ids: (0..4).map(|i| i.to_string()).collect(),
         imu_model: ImuPreset::Consumer,
         gnss_vel_std_mps: 0.05,

@@ -5,8 +5,8 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use navsync::estimator::pipeline::Pipeline;
-use navsync::roles::estimator::EstimatorArgs;
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
 use navsync_shared::samples::{AnySample, NavStatus};
 use navsync_sim::imu_errors::ImuPreset;
 use navsync_sim::published::PublishedStream;
@@ -47,7 +47,7 @@ fn no_heap_allocation_per_sample_in_steady_state() {
         .take_while(|p| p.delivered_ns - host0 < 180_000_000_000)
         .map(|p| p.sample)
         .collect();
-    let mut p = Pipeline::new(EstimatorArgs::default().pipeline_config());
+    let mut p = Pipeline::new(Settings::default().pipeline_config());
     let feed = |p: &mut Pipeline, s: &AnySample| match s {
         AnySample::Imu(x) => p.on_imu(x).map(|n| n.status),
         AnySample::GnssFix(f) => {

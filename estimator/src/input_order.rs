@@ -56,7 +56,7 @@
 //! A reference IMU that stops while others go on (its driver died): once another IMU's
 //! samples are [`REFERENCE_SILENT_NS`] ahead of the last reference sample, samples are due up
 //! to that lag behind the newest IMU sample, so the estimator sees the reference go stale and
-//! hands the reference over to a live IMU ([`crate::estimator::imu_array`]); the consumer then
+//! hands the reference over to a live IMU ([`crate::array::imu_array`]); the consumer then
 //! tells the order the new reference ([`InputOrder::set_reference`]) and it releases samples
 //! with no lag again. Both rules depend on the samples only.
 

@@ -11,9 +11,10 @@ use std::time::{Duration, Instant};
 use navsync_shared::samples::{AnySample, NavState, TimeState};
 use navsync_shared::time::NS_PER_S;
 
-use crate::estimator::pipeline::Pipeline;
 use crate::evaluation::{DelayTruth, Evaluator, Summary};
 use crate::input_order::InputOrder;
+use crate::pipeline::Pipeline;
+use crate::settings::Settings;
 
 /// What an offline run produced.
 pub struct OfflineRun {
@@ -31,6 +32,28 @@ pub enum Output<'a> {
     /// time (live: the host clock when published), so time states differ from the live ones
     /// in that field and in how many there are; navigation states do not.
     Time(&'a TimeState),
+}
+
+/// Builds the estimator `settings` describe and runs it over `samples` (each with a tag `T`,
+/// e.g. its recording time) in the canonical input order of its reference IMU: the one entry
+/// point of every offline tool. Outputs as for [`run_ordered`].
+pub fn estimate<T, I: IntoIterator<Item = (AnySample, T)>>(
+    settings: &Settings,
+    samples: I,
+    time_states: bool,
+    on_output: impl FnMut(Output<'_>, &T),
+) -> OfflineRun {
+    let cfg = settings.pipeline_config();
+    let reference = cfg.reference_imu.clone();
+    let mut pipeline = Pipeline::new(cfg);
+    run_ordered(
+        &mut pipeline,
+        Some(&reference),
+        samples,
+        settings.delay_truth(),
+        time_states,
+        on_output,
+    )
 }
 
 /// Feeds `samples` to `pipeline`; every navigation state goes to `on_nav`. The reference

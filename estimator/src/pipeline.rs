@@ -11,10 +11,10 @@
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{GnssFix, ImuSample, NavState, PpsEdge, TimeState, TimeStatus};
 
-use super::gnss_fusion::{self, GnssAccuracy};
-use super::imu_array::{ArrayConfig, ImuArray};
-use super::navigator::{NavConfig, Navigator};
-use super::time_sync::{TimeSync, TimeSyncConfig};
+use crate::array::imu_array::{ArrayConfig, ImuArray};
+use crate::nav::gnss_fusion::{self, GnssAccuracy};
+use crate::nav::navigator::{NavConfig, Navigator};
+use crate::time::time_sync::{TimeSync, TimeSyncConfig};
 
 /// Mechanization steps of the output catch-up after a correction done per `NavState`
 /// ([`Pipeline::catch_up`]): a 1.5 s horizon at 1 kHz (1500 steps) reaches the output 8
@@ -59,7 +59,7 @@ pub struct PipelineCounters {
     /// Fixes held back while the PPS clock was acquiring.
     pub fixes_waiting_for_time: u64,
     /// IMU samples rejected by the array (non-finite values or interval, time going backwards,
-    /// saturated: [`ArrayCounters`](super::imu_array::ArrayCounters) says which). A rejected
+    /// saturated: [`ArrayCounters`](crate::array::imu_array::ArrayCounters) says which). A rejected
     /// sample yields no `NavState`; the next accepted one bridges its interval.
     pub imu_invalid: u64,
 }

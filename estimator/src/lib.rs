@@ -1,0 +1,30 @@
+//! # navsync-estimator
+//!
+//! The functional core of navsync: plain synchronous state machines fed with time-stamped
+//! samples, with no IPC, clocks, threads or files. The `navsync estimator` process, the
+//! offline tools (`replay --estimate`, `sim --fast --estimate`, `report`, `analyze`), the
+//! benchmarks and the tests all drive the same [`pipeline::Pipeline`], built from
+//! [`settings::Settings`], in the same [`input_order`]; so the output depends only on the
+//! samples and their order, and a replay is bit-identical.
+//!
+//! - [`time`]: the host clock against GNSS time (PPS labelling, clock Kalman filter, holdover,
+//!   software-sync fallback, receiver latency, device clocks).
+//! - [`nav`]: the navigation filter: strapdown mechanization in NED on WGS-84, the 22-state
+//!   error model (KF-GINS conventions + GNSS delay Δ), the Kalman engine, alignment and the
+//!   fusion horizon with its measurement queue ([`nav::measurement`]).
+//! - [`array`]: several IMUs: online offset estimation, Lagrange fractional-delay alignment,
+//!   fusion into one virtual IMU.
+//! - [`pipeline`]: time sync + array + navigator as one state machine.
+//! - [`input_order`]: the canonical order in which samples of many services enter it.
+//! - [`offline`]: the pipeline over a stream of samples as fast as the CPU allows.
+//! - [`evaluation`]: accuracy against a truth (the simulator's, or another trajectory).
+//! - [`settings`]: every setting with its default.
+
+pub mod array;
+pub mod evaluation;
+pub mod input_order;
+pub mod nav;
+pub mod offline;
+pub mod pipeline;
+pub mod settings;
+pub mod time;
