@@ -361,17 +361,6 @@ enum Cmd {
         #[arg(long, default_value_t = 0)]
         unit: u32,
     },
-    /// Benchmarks: `timing` (clock model, offline), `ipc`, `e2e`, `throughput` (README "## Performance").
-    Bench {
-        #[command(subcommand)]
-        what: roles::bench_cli::BenchCmd,
-    },
-    /// The processes the benchmarks start (publishers and subscribers).
-    #[command(hide = true)]
-    BenchHelper {
-        #[command(subcommand)]
-        what: roles::bench_cli::HelperCmd,
-    },
     /// Records navsync services into an MCAP file until Ctrl-C/SIGTERM or --duration.
     Record {
         /// Output file (MCAP); default `[outputs.record].path`.
@@ -607,7 +596,7 @@ fn main() -> Result<()> {
         Cmd::Estimator { est, idle_polling } => {
             let args = roles::service::estimator_args(&cfg, sub, est.args())?;
             let _hold = idle_polling
-                .then(roles::cpu_wakeup::CpuWakeupHold::take)
+                .then(navsync_shared::cpu_wakeup::CpuWakeupHold::take)
                 .transpose()
                 .context("--idle-polling: holding /dev/cpu_dma_latency at 0")?;
             roles::estimator::run(&args).context("estimator")?;
@@ -725,12 +714,6 @@ fn main() -> Result<()> {
         Cmd::Ntpshm { unit } => {
             let unit = roles::service::ntpshm_unit(&cfg, sub, unit);
             roles::ntpshm::run(&roles::ntpshm::NtpShmArgs { unit }).context("ntpshm")?;
-        }
-        Cmd::Bench { what } => {
-            roles::bench_cli::run(what).context("bench")?;
-        }
-        Cmd::BenchHelper { what } => {
-            roles::bench_cli::run_helper(what).context("bench helper")?;
         }
         Cmd::Record {
             out,

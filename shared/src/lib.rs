@@ -20,6 +20,7 @@
 
 pub mod client;
 pub mod config;
+pub mod cpu_wakeup;
 pub mod earth;
 pub mod health_reporter;
 pub mod imu_spec;

@@ -25,12 +25,22 @@ pub fn navsync_bin() -> PathBuf {
     if let Ok(p) = std::env::var("NAVSYNC_BIN") {
         return PathBuf::from(p);
     }
+    workspace_bin("navsync")
+}
+
+/// Path of the `navsync-bench` executable (the benchmarks, a crate of their own).
+pub fn bench_bin() -> PathBuf {
+    workspace_bin("navsync-bench")
+}
+
+/// A binary of the workspace that cargo built next to the test executable.
+fn workspace_bin(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
-    // target/<profile>/deps/<test>-<hash> → target/<profile>/navsync
+    // target/<profile>/deps/<test>-<hash> → target/<profile>/<name>
     let bin = exe
         .parent()
         .and_then(Path::parent)
-        .map(|d| d.join("navsync"))
+        .map(|d| d.join(name))
         .expect("target dir");
     assert!(
         bin.exists(),
@@ -76,7 +86,12 @@ impl TestEnv {
 
     /// A `navsync` command with this environment's prefix.
     pub fn command(&self, args: &[&str]) -> Command {
-        let mut c = Command::new(navsync_bin());
+        self.command_of(navsync_bin(), args)
+    }
+
+    /// `program ARGS` (a workspace binary) with this environment's prefix.
+    pub fn command_of(&self, program: PathBuf, args: &[&str]) -> Command {
+        let mut c = Command::new(program);
         c.args(args)
             .env(navsync_shared::services::PREFIX_ENV, &self.prefix)
             .env("RUST_LOG", "warn");

@@ -4,18 +4,23 @@
 
 use std::path::Path;
 
-use navsync_tests::TestEnv;
+use navsync_tests::{TestEnv, bench_bin, navsync_bin};
 use serde_json::Value;
 
 fn run_json(env: &TestEnv, args: &[&str], json: &Path) -> Value {
     let mut a: Vec<&str> = args.to_vec();
     let j = json.display().to_string();
     a.extend(["--quick", "--json", &j]);
-    let o = env.command(&a).output().unwrap();
+    // The live benchmarks start the `navsync` roles beside `navsync-bench`, or `$NAVSYNC_BIN`.
+    let o = env
+        .command_of(bench_bin(), &a)
+        .env("NAVSYNC_BIN", navsync_bin())
+        .output()
+        .unwrap();
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
         o.status.success(),
-        "navsync {a:?}: {}\n{out}\n{}",
+        "navsync-bench {a:?}: {}\n{out}\n{}",
         o.status,
         String::from_utf8_lossy(&o.stderr)
     );
@@ -36,7 +41,7 @@ fn percentiles_sane(p: &Value, what: &str) {
 fn benchmarks_run_and_report_sane_figures() {
     let env = TestEnv::new("bench");
 
-    let ipc = run_json(&env, &["bench", "ipc"], &env.dir.join("ipc.json"));
+    let ipc = run_json(&env, &["ipc"], &env.dir.join("ipc.json"));
     let cases = ipc["cases"].as_array().unwrap();
     // imu, nav × 1000 Hz, max × iceoryx2, socket.
     assert_eq!(cases.len(), 8, "{ipc}");
@@ -53,7 +58,7 @@ fn benchmarks_run_and_report_sane_figures() {
         assert_eq!(c["latency"]["count"].as_u64(), c["received"].as_u64(), "{c}");
     }
 
-    let e2e = run_json(&env, &["bench", "e2e"], &env.dir.join("e2e.json"));
+    let e2e = run_json(&env, &["e2e"], &env.dir.join("e2e.json"));
     for c in e2e["cases"].as_array().unwrap() {
         assert!(c["nav_states"].as_u64().unwrap() > 100, "{c}");
         assert!(c["matched"].as_u64().unwrap() > 0, "{c}");
@@ -67,7 +72,7 @@ fn benchmarks_run_and_report_sane_figures() {
         assert!(est["cpu_percent"].as_f64().unwrap() > 0.0, "{est}");
     }
 
-    let thr = run_json(&env, &["bench", "throughput"], &env.dir.join("throughput.json"));
+    let thr = run_json(&env, &["throughput"], &env.dir.join("throughput.json"));
     let cases = thr["cases"].as_array().unwrap();
     assert_eq!(cases.len(), 2, "{thr}");
     for c in cases {

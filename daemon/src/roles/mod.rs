@@ -1,13 +1,6 @@
 //! Process shells: each role wires a functional core to its iceoryx2 services.
 
 pub mod analyze;
-pub mod bench_cli;
-pub mod bench_e2e;
-pub mod bench_ipc;
-pub mod bench_throughput;
-pub mod bench_timing;
-pub mod bench_util;
-pub mod cpu_wakeup;
 pub mod demo;
 pub mod echo;
 pub mod estimator;

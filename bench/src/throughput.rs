@@ -1,4 +1,4 @@
-//! `navsync bench throughput`: how many IMU samples per second the estimator library takes on
+//! `navsync-bench throughput`: how many IMU samples per second the estimator library takes on
 //! one core, for 1, 4 and 8 IMUs, and whether its cost per sample stays flat over an hour.
 //!
 //! The simulated world's published samples (what the drivers would publish: IMU samples, PPS
@@ -19,7 +19,7 @@ use navsync_sim::published::PublishedStream;
 use navsync_sim::world::World;
 use serde::Serialize;
 
-use super::bench_util::{self, Machine};
+use crate::util::{self, Machine};
 use navsync_estimator::input_order::InputOrder;
 use navsync_estimator::pipeline::Pipeline;
 use navsync_estimator::settings::Settings;
@@ -29,20 +29,35 @@ pub const BLOCK_S: f64 = 600.0;
 /// Longest batch produced before it is estimated, s of scenario time.
 const BATCH_S: i64 = 10;
 
-/// Settings of `navsync bench throughput`.
-#[derive(Debug, Clone)]
+/// `navsync-bench throughput`: estimator throughput (IMU samples/s, one core) for several IMU
+/// counts; `--hour`: the cost per sample per 10 minutes of a one-hour drive.
+#[derive(Debug, Clone, clap::Args)]
 pub struct ThroughputArgs {
-    /// IMU counts.
+    /// IMU counts, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1,4,8", value_parser = crate::util::imu_count)]
     pub imus: Vec<usize>,
-    /// Scenario (default: the embedded 10-minute drive).
+    /// Scenario file (default: the embedded 10-minute drive).
+    #[arg(long)]
     pub scenario: Option<PathBuf>,
-    /// Scenario seconds to run (default: the whole scenario).
+    /// Seconds of scenario to run (default: all of it).
+    #[arg(long = "duration")]
     pub duration_s: Option<f64>,
     /// Block length for the cost table, s.
+    #[arg(skip = BLOCK_S)]
     pub block_s: f64,
-    /// Write the results as JSON here.
+    /// The one-hour drive (sim/scenarios/long_drive_1h.toml, embedded), one IMU, cost per 10 minutes.
+    #[arg(long, conflicts_with_all = ["scenario", "imus"])]
+    pub hour: bool,
+    /// A short run (60 s of scenario, 1 and 4 IMUs) for smoke tests.
+    #[arg(long)]
+    pub quick: bool,
+    /// Write the results as JSON to this file.
+    #[arg(long)]
     pub json: Option<PathBuf>,
 }
+
+/// The one-hour drive of `navsync-bench throughput --hour`.
+pub const LONG_DRIVE_1H: &str = include_str!("../../sim/scenarios/long_drive_1h.toml");
 
 /// The cost of one block of scenario time.
 #[derive(Debug, Clone, Serialize)]
@@ -86,7 +101,7 @@ pub struct ThroughputCase {
     pub peak_rss_kib: u64,
 }
 
-/// Everything `navsync bench throughput` measured.
+/// Everything `navsync-bench throughput` measured.
 #[derive(Debug, Clone, Serialize)]
 pub struct ThroughputReport {
     /// The machine and its load.
@@ -183,7 +198,7 @@ pub fn run_case(args: &ThroughputArgs, imus: usize) -> Result<ThroughputCase, Si
         ns_per_sample: estimator_s / imu_samples.max(1) as f64 * 1e9,
         simulator_s: sim_s,
         blocks,
-        peak_rss_kib: bench_util::peak_rss_kib(std::process::id()).unwrap_or(0),
+        peak_rss_kib: util::peak_rss_kib(std::process::id()).unwrap_or(0),
     })
 }
 
@@ -205,6 +220,25 @@ fn feed(p: &mut Pipeline, s: &AnySample) -> bool {
 
 /// Runs every IMU count, prints the tables, writes the JSON.
 pub fn run(args: &ThroughputArgs) -> Result<ThroughputReport, ThroughputError> {
+    let mut args = args.clone();
+    // The hour-long drive is embedded, so the command runs from any directory.
+    let hour_file = args
+        .hour
+        .then(|| std::env::temp_dir().join(format!("navsync-long-drive-{}.toml", std::process::id())));
+    if let Some(p) = &hour_file {
+        std::fs::write(p, LONG_DRIVE_1H).map_err(ThroughputError::Io)?;
+        (args.imus, args.scenario) = (vec![1], Some(p.clone()));
+    } else if args.quick {
+        (args.imus, args.duration_s, args.block_s) = (vec![1, 4], Some(60.0), 20.0);
+    }
+    let r = run_cases(&args);
+    if let Some(p) = hour_file {
+        let _ = std::fs::remove_file(p);
+    }
+    r
+}
+
+fn run_cases(args: &ThroughputArgs) -> Result<ThroughputReport, ThroughputError> {
     let mut report = ThroughputReport {
         machine: Machine::now(),
         cases: Vec::new(),
@@ -220,7 +254,7 @@ pub fn run(args: &ThroughputArgs) -> Result<ThroughputReport, ThroughputError> {
     report.machine.finish();
     println!("{}", table(&report));
     if let Some(p) = &args.json {
-        bench_util::write_json(p, &report).map_err(ThroughputError::Io)?;
+        util::write_json(p, &report).map_err(ThroughputError::Io)?;
     }
     Ok(report)
 }

@@ -1,4 +1,4 @@
-//! What the `navsync bench` benchmarks share: exact percentiles, the machine and its load,
+//! What the benchmarks share: exact percentiles, the machine and its load,
 //! per-process CPU time and memory from `/proc`, child processes with their own iceoryx2
 //! prefix, and the JSON output.
 
@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use super::cpu_wakeup::CpuWakeupHold;
+use navsync_shared::cpu_wakeup::CpuWakeupHold;
 
 /// Percentiles of a set of latencies, µs (exact: computed from every value).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
@@ -193,6 +193,46 @@ pub struct BenchEnv {
     children: Vec<(String, Child)>,
 }
 
+/// The `navsync` binary the benchmarks start: `$NAVSYNC_BIN`, else the one beside this
+/// executable (`cargo build --release` puts both into `target/release/`).
+pub fn navsync_exe() -> std::io::Result<PathBuf> {
+    if let Some(p) = std::env::var_os("NAVSYNC_BIN") {
+        return Ok(PathBuf::from(p));
+    }
+    let exe = std::env::current_exe()?;
+    let p = exe.with_file_name("navsync");
+    if p.exists() {
+        Ok(p)
+    } else {
+        Err(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!(
+                "no navsync binary beside {} (build it: cargo build --release -p navsync; or set $NAVSYNC_BIN)",
+                exe.display()
+            ),
+        ))
+    }
+}
+
+/// A comma-separated IMU count (1 to `MAX_IMUS`).
+pub fn imu_count(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if (1..=navsync_shared::samples::MAX_IMUS).contains(&n) => Ok(n),
+        _ => Err(format!("`{s}`: 1 to {} IMUs", navsync_shared::samples::MAX_IMUS)),
+    }
+}
+
+/// A subscriber count (1 to `MAX_SUBSCRIBERS`).
+pub fn subscriber_count(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if (1..=navsync_shared::services::MAX_SUBSCRIBERS).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "`{s}`: 1 to {} subscribers",
+            navsync_shared::services::MAX_SUBSCRIBERS
+        )),
+    }
+}
+
 impl BenchEnv {
     /// A fresh environment tagged `tag`.
     pub fn new(tag: &str) -> std::io::Result<Self> {
@@ -209,9 +249,15 @@ impl BenchEnv {
         })
     }
 
-    /// A `navsync ARGS` command in this environment (same executable as the caller).
+    /// A command in this environment: `navsync-bench helper …` (this executable) when
+    /// `args` start with `helper`, else `navsync ARGS` ([`navsync_exe`]).
     pub fn command(&self, args: &[String]) -> std::io::Result<Command> {
-        let mut c = Command::new(std::env::current_exe()?);
+        let program = if args.first().is_some_and(|a| a == "helper") {
+            std::env::current_exe()?
+        } else {
+            navsync_exe()?
+        };
+        let mut c = Command::new(program);
         c.args(args)
             .env(navsync_shared::services::PREFIX_ENV, &self.prefix)
             .env("RUST_LOG", "warn");

@@ -1,4 +1,4 @@
-//! `navsync bench timing`: the time synchronisation against the simulated host oscillator,
+//! `navsync-bench timing`: the time synchronisation against the simulated host oscillator,
 //! offline and deterministic (same seed, same numbers): the simulated world's PPS edges and
 //! NMEA (decoded by the GPS driver's own code, receipt-stamped as a UART would) are fed to
 //! [`TimeSync`] in delivery order; the `TimeState` a subscriber would hold (republished on
@@ -255,24 +255,8 @@ pub fn table() -> Result<String, SimError> {
     Ok(s)
 }
 
-/// Errors of `navsync bench`.
-#[derive(Debug, thiserror::Error)]
-pub enum BenchError {
-    /// Bad scenario.
-    #[error(transparent)]
-    Sim(#[from] SimError),
-    /// Unknown benchmark.
-    #[error("unknown benchmark `{0}` (known: timing)")]
-    Unknown(String),
-}
-
-/// Runs `navsync bench WHAT` and prints its table.
-pub fn run(what: &str) -> Result<(), BenchError> {
-    match what {
-        "timing" => {
-            println!("{}", table()?);
-            Ok(())
-        }
-        other => Err(BenchError::Unknown(other.to_string())),
-    }
+/// Runs `navsync-bench timing` and prints its table.
+pub fn run() -> Result<(), SimError> {
+    println!("{}", table()?);
+    Ok(())
 }

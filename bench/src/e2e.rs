@@ -1,4 +1,4 @@
-//! `navsync bench e2e`: end-to-end latency of the live pipeline, CPU and memory of every
+//! `navsync-bench e2e`: end-to-end latency of the live pipeline, CPU and memory of every
 //! process, under a 1 kHz load.
 //!
 //! Processes, as `navsync demo` runs them (each under the benchmark's own iceoryx2 prefix):
@@ -6,7 +6,7 @@
 //! 10 Hz at 460800 Bd) writing each IMU's Xsens MTData2 messages into a pseudo-terminal and
 //! NMEA into another, one `navsync imu --source xsens:…` driver per IMU, `navsync gps`,
 //! `navsync pps --source sim`, `navsync estimator` over all IMUs, and an independent
-//! subscriber (hidden `navsync bench-helper e2e-sub`) on `navsync/nav/state` and the reference
+//! subscriber (`navsync-bench helper e2e-sub`) on `navsync/nav/state` and the reference
 //! IMU's `navsync/imu/0/sample`.
 //!
 //! What is measured: an IMU driver stamps each sample with the `CLOCK_MONOTONIC` instant its
@@ -35,10 +35,10 @@ use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use serde::Serialize;
 
-use super::bench_util::{self, BenchEnv, Machine, Percentiles};
+use crate::util::{self, BenchEnv, Machine, Percentiles};
 
 /// The scenario of the benchmark (IMUs at 1 kHz, GNSS at 10 Hz).
-pub const BENCH_SCENARIO: &str = include_str!("../../../sim/scenarios/bench_1khz.toml");
+pub const BENCH_SCENARIO: &str = include_str!("../../sim/scenarios/bench_1khz.toml");
 /// Line rate of the simulated GNSS receiver in [`BENCH_SCENARIO`].
 const GNSS_BAUD: &str = "460800";
 
@@ -52,21 +52,44 @@ pub enum ImuPath {
     Direct,
 }
 
-/// Settings of `navsync bench e2e`.
-#[derive(Debug, Clone)]
+/// `navsync-bench e2e`: end-to-end latency (IMU driver → estimator → subscriber), CPU and
+/// memory of every process under IMUs at 1 kHz and GNSS at 10 Hz.
+#[derive(Debug, Clone, clap::Args)]
 pub struct E2eArgs {
-    /// IMU counts (one run each).
+    /// IMU counts, comma-separated (one run each, at most 8).
+    #[arg(long, value_delimiter = ',', default_value = "4", value_parser = crate::util::imu_count)]
     pub imus: Vec<usize>,
     /// Measured window, s.
+    #[arg(long = "duration", default_value_t = 60.0)]
     pub duration_s: f64,
     /// Warm-up after the first NavState, s.
+    #[arg(long = "warmup", default_value_t = 10.0)]
     pub warmup_s: f64,
-    /// IMU path.
+    /// How the IMU samples reach the services: xsens (simulator → pseudo-terminal → driver) or direct.
+    #[arg(long, default_value = "xsens")]
     pub imu_path: ImuPath,
-    /// SCHED_FIFO priority of the latency chain (IMU drivers, estimator, subscriber), if any.
+    /// Run the latency chain (IMU drivers, estimator, subscriber) under SCHED_FIFO with this
+    /// priority (1–99; needs CAP_SYS_NICE), as a deployment would with
+    /// `CPUSchedulingPolicy=fifo`; the simulator (the "hardware") stays SCHED_OTHER.
+    #[arg(long, value_name = "PRIO", value_parser = clap::value_parser!(u8).range(1..=99))]
     pub realtime: Option<u8>,
-    /// Write the results as JSON here.
+    /// A short run (2 IMUs, 3 s warm-up, 5 s measured) for smoke tests.
+    #[arg(long)]
+    pub quick: bool,
+    /// Write the results as JSON to this file.
+    #[arg(long)]
     pub json: Option<PathBuf>,
+}
+
+impl E2eArgs {
+    /// The settings with `--quick` applied.
+    fn effective(&self) -> Self {
+        let mut a = self.clone();
+        if a.quick {
+            (a.imus, a.duration_s, a.warmup_s) = (vec![2], 5.0, 3.0);
+        }
+        a
+    }
 }
 
 /// CPU and memory of one process.
@@ -107,7 +130,7 @@ pub struct E2eCase {
     pub processes: Vec<ProcFigures>,
 }
 
-/// Everything `navsync bench e2e` measured.
+/// Everything `navsync-bench e2e` measured.
 #[derive(Debug, Clone, Serialize)]
 pub struct E2eReport {
     /// The machine and its load.
@@ -200,7 +223,7 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
     let (pid, out) = env.spawn(
         "subscriber",
         &[
-            s("bench-helper"),
+            s("helper"),
             s("e2e-sub"),
             s("--warmup-s"),
             s(args.warmup_s),
@@ -294,7 +317,7 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
                 n if n.starts_with("imu-") || n == "gps" || n == "pps" => prio.saturating_sub(3).max(1),
                 _ => continue,
             };
-            bench_util::set_fifo(*pid, p).map_err(|e| E2eError::Child(format!("SCHED_FIFO {p} for {name}: {e}")))?;
+            util::set_fifo(*pid, p).map_err(|e| E2eError::Child(format!("SCHED_FIFO {p} for {name}: {e}")))?;
         }
     }
 
@@ -307,7 +330,7 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
     let t0 = Instant::now();
     let cpu0: Vec<f64> = pids
         .iter()
-        .map(|(_, p)| bench_util::cpu_time_s(*p).unwrap_or(f64::NAN))
+        .map(|(_, p)| util::cpu_time_s(*p).unwrap_or(f64::NAN))
         .collect();
     let result = wait_line(
         &lines,
@@ -321,8 +344,8 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
         .zip(&cpu0)
         .map(|((name, p), c0)| ProcFigures {
             name: name.clone(),
-            cpu_percent: (bench_util::cpu_time_s(*p).unwrap_or(f64::NAN) - c0) / window * 100.0,
-            peak_rss_mib: bench_util::peak_rss_kib(*p).map_or(f64::NAN, |k| k as f64 / 1024.0),
+            cpu_percent: (util::cpu_time_s(*p).unwrap_or(f64::NAN) - c0) / window * 100.0,
+            peak_rss_mib: util::peak_rss_kib(*p).map_or(f64::NAN, |k| k as f64 / 1024.0),
         })
         .collect();
     let bad = env.stop_all();
@@ -348,11 +371,12 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
 
 /// Runs every IMU count, prints the tables, writes the JSON.
 pub fn run(args: &E2eArgs) -> Result<E2eReport, E2eError> {
+    let args = &args.effective();
     let mut report = E2eReport {
         machine: Machine::now(),
         cases: Vec::new(),
     };
-    let _wakeup = bench_util::wakeup_hold_for_realtime(args.realtime, &mut report.machine);
+    let _wakeup = util::wakeup_hold_for_realtime(args.realtime, &mut report.machine);
     for &n in &args.imus {
         let c = run_case(args, n)?;
         eprintln!("{}", latency_row(&c));
@@ -361,7 +385,7 @@ pub fn run(args: &E2eArgs) -> Result<E2eReport, E2eError> {
     report.machine.finish();
     println!("{}", table(&report));
     if let Some(p) = &args.json {
-        bench_util::write_json(p, &report)?;
+        util::write_json(p, &report)?;
     }
     Ok(report)
 }
@@ -437,7 +461,7 @@ pub fn table(r: &E2eReport) -> String {
 /// Receipts of the reference IMU's samples by sequence number (ring).
 const RING: usize = 1024;
 
-/// `navsync bench-helper e2e-sub`: waits for the first NavState, lets `warmup_s` pass, prints
+/// `navsync-bench helper e2e-sub`: waits for the first NavState, lets `warmup_s` pass, prints
 /// `measuring`, measures for `duration_s` and prints one JSON line with the percentiles.
 pub fn helper_sub(warmup_s: f64, duration_s: f64) -> Result<(), E2eError> {
     use std::io::Write;

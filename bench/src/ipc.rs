@@ -1,10 +1,10 @@
-//! `navsync bench ipc`: publisher → subscriber latency between separate processes, iceoryx2
+//! `navsync-bench ipc`: publisher → subscriber latency between separate processes, iceoryx2
 //! (navsync's services: shared-memory sample + event notification, the subscriber asleep in a
 //! WaitSet as the estimator is) against a Unix-domain socket carrying the same bytes
 //! (SOCK_SEQPACKET, the subscriber asleep in a blocking `recv`), for `ImuSample` and
 //! `NavState`, paced at a fixed rate and unpaced.
 //!
-//! Every case starts its own processes (hidden `navsync bench-helper ipc-pub|ipc-sub`) under a
+//! Every case starts its own processes (`navsync-bench helper ipc-pub|ipc-sub`) under a
 //! fresh iceoryx2 prefix: the subscribers first (they print `ready` once listening), then the
 //! publisher. The publisher writes `CLOCK_MONOTONIC` into the payload (`stamp.host_ns`,
 //! `host_ns`) right before publishing and a sequence number; each subscriber takes
@@ -25,7 +25,7 @@ use navsync_shared::services;
 use navsync_shared::time::monotonic_now_ns;
 use serde::Serialize;
 
-use super::bench_util::{self, BenchEnv, Machine, Percentiles};
+use crate::util::{self, BenchEnv, Machine, Percentiles};
 
 /// How long a bench publisher stays after its last sample unless stopped earlier: longer than
 /// the bench waits for its subscribers.
@@ -139,22 +139,33 @@ fn bytes_of<T: Payload>(v: &T) -> &[u8] {
     unsafe { std::slice::from_raw_parts((v as *const T).cast::<u8>(), size_of::<T>()) }
 }
 
-/// Settings of `navsync bench ipc`.
-#[derive(Debug, Clone)]
+/// `navsync-bench ipc`: IPC latency between processes, iceoryx2 services against a
+/// Unix-domain socket.
+#[derive(Debug, Clone, clap::Args)]
 pub struct IpcBenchArgs {
     /// Samples per case.
+    #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..))]
     pub samples: u64,
-    /// Sample types.
+    /// Sample types, comma-separated: imu, nav.
+    #[arg(long, value_delimiter = ',', default_value = "imu,nav")]
     pub kinds: Vec<Kind>,
-    /// Publishing rates.
+    /// Publishing rates, Hz or `max` (back to back), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1000,max")]
     pub rates: Vec<Rate>,
-    /// Subscriber counts.
+    /// Subscriber process counts, comma-separated (at most 16).
+    #[arg(long, value_delimiter = ',', default_value = "1", value_parser = crate::util::subscriber_count)]
     pub subscribers: Vec<usize>,
-    /// Transports.
+    /// Transports, comma-separated: iceoryx2, socket.
+    #[arg(long, value_delimiter = ',', default_value = "iceoryx2,socket")]
     pub transports: Vec<Transport>,
-    /// SCHED_FIFO priority of the publisher and subscribers, if any.
+    /// Run publisher (PRIO) and subscribers (PRIO − 1) under SCHED_FIFO (needs CAP_SYS_NICE).
+    #[arg(long, value_name = "PRIO", value_parser = clap::value_parser!(u8).range(1..=99))]
     pub realtime: Option<u8>,
-    /// Write the results as JSON here.
+    /// A short run (2000 samples per case) for smoke tests.
+    #[arg(long)]
+    pub quick: bool,
+    /// Write the results as JSON to this file.
+    #[arg(long)]
     pub json: Option<PathBuf>,
 }
 
@@ -191,7 +202,7 @@ pub struct IpcCase {
     pub subscriber_cpu_us_per_sample: f64,
 }
 
-/// Everything `navsync bench ipc` measured.
+/// Everything `navsync-bench ipc` measured.
 #[derive(Debug, Clone, Serialize)]
 pub struct IpcReport {
     /// The machine and its load.
@@ -220,11 +231,16 @@ fn child_err(e: impl std::fmt::Display) -> IpcBenchError {
 
 /// Runs every case of `args` and prints the table; returns the report.
 pub fn run(args: &IpcBenchArgs) -> Result<IpcReport, IpcBenchError> {
+    let mut args = args.clone();
+    if args.quick {
+        args.samples = 2000;
+    }
+    let args = &args;
     let mut report = IpcReport {
         machine: Machine::now(),
         cases: Vec::new(),
     };
-    let _wakeup = bench_util::wakeup_hold_for_realtime(args.realtime, &mut report.machine);
+    let _wakeup = util::wakeup_hold_for_realtime(args.realtime, &mut report.machine);
     for &kind in &args.kinds {
         for &rate in &args.rates {
             for &subs in &args.subscribers {
@@ -240,7 +256,7 @@ pub fn run(args: &IpcBenchArgs) -> Result<IpcReport, IpcBenchError> {
     report.machine.finish();
     println!("{}", table(&report));
     if let Some(p) = &args.json {
-        bench_util::write_json(p, &report)?;
+        util::write_json(p, &report)?;
     }
     Ok(report)
 }
@@ -279,7 +295,7 @@ pub fn run_case(
         let lat = env.dir.join(format!("lat-{i}.bin"));
         let sock = env.dir.join(format!("sock-{i}"));
         let mut a = vec![
-            arg("bench-helper"),
+            arg("helper"),
             arg("ipc-sub"),
             arg("--transport"),
             arg(transport_name(transport)),
@@ -298,17 +314,17 @@ pub fn run_case(
         let name = format!("sub-{i}");
         let (pid, out) = env.spawn(&name, &a, true)?;
         if let Some(p) = realtime {
-            bench_util::set_fifo(pid, p.saturating_sub(1).max(1)).map_err(child_err)?;
+            util::set_fifo(pid, p.saturating_sub(1).max(1)).map_err(child_err)?;
         }
         let mut out = BufReader::new(out.ok_or_else(|| child_err("no stdout"))?);
-        if !bench_util::wait_for_line(&mut out, "ready", Duration::from_secs(20)) {
+        if !util::wait_for_line(&mut out, "ready", Duration::from_secs(20)) {
             return Err(child_err(format!("{name} did not get ready:\n{}", env.log(&name))));
         }
         outs.push((name, lat, out));
         sockets.push(sock.display().to_string());
     }
     let mut a = vec![
-        arg("bench-helper"),
+        arg("helper"),
         arg("ipc-pub"),
         arg("--transport"),
         arg(transport_name(transport)),
@@ -326,11 +342,11 @@ pub fn run_case(
     let (pid, pub_out) = env.spawn("pub", &a, true)?;
     if let Some(p) = realtime {
         // The publisher above its subscribers, as a driver above the estimator.
-        bench_util::set_fifo(pid, p).map_err(child_err)?;
+        util::set_fifo(pid, p).map_err(child_err)?;
     }
     let mut pub_out = BufReader::new(pub_out.ok_or_else(|| child_err("no stdout"))?);
     // The publisher prints its summary after the last sample and stays until stopped (below).
-    let Some(pub_summary) = bench_util::next_json_line(&mut pub_out) else {
+    let Some(pub_summary) = util::next_json_line(&mut pub_out) else {
         let st = env.wait_exit("pub", Duration::from_secs(5));
         return Err(child_err(format!(
             "publisher ended without a summary ({st:?}):\n{}",
@@ -358,9 +374,9 @@ pub fn run_case(
         if !st.success() {
             return Err(child_err(format!("{name} failed ({st}):\n{}", env.log(name))));
         }
-        let s = bench_util::last_json_line(out).unwrap_or_default();
+        let s = util::last_json_line(out).unwrap_or_default();
         sub_cpu += s["cpu_s"].as_f64().unwrap_or(f64::NAN);
-        let v = bench_util::read_latencies(lat)?;
+        let v = util::read_latencies(lat)?;
         received += v.len() as u64;
         all.extend(v);
     }
@@ -437,39 +453,52 @@ pub fn table(r: &IpcReport) -> String {
 
 // ---------------------------------------------------------------- helper processes
 
-/// Settings of `navsync bench-helper ipc-pub`.
-#[derive(Debug, Clone)]
+/// `navsync-bench helper ipc-pub`: publishes COUNT samples with CLOCK_MONOTONIC and a
+/// sequence number in the payload.
+#[derive(Debug, Clone, clap::Args)]
 pub struct PubArgs {
     /// Transport.
+    #[arg(long)]
     pub transport: Transport,
     /// Sample type.
+    #[arg(long)]
     pub kind: Kind,
     /// Samples to send (sequence numbers 0..count).
+    #[arg(long)]
     pub count: u64,
-    /// Rate.
+    /// Hz or `max`.
+    #[arg(long)]
     pub rate: Rate,
-    /// Socket paths of the subscribers (socket transport).
+    /// Socket paths of the subscribers (socket transport), comma-separated.
+    #[arg(long, value_delimiter = ',')]
     pub sockets: Vec<PathBuf>,
 }
 
-/// Settings of `navsync bench-helper ipc-sub`.
-#[derive(Debug, Clone)]
+/// `navsync-bench helper ipc-sub`: receives the samples of `ipc-pub` and writes their
+/// latencies.
+#[derive(Debug, Clone, clap::Args)]
 pub struct SubArgs {
     /// Transport.
+    #[arg(long)]
     pub transport: Transport,
     /// Sample type.
+    #[arg(long)]
     pub kind: Kind,
     /// Samples the publisher sends.
+    #[arg(long)]
     pub count: u64,
     /// Subscriber index (node name).
+    #[arg(long, default_value_t = 0)]
     pub index: usize,
-    /// Where to write the latencies.
+    /// Latency file (little-endian i64 ns).
+    #[arg(long)]
     pub out: PathBuf,
     /// Socket path to listen on (socket transport).
+    #[arg(long)]
     pub socket: Option<PathBuf>,
 }
 
-/// `navsync bench-helper ipc-pub`: publishes `count` samples and prints a JSON summary.
+/// Publishes `count` samples and prints a JSON summary.
 pub fn helper_pub(a: &PubArgs) -> Result<(), IpcBenchError> {
     match a.kind {
         Kind::Imu => publish::<ImuSample>(a),
@@ -477,7 +506,7 @@ pub fn helper_pub(a: &PubArgs) -> Result<(), IpcBenchError> {
     }
 }
 
-/// `navsync bench-helper ipc-sub`: receives until the last sequence number (or SIGTERM),
+/// `navsync-bench helper ipc-sub`: receives until the last sequence number (or SIGTERM),
 /// writes the latencies and prints a JSON summary.
 pub fn helper_sub(a: &SubArgs) -> Result<(), IpcBenchError> {
     match a.kind {
@@ -501,7 +530,7 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
     // first would take its unread samples with it.
     let summary = |errors: u64, t0: i64, cpu0: f64| {
         let wall = (monotonic_now_ns() - t0) as f64 * 1e-9;
-        let cpu = bench_util::own_cpu_time_s() - cpu0;
+        let cpu = util::own_cpu_time_s() - cpu0;
         println!(
             "{}",
             serde_json::json!({ "sent": a.count, "errors": errors, "wall_s": wall, "cpu_s": cpu })
@@ -513,7 +542,7 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
             let mut p = node.publisher::<T>(&T::service())?;
             // Let the subscribers' ports settle before the first sample.
             std::thread::sleep(Duration::from_millis(100));
-            let cpu0 = bench_util::own_cpu_time_s();
+            let cpu0 = util::own_cpu_time_s();
             let t0 = monotonic_now_ns();
             for i in 0..a.count {
                 if let Some(p) = period_ns {
@@ -531,7 +560,7 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
             // The sent bytes stay in the subscribers' socket buffers: closing ends their loops.
             let fds: Vec<Fd> = a.sockets.iter().map(|p| connect(p)).collect::<Result<_, _>>()?;
             std::thread::sleep(Duration::from_millis(100));
-            let cpu0 = bench_util::own_cpu_time_s();
+            let cpu0 = util::own_cpu_time_s();
             let t0 = monotonic_now_ns();
             for i in 0..a.count {
                 if let Some(p) = period_ns {
@@ -566,7 +595,7 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
                 .attach_notification(sub.listener())
                 .map_err(|e| child_err(format!("attaching to waitset: {e:?}")))?;
             ready();
-            cpu0 = bench_util::own_cpu_time_s();
+            cpu0 = util::own_cpu_time_s();
             let mut done = false;
             while !done && node.wait_on(&waitset, Duration::from_secs(1))? {
                 // Samples first, then the wake-up events (as the estimator drains its inputs).
@@ -588,7 +617,7 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
             if conn.0 < 0 {
                 return Err(std::io::Error::last_os_error().into());
             }
-            cpu0 = bench_util::own_cpu_time_s();
+            cpu0 = util::own_cpu_time_s();
             let mut v = T::zeroed();
             loop {
                 // SAFETY: receiving at most size_of::<T>() bytes into a T (any bytes are valid).
@@ -608,8 +637,8 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
             }
         }
     }
-    let cpu = bench_util::own_cpu_time_s() - cpu0;
-    bench_util::write_latencies(&a.out, &lat)?;
+    let cpu = util::own_cpu_time_s() - cpu0;
+    util::write_latencies(&a.out, &lat)?;
     println!("{}", serde_json::json!({ "received": lat.len(), "cpu_s": cpu }));
     Ok(())
 }

@@ -65,7 +65,7 @@ fn pps_time_mapping_is_within_5_us_after_30_s() {
     );
 }
 
-/// The README's timing table (`navsync bench timing`), asserted: simulated oscillator 0.5 ppm
+/// The README's timing table (`navsync-bench timing`), asserted: simulated oscillator 0.5 ppm
 /// with a random-walk frequency (Allan deviation 1e−10 at 1 s), PPS jitter 1 µs (kernel-like)
 /// and 30 µs (user space): mapped-time RMS error ≤ 1 µs and ≤ 10 µs; holdover error 60 s after
 /// the PPS and GNSS are lost ≤ 10 µs; the reported 2σ covers the actual error ≥ 95 % of the
@@ -73,7 +73,7 @@ fn pps_time_mapping_is_within_5_us_after_30_s() {
 /// labels stay right with d0 = 0.9 s ± 20 ms; d0 measured within 5 µs of the simulated latency.
 #[test]
 fn timing_benchmark_meets_the_issue_bounds() {
-    use navsync::roles::bench_timing::{TimingCase, run_case};
+    use navsync_bench::timing::{TimingCase, run_case};
     for case in TimingCase::standard() {
         let r = run_case(&case).expect("case runs");
         println!("{}: {r:?}", case.name);

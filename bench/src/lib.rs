@@ -1,0 +1,22 @@
+//! # navsync-bench
+//!
+//! The benchmarks behind the README's performance and timing tables, as a crate of their own
+//! so the production `navsync` binary does not carry them. Each is one subcommand of the
+//! `navsync-bench` binary with one options struct, prints a table and writes JSON with
+//! `--json FILE`; `--quick` is the smoke-test size CI runs (`tests/tests/bench_smoke.rs`).
+//!
+//! - [`ipc`]: publisher → subscriber latency between processes, iceoryx2 against a Unix socket.
+//! - [`e2e`]: IMU driver → estimator → subscriber latency of the live pipeline, CPU and memory.
+//! - [`throughput`]: IMU samples per second through the estimator library.
+//! - [`timing`]: the time synchronisation against the simulated host oscillator (offline).
+//! - [`util`]: percentiles, the machine's state, child processes, JSON.
+//!
+//! The processes the live benchmarks start are `navsync` roles (found beside this executable,
+//! or `$NAVSYNC_BIN`) and `navsync-bench helper …` (publishers and subscribers of the IPC
+//! benchmark, the end-to-end subscriber).
+
+pub mod e2e;
+pub mod ipc;
+pub mod throughput;
+pub mod timing;
+pub mod util;

@@ -1,0 +1,67 @@
+//! `navsync-bench`: the benchmarks (README "## Performance" and "## Timing"); one options
+//! struct per subcommand, passed whole to its module.
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use navsync_bench::{e2e, ipc, throughput, timing};
+
+#[derive(Parser)]
+#[command(name = "navsync-bench", version, about = "navsync's benchmarks")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Offline timing benchmark: clock model, holdover, d0 (the table in the README's "## Timing").
+    Timing,
+    /// IPC latency between processes: iceoryx2 services against a Unix-domain socket.
+    Ipc(ipc::IpcBenchArgs),
+    /// End-to-end latency (IMU driver → estimator → subscriber), CPU and memory of every
+    /// process under IMUs at 1 kHz and GNSS at 10 Hz.
+    E2e(e2e::E2eArgs),
+    /// Estimator throughput (IMU samples/s, one core) for several IMU counts; `--hour`: the
+    /// cost per sample per 10 minutes of a one-hour drive.
+    Throughput(throughput::ThroughputArgs),
+    /// The processes the benchmarks start (publishers and subscribers).
+    #[command(subcommand, hide = true)]
+    Helper(Helper),
+}
+
+#[derive(Subcommand)]
+enum Helper {
+    /// Publishes COUNT samples with CLOCK_MONOTONIC and a sequence number in the payload.
+    IpcPub(ipc::PubArgs),
+    /// Receives the samples of `ipc-pub` and writes their latencies.
+    IpcSub(ipc::SubArgs),
+    /// Subscribes to the NavStates and the reference IMU's samples and measures their latency.
+    E2eSub {
+        /// Seconds to wait after the first NavState.
+        #[arg(long)]
+        warmup_s: f64,
+        /// Seconds to measure.
+        #[arg(long)]
+        duration_s: f64,
+    },
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    match cli.cmd {
+        Cmd::Timing => timing::run().context("timing benchmark")?,
+        Cmd::Ipc(a) => drop(ipc::run(&a).context("IPC benchmark")?),
+        Cmd::E2e(a) => drop(e2e::run(&a).context("end-to-end benchmark")?),
+        Cmd::Throughput(a) => drop(throughput::run(&a).context("throughput benchmark")?),
+        Cmd::Helper(Helper::IpcPub(a)) => ipc::helper_pub(&a).context("ipc-pub")?,
+        Cmd::Helper(Helper::IpcSub(a)) => ipc::helper_sub(&a).context("ipc-sub")?,
+        Cmd::Helper(Helper::E2eSub { warmup_s, duration_s }) => {
+            e2e::helper_sub(warmup_s, duration_s).context("e2e-sub")?
+        }
+    }
+    Ok(())
+}
