@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use navsync_shared::ipc::{IpcError, IpcNode};
-use navsync_shared::recording::pacing;
+use navsync_shared::pacing;
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{ImuSample, NavState};
 use navsync_shared::services;

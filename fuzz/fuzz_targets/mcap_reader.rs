@@ -12,7 +12,7 @@ use std::io::Cursor;
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
-use navsync_shared::recording::{McapReader, SampleReader};
+use navsync_recording::{McapReader, SampleReader};
 
 /// Calls per scan, a bound for inputs that would make the reader loop.
 const MAX_STEPS: usize = 100_000;

@@ -27,7 +27,7 @@ pub mod imu_spec;
 pub mod ipc;
 pub mod json;
 pub mod latency_histogram;
-pub mod recording;
+pub mod pacing;
 pub mod reflect;
 pub mod samples;
 pub mod sd_notify;

@@ -17,7 +17,7 @@ use std::path::PathBuf;
 
 use navsync_shared::health_reporter::HealthReporter;
 use navsync_shared::ipc::{IpcError, IpcNode};
-use navsync_shared::recording::pacing;
+use navsync_shared::pacing;
 use navsync_shared::samples::{PpsEdge, SimTruth};
 use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns, realtime_now_ns};

@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use navsync_shared::recording::SampleReader;
+use navsync_recording::SampleReader;
 use navsync_shared::samples::{AnySample, GnssFix, ImuSample, SimTruth};
 use navsync_shared::time::gps_ns_from_utc_ns;
 use navsync_tests::TestEnv;

@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-use navsync_shared::recording::SampleReader;
-use navsync_shared::recording::channels::sample_json;
-use navsync_shared::recording::mcap_reader::ScanEnd;
+use navsync_recording::SampleReader;
+use navsync_recording::channels::sample_json;
+use navsync_recording::mcap_reader::ScanEnd;
 use navsync_shared::samples::{AnySample, Health, NavState, NavStatus, TimeStatus};
 use navsync_shared::services;
 use navsync_shared::time::monotonic_now_ns;

@@ -10,9 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-use navsync_shared::recording::channels::{self, sample_json};
-use navsync_shared::recording::mcap_reader::ScanEnd;
-use navsync_shared::recording::{McapReader, SampleReader};
+use navsync_recording::channels::{self, sample_json};
+use navsync_recording::mcap_reader::ScanEnd;
+use navsync_recording::{McapReader, SampleReader};
 use navsync_shared::samples::{AnySample, Health, NavState, NavStatus, TimeStatus};
 use navsync_shared::services;
 use navsync_tests::TestEnv;

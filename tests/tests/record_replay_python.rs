@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use navsync_shared::recording::SampleReader;
-use navsync_shared::recording::channels::sample_json;
+use navsync_recording::SampleReader;
+use navsync_recording::channels::sample_json;
 use navsync_tests::TestEnv;
 use serde_json::Value;
 

@@ -11,7 +11,7 @@
 
 use std::path::PathBuf;
 
-use navsync_shared::recording::sample_file::SampleReader;
+use navsync_recording::sample_file::SampleReader;
 use navsync_shared::samples::AnySample;
 use navsync_shared::services;
 
@@ -36,7 +36,7 @@ pub struct GnssDelayArgs {
 pub enum AnalyzeError {
     /// The recording could not be read.
     #[error(transparent)]
-    Recording(#[from] navsync_shared::recording::RecordingError),
+    Recording(#[from] navsync_recording::RecordingError),
     /// Nothing to analyse.
     #[error("{0}")]
     Empty(String),

@@ -13,8 +13,8 @@
 
 use std::path::{Path, PathBuf};
 
+use navsync_recording::SampleReader;
 use navsync_shared::earth;
-use navsync_shared::recording::SampleReader;
 use navsync_shared::samples::{AnySample, NavStatus};
 use navsync_shared::time::gps_ns_from_utc_ns;
 use serde::Serialize;
@@ -70,7 +70,7 @@ pub enum EvalError {
     KfGins(#[from] kf_gins::KfGinsError),
     /// Reading a recording.
     #[error(transparent)]
-    Recording(#[from] navsync_shared::recording::RecordingError),
+    Recording(#[from] navsync_recording::RecordingError),
     /// Reading a file.
     #[error("{0}: {1}")]
     Io(String, std::io::Error),

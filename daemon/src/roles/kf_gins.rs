@@ -49,7 +49,7 @@ use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::iter::Peekable;
 use std::path::{Path, PathBuf};
 
-use navsync_shared::recording::{RecordingError, SampleRecorder};
+use navsync_recording::{RecordingError, SampleRecorder};
 use navsync_shared::reflect::{Reflect, fixed_str};
 use navsync_shared::samples::*;
 use navsync_shared::services;

@@ -1,5 +1,5 @@
 //! `navsync record OUT.mcap [--services GLOB …] [--duration S]`: records navsync services into
-//! an MCAP file (see `navsync_shared::recording` for the format and conventions).
+//! an MCAP file (see `navsync_recording` for the format and conventions).
 //!
 //! One subscriber per service, all attached to one WaitSet: the recorder sleeps until a
 //! publisher wakes it (no polling per sample). Services are found by name: patterns without
@@ -24,11 +24,11 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 
+use navsync_recording::glob::{ServiceGlob, any_matches};
+use navsync_recording::ports::AnySubscriber;
+use navsync_recording::{RecordingError, SampleRecorder};
 use navsync_shared::health_reporter::HealthReporter;
 use navsync_shared::ipc::{self, IpcError, IpcNode};
-use navsync_shared::recording::glob::{ServiceGlob, any_matches};
-use navsync_shared::recording::ports::AnySubscriber;
-use navsync_shared::recording::{RecordingError, SampleRecorder};
 use navsync_shared::samples::AnySample;
 use navsync_shared::services::ServiceKind;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns, realtime_now_ns};

@@ -21,12 +21,12 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::str::FromStr;
 
+use navsync_recording::glob::{ServiceGlob, any_matches};
+use navsync_recording::mcap_reader::ScanEnd;
+use navsync_recording::ports::AnyPublisher;
+use navsync_recording::{RecordingError, SampleReader, SampleRecorder};
 use navsync_shared::ipc::{IpcError, IpcNode};
-use navsync_shared::recording::glob::{ServiceGlob, any_matches};
-use navsync_shared::recording::mcap_reader::ScanEnd;
-use navsync_shared::recording::pacing::sleep_until;
-use navsync_shared::recording::ports::AnyPublisher;
-use navsync_shared::recording::{RecordingError, SampleReader, SampleRecorder};
+use navsync_shared::pacing::sleep_until;
 use navsync_shared::samples::AnySample;
 use navsync_shared::services::{self, ServiceKind};
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};

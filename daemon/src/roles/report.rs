@@ -15,8 +15,8 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use navsync_recording::{RecordingError, SampleReader};
 use navsync_shared::earth;
-use navsync_shared::recording::{RecordingError, SampleReader};
 use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;
 

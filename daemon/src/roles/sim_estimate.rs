@@ -10,7 +10,7 @@
 
 use std::path::Path;
 
-use navsync_shared::recording::{RecordingError, SampleRecorder};
+use navsync_recording::{RecordingError, SampleRecorder};
 use navsync_sim::process::{SimArgs, load_config};
 use navsync_sim::published::PublishedStream;
 use navsync_sim::world::World;

@@ -22,7 +22,7 @@ use navsync_drivers::imu::iio_scan::{Endian, Repr, ScanElement, ScanType};
 use navsync_sim::xsens_imus::SimXsensImu;
 use navsync_drivers::imu::xsens_frame::{MtData2, RealFormat, STATUS_CLIP_GYR, encode_mtdata2};
 use navsync_sim::nmea::{EpochReport, FixReport, frame, write_burst};
-use navsync_shared::recording::{SampleReader, SampleRecorder};
+use navsync_recording::{SampleReader, SampleRecorder};
 use navsync_shared::samples::AnySample;
 
 struct Out(PathBuf);

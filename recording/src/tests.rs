@@ -8,9 +8,9 @@ use super::mcap_reader::{McapReader, ScanEnd};
 use super::mcap_writer::McapWriter;
 use super::sample_file::{SampleReader, SampleRecorder};
 use super::{RecordingError, mcap_format};
-use crate::reflect::Reflect;
-use crate::samples::{AnySample, ImuSample, NavState, Stamp, StampSource};
-use crate::services;
+use navsync_shared::reflect::Reflect;
+use navsync_shared::samples::{AnySample, ImuSample, NavState, Stamp, StampSource};
+use navsync_shared::services;
 
 fn imu(i: u64) -> AnySample {
     let mut s = ImuSample::zeroed();
@@ -231,7 +231,7 @@ fn unknown_records_and_foreign_channels_are_skipped() {
     let mut w = McapWriter::new(&mut buf, Path::new("mem.mcap"), "", "test").unwrap();
     let s = w.add_schema("foo.Bar", "protobuf", b"\x01\x02").unwrap();
     let foreign = w.add_channel(s, "/tf", "protobuf", &[("k", "v")]).unwrap();
-    let kind = crate::services::ServiceKind::NavState;
+    let kind = navsync_shared::services::ServiceKind::NavState;
     let s = w
         .add_schema(
             super::channels::schema_name(kind),

@@ -11,8 +11,8 @@ use super::channels::{self, LIBRARY, MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING}
 use super::error::RecordingError;
 use super::mcap_reader::{McapReader, ScanEnd, Summary};
 use super::mcap_writer::{ChannelId, McapWriter, SchemaId};
-use crate::samples::AnySample;
-use crate::services::ServiceKind;
+use navsync_shared::samples::AnySample;
+use navsync_shared::services::ServiceKind;
 
 /// Writes navsync samples into an MCAP file: one channel per service, one schema per type,
 /// created when a service is first seen.

@@ -6,7 +6,7 @@
 //!    schema per sample type named `navsync.ImuSample.v1`, …).
 //! 2. [`sample_file`]: [`SampleRecorder`] and [`SampleReader`], samples in and out by service.
 //! 3. [`mcap_writer`], [`mcap_reader`], [`mcap_format`], [`crc32`]: the container format.
-//! 4. [`ports`], [`glob`], [`pacing`]: what the record and replay processes need besides.
+//! 4. [`ports`], [`glob`]: what the record and replay processes need besides (pacing: `navsync_shared::pacing`).
 //!
 //! # Time stamps of the messages
 //!
@@ -38,7 +38,6 @@ pub mod glob;
 pub mod mcap_format;
 pub mod mcap_reader;
 pub mod mcap_writer;
-pub mod pacing;
 pub mod ports;
 pub mod sample_file;
 

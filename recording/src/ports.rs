@@ -4,26 +4,26 @@
 use iceoryx2::port::listener::Listener;
 
 use super::channels::SampleType;
-use crate::ipc::{IpcError, IpcNode, Publisher, Subscriber, Transport};
-use crate::samples::AnySample;
-use crate::services::ServiceKind;
+use navsync_shared::ipc::{IpcError, IpcNode, Publisher, Subscriber, Transport};
+use navsync_shared::samples::AnySample;
+use navsync_shared::services::ServiceKind;
 
 /// A subscriber of whatever type the service carries.
 pub enum AnySubscriber {
     /// `navsync/gnss/{id}/fix`
-    GnssFix(Subscriber<crate::samples::GnssFix>),
+    GnssFix(Subscriber<navsync_shared::samples::GnssFix>),
     /// `navsync/pps/{id}/edge`, `navsync/sim/pps`
-    PpsEdge(Subscriber<crate::samples::PpsEdge>),
+    PpsEdge(Subscriber<navsync_shared::samples::PpsEdge>),
     /// `navsync/imu/{id}/sample`
-    Imu(Subscriber<crate::samples::ImuSample>),
+    Imu(Subscriber<navsync_shared::samples::ImuSample>),
     /// `navsync/time/state`
-    Time(Subscriber<crate::samples::TimeState>),
+    Time(Subscriber<navsync_shared::samples::TimeState>),
     /// `navsync/nav/state`
-    Nav(Subscriber<crate::samples::NavState>),
+    Nav(Subscriber<navsync_shared::samples::NavState>),
     /// `navsync/health/{process}`
-    Health(Subscriber<crate::samples::Health>),
+    Health(Subscriber<navsync_shared::samples::Health>),
     /// `navsync/sim/truth`
-    Truth(Subscriber<crate::samples::SimTruth>),
+    Truth(Subscriber<navsync_shared::samples::SimTruth>),
 }
 
 macro_rules! each_subscriber {
@@ -82,19 +82,19 @@ impl AnySubscriber {
 /// A publisher of whatever type the service carries.
 pub enum AnyPublisher {
     /// `navsync/gnss/{id}/fix`
-    GnssFix(Publisher<crate::samples::GnssFix>),
+    GnssFix(Publisher<navsync_shared::samples::GnssFix>),
     /// `navsync/pps/{id}/edge`, `navsync/sim/pps`
-    PpsEdge(Publisher<crate::samples::PpsEdge>),
+    PpsEdge(Publisher<navsync_shared::samples::PpsEdge>),
     /// `navsync/imu/{id}/sample`
-    Imu(Publisher<crate::samples::ImuSample>),
+    Imu(Publisher<navsync_shared::samples::ImuSample>),
     /// `navsync/time/state`
-    Time(Publisher<crate::samples::TimeState>),
+    Time(Publisher<navsync_shared::samples::TimeState>),
     /// `navsync/nav/state`
-    Nav(Publisher<crate::samples::NavState>),
+    Nav(Publisher<navsync_shared::samples::NavState>),
     /// `navsync/health/{process}`
-    Health(Publisher<crate::samples::Health>),
+    Health(Publisher<navsync_shared::samples::Health>),
     /// `navsync/sim/truth`
-    Truth(Publisher<crate::samples::SimTruth>),
+    Truth(Publisher<navsync_shared::samples::SimTruth>),
 }
 
 impl AnyPublisher {

@@ -2,11 +2,11 @@
 //!
 //! * One channel per service; the topic is the service name (`navsync/imu/0/sample`).
 //! * One schema per sample type: name = the type name with its layout version
-//!   (`navsync.ImuSample.v1`), encoding `jsonschema`, data = [`json::schema`](crate::json::schema) of the type
+//!   (`navsync.ImuSample.v1`), encoding `jsonschema`, data = [`json::schema`](navsync_shared::json::schema) of the type
 //!   (JSON Schema draft 2020-12 with every field's units and frame as its description).
-//! * Message encoding `json`: the sample as [`json::to_json`](crate::json::to_json) writes it (UTF-8, compact).
+//! * Message encoding `json`: the sample as [`json::to_json`](navsync_shared::json::to_json) writes it (UTF-8, compact).
 //!   Foxglove and the `mcap` tools display and plot these without navsync.
-//! * Decoding is [`json::from_json`](crate::json::from_json), exact to the bit for every field (floats are written in
+//! * Decoding is [`json::from_json`](navsync_shared::json::from_json), exact to the bit for every field (floats are written in
 //!   the shortest form that parses back to the same `f64`, NaN as `null`).
 
 use core::fmt::Debug;
@@ -14,10 +14,10 @@ use core::fmt::Debug;
 use iceoryx2::prelude::ZeroCopySend;
 
 use super::mcap_reader::{Channel, Schema};
-use crate::json::{from_json, schema, to_json};
-use crate::reflect::Reflect;
-use crate::samples::{AnySample, GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
-use crate::services::ServiceKind;
+use navsync_shared::json::{from_json, schema, to_json};
+use navsync_shared::reflect::Reflect;
+use navsync_shared::samples::{AnySample, GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
+use navsync_shared::services::ServiceKind;
 
 /// Message encoding of every navsync channel.
 pub const MESSAGE_ENCODING: &str = "json";
@@ -67,32 +67,32 @@ sample_type!(SimTruth, SimTruth, Truth);
 macro_rules! with_sample_type {
     ($kind:expr, $T:ident => $body:expr) => {
         match $kind {
-            $crate::services::ServiceKind::GnssFix => {
-                type $T = $crate::samples::GnssFix;
+            navsync_shared::services::ServiceKind::GnssFix => {
+                type $T = navsync_shared::samples::GnssFix;
                 $body
             }
-            $crate::services::ServiceKind::PpsEdge => {
-                type $T = $crate::samples::PpsEdge;
+            navsync_shared::services::ServiceKind::PpsEdge => {
+                type $T = navsync_shared::samples::PpsEdge;
                 $body
             }
-            $crate::services::ServiceKind::ImuSample => {
-                type $T = $crate::samples::ImuSample;
+            navsync_shared::services::ServiceKind::ImuSample => {
+                type $T = navsync_shared::samples::ImuSample;
                 $body
             }
-            $crate::services::ServiceKind::TimeState => {
-                type $T = $crate::samples::TimeState;
+            navsync_shared::services::ServiceKind::TimeState => {
+                type $T = navsync_shared::samples::TimeState;
                 $body
             }
-            $crate::services::ServiceKind::NavState => {
-                type $T = $crate::samples::NavState;
+            navsync_shared::services::ServiceKind::NavState => {
+                type $T = navsync_shared::samples::NavState;
                 $body
             }
-            $crate::services::ServiceKind::Health => {
-                type $T = $crate::samples::Health;
+            navsync_shared::services::ServiceKind::Health => {
+                type $T = navsync_shared::samples::Health;
                 $body
             }
-            $crate::services::ServiceKind::SimTruth => {
-                type $T = $crate::samples::SimTruth;
+            navsync_shared::services::ServiceKind::SimTruth => {
+                type $T = navsync_shared::samples::SimTruth;
                 $body
             }
         }
@@ -162,7 +162,7 @@ pub fn channel_kind(channel: &Channel, schema: Option<&Schema>) -> Result<Servic
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::samples::{Stamp, StampSource};
+    use navsync_shared::samples::{Stamp, StampSource};
 
     #[test]
     fn every_kind_has_a_schema_and_round_trips_bit_for_bit() {
