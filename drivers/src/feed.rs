@@ -29,7 +29,6 @@ use std::io::Write;
 use std::os::fd::AsRawFd;
 use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
-use std::str::FromStr;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -42,32 +41,7 @@ use crate::pty::Pty;
 /// Line rate for pacing raw captures when `--baud` is not given.
 pub const DEFAULT_RAW_BAUD: u32 = 115_200;
 
-/// Playback speed.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Speed {
-    /// N times the capture's own pace (1 = real time).
-    Factor(f64),
-    /// As fast as the reader takes it.
-    Max,
-}
-
-impl FromStr for Speed {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "realtime" => Ok(Self::Factor(1.0)),
-            "max" => Ok(Self::Max),
-            _ => s
-                .parse::<f64>()
-                .ok()
-                .filter(|f| f.is_finite() && *f > 0.0)
-                .map(Self::Factor)
-                .ok_or_else(|| {
-                    format!("`{s}` is not a speed: expected `realtime`, `max` or a positive factor such as 10")
-                }),
-        }
-    }
-}
+pub use navsync_shared::pacing::Speed;
 
 /// Settings of `navsync feed`.
 #[derive(Debug, Clone)]
@@ -311,7 +285,9 @@ mod tests {
         assert_eq!("12.5".parse::<Speed>(), Ok(Speed::Factor(12.5)));
         for bad in ["0", "-2", "fast", "inf"] {
             assert!(
-                bad.parse::<Speed>().unwrap_err().contains("expected `realtime`, `max`"),
+                bad.parse::<Speed>()
+                    .unwrap_err()
+                    .contains("expected `realtime` (= 1), `max`"),
                 "{bad}"
             );
         }

@@ -31,7 +31,9 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use navsync_drivers::gps::offline::{CaptureCounters, decode_capture, epoch_json};
+use navsync_drivers::gnss::Protocol;
+use navsync_drivers::gnss::capture::{decode_capture, epoch_json};
+use navsync_drivers::gnss::nmea::NmeaCounters;
 use navsync_shared::samples::{GnssFix, SENTENCE_RMC, SENTENCE_VTG};
 use navsync_shared::time::{Civil, NS_PER_S, format_rfc3339_ms, utc_ns_from_civil};
 use serde_json::Value;
@@ -249,7 +251,7 @@ fn compare(gpsd: &Value, fix: &GnssFix) -> (Vec<Diff>, bool) {
 /// Diagnostics (`cargo test --test gpsd_conformance -- --nocapture` with): `NMEA_ALL=1`
 /// prints every unexplained mismatch, `NMEA_COUNTERS=1` the decoder's counters per capture,
 /// `NMEA_DUMP=NAME.log` the decoder's epochs, its counters and gpsd's epochs for one capture.
-fn dump(fixes: &[GnssFix], counters: &CaptureCounters, chk: &str) {
+fn dump(fixes: &[GnssFix], counters: &NmeaCounters, chk: &str) {
     for f in fixes {
         println!(
             "ours {} tod={} bits={:#04x} host={}",
@@ -279,7 +281,8 @@ struct Row {
 }
 
 fn check_capture(name: &str, log: &[u8], chk: &str, used: &mut [usize]) -> Row {
-    let (fixes, counters) = decode_capture(log);
+    let decoded = decode_capture(log, Protocol::Nmea);
+    let (fixes, counters) = (decoded.fixes.clone(), decoded.nmea().expect("NMEA").counters());
     if std::env::var("NMEA_DUMP").is_ok_and(|d| d == name) {
         dump(&fixes, &counters, chk);
     }

@@ -12,7 +12,7 @@ use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{GnssFix, ImuSample, NavState, PpsEdge, TimeState, TimeStatus};
 
 use crate::array::imu_array::{ArrayConfig, ImuArray};
-use crate::nav::gnss_fusion::{self, GnssAccuracy};
+use crate::nav::measurements::gnss::{self, GnssAccuracy};
 use crate::nav::navigator::{NavConfig, Navigator};
 use crate::time::time_sync::{TimeSync, TimeSyncConfig};
 
@@ -168,7 +168,7 @@ impl Pipeline {
             },
             FixStamping::Receipt => fix.stamp.host_ns,
         };
-        if let Some(obs) = gnss_fusion::observation(fix, stamp, &self.cfg.gnss) {
+        if let Some(obs) = gnss::observation(fix, stamp, &self.cfg.gnss) {
             self.nav.on_gnss(obs, fix.stamp.host_ns);
         }
         changed

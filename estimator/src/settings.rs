@@ -17,7 +17,7 @@ use crate::array::imu_array::{ArrayConfig, UnitConfig};
 use crate::array::imu_offset::OffsetConfig;
 use crate::evaluation::DelayTruth;
 use crate::nav::error_state::ProcessNoise;
-use crate::nav::gnss_fusion::GnssAccuracy;
+use crate::nav::measurements::gnss::GnssAccuracy;
 use crate::nav::navigator::NavConfig;
 use crate::pipeline::PipelineConfig;
 use crate::time::clock_model::OscillatorNoise;

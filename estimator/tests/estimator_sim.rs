@@ -76,7 +76,7 @@ fn run_with(
 /// velocity noise as the simulated receiver's), since a real IMU's attitude, bias and noise
 /// errors only add unknowns. Per horizontal axis j ∈ {N, E} the fix at t_k (1 Hz) measures
 ///   p: δp0_j + δv0_j·t_k + v_j(t_k)·Δ + n_p,   v: δv0_j + a_j(t_k)·Δ + n_v
-/// (the INS minus the GNSS at its true epoch, the Jacobians of `gnss_fusion.rs` with a
+/// (the INS minus the GNSS at its true epoch, the Jacobians of `nav/measurements/gnss.rs` with a
 /// perfect INS whose only errors are its initial position and velocity), and the bound is
 /// √[(Σ Hᵀ R⁻¹ H)⁻¹]_ΔΔ (Fisher information of the linear-Gaussian model, no prior).
 fn ideal_delay_bound_s(cfg: &SimConfig) -> Vec<f64> {

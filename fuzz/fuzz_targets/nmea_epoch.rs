@@ -1,5 +1,5 @@
 //! NMEA front end: serial bytes → `LineFramer` → `EpochAssembler` → `GnssFix`, as the live
-//! driver and `navsync nmea FILE` run it (`offline::decode_capture`), plus the framer fed in
+//! driver and `navsync decode FILE` run it (`capture::decode_capture`), plus the framer fed in
 //! odd-sized reads and the assembler fed raw lines (any bytes) that did not go through the
 //! framer.
 //!
@@ -10,9 +10,10 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use navsync_drivers::gps::nmea_epoch::EpochAssembler;
-use navsync_drivers::gps::nmea_framer::{LineFramer, MAX_SENTENCE_LEN};
-use navsync_drivers::gps::offline::decode_capture;
+use navsync_drivers::gnss::Protocol;
+use navsync_drivers::gnss::capture::decode_capture;
+use navsync_drivers::gnss::nmea::epoch::EpochAssembler;
+use navsync_drivers::gnss::nmea::framer::{LineFramer, MAX_SENTENCE_LEN};
 use navsync_shared::samples::{FixMode, GnssFix};
 
 const NS_PER_DAY: i64 = 86_400_000_000_000;
@@ -88,7 +89,8 @@ fn frame(data: &[u8], chunk: usize) -> Vec<Vec<u8>> {
 
 fuzz_target!(|data: &[u8]| {
     // The offline decoder: comments, delay cookies, one read per line, flush at the end.
-    let (fixes, counters) = decode_capture(data);
+    let decoded = decode_capture(data, Protocol::Nmea);
+    let (fixes, counters) = (decoded.fixes.clone(), decoded.nmea().expect("NMEA").counters());
     check_fixes(&fixes);
     assert_eq!(counters.epochs.epochs, fixes.len() as u64);
 

@@ -19,7 +19,6 @@
 //! Times: integer nanoseconds; `host_ns` is `CLOCK_MONOTONIC`.
 
 pub mod client;
-pub mod config;
 pub mod cpu_wakeup;
 pub mod earth;
 pub mod health_reporter;
@@ -32,4 +31,5 @@ pub mod reflect;
 pub mod samples;
 pub mod sd_notify;
 pub mod services;
+pub mod source_map;
 pub mod time;

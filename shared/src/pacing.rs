@@ -1,7 +1,37 @@
 //! Real-time pacing on the host clock: absolute sleeps on `CLOCK_MONOTONIC`, so that delays do
 //! not accumulate over thousands of waits (the simulator's event loop, `navsync replay`).
 
+use std::str::FromStr;
+
 use crate::time::{NS_PER_S, monotonic_now_ns};
+
+/// How fast recorded or captured data is played back (`navsync replay --speed`,
+/// `navsync feed --speed`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Speed {
+    /// The recorded spacing divided by this factor (1: real time).
+    Factor(f64),
+    /// As fast as possible (as fast as the reader takes it).
+    Max,
+}
+
+impl FromStr for Speed {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "realtime" => Ok(Self::Factor(1.0)),
+            "max" => Ok(Self::Max),
+            _ => s
+                .parse::<f64>()
+                .ok()
+                .filter(|f| f.is_finite() && *f > 0.0)
+                .map(Self::Factor)
+                .ok_or_else(|| {
+                    format!("`{s}` is not a speed: expected `realtime` (= 1), `max` or a positive factor such as 10")
+                }),
+        }
+    }
+}
 
 /// Sleeps until host time `target_ns` (`CLOCK_MONOTONIC`, ns) with an absolute
 /// `clock_nanosleep`, waking `spin_ns` early and spinning the rest (for wake-ups accurate to

@@ -30,43 +30,74 @@ use super::world::{SimEvent, World};
 use crate::xsens_imus::{SimImuOutput, SimImuSink, SimImuSinkError};
 use navsync_drivers::pty::Pty;
 
-/// Command-line overrides of the scenario.
-#[derive(Debug, Clone, Default)]
+/// `navsync sim`: the simulated world's settings, overriding the scenario's.
+#[derive(Debug, Clone, Default, clap::Args)]
 pub struct SimArgs {
-    /// Scenario file (default: the embedded drive).
+    /// Scenario file (TOML); default: the embedded ~10 minute drive.
+    #[arg(long)]
     pub scenario: Option<PathBuf>,
-    /// Number of IMUs.
+    /// Number of IMUs (overrides the scenario).
+    #[arg(long)]
     pub imus: Option<usize>,
-    /// IMU error preset for all IMUs.
+    /// IMU error preset for all IMUs: consumer, industrial, perfect.
+    #[arg(long = "imu-preset")]
     pub preset: Option<ImuPreset>,
-    /// Stamp offsets of the IMUs relative to the first, ms.
+    /// Stamp offsets of the IMUs relative to the first, ms, comma-separated (e.g. 0,10,15,20).
+    #[arg(long, value_delimiter = ',')]
     pub imu_offsets_ms: Option<Vec<f64>>,
     /// GNSS rate, Hz (1 or 10).
+    #[arg(long = "gnss-rate")]
     pub gnss_rate_hz: Option<u32>,
     /// NMEA output latency after the PPS edge, s.
+    #[arg(long = "gnss-latency")]
     pub gnss_latency_s: Option<f64>,
     /// Host oscillator frequency error, ppm.
+    #[arg(long, allow_hyphen_values = true)]
     pub clock_ppm: Option<f64>,
     /// PPS time-stamp jitter (1-sigma), ns.
+    #[arg(long)]
     pub pps_jitter_ns: Option<f64>,
     /// Random seed.
+    #[arg(long)]
     pub seed: Option<u64>,
-    /// Symlink to create for the NMEA pseudo-terminal.
+    /// Create this symlink to the NMEA pseudo-terminal.
+    #[arg(long)]
     pub pty_link: Option<PathBuf>,
-    /// How IMU samples leave the simulator: published directly, or as Xsens MTData2 messages
-    /// into one pseudo-terminal per IMU for `navsync imu` drivers.
+    /// IMU samples: `direct` into the services, or `xsens` MTData2 into one pseudo-terminal
+    /// per IMU for `navsync imu` drivers.
+    #[arg(long, default_value = "direct")]
     pub imu_output: SimImuOutput,
-    /// Directory of the IMU pseudo-terminal links `imu0`, `imu1`, … (xsens output; default
-    /// `/tmp/navsync`).
+    /// Directory of the IMU pseudo-terminal links (`imu0`, `imu1`, …) with `--imu-output xsens`
+    /// (default `/tmp/navsync`).
+    #[arg(long)]
     pub imu_pty_dir: Option<PathBuf>,
     /// Stop after this many seconds of scenario.
+    #[arg(long = "duration")]
     pub duration_s: Option<f64>,
     /// Simulated GNSS time minus the system clock, s (default 0: GNSS time ≈ system time).
+    #[arg(long = "utc-offset", default_value_t = 0.0, allow_hyphen_values = true)]
     pub utc_offset_s: f64,
-    /// Extra GNSS outages (start s, duration s), added to the scenario's.
+    /// A GNSS outage START:DURATION in seconds of scenario time (repeatable), added to the
+    /// scenario's.
+    #[arg(long = "gnss-outage", value_parser = parse_outage)]
     pub gnss_outages: Vec<(f64, f64)>,
-    /// Switch the body vibration off (`[trajectory.vibration] enabled = false`).
+    /// Switch the simulated body vibration off (a perfectly smooth drive;
+    /// `[trajectory.vibration] enabled = false`).
+    #[arg(long)]
     pub no_vibration: bool,
+}
+
+/// `START:DURATION`, two numbers of seconds.
+fn parse_outage(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}`: expected START:DURATION, two numbers of seconds"))?;
+    let num = |x: &str| {
+        x.trim()
+            .parse::<f64>()
+            .map_err(|_| format!("`{x}` is not a number of seconds"))
+    };
+    Ok((num(a)?, num(b)?))
 }
 
 /// Errors of the simulator process.

@@ -1,6 +1,6 @@
 //! The samples the drivers would publish for a simulated world, produced as fast as the CPU
 //! allows: IMU samples and PPS edges as the simulator publishes them, GNSS fixes decoded from
-//! the world's NMEA bytes by the GPS driver's own decoder ([`LineFramer`] → [`EpochAssembler`])
+//! the world's NMEA bytes by the GNSS driver's own [`Decoder`]
 //! with the same receipt stamps a UART at the configured baud rate would give, and the truth.
 //!
 //! Each item carries its service name and the host time at which it would be delivered
@@ -15,9 +15,8 @@ use navsync_shared::services;
 use navsync_shared::time::NS_PER_S;
 
 use super::world::{SimEvent, World};
-use navsync_drivers::gps::driver::IDLE_FLUSH;
-use navsync_drivers::gps::nmea_epoch::EpochAssembler;
-use navsync_drivers::gps::nmea_framer::LineFramer;
+use navsync_drivers::gnss::driver::IDLE_FLUSH;
+use navsync_drivers::gnss::{Decoder, GnssDecoder, Protocol};
 
 /// One published sample.
 #[derive(Debug, Clone)]
@@ -33,8 +32,7 @@ pub struct Published {
 /// Iterator over the published samples of a [`World`], in delivery order.
 pub struct PublishedStream {
     world: World,
-    framer: LineFramer,
-    assembler: EpochAssembler,
+    decoder: Decoder,
     char_ns: i64,
     gnss_service: Rc<str>,
     pps_service: Rc<str>,
@@ -54,8 +52,7 @@ impl PublishedStream {
         let next_event = world.next_event();
         Self {
             world,
-            framer: LineFramer::new(),
-            assembler: EpochAssembler::new(),
+            decoder: Decoder::new(Protocol::Nmea),
             char_ns,
             gnss_service: services::gnss_fix("0").into(),
             pps_service: services::pps_edge("0").into(),
@@ -76,8 +73,7 @@ impl PublishedStream {
         let read_ns = host_ns + (n - 1) * self.char_ns;
         let delivered_ns = read_ns + IDLE_FLUSH.as_nanos() as i64;
         let Self {
-            framer,
-            assembler,
+            decoder,
             fixes,
             gnss_service,
             char_ns,
@@ -90,10 +86,8 @@ impl PublishedStream {
                 sample: AnySample::GnssFix(*fix),
             });
         };
-        framer.push(bytes, read_ns, *char_ns, &mut |s| {
-            assembler.push(s.text, s.host_ns, &mut push)
-        });
-        assembler.flush(&mut push);
+        decoder.push(bytes, read_ns, *char_ns, &mut push);
+        decoder.flush(&mut push);
     }
 }
 

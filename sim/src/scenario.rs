@@ -19,7 +19,7 @@ use serde::Deserialize;
 
 pub use super::error::SimError;
 use super::imu_errors::ImuPreset;
-use navsync_shared::config::SourceMap;
+use navsync_shared::source_map::SourceMap;
 
 /// Origin label of the embedded default scenario.
 pub const DEFAULT_DRIVE_ORIGIN: &str = "sim/scenarios/default_drive.toml";

@@ -360,7 +360,7 @@ impl TestEnv {
     /// Starts the live pipeline as separate processes, as `navsync demo` does with xsens IMUs:
     /// `estimator` (first, so it sees every sample from the start), `pps` (`--source sim`),
     /// `sim` (on `scenario`, NMEA into a pseudo-terminal, each IMU as Xsens messages into its
-    /// own), `gps` on the NMEA pseudo-terminal and `imu0`…`imu{n-1}` on theirs.
+    /// own), `gnss` on the NMEA pseudo-terminal and `imu0`…`imu{n-1}` on theirs.
     pub fn spawn_pipeline(&mut self, scenario: &Path, imus: usize) {
         let ids: Vec<String> = (0..imus).map(|i| i.to_string()).collect();
         let ids = ids.join(",");
@@ -386,7 +386,7 @@ impl TestEnv {
             ],
         );
         self.wait_for_path(&link, Duration::from_secs(30));
-        self.spawn("gps", &["gps", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+        self.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"]);
         for i in 0..imus {
             let port = self.dir.join(format!("imu{i}"));
             self.wait_for_path(&port, Duration::from_secs(30));
@@ -407,7 +407,7 @@ impl TestEnv {
     }
 }
 
-/// The latest `Health` of some processes, by process name (`estimator`, `gps-0`, `imu-1`, …).
+/// The latest `Health` of some processes, by process name (`estimator`, `gnss-0`, `imu-1`, …).
 pub struct HealthWatch {
     subs: Vec<(String, Subscriber<Health>)>,
     latest: HashMap<String, Health>,

@@ -134,7 +134,7 @@ fn chrony_sees_the_gnss_time_offset_within_1_ms() {
         ],
     );
     env.wait_for_path(&link, Duration::from_secs(20));
-    env.spawn("gps", &["gps", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+    env.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"]);
     env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
     env.spawn("estimator", &["estimator", "--gnss", "0", "--pps", "0", "--imus", "0"]);
     env.spawn("ntpshm", &["ntpshm", "--unit", &unit_s]);

@@ -33,7 +33,7 @@ fn demo_runs_twice_in_a_row_and_cleans_up() {
             assert!(n > 0, "round {round}: no samples on {service}:\n{stdout}");
         }
         // The IMUs run through the Xsens path by default: one `navsync imu` per IMU.
-        for child in ["sim", "gps", "estimator", "imu0", "imu1"] {
+        for child in ["sim", "gnss", "estimator", "imu0", "imu1"] {
             assert!(
                 stdout.contains(&format!("{child}: exit status: 0")),
                 "round {round}: {child} did not exit cleanly:\n{stdout}"

@@ -164,7 +164,7 @@ enum Sensor {
 impl Sensor {
     fn child(self) -> &'static str {
         match self {
-            Sensor::Gnss => "gps",
+            Sensor::Gnss => "gnss",
             Sensor::Pps => "pps",
             Sensor::Imu1 => "imu1",
             Sensor::Imu0 => "imu0",

@@ -54,7 +54,7 @@ fn pps_silence_is_held_over_flagged_and_relocked_live() {
         ],
     );
     env.wait_for_path(&link, Duration::from_secs(20));
-    env.spawn("gps", &["gps", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+    env.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"]);
     env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
     env.spawn("estimator", &["estimator", "--gnss", "0", "--pps", "0", "--imus", "0"]);
 

@@ -1,7 +1,7 @@
 //! Real receiver captures from the gpsd corpus (`navsync_tests::corpus_dir()`, or
 //! `$NAVSYNC_CORPUS_DIR`) played by `navsync feed` into pseudo-terminals and read by live
-//! `navsync gps` processes: what arrives on `navsync/gnss/{id}/fix` must be, field by field,
-//! what the offline decoder (`gps::offline::decode_capture`) makes of the same file, and the
+//! `navsync gps` (the alias of `navsync gnss`) processes: what arrives on `navsync/gnss/{id}/fix` must be, field by field,
+//! what the offline decoder (`gnss::capture::decode_capture`) makes of the same file, and the
 //! driver's error counters must equal the offline ones. Most captures are played as fast as
 //! the driver reads (`--speed max`), two at 5× their own pace (epoch by epoch, with idle line
 //! time in between, as from the receiver).
@@ -9,7 +9,8 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use navsync_drivers::gps::offline::decode_capture;
+use navsync_drivers::gnss::Protocol;
+use navsync_drivers::gnss::capture::decode_capture;
 use navsync_shared::ipc::Subscriber;
 use navsync_shared::samples::*;
 use navsync_shared::services;
@@ -110,7 +111,7 @@ struct Run {
     name: &'static str,
     id: String,
     offline: Vec<GnssFix>,
-    counters: navsync_drivers::gps::offline::CaptureCounters,
+    counters: navsync_drivers::gnss::nmea::NmeaCounters,
     fixes: Sub,
     health: Subscriber<Health>,
     live: Vec<GnssFix>,
@@ -128,7 +129,8 @@ fn corpus_captures_through_feed_and_gps_match_the_offline_decoder() {
     let mut runs = Vec::new();
     for (k, name) in MAX_SPEED.iter().chain(PACED.iter()).enumerate() {
         let bytes = std::fs::read(dir.join(name)).unwrap();
-        let (offline, counters) = decode_capture(&bytes);
+        let decoded = decode_capture(&bytes, Protocol::Nmea);
+        let (offline, counters) = (decoded.fixes.clone(), decoded.nmea().expect("NMEA").counters());
         assert!(!offline.is_empty(), "{name}: no fixes offline");
         let id = format!("c{k}");
         runs.push(Run {
@@ -137,7 +139,7 @@ fn corpus_captures_through_feed_and_gps_match_the_offline_decoder() {
             counters,
             fixes: node.subscriber::<GnssFix>(&services::gnss_fix(&id)).unwrap(),
             health: node
-                .subscriber::<Health>(&services::health(&format!("gps-{id}")))
+                .subscriber::<Health>(&services::health(&format!("gnss-{id}")))
                 .unwrap(),
             id,
             live: Vec::new(),

@@ -1,4 +1,4 @@
-//! The demo's processes (sim, gps, pps, estimator) as separate OS processes over real iceoryx2
+//! The demo's processes (sim, gnss, pps, estimator) as separate OS processes over real iceoryx2
 //! services, observed from this test process: every service carries samples, and the time
 //! mapping from the simulated PPS (0.5 ppm, 1 µs jitter) is within 5 µs of the truth after 30 s.
 
@@ -23,7 +23,7 @@ fn every_service_carries_samples_and_time_maps_within_5_us() {
     let time = node.subscriber::<TimeState>(services::TIME_STATE).unwrap();
     let nav = node.subscriber::<NavState>(services::NAV_STATE).unwrap();
     let truth = node.subscriber::<SimTruth>(services::SIM_TRUTH).unwrap();
-    let healths: Vec<_> = ["sim", "gps-0", "pps-0", "estimator"]
+    let healths: Vec<_> = ["sim", "gnss-0", "pps-0", "estimator"]
         .iter()
         .map(|p| node.subscriber::<Health>(&services::health(p)).unwrap())
         .collect();
@@ -49,7 +49,7 @@ fn every_service_carries_samples_and_time_maps_within_5_us() {
         ],
     );
     env.wait_for_path(&link, Duration::from_secs(20));
-    env.spawn("gps", &["gps", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+    env.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"]);
     for i in 0..4 {
         let port = env.dir.join(format!("imu{i}"));
         env.wait_for_path(&port, Duration::from_secs(20));

@@ -3,8 +3,8 @@
 //!
 //! * IMU (Xsens): bytes of MTData2 messages → [`XbusFramer`] → [`decode_mtdata2`] → a checked,
 //!   stamped sample ([`SampleOutput::offer`]: checks, stamp, iceoryx2 publish, health tick);
-//! * GNSS (NMEA): bytes of epoch bursts (RMC, VTG, GGA, GSA, GST, ZDA) → [`LineFramer`] →
-//!   [`EpochAssembler`] → an iceoryx2 publish of the `GnssFix`;
+//! * GNSS (NMEA): bytes of epoch bursts (RMC, VTG, GGA, GSA, GST, ZDA) → the GNSS driver's
+//!   [`Decoder`] (line framer → epoch assembler) → an iceoryx2 publish of the `GnssFix`;
 //!
 //! each with a subscriber attached in the same process that takes every sample (the publish
 //! then really delivers), allocate nothing of navsync's own. iceoryx2 0.10 itself allocates
@@ -19,8 +19,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use navsync_drivers::gps::nmea_epoch::EpochAssembler;
-use navsync_drivers::gps::nmea_framer::LineFramer;
+use navsync_drivers::gnss::{Decoder, GnssDecoder, Protocol};
 use navsync_drivers::imu::output::{Extras, SampleOutput};
 use navsync_drivers::imu::sample_checks::{Candidate, DeviceClock, Limits, Sequence};
 use navsync_drivers::imu::xsens_frame::{NS_PER_SAMPLE_TIME_FINE_TICK, XbusFramer, decode_mtdata2};
@@ -174,7 +173,7 @@ fn nmea_bytes_to_published_fix_allocate_nothing() {
     let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let env = TestEnv::new("noallocgps");
     let per_publish = iceoryx2_allocations_per_publish!(env, GnssFix, &services::gnss_fix("9"));
-    let node = env.node("gps-0");
+    let node = env.node("gnss-0");
     let reader = env.node("reader");
     let mut publisher = node.publisher::<GnssFix>(&services::gnss_fix("0")).unwrap();
     let sub = reader.subscriber::<GnssFix>(&services::gnss_fix("0")).unwrap();
@@ -202,19 +201,16 @@ fn nmea_bytes_to_published_fix_allocate_nothing() {
             out
         })
         .collect();
-    let mut framer = LineFramer::new();
-    let mut asm = EpochAssembler::new();
+    let mut decoder = Decoder::new(Protocol::Nmea);
     let mut host_ns = 5_000_000_000i64;
     let (published, received) = (std::cell::Cell::new(0u64), std::cell::Cell::new(0u64));
     let mut run = |bursts: &[Vec<u8>]| {
         for b in bursts {
             host_ns += 1_000_000_000;
             // 115 200 Bd: 86 806 ns per byte.
-            framer.push(b, host_ns, 86_806, &mut |s| {
-                asm.push(s.text, s.host_ns, &mut |fix| {
-                    publisher.publish(fix).expect("publish");
-                    published.set(published.get() + 1);
-                });
+            decoder.push(b, host_ns, 86_806, &mut |fix| {
+                publisher.publish(fix).expect("publish");
+                published.set(published.get() + 1);
             });
             while sub.receive().unwrap().is_some() {
                 received.set(received.get() + 1);

@@ -43,7 +43,7 @@ fn status_and_echo_see_the_live_processes() {
         .iter()
         .map(|p| p["name"].as_str().unwrap())
         .collect();
-    for p in ["sim", "gps-0", "pps-0", "estimator", "observer"] {
+    for p in ["sim", "gnss-0", "pps-0", "estimator", "observer"] {
         assert!(procs.contains(&p), "process {p} missing: {procs:?}");
     }
     let est = r["processes"]
@@ -85,7 +85,7 @@ fn status_and_echo_see_the_live_processes() {
 
     // Health: counters of every process.
     let health = r["health"].as_array().unwrap();
-    let gps = health.iter().find(|h| h["process"] == "gps-0").expect("gps health");
+    let gps = health.iter().find(|h| h["process"] == "gnss-0").expect("gps health");
     assert_eq!(gps["alive"], true);
     assert!(gps["counters"].as_object().unwrap().len() >= 3, "{gps}");
     let pps = health.iter().find(|h| h["process"] == "pps-0").expect("pps health");

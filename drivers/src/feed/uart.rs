@@ -99,9 +99,10 @@ mod tests {
                 assert!(out.len() < line.len(), "{tx} → {rx}: {}", out.len());
             }
             // Nothing the NMEA decoder accepts survives.
-            let (fixes, counters) = crate::gps::offline::decode_capture(&out);
+            let cap = crate::gnss::capture::decode_capture(&out, crate::gnss::Protocol::Nmea);
+            let (fixes, counters) = (&cap.fixes, cap.nmea().unwrap());
             assert!(fixes.is_empty(), "{tx} → {rx}: {} fixes", fixes.len());
-            assert!(counters.framer.noise_bytes > 0, "{tx} → {rx}: {counters:?}");
+            assert!(counters.counters().framer.noise_bytes > 0, "{tx} → {rx}: {counters:?}");
         }
     }
 }

@@ -50,6 +50,8 @@ impl std::fmt::Display for AxisMap {
     }
 }
 
+deserialize_from_str!(AxisMap);
+
 impl FromStr for AxisMap {
     type Err = String;
 

@@ -78,6 +78,19 @@ pub enum ImuSource {
     },
 }
 
+deserialize_from_str!(ImuSource);
+
+/// The source as written on the command line (`iio:adis16475`, `xsens:/dev/ttyUSB0:921600`).
+impl std::fmt::Display for ImuSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Iio { devices } => write!(f, "iio:{}", devices.join("+")),
+            Self::Xsens { port, baud } => write!(f, "xsens:{port}:{baud}"),
+            Self::Sim { dir } => write!(f, "sim:{}", dir.display()),
+        }
+    }
+}
+
 impl FromStr for ImuSource {
     type Err = String;
 

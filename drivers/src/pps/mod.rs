@@ -91,6 +91,8 @@ pub enum SourceSpec {
     Sim,
 }
 
+deserialize_from_str!(SourceSpec);
+
 impl std::str::FromStr for SourceSpec {
     type Err = PpsError;
     fn from_str(s: &str) -> Result<Self, PpsError> {

@@ -1,10 +1,14 @@
-//! Accuracy of a navigation run against the simulated truth: the numbers of the accuracy
-//! report (`navsync replay --estimate --summary-json`, the end of `navsync demo`).
+//! Accuracy of a navigation run: against the simulated truth while it runs (this module: the
+//! numbers of the accuracy report of `navsync replay --estimate --summary-json`, `sim --fast
+//! --estimate` and the end of `navsync demo`), and one trajectory against another afterwards
+//! ([`trajectory`]: `navsync eval`, the report's error plots). One set of angle helpers.
 //!
 //! Each `NavState` is compared with the truth interpolated linearly to its host time (truth
 //! arrives at 100–200 Hz; the interpolation error is below 0.1 mm and 1e−5 m/s for car
 //! dynamics). Only states after alignment count. Position errors are NED metres through ECEF
 //! ([`earth::ned_between`]); attitude errors are differences of roll, pitch and yaw wrapped to ±180°.
+
+pub mod trajectory;
 
 use std::collections::{BTreeMap, VecDeque};
 
@@ -136,17 +140,28 @@ impl Default for Evaluator {
     }
 }
 
-fn wrap_deg(a: f64) -> f64 {
-    (a + 180.0).rem_euclid(360.0) - 180.0
+/// `a` wrapped to [−period/2, period/2) (an angle difference, period 360° or 2π).
+fn wrap(a: f64, period: f64) -> f64 {
+    (a + 0.5 * period).rem_euclid(period) - 0.5 * period
+}
+
+/// An angle difference wrapped to [−180°, 180°), deg.
+pub fn wrap_deg(a: f64) -> f64 {
+    wrap(a, 360.0)
+}
+
+/// From angle `a` towards `b` by the fraction `w` along the shorter arc, deg.
+pub fn lerp_angle_deg(a: f64, b: f64, w: f64) -> f64 {
+    a + wrap_deg(b - a) * w
 }
 
 fn lerp(a: f64, b: f64, w: f64) -> f64 {
     a + (b - a) * w
 }
 
+/// From angle `a` towards `b` by the fraction `w` along the shorter arc, rad.
 fn lerp_angle(a: f64, b: f64, w: f64) -> f64 {
-    let d = (b - a + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI;
-    a + d * w
+    a + wrap(b - a, 2.0 * std::f64::consts::PI) * w
 }
 
 impl Evaluator {

@@ -8,8 +8,8 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use navsync_shared::earth;
 
-use super::gnss_fusion::GnssObservation;
 use super::imu_buffer::ImuRecord;
+use super::measurements::gnss::GnssObservation;
 use super::mechanization::Pva;
 
 /// Thresholds of the alignment.

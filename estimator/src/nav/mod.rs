@@ -3,14 +3,17 @@
 //! - [`mechanization`]: strapdown INS in NED on WGS-84 (increments, coning/sculling).
 //! - [`error_state`], [`eskf`]: the 22-state error model (KF-GINS conventions + GNSS delay Δ)
 //!   and the Kalman filter engine with chi-square gating.
-//! - [`gnss_fusion`]: GNSS position/velocity observations with lever arm and the Δ Jacobians.
 //! - [`alignment`]: levelling and GNSS-course heading.
-//! - [`imu_buffer`], [`navigator`]: the fusion horizon (delayed filter + output predictor).
+//! - [`imu_buffer`], [`filter`], [`navigator`]: the fusion horizon (delayed filter + output
+//!   predictor).
+//! - [`measurements`]: the one measurement queue and its kinds (GNSS position/velocity with
+//!   lever arm and the Δ Jacobians, …), each fused at its own epoch.
 
 pub mod alignment;
 pub mod error_state;
 pub mod eskf;
-pub mod gnss_fusion;
+pub mod filter;
 pub mod imu_buffer;
+pub mod measurements;
 pub mod mechanization;
 pub mod navigator;

@@ -3,9 +3,10 @@
 //!
 //! - Every IMU interval enters the [`ImuBuffer`]. The *delayed* filter consumes intervals once
 //!   they are older than the horizon (default 1.5 s): strapdown mechanization at the IMU rate,
-//!   covariance propagation every ~20 ms. A GNSS fix waits in a small queue until the delayed
-//!   filter reaches the fix's epoch t_f = t_stamp − Δ̂ and is fused *there*, at its measurement
-//!   time, so neither the receiver's output latency nor the serial transfer biases it.
+//!   covariance propagation every ~20 ms. Measurements wait in one queue
+//!   ([`super::measurements`]) until the delayed filter reaches their epoch, and are fused
+//!   *there*: a GNSS fix at t_f = t_stamp − Δ̂, its measurement time, so neither the receiver's
+//!   output latency nor the serial transfer biases it.
 //! - The *output* state is the delayed state carried to the present through the buffered
 //!   intervals. It advances one mechanization step per new IMU interval; after a correction
 //!   of the delayed state it is recomputed by replaying the buffer. A `NavState` is therefore
@@ -13,15 +14,16 @@
 //!
 //! Pure and deterministic: the output depends only on the samples and their order.
 
-use nalgebra::{UnitQuaternion, Vector3};
-use navsync_shared::earth;
+use nalgebra::Vector3;
 use navsync_shared::samples::{ImuSync, MAX_IMUS, NavState, NavStatus};
 
 use super::alignment::{AlignConfig, Aligner};
-use super::error_state::{self, ATT, BA, BG, DELAY, N, POS, ProcessNoise, SA, SG, StateMat, StateVec, VEL};
-use super::eskf::{Eskf, Update};
-use super::gnss_fusion::{self, GnssObservation};
+use super::error_state::{ATT, BA, BG, DELAY, N, POS, ProcessNoise, SA, SG, StateMat, VEL};
+use super::eskf::Eskf;
+use super::filter::DelayedFilter;
 use super::imu_buffer::{ImuBuffer, ImuRecord};
+use super::measurements::gnss::GnssObservation;
+use super::measurements::{Measurement, MeasurementConfig, MeasurementQueue, MeasurementStates};
 use super::mechanization::{ImuIncrement, Pva, propagate};
 
 /// 1-sigma of the motion-onset delay estimate, s.
@@ -55,6 +57,8 @@ pub struct NavConfig {
     pub gate_scale: f64,
     /// No fix for this long: INS-only, s.
     pub outage_after_s: f64,
+    /// Settings of each kind of measurement ([`super::measurements`]).
+    pub measurements: MeasurementConfig,
 }
 
 impl NavConfig {
@@ -73,6 +77,7 @@ impl NavConfig {
             init_vel_std_mps: 0.3,
             gate_scale: 1.0,
             outage_after_s: 2.5,
+            measurements: MeasurementConfig::default(),
         }
     }
 }
@@ -104,170 +109,7 @@ pub struct NavCounters {
     pub gnss_resets_full: u64,
 }
 
-/// Consecutive rejected fixes after which the filter resets to GNSS (a GNSS jump, or a filter
-/// that has lost consistency, must not keep it in dead reckoning forever; PX4's EKF2 does the
-/// same after its GPS rejection timeout). When the fix's velocity passes the gate the inertial
-/// solution is sound and the position jumped (a receiver reset, a spoofer): only the position
-/// is reset. Otherwise position and velocity are, and the attitude and sensor-error
-/// uncertainty reopened.
-pub const RESET_AFTER_REJECTS: u32 = 5;
-
-#[derive(Debug, Clone)]
-struct Delayed {
-    pva: Pva,
-    pre: ImuIncrement,
-    t_ns: i64,
-    eskf: Eskf,
-    bias_g: Vector3<f64>,
-    bias_a: Vector3<f64>,
-    scale_g: Vector3<f64>,
-    scale_a: Vector3<f64>,
-    delay_s: f64,
-    acc_ned: Vector3<f64>,
-    last_w: Vector3<f64>,
-    cov_dt: f64,
-    cov_f: Vector3<f64>,
-    cov_w: Vector3<f64>,
-}
-
-impl Delayed {
-    /// Bias- and scale-compensated rates of a record (KF-GINS `imuCompensate`).
-    fn compensate(&self, r: &ImuRecord) -> (Vector3<f64>, Vector3<f64>) {
-        let w = (r.gyro_rps - self.bias_g).component_div(&(Vector3::repeat(1.0) + self.scale_g));
-        let f = (r.accel_mps2 - self.bias_a).component_div(&(Vector3::repeat(1.0) + self.scale_a));
-        (w, f)
-    }
-
-    fn step(&mut self, r: &ImuRecord, cfg: &NavConfig) {
-        let (w, f) = self.compensate(r);
-        let inc = ImuIncrement::from_rates(r.dt_s, w, f);
-        let v0 = self.pva.vel_ned_mps;
-        self.pva = propagate(&self.pva, &self.pre, &inc);
-        self.pre = inc;
-        self.t_ns = r.host_ns;
-        if r.dt_s > 0.0 {
-            self.acc_ned = (self.pva.vel_ned_mps - v0) / r.dt_s;
-        }
-        self.last_w = w;
-        self.cov_dt += r.dt_s;
-        self.cov_f += f * r.dt_s;
-        self.cov_w += w * r.dt_s;
-        if self.cov_dt >= cfg.cov_step_s {
-            self.propagate_covariance(cfg);
-        }
-    }
-
-    /// P ← Φ P Φᵀ + Q over the accumulated interval, Φ = I + F·Δt with F at the current state
-    /// and the interval-mean rates (KF-GINS propagates per IMU sample; grouping ~20 ms keeps the
-    /// cost per sample low and changes Φ by O((F·Δt)²)).
-    fn propagate_covariance(&mut self, cfg: &NavConfig) {
-        if self.cov_dt <= 0.0 {
-            return;
-        }
-        let f_b = self.cov_f / self.cov_dt;
-        let w_b = self.cov_w / self.cov_dt;
-        let f = error_state::system_matrix(&self.pva, &f_b, &w_b, &cfg.noise);
-        let phi = StateMat::identity() + f * self.cov_dt;
-        let q = error_state::process_noise(&cfg.noise, self.cov_dt);
-        self.eskf.predict(&phi, &q);
-        self.cov_dt = 0.0;
-        self.cov_f = Vector3::zeros();
-        self.cov_w = Vector3::zeros();
-    }
-
-    /// Resets the position to a fix (extrapolated by ε to the filter time along the filter's
-    /// velocity) and its covariance to the fix's accuracy, decorrelated from the other states;
-    /// velocity, attitude and sensor errors are kept: for a GNSS position that jumped while
-    /// its velocity still agrees with the inertial solution.
-    fn reset_position_to(&mut self, obs: &GnssObservation, cfg: &NavConfig, eps: f64) {
-        let c_bn = self.pva.q_nb.to_rotation_matrix().into_inner();
-        let lever_n = c_bn * cfg.lever_arm_b_m;
-        let (rm, rn) = earth::radii(obs.lat_rad);
-        let p_ned = self.pva.vel_ned_mps * eps - lever_n;
-        self.pva.lat_rad = obs.lat_rad + p_ned.x / (rm + obs.h_m);
-        self.pva.lon_rad = obs.lon_rad + p_ned.y / ((rn + obs.h_m) * obs.lat_rad.cos());
-        self.pva.h_m = obs.h_m - p_ned.z;
-        for i in POS..POS + 3 {
-            for j in 0..N {
-                self.eskf.p[(i, j)] = 0.0;
-                self.eskf.p[(j, i)] = 0.0;
-            }
-        }
-        for i in 0..3 {
-            self.eskf.p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
-        }
-    }
-
-    /// Resets position and velocity to a fix (extrapolated by ε to the filter time; vertical
-    /// velocity 0 ± 2 m/s when the fix has none) and their covariance to the fix's accuracy,
-    /// decorrelated from the other states.
-    fn reset_to(&mut self, obs: &GnssObservation, cfg: &NavConfig, eps: f64) {
-        let c_bn = self.pva.q_nb.to_rotation_matrix().into_inner();
-        let lever_n = c_bn * cfg.lever_arm_b_m;
-        let (rm, rn) = earth::radii(obs.lat_rad);
-        // NMEA carries no vertical velocity: a land vehicle's is ~0, with 2 m/s of doubt.
-        let v_d = if obs.vel_ned_mps.z.is_finite() {
-            obs.vel_ned_mps.z
-        } else {
-            0.0
-        };
-        let v = if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
-            Vector3::new(obs.vel_ned_mps.x, obs.vel_ned_mps.y, v_d)
-        } else {
-            Vector3::new(self.pva.vel_ned_mps.x, self.pva.vel_ned_mps.y, v_d)
-        };
-        let p_ned = v * eps - lever_n;
-        self.pva.lat_rad = obs.lat_rad + p_ned.x / (rm + obs.h_m);
-        self.pva.lon_rad = obs.lon_rad + p_ned.y / ((rn + obs.h_m) * obs.lat_rad.cos());
-        self.pva.h_m = obs.h_m - p_ned.z;
-        self.pva.vel_ned_mps = v;
-        for i in POS..ATT {
-            for j in 0..N {
-                self.eskf.p[(i, j)] = 0.0;
-                self.eskf.p[(j, i)] = 0.0;
-            }
-        }
-        for i in 0..3 {
-            self.eskf.p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
-            self.eskf.p[(VEL + i, VEL + i)] = obs.vel_std_mps.powi(2) + cfg.init_vel_std_mps.powi(2);
-        }
-        if !obs.vel_ned_mps.z.is_finite() {
-            self.eskf.p[(VEL + 2, VEL + 2)] = 4.0;
-        }
-        // Persistent rejection means the filter was overconfident somewhere: reopen the
-        // attitude and sensor-error uncertainty to their initial values so it can re-converge.
-        let reopen = [
-            (ATT, cfg.init_level_std_rad),
-            (ATT + 1, cfg.init_level_std_rad),
-            (ATT + 2, cfg.init_yaw_std_rad),
-        ];
-        for (i, sd) in reopen {
-            self.eskf.p[(i, i)] = self.eskf.p[(i, i)].max(sd * sd);
-        }
-        for i in 0..3 {
-            let bg = cfg.noise.gyro_bias_init_std.powi(2);
-            let ba = cfg.noise.accel_bias_init_std.powi(2);
-            self.eskf.p[(BG + i, BG + i)] = self.eskf.p[(BG + i, BG + i)].max(bg);
-            self.eskf.p[(BA + i, BA + i)] = self.eskf.p[(BA + i, BA + i)].max(ba);
-        }
-    }
-
-    /// Closed-loop feedback of an error-state estimate (KF-GINS `stateFeedback`).
-    fn feedback(&mut self, dx: &StateVec, horizon_s: f64) {
-        let (rm, rn) = earth::radii(self.pva.lat_rad);
-        self.pva.lat_rad -= dx[POS] / (rm + self.pva.h_m);
-        self.pva.lon_rad -= dx[POS + 1] / ((rn + self.pva.h_m) * self.pva.lat_rad.cos());
-        self.pva.h_m += dx[POS + 2];
-        self.pva.vel_ned_mps -= dx.fixed_rows::<3>(VEL);
-        let q_pn = UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(ATT).into_owned());
-        self.pva.q_nb = UnitQuaternion::new_normalize((q_pn * self.pva.q_nb).into_inner());
-        self.bias_g += dx.fixed_rows::<3>(BG);
-        self.bias_a += dx.fixed_rows::<3>(BA);
-        self.scale_g += dx.fixed_rows::<3>(SG);
-        self.scale_a += dx.fixed_rows::<3>(SA);
-        self.delay_s = (self.delay_s + dx[DELAY]).clamp(-0.5, horizon_s - 0.05);
-    }
-}
+pub use super::measurements::gnss::RESET_AFTER_REJECTS;
 
 /// Output re-propagation after a correction: the state, last increment, host time (ns) and
 /// last compensated rates of the records integrated so far.
@@ -286,7 +128,7 @@ pub struct Navigator {
     cfg: NavConfig,
     buf: ImuBuffer,
     aligner: Aligner,
-    filt: Option<Delayed>,
+    filt: Option<DelayedFilter>,
     /// The present-time state, the last increment and the host time it is for.
     out: Option<(Pva, ImuIncrement, i64)>,
     /// Output-stream intervals newer than the newest filter-stream interval.
@@ -297,12 +139,13 @@ pub struct Navigator {
     /// The output re-propagated from a corrected delayed state, in progress (see
     /// [`Navigator::catch_up`]).
     catchup: Option<CatchUp>,
-    pending: [Option<GnssObservation>; 8],
+    /// Measurements waiting for their epochs.
+    queue: MeasurementQueue,
+    /// What each kind of measurement keeps between measurements.
+    states: MeasurementStates,
     counters: NavCounters,
     last_imu_ns: Option<i64>,
     last_fix_rx_ns: Option<i64>,
-    last_fused_ns: i64,
-    consecutive_rejects: u32,
 }
 
 impl Navigator {
@@ -319,18 +162,22 @@ impl Navigator {
             out_w: Vector3::zeros(),
             out_f: Vector3::zeros(),
             catchup: None,
-            pending: [None; 8],
+            queue: MeasurementQueue::default(),
+            states: MeasurementStates::default(),
             counters: NavCounters::default(),
             last_imu_ns: None,
             last_fix_rx_ns: None,
-            last_fused_ns: 0,
-            consecutive_rejects: 0,
         }
     }
 
     /// Counters so far.
     pub fn counters(&self) -> &NavCounters {
         &self.counters
+    }
+
+    /// What each kind of measurement keeps (its counters: [`MeasurementStates::each_counter`]).
+    pub fn measurement_states(&self) -> &MeasurementStates {
+        &self.states
     }
 
     /// Configuration in use.
@@ -382,16 +229,12 @@ impl Navigator {
             return;
         }
         let Some(f) = &self.filt else { return };
-        let t_f = obs.stamp_host_ns - (f.delay_s * 1e9) as i64;
         // Behind the delayed filter by more than one covariance step: the horizon was too short.
-        if f.t_ns - t_f > (self.cfg.cov_step_s * 1e9) as i64 {
+        if f.t_ns - obs.epoch_ns(f.delay_s) > (self.cfg.cov_step_s * 1e9) as i64 {
             self.counters.fixes_too_old += 1;
             return;
         }
-        match self.pending.iter_mut().find(|p| p.is_none()) {
-            Some(slot) => *slot = Some(obs),
-            None => self.counters.fixes_too_old += 1,
-        }
+        self.queue.push(obs.into(), &mut self.counters);
     }
 
     fn try_align(&mut self, obs: &GnssObservation) {
@@ -435,7 +278,7 @@ impl Navigator {
         p[(ATT + 2, ATT + 2)] = cfg.init_yaw_std_rad.powi(2);
         if cfg.noise.estimate_delay {
             // The initial position and velocity come from a fix whose epoch is only known to
-            // σ_Δ: δr = −v·δΔ and δv = −a·δΔ (see gnss_fusion), so they share that uncertainty.
+            // σ_Δ: δr = −v·δΔ and δv = −a·δΔ (see measurements::gnss), so they share that uncertainty.
             let var_d = cfg.delay_prior_std_s.powi(2);
             let v = a.pva.vel_ned_mps;
             let acc = a.acc_ned;
@@ -457,23 +300,14 @@ impl Navigator {
         while self.buf.front().is_some_and(|r| r.host_ns <= t_f) {
             self.buf.pop();
         }
-        self.filt = Some(Delayed {
-            pva: a.pva,
-            pre: ImuIncrement::zero(),
-            t_ns: t_f,
-            eskf: Eskf::new(p),
-            bias_g: a.gyro_bias,
-            bias_a: Vector3::zeros(),
-            scale_g: Vector3::zeros(),
-            scale_a: Vector3::zeros(),
-            delay_s: cfg.delay_prior_s,
-            acc_ned: Vector3::zeros(),
-            last_w: Vector3::zeros(),
-            cov_dt: 0.0,
-            cov_f: Vector3::zeros(),
-            cov_w: Vector3::zeros(),
-        });
-        self.last_fused_ns = t_f;
+        self.filt = Some(DelayedFilter::new(
+            a.pva,
+            t_f,
+            Eskf::new(p),
+            a.gyro_bias,
+            cfg.delay_prior_s,
+        ));
+        self.states.gnss.last_fused_ns = t_f;
         self.replay();
     }
 
@@ -568,14 +402,11 @@ impl Navigator {
             }
             self.buf.pop();
             filt.step(&r, &self.cfg);
-            corrected |= fuse_due(
-                filt,
-                &mut self.pending,
-                &self.cfg,
-                &mut self.counters,
-                &mut self.consecutive_rejects,
-                &mut self.last_fused_ns,
-            );
+            self.states
+                .on_step(&r, filt, &self.cfg, &mut self.queue, &mut self.counters);
+            corrected |= self
+                .queue
+                .fuse_due(filt, &self.cfg, &mut self.states, &mut self.counters);
         }
         if corrected {
             self.counters.replays += 1;
@@ -686,7 +517,7 @@ impl Navigator {
             .is_none_or(|t| (now_ns - t) as f64 * 1e-9 > self.cfg.outage_after_s);
         if outage {
             NavStatus::InsOnly
-        } else if self.consecutive_rejects >= 3 {
+        } else if self.states.gnss.consecutive_rejects >= 3 {
             NavStatus::Degraded
         } else {
             NavStatus::Aligned
@@ -699,7 +530,7 @@ impl Navigator {
         s.status = self.status(now_ns) as u8;
         s.fixes_used = self.counters.fixes_used as u32;
         s.fixes_rejected = self.counters.fixes_rejected as u32;
-        s.last_fix_host_ns = self.last_fused_ns;
+        s.last_fix_host_ns = self.states.gnss.last_fused_ns;
         let (Some((pva, _, _)), Some(filt)) = (&self.out, &self.filt) else {
             for v in [
                 &mut s.lat_deg,
@@ -745,71 +576,4 @@ impl Navigator {
     pub fn empty_imu_table() -> [ImuSync; MAX_IMUS] {
         [<ImuSync as navsync_shared::reflect::Reflect>::zeroed(); MAX_IMUS]
     }
-}
-
-/// Fuses every pending fix whose (Δ-corrected) epoch the delayed filter has reached.
-/// Returns true when the state was corrected.
-fn fuse_due(
-    f: &mut Delayed,
-    pending: &mut [Option<GnssObservation>; 8],
-    cfg: &NavConfig,
-    counters: &mut NavCounters,
-    consecutive_rejects: &mut u32,
-    last_fused_ns: &mut i64,
-) -> bool {
-    let mut corrected = false;
-    loop {
-        let due = pending
-            .iter()
-            .enumerate()
-            .filter_map(|(i, p)| p.map(|o| (i, o.stamp_host_ns - (f.delay_s * 1e9) as i64)))
-            .filter(|(_, t)| *t <= f.t_ns)
-            .min_by_key(|(_, t)| *t);
-        let Some((i, t_f)) = due else { break };
-        let Some(obs) = pending[i].take() else { break };
-        f.propagate_covariance(cfg);
-        let eps = (f.t_ns - t_f) as f64 * 1e-9;
-        let (dz, h, r) = gnss_fusion::position_terms(&f.pva, &cfg.lever_arm_b_m, &obs, eps);
-        match f.eskf.update(&dz, &h, &r, cfg.gate_scale) {
-            Update::Accepted { dx, .. } => {
-                f.feedback(&dx, cfg.horizon_s);
-                counters.fixes_used += 1;
-                *consecutive_rejects = 0;
-                *last_fused_ns = t_f;
-                corrected = true;
-            }
-            Update::Rejected { .. } => {
-                counters.fixes_rejected += 1;
-                *consecutive_rejects += 1;
-                if *consecutive_rejects < RESET_AFTER_REJECTS {
-                    continue;
-                }
-                // Persistently rejected: did the GNSS position jump, or has the filter lost
-                // consistency? The fix's velocity against the filter's tells.
-                let vel_agrees = obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() && {
-                    let (dz, h, r) =
-                        gnss_fusion::velocity_terms(&f.pva, &cfg.lever_arm_b_m, &f.last_w, &f.acc_ned, &obs, eps);
-                    f.eskf.gate(&dz, &h, &r, cfg.gate_scale).0
-                };
-                counters.gnss_resets += 1;
-                *consecutive_rejects = 0;
-                *last_fused_ns = t_f;
-                corrected = true;
-                if !vel_agrees {
-                    f.reset_to(&obs, cfg, eps);
-                    counters.gnss_resets_full += 1;
-                    continue;
-                }
-                f.reset_position_to(&obs, cfg, eps);
-            }
-        }
-        if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
-            let (dz, h, r) = gnss_fusion::velocity_terms(&f.pva, &cfg.lever_arm_b_m, &f.last_w, &f.acc_ned, &obs, eps);
-            match f.eskf.update(&dz, &h, &r, cfg.gate_scale) {
-                Update::Accepted { dx, .. } => f.feedback(&dx, cfg.horizon_s),
-                Update::Rejected { .. } => counters.vel_rejected += 1,
-            }
-        }
-    }
-    corrected
 }

@@ -35,7 +35,7 @@ pub fn start_live(env: &mut TestEnv) {
     env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
     env.spawn("sim", &["sim", "--scenario", &scen, "--pty-link", &link_s]);
     env.wait_for_path(&link, Duration::from_secs(20));
-    env.spawn("gps", &["gps", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+    env.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"]);
 }
 
 /// Waits until the time mapping is locked and (with `aligned`) the filter is aligned; the last

@@ -1,0 +1,136 @@
+use super::*;
+
+const EXAMPLE: &str = include_str!("../../../systemd/navsync.toml.example");
+
+fn err(text: &str) -> ConfigError {
+    Loaded::parse(text, Path::new("t.toml")).expect_err("should be rejected")
+}
+
+#[test]
+fn the_example_is_valid_and_complete() {
+    let l = Loaded::parse(EXAMPLE, Path::new("navsync.toml.example")).unwrap_or_else(|e| panic!("{e}"));
+    let c = &l.config;
+    assert_eq!(c.gnss["0"].baud, Some(Baud::Auto));
+    assert_eq!(c.gnss["0"].protocol, Some(Protocol::Nmea));
+    assert_eq!(c.gnss["0"].lever_arm_m, [0.10, 0.0, -1.20]);
+    assert_eq!(c.pps["0"].source.to_string(), "kernel:/dev/pps0");
+    assert_eq!(c.imu["0"].axes, Some("x,-y,-z".parse().unwrap()));
+    assert_eq!(c.imu["1"].mounting.rotation_deg, [0.0, 0.0, 90.0]);
+    assert_eq!(c.imu["1"].mounting.lever_arm_m, [0.35, -0.20, 0.05]);
+    assert_eq!(l.estimator_imus(), Some(vec!["0".to_string(), "1".to_string()]));
+    assert_eq!(c.outputs.ntpshm, Some(NtpShmOutput { unit: 0 }));
+    assert_eq!(c.logging.level.as_deref(), Some("info"));
+}
+
+#[test]
+fn empty_file_is_all_defaults() {
+    let l = Loaded::parse("", Path::new("e.toml")).unwrap();
+    assert_eq!(l.config, Config::default());
+    assert_eq!(l.estimator_imus(), None);
+    assert!(l.from_file());
+    assert!(!Loaded::none().from_file());
+}
+
+#[test]
+fn ids_default_to_the_sections() {
+    let l = Loaded::parse("[imu.b]\nsource=\"sim\"\n[imu.a]\nsource=\"sim\"\n", Path::new("x")).unwrap();
+    assert_eq!(l.estimator_imus(), Some(vec!["a".to_string(), "b".to_string()]));
+    assert_eq!(l.estimator_gnss(), None);
+}
+
+#[test]
+fn unknown_key_names_file_line_and_field() {
+    let e = err("[imu.0]\nsource = \"sim\"\nrate = 200\n");
+    assert_eq!(e.line.map(|l| l.0), Some(3), "{e}");
+    assert!(e.message.contains("unknown field `rate`"), "{e}");
+    assert!(e.message.contains("rate_hz"), "lists what is expected: {e}");
+    assert!(e.to_string().starts_with("t.toml:3:"), "{e}");
+    let e = err("[imu.0]\nsource = \"sim\"\n[estimatr]\nimus = []\n");
+    assert_eq!(e.line.map(|l| l.0), Some(3), "{e}");
+    assert!(e.message.contains("unknown field `estimatr`"), "{e}");
+}
+
+#[test]
+fn wrong_type_names_the_field() {
+    let e = err("[imu.0]\nsource = \"sim\"\nrate_hz = \"fast\"\n");
+    assert_eq!(e.line, Some((3, 11)), "{e}");
+    assert_eq!(e.field.as_deref(), Some("imu.0.rate_hz"), "{e}");
+    assert!(e.message.contains("expected"), "{e}");
+    let e = err("[gps.0]\nport = \"/dev/x\"\nbaud = \"fast\"\n");
+    assert_eq!(e.field.as_deref(), Some("gps.0.baud"), "{e}");
+    assert!(e.message.contains("\"auto\""), "{e}");
+    let e = err("[gps.0]\nport = \"/dev/x\"\nbaud = -5\n");
+    assert_eq!(e.field.as_deref(), Some("gps.0.baud"), "{e}");
+    let e = err("[gps.0]\nbaud = 9600\n");
+    assert!(e.message.contains("missing field `port`"), "{e}");
+    // `[gnss.ID]` is the name; `[gps.ID]` reads the same.
+    let l = Loaded::parse("[gnss.0]\nport = \"/dev/x\"\nbaud = 4800\n", Path::new("x")).unwrap();
+    assert_eq!(l.config.gnss["0"].baud, Some(Baud::Fixed(4800)));
+    let e = err("[gnss.0]\nport = \"/dev/x\"\nprotocol = \"sirf\"\n");
+    assert_eq!(e.field.as_deref(), Some("gnss.0.protocol"), "{e}");
+    assert!(e.message.contains("nmea"), "{e}");
+    let e = err("[imu.0]\nsource = \"spi:0\"\n");
+    assert_eq!(e.field.as_deref(), Some("imu.0.source"), "{e}");
+    assert!(e.message.contains("is not an IMU source"), "{e}");
+    let e = err("[imu.0]\nsource = \"sim\"\naxes = \"x,y\"\n");
+    assert_eq!(e.field.as_deref(), Some("imu.0.axes"), "{e}");
+    let e = err("[imu.0]\nsource = \"sim\"\nmounting = { rotation_deg = [0, 0] }\n");
+    assert_eq!(e.line.map(|l| l.0), Some(3), "{e}");
+}
+
+#[test]
+fn syntax_error_has_a_position() {
+    let e = err("[imu.0\nsource = 1\n");
+    assert_eq!(e.line.map(|l| l.0), Some(1), "{e}");
+}
+
+#[test]
+fn semantic_errors_are_located() {
+    let e = err("[imu.0]\nsource = \"sim\"\n\nrate_hz = 0.5\n");
+    assert_eq!(
+        (e.line.map(|l| l.0), e.field.as_deref()),
+        (Some(4), Some("imu.0.rate_hz")),
+        "{e}"
+    );
+    assert!(e.message.contains("1 < rate"), "{e}");
+    let e = err("[pps.0]\nsource = \"gpio:1\"\n");
+    assert_eq!(e.line.map(|l| l.0), Some(2), "{e}");
+    assert!(e.message.contains("kernel:/dev/ppsN"), "{e}");
+    let e = err("[estimator]\nimus = [\"0\", \"a b\"]\n");
+    assert_eq!(e.field.as_deref(), Some("estimator.imus[1]"), "{e}");
+    assert_eq!(e.line.map(|l| l.0), Some(2), "{e}");
+    let e = err("[estimator]\nimu_model = \"military\"\n");
+    assert!(e.message.contains("`consumer`, `industrial`, `perfect`"), "{e}");
+    let e = err("[logging]\nlevel = \"loud\"\n");
+    assert_eq!(e.field.as_deref(), Some("logging.level"), "{e}");
+    let e = err("[\"imu\".\"a b\"]\nsource = \"sim\"\n");
+    assert!(e.message.contains("is not an id"), "{e}");
+    let e = err("[imu.0]\nsource = \"sim\"\nmounting.lever_arm_m = [0, nan, 0]\n");
+    assert_eq!(e.field.as_deref(), Some("imu.0.mounting.lever_arm_m[1]"), "{e}");
+    let e = err("[ipc]\nprefix = \"a/b\"\n");
+    assert_eq!(e.field.as_deref(), Some("ipc.prefix"), "{e}");
+}
+
+#[test]
+fn error_at_locates_fields_for_the_roles() {
+    let l = Loaded::parse("[imu.0]\nsource = \"sim:/tmp\"\n", Path::new("f.toml")).unwrap();
+    let e = l.error_at("imu.0.source", "no such directory");
+    assert_eq!(e.to_string(), "f.toml:2:10: imu.0.source: no such directory");
+}
+
+#[test]
+fn rotation_matrix() {
+    let m = Mounting {
+        rotation_deg: [0.0, 0.0, 90.0],
+        lever_arm_m: [0.0; 3],
+    };
+    let c = m.c_b_s();
+    // Yaw 90°: the IMU's x axis points to the body's right (y).
+    let x = [c[0][0], c[1][0], c[2][0]];
+    assert!(
+        (x[0]).abs() < 1e-12 && (x[1] - 1.0).abs() < 1e-12 && x[2].abs() < 1e-12,
+        "{c:?}"
+    );
+    let id = Mounting::default().c_b_s();
+    assert_eq!(id, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+}

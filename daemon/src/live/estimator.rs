@@ -1,0 +1,348 @@
+//! `navsync estimator`: subscribes to the timing and sensor services, runs the estimator
+//! library and publishes `navsync/time/state` (and, with the navigation filter,
+//! `navsync/nav/state`).
+//!
+//! The loop sleeps in a WaitSet on the subscribers' events; on every wake-up it drains the
+//! services (IMUs first, then PPS and GNSS) into [`InputOrder`], which hands them to the
+//! pipeline in an order that depends on the samples alone (a PPS edge or fix goes in right
+//! before the first reference-IMU sample stamped a fixed hold after it; see
+//! [`navsync_estimator::input_order`]), so the results are the same whatever the scheduling, and
+//! `navsync replay --estimate` of a recording of the same samples reproduces them bit for bit.
+
+use std::time::Duration;
+
+use navsync_shared::health_reporter::HealthReporter;
+use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
+use navsync_shared::latency_histogram::LatencyHistogram;
+use navsync_shared::samples::{AnySample, GnssFix, ImuSample, NavState, NavStatus, PpsEdge, TimeState};
+use navsync_shared::services;
+use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
+use tracing::{info, info_span, warn};
+
+use navsync_estimator::input_order::InputOrder;
+use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::settings::Settings;
+
+use super::liveness::{Change, Liveness, STALE_MARGIN_NS};
+use crate::config::Loaded;
+use crate::config::estimator::EstimatorFlags;
+
+/// `navsync estimator`: time mapping and navigation filter from the sensor services.
+#[derive(clap::Args, Debug)]
+pub struct Options {
+    /// The estimator's settings.
+    #[command(flatten)]
+    pub est: EstimatorFlags,
+    /// Hold the CPU wake-up latency at 0 µs while running (`/dev/cpu_dma_latency`, as
+    /// cyclictest does): idle CPUs poll, so waking the estimator costs no exit from a
+    /// halted CPU. For low-latency deployments, with SCHED_FIFO; costs an idle core's power.
+    #[arg(long)]
+    pub idle_polling: bool,
+}
+
+/// Runs the estimator process with its settings (flags, else the file, else defaults).
+pub fn main(opts: Options, cfg: &Loaded) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let settings = opts.est.settings(cfg)?;
+    let _hold = opts
+        .idle_polling
+        .then(navsync_shared::cpu_wakeup::CpuWakeupHold::take)
+        .transpose()
+        .context("--idle-polling: holding /dev/cpu_dma_latency at 0")?;
+    run(&settings).context("estimator")
+}
+
+/// How often the estimator's reclaimer thread ([`super::reclaimer`]) removes dead nodes, so a
+/// killed driver's publisher no longer counts.
+const RECLAIM_INTERVAL: std::time::Duration = std::time::Duration::from_millis(40);
+
+/// How often the estimator's loop looks for inputs whose publishing process is gone (a
+/// publisher count of 0 on the input's service), ns. With [`RECLAIM_INTERVAL`] and the
+/// wake-up latency this bounds the time from a driver's death to its stale flag, whatever the
+/// input's rate.
+const PUBLISHER_CHECK_INTERVAL_NS: i64 = 20_000_000;
+
+/// The published navigation status while every GNSS input is gone: an aligned (or degraded)
+/// filter is inertial-only from that moment, not only after the navigator's outage time.
+fn status_without_gnss(status: u8) -> u8 {
+    if status == NavStatus::Aligned as u8 || status == NavStatus::Degraded as u8 {
+        NavStatus::InsOnly as u8
+    } else {
+        status
+    }
+}
+
+/// Notes a sample of input `i`; true (and logged) when the input was stale until now.
+fn resumed(live: &mut Liveness, i: usize, stamp_ns: i64, rx_ns: i64) -> bool {
+    match live.seen(i, stamp_ns, rx_ns) {
+        Some(Change::Resumed { stale_ns }) => {
+            info!(input = %live.inputs()[i].name, stale_ms = stale_ns / 1_000_000, "input back");
+            true
+        }
+        _ => false,
+    }
+}
+
+/// Errors of the estimator process.
+#[derive(Debug, thiserror::Error)]
+pub enum EstimatorError {
+    /// IPC failure.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// The dead-node reclaimer thread could not be started.
+    #[error("starting the dead-node reclaimer thread: {0}")]
+    Reclaimer(#[from] std::io::Error),
+}
+
+/// Runs the estimator until SIGINT/SIGTERM.
+pub fn run(args: &Settings) -> Result<(), EstimatorError> {
+    let _span = info_span!("estimator").entered();
+    let node = IpcNode::new("estimator")?;
+    // Dead drivers' publishers stop counting once their node is reclaimed: off this loop.
+    let _reclaimer = super::reclaimer::Reclaimer::start("estimator-reclaim", RECLAIM_INTERVAL)?;
+    let pps: Vec<Subscriber<PpsEdge>> = args
+        .pps_ids
+        .iter()
+        .map(|id| node.subscriber(&services::pps_edge(id)))
+        .collect::<Result<_, _>>()?;
+    let gnss: Vec<Subscriber<GnssFix>> = args
+        .gnss_ids
+        .iter()
+        .map(|id| node.subscriber(&services::gnss_fix(id)))
+        .collect::<Result<_, _>>()?;
+    let imus: Vec<Subscriber<ImuSample>> = args
+        .imu_ids
+        .iter()
+        .map(|id| node.subscriber(&services::imu_sample(id)))
+        .collect::<Result<_, _>>()?;
+    let mut time_pub = node.publisher::<TimeState>(services::TIME_STATE)?;
+    let mut health = HealthReporter::new(&node, "estimator")?;
+    let c_pps = health.counter("pps_used");
+    let c_pps_rej = health.counter("pps_rejected");
+    let c_fixes = health.counter("gnss_fixes");
+    let c_imu = health.counter("imu_samples");
+    let c_imu_gap = health.counter("imu_seq_gaps");
+    let r_imu = health.rate("imu_samples");
+    let r_fix = health.rate("gnss_fixes");
+
+    let waitset = node.waitset()?;
+    let mut guards = Vec::new();
+    for l in pps
+        .iter()
+        .map(|s| s.listener())
+        .chain(gnss.iter().map(|s| s.listener()))
+        .chain(imus.iter().map(|s| s.listener()))
+    {
+        guards.push(waitset.attach_notification(l).map_err(|e| IpcError::Iceoryx {
+            what: "attaching to waitset",
+            service: "-".into(),
+            detail: format!("{e:?}"),
+        })?);
+    }
+
+    let mut est = Pipeline::new(args.pipeline_config());
+    let mut nav_pub = node.publisher::<NavState>(services::NAV_STATE)?;
+    let c_nav = health.counter("nav_states");
+    let c_fix_used = health.counter("fixes_used");
+    let c_fix_rej = health.counter("fixes_rejected");
+    let c_fix_old = health.counter("fixes_too_old");
+    let c_late = health.counter("inputs_late");
+    // Faults in the data (issue 8): GNSS resets after persistent rejections, PPS holdovers and
+    // relocks, IMU samples rejected by the estimator (non-finite, time-reversed, saturated).
+    let c_gnss_resets = health.counter("gnss_resets");
+    let c_gnss_resets_full = health.counter("gnss_resets_full");
+    let c_holdovers = health.counter("time_holdovers");
+    let c_relocks = health.counter("time_relocks");
+    let c_imu_invalid = health.counter("imu_rejected_invalid");
+    let c_imu_back = health.counter("imu_rejected_backwards");
+    let c_imu_sat = health.counter("imu_rejected_saturated");
+    let mut order: InputOrder = InputOrder::new(args.imu_ids.first().map(String::as_str));
+    // Output latency: from taking an IMU sample off its queue to its NavState being published.
+    let c_lat_p99 = health.counter("nav_latency_p99_us");
+    let c_lat_max = health.counter("nav_latency_max_us");
+    let mut latency = LatencyHistogram::default();
+    let mut last_imu_seq: Vec<Option<u64>> = vec![None; imus.len()];
+    let mut last_state_ns = 0i64;
+    let mut last_status = est.time().status();
+    // Staleness of every input (roles/liveness.rs): IMUs first, then PPS, then GNSS, as
+    // drained below; flagged in Health at once (`stale_<kind>_<id>`: host ns when declared).
+    let mut live = Liveness::default();
+    let mut c_stale = Vec::new();
+    for (kind, ids, nominal_ns) in [
+        ("imu", &args.imu_ids, 10_000_000),
+        ("pps", &args.pps_ids, NS_PER_S),
+        ("gnss", &args.gnss_ids, NS_PER_S),
+    ] {
+        for id in ids {
+            live.add(&format!("{kind}_{id}"), nominal_ns);
+            c_stale.push(health.counter(&format!("stale_{kind}_{id}")));
+        }
+    }
+    let c_stale_n = health.counter("stale_inputs");
+    let c_stale_events = health.counter("stale_events");
+    let (n_imu, n_pps) = (imus.len(), pps.len());
+    let mut next_publisher_check_ns = monotonic_now_ns();
+    info!(pps = ?args.pps_ids, gnss = ?args.gnss_ids, imus = ?args.imu_ids, "estimator running");
+    navsync_shared::sd_notify::ready(&format!(
+        "estimator: gnss {:?}, pps {:?}, imus {:?}",
+        args.gnss_ids, args.pps_ids, args.imu_ids
+    ));
+
+    loop {
+        navsync_shared::sd_notify::watchdog();
+        // Wake at the nearest staleness deadline at the latest.
+        let now = monotonic_now_ns();
+        let wait_ns = live
+            .next_deadline()
+            .map_or(next_publisher_check_ns, |d| d.min(next_publisher_check_ns))
+            .saturating_sub(now)
+            .clamp(1_000_000, 100_000_000);
+        if !node.wait_on(&waitset, Duration::from_nanos(wait_ns as u64))? {
+            break;
+        }
+        let mut updated = false;
+        let rx_ns = monotonic_now_ns();
+        let mut liveness_changed = false;
+        // IMUs first: a PPS edge or fix published before the IMU sample that releases it is
+        // then always among what this wake-up drains.
+        for (i, (s, last)) in imus.iter().zip(last_imu_seq.iter_mut()).enumerate() {
+            s.drain(|sample| {
+                liveness_changed |= resumed(&mut live, i, sample.stamp.host_ns, rx_ns);
+                if let Some(prev) = *last
+                    && sample.stamp.seq > prev + 1
+                {
+                    health.add(c_imu_gap, sample.stamp.seq - prev - 1);
+                }
+                *last = Some(sample.stamp.seq);
+                health.add(c_imu, 1);
+                health.tick(r_imu);
+                order.push(AnySample::Imu(sample), ());
+                true
+            })?;
+        }
+        for (j, s) in pps.iter().enumerate() {
+            s.drain(|edge| {
+                liveness_changed |= resumed(&mut live, n_imu + j, edge.stamp.host_ns, rx_ns);
+                order.push(AnySample::PpsEdge(edge), ());
+                true
+            })?;
+        }
+        for (k, s) in gnss.iter().enumerate() {
+            s.drain(|fix| {
+                liveness_changed |= resumed(&mut live, n_imu + n_pps + k, fix.stamp.host_ns, rx_ns);
+                health.add(c_fixes, 1);
+                health.tick(r_fix);
+                order.push(AnySample::GnssFix(fix), ());
+                true
+            })?;
+        }
+        // NavStates say inertial-only at once when every receiver's driver is gone.
+        let gnss_gone = !gnss.is_empty() && live.inputs()[n_imu + n_pps..].iter().all(|x| x.is_gone());
+        // Without IMUs (or with the reference IMU silent) nothing releases the waiting samples.
+        let release_all = imus.is_empty() || order.stalled(monotonic_now_ns());
+        while let Some((s, ())) = if release_all { order.pop_any() } else { order.pop() } {
+            match s {
+                AnySample::Imu(sample) => {
+                    let t_in = monotonic_now_ns();
+                    if let Some(mut state) = est.on_imu(&sample) {
+                        if gnss_gone {
+                            state.status = status_without_gnss(state.status);
+                        }
+                        if let Err(e) = nav_pub.publish(&state) {
+                            warn!("publishing nav state: {e}");
+                        }
+                        latency.record(monotonic_now_ns() - t_in);
+                        health.add(c_nav, 1);
+                        est.catch_up();
+                    }
+                    let reference = est.reference_imu_id();
+                    if let Some(previous) = order.set_reference(reference) {
+                        warn!(
+                            from = navsync_shared::reflect::str_of(&previous),
+                            to = navsync_shared::reflect::str_of(&reference),
+                            "reference IMU stale: handed over to a live IMU"
+                        );
+                    }
+                }
+                AnySample::PpsEdge(edge) => updated |= est.on_pps(&edge),
+                AnySample::GnssFix(fix) => updated |= est.on_fix(&fix),
+                _ => {}
+            }
+        }
+        health.set(c_late, order.late());
+        let now = monotonic_now_ns();
+        live.check(now, |_, x, _| {
+            warn!(
+                input = %x.name,
+                silent_ms = (x.interval_ns() * 1e-6 + (STALE_MARGIN_NS / 1_000_000) as f64).round(),
+                "input stale: nothing for its interval plus the margin"
+            );
+            health.add(c_stale_events, 1);
+            liveness_changed = true;
+        });
+        if now >= next_publisher_check_ns {
+            next_publisher_check_ns = now + PUBLISHER_CHECK_INTERVAL_NS;
+            let publishers = imus
+                .iter()
+                .map(Subscriber::publisher_count)
+                .chain(pps.iter().map(Subscriber::publisher_count))
+                .chain(gnss.iter().map(Subscriber::publisher_count));
+            for (i, n) in publishers.enumerate() {
+                if n == 0 && live.gone(i, now).is_some() {
+                    warn!(input = %live.inputs()[i].name, "input stale: its publisher is gone");
+                    health.add(c_stale_events, 1);
+                    liveness_changed = true;
+                }
+            }
+        }
+        if liveness_changed {
+            for (c, x) in c_stale.iter().zip(live.inputs()) {
+                health.set(*c, x.stale_since_ns().map_or(0, |t| t.max(1) as u64));
+            }
+            health.set(c_stale_n, live.stale_count() as u64);
+            if let Err(e) = health.publish_now(now) {
+                warn!("publishing health: {e}");
+            }
+        }
+        if est.time().status() != last_status {
+            info!(
+                from = last_status.name(),
+                to = est.time().status().name(),
+                "time status"
+            );
+            last_status = est.time().status();
+        }
+        if updated || now - last_state_ns >= NS_PER_S {
+            let state = est.time_state(now);
+            if let Err(e) = time_pub.publish(&state) {
+                warn!("publishing time state: {e}");
+            }
+            last_state_ns = now;
+        }
+        let tc = *est.time().counters();
+        health.set(c_pps, tc.pps_used);
+        health.set(c_pps_rej, tc.rejected());
+        health.set(c_holdovers, tc.holdovers);
+        health.set(c_relocks, tc.relocks);
+        let nc = *est.nav().counters();
+        health.set(c_fix_used, nc.fixes_used);
+        health.set(c_fix_rej, nc.fixes_rejected);
+        health.set(c_fix_old, nc.fixes_too_old);
+        health.set(c_gnss_resets, nc.gnss_resets);
+        health.set(c_gnss_resets_full, nc.gnss_resets_full);
+        let ac = *est.array().counters();
+        health.set(c_imu_invalid, ac.invalid);
+        health.set(c_imu_back, ac.backwards);
+        health.set(c_imu_sat, ac.saturated);
+        health.set(c_lat_p99, latency.quantile_us(0.99) as u64);
+        health.set(c_lat_max, (latency.max_ns() as u64).div_ceil(1000));
+        if health.maybe_publish(now)? {
+            latency.clear();
+        }
+    }
+    navsync_shared::sd_notify::stopping();
+    drop(guards);
+    health.publish_final()?;
+    info!("estimator stopped");
+    Ok(())
+}

@@ -1,0 +1,812 @@
+//! `navsync gpsd-server [--listen 127.0.0.1:2947]`: the fused navigation state in gpsd's JSON
+//! protocol, so existing gpsd clients (`gpspipe -w`, `cgps`, libgps programs, gpsd's Python
+//! client) work unchanged.
+//!
+//! The subset of the protocol (gpsd_json(5)) that clients use:
+//!
+//! * On connect the server sends `VERSION`.
+//! * `?WATCH={"enable":true,"json":true};` answers `DEVICES` and `WATCH`, then streams `TPV`,
+//!   `ATT`, `IMU` (and `SKY` when a GNSS fix was seen) once per report period;
+//!   `?WATCH={"enable":false};` stops it; `?WATCH;` reports the watch state.
+//! * `?POLL;` answers one `POLL` with the latest `TPV` and `SKY`; `?VERSION;`, `?DEVICES;`,
+//!   `?DEVICE;` as gpsd. Anything else gets an `ERROR` object, as from gpsd.
+//!
+//! What the objects carry: `TPV` is the estimator's `NavState` (time = its UTC, lat/lon,
+//! `altHAE` = ellipsoidal height, `altMSL` with the receiver's geoid separation, velocities,
+//! track, speed, climb; error estimates `epx`/`epy`/`epv`/`eph`/`eps`/`epc`/`epd`/`sep` as
+//! 2σ (≈95 %, gpsd's convention) of the filter's covariance, `ept` the time mapping's 2σ);
+//! mode 3 once the filter is aligned (status 6 "GNSS+DR", 5 "DR" while INS-only), mode 1 while
+//! aligning. `ATT` has roll, pitch, heading (= yaw) in degrees; `IMU` the bias-compensated
+//! specific force (m/s²) and rate (°/s) in body FRD axes; `SKY` the receiver's DOPs and
+//! satellites used.
+//!
+//! One thread, one `poll(2)` loop over the listening socket and the clients (no async
+//! runtime): sockets are non-blocking; each client has a bounded output queue, and a client
+//! that lets it fill (a slow reader) is dropped instead of blocking the others; at most
+//! `--max-clients` clients at once (one more gets an `ERROR` and is closed). Listens on
+//! localhost unless told otherwise. Counters in `navsync/health/gpsd-server`.
+
+use std::collections::VecDeque;
+use std::io::{ErrorKind, Read, Write};
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::os::fd::AsRawFd;
+
+use navsync_shared::health_reporter::HealthReporter;
+use navsync_shared::ipc::{IpcError, IpcNode};
+use navsync_shared::samples::{GnssFix, NavState, NavStatus, TimeState};
+use navsync_shared::services;
+use navsync_shared::time::{format_rfc3339_ms, monotonic_now_ns};
+use serde_json::{Map, Value, json};
+use tracing::{info, warn};
+
+/// The gpsd protocol version spoken (gpsd 3.2x).
+const PROTO_MAJOR: u32 = 3;
+/// Minor protocol version.
+const PROTO_MINOR: u32 = 14;
+/// The device name in every report.
+pub const DEVICE: &str = "navsync";
+/// A client's pending output beyond this is a slow client: it is dropped.
+pub const MAX_PENDING_BYTES: usize = 256 * 1024;
+/// The kernel's send buffer of a client socket (bounded: autotuning could hold megabytes for a
+/// client that does not read).
+const SEND_BUFFER_BYTES: libc::c_int = 64 * 1024;
+/// A request line longer than this (gpsd allows 80 characters) closes the client.
+const MAX_REQUEST_BYTES: usize = 4096;
+
+/// `navsync gpsd-server`: the fused state for gpsd clients (gpsd JSON protocol: VERSION,
+/// DEVICES, WATCH, POLL, TPV, SKY, ATT, IMU).
+#[derive(Debug, Clone, clap::Args)]
+pub struct GpsdArgs {
+    /// Address to listen on (localhost by default; port 0: any free port, printed on stderr).
+    #[arg(long, default_value = "127.0.0.1:2947")]
+    pub listen: SocketAddr,
+    /// Most clients at once.
+    #[arg(long, default_value_t = 32, value_parser = at_least_one)]
+    pub max_clients: usize,
+    /// Reports (TPV, ATT, IMU, SKY) per second, in (0, 1000].
+    #[arg(long = "rate", default_value_t = 1.0, value_parser = report_rate)]
+    pub rate_hz: f64,
+}
+
+fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if n > 0 => Ok(n),
+        _ => Err(format!("`{s}`: expected at least 1")),
+    }
+}
+
+fn report_rate(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(r) if r > 0.0 && r <= 1000.0 => Ok(r),
+        _ => Err(format!("`{s}`: expected a rate in (0, 1000] reports per second")),
+    }
+}
+
+/// Errors of `navsync gpsd-server`.
+#[derive(Debug, thiserror::Error)]
+pub enum GpsdError {
+    /// IPC failure.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// Socket failure.
+    #[error("{what}: {source}")]
+    Io {
+        /// What was done.
+        what: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+}
+
+/// A watch request's settings.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Watch {
+    enable: bool,
+    json: bool,
+}
+
+struct Client {
+    stream: TcpStream,
+    peer: SocketAddr,
+    inbuf: Vec<u8>,
+    out: VecDeque<u8>,
+    watch: Watch,
+    closing: bool,
+}
+
+impl Client {
+    /// A freshly accepted connection: non-blocking, no Nagle delay, a bounded send buffer.
+    fn accepted(stream: TcpStream, peer: SocketAddr) -> Self {
+        let _ = stream.set_nonblocking(true);
+        let _ = stream.set_nodelay(true);
+        set_send_buffer(&stream, SEND_BUFFER_BYTES);
+        Self {
+            stream,
+            peer,
+            inbuf: Vec::new(),
+            out: VecDeque::new(),
+            watch: Watch::default(),
+            closing: false,
+        }
+    }
+
+    fn queue(&mut self, line: &str) {
+        self.out.extend(line.as_bytes());
+        self.out.push_back(b'\n');
+    }
+
+    /// Writes what the socket takes now; false when the peer is gone.
+    fn flush(&mut self) -> bool {
+        while !self.out.is_empty() {
+            let (a, _) = self.out.as_slices();
+            match self.stream.write(a) {
+                Ok(0) => return false,
+                Ok(n) => {
+                    self.out.drain(..n);
+                }
+                Err(e) if e.kind() == ErrorKind::WouldBlock => return true,
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(_) => return false,
+            }
+        }
+        true
+    }
+}
+
+/// What became of a client after a report was queued to it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Delivery {
+    /// Written, or queued within the bound.
+    Kept,
+    /// The peer closed or the socket failed.
+    Gone,
+    /// More than `max_pending_bytes` wait for a reader that does not read: drop it rather
+    /// than buffer without bound or block the other clients.
+    Slow,
+}
+
+/// Queues `lines` to `c`, writes what its socket takes now (never blocks) and applies the
+/// slow-client bound.
+fn deliver(c: &mut Client, lines: &[String], max_pending_bytes: usize) -> Delivery {
+    for l in lines {
+        c.queue(l);
+    }
+    if !c.flush() {
+        Delivery::Gone
+    } else if c.out.len() > max_pending_bytes {
+        Delivery::Slow
+    } else {
+        Delivery::Kept
+    }
+}
+
+fn set_send_buffer(s: &TcpStream, bytes: libc::c_int) {
+    // SAFETY: setsockopt on a socket we own, with a pointer to a live int of the stated size.
+    unsafe {
+        libc::setsockopt(
+            s.as_raw_fd(),
+            libc::SOL_SOCKET,
+            libc::SO_SNDBUF,
+            (&bytes as *const libc::c_int).cast(),
+            size_of::<libc::c_int>() as libc::socklen_t,
+        );
+    }
+}
+
+/// One command of a request line: name and JSON argument.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Command {
+    /// E.g. `WATCH`.
+    pub name: String,
+    /// The `=`-argument, if any.
+    pub arg: Option<Value>,
+}
+
+/// Splits request text (`?WATCH={...};?POLL;`) into commands; returns the commands and how many
+/// bytes were consumed (a command still being received stays in the buffer). Malformed JSON
+/// arguments yield a command with a `Value::Null` argument, which is answered with an error.
+pub fn parse_commands(buf: &[u8]) -> (Vec<Command>, usize) {
+    let mut out = Vec::new();
+    let mut i = 0;
+    let mut consumed = 0;
+    while i < buf.len() {
+        match buf[i] {
+            b'?' => {
+                let start = i + 1;
+                let mut j = start;
+                while j < buf.len() && buf[j].is_ascii_alphanumeric() {
+                    j += 1;
+                }
+                if j == buf.len() {
+                    break; // incomplete
+                }
+                let name = String::from_utf8_lossy(&buf[start..j]).to_ascii_uppercase();
+                let mut arg = None;
+                if buf[j] == b'=' {
+                    // A JSON object: up to its matching brace (gpsd's objects have no braces in strings).
+                    let mut k = j + 1;
+                    let mut depth = 0i32;
+                    let mut end = None;
+                    while k < buf.len() {
+                        match buf[k] {
+                            b'{' => depth += 1,
+                            b'}' => {
+                                depth -= 1;
+                                if depth == 0 {
+                                    end = Some(k + 1);
+                                    break;
+                                }
+                            }
+                            b'\n' if depth == 0 => {
+                                end = Some(k);
+                                break;
+                            }
+                            _ => {}
+                        }
+                        k += 1;
+                    }
+                    let Some(end) = end else { break };
+                    arg = Some(serde_json::from_slice::<Value>(&buf[j + 1..end]).unwrap_or(Value::Null));
+                    j = end;
+                }
+                while j < buf.len() && matches!(buf[j], b';' | b'\r' | b'\n') {
+                    j += 1;
+                }
+                out.push(Command { name, arg });
+                i = j;
+                consumed = j;
+            }
+            _ => {
+                i += 1;
+                // Anything outside a command up to a line end is ignored.
+                if buf[i - 1] == b'\n' {
+                    consumed = i;
+                }
+            }
+        }
+    }
+    (out, consumed)
+}
+
+fn num(x: f64) -> Option<Value> {
+    x.is_finite().then(|| json!(x))
+}
+
+fn put(m: &mut Map<String, Value>, k: &str, v: Option<Value>) {
+    if let Some(v) = v {
+        m.insert(k.to_string(), v);
+    }
+}
+
+fn iso_time(utc_ns: i64) -> Option<Value> {
+    (utc_ns != i64::MIN).then(|| json!(format_rfc3339_ms(utc_ns)))
+}
+
+/// The `TPV` object of a navigation state (with the latest fix for the geoid separation and
+/// the latest time state for the time error).
+pub fn tpv(n: &NavState, fix: Option<&GnssFix>, time: Option<&TimeState>) -> Value {
+    let mut m = Map::new();
+    m.insert("class".into(), json!("TPV"));
+    m.insert("device".into(), json!(DEVICE));
+    let aligned = n.status != NavStatus::Aligning as u8 && n.lat_deg.is_finite() && n.lon_deg.is_finite();
+    m.insert("mode".into(), json!(if aligned { 3 } else { 1 }));
+    if aligned {
+        let dr = n.status == NavStatus::InsOnly as u8;
+        m.insert("status".into(), json!(if dr { 5 } else { 6 }));
+    }
+    put(&mut m, "time", iso_time(n.utc_ns));
+    if let Some(t) = time.filter(|t| t.is_valid()) {
+        put(&mut m, "ept", num(2.0 * t.utc_std_ns_at(n.host_ns) * 1e-9));
+        put(&mut m, "leapseconds", Some(json!(t.leap_s)));
+    }
+    if !aligned {
+        return Value::Object(m);
+    }
+    let [sn, se, sd] = n.pos_std_ned_m;
+    let [svn, sve, svd] = n.vel_std_ned_mps;
+    let [vn, ve, vd] = n.vel_ned_mps;
+    let speed = vn.hypot(ve);
+    put(&mut m, "lat", num(n.lat_deg));
+    put(&mut m, "lon", num(n.lon_deg));
+    put(&mut m, "altHAE", num(n.height_m));
+    if let Some(sep) = fix.map(|f| f.geoid_sep_m).filter(|s| s.is_finite()) {
+        put(&mut m, "altMSL", num(n.height_m - sep));
+        put(&mut m, "alt", num(n.height_m - sep));
+        put(&mut m, "geoidSep", num(sep));
+    }
+    put(&mut m, "epx", num(2.0 * se));
+    put(&mut m, "epy", num(2.0 * sn));
+    put(&mut m, "epv", num(2.0 * sd));
+    put(&mut m, "eph", num(2.0 * sn.hypot(se)));
+    put(&mut m, "sep", num(2.0 * (sn * sn + se * se + sd * sd).sqrt()));
+    put(&mut m, "track", num(ve.atan2(vn).to_degrees().rem_euclid(360.0)));
+    put(&mut m, "speed", num(speed));
+    put(&mut m, "climb", num(-vd));
+    put(&mut m, "velN", num(vn));
+    put(&mut m, "velE", num(ve));
+    put(&mut m, "velD", num(vd));
+    put(&mut m, "eps", num(2.0 * svn.hypot(sve)));
+    put(&mut m, "epc", num(2.0 * svd));
+    if speed > 0.1 {
+        // Track error from the horizontal velocity error across the direction of travel.
+        put(&mut m, "epd", num((2.0 * svn.hypot(sve) / speed).atan().to_degrees()));
+    }
+    Value::Object(m)
+}
+
+/// The `ATT` object: roll, pitch, heading in degrees.
+pub fn att(n: &NavState) -> Value {
+    let [r, p, y] = n.rpy_rad.map(f64::to_degrees);
+    let mut m = Map::new();
+    m.insert("class".into(), json!("ATT"));
+    m.insert("device".into(), json!(DEVICE));
+    put(&mut m, "time", iso_time(n.utc_ns));
+    put(&mut m, "heading", num(y.rem_euclid(360.0)));
+    put(&mut m, "pitch", num(p));
+    put(&mut m, "roll", num(r));
+    put(&mut m, "yaw", num(y.rem_euclid(360.0)));
+    let [sr, sp, sy] = n.att_std_rad.map(f64::to_degrees);
+    put(&mut m, "roll_st", num(sr));
+    put(&mut m, "pitch_st", num(sp));
+    put(&mut m, "yaw_st", num(sy));
+    Value::Object(m)
+}
+
+/// The `IMU` object: body-frame specific force (m/s²) and angular rate (°/s).
+pub fn imu(n: &NavState) -> Value {
+    let mut m = Map::new();
+    m.insert("class".into(), json!("IMU"));
+    m.insert("device".into(), json!(DEVICE));
+    put(&mut m, "time", iso_time(n.utc_ns));
+    for (k, v) in ["acc_x", "acc_y", "acc_z"].iter().zip(n.accel_body_mps2) {
+        put(&mut m, k, num(v));
+    }
+    for (k, v) in ["gyro_x", "gyro_y", "gyro_z"].iter().zip(n.gyro_body_rps) {
+        put(&mut m, k, num(v.to_degrees()));
+    }
+    Value::Object(m)
+}
+
+/// The `SKY` object of a fix: dilutions of precision and satellites used.
+pub fn sky(f: &GnssFix) -> Value {
+    let mut m = Map::new();
+    m.insert("class".into(), json!("SKY"));
+    m.insert("device".into(), json!(DEVICE));
+    put(&mut m, "time", iso_time(f.utc_ns));
+    put(&mut m, "hdop", num(f.hdop));
+    put(&mut m, "vdop", num(f.vdop));
+    put(&mut m, "pdop", num(f.pdop));
+    if f.sats_used != u16::MAX {
+        m.insert("uSat".into(), json!(f.sats_used));
+    }
+    Value::Object(m)
+}
+
+fn version() -> Value {
+    json!({
+        "class": "VERSION",
+        "release": format!("navsync {}", env!("CARGO_PKG_VERSION")),
+        "rev": env!("CARGO_PKG_VERSION"),
+        "proto_major": PROTO_MAJOR,
+        "proto_minor": PROTO_MINOR,
+    })
+}
+
+fn device(activated: &str) -> Value {
+    json!({
+        "class": "DEVICE",
+        "path": DEVICE,
+        "driver": "navsync GNSS/INS",
+        "activated": activated,
+        "flags": 1,
+        "native": 0,
+    })
+}
+
+fn watch_json(w: Watch) -> Value {
+    json!({
+        "class": "WATCH",
+        "enable": w.enable,
+        "json": w.json,
+        "nmea": false,
+        "raw": 0,
+        "scaled": false,
+        "timing": false,
+        "split24": false,
+        "pps": false,
+    })
+}
+
+fn error(message: &str) -> Value {
+    json!({ "class": "ERROR", "message": message })
+}
+
+/// The latest inputs.
+#[derive(Default)]
+struct Latest {
+    nav: Option<NavState>,
+    fix: Option<GnssFix>,
+    time: Option<TimeState>,
+}
+
+impl Latest {
+    fn activated(&self) -> String {
+        self.nav
+            .filter(|n| n.utc_ns != i64::MIN)
+            .map(|n| format_rfc3339_ms(n.utc_ns))
+            .unwrap_or_default()
+    }
+}
+
+/// Answers the commands of one client.
+fn handle(c: &mut Client, cmds: Vec<Command>, latest: &Latest) {
+    for cmd in cmds {
+        match (cmd.name.as_str(), &cmd.arg) {
+            (_, Some(Value::Null)) => c.queue(&error(&format!("Invalid {} argument", cmd.name)).to_string()),
+            ("VERSION", _) => c.queue(&version().to_string()),
+            ("DEVICES", _) => {
+                c.queue(&json!({"class": "DEVICES", "devices": [device(&latest.activated())]}).to_string())
+            }
+            ("DEVICE", _) => c.queue(&device(&latest.activated()).to_string()),
+            ("WATCH", arg) => {
+                if let Some(a) = arg {
+                    let enable = a.get("enable").and_then(Value::as_bool).unwrap_or(true);
+                    let json = a.get("json").and_then(Value::as_bool).unwrap_or(c.watch.json || enable);
+                    c.watch = Watch { enable, json };
+                    if enable {
+                        c.queue(&json!({"class": "DEVICES", "devices": [device(&latest.activated())]}).to_string());
+                    }
+                }
+                c.queue(&watch_json(c.watch).to_string());
+            }
+            ("POLL", _) => {
+                let tpvs: Vec<Value> = latest
+                    .nav
+                    .iter()
+                    .map(|n| tpv(n, latest.fix.as_ref(), latest.time.as_ref()))
+                    .collect();
+                let skies: Vec<Value> = latest.fix.iter().map(sky).collect();
+                let time = latest
+                    .nav
+                    .and_then(|n| iso_time(n.utc_ns))
+                    .unwrap_or_else(|| json!(format_rfc3339_ms(navsync_shared::time::realtime_now_ns())));
+                c.queue(
+                    &json!({
+                        "class": "POLL",
+                        "time": time,
+                        "active": usize::from(latest.nav.is_some()),
+                        "tpv": tpvs,
+                        "gst": [],
+                        "sky": skies,
+                    })
+                    .to_string(),
+                );
+            }
+            (other, _) => c.queue(&error(&format!("Unrecognized request '{other}'")).to_string()),
+        }
+    }
+}
+
+/// Runs the server until SIGINT/SIGTERM.
+pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
+    let io = |what: &str| {
+        let what = what.to_string();
+        move |source| GpsdError::Io { what, source }
+    };
+    let node = IpcNode::new("gpsd-server")?;
+    let nav_sub = node.subscriber::<NavState>(services::NAV_STATE)?;
+    let fix_sub = node.subscriber::<GnssFix>(&services::gnss_fix("0"))?;
+    let time_sub = node.subscriber::<TimeState>(services::TIME_STATE)?;
+    let mut health = HealthReporter::new(&node, "gpsd-server")?;
+    let c_accepted = health.counter("clients_accepted");
+    let c_rejected = health.counter("clients_rejected");
+    let c_slow = health.counter("clients_dropped_slow");
+    let c_active = health.counter("clients_active");
+    let c_reports = health.counter("reports_sent");
+    let c_bad = health.counter("bad_requests");
+    let r_tpv = health.rate("tpv_out");
+
+    let listener = TcpListener::bind(args.listen).map_err(io(&format!("listening on {}", args.listen)))?;
+    listener.set_nonblocking(true).map_err(io("listener"))?;
+    let local = listener.local_addr().map_err(io("listener address"))?;
+    // The bound address on stderr (with --listen …:0 the port the system chose).
+    eprintln!("navsync gpsd-server: listening on {local}");
+    info!(%local, max_clients = args.max_clients, "gpsd server");
+
+    let period_ns = (1e9 / args.rate_hz.clamp(0.01, 1000.0)) as i64;
+    let mut clients: Vec<Client> = Vec::new();
+    let mut latest = Latest::default();
+    let mut last_slot: Option<i64> = None;
+    let mut rx = [0u8; 2048];
+    while !node.termination_requested() {
+        // poll(2): the listener and every client (writable only while output is pending).
+        let mut fds: Vec<libc::pollfd> = Vec::with_capacity(1 + clients.len());
+        fds.push(libc::pollfd {
+            fd: listener.as_raw_fd(),
+            events: libc::POLLIN,
+            revents: 0,
+        });
+        for c in &clients {
+            let mut events = libc::POLLIN;
+            if !c.out.is_empty() {
+                events |= libc::POLLOUT;
+            }
+            fds.push(libc::pollfd {
+                fd: c.stream.as_raw_fd(),
+                events,
+                revents: 0,
+            });
+        }
+        // SAFETY: fds is a valid array of pollfd for the call's duration.
+        let n = unsafe { libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, 10) };
+        if n < 0 {
+            let e = std::io::Error::last_os_error();
+            if e.kind() != ErrorKind::Interrupted {
+                return Err(GpsdError::Io {
+                    what: "poll".into(),
+                    source: e,
+                });
+            }
+        }
+        // New clients.
+        if fds[0].revents & libc::POLLIN != 0 {
+            loop {
+                match listener.accept() {
+                    Ok((stream, peer)) => {
+                        let mut c = Client::accepted(stream, peer);
+                        if clients.len() >= args.max_clients {
+                            health.add(c_rejected, 1);
+                            c.queue(&error("too many clients").to_string());
+                            let _ = c.flush();
+                            warn!(%peer, "client rejected: {} clients already", clients.len());
+                            continue;
+                        }
+                        health.add(c_accepted, 1);
+                        c.queue(&version().to_string());
+                        c.flush();
+                        info!(%peer, "client connected");
+                        clients.push(c);
+                    }
+                    Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+                    Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                    Err(e) => {
+                        warn!("accept: {e}");
+                        break;
+                    }
+                }
+            }
+        }
+        // Requests and writable sockets.
+        for (c, pfd) in clients.iter_mut().zip(fds.iter().skip(1)) {
+            if pfd.revents & (libc::POLLIN | libc::POLLHUP | libc::POLLERR) != 0 {
+                loop {
+                    match c.stream.read(&mut rx) {
+                        Ok(0) => {
+                            c.closing = true;
+                            break;
+                        }
+                        Ok(k) => c.inbuf.extend_from_slice(&rx[..k]),
+                        Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+                        Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                        Err(_) => {
+                            c.closing = true;
+                            break;
+                        }
+                    }
+                    if c.inbuf.len() > MAX_REQUEST_BYTES {
+                        health.add(c_bad, 1);
+                        c.closing = true;
+                        break;
+                    }
+                }
+                let (cmds, used) = parse_commands(&c.inbuf);
+                c.inbuf.drain(..used);
+                if cmds.iter().any(|k| k.arg == Some(Value::Null)) {
+                    health.add(c_bad, 1);
+                }
+                handle(c, cmds, &latest);
+            }
+            if !c.out.is_empty() && !c.flush() {
+                c.closing = true;
+            }
+        }
+        // Inputs.
+        while let Some(t) = time_sub.receive()? {
+            latest.time = Some(t);
+        }
+        while let Some(f) = fix_sub.receive()? {
+            latest.fix = Some(f);
+        }
+        let mut due = None;
+        while let Some(n) = nav_sub.receive()? {
+            // Report on the first state of each period (UTC when known, else host time).
+            let t = if n.utc_ns != i64::MIN { n.utc_ns } else { n.host_ns };
+            let slot = t.div_euclid(period_ns);
+            if last_slot != Some(slot) {
+                last_slot = Some(slot);
+                due = Some(n);
+            }
+            latest.nav = Some(n);
+        }
+        if let Some(n) = due {
+            let mut lines = vec![
+                tpv(&n, latest.fix.as_ref(), latest.time.as_ref()).to_string(),
+                att(&n).to_string(),
+                imu(&n).to_string(),
+            ];
+            if let Some(f) = &latest.fix {
+                lines.push(sky(f).to_string());
+            }
+            health.tick(r_tpv);
+            for c in clients
+                .iter_mut()
+                .filter(|c| c.watch.enable && c.watch.json && !c.closing)
+            {
+                health.add(c_reports, 1);
+                match deliver(c, &lines, MAX_PENDING_BYTES) {
+                    Delivery::Kept => {}
+                    Delivery::Gone => c.closing = true,
+                    Delivery::Slow => {
+                        warn!(peer = %c.peer, pending = c.out.len(), "dropping a slow client");
+                        health.add(c_slow, 1);
+                        c.closing = true;
+                    }
+                }
+            }
+        }
+        clients.retain(|c| {
+            if c.closing {
+                info!(peer = %c.peer, "client gone");
+            }
+            !c.closing
+        });
+        health.set(c_active, clients.len() as u64);
+        health.maybe_publish(monotonic_now_ns())?;
+    }
+    health.publish_final()?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use navsync_shared::reflect::Reflect;
+
+    /// A real loopback TCP connection: the server side as the run loop accepts it, and the
+    /// peer's socket.
+    fn connected_pair() -> (Client, TcpStream) {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let peer = TcpStream::connect(listener.local_addr().unwrap()).unwrap();
+        let (stream, addr) = listener.accept().unwrap();
+        (Client::accepted(stream, addr), peer)
+    }
+
+    /// One report's worth of lines, about 1.5 KiB like TPV + ATT + IMU + SKY.
+    fn report() -> Vec<String> {
+        (0..4)
+            .map(|i| format!("{{\"class\":\"X{i}\",\"pad\":\"{}\"}}", "x".repeat(370)))
+            .collect()
+    }
+
+    #[test]
+    fn a_client_that_stops_reading_is_dropped_once_its_queue_passes_the_bound() {
+        let (mut c, peer) = connected_pair();
+        let lines = report();
+        let per_report: usize = lines.iter().map(|l| l.len() + 1).sum();
+        // The peer never reads: the kernel's buffers fill (a few MiB at most on loopback), then
+        // the queue grows until the bound is passed. Never blocks: each call returns at once.
+        let mut reports = 0usize;
+        let verdict = loop {
+            match deliver(&mut c, &lines, MAX_PENDING_BYTES) {
+                Delivery::Kept => reports += 1,
+                other => break other,
+            }
+            assert!(
+                reports < 100_000,
+                "never dropped after {} MiB",
+                (reports * per_report) >> 20
+            );
+        };
+        assert_eq!(verdict, Delivery::Slow);
+        assert!(c.out.len() > MAX_PENDING_BYTES);
+        assert!(
+            c.out.len() <= MAX_PENDING_BYTES + per_report,
+            "the bound is checked per report"
+        );
+        println!(
+            "dropped after {reports} reports ({} KiB sent, {} KiB in the kernel's buffers)",
+            (reports * per_report) >> 10,
+            (reports * per_report - c.out.len()) >> 10
+        );
+        drop(peer);
+    }
+
+    #[test]
+    fn a_client_that_reads_is_kept_and_gets_every_byte() {
+        let (mut c, mut peer) = connected_pair();
+        let lines = report();
+        let per_report: usize = lines.iter().map(|l| l.len() + 1).sum();
+        let mut buf = vec![0u8; per_report];
+        // Twice the volume that drops a silent client, read as it comes.
+        let n = 2 * (MAX_PENDING_BYTES + (8 << 20)) / per_report;
+        for _ in 0..n {
+            assert_eq!(deliver(&mut c, &lines, MAX_PENDING_BYTES), Delivery::Kept);
+            // Drain what was queued (the socket may hold part of it back until read).
+            let mut got = 0;
+            while got < per_report {
+                got += peer.read(&mut buf[got..]).unwrap();
+                assert!(c.flush());
+            }
+            assert_eq!(&buf[..lines[0].len()], lines[0].as_bytes());
+        }
+        assert!(c.out.is_empty());
+    }
+
+    #[test]
+    fn a_client_that_closed_is_gone() {
+        let (mut c, peer) = connected_pair();
+        drop(peer);
+        let lines = report();
+        // The first write may still succeed (the peer's RST arrives after it); the next fail.
+        let verdicts: Vec<Delivery> = (0..50).map(|_| deliver(&mut c, &lines, MAX_PENDING_BYTES)).collect();
+        assert!(verdicts.contains(&Delivery::Gone), "{verdicts:?}");
+    }
+
+    #[test]
+    fn commands_are_split_and_incomplete_ones_kept() {
+        let (c, used) = parse_commands(b"?WATCH={\"enable\":true,\"json\":true};?POLL;\n?VERS");
+        assert_eq!(c.len(), 2);
+        assert_eq!(c[0].name, "WATCH");
+        assert_eq!(c[0].arg, Some(json!({"enable": true, "json": true})));
+        assert_eq!(
+            c[1],
+            Command {
+                name: "POLL".into(),
+                arg: None
+            }
+        );
+        assert_eq!(used, 42);
+        let (c, used) = parse_commands(b"?WATCH={\"enable\":tr");
+        assert!(c.is_empty());
+        assert_eq!(used, 0);
+        let (c, _) = parse_commands(b"?WATCH={bad};\r\n");
+        assert_eq!(c[0].arg, Some(Value::Null));
+        let (c, used) = parse_commands(b"garbage\n?version;");
+        assert_eq!(c[0].name, "VERSION");
+        assert_eq!(used, 17);
+    }
+
+    #[test]
+    fn tpv_carries_position_velocity_and_2_sigma_errors() {
+        let mut n = NavState::zeroed();
+        n.status = NavStatus::Aligned as u8;
+        n.utc_ns = 1_700_000_000_123_000_000;
+        n.lat_deg = 48.1;
+        n.lon_deg = 11.5;
+        n.height_m = 600.0;
+        n.vel_ned_mps = [3.0, 4.0, -0.5];
+        n.pos_std_ned_m = [0.3, 0.4, 0.6];
+        n.vel_std_ned_mps = [0.03, 0.04, 0.05];
+        let mut fix = GnssFix::empty(navsync_shared::samples::Stamp::host(
+            0,
+            0,
+            navsync_shared::samples::StampSource::Receipt,
+        ));
+        fix.geoid_sep_m = 47.0;
+        let v = tpv(&n, Some(&fix), None);
+        assert_eq!(v["mode"], 3);
+        assert_eq!(v["status"], 6);
+        assert_eq!(v["time"], "2023-11-14T22:13:20.123Z");
+        assert_eq!(v["altMSL"], 553.0);
+        assert!((v["speed"].as_f64().unwrap() - 5.0).abs() < 1e-12);
+        assert!((v["track"].as_f64().unwrap() - 53.130102354).abs() < 1e-6);
+        assert!((v["climb"].as_f64().unwrap() - 0.5).abs() < 1e-12);
+        assert!((v["epx"].as_f64().unwrap() - 0.8).abs() < 1e-12);
+        assert!((v["epy"].as_f64().unwrap() - 0.6).abs() < 1e-12);
+        assert!((v["eph"].as_f64().unwrap() - 1.0).abs() < 1e-12);
+        n.status = NavStatus::Aligning as u8;
+        let v = tpv(&n, None, None);
+        assert_eq!(v["mode"], 1);
+        assert!(v.get("lat").is_none());
+    }
+}

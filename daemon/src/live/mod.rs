@@ -1,0 +1,18 @@
+//! Process shells: each wires a functional core to its iceoryx2 services, or is a client of
+//! the live services.
+
+pub mod demo;
+pub mod echo;
+pub mod estimator;
+pub mod feed;
+pub mod gnss;
+pub mod gpsd_server;
+pub mod imu;
+pub mod liveness;
+pub mod ntpshm;
+pub mod pps;
+pub mod reclaimer;
+pub mod record;
+pub mod replay;
+pub mod sim;
+pub mod status;

@@ -1,0 +1,396 @@
+//! `navsync ntpshm --unit N`: exports navsync's GNSS time to chrony or ntpd through the NTP
+//! shared-memory reference clock (ntpd's `refclock_shm.c` driver, "type 28"; chrony's
+//! `refclock SHM N`; gpsd writes the same segment).
+//!
+//! The segment is System V shared memory with key `0x4e545030 + N` ("NTP0" + unit) holding
+//! one [`ShmTime`]. The writer uses mode 1, the count/valid protocol: set `valid = 0`,
+//! increment `count`, write the fields, increment `count` again, set `valid = 1`; the reader
+//! copies the structure and uses it only if `count` did not change while it copied and `valid`
+//! was set, then clears `valid` (ntpd `refclock_shm.c`, `shm_query`).
+//!
+//! What goes in. A sample is a pair of readings of the same instant h:
+//! - `clockTimeStamp` = GNSS time (UTC) at h from the published [`TimeState`] mapping;
+//! - `receiveTimeStamp` = the system's `CLOCK_REALTIME` at h.
+//!
+//! The reference clock's offset that chrony/ntpd measure is their difference. h is chosen now:
+//! (monotonic, realtime, monotonic) are read back to back, h is the middle of the monotonic
+//! pair (the tightest of three tries, < 1 µs wide), and the mapping gives GNSS time at h (the
+//! mapping is continuous in host time; when locked it is at most ~1 s from its last PPS edge).
+//! One sample per second while the mapping is usable: locked, in holdover (chrony keeps
+//! disciplining through a PPS or GNSS loss; the mapping's uncertainty grows honestly and is
+//! written as `precision`), or software sync; nothing while it is acquiring or unknown, and
+//! nothing when no `TimeState` arrived for [`STALE_AFTER_NS`] (the estimator is gone).
+
+use std::time::Duration;
+
+use navsync_shared::health_reporter::HealthReporter;
+use navsync_shared::ipc::{IpcError, IpcNode};
+use navsync_shared::samples::{TimeState, TimeStatus};
+use navsync_shared::services;
+use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
+use tracing::{info, info_span, warn};
+
+/// Key of unit 0: "NTP0".
+pub const NTP_SHM_BASE_KEY: i32 = 0x4e54_5030;
+/// Consecutive failed waits (other than for a termination signal) before giving up.
+const MAX_IPC_ERRORS: u32 = 100;
+/// A `TimeState` older than this is not exported, ns.
+pub const STALE_AFTER_NS: i64 = 5 * NS_PER_S;
+
+/// ntpd's `struct shmTime` (ntpd `refclock_shm.c`, gpsd `ntpshm.h`), native layout.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ShmTime {
+    /// 0: valid-flag protocol only; 1: count/valid protocol (navsync writes 1).
+    pub mode: i32,
+    /// Incremented before and after each write.
+    pub count: i32,
+    /// Reference (GNSS) time, seconds since 1970.
+    pub clock_time_stamp_sec: libc::time_t,
+    /// Reference time, µs part.
+    pub clock_time_stamp_usec: i32,
+    /// System clock at the same instant, seconds.
+    pub receive_time_stamp_sec: libc::time_t,
+    /// System clock, µs part.
+    pub receive_time_stamp_usec: i32,
+    /// Leap indicator: 0 none, 1 insert, 2 delete, 3 not synchronised.
+    pub leap: i32,
+    /// log2 of the sample's precision, s.
+    pub precision: i32,
+    /// Unused (ntpd's filter length).
+    pub nsamples: i32,
+    /// 1 when the fields hold a new sample.
+    pub valid: i32,
+    /// Reference time, ns part (must agree with the µs part).
+    pub clock_time_stamp_nsec: u32,
+    /// System clock, ns part.
+    pub receive_time_stamp_nsec: u32,
+    /// Reserved.
+    pub dummy: [i32; 8],
+}
+
+/// One sample to write.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShmSample {
+    /// GNSS (UTC) time of the instant, ns since 1970.
+    pub clock_ns: i64,
+    /// `CLOCK_REALTIME` at the same instant, ns since 1970.
+    pub receive_ns: i64,
+    /// log2 of the 1-sigma, s.
+    pub precision: i32,
+}
+
+/// The sample for instant `host_ns` (`CLOCK_MONOTONIC`) read as `realtime_ns` on the system
+/// clock, from the mapping `state` received at host time `state_rx_ns`; `None` when the
+/// mapping must not be exported. Pure.
+pub fn sample_for(state: &TimeState, host_ns: i64, realtime_ns: i64) -> Option<ShmSample> {
+    if !matches!(
+        state.status(),
+        TimeStatus::Locked | TimeStatus::Holdover | TimeStatus::Software
+    ) {
+        return None;
+    }
+    if host_ns - state.computed_host_ns > STALE_AFTER_NS {
+        return None;
+    }
+    let sigma_s = state.utc_std_ns_at(host_ns) * 1e-9;
+    let precision = if sigma_s.is_finite() && sigma_s > 0.0 {
+        sigma_s.log2().ceil().clamp(-30.0, 0.0) as i32
+    } else {
+        -20
+    };
+    Some(ShmSample {
+        clock_ns: state.utc_ns_at(host_ns),
+        receive_ns: realtime_ns,
+        precision,
+    })
+}
+
+fn split(ns: i64) -> (libc::time_t, i32, u32) {
+    let sec = ns.div_euclid(NS_PER_S);
+    let nsec = ns.rem_euclid(NS_PER_S) as u32;
+    (sec as libc::time_t, (nsec / 1000) as i32, nsec)
+}
+
+/// Writes `s` into `shm` with the mode-1 count/valid protocol.
+///
+/// # Safety
+/// `shm` must point to a mapped `ShmTime` (it may be shared with other processes).
+pub unsafe fn write_sample(shm: *mut ShmTime, s: &ShmSample) {
+    use core::ptr::{addr_of_mut, read_volatile, write_volatile};
+    use core::sync::atomic::{Ordering, fence};
+    let (cs, cu, cn) = split(s.clock_ns);
+    let (rs, ru, rn) = split(s.receive_ns);
+    // SAFETY (whole block): the caller guarantees `shm` is mapped; volatile accesses because a
+    // reader in another process polls the same memory.
+    unsafe {
+        write_volatile(addr_of_mut!((*shm).mode), 1);
+        write_volatile(addr_of_mut!((*shm).valid), 0);
+        let c = read_volatile(addr_of_mut!((*shm).count));
+        write_volatile(addr_of_mut!((*shm).count), c.wrapping_add(1));
+        fence(Ordering::SeqCst);
+        write_volatile(addr_of_mut!((*shm).clock_time_stamp_sec), cs);
+        write_volatile(addr_of_mut!((*shm).clock_time_stamp_usec), cu);
+        write_volatile(addr_of_mut!((*shm).clock_time_stamp_nsec), cn);
+        write_volatile(addr_of_mut!((*shm).receive_time_stamp_sec), rs);
+        write_volatile(addr_of_mut!((*shm).receive_time_stamp_usec), ru);
+        write_volatile(addr_of_mut!((*shm).receive_time_stamp_nsec), rn);
+        write_volatile(addr_of_mut!((*shm).leap), 0);
+        write_volatile(addr_of_mut!((*shm).precision), s.precision);
+        write_volatile(addr_of_mut!((*shm).nsamples), 3);
+        fence(Ordering::SeqCst);
+        let c = read_volatile(addr_of_mut!((*shm).count));
+        write_volatile(addr_of_mut!((*shm).count), c.wrapping_add(1));
+        write_volatile(addr_of_mut!((*shm).valid), 1);
+    }
+}
+
+/// Errors of the SHM exporter.
+#[derive(Debug, thiserror::Error)]
+pub enum NtpShmError {
+    /// The segment could not be created or attached.
+    #[error("NTP SHM unit {unit} (key {key:#x}): {what}: {source}")]
+    Shm {
+        /// Unit.
+        unit: u32,
+        /// Key.
+        key: i32,
+        /// The call.
+        what: &'static str,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// IPC failure.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+}
+
+/// An attached SHM segment.
+pub struct ShmSegment {
+    ptr: *mut ShmTime,
+}
+
+impl ShmSegment {
+    /// The key of `unit`.
+    pub fn key(unit: u32) -> i32 {
+        NTP_SHM_BASE_KEY.wrapping_add(unit as i32)
+    }
+
+    /// Creates (or opens) and attaches the segment of `unit`. Units 0 and 1 are root-only
+    /// (0600) as in ntpd and gpsd, others 0666.
+    pub fn open(unit: u32) -> Result<Self, NtpShmError> {
+        let key = Self::key(unit);
+        let perm = if unit < 2 { 0o600 } else { 0o666 };
+        let fail = |what, source| NtpShmError::Shm {
+            unit,
+            key,
+            what,
+            source,
+        };
+        // SAFETY: System V shared memory calls with checked results.
+        unsafe {
+            let id = libc::shmget(key, size_of::<ShmTime>(), libc::IPC_CREAT | perm);
+            if id < 0 {
+                return Err(fail("shmget", std::io::Error::last_os_error()));
+            }
+            let p = libc::shmat(id, std::ptr::null(), 0);
+            if p as isize == -1 {
+                return Err(fail("shmat", std::io::Error::last_os_error()));
+            }
+            Ok(Self { ptr: p.cast() })
+        }
+    }
+
+    /// Writes one sample.
+    pub fn write(&mut self, s: &ShmSample) {
+        // SAFETY: `ptr` is our attached segment of at least size_of::<ShmTime>().
+        unsafe { write_sample(self.ptr, s) }
+    }
+}
+
+impl Drop for ShmSegment {
+    fn drop(&mut self) {
+        // The segment stays (as with gpsd) so a running chronyd keeps its attachment valid.
+        // SAFETY: detaching our own attachment.
+        unsafe { libc::shmdt(self.ptr.cast()) };
+    }
+}
+
+/// (monotonic, realtime) of one instant: of three back-to-back (mono, real, mono) readings
+/// the one with the tightest bracket; the monotonic time is the bracket's middle.
+pub fn paired_clocks_ns() -> (i64, i64) {
+    let mut best = (i64::MAX, 0i64, 0i64);
+    for _ in 0..3 {
+        let a = monotonic_now_ns();
+        let r = navsync_shared::time::realtime_now_ns();
+        let b = monotonic_now_ns();
+        if b - a < best.0 {
+            best = (b - a, a + (b - a) / 2, r);
+        }
+    }
+    (best.1, best.2)
+}
+
+/// `navsync ntpshm`: GNSS time (`navsync/time/state`) to chrony/ntpd as an NTP shared-memory
+/// refclock.
+#[derive(Debug, Clone, clap::Args)]
+pub struct NtpShmArgs {
+    /// SHM unit: segment key 0x4e545030 + unit (chrony: `refclock SHM <unit>`)
+    /// [default: [outputs.ntpshm].unit, else 0].
+    #[arg(long)]
+    pub unit: Option<u32>,
+}
+
+/// Runs `navsync ntpshm` with the unit: flag, else `[outputs.ntpshm].unit`, else 0.
+pub fn main(opts: NtpShmArgs, cfg: &crate::config::Loaded) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let unit = opts
+        .unit
+        .or(cfg.config.outputs.ntpshm.as_ref().map(|n| n.unit))
+        .unwrap_or(0);
+    run(unit).context("ntpshm")
+}
+
+/// Runs the exporter for SHM `unit` until SIGINT/SIGTERM.
+pub fn run(unit: u32) -> Result<(), NtpShmError> {
+    let process = format!("ntpshm-{unit}");
+    let _span = info_span!("ntpshm", unit).entered();
+    let node = IpcNode::new(&process)?;
+    let time = node.subscriber::<TimeState>(services::TIME_STATE)?;
+    let mut health = HealthReporter::new(&node, &process)?;
+    let c_written = health.counter("samples_written");
+    let c_skipped = health.counter("seconds_not_exported");
+    let c_holdover = health.counter("holdover_samples");
+    let mut shm = ShmSegment::open(unit)?;
+    info!(
+        key = format!("{:#x}", ShmSegment::key(unit)),
+        "NTP SHM exporter running"
+    );
+    let mut latest: Option<TimeState> = None;
+    let mut next_write = monotonic_now_ns();
+    let mut last_status = TimeStatus::None;
+    let mut ipc_errors = 0u32;
+    navsync_shared::sd_notify::ready(&format!("NTP SHM unit {}", unit));
+    loop {
+        navsync_shared::sd_notify::watchdog();
+        let now = monotonic_now_ns();
+        let wait = Duration::from_nanos((next_write - now).clamp(1_000_000, NS_PER_S) as u64);
+        match time.wait_next(wait) {
+            Ok(Some(s)) => {
+                latest = Some(s);
+                while let Some(s) = time.receive()? {
+                    latest = Some(s);
+                }
+                ipc_errors = 0;
+            }
+            Ok(None) => {}
+            // A signal interrupts the wait: SIGTERM/SIGINT end the loop below; others are retried.
+            Err(e) => {
+                ipc_errors += 1;
+                if ipc_errors > MAX_IPC_ERRORS && !node.termination_requested() {
+                    return Err(e.into());
+                }
+            }
+        }
+        if node.termination_requested() {
+            break;
+        }
+        let now = monotonic_now_ns();
+        if now < next_write {
+            continue;
+        }
+        next_write = now + NS_PER_S;
+        let (h, real) = paired_clocks_ns();
+        match latest
+            .as_ref()
+            .and_then(|s| sample_for(s, h, real).map(|x| (x, s.status())))
+        {
+            Some((sample, status)) => {
+                shm.write(&sample);
+                health.add(c_written, 1);
+                if status == TimeStatus::Holdover {
+                    health.add(c_holdover, 1);
+                }
+                if status != last_status {
+                    info!(status = status.name(), "exporting");
+                    last_status = status;
+                }
+            }
+            None => health.add(c_skipped, 1),
+        }
+        if let Err(e) = health.maybe_publish(now) {
+            warn!("publishing health: {e}");
+        }
+    }
+    navsync_shared::sd_notify::stopping();
+    let _ = health.publish_final();
+    info!("NTP SHM exporter stopped");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn locked(ref_host_ns: i64, ref_utc_ns: i64) -> TimeState {
+        let mut s = TimeState::unknown();
+        s.status = TimeStatus::Locked as u8;
+        s.ref_host_ns = ref_host_ns;
+        s.ref_utc_ns = ref_utc_ns;
+        s.computed_host_ns = ref_host_ns;
+        s.rate_error = 1e-6;
+        s.offset_std_ns = 500.0;
+        s.rate_std = 1e-9;
+        s.offset_rate_cov_ns = 0.0;
+        s.q_offset_ns2_per_s = 0.0;
+        s.q_rate_per_s = 0.0;
+        s
+    }
+
+    #[test]
+    fn sample_pairs_gnss_time_and_system_time_of_one_instant() {
+        let s = locked(5_000_000_000, 1_790_000_000_000_000_000);
+        let x = sample_for(&s, 5_500_000_000, 1_790_000_000_250_000_123).expect("sample");
+        assert_eq!(x.clock_ns, 1_790_000_000_000_000_000 + 500_000_000 + 500);
+        assert_eq!(x.receive_ns, 1_790_000_000_250_000_123);
+        assert_eq!(x.precision, -20, "σ ≈ 0.5 µs → 2^-20 s");
+        let mut acquiring = s;
+        acquiring.status = TimeStatus::Acquiring as u8;
+        assert_eq!(sample_for(&acquiring, 5_500_000_000, 0), None);
+        assert_eq!(sample_for(&s, 5_000_000_000 + STALE_AFTER_NS + 1, 0), None, "stale");
+        let mut holdover = s;
+        holdover.status = TimeStatus::Holdover as u8;
+        assert!(sample_for(&holdover, 6_000_000_000, 0).is_some());
+    }
+
+    #[test]
+    fn protocol_fields_are_consistent() {
+        let mut t = ShmTime::default();
+        let s = ShmSample {
+            clock_ns: 1_700_000_001_123_456_789,
+            receive_ns: -1,
+            precision: -19,
+        };
+        // SAFETY: a local ShmTime.
+        unsafe { write_sample(&mut t, &s) };
+        assert_eq!((t.mode, t.count, t.valid), (1, 2, 1));
+        assert_eq!(t.clock_time_stamp_sec, 1_700_000_001);
+        assert_eq!(
+            (t.clock_time_stamp_usec, t.clock_time_stamp_nsec),
+            (123_456, 123_456_789)
+        );
+        assert_eq!(t.receive_time_stamp_sec, -1);
+        assert_eq!(t.receive_time_stamp_nsec, 999_999_999);
+        assert_eq!(t.precision, -19);
+    }
+
+    #[test]
+    fn layout_matches_ntpd_on_lp64() {
+        if size_of::<libc::time_t>() == 8 {
+            assert_eq!(size_of::<ShmTime>(), 96);
+            assert_eq!(std::mem::offset_of!(ShmTime, receive_time_stamp_sec), 24);
+            assert_eq!(std::mem::offset_of!(ShmTime, valid), 48);
+            assert_eq!(std::mem::offset_of!(ShmTime, clock_time_stamp_nsec), 52);
+        }
+    }
+}

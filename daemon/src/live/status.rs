@@ -1,0 +1,649 @@
+//! `navsync status`: every navsync process and service on the host, what flows where, and the
+//! time-synchronisation and navigation state in one view.
+//!
+//! Discovery is iceoryx2's own: [`Node::list`] finds the processes (nodes) under the navsync
+//! resource prefix (`$NAVSYNC_IPC_PREFIX` or `navsync_`), `Service::list` the services. Every
+//! navsync publish-subscribe service is opened (never created) and subscribed to for the
+//! measurement window: the rate is what arrived in it, the last-sample age is the host clock
+//! minus the newest sample's own stamp (`CLOCK_MONOTONIC`), and publisher/subscriber counts
+//! come from the service's dynamic configuration (this process's own subscriber not counted).
+//! The latest `Health` of each process gives its counters; the latest `TimeState` and
+//! `NavState` give the time-sync state, the receiver latency d0, the GNSS delay Δ and the
+//! per-IMU offsets.
+//!
+//! `--json` prints one JSON document (one line per refresh with `--watch`); `--watch S`
+//! refreshes every S seconds until Ctrl-C (`--count N` refreshes, then exits).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use iceoryx2::node::NodeView;
+use iceoryx2::prelude::*;
+use iceoryx2::service::static_config::messaging_pattern::MessagingPattern;
+use navsync_shared::ipc::{self, IpcError, IpcNode, Transport};
+use navsync_shared::reflect::{Reflect, str_of};
+use navsync_shared::samples::*;
+use navsync_shared::services::ServiceKind;
+use navsync_shared::time::monotonic_now_ns;
+use serde_json::{Map, Value, json};
+
+/// Settings of `navsync status`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StatusArgs {
+    /// One JSON document (one line per refresh with --watch).
+    #[arg(long)]
+    pub json: bool,
+    /// Refresh every S seconds until Ctrl-C.
+    #[arg(long, value_name = "S", num_args = 0..=1, default_missing_value = "1", value_parser = super::echo::positive_seconds)]
+    pub watch: Option<Duration>,
+    /// Measurement window of a single report, s.
+    #[arg(long, value_name = "S", default_value = "2", value_parser = super::echo::positive_seconds)]
+    pub window: Duration,
+    /// With --watch: stop after N refreshes.
+    #[arg(long)]
+    pub count: Option<u64>,
+}
+
+/// Errors of `navsync status`.
+#[derive(Debug, thiserror::Error)]
+pub enum StatusError {
+    /// IPC failure.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// Listing nodes or services failed.
+    #[error("{0}")]
+    Discovery(String),
+    /// stdout closed.
+    #[error("writing output: {0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// One observed service, type-erased.
+trait Monitor {
+    /// Drains the subscriber; returns how many samples arrived.
+    fn poll(&mut self) -> usize;
+    /// (publishers, subscribers) on the service, including this process's subscriber.
+    fn ports(&self) -> (usize, usize);
+    /// Host stamp of the newest sample ever received.
+    fn last_host_ns(&self) -> Option<i64>;
+    /// The newest sample.
+    fn latest(&self) -> Option<AnySample>;
+}
+
+struct Typed<T: Reflect + ZeroCopySend + core::fmt::Debug> {
+    factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, T, ()>,
+    sub: iceoryx2::port::subscriber::Subscriber<Transport, T, ()>,
+    latest: Option<T>,
+    wrap: fn(T) -> AnySample,
+}
+
+impl<T: Reflect + ZeroCopySend + core::fmt::Debug> Monitor for Typed<T> {
+    fn poll(&mut self) -> usize {
+        let mut n = 0;
+        while let Ok(Some(s)) = self.sub.receive() {
+            self.latest = Some(*s.payload());
+            n += 1;
+        }
+        n
+    }
+    fn ports(&self) -> (usize, usize) {
+        let d = self.factory.dynamic_config();
+        (d.number_of_publishers(), d.number_of_subscribers())
+    }
+    fn last_host_ns(&self) -> Option<i64> {
+        self.latest.map(|s| (self.wrap)(s).host_ns())
+    }
+    fn latest(&self) -> Option<AnySample> {
+        self.latest.map(self.wrap)
+    }
+}
+
+fn open_typed<T: Reflect + ZeroCopySend + core::fmt::Debug>(
+    node: &IpcNode,
+    service: &str,
+    wrap: fn(T) -> AnySample,
+) -> Result<Box<dyn Monitor>, String> {
+    let name: ServiceName = service.try_into().map_err(|e| format!("{e:?}"))?;
+    // Open only: status must never create a service that is not there.
+    let factory = node
+        .node()
+        .service_builder(&name)
+        .publish_subscribe::<T>()
+        .open()
+        .map_err(|e| format!("{e:?}"))?;
+    let sub = factory.subscriber_builder().create().map_err(|e| format!("{e:?}"))?;
+    Ok(Box::new(Typed {
+        factory,
+        sub,
+        latest: None,
+        wrap,
+    }))
+}
+
+fn open_monitor(node: &IpcNode, service: &str, kind: ServiceKind) -> Result<Box<dyn Monitor>, String> {
+    match kind {
+        ServiceKind::GnssFix => open_typed::<GnssFix>(node, service, AnySample::GnssFix),
+        ServiceKind::PpsEdge => open_typed::<PpsEdge>(node, service, AnySample::PpsEdge),
+        ServiceKind::ImuSample => open_typed::<ImuSample>(node, service, AnySample::Imu),
+        ServiceKind::TimeState => open_typed::<TimeState>(node, service, AnySample::Time),
+        ServiceKind::NavState => open_typed::<NavState>(node, service, AnySample::Nav),
+        ServiceKind::Health => open_typed::<Health>(node, service, AnySample::Health),
+        ServiceKind::SimTruth => open_typed::<SimTruth>(node, service, AnySample::Truth),
+    }
+}
+
+/// A service being watched and its counts since the last report.
+struct Watched {
+    kind: ServiceKind,
+    monitor: Box<dyn Monitor>,
+    /// Samples since the interval started.
+    interval_samples: u64,
+    total: u64,
+    last_arrival: Option<Instant>,
+    /// Names of the nodes attached to the service, from discovery.
+    nodes: Vec<String>,
+}
+
+/// A discovered process (iceoryx2 node).
+#[derive(Debug, Clone)]
+struct Process {
+    name: String,
+    pid: Option<i32>,
+    executable: String,
+    state: &'static str,
+}
+
+struct Status {
+    node: IpcNode,
+    services: BTreeMap<String, Watched>,
+    processes: Vec<Process>,
+    foreign_services: Vec<String>,
+    interval_start: Instant,
+}
+
+impl Status {
+    fn new() -> Result<Self, StatusError> {
+        let node = IpcNode::new(&format!("status-{}", std::process::id()))?;
+        Ok(Self {
+            node,
+            services: BTreeMap::new(),
+            processes: Vec::new(),
+            foreign_services: Vec::new(),
+            interval_start: Instant::now(),
+        })
+    }
+
+    /// Finds processes and services; subscribes to new services, forgets vanished ones.
+    fn discover(&mut self) -> Result<(), StatusError> {
+        let config = ipc::config()?;
+        let own = *self.node.node().id();
+        let mut processes = Vec::new();
+        Node::<Transport>::list(&config, |state| {
+            let (view, st) = match &state {
+                NodeState::Alive(v) => (Some(v.details().clone()), "alive"),
+                NodeState::Dead(v) => (Some(v.details().clone()), "dead"),
+                NodeState::Inaccessible(_) => (None, "inaccessible"),
+                NodeState::Undefined(_) => (None, "undefined"),
+            };
+            if *state.node_id() == own {
+                return CallbackProgression::Continue;
+            }
+            let details = view.flatten();
+            processes.push(Process {
+                name: details
+                    .as_ref()
+                    .map_or(String::new(), |d| d.name().as_str().to_string()),
+                pid: details.as_ref().map(|d| d.process_id().value()),
+                executable: details.as_ref().map_or(String::new(), |d| d.executable().to_string()),
+                state: st,
+            });
+            CallbackProgression::Continue
+        })
+        .map_err(|e| StatusError::Discovery(format!("listing nodes: {e:?}")))?;
+        processes.sort_by(|a, b| (&a.name, a.pid).cmp(&(&b.name, b.pid)));
+        self.processes = processes;
+
+        let mut found: BTreeMap<String, Vec<String>> = BTreeMap::new();
+        let mut foreign = Vec::new();
+        Transport::list(&config, |s| {
+            if matches!(
+                s.static_details.messaging_pattern(),
+                MessagingPattern::PublishSubscribe(_)
+            ) {
+                let name = s.static_details.name().as_str().to_string();
+                let mut nodes = Vec::new();
+                if let Some(d) = &s.dynamic_details {
+                    for n in &d.nodes {
+                        if *n.node_id() == own {
+                            continue;
+                        }
+                        if let NodeState::Alive(v) = n
+                            && let Some(det) = v.details()
+                        {
+                            nodes.push(det.name().as_str().to_string());
+                        }
+                    }
+                }
+                nodes.sort();
+                nodes.dedup();
+                if ServiceKind::of(&name).is_some() {
+                    found.insert(name, nodes);
+                } else {
+                    foreign.push(name);
+                }
+            }
+            CallbackProgression::Continue
+        })
+        .map_err(|e| StatusError::Discovery(format!("listing services: {e:?}")))?;
+        foreign.sort();
+        self.foreign_services = foreign;
+        self.services.retain(|name, _| found.contains_key(name));
+        for (name, nodes) in found {
+            if let Some(w) = self.services.get_mut(&name) {
+                w.nodes = nodes;
+                continue;
+            }
+            let kind = ServiceKind::of(&name).expect("filtered above");
+            match open_monitor(&self.node, &name, kind) {
+                Ok(mut monitor) => {
+                    // What arrives at once is history (the newest sample before we came), not rate.
+                    monitor.poll();
+                    self.services.insert(
+                        name,
+                        Watched {
+                            kind,
+                            monitor,
+                            interval_samples: 0,
+                            total: 0,
+                            last_arrival: None,
+                            nodes,
+                        },
+                    );
+                }
+                Err(e) => tracing::debug!("cannot open {name}: {e}"),
+            }
+        }
+        Ok(())
+    }
+
+    fn poll(&mut self) {
+        for w in self.services.values_mut() {
+            let n = w.monitor.poll() as u64;
+            if n > 0 {
+                w.interval_samples += n;
+                w.total += n;
+                w.last_arrival = Some(Instant::now());
+            }
+        }
+    }
+
+    /// The report over the interval since the last one, as JSON; starts the next interval.
+    fn report(&mut self) -> Value {
+        let now_ns = monotonic_now_ns();
+        let now = Instant::now();
+        let span = now.duration_since(self.interval_start).as_secs_f64().max(1e-3);
+        let age = |h: i64| (now_ns - h) as f64 * 1e-9;
+        let mut services = Vec::new();
+        let (mut health, mut time, mut nav) = (Vec::new(), None, None);
+        for (name, w) in &mut self.services {
+            let (publishers, subscribers) = w.monitor.ports();
+            services.push(json!({
+                "name": name,
+                "type": w.kind.type_name(),
+                "publishers": publishers,
+                "subscribers": subscribers.saturating_sub(1),
+                "nodes": w.nodes,
+                "rate_hz": w.interval_samples as f64 / span,
+                "samples": w.interval_samples,
+                "received_total": w.total,
+                "last_sample_age_s": w.monitor.last_host_ns().map(age),
+                "last_received_s": w.last_arrival.map(|t| now.duration_since(t).as_secs_f64()),
+            }));
+            w.interval_samples = 0;
+            match w.monitor.latest() {
+                Some(AnySample::Health(h)) => health.push(health_json(&h, now_ns)),
+                Some(AnySample::Time(t)) => time = Some(time_json(&t, now_ns)),
+                Some(AnySample::Nav(n)) => nav = Some(nav_json(&n, now_ns)),
+                _ => {}
+            }
+        }
+        self.interval_start = now;
+        let processes: Vec<Value> = self
+            .processes
+            .iter()
+            .map(|p| {
+                let h = health
+                    .iter()
+                    .find(|h| h["process"] == p.name.as_str() && h["pid"].as_i64() == p.pid.map(i64::from));
+                json!({
+                    "name": p.name,
+                    "pid": p.pid,
+                    "executable": p.executable,
+                    "state": p.state,
+                    "uptime_s": h.and_then(|h| h["uptime_s"].as_f64()),
+                })
+            })
+            .collect();
+        json!({
+            "prefix": ipc::prefix(),
+            "host_ns": now_ns,
+            "interval_s": span,
+            "processes": processes,
+            "services": services,
+            "other_services": self.foreign_services,
+            "health": health,
+            "time": time,
+            "nav": nav,
+        })
+    }
+}
+
+fn f(x: f64) -> Value {
+    if x.is_finite() { json!(x) } else { Value::Null }
+}
+
+fn imu_table(t: &[ImuSync]) -> Vec<Value> {
+    t.iter()
+        .map(|e| {
+            json!({
+                "id": str_of(&e.imu_id),
+                "offset_s": f(e.offset_s),
+                "offset_std_s": f(e.offset_std_s),
+                "in_array": e.in_array == 1,
+                "reason": ImuSyncReason::name(e.reason),
+                "observable": e.observable == 1,
+            })
+        })
+        .collect()
+}
+
+fn health_json(h: &Health, now_ns: i64) -> Value {
+    let counters: Map<String, Value> = h
+        .counters
+        .iter()
+        .filter(|c| c.name[0] != 0)
+        .map(|c| (str_of(&c.name).to_string(), json!(c.value)))
+        .collect();
+    let rates: Map<String, Value> = h
+        .rates
+        .iter()
+        .filter(|r| r.name[0] != 0)
+        .map(|r| (str_of(&r.name).to_string(), f(r.hz)))
+        .collect();
+    json!({
+        "process": str_of(&h.process),
+        "pid": h.pid,
+        "alive": h.alive == 1,
+        "uptime_s": (h.host_ns - h.started_host_ns) as f64 * 1e-9,
+        "report_age_s": (now_ns - h.host_ns) as f64 * 1e-9,
+        "reports": h.seq,
+        "counters": counters,
+        "rates": rates,
+    })
+}
+
+fn time_json(t: &TimeState, now_ns: i64) -> Value {
+    json!({
+        "status": t.status().name(),
+        "state_age_s": (now_ns - t.computed_host_ns) as f64 * 1e-9,
+        "utc_now_ns": t.is_valid().then(|| t.utc_ns_at(now_ns)),
+        "utc_std_ns": if t.is_valid() { f(t.utc_std_ns_at(now_ns)) } else { Value::Null },
+        "offset_std_ns": f(t.offset_std_ns),
+        "drift_ppm": f(t.rate_error * 1e6),
+        "drift_std_ppm": f(t.rate_std * 1e6),
+        "last_pps_age_s": (t.last_pps_host_ns != 0).then(|| (now_ns - t.last_pps_host_ns) as f64 * 1e-9),
+        "pps_used": t.pps_used,
+        "pps_rejected": t.pps_rejected,
+        "receiver_latency_d0_s": {
+            "min": f(t.latency_min_s),
+            "median": f(t.latency_median_s),
+            "p99": f(t.latency_p99_s),
+            "max": f(t.latency_max_s),
+            "epochs": t.latency_count,
+        },
+        "gnss_delay_s": f(t.gnss_delay_s),
+        "gnss_delay_std_s": f(t.gnss_delay_std_s),
+        "leap_s": t.leap_s,
+        "imu": imu_table(&t.imu[..usize::from(t.imu_count).min(MAX_IMUS)]),
+    })
+}
+
+fn nav_json(n: &NavState, now_ns: i64) -> Value {
+    json!({
+        "status": NavStatus::name(n.status),
+        "time_status": TimeStatus::from_u8(n.time_status).name(),
+        "state_age_s": (now_ns - n.host_ns) as f64 * 1e-9,
+        "utc_ns": (n.utc_ns != i64::MIN).then_some(n.utc_ns),
+        "lat_deg": f(n.lat_deg),
+        "lon_deg": f(n.lon_deg),
+        "height_m": f(n.height_m),
+        "vel_ned_mps": n.vel_ned_mps.map(f),
+        "rpy_deg": n.rpy_rad.map(|r| f(r.to_degrees())),
+        "pos_std_ned_m": n.pos_std_ned_m.map(f),
+        "fixes_used": n.fixes_used,
+        "fixes_rejected": n.fixes_rejected,
+        "last_fix_age_s": (n.last_fix_host_ns != 0).then(|| (now_ns - n.last_fix_host_ns) as f64 * 1e-9),
+        "gnss_delay_s": f(n.gnss_delay_s),
+        "gnss_delay_std_s": f(n.gnss_delay_std_s),
+        "imu": imu_table(&n.imu[..usize::from(n.imu_count).min(MAX_IMUS)]),
+    })
+}
+
+fn num(v: &Value, digits: usize) -> String {
+    v.as_f64().map_or("-".into(), |x| format!("{x:.digits$}"))
+}
+
+fn seconds(v: &Value) -> String {
+    match v.as_f64() {
+        None => "-".into(),
+        Some(x) if x.abs() < 1.0 => format!("{:.1} ms", x * 1e3),
+        Some(x) if x.abs() < 120.0 => format!("{x:.2} s"),
+        Some(x) => format!("{:.0} s", x),
+    }
+}
+
+/// The report as text.
+pub fn render_text(r: &Value) -> String {
+    let mut s = String::new();
+    let procs = r["processes"].as_array().map_or(&[][..], |v| v);
+    let services = r["services"].as_array().map_or(&[][..], |v| v);
+    let _ = writeln!(
+        s,
+        "navsync status: prefix {}, {} processes, {} services (measured over {:.1} s)",
+        r["prefix"].as_str().unwrap_or(""),
+        procs.len(),
+        services.len(),
+        r["interval_s"].as_f64().unwrap_or(0.0)
+    );
+    let _ = writeln!(s, "\n{:<24} {:>8} {:<13} {:>10}", "PROCESS", "PID", "STATE", "UPTIME");
+    for p in procs {
+        let _ = writeln!(
+            s,
+            "{:<24} {:>8} {:<13} {:>10}",
+            p["name"].as_str().unwrap_or(""),
+            p["pid"].as_i64().map_or("-".into(), |x| x.to_string()),
+            p["state"].as_str().unwrap_or(""),
+            seconds(&p["uptime_s"])
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n{:<28} {:<22} {:>3} {:>3} {:>9} {:>10}  NODES",
+        "SERVICE", "TYPE", "PUB", "SUB", "RATE Hz", "LAST AGE"
+    );
+    for v in services {
+        let nodes: Vec<&str> = v["nodes"]
+            .as_array()
+            .map(|a| a.iter().filter_map(Value::as_str).collect())
+            .unwrap_or_default();
+        let _ = writeln!(
+            s,
+            "{:<28} {:<22} {:>3} {:>3} {:>9} {:>10}  {}",
+            v["name"].as_str().unwrap_or(""),
+            v["type"].as_str().unwrap_or(""),
+            v["publishers"],
+            v["subscribers"],
+            num(&v["rate_hz"], 1),
+            seconds(&v["last_sample_age_s"]),
+            nodes.join(",")
+        );
+    }
+    if let Some(other) = r["other_services"].as_array().filter(|a| !a.is_empty()) {
+        let names: Vec<&str> = other.iter().filter_map(Value::as_str).collect();
+        let _ = writeln!(s, "(other services under this prefix: {})", names.join(", "));
+    }
+    let t = &r["time"];
+    if t.is_object() {
+        let d0 = &t["receiver_latency_d0_s"];
+        let _ = writeln!(
+            s,
+            "\nTIME  {}  σ {} ns  drift {} ppm  last PPS {} ago  PPS used {} rejected {}",
+            t["status"].as_str().unwrap_or(""),
+            num(&t["utc_std_ns"], 1),
+            num(&t["drift_ppm"], 4),
+            seconds(&t["last_pps_age_s"]),
+            t["pps_used"],
+            t["pps_rejected"]
+        );
+        let _ = writeln!(
+            s,
+            "      receiver latency d0: min {} s  median {} s  p99 {} s  max {} s  ({} epochs)",
+            num(&d0["min"], 6),
+            num(&d0["median"], 6),
+            num(&d0["p99"], 6),
+            num(&d0["max"], 6),
+            d0["epochs"]
+        );
+        let _ = writeln!(
+            s,
+            "      GNSS delay Δ {} ± {} s",
+            num(&t["gnss_delay_s"], 4),
+            num(&t["gnss_delay_std_s"], 4)
+        );
+    } else {
+        let _ = writeln!(s, "\nTIME  no time state");
+    }
+    let n = &r["nav"];
+    if n.is_object() {
+        let p = &n["pos_std_ned_m"];
+        let hstd = p[0].as_f64().zip(p[1].as_f64()).map(|(a, b)| a.hypot(b));
+        let v = &n["vel_ned_mps"];
+        let speed = v[0].as_f64().zip(v[1].as_f64()).map(|(a, b)| a.hypot(b));
+        let _ = writeln!(
+            s,
+            "NAV   {} ({} time)  {} {} {} m  ±{} m  speed {} m/s  yaw {}°  fixes {} ({} rejected), last {} ago  state age {}",
+            n["status"].as_str().unwrap_or(""),
+            n["time_status"].as_str().unwrap_or(""),
+            num(&n["lat_deg"], 7),
+            num(&n["lon_deg"], 7),
+            num(&n["height_m"], 2),
+            hstd.map_or("-".into(), |x| format!("{x:.2}")),
+            speed.map_or("-".into(), |x| format!("{x:.2}")),
+            num(&n["rpy_deg"][2], 1),
+            n["fixes_used"],
+            n["fixes_rejected"],
+            seconds(&n["last_fix_age_s"]),
+            seconds(&n["state_age_s"])
+        );
+        let _ = writeln!(
+            s,
+            "      GNSS delay Δ {} ± {} s",
+            num(&n["gnss_delay_s"], 4),
+            num(&n["gnss_delay_std_s"], 4)
+        );
+        if let Some(imus) = n["imu"].as_array().filter(|a| !a.is_empty()) {
+            let _ = writeln!(s, "      IMU  offset Td         ±2σ        array      observable");
+            for e in imus {
+                let _ = writeln!(
+                    s,
+                    "      {:<4} {:>9} ms  {:>9} ms  {:<10} {}",
+                    e["id"].as_str().unwrap_or(""),
+                    e["offset_s"].as_f64().map_or("-".into(), |x| format!("{:.4}", x * 1e3)),
+                    e["offset_std_s"]
+                        .as_f64()
+                        .map_or("-".into(), |x| format!("{:.4}", 2.0 * x * 1e3)),
+                    if e["in_array"] == true {
+                        "in"
+                    } else {
+                        e["reason"].as_str().unwrap_or("")
+                    },
+                    if e["observable"] == true { "yes" } else { "frozen" }
+                );
+            }
+        }
+    } else {
+        let _ = writeln!(s, "NAV   no navigation state");
+    }
+    let mut errors = String::new();
+    for h in r["health"].as_array().map_or(&[][..], |v| v) {
+        let nonzero: Vec<String> = h["counters"]
+            .as_object()
+            .map(|m| {
+                m.iter()
+                    .filter(|(_, v)| v.as_u64().is_some_and(|x| x > 0))
+                    .map(|(k, v)| format!("{k}={v}"))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let _ = writeln!(
+            errors,
+            "  {:<14} report {} ago{}  {}",
+            h["process"].as_str().unwrap_or(""),
+            seconds(&h["report_age_s"]),
+            if h["alive"] == true { "" } else { " (exiting)" },
+            if nonzero.is_empty() {
+                "no counts".to_string()
+            } else {
+                nonzero.join(" ")
+            }
+        );
+    }
+    if !errors.is_empty() {
+        let _ = writeln!(s, "\nHEALTH (counters that are not zero)\n{errors}");
+    }
+    s
+}
+
+/// Runs `navsync status`.
+pub fn run(args: &StatusArgs) -> Result<(), StatusError> {
+    let mut st = Status::new()?;
+    st.discover()?;
+    let mut out = std::io::stdout().lock();
+    let tty = std::io::IsTerminal::is_terminal(&std::io::stdout());
+    let interval = args.watch.unwrap_or(args.window);
+    let mut reports = 0u64;
+    let mut last_discovery = Instant::now();
+    loop {
+        let until = st.interval_start + interval;
+        while Instant::now() < until {
+            if !st
+                .node
+                .sleep(Duration::from_millis(50).min(until.saturating_duration_since(Instant::now())))
+            {
+                return Ok(());
+            }
+            st.poll();
+            if args.watch.is_some() && last_discovery.elapsed() >= Duration::from_secs(1) {
+                st.discover()?;
+                last_discovery = Instant::now();
+            }
+        }
+        st.poll();
+        let report = st.report();
+        if args.json {
+            writeln!(out, "{report}")?;
+        } else {
+            if args.watch.is_some() && tty {
+                write!(out, "\x1b[H\x1b[2J")?;
+            }
+            write!(out, "{}", render_text(&report))?;
+        }
+        out.flush()?;
+        reports += 1;
+        if args.watch.is_none() || args.count.is_some_and(|c| reports >= c) {
+            return Ok(());
+        }
+    }
+}

@@ -1,0 +1,69 @@
+//! `navsync check-config`: parses and checks the whole configuration file (every section is
+//! typed: device strings are parsed as the roles parse them) and prints what every role would
+//! run. Starts nothing.
+
+use std::path::Path;
+
+use anyhow::Result;
+use navsync_drivers::gnss::driver::Baud;
+
+use crate::config::estimator::EstimatorFlags;
+use crate::config::{DEFAULT_PATH, Loaded};
+
+/// Checks `--config FILE` (default `/etc/navsync/navsync.toml`).
+pub fn run(explicit: Option<&Path>) -> Result<()> {
+    let path = explicit.unwrap_or(Path::new(DEFAULT_PATH));
+    let cfg = Loaded::load(path)?;
+    let c = &cfg.config;
+    let est = EstimatorFlags::default().settings(&cfg)?;
+    let mut warnings = Vec::new();
+    for (kind, ids, known) in [
+        ("gnss", &est.gnss_ids, c.gnss.keys().collect::<Vec<_>>()),
+        ("pps", &est.pps_ids, c.pps.keys().collect()),
+        ("imus", &est.imu_ids, c.imu.keys().collect()),
+    ] {
+        for id in ids {
+            if !known.contains(&id) {
+                warnings.push(format!(
+                    "estimator.{kind} names `{id}`, which has no section in this file (its driver must get its device on the command line)"
+                ));
+            }
+        }
+    }
+    println!("{}: OK", cfg.file.display());
+    for (id, g) in &c.gnss {
+        println!(
+            "  navsync gnss --id {id}: {} at {} Bd, {}",
+            g.port,
+            g.baud.unwrap_or(Baud::Fixed(9600)),
+            g.protocol.unwrap_or_default()
+        );
+    }
+    for (id, p) in &c.pps {
+        println!("  navsync pps --id {id}: {}", p.source);
+    }
+    for (id, i) in &c.imu {
+        println!(
+            "  navsync imu --id {id}: {} (rotation {:?}°, lever arm {:?} m)",
+            i.source, i.mounting.rotation_deg, i.mounting.lever_arm_m
+        );
+    }
+    println!(
+        "  navsync estimator: gnss {:?}, pps {:?}, imus {:?}, {} sync, {:?} IMU noise",
+        est.gnss_ids,
+        est.pps_ids,
+        est.imu_ids,
+        if est.software_sync { "software" } else { "PPS" },
+        est.imu_model
+    );
+    if let Some(n) = &c.outputs.ntpshm {
+        println!("  navsync ntpshm: unit {}", n.unit);
+    }
+    if let Some(r) = &c.outputs.record {
+        println!("  navsync record: {}", r.path.display());
+    }
+    for w in warnings {
+        println!("warning: {w}");
+    }
+    Ok(())
+}

@@ -1,0 +1,190 @@
+//! `navsync replay REC.mcap --estimate`: the estimator over a recording, offline.
+//!
+//! The samples the live estimator would subscribe to (`--gnss`, `--pps`, `--imus` ids) go in
+//! recorded order through [`offline::estimate`] with the settings the live process builds
+//! from the same flags and file, as fast as the CPU allows. Both go through
+//! [`navsync_estimator::input_order`], so the `NavState`s are bit-identical to the live
+//! process's for the same samples, and bit-identical from run to run.
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+
+use navsync_estimator::evaluation::Summary;
+use navsync_estimator::offline::{self, Output};
+use navsync_estimator::settings::Settings;
+use navsync_recording::mcap_reader::ScanEnd;
+use navsync_recording::{RecordingError, SampleReader, SampleRecorder};
+use navsync_shared::samples::AnySample;
+use navsync_shared::services;
+use tracing::{info_span, warn};
+
+use super::kf_gins::{KfGinsError, ResultWriter};
+use crate::config::estimator::EstimatorFlags;
+use crate::config::{ConfigError, Loaded};
+
+/// Output format of `--out`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// NavState and TimeState in an MCAP file.
+    Mcap,
+    /// KF-GINS's navigation result (11 columns; a directory gets its IMU_ERR and STD files too).
+    KfGins,
+}
+
+/// What `replay --estimate` writes, and the estimator's settings.
+#[derive(clap::Args, Debug, Clone)]
+pub struct EstimateOptions {
+    /// Write the estimator's NavState and TimeState into this file (with --estimate).
+    #[arg(long, requires = "estimate")]
+    pub out: Option<PathBuf>,
+    /// Format of --out: `mcap`, or `kf-gins` (KF-GINS's result layout; a directory gets
+    /// KF_GINS_Navresult.nav, KF_GINS_IMU_ERR.txt and KF_GINS_STD.txt).
+    #[arg(long, default_value = "mcap", requires = "out")]
+    pub format: Format,
+    /// Write the accuracy summary as JSON to this file (with --estimate).
+    #[arg(long, requires = "estimate")]
+    pub summary_json: Option<PathBuf>,
+    /// The estimator's settings.
+    #[command(flatten)]
+    pub est: EstimatorFlags,
+}
+
+/// Errors of `navsync replay --estimate`.
+#[derive(Debug, thiserror::Error)]
+pub enum EstimateError {
+    /// Reading the recording or writing the output.
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+    /// Writing the KF-GINS result.
+    #[error(transparent)]
+    KfGins(#[from] KfGinsError),
+    /// The settings.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// Writing the summary.
+    #[error("writing {path}: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+}
+
+/// The samples of a recording that `settings` fuses, and the simulator's truth, with their
+/// `log_time`; a read error ends the stream and is kept in [`RecordedInputs::error`].
+pub struct RecordedInputs<'a> {
+    reader: &'a mut SampleReader,
+    wanted: HashSet<String>,
+    /// The read error that ended the stream, if any.
+    pub error: Option<RecordingError>,
+}
+
+impl<'a> RecordedInputs<'a> {
+    /// The estimator's inputs of `reader`.
+    pub fn new(reader: &'a mut SampleReader, settings: &Settings) -> Self {
+        let mut wanted: HashSet<String> = settings.input_services().into_iter().collect();
+        wanted.insert(services::SIM_TRUTH.to_string());
+        Self {
+            reader,
+            wanted,
+            error: None,
+        }
+    }
+}
+
+impl Iterator for RecordedInputs<'_> {
+    type Item = (AnySample, u64);
+    fn next(&mut self) -> Option<(AnySample, u64)> {
+        loop {
+            match self.reader.next_sample() {
+                Ok(Some(m)) if self.wanted.contains(m.service) => return Some((m.sample, m.log_time)),
+                Ok(Some(_)) => {}
+                Ok(None) => return None,
+                Err(e) => {
+                    self.error = Some(e);
+                    return None;
+                }
+            }
+        }
+    }
+}
+
+/// Warns when the recording was not closed properly (its end is missing).
+pub fn warn_if_truncated(reader: &SampleReader, path: &Path) {
+    if let Some(ScanEnd::Truncated { offset, record }) = reader.scan_end() {
+        warn!(
+            "{}: the recording stops at byte {offset} ({record}): it was not closed properly; estimated over what precedes",
+            path.display()
+        );
+    }
+}
+
+/// Runs the estimator over a recording as fast as the CPU allows; prints the summary table
+/// (to stdout) and returns it.
+pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary, EstimateError> {
+    let _span = info_span!("replay-estimate").entered();
+    let settings = opts.est.settings(cfg)?;
+    let mut reader = SampleReader::open(input)?;
+    let mut out = match &opts.out {
+        Some(p) if opts.format == Format::Mcap => Some(SampleRecorder::create(p)?),
+        _ => None,
+    };
+    let mut kf_gins = match &opts.out {
+        Some(p) if opts.format == Format::KfGins => Some(ResultWriter::create(p)?),
+        _ => None,
+    };
+    let mut kf_gins_err: Option<KfGinsError> = None;
+    let mut write_err: Option<RecordingError> = None;
+    let mut inputs = RecordedInputs::new(&mut reader, &settings);
+    let run = offline::estimate(&settings, inputs.by_ref(), out.is_some(), |o, &log_time| {
+        if kf_gins_err.is_none()
+            && let (Some(w), Output::Nav(n)) = (kf_gins.as_mut(), o)
+        {
+            kf_gins_err = w.write(n).err();
+        }
+        let Some(rec) = out.as_mut() else { return };
+        if write_err.is_some() {
+            return;
+        }
+        let r = match o {
+            Output::Nav(n) => rec.write(
+                services::NAV_STATE,
+                &AnySample::Nav(*n),
+                log_time,
+                n.host_ns.max(0) as u64,
+            ),
+            Output::Time(t) => rec.write(
+                services::TIME_STATE,
+                &AnySample::Time(*t),
+                log_time,
+                t.computed_host_ns.max(0) as u64,
+            ),
+        };
+        if let Err(e) = r {
+            write_err = Some(e);
+        }
+    });
+    if let Some(e) = inputs.error.take().or(write_err) {
+        return Err(e.into());
+    }
+    warn_if_truncated(&reader, input);
+    if let Some(rec) = out {
+        rec.close()?;
+    }
+    if let Some(e) = kf_gins_err {
+        return Err(e.into());
+    }
+    if let Some(w) = kf_gins {
+        w.finish()?;
+    }
+    println!("{}", run.summary.table());
+    if let Some(p) = &opts.summary_json {
+        let text = serde_json::to_string_pretty(&run.summary).unwrap_or_default();
+        std::fs::write(p, text).map_err(|source| EstimateError::Io {
+            path: p.display().to_string(),
+            source,
+        })?;
+    }
+    Ok(run.summary)
+}

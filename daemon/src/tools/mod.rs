@@ -1,0 +1,12 @@
+//! Offline tools over files, and the installation helpers.
+
+pub mod analyze;
+pub mod check_config;
+pub mod decode;
+pub mod estimate;
+pub mod eval;
+pub mod install;
+pub mod kf_gins;
+pub mod python_types;
+pub mod report;
+pub mod sim_fast;

@@ -1,0 +1,127 @@
+//! `navsync sim --fast`: the simulated world's published samples, produced as fast as the CPU
+//! allows, fed straight into the estimator library (`--estimate`, prints the accuracy report)
+//! and/or written into an MCAP recording (`--record OUT.mcap`).
+//!
+//! The samples are exactly those the drivers would publish ([`PublishedStream`]: IMU samples
+//! and PPS edges as the simulator publishes them, fixes decoded from the world's NMEA by the
+//! GNSS driver's own decoder, the truth), in delivery order. In the recording each message has
+//! `log_time` = the simulated UTC of its delivery instant and `publish_time` = its delivery
+//! host time (`World::utc_ns_at_host`), so `navsync replay` paces it as the drivers would have.
+
+use std::path::Path;
+
+use navsync_recording::{RecordingError, SampleRecorder};
+use navsync_sim::process::{SimArgs, load_config};
+use navsync_sim::published::PublishedStream;
+use navsync_sim::world::World;
+
+use navsync_estimator::offline;
+use navsync_estimator::settings::Settings;
+use navsync_sim::scenario::SimConfig;
+
+use crate::config::estimator::ModelFlags;
+use crate::config::{ConfigError, Loaded};
+
+/// Errors of the offline simulation.
+#[derive(Debug, thiserror::Error)]
+pub enum SimEstimateError {
+    /// Bad scenario.
+    #[error(transparent)]
+    Scenario(#[from] navsync_sim::error::SimError),
+    /// Writing the summary.
+    #[error("writing {path}: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Writing the recording.
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+    /// The estimator's settings.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+}
+
+/// What `navsync sim --fast` does with the samples.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Outputs<'a> {
+    /// Run the estimator and print the accuracy report.
+    pub estimate: bool,
+    /// Write the accuracy report as JSON here (with `estimate`).
+    pub summary_json: Option<&'a Path>,
+    /// Write the samples into this MCAP file.
+    pub record: Option<&'a Path>,
+}
+
+/// The estimator's settings for the simulated world: every simulated IMU (ids "0", "1", …;
+/// the first is the reference), the configuration file, then `flags`. Unless the flags name
+/// an IMU model, the filter is told what the simulated devices are: the IMU class and the
+/// receiver's velocity noise.
+pub fn settings(cfg: &SimConfig, flags: &ModelFlags, file: &Loaded) -> Result<Settings, ConfigError> {
+    let mut s = Settings::default();
+    crate::config::estimator::apply_file(&mut s, file)?;
+    s.imu_ids = (0..cfg.imu.count).map(|i| i.to_string()).collect();
+    if flags.imu_model.is_none() {
+        s.imu_model = cfg.imu.preset;
+        s.gnss_vel_std_mps = cfg.gnss.velocity_sigma_mps.max(0.01);
+    }
+    flags.apply(&mut s);
+    Ok(s)
+}
+
+/// Produces the world's samples as fast as the CPU allows (up to `--duration` of scenario
+/// time when given) and estimates and/or records them.
+pub fn run(sim: &SimArgs, flags: &ModelFlags, file: &Loaded, outputs: Outputs<'_>) -> Result<(), SimEstimateError> {
+    let cfg = load_config(sim)?;
+    let est = settings(&cfg, flags, file)?;
+    let start_host = 1_000_000_000_000;
+    let start_utc = navsync_shared::time::realtime_now_ns() / 1_000_000_000 * 1_000_000_000;
+    let world = World::new(&cfg, start_host, start_utc)?;
+    // The world's clock, for the UTC of each delivery instant (a pure function of the world).
+    let clock = world.clone();
+    let end_host = sim.duration_s.map(|d| start_host + (d * 1e9) as i64);
+    let mut recorder = match outputs.record {
+        Some(p) => Some(SampleRecorder::create(p)?),
+        None => None,
+    };
+    let mut write_err: Option<RecordingError> = None;
+    let stream = PublishedStream::new(world)
+        .take_while(|p| end_host.is_none_or(|end| p.delivered_ns <= end))
+        .inspect(|p| {
+            if let Some(r) = recorder.as_mut()
+                && write_err.is_none()
+            {
+                let log_time = clock.utc_ns_at_host(p.delivered_ns).max(0) as u64;
+                if let Err(e) = r.write(&p.service, &p.sample, log_time, p.delivered_ns.max(0) as u64) {
+                    write_err = Some(e);
+                }
+            }
+        })
+        .map(|p| p.sample);
+    if outputs.estimate {
+        let run = offline::estimate(&est, stream.map(|s| (s, ())), false, |_, _| {});
+        println!("{}", run.summary.table());
+        if let Some(p) = outputs.summary_json {
+            let text = serde_json::to_string_pretty(&run.summary).unwrap_or_default();
+            std::fs::write(p, text).map_err(|source| SimEstimateError::Io {
+                path: p.display().to_string(),
+                source,
+            })?;
+        }
+    } else {
+        stream.for_each(drop);
+    }
+    if let Some(e) = write_err {
+        return Err(e.into());
+    }
+    if let Some(r) = recorder {
+        let messages = r.message_count();
+        r.close()?;
+        if let Some(p) = outputs.record {
+            eprintln!("navsync sim: {messages} samples recorded to {}", p.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,181 @@
+//! Offline decoding of a recorded receiver capture, exactly as the live driver decodes a
+//! port (through the same [`Decoder`]).
+//!
+//! Used by `navsync decode FILE|-` (one JSON object per epoch) and by the gpsd conformance
+//! test. Lines starting with `#` are gpsd log comments (receiver name, location), not
+//! receiver output, and are skipped; a `# Delay-Cookie: <c> …` header makes `<c>` a read
+//! boundary rather than data, as gpsd's test player `gpsfake` treats it.
+
+use navsync_shared::samples::{FixMode, GnssFix};
+use navsync_shared::time::format_rfc3339_ms;
+use serde_json::{Map, Value};
+
+use super::nmea::NmeaDecoder;
+use super::{Decoder, GnssDecoder, Protocol};
+
+/// Line rate assumed when replaying a capture: 9600 Bd, 10 bits per character, so that
+/// replayed stamps are spaced as on a real serial line (`host_ns` = byte offset × this).
+pub const REPLAY_NS_PER_BYTE: i64 = 1_000_000_000 * 10 / 9600;
+
+/// A decoded capture.
+#[derive(Debug, Clone)]
+pub struct Capture {
+    /// The fixes, one per epoch, in order.
+    pub fixes: Vec<GnssFix>,
+    /// The decoder after the whole capture (its counters: framing, checks, epochs).
+    pub decoder: Decoder,
+    /// `#` comment lines skipped.
+    pub comment_lines: u64,
+}
+
+impl Capture {
+    /// The NMEA decoder, when the capture was decoded as NMEA.
+    pub fn nmea(&self) -> Option<&NmeaDecoder> {
+        match &self.decoder {
+            Decoder::Nmea(d) => Some(d),
+        }
+    }
+
+    /// The decoder's counters by name.
+    pub fn counters(&self) -> Vec<(&'static str, u64)> {
+        let mut v = Vec::new();
+        self.decoder.each_counter(&mut |n, c| v.push((n, c)));
+        v.push(("comment_lines", self.comment_lines));
+        v
+    }
+}
+
+/// Decodes a whole capture as `protocol`: every line not starting with `#` (split at the delay
+/// cookie, if the log declares one) goes through the [`Decoder`] as one read, stamped as if
+/// the capture had arrived at [`REPLAY_NS_PER_BYTE`] from host time 0; the decoder is flushed
+/// at the end, as the live driver does when the line goes idle.
+pub fn decode_capture(bytes: &[u8], protocol: Protocol) -> Capture {
+    let mut decoder = Decoder::new(protocol);
+    let mut fixes = Vec::new();
+    let mut comment_lines = 0;
+    let mut cookie = None;
+    let mut offset = 0usize;
+    for line in bytes.split_inclusive(|&b| b == b'\n') {
+        if line.first() == Some(&b'#') {
+            offset += line.len();
+            comment_lines += 1;
+            cookie = cookie.or_else(|| delay_cookie(line));
+            continue;
+        }
+        // Between delay cookies gpsfake writes separately: replay them as separate reads.
+        for chunk in line.split(|&b| Some(b) == cookie) {
+            offset += chunk.len();
+            let read_ns = i64::try_from(offset)
+                .unwrap_or(i64::MAX)
+                .saturating_mul(REPLAY_NS_PER_BYTE);
+            decoder.push(chunk, read_ns, REPLAY_NS_PER_BYTE, &mut |fix| fixes.push(*fix));
+        }
+    }
+    decoder.flush(&mut |fix| fixes.push(*fix));
+    Capture {
+        fixes,
+        decoder,
+        comment_lines,
+    }
+}
+
+/// The write-boundary character declared by a gpsd log header `# Delay-Cookie: <c> <s>`:
+/// gpsfake splits the following data at `<c>` (dropping it) and pauses `<s>` seconds between
+/// the pieces, so `<c>` is not receiver output.
+fn delay_cookie(comment: &[u8]) -> Option<u8> {
+    let text = core::str::from_utf8(comment).ok()?;
+    let rest = text
+        .trim_start_matches('#')
+        .trim_start()
+        .strip_prefix("Delay-Cookie:")?;
+    match rest.trim_start().as_bytes() {
+        [c, ..] if !c.is_ascii_whitespace() => Some(*c),
+        _ => None,
+    }
+}
+
+/// A float as JSON, `null` when not known (NaN).
+fn num(v: f64) -> Value {
+    serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number)
+}
+
+/// One epoch as a JSON object: `time` (RFC 3339 UTC with milliseconds, as gpsd prints it),
+/// `lat`/`lon` (degrees), `alt_msl` (m), `speed_mps`, `track_deg` (degrees true), `mode`
+/// (0 unknown, 1 no fix, 2 2D, 3 3D), `sats_used`, `hdop`; `null` where the epoch had no
+/// such field.
+pub fn epoch_json(fix: &GnssFix) -> Value {
+    let mut m = Map::new();
+    let time = if fix.utc_ns == i64::MIN {
+        Value::Null
+    } else {
+        Value::String(format_rfc3339_ms(fix.utc_ns))
+    };
+    m.insert("time".into(), time);
+    m.insert("lat".into(), num(fix.lat_deg));
+    m.insert("lon".into(), num(fix.lon_deg));
+    m.insert("alt_msl".into(), num(fix.alt_msl_m));
+    m.insert("speed_mps".into(), num(fix.speed_mps));
+    m.insert("track_deg".into(), num(fix.track_deg));
+    let mode = if fix.mode <= FixMode::Fix3d as u8 {
+        fix.mode
+    } else {
+        FixMode::Unknown as u8
+    };
+    m.insert("mode".into(), Value::from(mode));
+    let sats = if fix.sats_used == u16::MAX {
+        Value::Null
+    } else {
+        Value::from(fix.sats_used)
+    };
+    m.insert("sats_used".into(), sats);
+    m.insert("hdop".into(), num(fix.hdop));
+    Value::Object(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn comments_are_skipped_and_json_has_nulls() {
+        let cap = b"# Name: test\n$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n";
+        let c = decode_capture(cap, Protocol::Nmea);
+        let fixes = &c.fixes;
+        assert_eq!(c.comment_lines, 1);
+        assert_eq!(c.nmea().unwrap().counters().framer.noise_bytes, 0);
+        assert_eq!(fixes.len(), 1);
+        let j = epoch_json(&fixes[0]);
+        assert_eq!(j["time"], Value::Null, "no date sentence yet");
+        assert_eq!(j["mode"], 3);
+        assert_eq!(j["sats_used"], 8);
+        assert_eq!(j["speed_mps"], Value::Null);
+        assert!((j["lat"].as_f64().unwrap_or(0.0) - 48.1173).abs() < 1e-9);
+        assert!((j["alt_msl"].as_f64().unwrap_or(0.0) - 545.4).abs() < 1e-9);
+        // The `$` is byte 13 of the file (0-based); byte k has fully arrived k + 1 character
+        // times after the replay started.
+        assert_eq!(fixes[0].stamp.host_ns, 14 * REPLAY_NS_PER_BYTE);
+    }
+
+    #[test]
+    fn delay_cookie_splits_reads_and_is_not_data() {
+        let cap = b"# Delay-Cookie: | 0.01\n$GPGGA,|12351|9,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\n";
+        let c = decode_capture(cap, Protocol::Nmea);
+        let fixes = &c.fixes;
+        assert_eq!(c.nmea().unwrap().counters().epochs.bad_checksum, 0);
+        assert_eq!(fixes.len(), 1);
+        assert_eq!(fixes[0].alt_msl_m, 545.4);
+        assert_eq!(delay_cookie(b"# Date: 2013-11-03\n"), None);
+    }
+
+    #[test]
+    fn json_time_is_rfc3339_ms() {
+        let cap = b"$GPRMC,225446.33,A,4916.45,N,12311.12,W,000.5,054.7,191194,020.3,E*46\r\n";
+        let fixes = decode_capture(cap, Protocol::Nmea).fixes;
+        assert_eq!(fixes.len(), 1);
+        let j = epoch_json(&fixes[0]);
+        assert_eq!(j["time"], "1994-11-19T22:54:46.330Z");
+        assert_eq!(j["mode"], 2);
+        assert!((j["speed_mps"].as_f64().unwrap_or(0.0) - 0.5 * 1852.0 / 3600.0).abs() < 1e-12);
+        assert_eq!(j["track_deg"], 54.7);
+    }
+}

@@ -1,0 +1,419 @@
+//! `navsync gnss`: the process shell around a receiver protocol's [`Decoder`].
+//!
+//! read (serialport, as little buffering as the API allows) → stamp (host time when the read
+//! returned, back-dated by the line rate for bytes that were already waiting) → decode
+//! ([`Decoder`], pure) → publish `GnssFix` on `navsync/gnss/{id}/fix`.
+//!
+//! Robustness:
+//!
+//! - Malformed input (binary noise, bad or missing checksums, truncated, over-long or
+//!   non-ASCII sentences, unparsable fields) is dropped by the decoder and counted; every
+//!   counter is in the health report, and each kind is logged when it first occurs and then
+//!   at most every 10 s ([`RateLimitedLog`]).
+//! - The port vanishing (USB unplug: the device node or its symlink disappears, reads fail or
+//!   hang up) is survived: the epoch being assembled is emitted (its bytes all arrived), the
+//!   driver logs once, reopens with exponential backoff (0.1 s → 5 s), and resumes when the
+//!   port is back. A read of zero bytes (hang-up) counts as the port closing, so a dead line
+//!   cannot spin the process.
+//! - `--baud auto` hunts the common rates like gpsd does: at each rate it listens until
+//!   [`HUNT_DWELL`] has passed with at least [`HUNT_MIN_BYTES`] received and no frame with
+//!   a valid checksum (the decoder's [`GnssDecoder::valid_frames`]), then switches rate (the port stays open; only the line settings and
+//!   the input queue are reset). A rate that yields valid sentences is kept (and tried first
+//!   after a reconnection); if it later yields only garbage for [`HUNT_DWELL`], hunting
+//!   resumes. A silent line is not hunted (silence says nothing about the rate). A fixed
+//!   `--baud` never hunts: a wrong rate then shows as noise and checksum counters.
+//!
+//! Health counters besides the decoder's: `baud` (current rate), `baud_hunts`, `port_opens`,
+//! `port_open_failures`, `port_reopens` (read failures and hang-ups), `publish_errors`.
+
+use std::io::{ErrorKind, Read};
+use std::time::{Duration, Instant};
+
+use navsync_shared::health_reporter::{CounterId, HealthReporter};
+use navsync_shared::ipc::{IpcError, IpcNode};
+use navsync_shared::samples::GnssFix;
+use navsync_shared::services;
+use navsync_shared::time::monotonic_now_ns;
+use serialport::{ClearBuffer, SerialPort, TTYPort};
+use tracing::{info, info_span, warn};
+
+use super::{Decoder, GnssDecoder, Protocol};
+use crate::rate_log::RateLimitedLog;
+
+/// Baud rates tried by `--baud auto`, most common first (gpsd's hunt order differs; these
+/// are the rates receivers ship with).
+pub const HUNT_BAUDS: [u32; 7] = [9600, 4800, 38_400, 115_200, 19_200, 57_600, 230_400];
+
+/// How long one baud rate is tried before hunting on, when bytes but no valid sentence arrive.
+pub const HUNT_DWELL: Duration = Duration::from_millis(2500);
+
+/// Bytes that must have arrived at a rate without a valid sentence before it is abandoned.
+pub const HUNT_MIN_BYTES: u64 = 64;
+
+/// Read timeout; after this much silence the epoch being assembled is emitted.
+pub const IDLE_FLUSH: Duration = Duration::from_millis(50);
+
+/// Serial line rate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Baud {
+    /// A fixed rate, e.g. 9600.
+    Fixed(u32),
+    /// Hunt through [`HUNT_BAUDS`] until sentences with valid checksums arrive.
+    Auto,
+}
+
+impl std::str::FromStr for Baud {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "auto" {
+            return Ok(Baud::Auto);
+        }
+        s.parse::<u32>()
+            .ok()
+            .filter(|b| *b > 0)
+            .map(Baud::Fixed)
+            .ok_or_else(|| format!("`{s}` is not a baud rate (a positive integer or `auto`)"))
+    }
+}
+
+impl std::fmt::Display for Baud {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Fixed(b) => write!(f, "{b}"),
+            Self::Auto => f.write_str("auto"),
+        }
+    }
+}
+
+/// In a configuration file: a positive integer (`9600`) or `"auto"`.
+impl<'de> serde::Deserialize<'de> for Baud {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl serde::de::Visitor<'_> for V {
+            type Value = Baud;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a baud rate (a positive integer such as 9600) or \"auto\"")
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Baud, E> {
+                u32::try_from(v)
+                    .ok()
+                    .filter(|b| *b > 0)
+                    .map(Baud::Fixed)
+                    .ok_or_else(|| E::invalid_value(serde::de::Unexpected::Signed(v), &self))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Baud, E> {
+                self.visit_i64(i64::try_from(v).unwrap_or(-1))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Baud, E> {
+                if v == "auto" {
+                    Ok(Baud::Auto)
+                } else {
+                    Err(E::invalid_value(serde::de::Unexpected::Str(v), &self))
+                }
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// Settings of the GNSS driver process.
+#[derive(Debug, Clone)]
+pub struct GnssArgs {
+    /// Serial device, e.g. `/dev/ttyUSB0` or a pseudo-terminal.
+    pub port: String,
+    /// Line rate.
+    pub baud: Baud,
+    /// The receiver's protocol.
+    pub protocol: Protocol,
+    /// Receiver id (service `navsync/gnss/{id}/fix`, health `navsync/health/gnss-{id}`).
+    pub id: String,
+}
+
+/// Errors that stop the GNSS driver (device errors never do: it reopens).
+#[derive(Debug, thiserror::Error)]
+pub enum GnssError {
+    /// IPC failure.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+}
+
+/// The baud-rate hunt of `--baud auto` (a pure state machine on counters and time).
+#[derive(Debug, Clone)]
+pub struct BaudHunt {
+    index: usize,
+    locked: Option<u32>,
+    /// When the current rate was set, with the byte and valid-sentence counts at that moment
+    /// or at the last valid sentence.
+    since: Instant,
+    bytes_at: u64,
+    valid_at: u64,
+    hunts: u64,
+}
+
+/// What the hunt decided after looking at the counters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HuntStep {
+    /// Keep listening at the current rate.
+    Stay,
+    /// Valid sentences arrive at this rate for the first time: it is now locked.
+    Locked(u32),
+    /// Switch to this rate.
+    Switch(u32),
+}
+
+impl BaudHunt {
+    /// A hunt starting at the first of [`HUNT_BAUDS`].
+    pub fn new(now: Instant) -> Self {
+        Self {
+            index: 0,
+            locked: None,
+            since: now,
+            bytes_at: 0,
+            valid_at: 0,
+            hunts: 0,
+        }
+    }
+
+    /// The rate to use now.
+    pub fn baud(&self) -> u32 {
+        HUNT_BAUDS[self.index % HUNT_BAUDS.len()]
+    }
+
+    /// Rate changes so far.
+    pub fn hunts(&self) -> u64 {
+        self.hunts
+    }
+
+    /// The rate that yielded valid sentences, if any.
+    pub fn locked(&self) -> Option<u32> {
+        self.locked
+    }
+
+    /// Restarts the dwell at the current rate (after the port was (re)opened).
+    pub fn restart(&mut self, now: Instant, bytes: u64, valid: u64) {
+        self.since = now;
+        self.bytes_at = bytes;
+        self.valid_at = valid;
+    }
+
+    /// Looks at the byte and valid-sentence counters at time `now`.
+    pub fn step(&mut self, now: Instant, bytes: u64, valid: u64) -> HuntStep {
+        if valid > self.valid_at {
+            self.restart(now, bytes, valid);
+            let b = self.baud();
+            if self.locked != Some(b) {
+                self.locked = Some(b);
+                return HuntStep::Locked(b);
+            }
+            return HuntStep::Stay;
+        }
+        if now.duration_since(self.since) < HUNT_DWELL || bytes - self.bytes_at < HUNT_MIN_BYTES {
+            return HuntStep::Stay;
+        }
+        self.locked = None;
+        self.index = (self.index + 1) % HUNT_BAUDS.len();
+        self.hunts += 1;
+        self.restart(now, bytes, valid);
+        HuntStep::Switch(self.baud())
+    }
+}
+
+/// Health counter ids of the port.
+struct PortCounters {
+    baud: CounterId,
+    hunts: CounterId,
+    opens: CounterId,
+    open_failures: CounterId,
+    reopens: CounterId,
+    publish_errors: CounterId,
+}
+
+/// Runs the driver until SIGINT/SIGTERM.
+pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
+    let process = format!("gnss-{}", args.id);
+    let _span = info_span!("gnss", id = %args.id, port = %args.port, protocol = %args.protocol).entered();
+    let node = IpcNode::new(&process)?;
+    let mut publisher = node.publisher::<GnssFix>(&services::gnss_fix(&args.id))?;
+    let mut health = HealthReporter::new(&node, &process)?;
+    let r_fix = health.rate("fixes_out");
+    let pc = PortCounters {
+        baud: health.counter("baud"),
+        hunts: health.counter("baud_hunts"),
+        opens: health.counter("port_opens"),
+        open_failures: health.counter("port_open_failures"),
+        reopens: health.counter("port_reopens"),
+        publish_errors: health.counter("publish_errors"),
+    };
+    let mut dec = Decoder::new(args.protocol);
+    let mut log = RateLimitedLog::default();
+    let mut hunt = BaudHunt::new(Instant::now());
+    let mut backoff = Duration::from_millis(100);
+    let mut warned_open = false;
+
+    info!("gnss driver running");
+    while !node.termination_requested() {
+        // Serving: the services exist and the device is being read (or waited for, with backoff).
+        navsync_shared::sd_notify::ready(&format!("gnss {}: reading {}", args.id, args.port));
+        let baud = match args.baud {
+            Baud::Fixed(b) => b,
+            Baud::Auto => hunt.baud(),
+        };
+        let mut port = match open(&args.port, baud) {
+            Ok(p) => {
+                if warned_open {
+                    info!(baud, "port is back");
+                }
+                warned_open = false;
+                p
+            }
+            Err(e) => {
+                if !warned_open {
+                    warn!("cannot open {}: {e}; retrying with backoff", args.port);
+                    warned_open = true;
+                }
+                health.add(pc.open_failures, 1);
+                publish_health(&mut health, &dec, &mut log);
+                if !node.sleep(backoff) {
+                    break;
+                }
+                backoff = (backoff * 2).min(Duration::from_secs(5));
+                continue;
+            }
+        };
+        health.add(pc.opens, 1);
+        health.set(pc.baud, u64::from(baud));
+        info!(baud, "port open");
+        let mut ns_per_byte = 10_000_000_000 / i64::from(baud);
+        hunt.restart(Instant::now(), dec.bytes(), dec.valid_frames());
+        let mut buf = [0u8; 512];
+        let mut emit = |fix: &GnssFix, health: &mut HealthReporter| match publisher.publish(fix) {
+            Ok(()) => health.tick(r_fix),
+            Err(e) => {
+                health.add(pc.publish_errors, 1);
+                warn!("publishing fix: {e}");
+            }
+        };
+        loop {
+            if node.termination_requested() {
+                break;
+            }
+            let closed = match port.read(&mut buf) {
+                Ok(0) => Some("the port hung up".to_string()),
+                Ok(n) => {
+                    backoff = Duration::from_millis(100);
+                    let t = monotonic_now_ns();
+                    dec.push(&buf[..n], t, ns_per_byte, &mut |fix| emit(fix, &mut health));
+                    None
+                }
+                Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {
+                    dec.flush(&mut |fix| emit(fix, &mut health));
+                    None
+                }
+                Err(e) => Some(format!("read failed: {e}")),
+            };
+            if let Some(why) = closed {
+                // Everything of the epoch in progress has arrived: emit it, then reopen.
+                dec.flush(&mut |fix| emit(fix, &mut health));
+                dec.reset();
+                warn!("{}: {why}; reopening with backoff", args.port);
+                health.add(pc.reopens, 1);
+                break;
+            }
+            if args.baud == Baud::Auto {
+                match hunt.step(Instant::now(), dec.bytes(), dec.valid_frames()) {
+                    HuntStep::Stay => {}
+                    HuntStep::Locked(b) => info!(baud = b, "valid frames at this rate; keeping it"),
+                    HuntStep::Switch(b) => {
+                        info!(from = baud, to = b, "no valid frames at this rate; hunting on");
+                        health.set(pc.hunts, hunt.hunts());
+                        if port
+                            .set_baud_rate(b)
+                            .and_then(|()| port.clear(ClearBuffer::Input))
+                            .is_err()
+                        {
+                            break;
+                        }
+                        dec.reset();
+                        health.set(pc.baud, u64::from(b));
+                        ns_per_byte = 10_000_000_000 / i64::from(b);
+                    }
+                }
+            }
+            publish_health(&mut health, &dec, &mut log);
+        }
+        drop(port);
+        if node.termination_requested() {
+            break;
+        }
+        publish_health(&mut health, &dec, &mut log);
+        if !node.sleep(backoff) {
+            break;
+        }
+        backoff = (backoff * 2).min(Duration::from_secs(5));
+    }
+    navsync_shared::sd_notify::stopping();
+    publish_health(&mut health, &dec, &mut log);
+    let _ = health.publish_final();
+    info!("gnss driver stopped");
+    Ok(())
+}
+
+/// Opens the port raw, with a short read timeout, and discards stale input.
+fn open(path: &str, baud: u32) -> Result<TTYPort, serialport::Error> {
+    let mut port = serialport::new(path, baud).timeout(IDLE_FLUSH).open_native()?;
+    // Exclusive access is advisory; a pseudo-terminal's creator may hold it open too.
+    let _ = port.set_exclusive(false);
+    port.clear(ClearBuffer::Input)?;
+    Ok(port)
+}
+
+/// Copies the decoder's counters into the report, logs growing error counters (once per
+/// kind, then rate-limited) and publishes the report when due.
+fn publish_health(h: &mut HealthReporter, d: &Decoder, log: &mut RateLimitedLog) {
+    // Called on every turn of the read loop and of the reopen backoff: the systemd watchdog.
+    navsync_shared::sd_notify::watchdog();
+    let now = Instant::now();
+    d.each_counter(&mut |name, v| {
+        h.set_named(name, v);
+        if let Some(what) = Decoder::describe(name) {
+            log.update(name, v, what, now);
+        }
+    });
+    if let Err(e) = h.maybe_publish(monotonic_now_ns()) {
+        warn!("publishing health: {e}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hunt_moves_on_only_after_garbage_for_the_dwell() {
+        let t0 = Instant::now();
+        let mut h = BaudHunt::new(t0);
+        assert_eq!(h.baud(), 9600);
+        // Silence: no hunting however long.
+        assert_eq!(h.step(t0 + HUNT_DWELL * 3, 0, 0), HuntStep::Stay);
+        // Garbage, but not yet for the dwell.
+        assert_eq!(h.step(t0 + HUNT_DWELL / 2, 1000, 0), HuntStep::Stay);
+        assert_eq!(h.step(t0 + HUNT_DWELL, 1000, 0), HuntStep::Switch(4800));
+        let t1 = t0 + HUNT_DWELL;
+        assert_eq!(h.step(t1 + HUNT_DWELL, 1010, 0), HuntStep::Stay, "too few bytes");
+        assert_eq!(h.step(t1 + HUNT_DWELL, 2000, 0), HuntStep::Switch(38_400));
+        let t2 = t1 + HUNT_DWELL;
+        assert_eq!(
+            h.step(t2 + Duration::from_millis(300), 2500, 3),
+            HuntStep::Locked(38_400)
+        );
+        assert_eq!(h.step(t2 + Duration::from_millis(600), 2600, 5), HuntStep::Stay);
+        assert_eq!(h.locked(), Some(38_400));
+        assert_eq!(h.hunts(), 2);
+        // Valid sentences keep the rate however much noise comes with them.
+        assert_eq!(h.step(t2 + HUNT_DWELL * 2, 90_000, 6), HuntStep::Stay);
+        // Only garbage for a whole dwell: the lock is lost and hunting resumes.
+        let t3 = t2 + HUNT_DWELL * 2;
+        assert_eq!(h.step(t3 + HUNT_DWELL, 99_000, 6), HuntStep::Switch(115_200));
+        assert_eq!(h.locked(), None);
+    }
+}

@@ -1,0 +1,126 @@
+//! The delayed filter of the fusion horizon: strapdown mechanization at the IMU rate,
+//! covariance propagation every ~20 ms, closed-loop feedback of the error-state estimates.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use navsync_shared::earth;
+
+use super::error_state::{self, ATT, BA, BG, DELAY, POS, SA, SG, StateMat, StateVec, VEL};
+use super::eskf::Eskf;
+use super::imu_buffer::ImuRecord;
+use super::mechanization::{ImuIncrement, Pva, propagate};
+use super::navigator::NavConfig;
+
+/// The delayed filter: the navigation state at the delayed time (the fusion horizon behind
+/// the present), its error covariance and the sensor-error and GNSS-delay estimates. The
+/// measurements ([`super::measurements`]) fuse into it at their epochs.
+#[derive(Debug, Clone)]
+pub struct DelayedFilter {
+    /// Position, velocity, attitude at [`t_ns`](Self::t_ns).
+    pub pva: Pva,
+    /// The last IMU increment (coning/sculling of the next step).
+    pub pre: ImuIncrement,
+    /// Host time of the state, ns.
+    pub t_ns: i64,
+    /// The error-state covariance.
+    pub eskf: Eskf,
+    /// Gyro bias estimate (body FRD), rad/s.
+    pub bias_g: Vector3<f64>,
+    /// Accelerometer bias estimate (body FRD), m/s².
+    pub bias_a: Vector3<f64>,
+    /// Gyro scale-factor estimate.
+    pub scale_g: Vector3<f64>,
+    /// Accelerometer scale-factor estimate.
+    pub scale_a: Vector3<f64>,
+    /// GNSS delay estimate Δ̂, s.
+    pub delay_s: f64,
+    /// NED acceleration over the last step, m/s².
+    pub acc_ned: Vector3<f64>,
+    /// Compensated angular rate of the last step (body FRD), rad/s.
+    pub last_w: Vector3<f64>,
+    cov_dt: f64,
+    cov_f: Vector3<f64>,
+    cov_w: Vector3<f64>,
+}
+
+impl DelayedFilter {
+    /// A filter at `pva` and host time `t_ns` with covariance `eskf`, gyro bias `bias_g`
+    /// (rad/s), GNSS delay `delay_s` (s), the other sensor errors zero.
+    pub fn new(pva: Pva, t_ns: i64, eskf: Eskf, bias_g: Vector3<f64>, delay_s: f64) -> Self {
+        Self {
+            pva,
+            pre: ImuIncrement::zero(),
+            t_ns,
+            eskf,
+            bias_g,
+            bias_a: Vector3::zeros(),
+            scale_g: Vector3::zeros(),
+            scale_a: Vector3::zeros(),
+            delay_s,
+            acc_ned: Vector3::zeros(),
+            last_w: Vector3::zeros(),
+            cov_dt: 0.0,
+            cov_f: Vector3::zeros(),
+            cov_w: Vector3::zeros(),
+        }
+    }
+
+    /// Bias- and scale-compensated rates of a record (KF-GINS `imuCompensate`).
+    pub fn compensate(&self, r: &ImuRecord) -> (Vector3<f64>, Vector3<f64>) {
+        let w = (r.gyro_rps - self.bias_g).component_div(&(Vector3::repeat(1.0) + self.scale_g));
+        let f = (r.accel_mps2 - self.bias_a).component_div(&(Vector3::repeat(1.0) + self.scale_a));
+        (w, f)
+    }
+
+    pub(crate) fn step(&mut self, r: &ImuRecord, cfg: &NavConfig) {
+        let (w, f) = self.compensate(r);
+        let inc = ImuIncrement::from_rates(r.dt_s, w, f);
+        let v0 = self.pva.vel_ned_mps;
+        self.pva = propagate(&self.pva, &self.pre, &inc);
+        self.pre = inc;
+        self.t_ns = r.host_ns;
+        if r.dt_s > 0.0 {
+            self.acc_ned = (self.pva.vel_ned_mps - v0) / r.dt_s;
+        }
+        self.last_w = w;
+        self.cov_dt += r.dt_s;
+        self.cov_f += f * r.dt_s;
+        self.cov_w += w * r.dt_s;
+        if self.cov_dt >= cfg.cov_step_s {
+            self.propagate_covariance(cfg);
+        }
+    }
+
+    /// P ← Φ P Φᵀ + Q over the accumulated interval, Φ = I + F·Δt with F at the current state
+    /// and the interval-mean rates (KF-GINS propagates per IMU sample; grouping ~20 ms keeps the
+    /// cost per sample low and changes Φ by O((F·Δt)²)).
+    pub fn propagate_covariance(&mut self, cfg: &NavConfig) {
+        if self.cov_dt <= 0.0 {
+            return;
+        }
+        let f_b = self.cov_f / self.cov_dt;
+        let w_b = self.cov_w / self.cov_dt;
+        let f = error_state::system_matrix(&self.pva, &f_b, &w_b, &cfg.noise);
+        let phi = StateMat::identity() + f * self.cov_dt;
+        let q = error_state::process_noise(&cfg.noise, self.cov_dt);
+        self.eskf.predict(&phi, &q);
+        self.cov_dt = 0.0;
+        self.cov_f = Vector3::zeros();
+        self.cov_w = Vector3::zeros();
+    }
+
+    /// Closed-loop feedback of an error-state estimate (KF-GINS `stateFeedback`).
+    pub fn feedback(&mut self, dx: &StateVec, horizon_s: f64) {
+        let (rm, rn) = earth::radii(self.pva.lat_rad);
+        self.pva.lat_rad -= dx[POS] / (rm + self.pva.h_m);
+        self.pva.lon_rad -= dx[POS + 1] / ((rn + self.pva.h_m) * self.pva.lat_rad.cos());
+        self.pva.h_m += dx[POS + 2];
+        self.pva.vel_ned_mps -= dx.fixed_rows::<3>(VEL);
+        let q_pn = UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(ATT).into_owned());
+        self.pva.q_nb = UnitQuaternion::new_normalize((q_pn * self.pva.q_nb).into_inner());
+        self.bias_g += dx.fixed_rows::<3>(BG);
+        self.bias_a += dx.fixed_rows::<3>(BA);
+        self.scale_g += dx.fixed_rows::<3>(SG);
+        self.scale_a += dx.fixed_rows::<3>(SA);
+        self.delay_s = (self.delay_s + dx[DELAY]).clamp(-0.5, horizon_s - 0.05);
+    }
+}

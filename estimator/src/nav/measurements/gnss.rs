@@ -1,0 +1,344 @@
+//! Loosely coupled GNSS aiding: position and velocity of the antenna, with the lever arm and
+//! the GNSS time-synchronisation error Δ; one [`Measurement`] kind of the navigator's queue
+//! (PX4 EKF2 keeps each aiding source in its own file; this is the GNSS one).
+//!
+//! Measurement model. The receiver reports the antenna state at its epoch t_e; the filter fuses
+//! the fix at t_f = t_stamp − Δ̂ (t_stamp: the epoch mapped to host time under hardware sync, the
+//! receipt time of its first byte under software sync). With δΔ = Δ − Δ̂ the true epoch is
+//! t_f − δΔ, so the fix measures p(t_f − δΔ) ≈ p(t_f) − v·δΔ and v(t_f − δΔ) ≈ v(t_f) − a·δΔ:
+//! the measurement Jacobian w.r.t. Δ is −v for position and −a for velocity (Li et al.,
+//! GPS/SINS time synchronisation). In KF-GINS's innovation form dz = INS − GNSS = H δx this
+//! appears as +v and +a in the Δ column, with δΔ "true − estimated".
+//!
+//! Position innovation (KF-GINS `gnssUpdate`): dz_r = D_R (p_ant − p_gnss), p_ant = p + D_R⁻¹ C_b^n l,
+//! D_R = diag(R_M+h, (R_N+h) cos φ, −1); H_r = [I₃, 0, [(C_b^n l)×], 0, …, v].
+//! Velocity innovation: v_ant = v + C_b^n (ω_ib^b × l); dz_v = v_ant − v_gnss;
+//! H_v = [0, I₃, [(C_b^n (ω×l))×], −C_b^n [l×], 0, …, a].
+
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use navsync_shared::earth;
+use navsync_shared::samples::GnssFix;
+
+use super::Measurement;
+use crate::nav::error_state::{ATT, BA, BG, DELAY, N, POS, VEL};
+use crate::nav::eskf::Update;
+use crate::nav::filter::DelayedFilter;
+use crate::nav::mechanization::{Pva, skew};
+use crate::nav::navigator::{NavConfig, NavCounters};
+
+/// A fix reduced to what the filter fuses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GnssObservation {
+    /// Host time of the fix before the Δ correction, ns (see module docs).
+    pub stamp_host_ns: i64,
+    /// Latitude, rad.
+    pub lat_rad: f64,
+    /// Longitude, rad.
+    pub lon_rad: f64,
+    /// Ellipsoidal height of the antenna, m.
+    pub h_m: f64,
+    /// NED velocity, m/s; the down component may be NaN (NMEA carries none).
+    pub vel_ned_mps: Vector3<f64>,
+    /// 1-sigma position error N, E, D, m.
+    pub pos_std_m: Vector3<f64>,
+    /// 1-sigma velocity error per axis, m/s.
+    pub vel_std_mps: f64,
+    /// Speed over ground, m/s (NaN when unknown).
+    pub speed_mps: f64,
+    /// Track over ground, rad (NaN when unknown).
+    pub track_rad: f64,
+}
+
+/// Defaults for fixes that carry no accuracy of their own.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GnssAccuracy {
+    /// User-equivalent range error, m: σ_horizontal axis = HDOP·UERE/√2, σ_down = VDOP·UERE.
+    pub uere_m: f64,
+    /// Velocity 1-sigma per axis, m/s (NMEA reports none).
+    pub vel_std_mps: f64,
+}
+
+impl Default for GnssAccuracy {
+    fn default() -> Self {
+        Self {
+            uere_m: 2.0,
+            vel_std_mps: 0.1,
+        }
+    }
+}
+
+/// 1-sigma given to an altitude the receiver holds ([`GnssFix::altitude_held`]), m: large
+/// enough that the update carries no vertical information.
+pub const HELD_ALTITUDE_STD_M: f64 = 1.0e3;
+
+/// Prepares a fix for fusion; `None` when it has no usable position. Accuracy from GST when
+/// present, else from the DOPs (VDOP unknown: 1.5·HDOP; HDOP unknown: 2).
+pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Option<GnssObservation> {
+    if !fix.has_position() || !fix.alt_msl_m.is_finite() {
+        return None;
+    }
+    let hdop = if fix.hdop.is_finite() { fix.hdop } else { 2.0 };
+    let vdop = if fix.vdop.is_finite() { fix.vdop } else { 1.5 * hdop };
+    let gst = [fix.std_lat_m, fix.std_lon_m, fix.std_alt_m];
+    let mut pos_std = if gst.iter().all(|s| s.is_finite() && *s > 0.0) {
+        Vector3::from(gst)
+    } else {
+        let h = hdop * acc.uere_m / std::f64::consts::SQRT_2;
+        Vector3::new(h, h, vdop * acc.uere_m)
+    };
+    if fix.altitude_held() {
+        // From ≤ 3 satellites the altitude is the receiver's assumption: no vertical information.
+        pos_std.z = pos_std.z.max(HELD_ALTITUDE_STD_M);
+    }
+    Some(GnssObservation {
+        stamp_host_ns,
+        lat_rad: fix.lat_deg.to_radians(),
+        lon_rad: fix.lon_deg.to_radians(),
+        h_m: fix.height_m(),
+        vel_ned_mps: Vector3::new(fix.vel_n_mps, fix.vel_e_mps, fix.vel_d_mps),
+        pos_std_m: pos_std,
+        vel_std_mps: acc.vel_std_mps,
+        speed_mps: fix.speed_mps,
+        track_rad: fix.track_deg.to_radians(),
+    })
+}
+
+/// Position update terms at the filter state `pva`, fused `eps_s` after the observation's
+/// (Δ-corrected) time: the GNSS position is extrapolated by v·ε.
+pub fn position_terms(
+    pva: &Pva,
+    lever_b: &Vector3<f64>,
+    obs: &GnssObservation,
+    eps_s: f64,
+) -> (SVector<f64, 3>, SMatrix<f64, 3, N>, Matrix3<f64>) {
+    let c_bn = pva.q_nb.to_rotation_matrix().into_inner();
+    let (rm, rn) = earth::radii(pva.lat_rad);
+    let d_r = Vector3::new(rm + pva.h_m, (rn + pva.h_m) * pva.lat_rad.cos(), -1.0);
+    let lever_n = c_bn * lever_b;
+    let v = pva.vel_ned_mps;
+    let dz = Vector3::new(
+        (pva.lat_rad - obs.lat_rad) * d_r.x,
+        (pva.lon_rad - obs.lon_rad) * d_r.y,
+        (pva.h_m - obs.h_m) * d_r.z,
+    ) + lever_n
+        - v * eps_s;
+    let mut h = SMatrix::<f64, 3, N>::zeros();
+    h.fixed_view_mut::<3, 3>(0, POS).copy_from(&Matrix3::identity());
+    h.fixed_view_mut::<3, 3>(0, ATT).copy_from(&skew(&lever_n));
+    h.fixed_view_mut::<3, 1>(0, DELAY).copy_from(&v);
+    let r = Matrix3::from_diagonal(&obs.pos_std_m.component_mul(&obs.pos_std_m));
+    (dz, h, r)
+}
+
+/// Horizontal velocity update terms (NMEA has no vertical velocity), with body rate `w_b`
+/// (rad/s, bias compensated) and NED acceleration `acc_ned` for the Δ column.
+pub fn velocity_terms(
+    pva: &Pva,
+    lever_b: &Vector3<f64>,
+    w_b: &Vector3<f64>,
+    acc_ned: &Vector3<f64>,
+    obs: &GnssObservation,
+    eps_s: f64,
+) -> (SVector<f64, 2>, SMatrix<f64, 2, N>, nalgebra::Matrix2<f64>) {
+    let c_bn = pva.q_nb.to_rotation_matrix().into_inner();
+    let rot = c_bn * w_b.cross(lever_b);
+    let v_ant = pva.vel_ned_mps + rot;
+    let dz3 = v_ant - obs.vel_ned_mps - acc_ned * eps_s;
+    let mut h3 = SMatrix::<f64, 3, N>::zeros();
+    h3.fixed_view_mut::<3, 3>(0, VEL).copy_from(&Matrix3::identity());
+    h3.fixed_view_mut::<3, 3>(0, ATT).copy_from(&skew(&rot));
+    h3.fixed_view_mut::<3, 3>(0, BG).copy_from(&(-c_bn * skew(lever_b)));
+    h3.fixed_view_mut::<3, 1>(0, DELAY).copy_from(acc_ned);
+    let dz = SVector::<f64, 2>::new(dz3.x, dz3.y);
+    let h = h3.fixed_rows::<2>(0).into_owned();
+    let r = nalgebra::Matrix2::identity() * (obs.vel_std_mps * obs.vel_std_mps);
+    (dz, h, r)
+}
+
+
+/// Consecutive rejected fixes after which the filter resets to GNSS (a GNSS jump, or a filter
+/// that has lost consistency, must not keep it in dead reckoning forever; PX4's EKF2 does the
+/// same after its GPS rejection timeout). When the fix's velocity passes the gate the inertial
+/// solution is sound and the position jumped (a receiver reset, a spoofer): only the position
+/// is reset. Otherwise position and velocity are, and the attitude and sensor-error
+/// uncertainty reopened.
+pub const RESET_AFTER_REJECTS: u32 = 5;
+
+/// What GNSS fusion keeps between fixes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct GnssState {
+    /// Fixes rejected in a row (reset after [`RESET_AFTER_REJECTS`]).
+    pub consecutive_rejects: u32,
+    /// Host time of the last fix fused (or reset to), ns.
+    pub last_fused_ns: i64,
+}
+
+impl Measurement for GnssObservation {
+    type Config = ();
+    type State = GnssState;
+
+    /// The fix's epoch: its stamp minus the GNSS delay estimate (module docs).
+    fn epoch_ns(&self, delay_s: f64) -> i64 {
+        self.stamp_host_ns - (delay_s * 1e9) as i64
+    }
+
+    /// Position (gated; five rejections in a row reset to the fix), then horizontal velocity.
+    fn fuse(
+        &self,
+        f: &mut DelayedFilter,
+        eps: f64,
+        cfg: &NavConfig,
+        state: &mut GnssState,
+        counters: &mut NavCounters,
+    ) -> bool {
+        let obs = self;
+        let t_f = self.epoch_ns(f.delay_s);
+        let (dz, h, r) = position_terms(&f.pva, &cfg.lever_arm_b_m, obs, eps);
+        match f.eskf.update(&dz, &h, &r, cfg.gate_scale) {
+            Update::Accepted { dx, .. } => {
+                f.feedback(&dx, cfg.horizon_s);
+                counters.fixes_used += 1;
+                state.consecutive_rejects = 0;
+                state.last_fused_ns = t_f;
+            }
+            Update::Rejected { .. } => {
+                counters.fixes_rejected += 1;
+                state.consecutive_rejects += 1;
+                if state.consecutive_rejects < RESET_AFTER_REJECTS {
+                    return false;
+                }
+                // Persistently rejected: did the GNSS position jump, or has the filter lost
+                // consistency? The fix's velocity against the filter's tells.
+                let vel_agrees = obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() && {
+                    let (dz, h, r) = velocity_terms(&f.pva, &cfg.lever_arm_b_m, &f.last_w, &f.acc_ned, obs, eps);
+                    f.eskf.gate(&dz, &h, &r, cfg.gate_scale).0
+                };
+                counters.gnss_resets += 1;
+                state.consecutive_rejects = 0;
+                state.last_fused_ns = t_f;
+                if !vel_agrees {
+                    reset_to(f, obs, cfg, eps);
+                    counters.gnss_resets_full += 1;
+                    return true;
+                }
+                reset_position_to(f, obs, cfg, eps);
+            }
+        }
+        if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
+            let (dz, h, r) = velocity_terms(&f.pva, &cfg.lever_arm_b_m, &f.last_w, &f.acc_ned, obs, eps);
+            match f.eskf.update(&dz, &h, &r, cfg.gate_scale) {
+                Update::Accepted { dx, .. } => f.feedback(&dx, cfg.horizon_s),
+                Update::Rejected { .. } => counters.vel_rejected += 1,
+            }
+        }
+        true
+    }
+}
+
+/// Resets the position to a fix (extrapolated by ε to the filter time along the filter's
+/// velocity) and its covariance to the fix's accuracy, decorrelated from the other states;
+/// velocity, attitude and sensor errors are kept: for a GNSS position that jumped while
+/// its velocity still agrees with the inertial solution.
+fn reset_position_to(f: &mut DelayedFilter, obs: &GnssObservation, cfg: &NavConfig, eps: f64) {
+    let c_bn = f.pva.q_nb.to_rotation_matrix().into_inner();
+    let lever_n = c_bn * cfg.lever_arm_b_m;
+    let (rm, rn) = earth::radii(obs.lat_rad);
+    let p_ned = f.pva.vel_ned_mps * eps - lever_n;
+    f.pva.lat_rad = obs.lat_rad + p_ned.x / (rm + obs.h_m);
+    f.pva.lon_rad = obs.lon_rad + p_ned.y / ((rn + obs.h_m) * obs.lat_rad.cos());
+    f.pva.h_m = obs.h_m - p_ned.z;
+    for i in POS..POS + 3 {
+        for j in 0..N {
+            f.eskf.p[(i, j)] = 0.0;
+            f.eskf.p[(j, i)] = 0.0;
+        }
+    }
+    for i in 0..3 {
+        f.eskf.p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
+    }
+}
+
+/// Resets position and velocity to a fix (extrapolated by ε to the filter time; vertical
+/// velocity 0 ± 2 m/s when the fix has none) and their covariance to the fix's accuracy,
+/// decorrelated from the other states.
+fn reset_to(f: &mut DelayedFilter, obs: &GnssObservation, cfg: &NavConfig, eps: f64) {
+    let c_bn = f.pva.q_nb.to_rotation_matrix().into_inner();
+    let lever_n = c_bn * cfg.lever_arm_b_m;
+    let (rm, rn) = earth::radii(obs.lat_rad);
+    // NMEA carries no vertical velocity: a land vehicle's is ~0, with 2 m/s of doubt.
+    let v_d = if obs.vel_ned_mps.z.is_finite() {
+        obs.vel_ned_mps.z
+    } else {
+        0.0
+    };
+    let v = if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
+        Vector3::new(obs.vel_ned_mps.x, obs.vel_ned_mps.y, v_d)
+    } else {
+        Vector3::new(f.pva.vel_ned_mps.x, f.pva.vel_ned_mps.y, v_d)
+    };
+    let p_ned = v * eps - lever_n;
+    f.pva.lat_rad = obs.lat_rad + p_ned.x / (rm + obs.h_m);
+    f.pva.lon_rad = obs.lon_rad + p_ned.y / ((rn + obs.h_m) * obs.lat_rad.cos());
+    f.pva.h_m = obs.h_m - p_ned.z;
+    f.pva.vel_ned_mps = v;
+    for i in POS..ATT {
+        for j in 0..N {
+            f.eskf.p[(i, j)] = 0.0;
+            f.eskf.p[(j, i)] = 0.0;
+        }
+    }
+    for i in 0..3 {
+        f.eskf.p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
+        f.eskf.p[(VEL + i, VEL + i)] = obs.vel_std_mps.powi(2) + cfg.init_vel_std_mps.powi(2);
+    }
+    if !obs.vel_ned_mps.z.is_finite() {
+        f.eskf.p[(VEL + 2, VEL + 2)] = 4.0;
+    }
+    // Persistent rejection means the filter was overconfident somewhere: reopen the
+    // attitude and sensor-error uncertainty to their initial values so it can re-converge.
+    let reopen = [
+        (ATT, cfg.init_level_std_rad),
+        (ATT + 1, cfg.init_level_std_rad),
+        (ATT + 2, cfg.init_yaw_std_rad),
+    ];
+    for (i, sd) in reopen {
+        f.eskf.p[(i, i)] = f.eskf.p[(i, i)].max(sd * sd);
+    }
+    for i in 0..3 {
+        let bg = cfg.noise.gyro_bias_init_std.powi(2);
+        let ba = cfg.noise.accel_bias_init_std.powi(2);
+        f.eskf.p[(BG + i, BG + i)] = f.eskf.p[(BG + i, BG + i)].max(bg);
+        f.eskf.p[(BA + i, BA + i)] = f.eskf.p[(BA + i, BA + i)].max(ba);
+    }
+}
+
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use navsync_shared::samples::{FixMode, Stamp, StampSource};
+
+    fn fix(sats_used: u16) -> GnssFix {
+        let mut f = GnssFix::empty(Stamp::host(0, 0, StampSource::Receipt));
+        f.lat_deg = 48.1;
+        f.lon_deg = 11.5;
+        f.alt_msl_m = 520.0;
+        f.hdop = 1.0;
+        f.vdop = 1.5;
+        f.sats_used = sats_used;
+        f.mode = FixMode::Fix3d as u8;
+        f
+    }
+
+    #[test]
+    fn a_held_altitude_carries_no_vertical_weight() {
+        let acc = GnssAccuracy::default();
+        let measured = observation(&fix(7), 0, &acc).expect("usable");
+        assert!((measured.pos_std_m.z - 1.5 * acc.uere_m).abs() < 1e-12);
+        let held = observation(&fix(3), 0, &acc).expect("usable");
+        assert_eq!(held.pos_std_m.z, HELD_ALTITUDE_STD_M);
+        assert_eq!(held.pos_std_m.x, measured.pos_std_m.x, "horizontal unchanged");
+        // Unknown satellite count: the altitude counts as measured.
+        assert!(observation(&fix(u16::MAX), 0, &acc).unwrap().pos_std_m.z < 10.0);
+    }
+}
