@@ -123,6 +123,8 @@ macro_rules! measurement_kinds {
 measurement_kinds! {
     /// GNSS fixes: antenna position and horizontal velocity ([`gnss`]).
     gnss: Gnss(gnss::GnssObservation),
+    /// Zero velocity and zero angular rate while the vehicle stands still ([`zupt`]).
+    zupt: Zupt(zupt::Zupt),
 }
 
 /// Measurements waiting for the delayed filter to reach their epochs. Fixed capacity, no
