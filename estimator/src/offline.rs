@@ -165,7 +165,9 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
     }
     let wall = t0.elapsed().as_secs_f64();
     let rejected = pipeline.nav().counters().fixes_rejected;
-    OfflineRun {
-        summary: eval.summary((imu, fixes, rejected), wall, in_estimator.as_secs_f64(), delay_truth),
-    }
+    let mut summary = eval.summary((imu, fixes, rejected), wall, in_estimator.as_secs_f64(), delay_truth);
+    pipeline.nav().measurement_states().each_counter(&mut |name, v| {
+        summary.measurement_counters.insert(name.to_string(), v);
+    });
+    OfflineRun { summary }
 }

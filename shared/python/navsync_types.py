@@ -427,7 +427,7 @@ class Health(ctypes.Structure):
         # Report sequence number.
         ("seq", ctypes.c_uint64),
         # Error and event counters.
-        ("counters", (Counter * 32)),
+        ("counters", (Counter * 64)),
         # Rates.
         ("rates", (RateEntry * 8)),
         # Process name, e.g. "gps-0" (NUL-padded ASCII).
@@ -441,16 +441,16 @@ class Health(ctypes.Structure):
     ]
 
     #: Size in bytes of the Rust type.
-    RUST_SIZE = 1344
+    RUST_SIZE = 2368
     #: Alignment in bytes of the Rust type.
     RUST_ALIGN = 8
     #: Byte offset of every field in the Rust type.
-    RUST_OFFSETS = {"host_ns": 0, "started_host_ns": 8, "seq": 16, "counters": 24, "rates": 1048, "process": 1304, "pid": 1336, "alive": 1340, "reserved": 1341}
+    RUST_OFFSETS = {"host_ns": 0, "started_host_ns": 8, "seq": 16, "counters": 24, "rates": 2072, "process": 2328, "pid": 2360, "alive": 2364, "reserved": 2365}
 
     @staticmethod
     def type_name():
         """The iceoryx2 type name (with the layout version)."""
-        return "navsync.Health.v1"
+        return "navsync.Health.v2"
 
 
 class SimTruth(ctypes.Structure):

@@ -1,4 +1,8 @@
 //! Publishes a process's [`Health`] on `navsync/health/{process}` about once per second.
+//!
+//! Counters and rates are registered by name (at most 23 bytes, the [`Health`] name field)
+//! into the report's fixed table ([`MAX_COUNTERS`] counters, [`MAX_RATES`] rates); a name too
+//! long or a table full is a [`HealthError`], never a silently shared or truncated slot.
 
 use crate::ipc::{IpcError, IpcNode, Publisher};
 use crate::reflect::fixed_str;
@@ -17,6 +21,34 @@ pub struct HealthReporter {
     /// Events counted since the last report, per rate slot.
     events: [u64; MAX_RATES],
 }
+
+/// Why a counter or rate could not be registered.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum HealthError {
+    /// The table is full.
+    #[error("health report of {process}: no room for `{name}` (all {capacity} {what} slots taken)")]
+    Full {
+        /// The process.
+        process: String,
+        /// The name that did not fit.
+        name: String,
+        /// `counter` or `rate`.
+        what: &'static str,
+        /// Slots in the table.
+        capacity: usize,
+    },
+    /// The name is longer than the report's name field.
+    #[error("health counter name `{name}` is longer than {max} bytes")]
+    NameTooLong {
+        /// The name.
+        name: String,
+        /// Longest name, bytes.
+        max: usize,
+    },
+}
+
+/// Longest counter or rate name, bytes (the field holds a NUL-terminated 24-byte string).
+pub const MAX_NAME_LEN: usize = 23;
 
 /// Index of a registered counter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,16 +72,37 @@ impl HealthReporter {
         })
     }
 
-    /// Registers (or finds) a counter slot. Past [`MAX_COUNTERS`] the last slot is shared.
-    pub fn counter(&mut self, name: &str) -> CounterId {
-        let key = fixed_str::<24>(name);
-        let slots = &mut self.health.counters;
-        if let Some(i) = slots.iter().position(|c| c.name == key) {
-            return CounterId(i);
+    fn key(name: &str) -> Result<[u8; 24], HealthError> {
+        if name.len() > MAX_NAME_LEN {
+            return Err(HealthError::NameTooLong {
+                name: name.to_string(),
+                max: MAX_NAME_LEN,
+            });
         }
-        let i = slots.iter().position(|c| c.name[0] == 0).unwrap_or(MAX_COUNTERS - 1);
-        slots[i].name = key;
-        CounterId(i)
+        Ok(fixed_str::<24>(name))
+    }
+
+    fn full(&self, name: &str, what: &'static str, capacity: usize) -> HealthError {
+        HealthError::Full {
+            process: crate::reflect::str_of(&self.health.process).to_string(),
+            name: name.to_string(),
+            what,
+            capacity,
+        }
+    }
+
+    /// Registers (or finds) a counter slot.
+    pub fn counter(&mut self, name: &str) -> Result<CounterId, HealthError> {
+        let key = Self::key(name)?;
+        let slots = &self.health.counters;
+        if let Some(i) = slots.iter().position(|c| c.name == key) {
+            return Ok(CounterId(i));
+        }
+        let Some(i) = slots.iter().position(|c| c.name[0] == 0) else {
+            return Err(self.full(name, "counter", MAX_COUNTERS));
+        };
+        self.health.counters[i].name = key;
+        Ok(CounterId(i))
     }
 
     /// Sets a counter's value.
@@ -63,21 +116,24 @@ impl HealthReporter {
     }
 
     /// Sets a counter by name (registering it on first use).
-    pub fn set_named(&mut self, name: &str, value: u64) {
-        let id = self.counter(name);
+    pub fn set_named(&mut self, name: &str, value: u64) -> Result<(), HealthError> {
+        let id = self.counter(name)?;
         self.set(id, value);
+        Ok(())
     }
 
     /// Registers (or finds) a rate slot, e.g. "samples_out".
-    pub fn rate(&mut self, name: &str) -> RateId {
-        let key = fixed_str::<24>(name);
-        let slots = &mut self.health.rates;
+    pub fn rate(&mut self, name: &str) -> Result<RateId, HealthError> {
+        let key = Self::key(name)?;
+        let slots = &self.health.rates;
         if let Some(i) = slots.iter().position(|r| r.name == key) {
-            return RateId(i);
+            return Ok(RateId(i));
         }
-        let i = slots.iter().position(|r| r.name[0] == 0).unwrap_or(MAX_RATES - 1);
-        slots[i].name = key;
-        RateId(i)
+        let Some(i) = slots.iter().position(|r| r.name[0] == 0) else {
+            return Err(self.full(name, "rate", MAX_RATES));
+        };
+        self.health.rates[i].name = key;
+        Ok(RateId(i))
     }
 
     /// Counts one event towards a rate.

@@ -115,6 +115,9 @@ pub enum SimProcessError {
     /// The IMU outputs could not be set up.
     #[error(transparent)]
     ImuOutput(#[from] SimImuSinkError),
+    /// A health counter could not be registered.
+    #[error(transparent)]
+    Health(#[from] navsync_shared::health_reporter::HealthError),
 }
 
 /// Loads the scenario and applies the command-line overrides.
@@ -247,11 +250,11 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
     let mut pps_pub = node.publisher::<PpsEdge>(services::SIM_PPS)?;
     let mut truth_pub = node.publisher::<SimTruth>(services::SIM_TRUTH)?;
     let mut health = HealthReporter::new(&node, "sim")?;
-    let c_late = health.counter("late_wakeups");
-    let c_shifted = health.counter("nmea_bursts_shifted");
-    let c_dropped = health.counter("nmea_bytes_dropped");
-    let r_imu = health.rate("imu_samples");
-    let c_imu_dropped = health.counter("imu_bytes_dropped");
+    let c_late = health.counter("late_wakeups")?;
+    let c_shifted = health.counter("nmea_bursts_shifted")?;
+    let c_dropped = health.counter("nmea_bytes_dropped")?;
+    let r_imu = health.rate("imu_samples")?;
+    let c_imu_dropped = health.counter("imu_bytes_dropped")?;
 
     let pty = Pty::open(args.pty_link.as_deref()).map_err(SimProcessError::Pty)?;
     println!(

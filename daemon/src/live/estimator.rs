@@ -92,6 +92,9 @@ pub enum EstimatorError {
     /// The dead-node reclaimer thread could not be started.
     #[error("starting the dead-node reclaimer thread: {0}")]
     Reclaimer(#[from] std::io::Error),
+    /// A health counter could not be registered.
+    #[error(transparent)]
+    Health(#[from] navsync_shared::health_reporter::HealthError),
 }
 
 /// Runs the estimator until SIGINT/SIGTERM.
@@ -117,13 +120,13 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
         .collect::<Result<_, _>>()?;
     let mut time_pub = node.publisher::<TimeState>(services::TIME_STATE)?;
     let mut health = HealthReporter::new(&node, "estimator")?;
-    let c_pps = health.counter("pps_used");
-    let c_pps_rej = health.counter("pps_rejected");
-    let c_fixes = health.counter("gnss_fixes");
-    let c_imu = health.counter("imu_samples");
-    let c_imu_gap = health.counter("imu_seq_gaps");
-    let r_imu = health.rate("imu_samples");
-    let r_fix = health.rate("gnss_fixes");
+    let c_pps = health.counter("pps_used")?;
+    let c_pps_rej = health.counter("pps_rejected")?;
+    let c_fixes = health.counter("gnss_fixes")?;
+    let c_imu = health.counter("imu_samples")?;
+    let c_imu_gap = health.counter("imu_seq_gaps")?;
+    let r_imu = health.rate("imu_samples")?;
+    let r_fix = health.rate("gnss_fixes")?;
 
     let waitset = node.waitset()?;
     let mut guards = Vec::new();
@@ -142,24 +145,24 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
 
     let mut est = Pipeline::new(args.pipeline_config());
     let mut nav_pub = node.publisher::<NavState>(services::NAV_STATE)?;
-    let c_nav = health.counter("nav_states");
-    let c_fix_used = health.counter("fixes_used");
-    let c_fix_rej = health.counter("fixes_rejected");
-    let c_fix_old = health.counter("fixes_too_old");
-    let c_late = health.counter("inputs_late");
+    let c_nav = health.counter("nav_states")?;
+    let c_fix_used = health.counter("fixes_used")?;
+    let c_fix_rej = health.counter("fixes_rejected")?;
+    let c_fix_old = health.counter("fixes_too_old")?;
+    let c_late = health.counter("inputs_late")?;
     // Faults in the data (issue 8): GNSS resets after persistent rejections, PPS holdovers and
     // relocks, IMU samples rejected by the estimator (non-finite, time-reversed, saturated).
-    let c_gnss_resets = health.counter("gnss_resets");
-    let c_gnss_resets_full = health.counter("gnss_resets_full");
-    let c_holdovers = health.counter("time_holdovers");
-    let c_relocks = health.counter("time_relocks");
-    let c_imu_invalid = health.counter("imu_rejected_invalid");
-    let c_imu_back = health.counter("imu_rejected_backwards");
-    let c_imu_sat = health.counter("imu_rejected_saturated");
+    let c_gnss_resets = health.counter("gnss_resets")?;
+    let c_gnss_resets_full = health.counter("gnss_resets_full")?;
+    let c_holdovers = health.counter("time_holdovers")?;
+    let c_relocks = health.counter("time_relocks")?;
+    let c_imu_invalid = health.counter("imu_rejected_invalid")?;
+    let c_imu_back = health.counter("imu_rejected_backwards")?;
+    let c_imu_sat = health.counter("imu_rejected_saturated")?;
     let mut order: InputOrder = InputOrder::new(args.imu_ids.first().map(String::as_str));
     // Output latency: from taking an IMU sample off its queue to its NavState being published.
-    let c_lat_p99 = health.counter("nav_latency_p99_us");
-    let c_lat_max = health.counter("nav_latency_max_us");
+    let c_lat_p99 = health.counter("nav_latency_p99_us")?;
+    let c_lat_max = health.counter("nav_latency_max_us")?;
     let mut latency = LatencyHistogram::default();
     let mut last_imu_seq: Vec<Option<u64>> = vec![None; imus.len()];
     let mut last_state_ns = 0i64;
@@ -175,11 +178,20 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
     ] {
         for id in ids {
             live.add(&format!("{kind}_{id}"), nominal_ns);
-            c_stale.push(health.counter(&format!("stale_{kind}_{id}")));
+            c_stale.push(health.counter(&format!("stale_{kind}_{id}"))?);
         }
     }
-    let c_stale_n = health.counter("stale_inputs");
-    let c_stale_events = health.counter("stale_events");
+    // Each kind of measurement's counters (`zupt_used`, …), whatever kinds there are.
+    let mut c_measurements = Vec::new();
+    est.nav()
+        .measurement_states()
+        .each_counter(&mut |name, _| c_measurements.push(name));
+    let c_measurements = c_measurements
+        .into_iter()
+        .map(|name| health.counter(name))
+        .collect::<Result<Vec<_>, _>>()?;
+    let c_stale_n = health.counter("stale_inputs")?;
+    let c_stale_events = health.counter("stale_events")?;
     let (n_imu, n_pps) = (imus.len(), pps.len());
     let mut next_publisher_check_ns = monotonic_now_ns();
     info!(pps = ?args.pps_ids, gnss = ?args.gnss_ids, imus = ?args.imu_ids, "estimator running");
@@ -334,6 +346,13 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
         health.set(c_imu_invalid, ac.invalid);
         health.set(c_imu_back, ac.backwards);
         health.set(c_imu_sat, ac.saturated);
+        let mut k = 0;
+        est.nav().measurement_states().each_counter(&mut |_, v| {
+            if let Some(c) = c_measurements.get(k) {
+                health.set(*c, v);
+            }
+            k += 1;
+        });
         health.set(c_lat_p99, latency.quantile_us(0.99) as u64);
         health.set(c_lat_max, (latency.max_ns() as u64).div_ceil(1000));
         if health.maybe_publish(now)? {

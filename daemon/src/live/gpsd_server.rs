@@ -96,6 +96,9 @@ pub enum GpsdError {
         /// Cause.
         source: std::io::Error,
     },
+    /// A health counter could not be registered.
+    #[error(transparent)]
+    Health(#[from] navsync_shared::health_reporter::HealthError),
 }
 
 /// A watch request's settings.
@@ -498,13 +501,13 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
     let fix_sub = node.subscriber::<GnssFix>(&services::gnss_fix("0"))?;
     let time_sub = node.subscriber::<TimeState>(services::TIME_STATE)?;
     let mut health = HealthReporter::new(&node, "gpsd-server")?;
-    let c_accepted = health.counter("clients_accepted");
-    let c_rejected = health.counter("clients_rejected");
-    let c_slow = health.counter("clients_dropped_slow");
-    let c_active = health.counter("clients_active");
-    let c_reports = health.counter("reports_sent");
-    let c_bad = health.counter("bad_requests");
-    let r_tpv = health.rate("tpv_out");
+    let c_accepted = health.counter("clients_accepted")?;
+    let c_rejected = health.counter("clients_rejected")?;
+    let c_slow = health.counter("clients_dropped_slow")?;
+    let c_active = health.counter("clients_active")?;
+    let c_reports = health.counter("reports_sent")?;
+    let c_bad = health.counter("bad_requests")?;
+    let r_tpv = health.rate("tpv_out")?;
 
     let listener = TcpListener::bind(args.listen).map_err(io(&format!("listening on {}", args.listen)))?;
     listener.set_nonblocking(true).map_err(io("listener"))?;

@@ -163,6 +163,9 @@ pub enum NtpShmError {
     /// IPC failure.
     #[error(transparent)]
     Ipc(#[from] IpcError),
+    /// A health counter could not be registered.
+    #[error(transparent)]
+    Health(#[from] navsync_shared::health_reporter::HealthError),
 }
 
 /// An attached SHM segment.
@@ -258,9 +261,9 @@ pub fn run(unit: u32) -> Result<(), NtpShmError> {
     let node = IpcNode::new(&process)?;
     let time = node.subscriber::<TimeState>(services::TIME_STATE)?;
     let mut health = HealthReporter::new(&node, &process)?;
-    let c_written = health.counter("samples_written");
-    let c_skipped = health.counter("seconds_not_exported");
-    let c_holdover = health.counter("holdover_samples");
+    let c_written = health.counter("samples_written")?;
+    let c_skipped = health.counter("seconds_not_exported")?;
+    let c_holdover = health.counter("holdover_samples")?;
     let mut shm = ShmSegment::open(unit)?;
     info!(
         key = format!("{:#x}", ShmSegment::key(unit)),

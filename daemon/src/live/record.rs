@@ -104,6 +104,9 @@ pub enum RecordError {
         "`{0}` is not a navsync service name or pattern (expected e.g. navsync/imu/0/sample, navsync/imu/*/sample)"
     )]
     BadPattern(String),
+    /// A health counter could not be registered.
+    #[error(transparent)]
+    Health(#[from] navsync_shared::health_reporter::HealthError),
 }
 
 /// What a recording run wrote.
@@ -139,10 +142,10 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
     // Messages per subscriber (kept apart: the WaitSet guards borrow the subscribers).
     let mut counts: Vec<u64> = vec![0; subs.len()];
     let mut health = HealthReporter::new(&node, "record")?;
-    let c_msgs = health.counter("messages");
-    let c_bytes = health.counter("bytes");
-    let c_services = health.counter("services");
-    let r_msgs = health.rate("messages");
+    let c_msgs = health.counter("messages")?;
+    let c_bytes = health.counter("bytes")?;
+    let c_services = health.counter("services")?;
+    let r_msgs = health.rate("messages")?;
 
     // The file appears once the initial subscriptions exist: from then on nothing is missed.
     let mut rec = SampleRecorder::create(&args.out)?;

@@ -29,7 +29,7 @@
 use std::io::{ErrorKind, Read};
 use std::time::{Duration, Instant};
 
-use navsync_shared::health_reporter::{CounterId, HealthReporter};
+use navsync_shared::health_reporter::{CounterId, HealthError, HealthReporter};
 use navsync_shared::ipc::{IpcError, IpcNode};
 use navsync_shared::samples::GnssFix;
 use navsync_shared::services;
@@ -135,6 +135,9 @@ pub enum GnssError {
     /// IPC failure.
     #[error(transparent)]
     Ipc(#[from] IpcError),
+    /// A health counter could not be registered.
+    #[error(transparent)]
+    Health(#[from] navsync_shared::health_reporter::HealthError),
 }
 
 /// The baud-rate hunt of `--baud auto` (a pure state machine on counters and time).
@@ -235,14 +238,14 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
     let node = IpcNode::new(&process)?;
     let mut publisher = node.publisher::<GnssFix>(&services::gnss_fix(&args.id))?;
     let mut health = HealthReporter::new(&node, &process)?;
-    let r_fix = health.rate("fixes_out");
+    let r_fix = health.rate("fixes_out")?;
     let pc = PortCounters {
-        baud: health.counter("baud"),
-        hunts: health.counter("baud_hunts"),
-        opens: health.counter("port_opens"),
-        open_failures: health.counter("port_open_failures"),
-        reopens: health.counter("port_reopens"),
-        publish_errors: health.counter("publish_errors"),
+        baud: health.counter("baud")?,
+        hunts: health.counter("baud_hunts")?,
+        opens: health.counter("port_opens")?,
+        open_failures: health.counter("port_open_failures")?,
+        reopens: health.counter("port_reopens")?,
+        publish_errors: health.counter("publish_errors")?,
     };
     let mut dec = Decoder::new(args.protocol);
     let mut log = RateLimitedLog::default();
@@ -272,7 +275,7 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
                     warned_open = true;
                 }
                 health.add(pc.open_failures, 1);
-                publish_health(&mut health, &dec, &mut log);
+                publish_health(&mut health, &dec, &mut log)?;
                 if !node.sleep(backoff) {
                     break;
                 }
@@ -339,20 +342,20 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
                     }
                 }
             }
-            publish_health(&mut health, &dec, &mut log);
+            publish_health(&mut health, &dec, &mut log)?;
         }
         drop(port);
         if node.termination_requested() {
             break;
         }
-        publish_health(&mut health, &dec, &mut log);
+        publish_health(&mut health, &dec, &mut log)?;
         if !node.sleep(backoff) {
             break;
         }
         backoff = (backoff * 2).min(Duration::from_secs(5));
     }
     navsync_shared::sd_notify::stopping();
-    publish_health(&mut health, &dec, &mut log);
+    publish_health(&mut health, &dec, &mut log)?;
     let _ = health.publish_final();
     info!("gnss driver stopped");
     Ok(())
@@ -369,12 +372,15 @@ fn open(path: &str, baud: u32) -> Result<TTYPort, serialport::Error> {
 
 /// Copies the decoder's counters into the report, logs growing error counters (once per
 /// kind, then rate-limited) and publishes the report when due.
-fn publish_health(h: &mut HealthReporter, d: &Decoder, log: &mut RateLimitedLog) {
+fn publish_health(h: &mut HealthReporter, d: &Decoder, log: &mut RateLimitedLog) -> Result<(), HealthError> {
     // Called on every turn of the read loop and of the reopen backoff: the systemd watchdog.
     navsync_shared::sd_notify::watchdog();
     let now = Instant::now();
+    let mut result = Ok(());
     d.each_counter(&mut |name, v| {
-        h.set_named(name, v);
+        if let Err(e) = h.set_named(name, v) {
+            result = Err(e);
+        }
         if let Some(what) = Decoder::describe(name) {
             log.update(name, v, what, now);
         }
@@ -382,6 +388,7 @@ fn publish_health(h: &mut HealthReporter, d: &Decoder, log: &mut RateLimitedLog)
     if let Err(e) = h.maybe_publish(monotonic_now_ns()) {
         warn!("publishing health: {e}");
     }
+    result
 }
 
 #[cfg(test)]

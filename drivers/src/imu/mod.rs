@@ -169,6 +169,9 @@ pub enum ImuError {
     /// A setting is out of range.
     #[error("{0}")]
     Config(String),
+    /// A health counter could not be registered.
+    #[error(transparent)]
+    Health(#[from] navsync_shared::health_reporter::HealthError),
 }
 
 /// Runs the driver until SIGINT/SIGTERM.

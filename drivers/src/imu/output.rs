@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use navsync_shared::health_reporter::{CounterId, HealthReporter, RateId};
-use navsync_shared::ipc::{IpcError, IpcNode, Publisher};
+use navsync_shared::ipc::{IpcNode, Publisher};
 use navsync_shared::reflect::fixed_str;
 use navsync_shared::samples::{IMU_FLAG_SATURATED, ImuSample, Stamp, StampSource};
 use navsync_shared::services;
@@ -42,6 +42,8 @@ pub struct SampleOutput {
     c_publish_err: CounterId,
     log: RateLimitedLog,
     published: u64,
+    /// A counter did not fit the health report (logged once).
+    health_full_logged: bool,
 }
 
 impl SampleOutput {
@@ -52,11 +54,11 @@ impl SampleOutput {
         process: &str,
         limits: Limits,
         nominal_dt_s: Option<f64>,
-    ) -> Result<Self, IpcError> {
+    ) -> Result<Self, super::ImuError> {
         let publisher = node.publisher::<ImuSample>(&services::imu_sample(id))?;
         let mut health = HealthReporter::new(node, process)?;
-        let r_out = health.rate("samples_out");
-        let c_publish_err = health.counter("publish_errors");
+        let r_out = health.rate("samples_out")?;
+        let c_publish_err = health.counter("publish_errors")?;
         Ok(Self {
             publisher,
             health,
@@ -70,6 +72,7 @@ impl SampleOutput {
             c_publish_err,
             log: RateLimitedLog::default(),
             published: 0,
+            health_full_logged: false,
         })
     }
 
@@ -158,13 +161,19 @@ impl SampleOutput {
 
     /// Copies the check counters and `extra` counters into the health report, logs the
     /// growing error counters (rate-limited per kind) and publishes the report when due.
+    /// A counter that does not fit the report is logged, not dropped silently.
     pub fn tick(&mut self, extra: impl IntoIterator<Item = (&'static str, u64)>) {
         // Every source's loop (reads and reopen backoff) ticks: the systemd watchdog.
         navsync_shared::sd_notify::watchdog();
         let now = Instant::now();
         let counters = *self.checks.counters();
         for (name, v) in counters.named().into_iter().chain(extra) {
-            self.health.set_named(name, v);
+            if let Err(e) = self.health.set_named(name, v)
+                && !self.health_full_logged
+            {
+                warn!("{e}");
+                self.health_full_logged = true;
+            }
             if let Some(what) = describe(name) {
                 self.log.update(name, v, what, now);
             }

@@ -78,6 +78,9 @@ pub enum PpsError {
     /// IPC failure.
     #[error(transparent)]
     Ipc(#[from] IpcError),
+    /// A health counter could not be registered.
+    #[error(transparent)]
+    Health(#[from] navsync_shared::health_reporter::HealthError),
 }
 
 /// Where the edges come from.
@@ -235,10 +238,10 @@ pub fn run(args: &PpsArgs) -> Result<(), PpsError> {
     let node = IpcNode::new(&process)?;
     let mut publisher = node.publisher::<PpsEdge>(&services::pps_edge(&args.id))?;
     let mut health = HealthReporter::new(&node, &process)?;
-    let r_edges = health.rate("edges_out");
-    let c_reopen = health.counter("device_reopens");
-    let c_jitter = health.counter("jitter_ns");
-    let c_publish_err = health.counter("publish_errors");
+    let r_edges = health.rate("edges_out")?;
+    let c_reopen = health.counter("device_reopens")?;
+    let c_jitter = health.counter("jitter_ns")?;
+    let c_publish_err = health.counter("publish_errors")?;
     let mut validator = EdgeValidator::new(ValidatorConfig::default());
     let stamp_source = args.source.stamp_source();
     let mut backoff = Duration::from_millis(100);
@@ -319,11 +322,11 @@ pub fn run(args: &PpsArgs) -> Result<(), PpsError> {
                 }
             }
             for (name, v) in validator.counters().named() {
-                health.set_named(name, v);
+                health.set_named(name, v)?;
             }
             for (name, v) in source.device_counters() {
                 if !name.is_empty() {
-                    health.set_named(name, v);
+                    health.set_named(name, v)?;
                 }
             }
             health.set(

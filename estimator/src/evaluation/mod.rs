@@ -87,6 +87,8 @@ pub struct Summary {
     pub imu_offset_std_s: BTreeMap<String, f64>,
     /// The true offsets, s (empty without truth).
     pub imu_offset_true_s: BTreeMap<String, f64>,
+    /// The counters of each kind of measurement besides GNSS (`zupt_used`, …).
+    pub measurement_counters: BTreeMap<String, u64>,
     /// 1 Hz error series.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub series: Vec<SeriesPoint>,
@@ -293,6 +295,7 @@ impl Evaluator {
                     .collect(),
                 _ => BTreeMap::new(),
             },
+            measurement_counters: BTreeMap::new(),
             series: self.series.clone(),
         }
     }
@@ -364,6 +367,14 @@ impl Summary {
                 est * 1e3,
                 sd * 1e3
             ));
+        }
+        if !self.measurement_counters.is_empty() {
+            let list: Vec<String> = self
+                .measurement_counters
+                .iter()
+                .map(|(k, v)| format!("{k} {v}"))
+                .collect();
+            s.push_str(&format!("measurements        {}\n", list.join(", ")));
         }
         if self.estimator_s > 0.0 {
             s.push_str(&format!(

@@ -23,13 +23,13 @@ crate::sample_struct! {
 }
 
 /// Counter slots in [`Health`].
-pub const MAX_COUNTERS: usize = 32;
+pub const MAX_COUNTERS: usize = 64;
 /// Rate slots in [`Health`].
 pub const MAX_RATES: usize = 8;
 
 crate::sample_struct! {
     /// Heartbeat of one process, published about once per second on `navsync/health/{process}`.
-    pub struct Health = "navsync.Health.v1" {
+    pub struct Health = "navsync.Health.v2" {
         /// Host time of this report, ns (`CLOCK_MONOTONIC`).
         pub host_ns: i64,
         /// Host time the process started, ns.
