@@ -26,7 +26,7 @@
 //! and a sample is consumed once a reference-IMU sample with a key at least as large has
 //! arrived, in key order. So a PPS edge or a fix is applied right before the first reference
 //! IMU sample stamped `hold` after it, whenever it happened to arrive. The live process
-//! ([`crate::roles::estimator`]) and the offline runner ([`crate::offline`], used by
+//! (`navsync estimator`, the daemon's `live::estimator`) and the offline runner ([`crate::offline`], used by
 //! `navsync replay --estimate` and `navsync sim --fast --estimate`) both go through
 //! [`InputOrder`], so they consume any recording of the same samples in the same order,
 //! whatever order it was recorded in.

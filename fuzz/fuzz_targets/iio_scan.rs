@@ -1,4 +1,4 @@
-//! IIO scan elements: `in_<channel>_type` text → `ScanType`, channel names → `Role`, and the
+//! IIO scan elements: `in_<channel>_type` text → `ScanType`, channel names → `ChannelRole`, and the
 //! enabled elements → the kernel's record layout (`iio_record::layout`). Input: the text
 //! description of `navsync_fuzz::split_iio` (records, if any, are ignored).
 //!
@@ -11,7 +11,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use navsync_drivers::imu::iio_record::layout;
-use navsync_drivers::imu::iio_scan::{Endian, Repr, Role, ScanElement, ScanType};
+use navsync_drivers::imu::iio_scan::{Endian, Repr, ChannelRole, ScanElement, ScanType};
 use navsync_fuzz::split_iio;
 
 fn canonical(t: &ScanType) -> String {
@@ -56,14 +56,14 @@ fn check_type(text: &str) -> Option<ScanType> {
 
 fn check_role(name: &str) {
     let axes = ["x", "y", "z"];
-    match Role::of(name) {
-        Some(Role::Gyro(i)) => assert_eq!(name, format!("anglvel_{}", axes[i])),
-        Some(Role::Accel(i)) => assert_eq!(name, format!("accel_{}", axes[i])),
-        Some(Role::Timestamp) => assert_eq!(name, "timestamp"),
-        Some(Role::Temp) => assert!(name.starts_with("temp")),
+    match ChannelRole::of(name) {
+        Some(ChannelRole::Gyro(i)) => assert_eq!(name, format!("anglvel_{}", axes[i])),
+        Some(ChannelRole::Accel(i)) => assert_eq!(name, format!("accel_{}", axes[i])),
+        Some(ChannelRole::Timestamp) => assert_eq!(name, "timestamp"),
+        Some(ChannelRole::Temp) => assert!(name.starts_with("temp")),
         None => {}
     }
-    if let Some(r) = Role::of(name) {
+    if let Some(r) = ChannelRole::of(name) {
         assert!(name.starts_with(r.type_name()));
     }
 }

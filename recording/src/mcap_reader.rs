@@ -109,7 +109,7 @@ pub struct ChunkIndex {
 
 /// The summary section of a cleanly closed file.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct Summary {
+pub struct SummarySection {
     /// Schemas.
     pub schemas: Vec<Schema>,
     /// Channels.
@@ -178,7 +178,7 @@ pub struct McapReader<R: Read + Seek> {
     /// File offset of the next top-level record.
     pos: u64,
     header: Header,
-    summary: Option<Summary>,
+    summary: Option<SummarySection>,
     schemas: Vec<Option<Schema>>,
     channels: Vec<Option<Channel>>,
     /// Content of the current top-level record.
@@ -304,7 +304,7 @@ impl<R: Read + Seek> McapReader<R> {
     }
 
     /// The summary, when the file was closed properly.
-    pub fn summary(&self) -> Option<&Summary> {
+    pub fn summary(&self) -> Option<&SummarySection> {
         self.summary.as_ref()
     }
 
@@ -369,7 +369,7 @@ impl<R: Read + Seek> McapReader<R> {
     }
 
     /// The footer's summary, if the file ends in a valid footer.
-    fn read_summary(&mut self) -> Result<Option<Summary>, RecordingError> {
+    fn read_summary(&mut self) -> Result<Option<SummarySection>, RecordingError> {
         if self.len < 8 + FOOTER_AND_MAGIC_LEN {
             return Ok(None);
         }
@@ -430,7 +430,7 @@ impl<R: Read + Seek> McapReader<R> {
                 ));
             }
         }
-        let mut s = Summary::default();
+        let mut s = SummarySection::default();
         let region = &bytes[..(end - summary_start) as usize];
         let mut at = 0usize;
         while at < region.len() {

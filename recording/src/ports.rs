@@ -131,7 +131,11 @@ fn pub_as<T: SampleType>(p: &mut Publisher<T>, sample: &AnySample) -> Result<(),
         None => Err(IpcError::Iceoryx {
             what: "publishing",
             service: p.service().to_string(),
-            detail: format!("a {:?} sample on a {:?} service", sample.kind(), T::KIND),
+            detail: format!(
+                "a {:?} sample on a {:?} service",
+                ServiceKind::of_sample(sample),
+                T::KIND
+            ),
         }),
     }
 }

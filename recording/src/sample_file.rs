@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use super::channels::{self, LIBRARY, MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING};
 use super::error::RecordingError;
-use super::mcap_reader::{McapReader, ScanEnd, Summary};
+use super::mcap_reader::{McapReader, ScanEnd, SummarySection};
 use super::mcap_writer::{ChannelId, McapWriter, SchemaId};
 use navsync_shared::samples::AnySample;
 use navsync_shared::services::ServiceKind;
@@ -103,10 +103,14 @@ impl<W: Write> SampleRecorder<W> {
                 self.channels[service]
             }
         };
-        if kind != sample.kind() {
+        if kind != ServiceKind::of_sample(sample) {
             return Err(RecordingError::Usage {
                 path: self.path.clone(),
-                problem: format!("a {:?} sample on `{service}`, which carries {:?}", sample.kind(), kind),
+                problem: format!(
+                    "a {:?} sample on `{service}`, which carries {:?}",
+                    ServiceKind::of_sample(sample),
+                    kind
+                ),
             });
         }
         channels::encode(sample, &mut self.json);
@@ -182,7 +186,7 @@ impl<R: Read + Seek> SampleReader<R> {
     }
 
     /// The summary of a properly closed file.
-    pub fn summary(&self) -> Option<&Summary> {
+    pub fn summary(&self) -> Option<&SummarySection> {
         self.mcap.summary()
     }
 

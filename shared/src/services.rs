@@ -15,7 +15,7 @@
 //! publishers wake subscribers.
 
 use crate::reflect::Reflect;
-use crate::samples::{GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
+use crate::samples::{AnySample, GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
 
 /// Environment variable with the iceoryx2 resource prefix (default [`DEFAULT_PREFIX`]).
 /// Tests set a unique value so that parallel tests and a running demo never meet.
@@ -69,6 +69,19 @@ pub enum ServiceKind {
 }
 
 impl ServiceKind {
+    /// The kind of service that carries `sample`.
+    pub fn of_sample(sample: &AnySample) -> Self {
+        match sample {
+            AnySample::GnssFix(_) => Self::GnssFix,
+            AnySample::PpsEdge(_) => Self::PpsEdge,
+            AnySample::Imu(_) => Self::ImuSample,
+            AnySample::Time(_) => Self::TimeState,
+            AnySample::Nav(_) => Self::NavState,
+            AnySample::Health(_) => Self::Health,
+            AnySample::Truth(_) => Self::SimTruth,
+        }
+    }
+
     /// All kinds.
     pub const ALL: [ServiceKind; 7] = [
         Self::GnssFix,

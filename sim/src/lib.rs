@@ -20,6 +20,7 @@ pub mod gnss_receiver;
 pub mod imu_errors;
 pub mod imu_stream;
 pub mod inverse_mechanization;
+pub mod jet;
 pub mod nmea;
 pub mod oscillator;
 pub mod pps;

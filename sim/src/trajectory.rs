@@ -66,8 +66,7 @@ pub fn smooth_step(x: f64) -> [f64; 3] {
     [x - s2 / TAU, 1.0 - c2, TAU * s2]
 }
 
-/// A scalar and its first two time derivatives.
-pub type Jet = [f64; 3];
+pub use super::jet::Jet;
 
 /// One segment's closed-form motion, all angles in rad.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -81,9 +81,9 @@
 
 use std::f64::consts::TAU;
 
+use super::jet::Jet;
 use super::rng::Rng;
 use super::scenario::VibrationConfig;
-use super::trajectory::Jet;
 
 /// Stream tag of the vibration phases (see [`super::rng::streams`]; kept apart from the
 /// sensor-noise streams so that switching the vibration off does not change the noise).

@@ -21,7 +21,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use navsync_drivers::gnss::{Decoder, GnssDecoder, Protocol};
 use navsync_drivers::imu::output::{Extras, SampleOutput};
-use navsync_drivers::imu::sample_checks::{Candidate, DeviceClock, Limits, Sequence};
+use navsync_drivers::imu::sample_checks::{Candidate, CounterReading, Limits, Sequence};
 use navsync_drivers::imu::xsens_frame::{NS_PER_SAMPLE_TIME_FINE_TICK, XbusFramer, decode_mtdata2};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{GnssFix, ImuSample, StampSource};
@@ -123,7 +123,7 @@ fn xsens_bytes_to_published_sample_allocate_nothing() {
                 let stf = m.sample_time_fine.expect("SampleTimeFine");
                 let c = Candidate {
                     host_ns: msg.host_ns,
-                    device: Some(DeviceClock {
+                    device: Some(CounterReading {
                         ticks: u64::from(stf),
                         modulus: 1 << 32,
                         ns_per_tick: NS_PER_SAMPLE_TIME_FINE_TICK,

@@ -13,7 +13,7 @@
 
 use std::path::{Path, PathBuf};
 
-use navsync_estimator::evaluation::trajectory::{EvalReport, TrajPoint, Trajectory, errors, statistics};
+use navsync_estimator::evaluation::track::{EvalReport, Track, TrackPoint, errors, statistics};
 use navsync_recording::SampleReader;
 use navsync_shared::samples::{AnySample, NavStatus};
 use navsync_shared::time::gps_ns_from_utc_ns;
@@ -49,7 +49,7 @@ fn is_mcap(path: &Path) -> Result<bool, EvalError> {
 
 /// Which samples of a recording make the trajectory.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Role {
+pub enum TrackRole {
     /// `SimTruth`, else `NavState`.
     Truth,
     /// `NavState` (not while aligning).
@@ -57,14 +57,14 @@ pub enum Role {
 }
 
 /// Reads a trajectory from a KF-GINS file or a recording.
-pub fn read_trajectory(path: &Path, role: Role) -> Result<Trajectory, EvalError> {
+pub fn read_trajectory(path: &Path, role: TrackRole) -> Result<Track, EvalError> {
     let source = path.display().to_string();
     if !is_mcap(path)? {
         let recs = kf_gins::read_nav(path)?;
         let week_known = recs.iter().all(|r| r.week > 0);
         let points = recs
             .iter()
-            .map(|r| TrajPoint {
+            .map(|r| TrackPoint {
                 t_s: if week_known {
                     r.week as f64 * 604_800.0 + r.sow
                 } else {
@@ -77,7 +77,7 @@ pub fn read_trajectory(path: &Path, role: Role) -> Result<Trajectory, EvalError>
                 rpy_deg: r.rpy_deg,
             })
             .collect();
-        return Ok(Trajectory {
+        return Ok(Track {
             points,
             week_known,
             source,
@@ -88,7 +88,7 @@ pub fn read_trajectory(path: &Path, role: Role) -> Result<Trajectory, EvalError>
     let t_of = |utc_ns: i64| gps_ns_from_utc_ns(utc_ns) as f64 * 1e-9;
     while let Some(s) = reader.next_sample()? {
         match s.sample {
-            AnySample::Truth(t) if role == Role::Truth && t.utc_ns != i64::MIN => truth.push(TrajPoint {
+            AnySample::Truth(t) if role == TrackRole::Truth && t.utc_ns != i64::MIN => truth.push(TrackPoint {
                 t_s: t_of(t.utc_ns),
                 lat_deg: t.lat_deg,
                 lon_deg: t.lon_deg,
@@ -96,24 +96,26 @@ pub fn read_trajectory(path: &Path, role: Role) -> Result<Trajectory, EvalError>
                 vel_ned_mps: t.vel_ned_mps,
                 rpy_deg: t.rpy_rad.map(f64::to_degrees),
             }),
-            AnySample::Nav(n) if n.utc_ns != i64::MIN && n.status != NavStatus::Aligning as u8 => nav.push(TrajPoint {
-                t_s: t_of(n.utc_ns),
-                lat_deg: n.lat_deg,
-                lon_deg: n.lon_deg,
-                height_m: n.height_m,
-                vel_ned_mps: n.vel_ned_mps,
-                rpy_deg: n.rpy_rad.map(f64::to_degrees),
-            }),
+            AnySample::Nav(n) if n.utc_ns != i64::MIN && n.status != NavStatus::Aligning as u8 => {
+                nav.push(TrackPoint {
+                    t_s: t_of(n.utc_ns),
+                    lat_deg: n.lat_deg,
+                    lon_deg: n.lon_deg,
+                    height_m: n.height_m,
+                    vel_ned_mps: n.vel_ned_mps,
+                    rpy_deg: n.rpy_rad.map(f64::to_degrees),
+                })
+            }
             _ => {}
         }
     }
-    let mut points = if role == Role::Truth && !truth.is_empty() {
+    let mut points = if role == TrackRole::Truth && !truth.is_empty() {
         truth
     } else {
         nav
     };
     points.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-    Ok(Trajectory {
+    Ok(Track {
         points,
         week_known: true,
         source,
@@ -140,8 +142,8 @@ pub struct EvalArgs {
 
 /// Runs `navsync eval`; prints the table (or JSON) and returns the report.
 pub fn run(args: &EvalArgs) -> Result<EvalReport, EvalError> {
-    let truth = read_trajectory(&args.truth, Role::Truth)?;
-    let mut solution = read_trajectory(&args.solution, Role::Solution)?;
+    let truth = read_trajectory(&args.truth, TrackRole::Truth)?;
+    let mut solution = read_trajectory(&args.solution, TrackRole::Solution)?;
     if truth.points.len() < 2 {
         return Err(EvalError::Empty(format!(
             "{}: fewer than two truth points",

@@ -20,7 +20,7 @@ use navsync_shared::earth;
 use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;
 
-use navsync_estimator::evaluation::trajectory::{self, TrajPoint, Trajectory};
+use navsync_estimator::evaluation::track::{self, Track, TrackPoint};
 use navsync_estimator::offline::{self, Output};
 use navsync_estimator::settings::Settings;
 
@@ -640,11 +640,11 @@ fn render(args: &ReportArgs, d: &Data) -> String {
 
     // Errors against the truth.
     if !d.truth.is_empty() && !aligned.is_empty() {
-        let tr = Trajectory {
+        let tr = Track {
             points: d
                 .truth
                 .iter()
-                .map(|t| TrajPoint {
+                .map(|t| TrackPoint {
                     t_s: t_of(d, t.host_ns),
                     lat_deg: t.lat_deg,
                     lon_deg: t.lon_deg,
@@ -656,10 +656,10 @@ fn render(args: &ReportArgs, d: &Data) -> String {
             week_known: true,
             source: "truth".into(),
         };
-        let so = Trajectory {
+        let so = Track {
             points: aligned
                 .iter()
-                .map(|n| TrajPoint {
+                .map(|n| TrackPoint {
                     t_s: t_of(d, n.host_ns),
                     lat_deg: n.lat_deg,
                     lon_deg: n.lon_deg,
@@ -671,8 +671,8 @@ fn render(args: &ReportArgs, d: &Data) -> String {
             week_known: true,
             source: "solution".into(),
         };
-        let errs = trajectory::errors(&tr, &so, 2.0);
-        let stats = trajectory::statistics("truth", "solution", &errs, so.points.len());
+        let errs = track::errors(&tr, &so, 2.0);
+        let stats = track::statistics("truth", "solution", &errs, so.points.len());
         summary.push((
             "horizontal position error".into(),
             format!(

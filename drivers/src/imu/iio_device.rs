@@ -23,7 +23,7 @@ use std::io::ErrorKind;
 use std::path::{Path, PathBuf};
 
 use super::iio_record::{Conversion, MissingChannel, RecordDecoder, layout};
-use super::iio_scan::{Role, ScanElement, ScanType, ScanTypeError};
+use super::iio_scan::{ChannelRole, ScanElement, ScanType, ScanTypeError};
 
 /// Default sysfs directory of IIO devices.
 pub const SYSFS_ROOT: &str = "/sys/bus/iio/devices";
@@ -246,7 +246,7 @@ pub fn configure(dir: &Path, dev_root: &Path, setup: &IioSetup) -> Result<IioDev
     let mut enabled = Vec::new();
     for n in scan_names(&scan_dir)? {
         let en = scan_dir.join(format!("in_{n}_en"));
-        let want = Role::of(&n).is_some();
+        let want = ChannelRole::of(&n).is_some();
         // Some channels cannot be switched (always on, or not allowed together); the
         // read-back decides what the records hold.
         let _ = write_attr(&en, if want { "1" } else { "0" });
@@ -300,7 +300,7 @@ pub fn configure(dir: &Path, dev_root: &Path, setup: &IioSetup) -> Result<IioDev
         };
         let (scale, offset) = match role {
             // Temperatures are milli-°C after scaling; a missing scale means 1 m°C per LSB.
-            Role::Temp => (number("scale", Some(1.0)) * 1e-3, number("offset", Some(0.0))),
+            ChannelRole::Temp => (number("scale", Some(1.0)) * 1e-3, number("offset", Some(0.0))),
             _ => (number("scale", None), number("offset", Some(0.0))),
         };
         Conversion { scale, offset }

@@ -38,7 +38,7 @@ use tracing::{info, warn};
 use super::axes::AxisMap;
 use super::iio_device::{self, IioDevice, IioError, IioSetup};
 use super::iio_pair::{Half, Pairer};
-use super::iio_record::ImuRecord;
+use super::iio_record::IioSample;
 use super::output::{Extras, SampleOutput};
 use super::sample_checks::{Candidate, Sequence};
 
@@ -346,7 +346,7 @@ fn capture(
                 c.short_reads += 1;
             }
             for k in 0..whole {
-                let r: ImuRecord = s.dev.decoder.decode(&s.buf[k * rec..(k + 1) * rec]);
+                let r: IioSample = s.dev.decoder.decode(&s.buf[k * rec..(k + 1) * rec]);
                 c.records += 1;
                 let (host_ns, source) = match r.timestamp_ns {
                     // A kernel stamp is taken before the read returns, and a record does not

@@ -12,7 +12,7 @@
 //! for `temp` (kernel `sysfs-bus-iio`); the timestamp is ns of the clock chosen in
 //! `current_timestamp_clock`.
 
-use super::iio_scan::{Endian, Repr, Role, ScanElement, ScanType};
+use super::iio_scan::{ChannelRole, Endian, Repr, ScanElement, ScanType};
 
 /// Where one channel is in a record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -158,7 +158,7 @@ impl Conversion {
 
 /// A record converted to physical values, in the device's axes.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ImuRecord {
+pub struct IioSample {
     /// Angular rate, rad/s (`None` when the device has no gyroscope channels).
     pub gyro_rps: Option<[f64; 3]>,
     /// Acceleration, m/s² (`None` when the device has no accelerometer channels).
@@ -194,9 +194,9 @@ impl RecordDecoder {
     /// any of its axes is in the scan, and then all three must be; at least one triad must be.
     pub fn new(
         layout: &RecordLayout,
-        mut conversion: impl FnMut(&str, Role) -> Conversion,
+        mut conversion: impl FnMut(&str, ChannelRole) -> Conversion,
     ) -> Result<Self, MissingChannel> {
-        let mut triad = |kind: &str, role: fn(usize) -> Role| -> Result<Option<Triad>, MissingChannel> {
+        let mut triad = |kind: &str, role: fn(usize) -> ChannelRole| -> Result<Option<Triad>, MissingChannel> {
             let names = ["x", "y", "z"].map(|a| format!("{kind}_{a}"));
             if names.iter().all(|n| layout.slot(n).is_none()) {
                 return Ok(None);
@@ -208,16 +208,16 @@ impl RecordDecoder {
             }
             Ok(Some([out[0], out[1], out[2]]))
         };
-        let gyro = triad("anglvel", Role::Gyro)?;
-        let accel = triad("accel", Role::Accel)?;
+        let gyro = triad("anglvel", ChannelRole::Gyro)?;
+        let accel = triad("accel", ChannelRole::Accel)?;
         if gyro.is_none() && accel.is_none() {
             return Err(MissingChannel("anglvel_x".into()));
         }
         let temp = layout
             .slots
             .iter()
-            .find(|(n, _)| Role::of(n) == Some(Role::Temp))
-            .map(|(n, s)| (*s, conversion(n, Role::Temp)));
+            .find(|(n, _)| ChannelRole::of(n) == Some(ChannelRole::Temp))
+            .map(|(n, s)| (*s, conversion(n, ChannelRole::Temp)));
         Ok(Self {
             record_bytes: layout.record_bytes,
             gyro,
@@ -248,7 +248,7 @@ impl RecordDecoder {
     }
 
     /// Converts one record (exactly [`record_bytes`](Self::record_bytes) long).
-    pub fn decode(&self, record: &[u8]) -> ImuRecord {
+    pub fn decode(&self, record: &[u8]) -> IioSample {
         let mut full = false;
         let mut triad = |t: &Triad| {
             t.map(|(slot, conv)| {
@@ -270,7 +270,7 @@ impl RecordDecoder {
                 Raw::Int(v) => Some(v),
                 Raw::Float(_) => None,
             });
-        ImuRecord {
+        IioSample {
             gyro_rps,
             accel_mps2,
             temperature_c,
@@ -366,11 +366,11 @@ mod tests {
         ]);
         assert_eq!(l.record_bytes, 32);
         let d = RecordDecoder::new(&l, |_, role| match role {
-            Role::Gyro(_) => Conversion {
+            ChannelRole::Gyro(_) => Conversion {
                 scale: 1e-6,
                 offset: 0.0,
             },
-            Role::Accel(_) => Conversion {
+            ChannelRole::Accel(_) => Conversion {
                 scale: 0.01,
                 offset: 0.0,
             },

@@ -145,7 +145,7 @@ pub struct ScanElement {
 
 /// What a channel measures, as far as an IMU driver is concerned.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Role {
+pub enum ChannelRole {
     /// Angular rate, axis 0..2 (x, y, z).
     Gyro(usize),
     /// Acceleration, axis 0..2.
@@ -156,7 +156,7 @@ pub enum Role {
     Timestamp,
 }
 
-impl Role {
+impl ChannelRole {
     /// The role of a channel name, `None` for channels the driver does not use (magnetometer,
     /// pressure, delta angles, …).
     pub fn of(name: &str) -> Option<Self> {
@@ -167,16 +167,16 @@ impl Role {
             _ => None,
         };
         if let Some(a) = name.strip_prefix("anglvel_") {
-            return axis(a).map(Role::Gyro);
+            return axis(a).map(ChannelRole::Gyro);
         }
         if let Some(a) = name.strip_prefix("accel_") {
-            return axis(a).map(Role::Accel);
+            return axis(a).map(ChannelRole::Accel);
         }
         if name == "timestamp" {
-            return Some(Role::Timestamp);
+            return Some(ChannelRole::Timestamp);
         }
         match name.strip_prefix("temp") {
-            Some(rest) if rest.chars().all(|c| c.is_ascii_digit()) => Some(Role::Temp),
+            Some(rest) if rest.chars().all(|c| c.is_ascii_digit()) => Some(ChannelRole::Temp),
             _ => None,
         }
     }
@@ -184,10 +184,10 @@ impl Role {
     /// The channel type prefix whose shared `in_<type>_scale` applies (`anglvel`, `accel`, `temp`).
     pub fn type_name(self) -> &'static str {
         match self {
-            Role::Gyro(_) => "anglvel",
-            Role::Accel(_) => "accel",
-            Role::Temp => "temp",
-            Role::Timestamp => "timestamp",
+            ChannelRole::Gyro(_) => "anglvel",
+            ChannelRole::Accel(_) => "accel",
+            ChannelRole::Temp => "temp",
+            ChannelRole::Timestamp => "timestamp",
         }
     }
 }
@@ -243,13 +243,13 @@ mod tests {
 
     #[test]
     fn roles() {
-        assert_eq!(Role::of("anglvel_z"), Some(Role::Gyro(2)));
-        assert_eq!(Role::of("accel_x"), Some(Role::Accel(0)));
-        assert_eq!(Role::of("temp"), Some(Role::Temp));
-        assert_eq!(Role::of("temp0"), Some(Role::Temp));
-        assert_eq!(Role::of("timestamp"), Some(Role::Timestamp));
-        assert_eq!(Role::of("magn_x"), None);
-        assert_eq!(Role::of("anglvel_w"), None);
-        assert_eq!(Role::of("deltaangl_x"), None);
+        assert_eq!(ChannelRole::of("anglvel_z"), Some(ChannelRole::Gyro(2)));
+        assert_eq!(ChannelRole::of("accel_x"), Some(ChannelRole::Accel(0)));
+        assert_eq!(ChannelRole::of("temp"), Some(ChannelRole::Temp));
+        assert_eq!(ChannelRole::of("temp0"), Some(ChannelRole::Temp));
+        assert_eq!(ChannelRole::of("timestamp"), Some(ChannelRole::Timestamp));
+        assert_eq!(ChannelRole::of("magn_x"), None);
+        assert_eq!(ChannelRole::of("anglvel_w"), None);
+        assert_eq!(ChannelRole::of("deltaangl_x"), None);
     }
 }

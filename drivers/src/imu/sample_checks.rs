@@ -45,7 +45,7 @@ pub enum Sequence {
 
 /// A device clock reading (a counter that wraps at `modulus`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct DeviceClock {
+pub struct CounterReading {
     /// Counter reading, ticks.
     pub ticks: u64,
     /// Counter period, ticks (2³² for SampleTimeFine).
@@ -60,7 +60,7 @@ pub struct Candidate {
     /// Host time stamp, ns (`CLOCK_MONOTONIC`).
     pub host_ns: i64,
     /// The device's clock at the sample, if it has one.
-    pub device: Option<DeviceClock>,
+    pub device: Option<CounterReading>,
     /// How the sample is numbered.
     pub sequence: Sequence,
     /// Angular rate, rad/s (already in the published axes).
@@ -330,7 +330,7 @@ mod tests {
     fn xsens(host_ns: i64, pc: u64, stf: u64) -> Candidate {
         Candidate {
             host_ns,
-            device: Some(DeviceClock {
+            device: Some(CounterReading {
                 ticks: stf,
                 modulus: 1 << 32,
                 ns_per_tick: 100_000,

@@ -52,7 +52,7 @@ use tracing::{info, warn};
 
 use super::axes::AxisMap;
 use super::output::{Extras, SampleOutput};
-use super::sample_checks::{Candidate, DeviceClock, RESYNC_AFTER, Sequence};
+use super::sample_checks::{Candidate, CounterReading, RESYNC_AFTER, Sequence};
 use super::xsens_frame::{
     MID_MTDATA2, Message, MtData2, NS_PER_SAMPLE_TIME_FINE_TICK, STATUS_CLIP_ACC, STATUS_CLIP_GYR, XbusFramer,
     decode_mtdata2,
@@ -201,7 +201,7 @@ impl Decoder {
             .any(|b| status & b != 0);
         let candidate = Candidate {
             host_ns,
-            device: m.sample_time_fine.map(|t| DeviceClock {
+            device: m.sample_time_fine.map(|t| CounterReading {
                 ticks: u64::from(t),
                 modulus: 1 << 32,
                 ns_per_tick: NS_PER_SAMPLE_TIME_FINE_TICK,

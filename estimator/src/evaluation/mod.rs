@@ -1,14 +1,14 @@
 //! Accuracy of a navigation run: against the simulated truth while it runs (this module: the
 //! numbers of the accuracy report of `navsync replay --estimate --summary-json`, `sim --fast
 //! --estimate` and the end of `navsync demo`), and one trajectory against another afterwards
-//! ([`trajectory`]: `navsync eval`, the report's error plots). One set of angle helpers.
+//! ([`track`]: `navsync eval`, the report's error plots). One set of angle helpers.
 //!
 //! Each `NavState` is compared with the truth interpolated linearly to its host time (truth
 //! arrives at 100–200 Hz; the interpolation error is below 0.1 mm and 1e−5 m/s for car
 //! dynamics). Only states after alignment count. Position errors are NED metres through ECEF
 //! ([`earth::ned_between`]); attitude errors are differences of roll, pitch and yaw wrapped to ±180°.
 
-pub mod trajectory;
+pub mod track;
 
 use std::collections::{BTreeMap, VecDeque};
 

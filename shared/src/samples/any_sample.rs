@@ -1,9 +1,8 @@
 //! Any navsync sample, tagged with its type: what a recording holds and a replay publishes.
 
 use super::{GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
-use crate::services::ServiceKind;
 
-/// A sample of any navsync type. Variants differ in size (a `Health` report is ~1.3 kB); the
+/// A sample of any navsync type. Variants differ in size (a `Health` report is ~2.4 kB); the
 /// enum stays unboxed because boxing would allocate per sample on replay paths.
 #[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -25,19 +24,6 @@ pub enum AnySample {
 }
 
 impl AnySample {
-    /// The kind of service that carries it.
-    pub fn kind(&self) -> ServiceKind {
-        match self {
-            Self::GnssFix(_) => ServiceKind::GnssFix,
-            Self::PpsEdge(_) => ServiceKind::PpsEdge,
-            Self::Imu(_) => ServiceKind::ImuSample,
-            Self::Time(_) => ServiceKind::TimeState,
-            Self::Nav(_) => ServiceKind::NavState,
-            Self::Health(_) => ServiceKind::Health,
-            Self::Truth(_) => ServiceKind::SimTruth,
-        }
-    }
-
     /// The host time the sample is stamped with, ns (`CLOCK_MONOTONIC`).
     pub fn host_ns(&self) -> i64 {
         match self {

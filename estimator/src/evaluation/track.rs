@@ -18,7 +18,7 @@ const WEEK_NS: i64 = 604_800 * NS_PER_S;
 
 /// A point of a trajectory on GPS time.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TrajPoint {
+pub struct TrackPoint {
     /// GPS time, s (since 1980-01-06; or seconds of week when the week is unknown).
     pub t_s: f64,
     /// Latitude, deg.
@@ -33,18 +33,19 @@ pub struct TrajPoint {
     pub rpy_deg: [f64; 3],
 }
 
-/// A trajectory and whether its times carry the week.
+/// A trajectory as sampled points (a recording, a KF-GINS file) and whether their times carry
+/// the week.
 #[derive(Debug, Clone, Default)]
-pub struct Trajectory {
+pub struct Track {
     /// The points in time order.
-    pub points: Vec<TrajPoint>,
+    pub points: Vec<TrackPoint>,
     /// False when the times are seconds of week only.
     pub week_known: bool,
     /// Where it came from (for messages).
     pub source: String,
 }
 
-impl Trajectory {
+impl Track {
     /// Drops the weeks (seconds of week only).
     pub fn convert_to_sow(&mut self) {
         if self.week_known {
@@ -72,7 +73,7 @@ pub struct ErrorPoint {
 
 /// The solution's errors against the truth at every solution point inside the truth's span
 /// (truth gaps over `max_gap_s` are not bridged).
-pub fn errors(truth: &Trajectory, solution: &Trajectory, max_gap_s: f64) -> Vec<ErrorPoint> {
+pub fn errors(truth: &Track, solution: &Track, max_gap_s: f64) -> Vec<ErrorPoint> {
     let (mut truth, mut solution) = (truth.clone(), solution.clone());
     if !(truth.week_known && solution.week_known) {
         truth.convert_to_sow();
@@ -242,12 +243,12 @@ impl EvalReport {
 mod tests {
     use super::*;
 
-    fn traj(offset: [f64; 3], week_known: bool) -> Trajectory {
+    fn traj(offset: [f64; 3], week_known: bool) -> Track {
         let (rm, rn) = earth::radii(30f64.to_radians());
         let points = (0..100)
             .map(|i| {
                 let t = i as f64 * 0.1;
-                TrajPoint {
+                TrackPoint {
                     t_s: if week_known { 2200.0 * 604_800.0 } else { 0.0 } + 1000.0 + t,
                     lat_deg: 30.0 + (10.0 * t + offset[0]).to_degrees() / rm,
                     lon_deg: 114.0 + offset[1].to_degrees() / (rn * 30f64.to_radians().cos()),
@@ -257,7 +258,7 @@ mod tests {
                 }
             })
             .collect();
-        Trajectory {
+        Track {
             points,
             week_known,
             source: String::new(),
