@@ -104,6 +104,9 @@ pub struct Settings {
     /// Host oscillator Allan deviations at 1 s (white FM, random-walk FM); default a TCXO
     /// ([`OscillatorNoise::default`]).
     pub oscillator_adev_1s: Option<(f64, f64)>,
+    /// Zero-velocity and zero-angular-rate updates while the vehicle stands still
+    /// ([`crate::nav::measurements::zupt`]); default on.
+    pub zupt: bool,
     /// Prior of Δ under software sync and its 1-sigma, s (default 0.5 ± 0.5 s: any receiver
     /// latency below the fusion horizon).
     pub software_delay_prior_s: (f64, f64),
@@ -129,6 +132,7 @@ impl Default for Settings {
             imu_mountings: BTreeMap::new(),
             gnss_lever_arm_m: [0.0; 3],
             oscillator_adev_1s: None,
+            zupt: true,
             software_delay_prior_s: (0.5, 0.5),
             hardware_delay_prior_s: (0.0, 0.02),
             array: ArrayTuning::default(),
@@ -208,6 +212,11 @@ impl Settings {
     pub fn pipeline_config(&self) -> PipelineConfig {
         let mut noise = ProcessNoise::from_spec(&self.imu_model.spec());
         noise.estimate_delay = self.estimate_delay;
+        let mut nav = NavConfig {
+            lever_arm_b_m: Vector3::from(self.gnss_lever_arm_m),
+            ..NavConfig::with_noise(noise)
+        };
+        nav.measurements.zupt.enabled = self.zupt;
         PipelineConfig {
             time: TimeSyncConfig {
                 software_sync: self.software_sync,
@@ -216,10 +225,7 @@ impl Settings {
                     .map_or_else(Default::default, |(w, r)| OscillatorNoise::from_allan(w, r)),
                 ..Default::default()
             },
-            nav: NavConfig {
-                lever_arm_b_m: Vector3::from(self.gnss_lever_arm_m),
-                ..NavConfig::with_noise(noise)
-            },
+            nav,
             gnss: GnssAccuracy {
                 vel_std_mps: self.gnss_vel_std_mps,
                 ..GnssAccuracy::default()

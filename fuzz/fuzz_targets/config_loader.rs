@@ -1,6 +1,6 @@
-//! The configuration loader: TOML text → `Loaded::parse` (TOML, serde, the source map that
-//! locates errors, the semantic checks), then what the roles do with an accepted file (IMU
-//! source and axis strings through the drivers' parsers, errors located with `error_at`).
+//! The configuration loader: TOML text → `Loaded::parse` (TOML, serde into the roles' typed
+//! values — the drivers' parsers run during deserialisation —, the source map that locates
+//! errors, the semantic checks), then what the roles do with an accepted file.
 //!
 //! Checks: no panic; an error's line/column lies inside the text; an accepted file satisfies
 //! every rule `Loaded::check` documents (ids, rates, ranges, finite lever arms and angles,
@@ -10,9 +10,9 @@
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
-use navsync_drivers::imu::ImuSource;
-use navsync_drivers::imu::axes::AxisMap;
-use navsync_shared::config::{ConfigError, Loaded, SourceMap, valid_id};
+use navsync::config::estimator::EstimatorFlags;
+use navsync::config::{ConfigError, Loaded, valid_id};
+use navsync_shared::source_map::SourceMap;
 
 fn check_location(e: &ConfigError, text: &str) {
     let lines = text.split('\n').count();
@@ -25,14 +25,14 @@ fn check_location(e: &ConfigError, text: &str) {
 
 fn check_accepted(l: &Loaded, text: &str) {
     let c = &l.config;
-    for id in c.gps.keys().chain(c.pps.keys()).chain(c.imu.keys()) {
+    for id in c.gnss.keys().chain(c.pps.keys()).chain(c.imu.keys()) {
         assert!(valid_id(id), "{id:?}");
     }
-    for g in c.gps.values() {
+    for g in c.gnss.values() {
         assert!(!g.port.is_empty());
         assert!(g.lever_arm_m.iter().all(|x| x.is_finite()));
     }
-    for (id, i) in &c.imu {
+    for i in c.imu.values() {
         if let Some(r) = i.rate_hz {
             assert!(r.is_finite() && r > 1.0 && r <= 100_000.0, "rate {r}");
         }
@@ -47,13 +47,16 @@ fn check_accepted(l: &Loaded, text: &str) {
             let norm: f64 = row.iter().map(|x| x * x).sum();
             assert!((norm - 1.0).abs() < 1e-9, "row {r} of {m:?}");
         }
-        // What `navsync imu` does with the strings; errors are reported at the field.
-        if let Err(msg) = i.source.parse::<ImuSource>() {
-            check_location(&l.error_at(&format!("imu.{id}.source"), msg), text);
+        // The typed values print back as text the parsers take again.
+        assert_eq!(i.source.to_string().parse().ok(), Some(i.source.clone()));
+        if let Some(a) = i.axes {
+            assert_eq!(a.to_string().parse().ok(), Some(a));
         }
-        if let Some(Err(msg)) = i.axes.as_deref().map(str::parse::<AxisMap>) {
-            check_location(&l.error_at(&format!("imu.{id}.axes"), msg), text);
-        }
+    }
+    // What `navsync estimator` and the offline tools build from an accepted file.
+    if let Ok(s) = EstimatorFlags::default().settings(l) {
+        assert!(!s.imu_ids.is_empty());
+        let _ = s.pipeline_config();
     }
     if let Some(imus) = &c.estimator.imus {
         assert!((1..=8).contains(&imus.len()));

@@ -179,19 +179,19 @@ class GnssFix(ctypes.Structure):
         ("vdop", ctypes.c_double),
         # Position dilution of precision, NaN when not known.
         ("pdop", ctypes.c_double),
-        # 1-sigma latitude error from GST, m, NaN when not known.
+        # 1-sigma latitude error as the receiver reports it (NMEA GST), m, NaN when not known.
         ("std_lat_m", ctypes.c_double),
-        # 1-sigma longitude error from GST, m, NaN when not known.
+        # 1-sigma longitude error as the receiver reports it (NMEA GST), m, NaN when not known.
         ("std_lon_m", ctypes.c_double),
-        # 1-sigma altitude error from GST, m, NaN when not known.
+        # 1-sigma altitude error as the receiver reports it (NMEA GST), m, NaN when not known.
         ("std_alt_m", ctypes.c_double),
-        # Bit set of the sentences merged into this epoch (bit order: GGA, RMC, GNS, VTG, GSA, GST, ZDA, GLL).
+        # The set of source messages merged into this epoch, one bit per message type of the receiver's protocol (NMEA: the `SENTENCE_*` bits, GGA, RMC, GNS, VTG, GSA, GST, ZDA, GLL in bit order).
         ("sentences", ctypes.c_uint32),
         # Satellites used in the solution, `u16::MAX` when not known.
         ("sats_used", ctypes.c_uint16),
         # Fix mode: 0 unknown, 1 no fix, 2 2D, 3 3D (as gpsd's TPV `mode`).
         ("mode", ctypes.c_uint8),
-        # GGA fix quality (0 invalid, 1 GPS, 2 DGPS, 4 RTK fixed, 5 RTK float, 6 dead reckoning), 255 unknown.
+        # Fix quality in NMEA GGA's terms, whatever the protocol (0 invalid, 1 GPS, 2 DGPS, 4 RTK fixed, 5 RTK float, 6 dead reckoning), 255 unknown.
         ("quality", ctypes.c_uint8),
     ]
 

@@ -61,6 +61,9 @@ pub struct ModelFlags {
     /// [default: estimated].
     #[arg(long)]
     pub no_imu_offsets: bool,
+    /// No zero-velocity updates while standing still [default: [estimator].zupt, else on].
+    #[arg(long)]
+    pub no_zupt: bool,
     /// 1-sigma of the receiver's velocity per axis, m/s [default: [estimator].gnss_vel_std_mps,
     /// else 0.1].
     #[arg(long = "gnss-vel-std")]
@@ -110,6 +113,9 @@ impl ModelFlags {
         if self.no_imu_offsets {
             s.estimate_imu_offsets = false;
         }
+        if self.no_zupt {
+            s.zupt = false;
+        }
         if let Some(v) = self.gnss_vel_std_mps {
             s.gnss_vel_std_mps = v;
         }
@@ -143,6 +149,9 @@ pub fn apply_file(s: &mut Settings, cfg: &Loaded) -> Result<(), ConfigError> {
     }
     if let Some(v) = e.estimate_imu_offsets {
         s.estimate_imu_offsets = v;
+    }
+    if let Some(v) = e.zupt {
+        s.zupt = v;
     }
     for (id, i) in &c.imu {
         s.imu_mountings.insert(

@@ -210,6 +210,8 @@ pub struct EstimatorConfig {
     pub gnss_vel_std_mps: Option<f64>,
     /// Estimate the IMUs' time offsets (default true).
     pub estimate_imu_offsets: Option<bool>,
+    /// Zero-velocity updates while the vehicle stands still (default true).
+    pub zupt: Option<bool>,
 }
 
 /// `[outputs.ntpshm]`.

@@ -25,8 +25,8 @@
 //!   tick. It is exact in the device's time scale but that scale drifts against the host
 //!   clock (crystal tolerance, tens of ppm, and temperature).
 //!
-//! The estimator maps device time to GNSS time with its device clock model
-//! (`daemon/src/estimator/device_clock.rs`): a two-state Kalman filter of the device clock's
+//! The estimator's device clock model (`navsync_estimator::time::device_clock`) is made to map
+//! device time to GNSS time: a two-state Kalman filter of the device clock's
 //! offset and fractional frequency against GNSS time (the same model as the host clock's,
 //! process noise from the device oscillator's Allan deviation), fed with (device time,
 //! receipt stamp mapped through the host → GNSS `TimeState`) pairs whose noise is the

@@ -12,10 +12,18 @@ pub const CHI2_999: [f64; 6] = [10.83, 13.82, 16.27, 18.47, 20.52, 22.46];
 /// Outcome of a measurement update.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Update {
-    /// Fused; the error-state estimate to feed back, and the normalised innovation squared.
-    Accepted { dx: StateVec, nis: f64 },
-    /// Gated out; the normalised innovation squared that failed the gate.
-    Rejected { nis: f64 },
+    /// Fused.
+    Accepted {
+        /// The error-state estimate to feed back.
+        dx: StateVec,
+        /// The normalised innovation squared.
+        nis: f64,
+    },
+    /// Gated out.
+    Rejected {
+        /// The normalised innovation squared that failed the gate.
+        nis: f64,
+    },
 }
 
 /// Covariance of the error state.

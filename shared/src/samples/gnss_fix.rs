@@ -1,11 +1,13 @@
-//! One GNSS epoch, assembled from the NMEA sentences that carry its time tag.
+//! One GNSS epoch: a receiver's navigation solution for one measurement instant, whatever its
+//! protocol (the GNSS driver's decoder merges the messages that carry the epoch's time tag).
 
 use iceoryx2::prelude::ZeroCopySend;
 
 use super::Stamp;
 
 crate::sample_struct! {
-    /// A GNSS receiver's solution for one epoch (all sentences of one time tag merged).
+    /// A GNSS receiver's solution for one epoch (all messages of one time tag merged; for
+    /// NMEA the sentences of one time tag).
     ///
     /// `stamp.host_ns` is the host time at which the epoch's first byte was received
     /// (`StampSource::Receipt`); the epoch itself happened earlier, at `utc_ns`.
@@ -43,19 +45,22 @@ crate::sample_struct! {
         pub vdop: f64,
         /// Position dilution of precision, NaN when not known.
         pub pdop: f64,
-        /// 1-sigma latitude error from GST, m, NaN when not known.
+        /// 1-sigma latitude error as the receiver reports it (NMEA GST), m, NaN when not known.
         pub std_lat_m: f64,
-        /// 1-sigma longitude error from GST, m, NaN when not known.
+        /// 1-sigma longitude error as the receiver reports it (NMEA GST), m, NaN when not known.
         pub std_lon_m: f64,
-        /// 1-sigma altitude error from GST, m, NaN when not known.
+        /// 1-sigma altitude error as the receiver reports it (NMEA GST), m, NaN when not known.
         pub std_alt_m: f64,
-        /// Bit set of the sentences merged into this epoch (bit order: GGA, RMC, GNS, VTG, GSA, GST, ZDA, GLL).
+        /// The set of source messages merged into this epoch, one bit per message type of the
+        /// receiver's protocol (NMEA: the `SENTENCE_*` bits, GGA, RMC, GNS, VTG, GSA, GST, ZDA,
+        /// GLL in bit order).
         pub sentences: u32,
         /// Satellites used in the solution, `u16::MAX` when not known.
         pub sats_used: u16,
         /// Fix mode: 0 unknown, 1 no fix, 2 2D, 3 3D (as gpsd's TPV `mode`).
         pub mode: u8,
-        /// GGA fix quality (0 invalid, 1 GPS, 2 DGPS, 4 RTK fixed, 5 RTK float, 6 dead reckoning), 255 unknown.
+        /// Fix quality in NMEA GGA's terms, whatever the protocol (0 invalid, 1 GPS, 2 DGPS,
+        /// 4 RTK fixed, 5 RTK float, 6 dead reckoning), 255 unknown.
         pub quality: u8,
     }
 }
