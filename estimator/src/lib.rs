@@ -25,6 +25,7 @@ pub mod evaluation;
 pub mod input_order;
 pub mod nav;
 pub mod offline;
+pub mod output_check;
 pub mod pipeline;
 pub mod settings;
 pub mod time;

@@ -13,6 +13,7 @@ use navsync_shared::time::NS_PER_S;
 
 use crate::evaluation::{DelayTruth, Evaluator, Summary};
 use crate::input_order::InputOrder;
+use crate::output_check::OutputCheck;
 use crate::pipeline::Pipeline;
 use crate::settings::Settings;
 
@@ -95,6 +96,7 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
 ) -> OfflineRun {
     let t0 = Instant::now();
     let mut eval = Evaluator::default();
+    let mut check = OutputCheck::default();
     let mut order: InputOrder<T> = InputOrder::new(reference_imu);
     let (mut imu, mut fixes) = (0u64, 0u64);
     // Time spent inside the estimator only (not producing or decoding the samples).
@@ -113,6 +115,7 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
                 latest_host_ns = latest_host_ns.max(x.stamp.host_ns);
                 if let Some(n) = out {
                     eval.add_nav(&n);
+                    check.add(&n);
                     on_output(Output::Nav(&n), &tag);
                     let t = Instant::now();
                     pipeline.catch_up();
@@ -169,5 +172,8 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
     pipeline.nav().measurement_states().each_counter(&mut |name, v| {
         summary.measurement_counters.insert(name.to_string(), v);
     });
+    summary.nav_states = check.states;
+    summary.usable_states = check.usable;
+    summary.problem = check.problem(&pipeline.inputs_seen());
     OfflineRun { summary }
 }

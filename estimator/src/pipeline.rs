@@ -14,6 +14,7 @@ use navsync_shared::samples::{GnssFix, ImuSample, NavState, PpsEdge, TimeState, 
 use crate::array::imu_array::{ArrayConfig, ImuArray};
 use crate::nav::measurements::gnss::{self, GnssAccuracy};
 use crate::nav::navigator::{NavConfig, Navigator};
+use crate::settings::InitialState;
 use crate::time::time_sync::{TimeSync, TimeSyncConfig};
 
 /// Mechanization steps of the output catch-up after a correction done per `NavState`
@@ -38,6 +39,8 @@ pub struct PipelineConfig {
     pub software_delay_prior: (f64, f64),
     /// Prior of Δ under hardware sync, s, and its 1-sigma.
     pub hardware_delay_prior: (f64, f64),
+    /// A known initial state: the filter starts from it instead of aligning itself.
+    pub initial_state: Option<InitialState>,
 }
 
 /// How fix stamps are currently obtained.
@@ -56,6 +59,8 @@ pub struct PipelineCounters {
     pub imu_used: u64,
     /// IMU samples of other IMUs (not fused yet).
     pub imu_other: u64,
+    /// Fixes that reached the estimator.
+    pub fixes: u64,
     /// Fixes held back while the PPS clock was acquiring.
     pub fixes_waiting_for_time: u64,
     /// IMU samples rejected by the array (non-finite values or interval, time going backwards,
@@ -142,6 +147,7 @@ impl Pipeline {
     /// Feeds a GNSS fix; true when the time mapping changed.
     pub fn on_fix(&mut self, fix: &GnssFix) -> bool {
         self.catch_up();
+        self.counters.fixes += 1;
         let changed = self.time.on_fix(fix);
         self.time.tick(fix.stamp.host_ns);
         let stamping = match self.time.status() {
@@ -168,6 +174,11 @@ impl Pipeline {
             },
             FixStamping::Receipt => fix.stamp.host_ns,
         };
+        if self.cfg.initial_state.is_some() && !self.nav.is_aligned() {
+            // With a known initial state the filter does not align itself: fixes before its
+            // instant are not used.
+            return changed;
+        }
         if let Some(obs) = gnss::observation(fix, stamp, &self.cfg.gnss) {
             self.nav.on_gnss(obs, fix.stamp.host_ns);
         }
@@ -200,6 +211,13 @@ impl Pipeline {
         }
         self.time.tick(s.stamp.host_ns);
         let (host_ns, g, a) = self.array.output_sample(index, s);
+        if let Some(init) = &self.cfg.initial_state
+            && !self.nav.is_aligned()
+            && self.time.utc_ns_at_host(host_ns).is_some_and(|u| u >= init.utc_ns)
+            && let Some(h0) = self.time.host_ns_at_utc(init.utc_ns)
+        {
+            self.nav.initialize(init, h0);
+        }
         self.nav.on_output_imu(host_ns, s.dt_s, g, a);
         self.catch_up_due = true;
         Some(self.nav_state(host_ns))
@@ -226,13 +244,36 @@ impl Pipeline {
         &self.array
     }
 
+    /// What the estimator has seen, for [`OutputCheck::problem`](crate::output_check::OutputCheck::problem).
+    pub fn inputs_seen(&self) -> crate::output_check::InputsSeen {
+        crate::output_check::InputsSeen {
+            fixes: self.counters.fixes,
+            fixes_used: self.nav.counters().fixes_used,
+            fixes_unlabelled: self.counters.fixes_waiting_for_time,
+            pps_used: self.time.counters().pps_used,
+            initial_state: self.cfg.initial_state.is_some(),
+            align_min_speed_mps: self.cfg.nav.align.min_speed_mps,
+        }
+    }
+
     /// The navigation state for host time `now_ns` (the latest IMU sample's).
     pub fn nav_state(&mut self, now_ns: i64) -> NavState {
         let mut s = NavState::zeroed();
         self.nav.fill(&mut s, now_ns);
         self.nav_seq += 1;
         s.seq = self.nav_seq;
-        s.utc_ns = self.time.utc_ns_at_host(now_ns).unwrap_or(i64::MIN);
+        // The state's GNSS time: the IMU sample's host time mapped to GNSS time, on the GNSS
+        // side of the estimated delay Δ̂ (under hardware sync Δ̂ is the IMU-to-GNSS offset left
+        // after the PPS mapping; under software sync the mapping goes through the fixes'
+        // receipt minus Δ̂ already).
+        let (d, d_std) = self.nav.gnss_delay();
+        self.time.set_gnss_delay(d, d_std);
+        let hardware = matches!(self.time.status(), TimeStatus::Locked | TimeStatus::Holdover);
+        s.utc_ns = match self.time.utc_ns_at_host(now_ns) {
+            Some(u) if hardware && d.is_finite() => u + (d * 1e9).round() as i64,
+            Some(u) => u,
+            None => i64::MIN,
+        };
         s.time_status = self.time.status() as u8;
         (s.imu, s.imu_count) = self.array.table();
         s

@@ -10,7 +10,7 @@
 use std::collections::BTreeMap;
 
 use nalgebra::{Matrix3, Vector3};
-use navsync_shared::imu_spec::ImuPreset;
+use navsync_shared::imu_spec::{ImuNoise, ImuPreset};
 use navsync_shared::services;
 
 use crate::array::imu_array::{ArrayConfig, UnitConfig};
@@ -76,6 +76,40 @@ impl Default for ArrayTuning {
     }
 }
 
+/// A known initial state (KF-GINS's `initpos`, `initvel`, `initatt`, `initgyrbias`,
+/// `initaccbias` and their σ): the filter starts from it at `utc_ns` instead of aligning
+/// itself (levelling and the GNSS course). Position of the IMU (navigation point), not the
+/// antenna.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InitialState {
+    /// The instant, ns UTC since 1970 (GNSS time; KF-GINS `starttime` in seconds of week is
+    /// converted by the import).
+    pub utc_ns: i64,
+    /// Latitude, deg.
+    pub lat_deg: f64,
+    /// Longitude, deg.
+    pub lon_deg: f64,
+    /// Ellipsoidal height, m.
+    pub height_m: f64,
+    /// Velocity NED, m/s.
+    pub vel_ned_mps: [f64; 3],
+    /// Roll, pitch, yaw of the body frame (FRD) in NED, deg.
+    pub rpy_deg: [f64; 3],
+    /// Gyro bias (body FRD), °/h.
+    #[serde(default)]
+    pub gyro_bias_deg_per_h: [f64; 3],
+    /// Accelerometer bias (body FRD), mGal.
+    #[serde(default)]
+    pub accel_bias_mgal: [f64; 3],
+    /// 1-sigma of the position N, E, D, m.
+    pub pos_std_m: [f64; 3],
+    /// 1-sigma of the velocity N, E, D, m/s.
+    pub vel_std_mps: [f64; 3],
+    /// 1-sigma of roll, pitch, yaw, deg.
+    pub att_std_deg: [f64; 3],
+}
+
 /// Everything the estimator needs to be built.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Settings {
@@ -88,12 +122,27 @@ pub struct Settings {
     /// Ignore PPS: stamp fixes by the receipt of their first byte (software sync, ms-level
     /// time); default false.
     pub software_sync: bool,
-    /// IMU class: the filter's process noise; default industrial.
+    /// IMU class: the filter's process noise when `imu_noise` is not given; default industrial.
     pub imu_model: ImuPreset,
+    /// The IMU's noise model (KF-GINS units), overriding `imu_model`'s.
+    pub imu_noise: Option<ImuNoise>,
     /// Estimate the GNSS delay Δ as a filter state; default true.
     pub estimate_delay: bool,
     /// 1-sigma of the receiver's velocity per axis, m/s (NMEA reports none); default 0.1.
     pub gnss_vel_std_mps: f64,
+    /// Factor on the receiver's position σ (default 1).
+    pub gnss_pos_std_scale: f64,
+    /// Smallest position σ per axis, m (default 0.005).
+    pub gnss_pos_std_floor_m: f64,
+    /// Scale of the 99.9 % chi-square innovation gate (default 1).
+    pub gate_scale: f64,
+    /// GNSS speed above which the course gives the heading at alignment, m/s (default 3).
+    pub align_min_speed_mps: f64,
+    /// A known initial state instead of the alignment (default none).
+    pub initial_state: Option<InitialState>,
+    /// Fusion horizon: how far the delayed filter runs behind the present, s (default 1.5:
+    /// covers a receiver latency up to ~1.25 s plus the input hold).
+    pub fusion_horizon_s: f64,
     /// Estimate the IMUs' time offsets (else they are held at zero: an uncompensated array);
     /// default true.
     pub estimate_imu_offsets: bool,
@@ -107,6 +156,9 @@ pub struct Settings {
     /// Zero-velocity and zero-angular-rate updates while the vehicle stands still
     /// ([`crate::nav::measurements::zupt`]); default on.
     pub zupt: bool,
+    /// Adapt the IMU's process noise to the GNSS innovations
+    /// ([`crate::nav::measurements::gnss::GnssFusion`]); default off.
+    pub adapt_process_noise: bool,
     /// Prior of Δ under software sync and its 1-sigma, s (default 0.5 ± 0.5 s: any receiver
     /// latency below the fusion horizon).
     pub software_delay_prior_s: (f64, f64),
@@ -128,11 +180,19 @@ impl Default for Settings {
             imu_model: ImuPreset::Industrial,
             estimate_delay: true,
             gnss_vel_std_mps: GnssAccuracy::default().vel_std_mps,
+            gnss_pos_std_scale: GnssAccuracy::default().pos_std_scale,
+            gnss_pos_std_floor_m: GnssAccuracy::default().pos_std_floor_m,
+            gate_scale: 1.0,
+            align_min_speed_mps: 3.0,
+            initial_state: None,
+            fusion_horizon_s: 1.5,
             estimate_imu_offsets: true,
+            imu_noise: None,
             imu_mountings: BTreeMap::new(),
             gnss_lever_arm_m: [0.0; 3],
             oscillator_adev_1s: None,
             zupt: true,
+            adapt_process_noise: false,
             software_delay_prior_s: (0.5, 0.5),
             hardware_delay_prior_s: (0.0, 0.02),
             array: ArrayTuning::default(),
@@ -158,11 +218,19 @@ impl Settings {
         }
     }
 
+    /// The IMU noise model in force: `imu_noise`, else the preset's.
+    pub fn noise(&self) -> ImuNoise {
+        self.imu_noise.unwrap_or_else(|| self.imu_model.noise())
+    }
+
     /// The IMU array: every IMU of `imu_ids` with the IMU class's noise and its mounting.
     pub fn array_config(&self) -> ArrayConfig {
-        let spec = self.imu_model.spec();
+        let noise = ProcessNoise::from_imu_noise(&self.noise());
         let t = &self.array;
-        let (bg, ba) = (spec.gyro.bias_sigma.max(1e-6), spec.accel.bias_sigma.max(1e-5));
+        let (bg, ba) = (
+            noise.gyro_bias_init_std.mean().max(1e-6),
+            noise.accel_bias_init_std.mean().max(1e-5),
+        );
         let gm_rw = |sigma: f64, tau: f64| (2.0 * 2.0 * sigma * sigma / tau).sqrt();
         ArrayConfig {
             units: self
@@ -174,8 +242,8 @@ impl Settings {
                         id: id.clone(),
                         c_b_s: m.map_or_else(Matrix3::identity, |m| Matrix3::from_fn(|r, c| m.c_b_s[r][c])),
                         lever_b_m: m.map_or_else(Vector3::zeros, |m| Vector3::from(m.lever_b_m)),
-                        gyro_noise_density: spec.gyro.noise_density.max(1e-7),
-                        accel_noise_density: spec.accel.noise_density.max(1e-6),
+                        gyro_noise_density: noise.arw.mean().max(1e-7),
+                        accel_noise_density: noise.vrw.mean().max(1e-6),
                     }
                 })
                 .collect(),
@@ -193,10 +261,10 @@ impl Settings {
                 // Relative biases of two IMUs: √2 times one IMU's spread.
                 gyro_bias_std: std::f64::consts::SQRT_2 * bg,
                 accel_bias_std: std::f64::consts::SQRT_2 * ba,
-                gyro_bias_rw: gm_rw(spec.gyro.bias_instability_sigma, spec.gyro.bias_correlation_s).max(1e-9),
-                accel_bias_rw: gm_rw(spec.accel.bias_instability_sigma, spec.accel.bias_correlation_s).max(1e-8),
-                gyro_scale_std: std::f64::consts::SQRT_2 * spec.gyro.scale_factor_sigma.max(1e-5),
-                accel_scale_std: std::f64::consts::SQRT_2 * spec.accel.scale_factor_sigma.max(1e-5),
+                gyro_bias_rw: gm_rw(noise.gyro_bias_std.mean(), noise.corr_time_s).max(1e-9),
+                accel_bias_rw: gm_rw(noise.accel_bias_std.mean(), noise.corr_time_s).max(1e-8),
+                gyro_scale_std: std::f64::consts::SQRT_2 * noise.gyro_scale_init_std.mean().max(1e-5),
+                accel_scale_std: std::f64::consts::SQRT_2 * noise.accel_scale_init_std.mean().max(1e-5),
                 min_information_ratio: t.min_information_ratio,
             },
             admit_td_std_s: t.admit_td_std_s,
@@ -210,13 +278,17 @@ impl Settings {
 
     /// The estimator configuration these settings describe.
     pub fn pipeline_config(&self) -> PipelineConfig {
-        let mut noise = ProcessNoise::from_spec(&self.imu_model.spec());
+        let mut noise = ProcessNoise::from_imu_noise(&self.noise());
         noise.estimate_delay = self.estimate_delay;
         let mut nav = NavConfig {
             lever_arm_b_m: Vector3::from(self.gnss_lever_arm_m),
+            gate_scale: self.gate_scale,
+            horizon_s: self.fusion_horizon_s,
             ..NavConfig::with_noise(noise)
         };
+        nav.align.min_speed_mps = self.align_min_speed_mps;
         nav.measurements.zupt.enabled = self.zupt;
+        nav.measurements.gnss.adapt_process_noise = self.adapt_process_noise;
         PipelineConfig {
             time: TimeSyncConfig {
                 software_sync: self.software_sync,
@@ -228,8 +300,11 @@ impl Settings {
             nav,
             gnss: GnssAccuracy {
                 vel_std_mps: self.gnss_vel_std_mps,
+                pos_std_scale: self.gnss_pos_std_scale,
+                pos_std_floor_m: self.gnss_pos_std_floor_m,
                 ..GnssAccuracy::default()
             },
+            initial_state: self.initial_state,
             reference_imu: self.imu_ids.first().cloned().unwrap_or_else(|| "0".into()),
             array: self.array_config(),
             software_delay_prior: self.software_delay_prior_s,

@@ -193,8 +193,8 @@ fn a_permanent_10_km_step_is_reset_to_after_the_documented_fixes() {
     assert!(r.degraded_between(from, reset_at), "status degraded before the reset");
     // The state did not follow the first K − 1 fixes: still 10 km from the shifted truth.
     assert!(before_reset.n > 30 && before_reset.h_rms_m > 9_900.0, "{before_reset}");
-    // On the new position at once, and as good as without the step from then on; no
-    // rejections but the clean run's.
+    // On the new position at once, and as good as without the step from then on; no more
+    // rejections than the clean run's.
     assert!(
         err_at(reset_at + 1.0) < 2.0,
         "{} m 1 s after the reset",
@@ -214,10 +214,11 @@ fn a_permanent_10_km_step_is_reset_to_after_the_documented_fixes() {
         assert!(f.vel_rms_mps <= k.vel_rms_mps + 0.05, "{name}: {f} vs clean {k}");
         assert!(f.yaw_max_deg <= k.yaw_max_deg + 0.3, "{name}: {f} vs clean {k}");
     }
-    assert_eq!(
-        (end_counts.1 - at_reset.1, end_counts.2),
-        (c.at(end).1 - c.at(reset_at).1, 1),
-        "rejections/resets after the reset"
+    let (after, clean_after) = (end_counts.1 - at_reset.1, c.at(end).1 - c.at(reset_at).1);
+    assert!(
+        after <= clean_after && end_counts.2 == 1,
+        "after the reset: {after} rejections (clean run {clean_after}), {} resets",
+        end_counts.2
     );
     assert!(r.track.non_finite.is_none());
 }

@@ -8,6 +8,10 @@
 //!   Foxglove and the `mcap` tools display and plot these without navsync.
 //! * Decoding is [`json::from_json`](navsync_shared::json::from_json), exact to the bit for every field (floats are written in
 //!   the shortest form that parses back to the same `f64`, NaN as `null`).
+//! * Channel metadata says what the data were made with, so `navsync replay --estimate` runs
+//!   the estimator with the right models unless told otherwise: [`META_IMU_NOISE`] on IMU
+//!   channels, [`META_INITIAL_STATE`] on the reference IMU's, [`META_LEVER_ARM`] and
+//!   [`META_GNSS_VEL_STD`] on GNSS fix channels. Values are JSON.
 
 use core::fmt::Debug;
 
@@ -27,6 +31,22 @@ pub const SCHEMA_ENCODING: &str = "jsonschema";
 pub const PROFILE: &str = "";
 /// The library string in the Header of files navsync writes.
 pub const LIBRARY: &str = "navsync";
+
+/// IMU channels: the IMU's noise model, `navsync_shared::imu_spec::ImuNoise` as JSON
+/// (KF-GINS units).
+pub const META_IMU_NOISE: &str = "navsync.imu_noise";
+/// The reference IMU's channel: a known initial state, `navsync_estimator::settings::InitialState`
+/// as JSON.
+pub const META_INITIAL_STATE: &str = "navsync.initial_state";
+/// GNSS fix channels: the antenna in the body frame (FRD) from the IMU, m, as `[x, y, z]`.
+pub const META_LEVER_ARM: &str = "navsync.lever_arm_m";
+/// GNSS fix channels: the receiver's velocity 1-sigma per axis, m/s, as a number.
+pub const META_GNSS_VEL_STD: &str = "navsync.gnss_vel_std_mps";
+
+/// A channel metadata value: `v` as compact JSON (what the `META_*` keys hold).
+pub fn metadata_value<T: serde::Serialize + ?Sized>(v: &T) -> String {
+    serde_json::to_string(v).unwrap_or_default()
+}
 
 /// A navsync sample type and its place in [`AnySample`].
 pub trait SampleType: Reflect + ZeroCopySend + Debug {

@@ -21,6 +21,8 @@ pub struct SampleRecorder<W: Write = BufWriter<File>> {
     path: PathBuf,
     schemas: [Option<SchemaId>; ServiceKind::ALL.len()],
     channels: HashMap<String, (ChannelId, ServiceKind)>,
+    /// Key-value metadata for channels not created yet, by service.
+    metadata: HashMap<String, Vec<(String, String)>>,
     json: Vec<u8>,
 }
 
@@ -50,6 +52,7 @@ impl<W: Write> SampleRecorder<W> {
             path: path.to_path_buf(),
             schemas: [None; ServiceKind::ALL.len()],
             channels: HashMap::new(),
+            metadata: HashMap::new(),
             json: Vec::with_capacity(4096),
         })
     }
@@ -58,6 +61,22 @@ impl<W: Write> SampleRecorder<W> {
     pub fn with_chunk_size(mut self, bytes: usize) -> Self {
         self.mcap = self.mcap.with_chunk_size(bytes);
         self
+    }
+
+    /// Adds `key` = `value` to the metadata of `service`'s channel (what the data were made
+    /// with: see [`channels`](super::channels)); before the channel's first sample.
+    pub fn set_channel_metadata(&mut self, service: &str, key: &str, value: &str) -> Result<(), RecordingError> {
+        if self.channels.contains_key(service) {
+            return Err(RecordingError::Usage {
+                path: self.path.clone(),
+                problem: format!("metadata `{key}` for `{service}` after its first sample"),
+            });
+        }
+        self.metadata
+            .entry(service.to_string())
+            .or_default()
+            .push((key.to_string(), value.to_string()));
+        Ok(())
     }
 
     /// The channel of `service`, created (with its type's schema) on first use.
@@ -82,7 +101,9 @@ impl<W: Write> SampleRecorder<W> {
                 s
             }
         };
-        let id = self.mcap.add_channel(schema, service, MESSAGE_ENCODING, &[])?;
+        let metadata = self.metadata.remove(service).unwrap_or_default();
+        let pairs: Vec<(&str, &str)> = metadata.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+        let id = self.mcap.add_channel(schema, service, MESSAGE_ENCODING, &pairs)?;
         self.channels.insert(service.to_string(), (id, kind));
         Ok(id)
     }
@@ -193,6 +214,24 @@ impl<R: Read + Seek> SampleReader<R> {
     /// How the scan ended, once [`next_sample`](Self::next_sample) returned `None`.
     pub fn scan_end(&self) -> Option<&ScanEnd> {
         self.mcap.scan_end()
+    }
+
+    /// The metadata of the channel of `service`, from the summary of a closed file (else from
+    /// the channels read so far); empty when there is none.
+    pub fn channel_metadata(&self, service: &str) -> Vec<(String, String)> {
+        let from_summary = self
+            .summary()
+            .and_then(|s| s.channels.iter().find(|c| c.topic == service))
+            .map(|c| c.metadata.clone());
+        from_summary
+            .or_else(|| {
+                (0..=u16::MAX)
+                    .take(self.kinds.len())
+                    .filter_map(|id| self.mcap.channel(id))
+                    .find(|c| c.topic == service)
+                    .map(|c| c.metadata.clone())
+            })
+            .unwrap_or_default()
     }
 
     /// Channels skipped so far: (topic, reason).

@@ -234,3 +234,156 @@ impl ImuErrorSpec {
         }
     }
 }
+
+/// A value per axis (x, y, z of the IMU): in a configuration file a number (the same on
+/// every axis) or an array of three.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(transparent)]
+pub struct PerAxis(pub [f64; 3]);
+
+impl PerAxis {
+    /// The same value on every axis.
+    pub const fn all(x: f64) -> Self {
+        Self([x; 3])
+    }
+
+    /// Each value times `k`.
+    pub fn scaled(self, k: f64) -> Self {
+        Self(self.0.map(|x| x * k))
+    }
+}
+
+/// `2` (every axis) or `3,3,0.3` (x, y, z), as on the command line.
+impl std::str::FromStr for PerAxis {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let v: Vec<f64> = s
+            .split(',')
+            .map(|x| x.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| format!("`{s}`: expected a number or three numbers x,y,z"))?;
+        match v.as_slice() {
+            [x] => Ok(Self::all(*x)),
+            [x, y, z] => Ok(Self([*x, *y, *z])),
+            _ => Err(format!("`{s}`: expected a number or three numbers x,y,z")),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for PerAxis {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Repr {
+            One(f64),
+            Three([f64; 3]),
+        }
+        match Repr::deserialize(d) {
+            Ok(Repr::One(x)) => Ok(Self::all(x)),
+            Ok(Repr::Three(v)) => Ok(Self(v)),
+            Err(_) => Err(serde::de::Error::custom(
+                "expected a number or an array of three numbers",
+            )),
+        }
+    }
+}
+
+/// An IMU's noise and error model as a datasheet or an Allan-variance plot states it, in
+/// KF-GINS's units (its `imunoise` and initial-σ blocks), per axis: what the estimator's
+/// process noise and initial uncertainty are made of, what `[imu.ID.noise]` or
+/// `[estimator.imu_noise]` and `navsync import kf-gins --config` set, and what recordings store.
+///
+/// The bias and scale-factor errors are first-order Gauss–Markov processes with stationary
+/// standard deviation `*_std` and correlation time `corr_time_h` (driving noise 2σ²/τ), starting
+/// from a turn-on error of standard deviation `*_init_std`. An Allan plot's bias-instability
+/// floor B corresponds to σ = B / 0.6174 ([`GM_ADEV_PEAK_RATIO`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuNoise {
+    /// Angle random walk, °/√h (KF-GINS `arw`; a rate-noise density in °/s/√Hz × 60).
+    pub arw_deg_per_sqrt_h: PerAxis,
+    /// Velocity random walk, m/s/√h (KF-GINS `vrw`; an acceleration-noise density in
+    /// m/s²/√Hz × 60).
+    pub vrw_mps_per_sqrt_h: PerAxis,
+    /// Gyro bias instability: Gauss–Markov σ, °/h (KF-GINS `gbstd`).
+    pub gyro_bias_std_deg_per_h: PerAxis,
+    /// Accelerometer bias instability: Gauss–Markov σ, mGal = 1e-5 m/s² (KF-GINS `abstd`).
+    pub accel_bias_std_mgal: PerAxis,
+    /// Gyro scale-factor instability: Gauss–Markov σ, ppm (KF-GINS `gsstd`).
+    pub gyro_scale_std_ppm: PerAxis,
+    /// Accelerometer scale-factor instability: Gauss–Markov σ, ppm (KF-GINS `asstd`).
+    pub accel_scale_std_ppm: PerAxis,
+    /// Correlation time of the bias and scale-factor processes, h (KF-GINS `corrtime`).
+    pub corr_time_h: f64,
+    /// Turn-on gyro bias σ, °/h (KF-GINS `initbgstd`).
+    pub gyro_bias_init_std_deg_per_h: PerAxis,
+    /// Turn-on accelerometer bias σ, mGal (KF-GINS `initbastd`).
+    pub accel_bias_init_std_mgal: PerAxis,
+    /// Turn-on gyro scale-factor σ, ppm (KF-GINS `initsgstd`); 0 on every axis: scale factors
+    /// are not estimated.
+    pub gyro_scale_init_std_ppm: PerAxis,
+    /// Turn-on accelerometer scale-factor σ, ppm (KF-GINS `initsastd`).
+    pub accel_scale_init_std_ppm: PerAxis,
+}
+
+/// rad/s → °/h.
+const RAD_S_TO_DEG_H: f64 = 180.0 / std::f64::consts::PI * 3600.0;
+/// m/s² → mGal.
+const MPS2_TO_MGAL: f64 = 1e5;
+
+impl ImuNoise {
+    /// The model of an IMU class: its noise densities, bias instability and correlation time,
+    /// turn-on bias and scale-factor spread (scale-factor instability a tenth of the spread).
+    pub fn from_spec(spec: &ImuErrorSpec) -> Self {
+        let (g, a) = (&spec.gyro, &spec.accel);
+        Self {
+            arw_deg_per_sqrt_h: PerAxis::all(g.noise_density.to_degrees() * 60.0),
+            vrw_mps_per_sqrt_h: PerAxis::all(a.noise_density * 60.0),
+            gyro_bias_std_deg_per_h: PerAxis::all(g.bias_instability_sigma * RAD_S_TO_DEG_H),
+            accel_bias_std_mgal: PerAxis::all(a.bias_instability_sigma * MPS2_TO_MGAL),
+            gyro_scale_std_ppm: PerAxis::all(0.1 * g.scale_factor_sigma * 1e6),
+            accel_scale_std_ppm: PerAxis::all(0.1 * a.scale_factor_sigma * 1e6),
+            corr_time_h: g.bias_correlation_s / 3600.0,
+            gyro_bias_init_std_deg_per_h: PerAxis::all(g.bias_sigma.max(g.bias_instability_sigma) * RAD_S_TO_DEG_H),
+            accel_bias_init_std_mgal: PerAxis::all(a.bias_sigma.max(a.bias_instability_sigma) * MPS2_TO_MGAL),
+            gyro_scale_init_std_ppm: PerAxis::all(g.scale_factor_sigma * 1e6),
+            accel_scale_init_std_ppm: PerAxis::all(a.scale_factor_sigma * 1e6),
+        }
+    }
+
+    /// Every value finite and ≥ 0, the correlation time > 0; else what is wrong (a field name
+    /// and the value).
+    pub fn check(&self) -> Result<(), String> {
+        let fields = [
+            ("arw_deg_per_sqrt_h", self.arw_deg_per_sqrt_h),
+            ("vrw_mps_per_sqrt_h", self.vrw_mps_per_sqrt_h),
+            ("gyro_bias_std_deg_per_h", self.gyro_bias_std_deg_per_h),
+            ("accel_bias_std_mgal", self.accel_bias_std_mgal),
+            ("gyro_scale_std_ppm", self.gyro_scale_std_ppm),
+            ("accel_scale_std_ppm", self.accel_scale_std_ppm),
+            ("gyro_bias_init_std_deg_per_h", self.gyro_bias_init_std_deg_per_h),
+            ("accel_bias_init_std_mgal", self.accel_bias_init_std_mgal),
+            ("gyro_scale_init_std_ppm", self.gyro_scale_init_std_ppm),
+            ("accel_scale_init_std_ppm", self.accel_scale_init_std_ppm),
+        ];
+        for (name, v) in fields {
+            if let Some(x) = v.0.iter().find(|x| !(x.is_finite() && **x >= 0.0)) {
+                return Err(format!("{name}: {x} (expected a finite value ≥ 0)"));
+            }
+        }
+        if !(self.corr_time_h.is_finite() && self.corr_time_h > 0.0) {
+            return Err(format!(
+                "corr_time_h: {} (expected a time > 0 in hours)",
+                self.corr_time_h
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl ImuPreset {
+    /// The noise model of this preset.
+    pub fn noise(self) -> ImuNoise {
+        ImuNoise::from_spec(&self.spec())
+    }
+}

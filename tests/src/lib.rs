@@ -50,6 +50,58 @@ fn workspace_bin(name: &str) -> PathBuf {
     bin
 }
 
+/// Material provided beside the checkout (`../shared/<rel>`: corpora, datasets), else under
+/// `$NAVSYNC_SHARED_DIR` (set by `.ci/run` for clones elsewhere); panics saying where it was
+/// looked for.
+pub fn shared_material(rel: &str) -> PathBuf {
+    let beside = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared").join(rel);
+    if beside.exists() {
+        return beside;
+    }
+    if let Some(dir) = std::env::var_os("NAVSYNC_SHARED_DIR") {
+        let p = Path::new(&dir).join(rel);
+        if p.exists() {
+            return p;
+        }
+    }
+    panic!(
+        "{rel} is not at {} nor under $NAVSYNC_SHARED_DIR: put shared/ beside the checkout or set NAVSYNC_SHARED_DIR",
+        beside.display()
+    )
+}
+
+/// A Python 3 with `packages` installed by pip into a virtual environment in `dir` (else with
+/// `pip --target` into `dir/pylib`, returned for PYTHONPATH), or which step failed and why.
+pub fn python_with(dir: &Path, packages: &[&str]) -> Result<(PathBuf, Option<PathBuf>), String> {
+    let venv = dir.join("venv");
+    let venv_ok = Command::new("python3")
+        .args(["-m", "venv", &venv.display().to_string()])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    let (py, target) = if venv_ok {
+        (venv.join("bin/python"), None)
+    } else {
+        (PathBuf::from("python3"), Some(dir.join("pylib")))
+    };
+    let mut args = vec!["-m".to_string(), "pip".into(), "install".into(), "--quiet".into()];
+    if let Some(t) = &target {
+        args.extend(["--target".to_string(), t.display().to_string()]);
+    }
+    args.extend(packages.iter().map(|p| p.to_string()));
+    match Command::new(&py).args(&args).output() {
+        Ok(o) if o.status.success() => Ok((py, target)),
+        Ok(o) => Err(format!(
+            "`{} {}` failed ({}): {}",
+            py.display(),
+            args.join(" "),
+            o.status,
+            String::from_utf8_lossy(&o.stderr).trim()
+        )),
+        Err(e) => Err(format!("cannot run {}: {e}", py.display())),
+    }
+}
+
 /// Path of the gpsd NMEA corpus provided beside the checkout.
 pub fn corpus_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/corpora/gpsd-nmea")

@@ -10,52 +10,19 @@
 
 mod clients_common;
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Duration;
 
 use clients_common::{command_in, repo_root, start_live, wait_ready};
-use navsync_tests::TestEnv;
+use navsync_tests::{TestEnv, python_with};
 use serde_json::Value;
 
 /// The iceoryx2 version on PyPI that matches the Rust crate (Cargo.lock: iceoryx2 0.10.0).
 const ICEORYX2_PY: &str = "iceoryx2==0.10.0";
 
-/// A Python with iceoryx2 installed (venv, else `pip --target` with PYTHONPATH), or why not.
-fn python_with_iceoryx2(dir: &Path) -> Result<(PathBuf, Option<PathBuf>), String> {
-    let venv = dir.join("venv");
-    let venv_ok = Command::new("python3")
-        .args(["-m", "venv", &venv.display().to_string()])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    let (py, target) = if venv_ok {
-        (venv.join("bin/python"), None)
-    } else {
-        (PathBuf::from("python3"), Some(dir.join("pylib")))
-    };
-    let mut args = vec!["-m".to_string(), "pip".into(), "install".into(), "--quiet".into()];
-    if let Some(t) = &target {
-        args.extend(["--target".to_string(), t.display().to_string()]);
-    }
-    args.push(ICEORYX2_PY.into());
-    match Command::new(&py).args(&args).output() {
-        Ok(o) if o.status.success() => Ok((py, target)),
-        Ok(o) => Err(format!(
-            "`{} {}` failed ({}): {}",
-            py.display(),
-            args.join(" "),
-            o.status,
-            String::from_utf8_lossy(&o.stderr).trim()
-        )),
-        Err(e) => Err(format!("cannot run {}: {e}", py.display())),
-    }
-}
-
 #[test]
 fn a_python_iceoryx2_subscriber_reads_the_live_navigation_state() {
     let mut env = TestEnv::new("pyice");
-    let (py, target) = python_with_iceoryx2(&env.dir).unwrap_or_else(|why| {
+    let (py, target) = python_with(&env.dir, &[ICEORYX2_PY]).unwrap_or_else(|why| {
         panic!("cannot install the `{ICEORYX2_PY}` Python package (needs python3, pip, PyPI and a wheel for this platform): {why}")
     });
     start_live(&mut env);

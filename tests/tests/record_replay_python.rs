@@ -15,66 +15,11 @@ use std::time::{Duration, Instant};
 
 use navsync_recording::SampleReader;
 use navsync_recording::channels::sample_json;
-use navsync_tests::TestEnv;
+use navsync_tests::{TestEnv, python_with};
 use serde_json::Value;
 
 fn manifest() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// A Python interpreter and the environment that makes `import mcap` work, or why not.
-fn python_with_mcap(dir: &Path) -> Result<(PathBuf, Option<PathBuf>), String> {
-    let venv = dir.join("venv");
-    let venv_ok = Command::new("python3")
-        .args(["-m", "venv", &venv.display().to_string()])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    let attempts: Vec<(PathBuf, Vec<String>, Option<PathBuf>)> = if venv_ok {
-        vec![(
-            venv.join("bin/python"),
-            vec![
-                "-m".into(),
-                "pip".into(),
-                "install".into(),
-                "--quiet".into(),
-                "mcap".into(),
-            ],
-            None,
-        )]
-    } else {
-        // No venv module (e.g. Debian without python3-venv): install into a target directory.
-        let target = dir.join("pylib");
-        vec![(
-            PathBuf::from("python3"),
-            vec![
-                "-m".into(),
-                "pip".into(),
-                "install".into(),
-                "--quiet".into(),
-                "--target".into(),
-                target.display().to_string(),
-                "mcap".into(),
-            ],
-            Some(target),
-        )]
-    };
-    let mut why = String::new();
-    for (py, args, pythonpath) in attempts {
-        let out = Command::new(&py).args(&args).output();
-        match out {
-            Ok(o) if o.status.success() => return Ok((py, pythonpath)),
-            Ok(o) => why.push_str(&format!(
-                "`{} {}` failed ({}): {}",
-                py.display(),
-                args.join(" "),
-                o.status,
-                String::from_utf8_lossy(&o.stderr).trim()
-            )),
-            Err(e) => why.push_str(&format!("cannot run {}: {e}", py.display())),
-        }
-    }
-    Err(why)
 }
 
 /// Runs check_mcap.py on `file`; its JSON report.
@@ -129,7 +74,7 @@ fn compare(py: &Path, pythonpath: &Option<PathBuf>, file: &Path) -> u64 {
 #[test]
 fn the_mcap_package_reads_and_decodes_every_recording() {
     let mut env = TestEnv::new("recpython");
-    let (py, pythonpath) = python_with_mcap(&env.dir)
+    let (py, pythonpath) = python_with(&env.dir, &["mcap"])
         .unwrap_or_else(|why| panic!("cannot install the `mcap` Python package (needs python3, pip and PyPI): {why}"));
 
     // The simulator recording in the repository.

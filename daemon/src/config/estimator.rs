@@ -5,7 +5,7 @@
 //! `sim --fast --estimate`, `report`, `analyze`) take the same flags ([`EstimatorFlags`]).
 
 use navsync_estimator::settings::{ImuMounting, Settings};
-use navsync_shared::imu_spec::ImuPreset;
+use navsync_shared::imu_spec::{ImuNoise, ImuPreset, PerAxis};
 
 use super::{ConfigError, Loaded};
 
@@ -64,10 +64,125 @@ pub struct ModelFlags {
     /// No zero-velocity updates while standing still [default: [estimator].zupt, else on].
     #[arg(long)]
     pub no_zupt: bool,
+    /// Adapt the IMU's process noise when the GNSS innovations show it too optimistic
+    /// [default: [estimator].adapt_process_noise, else off].
+    #[arg(long = "adapt-noise")]
+    pub adapt_process_noise: bool,
     /// 1-sigma of the receiver's velocity per axis, m/s [default: [estimator].gnss_vel_std_mps,
     /// else 0.1].
     #[arg(long = "gnss-vel-std")]
     pub gnss_vel_std_mps: Option<f64>,
+    /// Factor on the receiver's position σ [default: [estimator].gnss_pos_std_scale, else 1].
+    #[arg(long = "gnss-std-scale")]
+    pub gnss_pos_std_scale: Option<f64>,
+    /// Smallest GNSS position σ, m [default: [estimator].gnss_pos_std_floor_m, else 0.005].
+    #[arg(long = "gnss-std-floor")]
+    pub gnss_pos_std_floor_m: Option<f64>,
+    /// GNSS antenna in the body frame (FRD) from the IMU, m, `x,y,z` [default: the first
+    /// receiver's [gnss.ID].lever_arm_m, else the recording's, else 0].
+    #[arg(long = "lever-arm", value_parser = parse_vector, allow_hyphen_values = true)]
+    pub lever_arm_m: Option<[f64; 3]>,
+    /// Scale of the 99.9 % innovation gate [default: [estimator].gate_scale, else 1].
+    #[arg(long)]
+    pub gate_scale: Option<f64>,
+    /// GNSS speed above which the course gives the initial heading, m/s
+    /// [default: [estimator].align_min_speed_mps, else 3].
+    #[arg(long = "align-speed")]
+    pub align_min_speed_mps: Option<f64>,
+    /// 1-sigma of the prior of Δ under hardware sync (the IMU-to-GNSS time offset left after
+    /// the PPS mapping), s [default: [estimator].delay_prior_std_s, else 0.02; IMU time tags
+    /// from another clock than the PPS's may need 0.2].
+    #[arg(long = "delay-prior-std")]
+    pub delay_prior_std_s: Option<f64>,
+    /// Fusion horizon, s: how far the filter runs behind the present to fuse late
+    /// measurements at their epoch (≥ the largest receiver latency + 0.25 s) [default 1.5].
+    #[arg(long = "horizon")]
+    pub fusion_horizon_s: Option<f64>,
+    /// The IMU's noise (KF-GINS units; each a number or x,y,z; over [estimator.imu_noise],
+    /// the recording's, else --imu-model's).
+    #[command(flatten)]
+    pub noise: NoiseFlags,
+}
+
+/// The IMU's noise model on the command line, field by field (KF-GINS's units).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct NoiseFlags {
+    /// Angle random walk, °/√h.
+    #[arg(long = "arw")]
+    pub arw_deg_per_sqrt_h: Option<PerAxis>,
+    /// Velocity random walk, m/s/√h.
+    #[arg(long = "vrw")]
+    pub vrw_mps_per_sqrt_h: Option<PerAxis>,
+    /// Gyro bias instability (Gauss–Markov σ), °/h.
+    #[arg(long = "gyro-bias-std")]
+    pub gyro_bias_std_deg_per_h: Option<PerAxis>,
+    /// Accelerometer bias instability (Gauss–Markov σ), mGal.
+    #[arg(long = "accel-bias-std")]
+    pub accel_bias_std_mgal: Option<PerAxis>,
+    /// Turn-on gyro bias σ, °/h.
+    #[arg(long = "gyro-bias-init-std")]
+    pub gyro_bias_init_std_deg_per_h: Option<PerAxis>,
+    /// Turn-on accelerometer bias σ, mGal.
+    #[arg(long = "accel-bias-init-std")]
+    pub accel_bias_init_std_mgal: Option<PerAxis>,
+    /// Gyro scale-factor σ (turn-on; instability a tenth), ppm; 0 switches scale factors off.
+    #[arg(long = "gyro-scale-std")]
+    pub gyro_scale_std_ppm: Option<PerAxis>,
+    /// Accelerometer scale-factor σ (turn-on; instability a tenth), ppm.
+    #[arg(long = "accel-scale-std")]
+    pub accel_scale_std_ppm: Option<PerAxis>,
+    /// Correlation time of the bias and scale-factor processes, h.
+    #[arg(long = "corr-time")]
+    pub corr_time_h: Option<f64>,
+}
+
+impl NoiseFlags {
+    /// The flags given, over `n`.
+    pub fn apply(&self, n: &mut ImuNoise) {
+        let set = |dst: &mut PerAxis, v: Option<PerAxis>| {
+            if let Some(v) = v {
+                *dst = v;
+            }
+        };
+        set(&mut n.arw_deg_per_sqrt_h, self.arw_deg_per_sqrt_h);
+        set(&mut n.vrw_mps_per_sqrt_h, self.vrw_mps_per_sqrt_h);
+        set(&mut n.gyro_bias_std_deg_per_h, self.gyro_bias_std_deg_per_h);
+        set(&mut n.accel_bias_std_mgal, self.accel_bias_std_mgal);
+        set(&mut n.gyro_bias_init_std_deg_per_h, self.gyro_bias_init_std_deg_per_h);
+        set(&mut n.accel_bias_init_std_mgal, self.accel_bias_init_std_mgal);
+        if let Some(v) = self.gyro_scale_std_ppm {
+            n.gyro_scale_init_std_ppm = v;
+            n.gyro_scale_std_ppm = v.scaled(0.1);
+        }
+        if let Some(v) = self.accel_scale_std_ppm {
+            n.accel_scale_init_std_ppm = v;
+            n.accel_scale_std_ppm = v.scaled(0.1);
+        }
+        if let Some(t) = self.corr_time_h {
+            n.corr_time_h = t;
+        }
+    }
+
+    /// Whether any flag was given.
+    fn any(&self) -> bool {
+        self.arw_deg_per_sqrt_h.is_some()
+            || self.vrw_mps_per_sqrt_h.is_some()
+            || self.gyro_bias_std_deg_per_h.is_some()
+            || self.accel_bias_std_mgal.is_some()
+            || self.gyro_bias_init_std_deg_per_h.is_some()
+            || self.accel_bias_init_std_mgal.is_some()
+            || self.gyro_scale_std_ppm.is_some()
+            || self.accel_scale_std_ppm.is_some()
+            || self.corr_time_h.is_some()
+    }
+}
+
+/// `x,y,z`: three numbers.
+fn parse_vector(s: &str) -> Result<[f64; 3], String> {
+    match s.parse::<PerAxis>() {
+        Ok(p) if s.contains(',') => Ok(p.0),
+        _ => Err(format!("`{s}`: expected three numbers x,y,z")),
+    }
 }
 
 impl EstimatorFlags {
@@ -105,7 +220,10 @@ impl ModelFlags {
             s.software_sync = true;
         }
         if let Some(m) = self.imu_model {
+            // A preset on the command line replaces an explicit model from the file or the
+            // recording.
             s.imu_model = m;
+            s.imu_noise = None;
         }
         if self.no_delay_state {
             s.estimate_delay = false;
@@ -116,8 +234,39 @@ impl ModelFlags {
         if self.no_zupt {
             s.zupt = false;
         }
+        if self.adapt_process_noise {
+            s.adapt_process_noise = true;
+        }
         if let Some(v) = self.gnss_vel_std_mps {
             s.gnss_vel_std_mps = v;
+        }
+        if let Some(v) = self.gnss_pos_std_scale {
+            s.gnss_pos_std_scale = v;
+        }
+        if let Some(v) = self.gnss_pos_std_floor_m {
+            s.gnss_pos_std_floor_m = v;
+        }
+        if let Some(v) = self.lever_arm_m {
+            s.gnss_lever_arm_m = v;
+        }
+        if let Some(v) = self.gate_scale {
+            s.gate_scale = v;
+        }
+        if let Some(v) = self.align_min_speed_mps {
+            s.align_min_speed_mps = v;
+        }
+        if let Some(v) = self.fusion_horizon_s {
+            s.fusion_horizon_s = v;
+        }
+        if let Some(v) = self.delay_prior_std_s {
+            s.hardware_delay_prior_s.1 = v;
+        }
+        if self.noise.any() {
+            // Flags refine the model in force: the file's or the recording's, else the preset's
+            // (after --imu-model).
+            let mut n = s.noise();
+            self.noise.apply(&mut n);
+            s.imu_noise = Some(n);
         }
     }
 }
@@ -152,6 +301,33 @@ pub fn apply_file(s: &mut Settings, cfg: &Loaded) -> Result<(), ConfigError> {
     }
     if let Some(v) = e.zupt {
         s.zupt = v;
+    }
+    if let Some(v) = e.adapt_process_noise {
+        s.adapt_process_noise = v;
+    }
+    if let Some(v) = e.gnss_pos_std_scale {
+        s.gnss_pos_std_scale = v;
+    }
+    if let Some(v) = e.gnss_pos_std_floor_m {
+        s.gnss_pos_std_floor_m = v;
+    }
+    if let Some(v) = e.gate_scale {
+        s.gate_scale = v;
+    }
+    if let Some(v) = e.align_min_speed_mps {
+        s.align_min_speed_mps = v;
+    }
+    if let Some(n) = e.imu_noise {
+        s.imu_noise = Some(n);
+    }
+    if let Some(i) = e.initial_state {
+        s.initial_state = Some(i);
+    }
+    if let Some(v) = e.delay_prior_std_s {
+        s.hardware_delay_prior_s.1 = v;
+    }
+    if let Some(v) = e.fusion_horizon_s {
+        s.fusion_horizon_s = v;
     }
     for (id, i) in &c.imu {
         s.imu_mountings.insert(

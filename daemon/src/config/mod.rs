@@ -49,7 +49,8 @@ use navsync_drivers::gnss::driver::Baud;
 use navsync_drivers::imu::ImuSource;
 use navsync_drivers::imu::axes::AxisMap;
 use navsync_drivers::pps::SourceSpec;
-use navsync_shared::imu_spec::ImuPreset;
+use navsync_estimator::settings::InitialState;
+use navsync_shared::imu_spec::{ImuNoise, ImuPreset};
 use navsync_shared::source_map::SourceMap;
 use serde::Deserialize;
 
@@ -212,6 +213,24 @@ pub struct EstimatorConfig {
     pub estimate_imu_offsets: Option<bool>,
     /// Zero-velocity updates while the vehicle stands still (default true).
     pub zupt: Option<bool>,
+    /// Adapt the IMU's process noise to the GNSS innovations (default false).
+    pub adapt_process_noise: Option<bool>,
+    /// Factor on the receiver's position σ (default 1).
+    pub gnss_pos_std_scale: Option<f64>,
+    /// Smallest GNSS position σ per axis, m (default 0.005).
+    pub gnss_pos_std_floor_m: Option<f64>,
+    /// Scale of the 99.9 % chi-square innovation gate (default 1).
+    pub gate_scale: Option<f64>,
+    /// GNSS speed above which the course gives the heading at alignment, m/s (default 3).
+    pub align_min_speed_mps: Option<f64>,
+    /// The IMU's noise model in KF-GINS's units (overrides `imu_model`'s).
+    pub imu_noise: Option<ImuNoise>,
+    /// A known initial state instead of the alignment.
+    pub initial_state: Option<InitialState>,
+    /// 1-sigma of the prior of Δ under hardware sync, s (default 0.02).
+    pub delay_prior_std_s: Option<f64>,
+    /// Largest fusion horizon, s (default 1.5).
+    pub fusion_horizon_s: Option<f64>,
 }
 
 /// `[outputs.ntpshm]`.
@@ -501,6 +520,38 @@ impl Loaded {
             e.gnss_vel_std_mps,
             "a 1-sigma velocity > 0 in m/s",
         )?;
+        positive(
+            "estimator.gnss_pos_std_scale".into(),
+            e.gnss_pos_std_scale,
+            "a factor > 0",
+        )?;
+        positive("estimator.gate_scale".into(), e.gate_scale, "a factor > 0")?;
+        positive(
+            "estimator.delay_prior_std_s".into(),
+            e.delay_prior_std_s,
+            "a 1-sigma > 0 in s",
+        )?;
+        if let Some(h) = e.fusion_horizon_s
+            && !(h.is_finite() && (0.3..=10.0).contains(&h))
+        {
+            return Err(self.error_at("estimator.fusion_horizon_s", format!("{h}: expected 0.3 to 10 s")));
+        }
+        positive(
+            "estimator.align_min_speed_mps".into(),
+            e.align_min_speed_mps,
+            "a speed > 0 in m/s",
+        )?;
+        if let Some(f) = e.gnss_pos_std_floor_m
+            && !(f.is_finite() && f >= 0.0)
+        {
+            return Err(self.error_at("estimator.gnss_pos_std_floor_m", format!("{f}: expected a σ ≥ 0 in m")));
+        }
+        if let Some(n) = &e.imu_noise
+            && let Err(msg) = n.check()
+        {
+            let field = msg.split(':').next().unwrap_or_default();
+            return Err(self.error_at(&format!("estimator.imu_noise.{field}"), msg));
+        }
         if let Some(r) = &c.outputs.record
             && r.path.as_os_str().is_empty()
         {

@@ -20,6 +20,7 @@ use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
 
 use navsync_estimator::input_order::InputOrder;
+use navsync_estimator::output_check::OutputCheck;
 use navsync_estimator::pipeline::Pipeline;
 use navsync_estimator::settings::Settings;
 
@@ -61,6 +62,8 @@ const RECLAIM_INTERVAL: std::time::Duration = std::time::Duration::from_millis(4
 /// wake-up latency this bounds the time from a driver's death to its stale flag, whatever the
 /// input's rate.
 const PUBLISHER_CHECK_INTERVAL_NS: i64 = 20_000_000;
+/// How often the usability of the output is checked (a warning each time it fails), ns.
+const OUTPUT_CHECK_INTERVAL_NS: i64 = 60 * NS_PER_S;
 
 /// The published navigation status while every GNSS input is gone: an aligned (or degraded)
 /// filter is inertial-only from that moment, not only after the navigator's outage time.
@@ -146,6 +149,11 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
     let mut est = Pipeline::new(args.pipeline_config());
     let mut nav_pub = node.publisher::<NavState>(services::NAV_STATE)?;
     let c_nav = health.counter("nav_states")?;
+    // Never silent: states usable by a subscriber (aligned, with a GNSS time); a warning
+    // with the reason every minute while they are missing or far fewer than the states.
+    let c_usable = health.counter("nav_usable")?;
+    let mut check = OutputCheck::default();
+    let mut next_check_ns = monotonic_now_ns() + OUTPUT_CHECK_INTERVAL_NS;
     let c_fix_used = health.counter("fixes_used")?;
     let c_fix_rej = health.counter("fixes_rejected")?;
     let c_fix_old = health.counter("fixes_too_old")?;
@@ -265,6 +273,8 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
                         }
                         latency.record(monotonic_now_ns() - t_in);
                         health.add(c_nav, 1);
+                        check.add(&state);
+                        health.set(c_usable, check.usable);
                         est.catch_up();
                     }
                     let reference = est.reference_imu_id();
@@ -283,6 +293,12 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
         }
         health.set(c_late, order.late());
         let now = monotonic_now_ns();
+        if now >= next_check_ns {
+            next_check_ns = now + OUTPUT_CHECK_INTERVAL_NS;
+            if let Some(why) = check.problem(&est.inputs_seen()) {
+                warn!(states = check.states, usable = check.usable, "{why}");
+            }
+        }
         live.check(now, |_, x, _| {
             warn!(
                 input = %x.name,

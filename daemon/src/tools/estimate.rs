@@ -13,7 +13,7 @@ use navsync_estimator::evaluation::Summary;
 use navsync_estimator::offline::{self, Output};
 use navsync_estimator::settings::Settings;
 use navsync_recording::mcap_reader::ScanEnd;
-use navsync_recording::{RecordingError, SampleReader, SampleRecorder};
+use navsync_recording::{RecordingError, SampleReader, SampleRecorder, channels};
 use navsync_shared::samples::AnySample;
 use navsync_shared::services;
 use tracing::{info_span, warn};
@@ -69,6 +69,10 @@ pub enum EstimateError {
         /// Cause.
         source: std::io::Error,
     },
+    /// The run finished, but the estimator produced no usable states or far fewer than
+    /// expected (the summary and its JSON say the same).
+    #[error("{0}")]
+    Unusable(String),
 }
 
 /// The samples of a recording that `settings` fuses, and the simulator's truth, with their
@@ -110,6 +114,46 @@ impl Iterator for RecordedInputs<'_> {
     }
 }
 
+/// The estimator's settings for a recording: what the recording says it was made with
+/// (channel metadata: the IMU's noise model, the antenna lever arm, the receiver's velocity σ,
+/// a known initial state), then the configuration file, then the flags.
+pub fn settings_for_recording(
+    est: &EstimatorFlags,
+    cfg: &Loaded,
+    reader: &SampleReader,
+) -> Result<Settings, ConfigError> {
+    let ids = est.settings(cfg)?;
+    let mut defaults = Settings {
+        gnss_ids: ids.gnss_ids.clone(),
+        pps_ids: ids.pps_ids.clone(),
+        imu_ids: ids.imu_ids.clone(),
+        ..Settings::default()
+    };
+    let meta = |service: Option<String>| service.map(|s| reader.channel_metadata(&s)).unwrap_or_default();
+    let imu = meta(ids.imu_ids.first().map(|id| services::imu_sample(id)));
+    let gnss = meta(ids.gnss_ids.first().map(|id| services::gnss_fix(id)));
+    let value = |list: &[(String, String)], key: &str| list.iter().find(|(k, _)| k == key).map(|(_, v)| v.clone());
+    let bad = |key: &str, e: serde_json::Error| ConfigError {
+        file: reader.mcap().path().to_path_buf(),
+        line: None,
+        field: Some(format!("channel metadata {key}")),
+        message: e.to_string(),
+    };
+    if let Some(v) = value(&imu, channels::META_IMU_NOISE) {
+        defaults.imu_noise = Some(serde_json::from_str(&v).map_err(|e| bad(channels::META_IMU_NOISE, e))?);
+    }
+    if let Some(v) = value(&imu, channels::META_INITIAL_STATE) {
+        defaults.initial_state = Some(serde_json::from_str(&v).map_err(|e| bad(channels::META_INITIAL_STATE, e))?);
+    }
+    if let Some(v) = value(&gnss, channels::META_LEVER_ARM) {
+        defaults.gnss_lever_arm_m = serde_json::from_str(&v).map_err(|e| bad(channels::META_LEVER_ARM, e))?;
+    }
+    if let Some(v) = value(&gnss, channels::META_GNSS_VEL_STD) {
+        defaults.gnss_vel_std_mps = serde_json::from_str(&v).map_err(|e| bad(channels::META_GNSS_VEL_STD, e))?;
+    }
+    est.settings_over(cfg, defaults)
+}
+
 /// Warns when the recording was not closed properly (its end is missing).
 pub fn warn_if_truncated(reader: &SampleReader, path: &Path) {
     if let Some(ScanEnd::Truncated { offset, record }) = reader.scan_end() {
@@ -124,8 +168,8 @@ pub fn warn_if_truncated(reader: &SampleReader, path: &Path) {
 /// (to stdout) and returns it.
 pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary, EstimateError> {
     let _span = info_span!("replay-estimate").entered();
-    let settings = opts.est.settings(cfg)?;
     let mut reader = SampleReader::open(input)?;
+    let settings = settings_for_recording(&opts.est, cfg, &reader)?;
     let mut out = match &opts.out {
         Some(p) if opts.format == Format::Mcap => Some(SampleRecorder::create(p)?),
         _ => None,
@@ -185,6 +229,9 @@ pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary
             path: p.display().to_string(),
             source,
         })?;
+    }
+    if let Some(p) = run.summary.problem {
+        return Err(EstimateError::Unusable(p));
     }
     Ok(run.summary)
 }

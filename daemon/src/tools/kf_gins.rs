@@ -35,21 +35,28 @@
 //! record is at [`HOST_BASE_NS`]; the GPS week comes from `--week` or the truth file. Each IMU
 //! row is an `ImuSample` with rate = increment / dt and `dt_s` = dt (so increment = rate · dt
 //! exactly); each GNSS row a `GnssFix` (ellipsoidal height as altitude with geoid separation 0,
-//! the STDs as GST errors, velocity from the file or else by central differences of the
-//! positions, mode 3D) received [`FIX_LATENCY_S`] after its epoch; one PPS edge at every whole
-//! GPS second, so the estimator maps host time to GNSS time exactly (hardware sync); each
-//! truth row a `SimTruth`, so `replay --estimate` reports the accuracy against it.
+//! the STDs as the receiver's σ, the velocity from a 13-column file or `--gnss-vel`, mode 3D)
+//! received `--gnss-latency` (default [`FIX_LATENCY_S`]) after its epoch; one PPS edge at
+//! every whole GPS second (unless `--no-pps`), so the estimator maps host time to GNSS time
+//! exactly (hardware sync); each truth row a `SimTruth`, so `replay --estimate` reports the
+//! accuracy against it. `--kf-gins-config` stores KF-GINS's IMU noise, lever arm and initial
+//! state as channel metadata, and keeps only its start/end time.
 //!
-//! Velocities by central differences carry the position noise (≈ 0.6 m/s RMS for 0.5 m fixes
-//! at 1 Hz, measured in `tests/tests/kf_gins.rs`): tell the estimator so, e.g.
-//! `navsync replay IMPORTED.mcap --estimate --gnss-vel-std 0.6`, or it trusts them too much.
+//! A file without velocities gives fixes with speed and track from central differences of
+//! the positions (for the alignment's heading) but no velocity: differences carry the
+//! positions' noise, correlated from fix to fix, so the filter makes position-only updates,
+//! as KF-GINS does.
 
+use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::iter::Peekable;
 use std::path::{Path, PathBuf};
 
-use navsync_recording::{RecordingError, SampleRecorder};
+use navsync_estimator::settings::InitialState;
+use navsync_recording::{RecordingError, SampleRecorder, channels};
+
+use super::kf_gins_config::KfGinsConfig;
 use navsync_shared::reflect::{Reflect, fixed_str};
 use navsync_shared::samples::*;
 use navsync_shared::services;
@@ -339,6 +346,14 @@ pub fn main(cmd: ImportCommand) -> anyhow::Result<()> {
         stats.truth,
         stats.week
     );
+    for m in &stats.metadata {
+        eprintln!("  stored: {m}");
+    }
+    for k in &stats.ignored {
+        eprintln!("  not used from the KF-GINS configuration: {k}");
+    }
+    anyhow::ensure!(stats.imu > 0, "no IMU sample in the span imported");
+    anyhow::ensure!(stats.fixes > 0, "no GNSS fix in the span imported");
     Ok(())
 }
 
@@ -363,9 +378,39 @@ pub struct ImportArgs {
     /// IMU id in the recording.
     #[arg(long, default_value = "0", value_parser = crate::config::estimator::parse_id)]
     pub imu_id: String,
+    /// KF-GINS's YAML configuration: its IMU noise, antenna lever arm, initial state and
+    /// start/end time go into the recording (channel metadata), so `replay --estimate` uses them.
+    /// (`--config` is navsync's own configuration file.)
+    #[arg(long = "kf-gins-config", value_name = "YAML")]
+    pub kf_gins_config: Option<PathBuf>,
+    /// Column order of a 13-column GNSS file: `kf-gins` (KF-GINS C++: position, velocity,
+    /// position STD, velocity STD) or `matlab` (KF-GINS-Matlab GNSS-POSVEL: position, position
+    /// STD, velocity, velocity STD).
+    #[arg(long, default_value = "kf-gins")]
+    pub gnss_layout: GnssLayout,
+    /// The receiver's velocity: `sow vN vE vD [σN σE σD]` (m/s), matched to the GNSS file's
+    /// epochs by time (instead of central differences of the positions).
+    #[arg(long)]
+    pub gnss_vel: Option<PathBuf>,
+    /// How long after its epoch each fix is received (its stamp), s.
+    #[arg(long, default_value_t = FIX_LATENCY_S)]
+    pub gnss_latency: f64,
+    /// No PPS edges: the recording has only receipt-stamped fixes, for the estimator's
+    /// software sync (it must find the latency itself).
+    #[arg(long)]
+    pub no_pps: bool,
     /// The output recording (MCAP).
     #[arg(short, long)]
     pub out: PathBuf,
+}
+
+/// Column order of a 13-column GNSS file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum GnssLayout {
+    /// KF-GINS (C++): `sow lat lon h vN vE vD σN σE σD σvN σvE σvD`.
+    KfGins,
+    /// KF-GINS-Matlab `GNSS-POSVEL`: `sow lat lon h σN σE σD vN vE vD σvN σvE σvD`.
+    Matlab,
 }
 
 /// What an import wrote.
@@ -383,6 +428,10 @@ pub struct ImportStats {
     pub week: i64,
     /// The IMU rate used, Hz.
     pub imu_rate_hz: f64,
+    /// What the recording stores about its models (channel metadata keys and values).
+    pub metadata: Vec<String>,
+    /// Keys of the KF-GINS configuration not used.
+    pub ignored: Vec<String>,
 }
 
 /// A sample on its way into the recording, ordered by its delivery (publish) time.
@@ -412,6 +461,42 @@ impl Timeline {
     }
 }
 
+/// Seconds of week as integer milliseconds (to match epochs of two files).
+fn ms_of(sow: f64) -> i64 {
+    (sow * 1e3).round() as i64
+}
+
+/// NED velocities, m/s, by epoch (seconds of week in ms).
+type VelocitiesByEpoch = BTreeMap<i64, [f64; 3]>;
+
+/// A velocity file: `sow vN vE vD [σN σE σD]` by epoch (ms), and the median σ when given.
+fn read_velocities(path: &Path) -> Result<(VelocitiesByEpoch, Option<f64>), KfGinsError> {
+    let mut v = BTreeMap::new();
+    let mut sigmas = Vec::new();
+    for r in Rows::open(path, &[4, 7])? {
+        let (_, row) = r?;
+        v.insert(ms_of(row[0]), [row[1], row[2], row[3]]);
+        if row.len() == 7 {
+            sigmas.extend_from_slice(&row[4..7]);
+        }
+    }
+    sigmas.sort_by(f64::total_cmp);
+    Ok((v, sigmas.get(sigmas.len() / 2).copied()))
+}
+
+/// The median velocity σ of a 13-column GNSS file (its last three columns).
+fn median_vel_std(path: &Path) -> Result<Option<f64>, KfGinsError> {
+    let mut sigmas = Vec::new();
+    for r in Rows::open(path, &[7, 13])? {
+        let (_, row) = r?;
+        if row.len() == 13 {
+            sigmas.extend_from_slice(&row[10..13]);
+        }
+    }
+    sigmas.sort_by(f64::total_cmp);
+    Ok(sigmas.get(sigmas.len() / 2).copied())
+}
+
 /// Median spacing of the first time tags of an IMU file, s.
 fn median_spacing(path: &Path) -> Result<f64, KfGinsError> {
     let mut ts = Vec::new();
@@ -428,7 +513,7 @@ fn median_spacing(path: &Path) -> Result<f64, KfGinsError> {
 }
 
 fn imu_items(
-    rows: Rows,
+    rows: impl Iterator<Item = Result<(usize, Vec<f64>), KfGinsError>>,
     tl: Timeline,
     nominal_dt: f64,
     service: String,
@@ -466,9 +551,17 @@ fn imu_items(
 
 /// The fixes of a GNSS file (small: read whole), with velocities by central differences when
 /// the file has none.
-fn read_fixes(path: &Path, tl: Timeline) -> Result<Vec<GnssFix>, KfGinsError> {
+fn read_fixes(
+    path: &Path,
+    tl: Timeline,
+    layout: GnssLayout,
+    latency_s: f64,
+    velocities: &BTreeMap<i64, [f64; 3]>,
+    span: (f64, f64),
+) -> Result<Vec<GnssFix>, KfGinsError> {
     let rows: Vec<Vec<f64>> = Rows::open(path, &[7, 13])?
         .map(|r| r.map(|(_, row)| row))
+        .filter(|r| r.as_ref().map_or(true, |row| row[0] >= span.0 && row[0] <= span.1))
         .collect::<Result<_, _>>()?;
     let ned = |a: &[f64], b: &[f64]| {
         navsync_shared::earth::ned_between(
@@ -484,7 +577,7 @@ fn read_fixes(path: &Path, tl: Timeline) -> Result<Vec<GnssFix>, KfGinsError> {
     for (i, row) in rows.iter().enumerate() {
         let t = row[0];
         let mut f = GnssFix::empty(Stamp::host(
-            tl.host_ns(t) + (FIX_LATENCY_S * 1e9) as i64,
+            tl.host_ns(t) + (latency_s * 1e9) as i64,
             i as u64,
             StampSource::Receipt,
         ));
@@ -495,12 +588,17 @@ fn read_fixes(path: &Path, tl: Timeline) -> Result<Vec<GnssFix>, KfGinsError> {
         f.lon_deg = row[2];
         f.alt_msl_m = row[3];
         f.geoid_sep_m = 0.0;
-        let (std, vel) = if row.len() == 13 {
-            ([row[7], row[8], row[9]], Some([row[4], row[5], row[6]]))
-        } else {
-            ([row[4], row[5], row[6]], None)
+        let (std, vel) = match (row.len(), layout) {
+            (13, GnssLayout::KfGins) => ([row[7], row[8], row[9]], Some([row[4], row[5], row[6]])),
+            (13, GnssLayout::Matlab) => ([row[4], row[5], row[6]], Some([row[7], row[8], row[9]])),
+            _ => ([row[4], row[5], row[6]], None),
         };
         [f.std_lat_m, f.std_lon_m, f.std_alt_m] = std;
+        let vel = vel.or_else(|| velocities.get(&ms_of(t)).copied());
+        // Without a velocity from the receiver: speed and track from central differences
+        // (the alignment's heading), but no velocity: they carry the positions' noise,
+        // correlated from fix to fix, so the filter makes position-only updates (as KF-GINS).
+        let from_receiver = vel.is_some();
         let vel = vel.or_else(|| {
             // Central difference of the neighbours within 2.5 s (one-sided at the ends).
             let a = if i > 0 && t - rows[i - 1][0] <= 2.5 {
@@ -517,9 +615,11 @@ fn read_fixes(path: &Path, tl: Timeline) -> Result<Vec<GnssFix>, KfGinsError> {
             (dt > 0.0).then(|| ned(a, b).map(|d| d / dt))
         });
         if let Some(v) = vel {
-            [f.vel_n_mps, f.vel_e_mps, f.vel_d_mps] = v;
             f.speed_mps = v[0].hypot(v[1]);
             f.track_deg = v[1].atan2(v[0]).to_degrees().rem_euclid(360.0);
+            if from_receiver {
+                [f.vel_n_mps, f.vel_e_mps, f.vel_d_mps] = v;
+            }
         }
         f.sentences = SENTENCE_GGA | SENTENCE_RMC | SENTENCE_GST | SENTENCE_ZDA;
         f.mode = FixMode::Fix3d as u8;
@@ -529,7 +629,11 @@ fn read_fixes(path: &Path, tl: Timeline) -> Result<Vec<GnssFix>, KfGinsError> {
     Ok(out)
 }
 
-fn truth_items(rows: Rows, tl: Timeline) -> impl Iterator<Item = Result<Item, KfGinsError>> {
+fn truth_items(
+    rows: impl Iterator<Item = Result<(usize, Vec<f64>), KfGinsError>>,
+    tl: Timeline,
+    gnss_latency_s: f64,
+) -> impl Iterator<Item = Result<Item, KfGinsError>> {
     let mut seq = 0u64;
     rows.map(move |r| {
         let (_, row) = r?;
@@ -544,7 +648,7 @@ fn truth_items(rows: Rows, tl: Timeline) -> impl Iterator<Item = Result<Item, Kf
         t.height_m = n.height_m;
         t.vel_ned_mps = n.vel_ned_mps;
         t.rpy_rad = n.rpy_deg.map(f64::to_radians);
-        t.gnss_latency_s = FIX_LATENCY_S;
+        t.gnss_latency_s = gnss_latency_s;
         t.imu_count = 1;
         seq += 1;
         Ok(Item {
@@ -572,6 +676,20 @@ fn pop_earliest(streams: &mut [Stream]) -> Option<Result<Item, KfGinsError>> {
 
 /// Runs `navsync import kf-gins`.
 pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
+    let config = match &args.kf_gins_config {
+        Some(p) => Some(KfGinsConfig::load(p).map_err(|e| KfGinsError::Format {
+            path: e.path.display().to_string(),
+            line: 0,
+            problem: e.problem,
+        })?),
+        None => None,
+    };
+    let span = config.as_ref().map_or((None, None), |c| c.span_sow);
+    let span = (span.0.unwrap_or(f64::NEG_INFINITY), span.1.unwrap_or(f64::INFINITY));
+    let in_span = move |r: &Result<(usize, Vec<f64>), KfGinsError>| {
+        r.as_ref().map_or(true, |(_, row)| row[0] >= span.0 && row[0] <= span.1)
+    };
+    let imu_rows = || -> Result<_, KfGinsError> { Ok(Rows::open(&args.imu, &[7, 8])?.filter(in_span)) };
     let dt = match args.imu_rate_hz {
         Some(r) if r > 0.0 => 1.0 / r,
         _ => median_spacing(&args.imu)?,
@@ -585,14 +703,22 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         None => None,
     };
     let week = args.week.or(truth_week).unwrap_or(DEFAULT_WEEK);
-    let first_imu = match Rows::open(&args.imu, &[7, 8])?.next() {
-        Some(r) => r?.1[0],
-        None => {
-            return Err(KfGinsError::Format {
-                path: args.imu.display().to_string(),
-                line: 1,
-                problem: "no IMU records".into(),
-            });
+    let (first_imu, last_imu) = {
+        let (mut first, mut last) = (None, f64::NAN);
+        for r in imu_rows()? {
+            let t = r?.1[0];
+            first.get_or_insert(t);
+            last = t;
+        }
+        match first {
+            Some(f) => (f, last),
+            None => {
+                return Err(KfGinsError::Format {
+                    path: args.imu.display().to_string(),
+                    line: 1,
+                    problem: "no IMU records (in the configuration's start/end time)".into(),
+                });
+            }
         }
     };
     // The first IMU record's interval starts dt before its tag.
@@ -600,21 +726,20 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         week,
         sow0: first_imu - dt,
     };
-    let fixes = read_fixes(&args.gnss, tl)?;
+    let (velocities, vel_file_std) = match &args.gnss_vel {
+        Some(p) => read_velocities(p)?,
+        None => (BTreeMap::new(), None),
+    };
+    let fixes = read_fixes(&args.gnss, tl, args.gnss_layout, args.gnss_latency, &velocities, span)?;
+    let vel_std = vel_file_std.or(median_vel_std(&args.gnss)?);
     let imu_service = services::imu_sample(&args.imu_id);
     let id = fixed_str::<8>(&args.imu_id);
 
     // PPS edges at every whole GPS second of the IMU span (delivered 1 ms after the edge).
-    let last_imu = {
-        let mut last = first_imu;
-        for r in Rows::open(&args.imu, &[7, 8])? {
-            last = r?.1[0];
-        }
-        last
-    };
     let first_edge = (first_imu - dt).ceil() as i64;
     let last_edge = last_imu.floor() as i64;
-    let pps = (first_edge..=last_edge).enumerate().map(move |(i, s)| {
+    let edges = if args.no_pps { 0 } else { last_edge - first_edge + 1 };
+    let pps = (first_edge..first_edge + edges.max(0)).enumerate().map(move |(i, s)| {
         let host = tl.host_ns(s as f64);
         let mut e = PpsEdge::zeroed();
         e.stamp = Stamp::host(host, i as u64, StampSource::Simulated);
@@ -635,13 +760,15 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         })
     });
     let mut streams: Vec<Stream> = vec![
-        (Box::new(imu_items(Rows::open(&args.imu, &[7, 8])?, tl, dt, imu_service, id)) as Box<dyn Iterator<Item = _>>)
-            .peekable(),
+        (Box::new(imu_items(imu_rows()?, tl, dt, imu_service.clone(), id)) as Box<dyn Iterator<Item = _>>).peekable(),
         (Box::new(pps) as Box<dyn Iterator<Item = _>>).peekable(),
         (Box::new(fix_items) as Box<dyn Iterator<Item = _>>).peekable(),
     ];
     if let Some(p) = &args.truth {
-        streams.push((Box::new(truth_items(Rows::open(p, &[11])?, tl)) as Box<dyn Iterator<Item = _>>).peekable());
+        // Truth rows: week, seconds of week, …
+        let rows = Rows::open(p, &[11])?
+            .filter(move |r| r.as_ref().map_or(true, |(_, row)| row[1] >= span.0 && row[1] <= span.1));
+        streams.push((Box::new(truth_items(rows, tl, args.gnss_latency)) as Box<dyn Iterator<Item = _>>).peekable());
     }
     let mut rec = SampleRecorder::create(&args.out)?;
     let mut stats = ImportStats {
@@ -649,6 +776,45 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         imu_rate_hz: 1.0 / dt,
         ..Default::default()
     };
+    // What the data were made with, for `replay --estimate`.
+    let mut meta = |service: &str, key: &str, value: String| -> Result<(), KfGinsError> {
+        rec.set_channel_metadata(service, key, &value)?;
+        stats.metadata.push(format!("{service} {key} = {value}"));
+        Ok(())
+    };
+    let fix_channel = services::gnss_fix("0");
+    if let Some(v) = vel_std {
+        meta(&fix_channel, channels::META_GNSS_VEL_STD, format!("{v}"))?;
+    }
+    if let Some(c) = &config {
+        if let Some(n) = &c.noise {
+            meta(&imu_service, channels::META_IMU_NOISE, channels::metadata_value(n))?;
+        }
+        if let Some(l) = c.lever_arm_m {
+            meta(&fix_channel, channels::META_LEVER_ARM, channels::metadata_value(&l))?;
+        }
+        if let Some(i) = &c.initial {
+            let state = InitialState {
+                utc_ns: tl.utc_ns(i.sow),
+                lat_deg: i.pos[0],
+                lon_deg: i.pos[1],
+                height_m: i.pos[2],
+                vel_ned_mps: i.vel,
+                rpy_deg: i.att_deg,
+                gyro_bias_deg_per_h: i.gyro_bias_deg_per_h,
+                accel_bias_mgal: i.accel_bias_mgal,
+                pos_std_m: i.pos_std,
+                vel_std_mps: i.vel_std,
+                att_std_deg: i.att_std_deg,
+            };
+            meta(
+                &imu_service,
+                channels::META_INITIAL_STATE,
+                channels::metadata_value(&state),
+            )?;
+        }
+        stats.ignored.clone_from(&c.ignored);
+    }
     // Log time: the UTC of the delivery instant (as `navsync sim --fast --record` writes it).
     let utc_of_host = |h: i64| tl.utc_ns(tl.sow0) + (h - HOST_BASE_NS);
     while let Some(item) = pop_earliest(&mut streams) {

@@ -50,12 +50,14 @@ pub struct Options {
 pub fn main(opts: Options, cfg: &Loaded) -> anyhow::Result<()> {
     use anyhow::Context;
     let out = opts.out.unwrap_or_else(|| default_out(&opts.input));
+    let reader = navsync_recording::SampleReader::open(&opts.input)?;
     let args = ReportArgs {
         input: opts.input.clone(),
         out: out.clone(),
         estimate: opts.estimate,
-        est: opts.est.settings(cfg)?,
+        est: super::estimate::settings_for_recording(&opts.est, cfg, &reader)?,
     };
+    drop(reader);
     let plots = run(&args).with_context(|| format!("report of {}", opts.input.display()))?;
     eprintln!("{}: {plots} plots", out.display());
     Ok(())
@@ -86,6 +88,15 @@ pub enum ReportError {
     /// Nothing to show.
     #[error("{0}")]
     Empty(String),
+    /// The page was written, but the estimator produced no usable states or far fewer than
+    /// expected (the reason is on the page too).
+    #[error("{path}: written, but {problem}")]
+    Unusable {
+        /// The page.
+        path: String,
+        /// Why.
+        problem: String,
+    },
 }
 
 /// What the page is made of, decimated to the plots' needs.
@@ -99,6 +110,8 @@ struct Data {
     counts: BTreeMap<String, u64>,
     first_host: Option<i64>,
     estimated: bool,
+    /// Why the estimator's states were unusable (estimated here only).
+    problem: Option<String>,
 }
 
 /// Keeps navigation states at most every this often (host time).
@@ -143,7 +156,7 @@ fn read(args: &ReportArgs) -> Result<Data, ReportError> {
         let mut inputs = RecordedInputs::new(&mut reader, &args.est);
         let mut nav = Vec::new();
         let mut time = Vec::new();
-        offline::estimate(&args.est, inputs.by_ref(), true, |o, _| match o {
+        let run = offline::estimate(&args.est, inputs.by_ref(), true, |o, _| match o {
             Output::Nav(n) => {
                 if nav
                     .last()
@@ -158,6 +171,7 @@ fn read(args: &ReportArgs) -> Result<Data, ReportError> {
             return Err(e.into());
         }
         warn_if_truncated(&reader, &args.input);
+        d.problem = run.summary.problem;
         d.nav = nav;
         d.time = time;
     }
@@ -578,6 +592,9 @@ fn render(args: &ReportArgs, d: &Data) -> String {
             },
         ),
     ];
+    if let Some(p) = &d.problem {
+        summary.push(("WARNING".into(), p.clone()));
+    }
     for (service, n) in &d.counts {
         summary.push((service.clone(), format!("{n} samples")));
     }
@@ -954,6 +971,12 @@ pub fn run(args: &ReportArgs) -> Result<usize, ReportError> {
     }
     let page = render(args, &d);
     std::fs::write(&args.out, &page).map_err(|e| ReportError::Io(args.out.display().to_string(), e))?;
+    if let Some(problem) = d.problem {
+        return Err(ReportError::Unusable {
+            path: args.out.display().to_string(),
+            problem,
+        });
+    }
     Ok(page.matches("<svg class=\"plot").count())
 }
 

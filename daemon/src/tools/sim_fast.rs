@@ -10,7 +10,8 @@
 
 use std::path::Path;
 
-use navsync_recording::{RecordingError, SampleRecorder};
+use navsync_recording::{RecordingError, SampleRecorder, channels};
+use navsync_shared::services;
 use navsync_sim::process::{SimArgs, load_config};
 use navsync_sim::published::PublishedStream;
 use navsync_sim::world::World;
@@ -42,6 +43,9 @@ pub enum SimEstimateError {
     /// The estimator's settings.
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// The estimator produced no usable states or far fewer than expected.
+    #[error("{0}")]
+    Unusable(String),
 }
 
 /// What `navsync sim --fast` does with the samples.
@@ -65,10 +69,41 @@ pub fn settings(cfg: &SimConfig, flags: &ModelFlags, file: &Loaded) -> Result<Se
     s.imu_ids = (0..cfg.imu.count).map(|i| i.to_string()).collect();
     if flags.imu_model.is_none() {
         s.imu_model = cfg.imu.preset;
-        s.gnss_vel_std_mps = cfg.gnss.velocity_sigma_mps.max(0.01);
+        s.gnss_vel_std_mps = sim_gnss_vel_std(cfg);
     }
+    s.gnss_lever_arm_m = cfg.gnss.antenna_lever_arm_m;
     flags.apply(&mut s);
     Ok(s)
+}
+
+/// The velocity σ the filter is given for the simulated receiver, m/s (its noise, at least 1 cm/s).
+fn sim_gnss_vel_std(cfg: &SimConfig) -> f64 {
+    cfg.gnss.velocity_sigma_mps.max(0.01)
+}
+
+/// Stores in the recording what the simulated devices are (each IMU's noise model, the
+/// antenna lever arm, the receiver's velocity σ), so `replay --estimate` uses the right models.
+fn describe_devices(mut rec: SampleRecorder, cfg: &SimConfig) -> Result<SampleRecorder, RecordingError> {
+    for i in 0..cfg.imu.count {
+        let noise = cfg.imu_unit(i).preset.noise();
+        rec.set_channel_metadata(
+            &services::imu_sample(&i.to_string()),
+            channels::META_IMU_NOISE,
+            &channels::metadata_value(&noise),
+        )?;
+    }
+    let fix = services::gnss_fix("0");
+    rec.set_channel_metadata(
+        &fix,
+        channels::META_LEVER_ARM,
+        &channels::metadata_value(&cfg.gnss.antenna_lever_arm_m),
+    )?;
+    rec.set_channel_metadata(
+        &fix,
+        channels::META_GNSS_VEL_STD,
+        &channels::metadata_value(&sim_gnss_vel_std(cfg)),
+    )?;
+    Ok(rec)
 }
 
 /// Produces the world's samples as fast as the CPU allows (up to `--duration` of scenario
@@ -83,10 +118,11 @@ pub fn run(sim: &SimArgs, flags: &ModelFlags, file: &Loaded, outputs: Outputs<'_
     let clock = world.clone();
     let end_host = sim.duration_s.map(|d| start_host + (d * 1e9) as i64);
     let mut recorder = match outputs.record {
-        Some(p) => Some(SampleRecorder::create(p)?),
+        Some(p) => Some(describe_devices(SampleRecorder::create(p)?, &cfg)?),
         None => None,
     };
     let mut write_err: Option<RecordingError> = None;
+    let mut unusable = None;
     let stream = PublishedStream::new(world)
         .take_while(|p| end_host.is_none_or(|end| p.delivered_ns <= end))
         .inspect(|p| {
@@ -110,6 +146,9 @@ pub fn run(sim: &SimArgs, flags: &ModelFlags, file: &Loaded, outputs: Outputs<'_
                 source,
             })?;
         }
+        if let Some(p) = run.summary.problem {
+            unusable = Some(p);
+        }
     } else {
         stream.for_each(drop);
     }
@@ -123,5 +162,8 @@ pub fn run(sim: &SimArgs, flags: &ModelFlags, file: &Loaded, outputs: Outputs<'_
             eprintln!("navsync sim: {messages} samples recorded to {}", p.display());
         }
     }
-    Ok(())
+    match unusable {
+        Some(p) => Err(SimEstimateError::Unusable(p)),
+        None => Ok(()),
+    }
 }

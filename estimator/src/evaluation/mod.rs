@@ -87,8 +87,15 @@ pub struct Summary {
     pub imu_offset_std_s: BTreeMap<String, f64>,
     /// The true offsets, s (empty without truth).
     pub imu_offset_true_s: BTreeMap<String, f64>,
-    /// The counters of each kind of measurement besides GNSS (`zupt_used`, …).
+    /// The counters of each kind of measurement (`zupt_used`, …).
     pub measurement_counters: BTreeMap<String, u64>,
+    /// Navigation states produced.
+    pub nav_states: u64,
+    /// Of those, usable: aligned, with a GNSS time.
+    pub usable_states: u64,
+    /// Why there were no usable states, or far fewer than states (null when as expected;
+    /// offline commands then exit non-zero).
+    pub problem: Option<String>,
     /// 1 Hz error series.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub series: Vec<SeriesPoint>,
@@ -296,6 +303,9 @@ impl Evaluator {
                 _ => BTreeMap::new(),
             },
             measurement_counters: BTreeMap::new(),
+            nav_states: 0,
+            usable_states: 0,
+            problem: None,
             series: self.series.clone(),
         }
     }
@@ -367,6 +377,9 @@ impl Summary {
                 est * 1e3,
                 sd * 1e3
             ));
+        }
+        if let Some(p) = &self.problem {
+            s.push_str(&format!("WARNING             {p}\n"));
         }
         if !self.measurement_counters.is_empty() {
             let list: Vec<String> = self

@@ -179,7 +179,13 @@ impl Aligner {
 
     /// Aligns on a fix moving fast enough, or returns `None` (and remembers the fix).
     pub fn try_align(&mut self, obs: &GnssObservation) -> Option<Alignment> {
-        let v = obs.vel_ned_mps;
+        // A fix with speed and track but no velocity (a receiver or file without one): the
+        // horizontal velocity along the track.
+        let mut v = obs.vel_ned_mps;
+        if !(v.x.is_finite() && v.y.is_finite()) && obs.speed_mps.is_finite() && obs.track_rad.is_finite() {
+            v.x = obs.speed_mps * obs.track_rad.cos();
+            v.y = obs.speed_mps * obs.track_rad.sin();
+        }
         let prev = self.prev_fix.replace((obs.stamp_host_ns, Vector3::new(v.x, v.y, 0.0)));
         let acc_ned = match prev {
             Some((t, pv)) if obs.stamp_host_ns > t && obs.stamp_host_ns - t <= 2_000_000_000 && v.x.is_finite() => {

@@ -19,7 +19,7 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use navsync_shared::earth::{self, OMEGA_IE};
-use navsync_shared::imu_spec::ImuErrorSpec;
+use navsync_shared::imu_spec::{ImuErrorSpec, ImuNoise, PerAxis};
 
 use super::mechanization::{Pva, skew};
 
@@ -47,31 +47,31 @@ pub type StateVec = SVector<f64, N>;
 /// Error-state covariance / transition matrix.
 pub type StateMat = SMatrix<f64, N, N>;
 
-/// IMU and filter process-noise figures (KF-GINS `ImuNoise`), SI units.
+/// IMU and filter process-noise figures (KF-GINS `ImuNoise`), SI units, per IMU axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ProcessNoise {
     /// Angle random walk, rad/√s.
-    pub arw: f64,
+    pub arw: Vector3<f64>,
     /// Velocity random walk, m/s/√s.
-    pub vrw: f64,
+    pub vrw: Vector3<f64>,
     /// Gyro bias Gauss–Markov standard deviation, rad/s.
-    pub gyro_bias_std: f64,
+    pub gyro_bias_std: Vector3<f64>,
     /// Accelerometer bias Gauss–Markov standard deviation, m/s².
-    pub accel_bias_std: f64,
+    pub accel_bias_std: Vector3<f64>,
     /// Gyro scale-factor Gauss–Markov standard deviation.
-    pub gyro_scale_std: f64,
+    pub gyro_scale_std: Vector3<f64>,
     /// Accelerometer scale-factor Gauss–Markov standard deviation.
-    pub accel_scale_std: f64,
+    pub accel_scale_std: Vector3<f64>,
     /// Correlation time of the bias and scale Gauss–Markov processes, s.
     pub corr_time_s: f64,
     /// Initial 1-sigma of the gyro bias (turn-on bias), rad/s.
-    pub gyro_bias_init_std: f64,
+    pub gyro_bias_init_std: Vector3<f64>,
     /// Initial 1-sigma of the accelerometer bias (turn-on bias), m/s².
-    pub accel_bias_init_std: f64,
+    pub accel_bias_init_std: Vector3<f64>,
     /// Initial 1-sigma of the gyro scale factor.
-    pub gyro_scale_init_std: f64,
+    pub gyro_scale_init_std: Vector3<f64>,
     /// Initial 1-sigma of the accelerometer scale factor.
-    pub accel_scale_init_std: f64,
+    pub accel_scale_init_std: Vector3<f64>,
     /// Random walk of the GNSS delay, s/√s (lets Δ follow slow changes of the receiver).
     pub delay_rw: f64,
     /// Estimate scale factors (else their states are frozen at zero).
@@ -81,28 +81,36 @@ pub struct ProcessNoise {
 }
 
 impl ProcessNoise {
-    /// Process noise of an IMU class: white noise from its noise densities, the bias
-    /// Gauss–Markov processes from its in-run stability, the initial uncertainties from its
-    /// turn-on bias and scale-factor spread. Scale factors are nearly constant: a Gauss–Markov
-    /// process with a tenth of their spread. Δ is a constant per session that may wander by
-    /// 0.1 ms/√s (a receiver firmware changing its output schedule).
-    pub fn from_spec(spec: &ImuErrorSpec) -> Self {
+    /// Process noise of an IMU as its model states it (KF-GINS units, converted to SI): white
+    /// noise from the random walks, the bias and scale Gauss–Markov processes from their
+    /// instabilities, the initial uncertainties from the turn-on errors. Scale factors are
+    /// estimated when a turn-on spread is given. Δ is a constant per session that may wander
+    /// by 0.1 ms/√s (a receiver firmware changing its output schedule).
+    pub fn from_imu_noise(n: &ImuNoise) -> Self {
+        const DEG_H: f64 = std::f64::consts::PI / 180.0 / 3600.0;
+        let v = |p: PerAxis, k: f64| Vector3::from(p.0) * k;
         Self {
-            arw: spec.gyro.noise_density,
-            vrw: spec.accel.noise_density,
-            gyro_bias_std: spec.gyro.bias_instability_sigma,
-            accel_bias_std: spec.accel.bias_instability_sigma,
-            gyro_scale_std: 0.1 * spec.gyro.scale_factor_sigma,
-            accel_scale_std: 0.1 * spec.accel.scale_factor_sigma,
-            corr_time_s: spec.gyro.bias_correlation_s,
-            gyro_bias_init_std: spec.gyro.bias_sigma.max(spec.gyro.bias_instability_sigma),
-            accel_bias_init_std: spec.accel.bias_sigma.max(spec.accel.bias_instability_sigma),
-            gyro_scale_init_std: spec.gyro.scale_factor_sigma,
-            accel_scale_init_std: spec.accel.scale_factor_sigma,
+            arw: v(n.arw_deg_per_sqrt_h, std::f64::consts::PI / 180.0 / 60.0),
+            vrw: v(n.vrw_mps_per_sqrt_h, 1.0 / 60.0),
+            gyro_bias_std: v(n.gyro_bias_std_deg_per_h, DEG_H),
+            accel_bias_std: v(n.accel_bias_std_mgal, 1e-5),
+            gyro_scale_std: v(n.gyro_scale_std_ppm, 1e-6),
+            accel_scale_std: v(n.accel_scale_std_ppm, 1e-6),
+            corr_time_s: n.corr_time_h * 3600.0,
+            gyro_bias_init_std: v(n.gyro_bias_init_std_deg_per_h, DEG_H),
+            accel_bias_init_std: v(n.accel_bias_init_std_mgal, 1e-5),
+            gyro_scale_init_std: v(n.gyro_scale_init_std_ppm, 1e-6),
+            accel_scale_init_std: v(n.accel_scale_init_std_ppm, 1e-6),
             delay_rw: 1e-4,
-            estimate_scale: spec.gyro.scale_factor_sigma > 0.0,
+            estimate_scale: n.gyro_scale_init_std_ppm.0.iter().any(|x| *x > 0.0)
+                || n.accel_scale_init_std_ppm.0.iter().any(|x| *x > 0.0),
             estimate_delay: true,
         }
+    }
+
+    /// Process noise of an IMU class ([`ImuNoise::from_spec`]).
+    pub fn from_spec(spec: &ImuErrorSpec) -> Self {
+        Self::from_imu_noise(&ImuNoise::from_spec(spec))
     }
 }
 
@@ -204,26 +212,30 @@ pub fn system_matrix(pva: &Pva, f_b: &Vector3<f64>, w_b: &Vector3<f64>, noise: &
     f
 }
 
-/// Discrete process noise over `dt`: Q_d = G Q_c Gᵀ·dt with the white-noise intensities of the
-/// random walks (ARW², VRW²) and of the Gauss–Markov drivers (2σ²/T). The noise enters velocity
-/// and attitude through C_b^n, and C (σ²I) Cᵀ = σ²I, so Q_d is diagonal. KF-GINS uses the
+/// Discrete process noise over `dt` at attitude `c_bn` (C_b^n): Q_d = G Q_c Gᵀ·dt with the
+/// white-noise intensities of the random walks (ARW², VRW² per IMU axis, rotated into the
+/// navigation frame: C diag(σ²) Cᵀ) and of the Gauss–Markov drivers (2σ²/T). KF-GINS uses the
 /// trapezoid ½(Φ Q Φᵀ + Q)·dt; the difference is O(F·dt) relative, below 2 % of the
-/// off-diagonal terms at the 20 ms covariance step, and the diagonal form costs nothing.
-pub fn process_noise(noise: &ProcessNoise, dt: f64) -> SVector<f64, N> {
-    let mut q = SVector::<f64, N>::zeros();
-    let gm = |std: f64| 2.0 * std * std / noise.corr_time_s;
+/// off-diagonal terms at the 20 ms covariance step. `imu_scale` multiplies the IMU's share
+/// (every term but the GNSS delay's): the filter's adaptation of a model that proved too
+/// optimistic (1 = the model as configured).
+pub fn process_noise(noise: &ProcessNoise, c_bn: &Matrix3<f64>, dt: f64, imu_scale: f64) -> StateMat {
+    let mut q = StateMat::zeros();
+    let dt_imu = dt * imu_scale;
+    let rotated = |s: &Vector3<f64>| c_bn * Matrix3::from_diagonal(&s.component_mul(s)) * c_bn.transpose() * dt_imu;
+    q.fixed_view_mut::<3, 3>(VEL, VEL).copy_from(&rotated(&noise.vrw));
+    q.fixed_view_mut::<3, 3>(ATT, ATT).copy_from(&rotated(&noise.arw));
+    let gm = |std: f64| 2.0 * std * std / noise.corr_time_s * dt_imu;
     for i in 0..3 {
-        q[VEL + i] = noise.vrw * noise.vrw;
-        q[ATT + i] = noise.arw * noise.arw;
-        q[BG + i] = gm(noise.gyro_bias_std);
-        q[BA + i] = gm(noise.accel_bias_std);
+        q[(BG + i, BG + i)] = gm(noise.gyro_bias_std[i]);
+        q[(BA + i, BA + i)] = gm(noise.accel_bias_std[i]);
         if noise.estimate_scale {
-            q[SG + i] = gm(noise.gyro_scale_std);
-            q[SA + i] = gm(noise.accel_scale_std);
+            q[(SG + i, SG + i)] = gm(noise.gyro_scale_std[i]);
+            q[(SA + i, SA + i)] = gm(noise.accel_scale_std[i]);
         }
     }
     if noise.estimate_delay {
-        q[DELAY] = noise.delay_rw * noise.delay_rw;
+        q[(DELAY, DELAY)] = noise.delay_rw * noise.delay_rw * dt;
     }
-    q * dt
+    q
 }

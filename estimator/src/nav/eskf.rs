@@ -9,6 +9,12 @@ use super::error_state::{N, StateMat, StateVec};
 /// Chi-square 99.9 % quantiles for 1…6 degrees of freedom (innovation gate).
 pub const CHI2_999: [f64; 6] = [10.83, 13.82, 16.27, 18.47, 20.52, 22.46];
 
+/// The innovation gate for `M` measured components: the 99.9 % chi-square quantile times
+/// `gate_scale`.
+pub fn gate_of<const M: usize>(gate_scale: f64) -> f64 {
+    CHI2_999[(M - 1).min(CHI2_999.len() - 1)] * gate_scale
+}
+
 /// Outcome of a measurement update.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Update {
@@ -39,12 +45,9 @@ impl Eskf {
         Self { p: p0 }
     }
 
-    /// P ← Φ P Φᵀ + Q_d with diagonal Q_d (Brown & Hwang eq. 5.2.10), symmetrised.
-    pub fn predict(&mut self, phi: &StateMat, qd_diag: &SVector<f64, N>) {
-        let mut p = phi * self.p * phi.transpose();
-        for i in 0..N {
-            p[(i, i)] += qd_diag[i];
-        }
+    /// P ← Φ P Φᵀ + Q_d (Brown & Hwang eq. 5.2.10), symmetrised.
+    pub fn predict(&mut self, phi: &StateMat, qd: &StateMat) {
+        let p = phi * self.p * phi.transpose() + qd;
         self.p = (p + p.transpose()) * 0.5;
     }
 
@@ -64,7 +67,7 @@ impl Eskf {
             return Update::Rejected { nis: f64::INFINITY };
         };
         let nis = (dz.transpose() * s_inv * dz)[(0, 0)];
-        let gate = CHI2_999[(M - 1).min(CHI2_999.len() - 1)] * gate_scale;
+        let gate = gate_of::<M>(gate_scale);
         if !nis.is_finite() || nis > gate {
             return Update::Rejected { nis };
         }
@@ -90,7 +93,7 @@ impl Eskf {
             return (false, f64::INFINITY);
         };
         let nis = (dz.transpose() * s_inv * dz)[(0, 0)];
-        let gate = CHI2_999[(M - 1).min(CHI2_999.len() - 1)] * gate_scale;
+        let gate = gate_of::<M>(gate_scale);
         (nis.is_finite() && nis <= gate, nis)
     }
 

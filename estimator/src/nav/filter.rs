@@ -37,6 +37,9 @@ pub struct DelayedFilter {
     pub acc_ned: Vector3<f64>,
     /// Compensated angular rate of the last step (body FRD), rad/s.
     pub last_w: Vector3<f64>,
+    /// Factor on the IMU's process noise, ≥ 1: raised when the GNSS innovations show the
+    /// configured model too optimistic ([`super::measurements::gnss::GnssFusion`]).
+    pub q_scale: f64,
     cov_dt: f64,
     cov_f: Vector3<f64>,
     cov_w: Vector3<f64>,
@@ -58,6 +61,7 @@ impl DelayedFilter {
             delay_s,
             acc_ned: Vector3::zeros(),
             last_w: Vector3::zeros(),
+            q_scale: 1.0,
             cov_dt: 0.0,
             cov_f: Vector3::zeros(),
             cov_w: Vector3::zeros(),
@@ -101,7 +105,8 @@ impl DelayedFilter {
         let w_b = self.cov_w / self.cov_dt;
         let f = error_state::system_matrix(&self.pva, &f_b, &w_b, &cfg.noise);
         let phi = StateMat::identity() + f * self.cov_dt;
-        let q = error_state::process_noise(&cfg.noise, self.cov_dt);
+        let c_bn = self.pva.q_nb.to_rotation_matrix().into_inner();
+        let q = error_state::process_noise(&cfg.noise, &c_bn, self.cov_dt, self.q_scale);
         self.eskf.predict(&phi, &q);
         self.cov_dt = 0.0;
         self.cov_f = Vector3::zeros();

@@ -25,6 +25,14 @@ use super::imu_buffer::{ImuBuffer, ImuRecord};
 use super::measurements::gnss::GnssObservation;
 use super::measurements::{Measurement, MeasurementConfig, MeasurementQueue, MeasurementStates};
 use super::mechanization::{ImuIncrement, Pva, propagate};
+use crate::settings::InitialState;
+
+/// Shortest adaptive fusion horizon, s.
+pub const MIN_HORIZON_S: f64 = 0.25;
+/// Margin of the adaptive horizon over the fixes' delay, s.
+const HORIZON_MARGIN_S: f64 = 0.02;
+/// How fast the adaptive horizon's memory of a long delay fades, per fix, s.
+const HORIZON_DECAY_S: f64 = 0.01;
 
 /// 1-sigma of the motion-onset delay estimate, s.
 const ONSET_DELAY_STD_S: f64 = 0.05;
@@ -36,9 +44,14 @@ pub struct NavConfig {
     pub noise: ProcessNoise,
     /// GNSS antenna position in the body frame (FRD), m.
     pub lever_arm_b_m: Vector3<f64>,
-    /// Fusion horizon: how far the delayed filter runs behind the present, s. Must exceed the
-    /// largest GNSS delay (epoch to receipt, plus Δ in software sync).
+    /// Fusion horizon: how far the delayed filter runs behind the present, s; with
+    /// `adaptive_horizon` its largest value. Must exceed the largest GNSS delay (epoch to
+    /// release into the filter: receipt, the input hold, plus Δ in software sync).
     pub horizon_s: f64,
+    /// Shorten the horizon to what the fixes need (their delay from epoch to release, with
+    /// Δ̂ + 3σ_Δ and a 20 ms margin, the largest of the recent ones), at least
+    /// [`MIN_HORIZON_S`]: the output then carries less dead reckoning after the last fix.
+    pub adaptive_horizon: bool,
     /// Covariance propagation step, s.
     pub cov_step_s: f64,
     /// Prior of the GNSS delay Δ, s, and its 1-sigma.
@@ -68,6 +81,7 @@ impl NavConfig {
             noise,
             lever_arm_b_m: Vector3::zeros(),
             horizon_s: 1.5,
+            adaptive_horizon: true,
             cov_step_s: 0.02,
             delay_prior_s: 0.0,
             delay_prior_std_s: 0.02,
@@ -146,6 +160,10 @@ pub struct Navigator {
     counters: NavCounters,
     last_imu_ns: Option<i64>,
     last_fix_rx_ns: Option<i64>,
+    /// The fusion horizon in force, ns.
+    horizon_ns: i64,
+    /// The longest recent delay of a fix from its epoch to its release, ns (fading).
+    fix_delay_ns: i64,
 }
 
 impl Navigator {
@@ -167,6 +185,8 @@ impl Navigator {
             counters: NavCounters::default(),
             last_imu_ns: None,
             last_fix_rx_ns: None,
+            horizon_ns: (cfg.horizon_s * 1e9) as i64,
+            fix_delay_ns: 0,
         }
     }
 
@@ -183,6 +203,11 @@ impl Navigator {
     /// Configuration in use.
     pub fn config(&self) -> &NavConfig {
         &self.cfg
+    }
+
+    /// The fusion horizon in force, s (adaptive: see [`NavConfig::adaptive_horizon`]).
+    pub fn horizon_s(&self) -> f64 {
+        self.horizon_ns as f64 * 1e-9
     }
 
     /// True once aligned.
@@ -229,12 +254,73 @@ impl Navigator {
             return;
         }
         let Some(f) = &self.filt else { return };
+        if self.cfg.adaptive_horizon
+            && let Some(now) = self.last_imu_ns
+        {
+            // The delay this fix needed from its epoch (with Δ's doubt) to its release now.
+            let (d, sd) = (f.delay_s, f.eskf.std(DELAY));
+            let doubt = if self.cfg.noise.estimate_delay { d + 3.0 * sd } else { d };
+            let needed = now - obs.stamp_host_ns + (doubt.max(0.0) * 1e9) as i64;
+            self.fix_delay_ns = needed.max(self.fix_delay_ns - (HORIZON_DECAY_S * 1e9) as i64);
+            let max = (self.cfg.horizon_s * 1e9) as i64;
+            let min = (MIN_HORIZON_S * 1e9) as i64;
+            self.horizon_ns = (self.fix_delay_ns + (HORIZON_MARGIN_S * 1e9) as i64).clamp(min, max);
+        }
         // Behind the delayed filter by more than one covariance step: the horizon was too short.
         if f.t_ns - obs.epoch_ns(f.delay_s) > (self.cfg.cov_step_s * 1e9) as i64 {
             self.counters.fixes_too_old += 1;
             return;
         }
         self.queue.push(obs.into(), &mut self.counters);
+    }
+
+    /// Starts the filter from a known state (instead of [`Self::on_gnss`]'s alignment) at host
+    /// time `host_ns` (the state's instant), with the gyro and accelerometer biases and their
+    /// and the state's 1-sigma as given; the other sensor errors start at zero with their
+    /// turn-on σ. Does nothing once the filter runs.
+    pub fn initialize(&mut self, init: &InitialState, host_ns: i64) {
+        if self.filt.is_some() {
+            return;
+        }
+        let cfg = &self.cfg;
+        let [r, p_, y] = init.rpy_deg.map(f64::to_radians);
+        let pva = Pva {
+            lat_rad: init.lat_deg.to_radians(),
+            lon_rad: init.lon_deg.to_radians(),
+            h_m: init.height_m,
+            vel_ned_mps: Vector3::from(init.vel_ned_mps),
+            q_nb: nalgebra::UnitQuaternion::from_euler_angles(r, p_, y),
+        };
+        const DEG_H: f64 = std::f64::consts::PI / 180.0 / 3600.0;
+        let mut p = StateMat::zeros();
+        for i in 0..3 {
+            p[(POS + i, POS + i)] = init.pos_std_m[i].powi(2);
+            p[(VEL + i, VEL + i)] = init.vel_std_mps[i].powi(2);
+            p[(ATT + i, ATT + i)] = init.att_std_deg[i].to_radians().powi(2);
+            p[(BG + i, BG + i)] = cfg.noise.gyro_bias_init_std[i].powi(2);
+            p[(BA + i, BA + i)] = cfg.noise.accel_bias_init_std[i].powi(2);
+            if cfg.noise.estimate_scale {
+                p[(SG + i, SG + i)] = cfg.noise.gyro_scale_init_std[i].powi(2);
+                p[(SA + i, SA + i)] = cfg.noise.accel_scale_init_std[i].powi(2);
+            }
+        }
+        if cfg.noise.estimate_delay {
+            p[(DELAY, DELAY)] = cfg.delay_prior_std_s.powi(2);
+        }
+        while self.buf.front().is_some_and(|r| r.host_ns <= host_ns) {
+            self.buf.pop();
+        }
+        let mut f = DelayedFilter::new(
+            pva,
+            host_ns,
+            Eskf::new(p),
+            Vector3::from(init.gyro_bias_deg_per_h) * DEG_H,
+            cfg.delay_prior_s,
+        );
+        f.bias_a = Vector3::from(init.accel_bias_mgal) * 1e-5;
+        self.filt = Some(f);
+        self.states.gnss.last_fused_ns = host_ns;
+        self.replay();
     }
 
     fn try_align(&mut self, obs: &GnssObservation) {
@@ -258,14 +344,14 @@ impl Navigator {
             p[(VEL + i, VEL + i)] = cfg.init_vel_std_mps.powi(2);
             p[(BG + i, BG + i)] = if a.levelled {
                 // Static average: white noise over the static time plus the bias instability.
-                cfg.noise.arw * cfg.noise.arw / a.static_s.max(1.0) + cfg.noise.gyro_bias_std.powi(2)
+                cfg.noise.arw[i] * cfg.noise.arw[i] / a.static_s.max(1.0) + cfg.noise.gyro_bias_std[i].powi(2)
             } else {
-                cfg.noise.gyro_bias_init_std.powi(2)
+                cfg.noise.gyro_bias_init_std[i].powi(2)
             };
-            p[(BA + i, BA + i)] = cfg.noise.accel_bias_init_std.powi(2);
+            p[(BA + i, BA + i)] = cfg.noise.accel_bias_init_std[i].powi(2);
             if cfg.noise.estimate_scale {
-                p[(SG + i, SG + i)] = cfg.noise.gyro_scale_init_std.powi(2);
-                p[(SA + i, SA + i)] = cfg.noise.accel_scale_init_std.powi(2);
+                p[(SG + i, SG + i)] = cfg.noise.gyro_scale_init_std[i].powi(2);
+                p[(SA + i, SA + i)] = cfg.noise.accel_scale_init_std[i].powi(2);
             }
         }
         let level_std = if a.levelled {
@@ -388,7 +474,7 @@ impl Navigator {
         while self.out_tail.front().is_some_and(|r| r.host_ns <= host_ns) {
             self.out_tail.pop();
         }
-        let horizon_ns = (self.cfg.horizon_s * 1e9) as i64;
+        let horizon_ns = self.horizon_ns;
         let Some(filt) = &mut self.filt else {
             while self.buf.front().is_some_and(|r| r.host_ns < host_ns - horizon_ns) {
                 self.buf.pop();
@@ -401,6 +487,10 @@ impl Navigator {
                 break;
             }
             self.buf.pop();
+            if r.host_ns <= filt.t_ns {
+                // Before a known initial state's instant (the filter stream lags the output's).
+                continue;
+            }
             filt.step(&r, &self.cfg);
             self.states
                 .on_step(&r, filt, &self.cfg, &mut self.queue, &mut self.counters);

@@ -1,13 +1,20 @@
 //! Host ↔ GNSS time synchronisation: labels PPS edges with their GNSS second, drives the
 //! [`ClockModel`], measures the receiver latency d0 and decides the [`TimeStatus`].
 //!
-//! Labelling. A receiver emits its PPS edge at the start of GNSS second T and the NMEA that
-//! describes epoch T some d0 later (0.1–0.9 s typically). Before the clock is locked, an edge
-//! is labelled by the first whole-second fix received within one second after it (so d0 must
-//! be below 1 s while acquiring). Once locked, every edge is labelled by rounding the mapped
-//! time to the nearest second, which stays unambiguous for any d0 as long as the mapping error
-//! is far below 0.5 s; an edge mapping more than [`EDGE_GATE_NS`] from a whole second is
-//! rejected as early/late.
+//! Labelling. A receiver emits its PPS edge at the start of GNSS second T and the message that
+//! describes an epoch some d0 later (0.1–0.9 s typically). Before the clock is locked, an edge
+//! at host time e is labelled by the first fix received within one second after it, whatever
+//! its epoch grid (whole seconds, 10 Hz, 4 Hz, epochs a few ms off the grid like a u-blox's
+//! x.999): a fix of epoch u received at r is that epoch's output d0 = (r − e) − (u − T) ≥ 0
+//! after it, and the smallest such d0 gives T = ⌈u − (r − e)⌉ (so d0 must be below 1 s while
+//! acquiring, as before). Once locked, every edge is labelled by rounding the mapped time to
+//! the nearest second, which stays unambiguous for any d0 as long as the mapping error is far
+//! below 0.5 s; an edge mapping more than [`EDGE_GATE_NS`] from a whole second is rejected as
+//! early/late.
+//!
+//! Software sync (no PPS): the host clock is mapped through the latest fix, received at r with
+//! epoch u: UTC(h) = u + (h − (r − Δ̂)), with Δ̂ the navigation filter's GNSS delay (the
+//! receiver's output latency as the IMU's clock sees it; 0 before the filter has one).
 //!
 //! Trust. An edge counts only if the receiver reported a valid fix in the last
 //! [`FIX_TRUST_NS`]; without one, the edge is rejected and the mapping goes into holdover.
@@ -105,7 +112,7 @@ pub struct TimeSync {
     status: TimeStatus,
     leap_s: i16,
     seq: u64,
-    /// Software-sync mapping: receipt host time and UTC of the last whole-second fix.
+    /// Software-sync mapping: receipt host time and UTC epoch of the last fix.
     last_fix_label: Option<(i64, i64)>,
     /// Externally estimated GNSS delay (the navigation filter's Δ), s and 1-sigma s.
     gnss_delay: (f64, f64),
@@ -252,10 +259,6 @@ impl TimeSync {
         }
         self.last_valid_fix_host_ns = Some(h);
         self.leap_s = gps_minus_utc_s(fix.utc_ns);
-        let whole_second = fix.utc_ns.rem_euclid(NS_PER_S) == 0;
-        if !whole_second {
-            return false;
-        }
         self.last_fix_label = Some((h, fix.utc_ns));
         let mut updated = false;
         if self.cfg.software_sync {
@@ -272,14 +275,22 @@ impl TimeSync {
                 .find(|e| e.host_ns <= h && h - e.host_ns < NS_PER_S)
                 .copied();
             if let Some(edge) = found {
+                // The edge's second: the latest whole second ≤ the epoch, counted back by the
+                // time from the edge to the receipt (module docs).
+                let label = (fix.utc_ns - (h - edge.host_ns)).div_euclid(NS_PER_S) * NS_PER_S;
+                let label = if label < fix.utc_ns - (h - edge.host_ns) {
+                    label + NS_PER_S
+                } else {
+                    label
+                };
                 if self.clock.is_initialized() {
-                    if let ClockUpdate::Accepted(_) = self.clock.update(edge.host_ns, fix.utc_ns, edge.sigma_ns) {
+                    if let ClockUpdate::Accepted(_) = self.clock.update(edge.host_ns, label, edge.sigma_ns) {
                         self.accept_edge(edge.host_ns);
                         updated = true;
                     }
                 } else {
                     // Rate unknown to 100 ppm: any crystal.
-                    self.clock.init(edge.host_ns, fix.utc_ns, edge.sigma_ns, 1e-4);
+                    self.clock.init(edge.host_ns, label, edge.sigma_ns, 1e-4);
                     self.counters.pps_used += 1;
                     self.last_used_host_ns = Some(edge.host_ns);
                     self.status = TimeStatus::Acquiring;
@@ -296,17 +307,40 @@ impl TimeSync {
         updated
     }
 
-    /// Host time at which UTC read `utc_ns`, when the mapping is PPS-based (locked or in
-    /// holdover); `None` otherwise.
+    /// Host time at which UTC read `utc_ns` by the current mapping (the inverse of
+    /// [`utc_ns_at_host`](Self::utc_ns_at_host)); `None` without one.
     pub fn host_ns_at_utc(&self, utc_ns: i64) -> Option<i64> {
-        (self.clock.is_initialized() && matches!(self.status, TimeStatus::Locked | TimeStatus::Holdover))
-            .then(|| self.clock_host_ns_at(utc_ns))
+        if self.clock.is_initialized() && matches!(self.status, TimeStatus::Locked | TimeStatus::Holdover) {
+            return Some(self.clock_host_ns_at(utc_ns));
+        }
+        if self.status == TimeStatus::Software
+            && let Some((rx, utc)) = self.last_fix_label
+        {
+            return Some(rx + (utc_ns - utc) - (self.software_latency_s() * 1e9).round() as i64);
+        }
+        None
     }
 
-    /// UTC at host time `host_ns` by the current mapping (PPS-based or software), if any.
+    /// The receipt latency of the fixes under software sync, s: the GNSS delay estimate, 0
+    /// before there is one.
+    fn software_latency_s(&self) -> f64 {
+        if self.gnss_delay.0.is_finite() {
+            self.gnss_delay.0
+        } else {
+            0.0
+        }
+    }
+
+    /// UTC at host time `host_ns` by the current mapping: PPS-based (locked or in holdover), or
+    /// under software sync through the latest fix and the GNSS delay (module docs).
     pub fn utc_ns_at_host(&self, host_ns: i64) -> Option<i64> {
         if self.clock.is_initialized() && matches!(self.status, TimeStatus::Locked | TimeStatus::Holdover) {
             return Some(self.clock.utc_ns_at(host_ns));
+        }
+        if self.status == TimeStatus::Software
+            && let Some((rx, utc)) = self.last_fix_label
+        {
+            return Some(utc + host_ns - rx + (self.software_latency_s() * 1e9).round() as i64);
         }
         None
     }

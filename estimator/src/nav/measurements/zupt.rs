@@ -6,7 +6,9 @@
 //! stream is cut into windows of `window_s`; a window is *still* when the standard deviation of
 //! the specific force (root of the trace of its covariance) is below `accel_std_mps2` (a moving
 //! car vibrates, a parked one hardly), the mean bias-compensated angular rate is below
-//! `gyro_rps`, and the filter's own speed is below `speed_mps` (a car cruising on a smooth road
+//! `gyro_rps`, the mean specific force is the previous window's within `accel_change_mps2`
+//! (no acceleration building up: a car moving off or coming to a stop changes it, however
+//! smoothly), and the filter's own speed is below `speed_mps` (a car cruising on a smooth road
 //! can look still to an IMU; the filter knows it is moving). After `still_windows` still
 //! windows in a row, every further still window yields one update at its end (Groves 2013,
 //! §15.3: ZUPT and ZARU as Kalman filter measurements):
@@ -42,7 +44,10 @@ pub struct ZuptConfig {
     pub accel_std_mps2: f64,
     /// Largest mean compensated angular rate of a still window, rad/s (default 1°/s).
     pub gyro_rps: f64,
-    /// Largest filter speed at which a window may count as still, m/s (default 0.5).
+    /// Largest change of the mean specific force from the previous window, m/s² (default
+    /// 0.03: a standing vehicle's mean is constant; an acceleration building up moves it).
+    pub accel_change_mps2: f64,
+    /// Largest filter speed at which a window may count as still, m/s (default 0.15).
     pub speed_mps: f64,
     /// Still windows in a row before the first update (default 2: one second).
     pub still_windows: u32,
@@ -59,7 +64,8 @@ impl Default for ZuptConfig {
             window_s: 0.5,
             accel_std_mps2: 0.25,
             gyro_rps: 1f64.to_radians(),
-            speed_mps: 0.5,
+            accel_change_mps2: 0.03,
+            speed_mps: 0.15,
             still_windows: 2,
             vel_std_mps: 0.02,
             rate_std_floor_rps: 2e-4,
@@ -83,6 +89,8 @@ struct Window {
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ZuptState {
     window: Window,
+    /// Mean specific force of the previous window (body FRD), m/s².
+    previous_mean_f: Option<Vector3<f64>>,
     still_in_a_row: u32,
     /// Updates fused.
     pub used: u64,
@@ -159,8 +167,14 @@ impl Measurement for Zupt {
         let n = f64::from(win.n);
         let var = |sum: Vector3<f64>, sum_sq: Vector3<f64>| (sum_sq / n - (sum / n).component_mul(&(sum / n))).sum().max(0.0);
         let mean_w = win.sum_w / n;
+        let mean_f = win.sum_f / n;
+        let steady = state
+            .previous_mean_f
+            .replace(mean_f)
+            .is_some_and(|p| (mean_f - p).norm() < z.accel_change_mps2);
         let still = var(win.sum_f, win.sum_ff).sqrt() < z.accel_std_mps2
             && mean_w.norm() < z.gyro_rps
+            && steady
             && win.max_speed < z.speed_mps;
         if !still {
             state.still_in_a_row = 0;

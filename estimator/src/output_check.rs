@@ -1,0 +1,137 @@
+//! Never silent: counts the navigation states that are usable (aligned, with a GNSS time) and,
+//! when there are none or far fewer than the states themselves, says why in words a user can
+//! act on. Used by the offline runs (the summary's `problem`; offline commands exit non-zero)
+//! and by the live estimator (`Health` counter `nav_usable` and a warning).
+
+use navsync_shared::samples::{NavState, NavStatus};
+
+/// Fewer usable states than this share of all states is a problem.
+pub const MIN_USABLE_SHARE: f64 = 0.5;
+
+/// What the pipeline saw, for the diagnosis.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct InputsSeen {
+    /// GNSS fixes that reached the estimator.
+    pub fixes: u64,
+    /// Fixes fused by the filter.
+    pub fixes_used: u64,
+    /// Fixes whose time could not be labelled (no PPS lock, no software mapping).
+    pub fixes_unlabelled: u64,
+    /// PPS edges used by the time synchroniser.
+    pub pps_used: u64,
+    /// A known initial state was configured (no self-alignment).
+    pub initial_state: bool,
+    /// GNSS speed the alignment waits for, m/s.
+    pub align_min_speed_mps: f64,
+}
+
+/// Counts of navigation states by usability.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct OutputCheck {
+    /// Navigation states produced.
+    pub states: u64,
+    /// Of those, aligned (position, velocity and attitude estimated).
+    pub aligned: u64,
+    /// Of those, with a GNSS/UTC time: usable by a subscriber or an export.
+    pub usable: u64,
+}
+
+impl OutputCheck {
+    /// Counts one navigation state.
+    pub fn add(&mut self, s: &NavState) {
+        self.states += 1;
+        if s.status != NavStatus::Aligning as u8 {
+            self.aligned += 1;
+            if s.utc_ns != i64::MIN {
+                self.usable += 1;
+            }
+        }
+    }
+
+    /// Why there are no usable states, or far fewer than states (below
+    /// [`MIN_USABLE_SHARE`]); `None` when the output is as expected.
+    pub fn problem(&self, seen: &InputsSeen) -> Option<String> {
+        if self.states == 0 {
+            return Some(
+                "no navigation state: no sample of the reference IMU reached the estimator (check the IMU ids, \
+                 e.g. --imus, against the recording's or the drivers' services)"
+                    .into(),
+            );
+        }
+        if self.usable as f64 >= MIN_USABLE_SHARE * self.states as f64 {
+            return None;
+        }
+        let share = format!(
+            "only {} of {} navigation states are usable (aligned, with a GNSS time)",
+            self.usable, self.states
+        );
+        let why = if self.aligned * 2 < self.states {
+            if seen.fixes == 0 {
+                "the filter is not aligned: no GNSS fix reached the estimator (check the receiver's service \
+                 and driver, e.g. --gnss)"
+                    .to_string()
+            } else if seen.initial_state {
+                "the filter is not aligned: the configured initial state's time was not reached or could not \
+                 be mapped to host time (is it within the data? under hardware sync the PPS must lock first)"
+                    .to_string()
+            } else {
+                format!(
+                    "the filter is not aligned: alignment takes the heading from the GNSS course once the speed \
+                     exceeds {:.1} m/s ({} fixes seen); a vehicle that stands still or moves slowly needs an \
+                     initial state ([estimator.initial_state]) or a lower --align-speed",
+                    seen.align_min_speed_mps, seen.fixes
+                )
+            }
+        } else if seen.pps_used == 0 && seen.fixes_used == 0 {
+            format!(
+                "the states have no GNSS time: no PPS edge was used and no fix could be labelled ({} of {} \
+                 fixes unlabelled); without PPS use --software-sync",
+                seen.fixes_unlabelled, seen.fixes
+            )
+        } else {
+            format!(
+                "the states have no GNSS time for long stretches: the PPS lock or the fixes' labels came late \
+                 or were lost ({} PPS edges used, {} of {} fixes unlabelled)",
+                seen.pps_used, seen.fixes_unlabelled, seen.fixes
+            )
+        };
+        Some(format!("{share}: {why}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use navsync_shared::reflect::Reflect;
+
+    fn state(status: NavStatus, utc_ns: i64) -> NavState {
+        let mut s = NavState::zeroed();
+        s.status = status as u8;
+        s.utc_ns = utc_ns;
+        s
+    }
+
+    #[test]
+    fn says_why_when_states_are_unusable() {
+        let seen = InputsSeen {
+            fixes: 10,
+            align_min_speed_mps: 3.0,
+            ..Default::default()
+        };
+        assert!(
+            OutputCheck::default()
+                .problem(&seen)
+                .unwrap()
+                .contains("no navigation state")
+        );
+        let mut c = OutputCheck::default();
+        (0..10).for_each(|_| c.add(&state(NavStatus::Aligning, i64::MIN)));
+        assert!(c.problem(&seen).unwrap().contains("exceeds 3.0 m/s"));
+        let mut c = OutputCheck::default();
+        (0..10).for_each(|_| c.add(&state(NavStatus::Aligned, i64::MIN)));
+        assert!(c.problem(&seen).unwrap().contains("--software-sync"));
+        (0..10).for_each(|_| c.add(&state(NavStatus::Aligned, 1)));
+        assert_eq!(c.usable, 10);
+        assert_eq!(c.problem(&seen), None, "half usable is enough");
+    }
+}
