@@ -351,11 +351,80 @@ pub fn apply_file(s: &mut Settings, cfg: &Loaded) -> Result<(), ConfigError> {
     Ok(())
 }
 
+/// What a live recording says about its devices, from the configuration file: the IMU noise
+/// model on every IMU channel when the file names one (`[estimator] imu_model` or
+/// `imu_noise`), the antenna lever arm (`[gnss.ID] lever_arm_m`) and the receiver's velocity σ
+/// (`[estimator] gnss_vel_std_mps`) on the fix channels, a configured initial state on the
+/// reference IMU's. Nothing the file does not state is claimed. Items: (service, key, value).
+pub fn recording_metadata(cfg: &Loaded) -> Result<Vec<(String, &'static str, String)>, ConfigError> {
+    use navsync_recording::channels::{self, metadata_value};
+    use navsync_shared::services;
+    let mut s = Settings::default();
+    apply_file(&mut s, cfg)?;
+    let (c, e) = (&cfg.config, &cfg.config.estimator);
+    let mut out = Vec::new();
+    if e.imu_model.is_some() || e.imu_noise.is_some() {
+        let noise = metadata_value(&s.noise());
+        for id in &s.imu_ids {
+            out.push((services::imu_sample(id), channels::META_IMU_NOISE, noise.clone()));
+        }
+    }
+    if let (Some(i), Some(id)) = (&s.initial_state, s.imu_ids.first()) {
+        out.push((
+            services::imu_sample(id),
+            channels::META_INITIAL_STATE,
+            metadata_value(i),
+        ));
+    }
+    for id in &s.gnss_ids {
+        if let Some(g) = c.gnss.get(id) {
+            out.push((
+                services::gnss_fix(id),
+                channels::META_LEVER_ARM,
+                metadata_value(&g.lever_arm_m),
+            ));
+        }
+        if let Some(v) = e.gnss_vel_std_mps {
+            out.push((services::gnss_fix(id), channels::META_GNSS_VEL_STD, metadata_value(&v)));
+        }
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use std::path::Path;
 
     use super::*;
+
+    #[test]
+    fn a_live_recording_claims_only_what_the_file_states() {
+        let none = Loaded::parse("[gnss.0]\nport = \"/dev/a\"\n", Path::new("t.toml")).unwrap();
+        let m = recording_metadata(&none).unwrap();
+        assert!(
+            m.iter()
+                .all(|(_, k, _)| *k != navsync_recording::channels::META_IMU_NOISE),
+            "{m:?}"
+        );
+        let cfg = Loaded::parse(
+            "[gnss.0]\nport = \"/dev/a\"\nlever_arm_m = [1, 2, 3]\n[estimator]\nimu_model = \"consumer\"\n",
+            Path::new("t.toml"),
+        )
+        .unwrap();
+        let m = recording_metadata(&cfg).unwrap();
+        let noise = &m
+            .iter()
+            .find(|(s, k, _)| s == "navsync/imu/0/sample" && *k == navsync_recording::channels::META_IMU_NOISE)
+            .unwrap()
+            .2;
+        let n: navsync_shared::imu_spec::ImuNoise = serde_json::from_str(noise).unwrap();
+        assert_eq!(n, ImuPreset::Consumer.noise());
+        assert!(m.contains(&(
+            "navsync/gnss/0/fix".into(),
+            navsync_recording::channels::META_LEVER_ARM,
+            "[1.0,2.0,3.0]".into()
+        )));
+    }
 
     #[test]
     fn flags_win_over_the_file_and_the_file_over_defaults() {

@@ -67,11 +67,13 @@ pub fn main(opts: Options, cfg: &crate::config::Loaded) -> anyhow::Result<()> {
     } else {
         opts.services
     };
+    let metadata = crate::config::estimator::recording_metadata(cfg)?;
     run(&RecordArgs {
         out: out.clone(),
         services,
         duration_s: opts.duration_s,
         progress: true,
+        metadata,
     })
     .with_context(|| format!("recording {}", out.display()))?;
     Ok(())
@@ -88,6 +90,9 @@ pub struct RecordArgs {
     pub duration_s: Option<f64>,
     /// Print progress to stderr.
     pub progress: bool,
+    /// Channel metadata (service, key, value): what the devices are
+    /// ([`crate::config::estimator::recording_metadata`]).
+    pub metadata: Vec<(String, &'static str, String)>,
 }
 
 /// Errors of `navsync record`.
@@ -149,6 +154,9 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
 
     // The file appears once the initial subscriptions exist: from then on nothing is missed.
     let mut rec = SampleRecorder::create(&args.out)?;
+    for (service, key, value) in &args.metadata {
+        rec.set_channel_metadata(service, key, value)?;
+    }
     for s in &subs {
         rec.channel(s.service())?;
     }
