@@ -15,6 +15,7 @@ use crate::array::imu_array::{ArrayConfig, ImuArray};
 use crate::nav::measurements::gnss::{self, GnssAccuracy};
 use crate::nav::navigator::{NavConfig, Navigator};
 use crate::settings::InitialState;
+use crate::time::device_timing::{DeviceTiming, DeviceTimingConfig};
 use crate::time::time_sync::{TimeSync, TimeSyncConfig};
 
 /// Mechanization steps of the output catch-up after a correction done per `NavState`
@@ -41,6 +42,8 @@ pub struct PipelineConfig {
     pub hardware_delay_prior: (f64, f64),
     /// A known initial state: the filter starts from it instead of aligning itself.
     pub initial_state: Option<InitialState>,
+    /// Sample times from the IMUs' own clocks where they carry one.
+    pub device_timing: DeviceTimingConfig,
 }
 
 /// How fix stamps are currently obtained.
@@ -77,6 +80,7 @@ pub struct Pipeline {
     nav: Navigator,
     array: ImuArray,
     stamping: Option<FixStamping>,
+    device_timing: DeviceTiming,
     counters: PipelineCounters,
     nav_seq: u64,
     /// A `NavState` was produced and the output catch-up step after it is not done yet.
@@ -95,16 +99,23 @@ impl Pipeline {
             .position(|u| u.id == cfg.reference_imu)
             .unwrap_or(0);
         let array = ImuArray::new(array_cfg);
+        let device_timing = DeviceTiming::new(cfg.device_timing);
         Self {
             cfg,
             time,
             nav,
             array,
             stamping: None,
+            device_timing,
             counters: PipelineCounters::default(),
             nav_seq: 0,
             catch_up_due: false,
         }
+    }
+
+    /// The IMUs' device clocks.
+    pub fn device_timing(&self) -> &DeviceTiming {
+        &self.device_timing
     }
 
     /// The time synchroniser.
@@ -196,6 +207,8 @@ impl Pipeline {
             self.counters.imu_other += 1;
             return None;
         };
+        let retimed = self.device_timing.retime(index, s);
+        let s = &retimed;
         let reference = self.array.reference();
         let accepted = self.array.accept(index, s);
         if !accepted {

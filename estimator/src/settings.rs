@@ -21,6 +21,7 @@ use crate::nav::measurements::gnss::GnssAccuracy;
 use crate::nav::navigator::NavConfig;
 use crate::pipeline::PipelineConfig;
 use crate::time::clock_model::OscillatorNoise;
+use crate::time::device_timing::DeviceTimingConfig;
 use crate::time::time_sync::TimeSyncConfig;
 
 /// Where one IMU sits in the body frame.
@@ -156,6 +157,9 @@ pub struct Settings {
     /// Zero-velocity and zero-angular-rate updates while the vehicle stands still
     /// ([`crate::nav::measurements::zupt`]); default on.
     pub zupt: bool,
+    /// Time IMU samples by their device clocks where they carry one (Xsens SampleTimeFine;
+    /// [`crate::time::device_timing`]); default on.
+    pub device_clocks: bool,
     /// Adapt the IMU's process noise to the GNSS innovations
     /// ([`crate::nav::measurements::gnss::GnssFusion`]); default off.
     pub adapt_process_noise: bool,
@@ -193,6 +197,7 @@ impl Default for Settings {
             oscillator_adev_1s: None,
             zupt: true,
             adapt_process_noise: false,
+            device_clocks: true,
             software_delay_prior_s: (0.5, 0.5),
             hardware_delay_prior_s: (0.0, 0.02),
             array: ArrayTuning::default(),
@@ -309,6 +314,10 @@ impl Settings {
             array: self.array_config(),
             software_delay_prior: self.software_delay_prior_s,
             hardware_delay_prior: self.hardware_delay_prior_s,
+            device_timing: DeviceTimingConfig {
+                enabled: self.device_clocks,
+                ..DeviceTimingConfig::default()
+            },
         }
     }
 }

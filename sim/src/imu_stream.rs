@@ -1,8 +1,10 @@
 //! One simulated IMU: its sample grid, true averaged outputs, sensor errors and host stamps.
 //!
-//! Sample k (seq = k) carries the sensor-frame averages over [t_k − T, t_k] of scenario time,
-//! t_k = phase + (k + 1)·T, T = 1/rate (increment / T, with the intervals tiling time
-//! exactly: sample k's interval starts at t_{k−1} as computed for sample k − 1), and is
+//! Sample k (seq = k) carries the sensor-frame averages over [t_{k−1}, t_k] of scenario time,
+//! t_k = (phase + (k + 1)·T) / (1 + y), T = 1/rate, y the frequency error of the crystal the
+//! IMU samples on (0 unless IMUs sample on their own clocks: `imu.device_clocks`), as
+//! increment / T (the nominal period, as a device reports it), with the intervals tiling
+//! time exactly (sample k's interval starts at t_{k−1} as computed for sample k − 1), and is
 //! stamped at host(t_k + Td) + N(0, σ²): stamps
 //! are late by the IMU's offset Td (its delay relative to true time; IMU 0 is the reference
 //! with Td = 0 by default). A stamp is never earlier than the previous one of the same IMU.
@@ -77,7 +79,7 @@ impl ImuStream {
 
     /// Scenario time of the end of sample `k`'s interval, s.
     pub fn sample_time_s(&self, k: u64) -> f64 {
-        self.cfg.phase_s + (k + 1) as f64 * self.period_s
+        (self.cfg.phase_s + (k + 1) as f64 * self.period_s) / (1.0 + self.cfg.clock_freq_error)
     }
 
     /// The next sample, `None` once its interval would end after the scenario.
@@ -89,7 +91,7 @@ impl ImuStream {
         }
         self.k += 1;
         let t_start = if k == 0 {
-            self.cfg.phase_s
+            self.cfg.phase_s / (1.0 + self.cfg.clock_freq_error)
         } else {
             self.sample_time_s(k - 1)
         };

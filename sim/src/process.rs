@@ -132,6 +132,10 @@ pub fn load_config(args: &SimArgs) -> Result<SimConfig, SimError> {
     if let Some(p) = args.preset {
         cfg.set_imu_preset(p);
     }
+    if args.imu_output == SimImuOutput::Xsens {
+        // An MTi samples on its own crystal, which SampleTimeFine counts.
+        cfg.set_imu_device_clocks(true);
+    }
     if let Some(offsets) = &args.imu_offsets_ms {
         let s: Vec<f64> = offsets.iter().map(|ms| ms * 1e-3).collect();
         cfg.set_imu_offsets_s(&s);

@@ -210,6 +210,17 @@ pub struct ImuArrayConfig {
     /// list use the defaults, tables beyond `count` are ignored.
     #[serde(rename = "unit")]
     pub units: Vec<ImuUnitConfig>,
+    /// Each IMU samples on its own crystal, [`imu_crystal_freq_error`] off true time (a
+    /// device with its own clock, such as an Xsens MTi, whose SampleTimeFine counts that
+    /// crystal); default false: every IMU samples on the exact grid of scenario time.
+    /// `navsync sim --imu-output xsens` switches it on.
+    pub device_clocks: bool,
+}
+
+/// Fractional frequency error of IMU `index`'s crystal when IMUs sample on their own clocks
+/// (+25, −40, +60, −15 ppm, …): its nominal sample period T lasts T/(1 + y) of true time.
+pub fn imu_crystal_freq_error(index: usize) -> f64 {
+    [25e-6, -40e-6, 60e-6, -15e-6][index % 4]
 }
 
 impl Default for ImuArrayConfig {
@@ -220,6 +231,7 @@ impl Default for ImuArrayConfig {
             rate_hz: 200.0,
             stamp_jitter_s: 20e-6,
             units: Vec::new(),
+            device_clocks: false,
         }
     }
 }
@@ -275,6 +287,8 @@ pub struct ResolvedImu {
     pub mount_rpy_rad: [f64; 3],
     /// Lever arm, body axes, m.
     pub lever_arm_m: [f64; 3],
+    /// Fractional frequency error of the crystal the IMU samples on (0: the exact grid).
+    pub clock_freq_error: f64,
 }
 
 /// NMEA talker identifier.
@@ -487,6 +501,11 @@ impl SimConfig {
             preset: unit.preset.unwrap_or(self.imu.preset),
             mount_rpy_rad: unit.mount_rpy_deg.map(f64::to_radians),
             lever_arm_m: unit.lever_arm_m,
+            clock_freq_error: if self.imu.device_clocks {
+                imu_crystal_freq_error(index)
+            } else {
+                0.0
+            },
         }
     }
 
@@ -543,6 +562,12 @@ impl SimConfig {
             unit.offset_s = Some(off);
         }
         self.mark("imu.unit");
+    }
+
+    /// Lets every IMU sample on its own crystal ([`ImuArrayConfig::device_clocks`]).
+    pub fn set_imu_device_clocks(&mut self, on: bool) {
+        self.imu.device_clocks = on;
+        self.mark("imu.device_clocks");
     }
 
     /// Sets the 1-σ stamp jitter of every IMU, s (per-IMU values from the file are dropped).

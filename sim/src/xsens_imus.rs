@@ -1,15 +1,17 @@
 //! The simulator's IMUs as Xsens MTi devices: what `navsync sim --imu-output xsens` writes
 //! into one pseudo-terminal per IMU, and where (`navsync imu --source sim[:DIR]` reads it).
 //!
-//! Each simulated IMU gets its own 10 kHz SampleTimeFine clock: it starts at
+//! Each simulated IMU gets its own 10 kHz SampleTimeFine clock, the crystal it samples on
+//! (as an MTi does: `--imu-output xsens` sets the scenario's `imu.device_clocks`): it starts at
 //! [`clock_start_ticks`] (close to the 2³² wrap, so a run of a minute crosses it) and runs
-//! with a constant fractional frequency error [`clock_freq_error`] (tens of ppm, like a
-//! crystal) against true time. Sample k of an IMU covers scenario time
-//! [phase + k·T, phase + (k+1)·T] (see `crate::imu_stream`), so its SampleTimeFine is the
-//! clock's reading at the end of that interval, τ_k = phase + (k+1)·T:
-//! `start + round(τ_k · (1 + y) · 10⁴)` modulo 2³². The stamp delay and jitter of the
-//! simulated host stamp are not in it: the device clock marks the physical sample, the
-//! host receipt comes later, as with real hardware.
+//! with a constant fractional frequency error y
+//! ([`imu_crystal_freq_error`](crate::scenario::imu_crystal_freq_error), tens of ppm) against
+//! true time. Sample k ends when that clock reads phase + (k+1)·T (true time
+//! (phase + (k+1)·T)/(1 + y), see `crate::imu_stream`), so its SampleTimeFine is
+//! `start + round((phase + (k+1)·T) · 10⁴)` modulo 2³²: exact whenever phase and T are
+//! whole ticks. The stamp delay and jitter of the simulated host stamp are not in it: the
+//! device clock marks the physical sample, the host receipt comes later, as with real
+//! hardware.
 //!
 //! The message is written when the world says the sample is stamped (its `host_ns`), with
 //! PacketCounter = seq (mod 2¹⁶), StatusWord clipping bits when the simulated sensor
@@ -53,11 +55,6 @@ impl FromStr for SimImuOutput {
     }
 }
 
-/// Fractional frequency error of simulated IMU `index`'s clock (+25, −40, +60, −15 ppm, …).
-pub fn clock_freq_error(index: usize) -> f64 {
-    [25e-6, -40e-6, 60e-6, -15e-6][index % 4]
-}
-
 /// SampleTimeFine of simulated IMU `index` at scenario time 0: 2³² − (20 + 10·index) s of
 /// ticks, so the counter wraps 20, 30, 40, … s into the run.
 pub fn clock_start_ticks(index: usize) -> u32 {
@@ -70,7 +67,6 @@ pub fn clock_start_ticks(index: usize) -> u32 {
 pub struct SimXsensImu {
     phase_s: f64,
     period_s: f64,
-    freq_error: f64,
     start_ticks: u32,
     buf: Vec<u8>,
 }
@@ -81,7 +77,6 @@ impl SimXsensImu {
         Self {
             phase_s,
             period_s: 1.0 / rate_hz,
-            freq_error: clock_freq_error(index),
             start_ticks: clock_start_ticks(index),
             buf: Vec::with_capacity(96),
         }
@@ -89,8 +84,8 @@ impl SimXsensImu {
 
     /// SampleTimeFine at the end of sample `k`'s interval.
     pub fn sample_time_fine(&self, k: u64) -> u32 {
-        let tau = self.phase_s + (k + 1) as f64 * self.period_s;
-        let ticks = (tau * (1.0 + self.freq_error) * SAMPLE_TIME_FINE_HZ as f64).round() as i64;
+        let device_s = self.phase_s + (k + 1) as f64 * self.period_s;
+        let ticks = (device_s * SAMPLE_TIME_FINE_HZ as f64).round() as i64;
         self.start_ticks.wrapping_add(ticks as u32)
     }
 
@@ -210,13 +205,11 @@ mod tests {
     #[test]
     fn counter_model() {
         let imu = SimXsensImu::new(1, 0.0011, 200.0);
-        // 200 Hz on a 10 kHz clock 40 ppm slow: 50 ticks per sample, one fewer every 500.
+        // 200 Hz sampled on the 10 kHz clock: exactly 50 ticks per sample.
         let d: Vec<u32> = (0..1000)
             .map(|k| imu.sample_time_fine(k + 1).wrapping_sub(imu.sample_time_fine(k)))
             .collect();
-        assert!(d.iter().all(|&x| x == 49 || x == 50), "{:?}", &d[..10]);
-        let total: u32 = d.iter().sum();
-        assert_eq!(total, 50_000 - 2);
+        assert!(d.iter().all(|&x| x == 50), "{:?}", &d[..10]);
         // It wraps 30 s into the run.
         let k_wrap = (0..20_000u64).find(|&k| imu.sample_time_fine(k + 1) < imu.sample_time_fine(k));
         assert!(k_wrap.is_some_and(|k| (5990..6010).contains(&k)), "{k_wrap:?}");

@@ -68,6 +68,10 @@ pub struct ModelFlags {
     /// [default: [estimator].adapt_process_noise, else off].
     #[arg(long = "adapt-noise")]
     pub adapt_process_noise: bool,
+    /// Fuse IMU samples at their receipt stamps even where they carry a device clock
+    /// [default: [estimator].device_clocks, else the device clocks are used].
+    #[arg(long)]
+    pub no_device_clocks: bool,
     /// 1-sigma of the receiver's velocity per axis, m/s [default: [estimator].gnss_vel_std_mps,
     /// else 0.1].
     #[arg(long = "gnss-vel-std")]
@@ -237,6 +241,9 @@ impl ModelFlags {
         if self.adapt_process_noise {
             s.adapt_process_noise = true;
         }
+        if self.no_device_clocks {
+            s.device_clocks = false;
+        }
         if let Some(v) = self.gnss_vel_std_mps {
             s.gnss_vel_std_mps = v;
         }
@@ -304,6 +311,9 @@ pub fn apply_file(s: &mut Settings, cfg: &Loaded) -> Result<(), ConfigError> {
     }
     if let Some(v) = e.adapt_process_noise {
         s.adapt_process_noise = v;
+    }
+    if let Some(v) = e.device_clocks {
+        s.device_clocks = v;
     }
     if let Some(v) = e.gnss_pos_std_scale {
         s.gnss_pos_std_scale = v;

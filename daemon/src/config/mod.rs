@@ -215,6 +215,8 @@ pub struct EstimatorConfig {
     pub zupt: Option<bool>,
     /// Adapt the IMU's process noise to the GNSS innovations (default false).
     pub adapt_process_noise: Option<bool>,
+    /// Time IMU samples by their device clocks where they carry one (default true).
+    pub device_clocks: Option<bool>,
     /// Factor on the receiver's position σ (default 1).
     pub gnss_pos_std_scale: Option<f64>,
     /// Smallest GNSS position σ per axis, m (default 0.005).

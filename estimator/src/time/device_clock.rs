@@ -22,11 +22,20 @@
 //! - [`DeviceClock::on_host_pair`]: a (counter, host stamp) pair with the host → GNSS
 //!   [`TimeState`] mapping: the counter of a sample and the host time its data-ready event
 //!   was stamped (kernel event, or receipt time minus a known transport latency), noisier
-//!   but needs no wiring.
+//!   but needs no wiring;
+//! - [`DeviceClock::on_host_stamp`]: the same pair with the host clock itself as the
+//!   reference time scale: the mapping then gives host time (what the estimator fuses in;
+//!   host → GNSS is the host clock model's job), and works before and without PPS. One clock
+//!   uses one reference scale: host stamps, or PPS captures and host pairs.
 //!
-//! [`DeviceClock::map`] gives the GNSS time of any counter value with its 1-sigma and the
+//! [`DeviceClock::map`] gives the reference time of any counter value with its 1-sigma and the
 //! [`StampSource`] to record; until the filter has two measurements it returns `None` and the
 //! caller stamps with receipt time (flag [`StampSource::Receipt`]), the fallback.
+//!
+//! Receipt stamps are late by a transport delay that varies (serial line, USB latency timer,
+//! scheduler: a one-sided distribution). The filter maps to their mean: a constant share of
+//! the delay stays in the mapped times (the estimator's IMU offset estimation takes it up),
+//! the scatter does not.
 
 use navsync_shared::samples::{StampSource, TimeState};
 
@@ -69,8 +78,9 @@ impl DeviceClockConfig {
 /// A mapped device time.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DeviceTime {
-    /// GNSS (UTC) time of the counter value, ns since 1970.
-    pub utc_ns: i64,
+    /// Time of the counter value in the reference scale, ns: GNSS (UTC) time since 1970 from
+    /// PPS captures and host pairs, host `CLOCK_MONOTONIC` time from host stamps.
+    pub time_ns: i64,
     /// 1-sigma, ns.
     pub sigma_ns: f64,
     /// How it was obtained (device counter through PPS captures or host pairs).
@@ -176,13 +186,13 @@ impl DeviceClock {
         (extended as f64 * self.cfg.tick_ns).round() as i64
     }
 
-    fn fuse(&mut self, device_ns: i64, utc_ns: i64, sigma_ns: f64) -> DeviceUpdate {
+    fn fuse(&mut self, device_ns: i64, ref_ns: i64, sigma_ns: f64) -> DeviceUpdate {
         if !self.model.is_initialized() {
             self.model
-                .init(device_ns, utc_ns, sigma_ns, self.cfg.initial_rate_sigma);
+                .init(device_ns, ref_ns, sigma_ns, self.cfg.initial_rate_sigma);
             return DeviceUpdate::Used;
         }
-        match self.model.update(device_ns, utc_ns, sigma_ns) {
+        match self.model.update(device_ns, ref_ns, sigma_ns) {
             ClockUpdate::Accepted(_) => DeviceUpdate::Used,
             ClockUpdate::Rejected(innovation) => {
                 self.counters.rejected += 1;
@@ -227,7 +237,22 @@ impl DeviceClock {
         r
     }
 
-    /// GNSS time of counter value `raw` (a sample's), once two measurements were used;
+    /// A device event with counter `raw` was stamped at host time `host_ns`, the host clock
+    /// being the reference time scale (module docs).
+    pub fn on_host_stamp(&mut self, raw: u64, host_ns: i64) -> DeviceUpdate {
+        let Some(ext) = self.unwrap.extend(raw, self.cfg.counter_bits, &mut self.counters.wraps) else {
+            self.counters.ignored += 1;
+            return DeviceUpdate::Ignored;
+        };
+        let event_host = host_ns - self.cfg.host_stamp_latency_ns.round() as i64;
+        let r = self.fuse(self.device_ns(ext), event_host, self.cfg.host_stamp_sigma_ns);
+        if r == DeviceUpdate::Used {
+            self.counters.host_pairs += 1;
+        }
+        r
+    }
+
+    /// Reference time of counter value `raw` (a sample's), once two measurements were used;
     /// `None` before: stamp with receipt time instead ([`StampSource::Receipt`]).
     pub fn map(&self, raw: u64) -> Option<DeviceTime> {
         if self.model.updates() < 2 {
@@ -238,7 +263,7 @@ impl DeviceClock {
         let ext = unwrap.extend(raw, self.cfg.counter_bits, &mut 0)?;
         let d = self.device_ns(ext);
         Some(DeviceTime {
-            utc_ns: self.model.utc_ns_at(d),
+            time_ns: self.model.utc_ns_at(d),
             sigma_ns: self.model.std_ns_at(d),
             source: StampSource::DeviceCounter,
         })
@@ -274,7 +299,11 @@ mod tests {
         let c2 = c(9) + 400_008; // 0.4 s after the last edge
         let t = dc.map(c2).expect("mapped");
         let expected = interpolate(U0 + 8_000_000_000, c(8), c(9), c2, 1_000.0);
-        assert!((t.utc_ns as f64 - expected).abs() <= 2.0, "{} vs {expected}", t.utc_ns);
+        assert!(
+            (t.time_ns as f64 - expected).abs() <= 2.0,
+            "{} vs {expected}",
+            t.time_ns
+        );
         assert_eq!(t.source, StampSource::DeviceCounter);
         assert!(t.sigma_ns < 10.0);
         assert!((dc.rate_error().unwrap() + 20e-6 / 1.00002).abs() < 1e-9);
@@ -296,7 +325,7 @@ mod tests {
         }
         assert!(dc.counters().wraps >= 5);
         let t = dc.map((39 * 10_000 + 5_000) & 0xffff).expect("mapped");
-        assert!((t.utc_ns - (U0 + 39_500_000_000)).abs() < 30_000, "{}", t.utc_ns - U0);
+        assert!((t.time_ns - (U0 + 39_500_000_000)).abs() < 30_000, "{}", t.time_ns - U0);
     }
 
     #[test]
@@ -323,7 +352,7 @@ mod tests {
         }
         let t = dc.map(7_000 + 1_999 * 5_000).expect("mapped");
         let truth = U0 + 1_999 * 5_000_000;
-        assert!((t.utc_ns - truth).abs() < 5_000, "{} ns", t.utc_ns - truth);
+        assert!((t.time_ns - truth).abs() < 5_000, "{} ns", t.time_ns - truth);
         assert!(dc.counters().host_pairs > 1_990);
     }
 
