@@ -11,7 +11,8 @@
 //!
 //! What is measured: an IMU driver stamps each sample with the `CLOCK_MONOTONIC` instant its
 //! read returned with the message's last byte (`stamp.host_ns`), then decodes, checks and
-//! publishes it; the estimator's `NavState` for that sample carries the same `host_ns`. The
+//! publishes it; the estimator (run with `--no-device-clocks`, so that it fuses each sample at
+//! that stamp) gives the `NavState` for that sample the same `host_ns`. The
 //! subscriber takes `CLOCK_MONOTONIC` when it has the `NavState` in hand: **end-to-end =
 //! receipt of the NavState − host_ns**, i.e. driver decode + publish, IPC, the estimator's
 //! wake-up, input ordering and filter, its publish, IPC and the subscriber's wake-up. The
@@ -298,6 +299,10 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
             imu_list,
             s("--imu-model"),
             s("consumer"),
+            // The latency is measured from the driver's receipt stamp, which a NavState
+            // carries when samples are fused at it; with device clocks it would carry the
+            // sample's device time mapped to host time instead.
+            s("--no-device-clocks"),
             s("--gnss-vel-std"),
             s("0.05"),
         ],

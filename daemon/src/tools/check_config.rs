@@ -48,13 +48,26 @@ pub fn run(explicit: Option<&Path>) -> Result<()> {
             i.source, i.mounting.rotation_deg, i.mounting.lever_arm_m
         );
     }
+    let noise = if est.imu_noise.is_some() {
+        let n = est.noise();
+        format!(
+            "IMU noise ARW {:?} °/√h, VRW {:?} m/s/√h ([estimator.imu_noise])",
+            n.arw_deg_per_sqrt_h.0, n.vrw_mps_per_sqrt_h.0
+        )
+    } else {
+        format!("{} IMU noise", est.imu_model.name())
+    };
     println!(
-        "  navsync estimator: gnss {:?}, pps {:?}, imus {:?}, {} sync, {:?} IMU noise",
+        "  navsync estimator: gnss {:?}, pps {:?}, imus {:?}, {} sync, {noise}{}",
         est.gnss_ids,
         est.pps_ids,
         est.imu_ids,
         if est.software_sync { "software" } else { "PPS" },
-        est.imu_model
+        if est.initial_state.is_some() {
+            ", initial state given"
+        } else {
+            ""
+        }
     );
     if let Some(n) = &c.outputs.ntpshm {
         println!("  navsync ntpshm: unit {}", n.unit);
