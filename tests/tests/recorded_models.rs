@@ -113,3 +113,31 @@ fn a_simulator_recording_carries_its_imu_model_and_a_wrong_one_does_not_diverge(
         assert!(y <= 2.0 * y0, "{name}: yaw RMS {y:.3}° vs matched {y0:.3}°");
     }
 }
+
+#[test]
+fn a_run_without_usable_states_says_why_and_fails() {
+    // The checked-in simulator recording, with an alignment speed the drive never reaches.
+    let env = TestEnv::new("silentrun");
+    let rec = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/record_drive.mcap");
+    let json = env.dir.join("s.json");
+    let o = env
+        .command(&[
+            "replay",
+            rec.to_str().unwrap(),
+            "--estimate",
+            "--align-speed",
+            "100",
+            "--summary-json",
+            json.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let (out, err) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(!o.status.success(), "exit 0 without a usable state:\n{out}\n{err}");
+    assert!(err.contains("not aligned") && err.contains("100.0 m/s"), "{err}");
+    assert!(out.contains("WARNING"), "{out}");
+    let s: Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(s["usable_states"].as_u64(), Some(0));
+    assert!(s["nav_states"].as_u64().unwrap() > 1000);
+    assert!(s["problem"].as_str().unwrap().contains("not aligned"));
+}
