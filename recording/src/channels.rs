@@ -18,7 +18,7 @@ use core::fmt::Debug;
 use iceoryx2::prelude::ZeroCopySend;
 
 use super::mcap_reader::{Channel, Schema};
-use navsync_shared::json::{from_json, schema, to_json};
+use navsync_shared::json::{from_json, from_json_onto, schema, to_json};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{AnySample, GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
 use navsync_shared::services::ServiceKind;
@@ -151,20 +151,54 @@ pub fn encode(sample: &AnySample, out: &mut Vec<u8>) {
 
 /// Decodes a message payload of a channel of `kind`.
 pub fn decode(kind: ServiceKind, data: &[u8]) -> Result<AnySample, String> {
+    decode_layout(ChannelType { kind, older: false }, data)
+}
+
+/// Decodes a message payload of a channel of type `ty`: an older layout
+/// ([`OLDER_LAYOUTS`]) onto the type's "not known" values, so the fields added since read as
+/// not known.
+pub fn decode_layout(ty: ChannelType, data: &[u8]) -> Result<AnySample, String> {
     let v: serde_json::Value = serde_json::from_slice(data).map_err(|e| format!("not JSON: {e}"))?;
-    with_sample_type!(kind, T => from_json::<T>(&v).map(T::wrap).map_err(|e| e.to_string()))
+    if ty.older {
+        return match ty.kind {
+            ServiceKind::GnssFix => from_json_onto(&v, GnssFix::empty(navsync_shared::samples::Stamp::zeroed()))
+                .map(AnySample::GnssFix)
+                .map_err(|e| e.to_string()),
+            _ => Err(format!("no older layout of {} is readable", ty.kind.type_name())),
+        };
+    }
+    with_sample_type!(ty.kind, T => from_json::<T>(&v).map(T::wrap).map_err(|e| e.to_string()))
+}
+
+/// Schema names of older layouts that navsync still reads, with their kind: each newer layout
+/// only added fields.
+pub const OLDER_LAYOUTS: &[(&str, ServiceKind)] = &[("navsync.GnssFix.v1", ServiceKind::GnssFix)];
+
+/// A channel's sample kind, and whether its messages have an older layout ([`OLDER_LAYOUTS`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChannelType {
+    /// The kind of sample.
+    pub kind: ServiceKind,
+    /// The messages have an older layout.
+    pub older: bool,
 }
 
 /// The sample kind of a channel, checked against navsync's conventions: a navsync service
 /// name as topic, `json` messages, and (when present) a `jsonschema` schema named after the
 /// service's type. An error says what does not match.
-pub fn channel_kind(channel: &Channel, schema: Option<&Schema>) -> Result<ServiceKind, String> {
+pub fn channel_kind(channel: &Channel, schema: Option<&Schema>) -> Result<ChannelType, String> {
     let kind = ServiceKind::of(&channel.topic).ok_or_else(|| "not a navsync service name".to_string())?;
     if channel.message_encoding != MESSAGE_ENCODING {
         return Err(format!(
             "message encoding `{}`, expected `{MESSAGE_ENCODING}`",
             channel.message_encoding
         ));
+    }
+    if let Some(s) = schema
+        && s.encoding == SCHEMA_ENCODING
+        && OLDER_LAYOUTS.iter().any(|(name, k)| *name == s.name && *k == kind)
+    {
+        return Ok(ChannelType { kind, older: true });
     }
     if let Some(s) = schema
         && (s.name != kind.type_name() || s.encoding != SCHEMA_ENCODING)
@@ -176,7 +210,7 @@ pub fn channel_kind(channel: &Channel, schema: Option<&Schema>) -> Result<Servic
             kind.type_name()
         ));
     }
-    Ok(kind)
+    Ok(ChannelType { kind, older: false })
 }
 
 #[cfg(test)]
@@ -235,7 +269,13 @@ mod tests {
             encoding: "jsonschema".into(),
             data: vec![],
         };
-        assert_eq!(channel_kind(&ch, Some(&good)), Ok(ServiceKind::ImuSample));
+        assert_eq!(
+            channel_kind(&ch, Some(&good)),
+            Ok(ChannelType {
+                kind: ServiceKind::ImuSample,
+                older: false
+            })
+        );
         let old = Schema {
             name: "navsync.ImuSample.v0".into(),
             ..good.clone()
@@ -247,5 +287,47 @@ mod tests {
         };
         assert!(channel_kind(&other, None).is_err());
         assert!(decode(ServiceKind::NavState, b"{").unwrap_err().starts_with("not JSON"));
+    }
+
+    #[test]
+    fn a_gnss_fix_of_the_older_layout_reads_with_the_new_fields_not_known() {
+        let mut fix = GnssFix::empty(Stamp::host(5, 7, StampSource::Receipt));
+        fix.lat_deg = 48.1;
+        fix.h_acc_m = 0.02;
+        let mut v = sample_json(&AnySample::GnssFix(fix));
+        let obj = v.as_object_mut().unwrap();
+        for added in [
+            "h_acc_m",
+            "v_acc_m",
+            "s_acc_mps",
+            "head_acc_deg",
+            "fix_flags",
+            "protocol",
+        ] {
+            assert!(obj.remove(added).is_some(), "{added}");
+        }
+        let data = serde_json::to_vec(&v).unwrap();
+        let ch = Channel {
+            id: 1,
+            schema_id: 1,
+            topic: "navsync/gnss/0/fix".into(),
+            message_encoding: "json".into(),
+            metadata: vec![],
+        };
+        let v1 = Schema {
+            id: 1,
+            name: "navsync.GnssFix.v1".into(),
+            encoding: "jsonschema".into(),
+            data: vec![],
+        };
+        let ty = channel_kind(&ch, Some(&v1)).unwrap();
+        assert!(ty.older);
+        let AnySample::GnssFix(back) = decode_layout(ty, &data).unwrap() else {
+            panic!("not a fix")
+        };
+        assert_eq!(back.lat_deg, 48.1);
+        assert_eq!(back.stamp.seq, 7);
+        assert!(back.h_acc_m.is_nan(), "added since: not known");
+        assert!(decode(ServiceKind::GnssFix, &data).unwrap_err().contains("missing"));
     }
 }

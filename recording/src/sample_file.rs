@@ -181,7 +181,7 @@ pub struct SampleReader<R: Read + Seek = BufReader<File>> {
     mcap: McapReader<R>,
     path: PathBuf,
     /// Per channel id: its kind, or why it is skipped.
-    kinds: Vec<Option<Result<ServiceKind, String>>>,
+    kinds: Vec<Option<Result<channels::ChannelType, String>>>,
 }
 
 impl SampleReader<BufReader<File>> {
@@ -288,7 +288,7 @@ impl<R: Read + Seek> SampleReader<R> {
                     }
                 }
             };
-            let sample = channels::decode(kind, m.data).map_err(|problem| RecordingError::Decode {
+            let sample = channels::decode_layout(kind, m.data).map_err(|problem| RecordingError::Decode {
                 path: self.path.clone(),
                 offset: m.offset,
                 topic: m.channel.topic.clone(),

@@ -185,7 +185,15 @@ class GnssFix(ctypes.Structure):
         ("std_lon_m", ctypes.c_double),
         # 1-sigma altitude error as the receiver reports it (NMEA GST), m, NaN when not known.
         ("std_alt_m", ctypes.c_double),
-        # The set of source messages merged into this epoch, one bit per message type of the receiver's protocol (NMEA: the `SENTENCE_*` bits, GGA, RMC, GNS, VTG, GSA, GST, ZDA, GLL in bit order).
+        # Horizontal accuracy estimate as the receiver reports it (UBX `hAcc`), m, NaN when not reported.
+        ("h_acc_m", ctypes.c_double),
+        # Vertical accuracy estimate (UBX `vAcc`), m, NaN when not reported.
+        ("v_acc_m", ctypes.c_double),
+        # Speed accuracy estimate (UBX `sAcc`), m/s, NaN when not reported.
+        ("s_acc_mps", ctypes.c_double),
+        # Heading (track) accuracy estimate (UBX `headAcc`), degrees, NaN when not reported.
+        ("head_acc_deg", ctypes.c_double),
+        # The set of source messages merged into this epoch, one bit per message type of the receiver's protocol (`protocol`): NMEA the `SENTENCE_*` bits (GGA, RMC, GNS, VTG, GSA, GST, ZDA, GLL in bit order), UBX the `UBX_MSG_*` bits.
         ("sentences", ctypes.c_uint32),
         # Satellites used in the solution, `u16::MAX` when not known.
         ("sats_used", ctypes.c_uint16),
@@ -193,19 +201,25 @@ class GnssFix(ctypes.Structure):
         ("mode", ctypes.c_uint8),
         # Fix quality in NMEA GGA's terms, whatever the protocol (0 invalid, 1 GPS, 2 DGPS, 4 RTK fixed, 5 RTK float, 6 dead reckoning), 255 unknown.
         ("quality", ctypes.c_uint8),
+        # The receiver's validity flags, `FIX_FLAG_*` bits (0 when the protocol has none).
+        ("fix_flags", ctypes.c_uint8),
+        # The receiver protocol the epoch came from, a `GNSS_PROTOCOL_*` value.
+        ("protocol", ctypes.c_uint8),
+        # Reserved, zero.
+        ("reserved", (ctypes.c_char * 6)),
     ]
 
     #: Size in bytes of the Rust type.
-    RUST_SIZE = 184
+    RUST_SIZE = 224
     #: Alignment in bytes of the Rust type.
     RUST_ALIGN = 8
     #: Byte offset of every field in the Rust type.
-    RUST_OFFSETS = {"stamp": 0, "utc_ns": 32, "gps_ns": 40, "tod_ns": 48, "lat_deg": 56, "lon_deg": 64, "alt_msl_m": 72, "geoid_sep_m": 80, "vel_n_mps": 88, "vel_e_mps": 96, "vel_d_mps": 104, "speed_mps": 112, "track_deg": 120, "hdop": 128, "vdop": 136, "pdop": 144, "std_lat_m": 152, "std_lon_m": 160, "std_alt_m": 168, "sentences": 176, "sats_used": 180, "mode": 182, "quality": 183}
+    RUST_OFFSETS = {"stamp": 0, "utc_ns": 32, "gps_ns": 40, "tod_ns": 48, "lat_deg": 56, "lon_deg": 64, "alt_msl_m": 72, "geoid_sep_m": 80, "vel_n_mps": 88, "vel_e_mps": 96, "vel_d_mps": 104, "speed_mps": 112, "track_deg": 120, "hdop": 128, "vdop": 136, "pdop": 144, "std_lat_m": 152, "std_lon_m": 160, "std_alt_m": 168, "h_acc_m": 176, "v_acc_m": 184, "s_acc_mps": 192, "head_acc_deg": 200, "sentences": 208, "sats_used": 212, "mode": 214, "quality": 215, "fix_flags": 216, "protocol": 217, "reserved": 218}
 
     @staticmethod
     def type_name():
         """The iceoryx2 type name (with the layout version)."""
-        return "navsync.GnssFix.v1"
+        return "navsync.GnssFix.v2"
 
 
 class PpsEdge(ctypes.Structure):

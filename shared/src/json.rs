@@ -69,7 +69,17 @@ unsafe fn encode_value(ty: &FieldType, p: *const u8) -> Value {
 pub fn from_json<T: Reflect>(v: &Value) -> Result<T, JsonError> {
     let mut out = T::zeroed();
     // SAFETY: as in `to_json`; writes are of the declared type at in-bounds offsets of `out`.
-    unsafe { decode_struct(T::FIELDS, (&mut out as *mut T).cast::<u8>(), v, "")? };
+    unsafe { decode_struct(T::FIELDS, (&mut out as *mut T).cast::<u8>(), v, "", false)? };
+    Ok(out)
+}
+
+/// Decodes a sample of an older layout of `T` (a subset of its fields) onto `base`: fields the
+/// JSON has are decoded as [`from_json`] does, fields it lacks (added since) keep `base`'s
+/// values (the type's "not known" values).
+pub fn from_json_onto<T: Reflect>(v: &Value, base: T) -> Result<T, JsonError> {
+    let mut out = base;
+    // SAFETY: as in `from_json`.
+    unsafe { decode_struct(T::FIELDS, (&mut out as *mut T).cast::<u8>(), v, "", true)? };
     Ok(out)
 }
 
@@ -80,7 +90,13 @@ fn bad(path: &str, problem: impl Into<String>) -> JsonError {
     }
 }
 
-unsafe fn decode_struct(fields: &[Field], base: *mut u8, v: &Value, path: &str) -> Result<(), JsonError> {
+unsafe fn decode_struct(
+    fields: &[Field],
+    base: *mut u8,
+    v: &Value,
+    path: &str,
+    lenient: bool,
+) -> Result<(), JsonError> {
     let obj = v.as_object().ok_or_else(|| bad(path, "expected an object"))?;
     for f in fields {
         if f.name == "reserved" {
@@ -91,8 +107,13 @@ unsafe fn decode_struct(fields: &[Field], base: *mut u8, v: &Value, path: &str) 
         } else {
             format!("{path}.{}", f.name)
         };
-        let fv = obj.get(f.name).ok_or_else(|| bad(&p, "missing"))?;
-        unsafe { decode_value(&f.ty, base.add(f.offset), fv, &p)? };
+        let Some(fv) = obj.get(f.name) else {
+            if lenient {
+                continue;
+            }
+            return Err(bad(&p, "missing"));
+        };
+        unsafe { decode_value(&f.ty, base.add(f.offset), fv, &p, lenient)? };
     }
     Ok(())
 }
@@ -113,7 +134,7 @@ fn flt(v: &Value, path: &str) -> Result<f64, JsonError> {
     }
 }
 
-unsafe fn decode_value(ty: &FieldType, p: *mut u8, v: &Value, path: &str) -> Result<(), JsonError> {
+unsafe fn decode_value(ty: &FieldType, p: *mut u8, v: &Value, path: &str, lenient: bool) -> Result<(), JsonError> {
     unsafe {
         match ty {
             FieldType::I64 => p.cast::<i64>().write_unaligned(int(v, path)?),
@@ -139,10 +160,10 @@ unsafe fn decode_value(ty: &FieldType, p: *mut u8, v: &Value, path: &str) -> Res
                     return Err(bad(path, format!("expected {n} elements, got {}", a.len())));
                 }
                 for (i, e) in a.iter().enumerate() {
-                    decode_value(t, p.add(i * t.size()), e, &format!("{path}[{i}]"))?;
+                    decode_value(t, p.add(i * t.size()), e, &format!("{path}[{i}]"), lenient)?;
                 }
             }
-            FieldType::Struct(fields) => decode_struct(fields, p, v, path)?,
+            FieldType::Struct(fields) => decode_struct(fields, p, v, path, lenient)?,
         }
     }
     Ok(())

@@ -76,8 +76,9 @@ fn the_checked_in_recording_survives_a_json_round_trip_byte_for_byte() {
     let mut n = 0;
     let mut buf = Vec::new();
     while let Some(m) = r.next_message().unwrap() {
-        let kind = channels::channel_kind(m.channel, m.schema).unwrap();
-        let sample = channels::decode(kind, m.data).unwrap();
+        let ty = channels::channel_kind(m.channel, m.schema).unwrap();
+        assert!(!ty.older, "{}: an older layout", m.channel.topic);
+        let sample = channels::decode(ty.kind, m.data).unwrap();
         channels::encode(&sample, &mut buf);
         // The shortest text of a float is unique, so equal text means equal bits.
         assert!(
@@ -109,7 +110,40 @@ fn replaying_the_checked_in_recording_drives_a_live_estimator() {
     args.extend(INPUTS);
     let mut recorder = start(&env, "record", &args);
     env.wait_for_path(&rec, Duration::from_secs(20));
-    env.spawn("estimator", &["estimator", "--gnss", "0", "--pps", "0", "--imus", "0"]);
+    // The live estimator gets the models the recording says it was made with, as
+    // `replay --estimate` takes them from its channel metadata: the receiver's velocity σ
+    // (the IMU is the industrial preset, the estimator's default; no lever arm).
+    let reader = SampleReader::open(&data_file()).unwrap();
+    let meta = |service: &str, key: &str| {
+        reader
+            .channel_metadata(service)
+            .into_iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v)
+            .unwrap_or_else(|| panic!("{key} missing on {service}"))
+    };
+    let vel_std = meta(&services::gnss_fix("0"), channels::META_GNSS_VEL_STD);
+    let noise: navsync_shared::imu_spec::ImuNoise =
+        serde_json::from_str(&meta(&services::imu_sample("0"), channels::META_IMU_NOISE)).unwrap();
+    assert_eq!(noise, navsync_shared::imu_spec::ImuPreset::Industrial.noise());
+    assert_eq!(
+        meta(&services::gnss_fix("0"), channels::META_LEVER_ARM),
+        "[0.0,0.0,0.0]"
+    );
+    env.spawn(
+        "estimator",
+        &[
+            "estimator",
+            "--gnss",
+            "0",
+            "--pps",
+            "0",
+            "--imus",
+            "0",
+            "--gnss-vel-std",
+            &vel_std,
+        ],
+    );
     assert!(
         est_health.wait_next(Duration::from_secs(20)).unwrap().is_some(),
         "the estimator did not start; log:\n{}",

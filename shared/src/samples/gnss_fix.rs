@@ -11,7 +11,7 @@ crate::sample_struct! {
     ///
     /// `stamp.host_ns` is the host time at which the epoch's first byte was received
     /// (`StampSource::Receipt`); the epoch itself happened earlier, at `utc_ns`.
-    pub struct GnssFix = "navsync.GnssFix.v1" {
+    pub struct GnssFix = "navsync.GnssFix.v2" {
         /// Receipt stamp of the epoch's first byte and the driver's epoch counter.
         pub stamp: Stamp,
         /// Epoch time, ns UTC since 1970-01-01 (`i64::MIN` when the receiver gave no time).
@@ -51,9 +51,18 @@ crate::sample_struct! {
         pub std_lon_m: f64,
         /// 1-sigma altitude error as the receiver reports it (NMEA GST), m, NaN when not known.
         pub std_alt_m: f64,
+        /// Horizontal accuracy estimate as the receiver reports it (UBX `hAcc`), m, NaN when
+        /// not reported.
+        pub h_acc_m: f64,
+        /// Vertical accuracy estimate (UBX `vAcc`), m, NaN when not reported.
+        pub v_acc_m: f64,
+        /// Speed accuracy estimate (UBX `sAcc`), m/s, NaN when not reported.
+        pub s_acc_mps: f64,
+        /// Heading (track) accuracy estimate (UBX `headAcc`), degrees, NaN when not reported.
+        pub head_acc_deg: f64,
         /// The set of source messages merged into this epoch, one bit per message type of the
-        /// receiver's protocol (NMEA: the `SENTENCE_*` bits, GGA, RMC, GNS, VTG, GSA, GST, ZDA,
-        /// GLL in bit order).
+        /// receiver's protocol (`protocol`): NMEA the `SENTENCE_*` bits (GGA, RMC, GNS, VTG,
+        /// GSA, GST, ZDA, GLL in bit order), UBX the `UBX_MSG_*` bits.
         pub sentences: u32,
         /// Satellites used in the solution, `u16::MAX` when not known.
         pub sats_used: u16,
@@ -62,8 +71,57 @@ crate::sample_struct! {
         /// Fix quality in NMEA GGA's terms, whatever the protocol (0 invalid, 1 GPS, 2 DGPS,
         /// 4 RTK fixed, 5 RTK float, 6 dead reckoning), 255 unknown.
         pub quality: u8,
+        /// The receiver's validity flags, `FIX_FLAG_*` bits (0 when the protocol has none).
+        pub fix_flags: u8,
+        /// The receiver protocol the epoch came from, a `GNSS_PROTOCOL_*` value.
+        pub protocol: u8,
+        /// Reserved, zero.
+        pub reserved: [u8; 6],
     }
 }
+
+/// [`GnssFix::protocol`]: NMEA 0183.
+pub const GNSS_PROTOCOL_NMEA: u8 = 0;
+/// [`GnssFix::protocol`]: u-blox UBX.
+pub const GNSS_PROTOCOL_UBX: u8 = 1;
+
+/// [`GnssFix::fix_flags`]: the receiver says the fix is valid (UBX NAV-PVT `gnssFixOK`,
+/// NAV-SOL `GPSfixOK`).
+pub const FIX_FLAG_OK: u8 = 1 << 0;
+/// [`GnssFix::fix_flags`]: differential corrections applied (UBX `diffSoln`).
+pub const FIX_FLAG_DIFFERENTIAL: u8 = 1 << 1;
+/// [`GnssFix::fix_flags`]: the receiver marks latitude, longitude and height invalid (UBX
+/// NAV-PVT `invalidLlh`).
+pub const FIX_FLAG_INVALID_LLH: u8 = 1 << 2;
+/// [`GnssFix::fix_flags`]: the date is valid (UBX `validDate`).
+pub const FIX_FLAG_VALID_DATE: u8 = 1 << 3;
+/// [`GnssFix::fix_flags`]: the time of day is valid (UBX `validTime`).
+pub const FIX_FLAG_VALID_TIME: u8 = 1 << 4;
+/// [`GnssFix::fix_flags`]: date and time are fully resolved (UBX `fullyResolved`).
+pub const FIX_FLAG_FULLY_RESOLVED: u8 = 1 << 5;
+
+/// [`GnssFix::sentences`] bit of a UBX NAV-PVT message.
+pub const UBX_MSG_NAV_PVT: u32 = 1 << 0;
+/// [`GnssFix::sentences`] bit of a UBX NAV-SOL message.
+pub const UBX_MSG_NAV_SOL: u32 = 1 << 1;
+/// [`GnssFix::sentences`] bit of a UBX NAV-TIMEGPS message.
+pub const UBX_MSG_NAV_TIMEGPS: u32 = 1 << 2;
+/// [`GnssFix::sentences`] bit of a UBX NAV-POSLLH message.
+pub const UBX_MSG_NAV_POSLLH: u32 = 1 << 3;
+/// [`GnssFix::sentences`] bit of a UBX NAV-VELNED message.
+pub const UBX_MSG_NAV_VELNED: u32 = 1 << 4;
+/// [`GnssFix::sentences`] bit of a UBX NAV-DOP message.
+pub const UBX_MSG_NAV_DOP: u32 = 1 << 5;
+/// [`GnssFix::sentences`] bit of a UBX NAV-STATUS message.
+pub const UBX_MSG_NAV_STATUS: u32 = 1 << 6;
+/// [`GnssFix::sentences`] bit of a UBX NAV-TIMEUTC message.
+pub const UBX_MSG_NAV_TIMEUTC: u32 = 1 << 7;
+/// [`GnssFix::sentences`] bit of a UBX NAV-SAT or NAV-SVINFO message.
+pub const UBX_MSG_NAV_SAT: u32 = 1 << 8;
+/// [`GnssFix::sentences`] bit of a UBX NAV-EOE message (the epoch is complete).
+pub const UBX_MSG_NAV_EOE: u32 = 1 << 9;
+/// [`GnssFix::sentences`] bit of a UBX HNR-PVT message (high-rate dead-reckoning output).
+pub const UBX_MSG_HNR_PVT: u32 = 1 << 10;
 
 /// [`GnssFix::sentences`] bit of a GGA sentence.
 pub const SENTENCE_GGA: u32 = 1 << 0;
@@ -119,10 +177,17 @@ impl GnssFix {
             std_lat_m: f64::NAN,
             std_lon_m: f64::NAN,
             std_alt_m: f64::NAN,
+            h_acc_m: f64::NAN,
+            v_acc_m: f64::NAN,
+            s_acc_mps: f64::NAN,
+            head_acc_deg: f64::NAN,
             sentences: 0,
             sats_used: u16::MAX,
             mode: FixMode::Unknown as u8,
             quality: u8::MAX,
+            fix_flags: 0,
+            protocol: GNSS_PROTOCOL_NMEA,
+            reserved: [0; 6],
         }
     }
 

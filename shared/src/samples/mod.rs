@@ -20,10 +20,7 @@ mod stamp;
 mod time_state;
 
 pub use any_sample::AnySample;
-pub use gnss_fix::{
-    FixMode, GnssFix, SENTENCE_GGA, SENTENCE_GLL, SENTENCE_GNS, SENTENCE_GSA, SENTENCE_GST, SENTENCE_RMC, SENTENCE_VTG,
-    SENTENCE_ZDA,
-};
+pub use gnss_fix::*;
 pub use health::{Counter, Health, MAX_COUNTERS, MAX_RATES, RateEntry};
 pub use imu_sample::{IMU_FLAG_SATURATED, ImuSample};
 pub use nav_state::{NavState, NavStatus};
