@@ -98,6 +98,11 @@ pub fn order_key(s: &AnySample) -> OrderKey {
         AnySample::Nav(n) => (n.host_ns, 4, [0; 8], n.seq),
         AnySample::Time(t) => (t.computed_host_ns, 5, [0; 8], t.seq),
         AnySample::Health(h) => (h.host_ns, 6, [0; 8], 0),
+        // A time pulse report comes before the edge it labels: held like an edge.
+        AnySample::TimePulse(t) => (t.stamp.host_ns.saturating_add(PPS_HOLD_NS), 0, [0; 8], t.stamp.seq),
+        AnySample::Event(e) => (e.stamp.host_ns, 7, [0; 8], e.stamp.seq),
+        AnySample::Raw(r) => (r.stamp.host_ns, 7, [1; 8], r.stamp.seq),
+        AnySample::NavData(d) => (d.stamp.host_ns, 7, [2; 8], d.stamp.seq),
     };
     OrderKey { at_ns, rank, id, seq }
 }

@@ -141,7 +141,13 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
                 eval.add_truth(t);
                 false
             }
-            AnySample::Time(_) | AnySample::Nav(_) | AnySample::Health(_) => false,
+            AnySample::Time(_)
+            | AnySample::Nav(_)
+            | AnySample::Health(_)
+            | AnySample::TimePulse(_)
+            | AnySample::Event(_)
+            | AnySample::Raw(_)
+            | AnySample::NavData(_) => false,
         };
         // Computing a time state does not change the navigation states (it only reads the
         // filter's Δ into the time synchroniser's report).

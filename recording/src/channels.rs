@@ -20,7 +20,10 @@ use iceoryx2::prelude::ZeroCopySend;
 use super::mcap_reader::{Channel, Schema};
 use navsync_shared::json::{from_json, from_json_onto, schema, to_json};
 use navsync_shared::reflect::Reflect;
-use navsync_shared::samples::{AnySample, GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
+use navsync_shared::samples::{
+    AnySample, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState, PpsEdge, SimTruth,
+    TimeState,
+};
 use navsync_shared::services::ServiceKind;
 
 /// Message encoding of every navsync channel.
@@ -81,6 +84,10 @@ sample_type!(TimeState, TimeState, Time);
 sample_type!(NavState, NavState, Nav);
 sample_type!(Health, Health, Health);
 sample_type!(SimTruth, SimTruth, Truth);
+sample_type!(GnssTimePulse, GnssTimePulse, TimePulse);
+sample_type!(GnssEvent, GnssEvent, Event);
+sample_type!(GnssRaw, GnssRaw, Raw);
+sample_type!(GnssNavData, GnssNavData, NavData);
 
 /// Evaluates `$body` with the type alias `$T` set to the sample type of `$kind`.
 #[macro_export]
@@ -115,6 +122,22 @@ macro_rules! with_sample_type {
                 type $T = navsync_shared::samples::SimTruth;
                 $body
             }
+            navsync_shared::services::ServiceKind::GnssTimePulse => {
+                type $T = navsync_shared::samples::GnssTimePulse;
+                $body
+            }
+            navsync_shared::services::ServiceKind::GnssEvent => {
+                type $T = navsync_shared::samples::GnssEvent;
+                $body
+            }
+            navsync_shared::services::ServiceKind::GnssRaw => {
+                type $T = navsync_shared::samples::GnssRaw;
+                $body
+            }
+            navsync_shared::services::ServiceKind::GnssNavData => {
+                type $T = navsync_shared::samples::GnssNavData;
+                $body
+            }
         }
     };
 }
@@ -139,6 +162,10 @@ pub fn sample_json(sample: &AnySample) -> serde_json::Value {
         AnySample::Nav(x) => to_json(x),
         AnySample::Health(x) => to_json(x),
         AnySample::Truth(x) => to_json(x),
+        AnySample::TimePulse(x) => to_json(x),
+        AnySample::Event(x) => to_json(x),
+        AnySample::Raw(x) => to_json(x),
+        AnySample::NavData(x) => to_json(x),
     }
 }
 

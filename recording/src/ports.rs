@@ -24,6 +24,14 @@ pub enum AnySubscriber {
     Health(Subscriber<navsync_shared::samples::Health>),
     /// `navsync/sim/truth`
     Truth(Subscriber<navsync_shared::samples::SimTruth>),
+    /// `navsync/gnss/{id}/timepulse`
+    TimePulse(Subscriber<navsync_shared::samples::GnssTimePulse>),
+    /// `navsync/gnss/{id}/event`
+    Event(Subscriber<navsync_shared::samples::GnssEvent>),
+    /// `navsync/gnss/{id}/raw`
+    Raw(Subscriber<navsync_shared::samples::GnssRaw>),
+    /// `navsync/gnss/{id}/nav-data`
+    NavData(Subscriber<navsync_shared::samples::GnssNavData>),
 }
 
 macro_rules! each_subscriber {
@@ -36,6 +44,10 @@ macro_rules! each_subscriber {
             AnySubscriber::Nav($s) => $body,
             AnySubscriber::Health($s) => $body,
             AnySubscriber::Truth($s) => $body,
+            AnySubscriber::TimePulse($s) => $body,
+            AnySubscriber::Event($s) => $body,
+            AnySubscriber::Raw($s) => $body,
+            AnySubscriber::NavData($s) => $body,
         }
     };
 }
@@ -55,6 +67,10 @@ impl AnySubscriber {
             ServiceKind::NavState => Self::Nav(node.subscriber(service)?),
             ServiceKind::Health => Self::Health(node.subscriber(service)?),
             ServiceKind::SimTruth => Self::Truth(node.subscriber(service)?),
+            ServiceKind::GnssTimePulse => Self::TimePulse(node.subscriber(service)?),
+            ServiceKind::GnssEvent => Self::Event(node.subscriber(service)?),
+            ServiceKind::GnssRaw => Self::Raw(node.subscriber(service)?),
+            ServiceKind::GnssNavData => Self::NavData(node.subscriber(service)?),
         })
     }
 
@@ -95,6 +111,14 @@ pub enum AnyPublisher {
     Health(Publisher<navsync_shared::samples::Health>),
     /// `navsync/sim/truth`
     Truth(Publisher<navsync_shared::samples::SimTruth>),
+    /// `navsync/gnss/{id}/timepulse`
+    TimePulse(Publisher<navsync_shared::samples::GnssTimePulse>),
+    /// `navsync/gnss/{id}/event`
+    Event(Publisher<navsync_shared::samples::GnssEvent>),
+    /// `navsync/gnss/{id}/raw`
+    Raw(Publisher<navsync_shared::samples::GnssRaw>),
+    /// `navsync/gnss/{id}/nav-data`
+    NavData(Publisher<navsync_shared::samples::GnssNavData>),
 }
 
 impl AnyPublisher {
@@ -108,6 +132,10 @@ impl AnyPublisher {
             ServiceKind::NavState => Self::Nav(node.publisher(service)?),
             ServiceKind::Health => Self::Health(node.publisher(service)?),
             ServiceKind::SimTruth => Self::Truth(node.publisher(service)?),
+            ServiceKind::GnssTimePulse => Self::TimePulse(node.publisher(service)?),
+            ServiceKind::GnssEvent => Self::Event(node.publisher(service)?),
+            ServiceKind::GnssRaw => Self::Raw(node.publisher(service)?),
+            ServiceKind::GnssNavData => Self::NavData(node.publisher(service)?),
         })
     }
 
@@ -121,6 +149,10 @@ impl AnyPublisher {
             Self::Nav(p) => pub_as(p, sample),
             Self::Health(p) => pub_as(p, sample),
             Self::Truth(p) => pub_as(p, sample),
+            Self::TimePulse(p) => pub_as(p, sample),
+            Self::Event(p) => pub_as(p, sample),
+            Self::Raw(p) => pub_as(p, sample),
+            Self::NavData(p) => pub_as(p, sample),
         }
     }
 }

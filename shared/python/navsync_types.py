@@ -514,6 +514,197 @@ class SimTruth(ctypes.Structure):
         return "navsync.SimTruth.v1"
 
 
+class GnssTimePulse(ctypes.Structure):
+    """The GNSS time of a receiver's next time pulse (navsync/gnss/{id}/timepulse)."""
+
+    _fields_ = [
+        # Receipt stamp of the message's first byte and the driver's message counter.
+        ("stamp", Stamp),
+        # GPS time of the next pulse, ns since 1980-01-06 (`i64::MIN` when not known).
+        ("pulse_gps_ns", ctypes.c_int64),
+        # UTC of the next pulse, ns since 1970 (`i64::MIN` when the leap seconds are not known).
+        ("pulse_utc_ns", ctypes.c_int64),
+        # Quantisation error of the next pulse, ps (`i32::MIN` when the receiver marks it invalid).
+        ("q_err_ps", ctypes.c_int32),
+        # The pulse's time base: 0 GNSS (GPS) time, 1 UTC.
+        ("time_base", ctypes.c_uint8),
+        # 1 when the receiver has UTC (leap seconds) information.
+        ("utc_available", ctypes.c_uint8),
+        # Reserved, zero.
+        ("reserved", (ctypes.c_char * 2)),
+    ]
+
+    #: Size in bytes of the Rust type.
+    RUST_SIZE = 56
+    #: Alignment in bytes of the Rust type.
+    RUST_ALIGN = 8
+    #: Byte offset of every field in the Rust type.
+    RUST_OFFSETS = {"stamp": 0, "pulse_gps_ns": 32, "pulse_utc_ns": 40, "q_err_ps": 48, "time_base": 52, "utc_available": 53, "reserved": 54}
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name (with the layout version)."""
+        return "navsync.GnssTimePulse.v1"
+
+
+class GnssEvent(ctypes.Structure):
+    """A time mark of an external event on a receiver pin (navsync/gnss/{id}/event)."""
+
+    _fields_ = [
+        # Receipt stamp of the message's first byte and the driver's message counter.
+        ("stamp", Stamp),
+        # GPS time of the last rising edge, ns since 1980-01-06 (`i64::MIN` when none is new).
+        ("rising_gps_ns", ctypes.c_int64),
+        # GPS time of the last falling edge, ns since 1980-01-06 (`i64::MIN` when none is new).
+        ("falling_gps_ns", ctypes.c_int64),
+        # Host time (`CLOCK_MONOTONIC`) of the rising edge through the estimator's time mapping, ns (`i64::MIN` when the mapping was not known).
+        ("rising_host_ns", ctypes.c_int64),
+        # Host time of the falling edge, ns (`i64::MIN` when not known).
+        ("falling_host_ns", ctypes.c_int64),
+        # The receiver's accuracy estimate of the time marks, ns.
+        ("accuracy_ns", ctypes.c_uint32),
+        # Edge counter of the channel (rising edges, as the receiver counts them).
+        ("count", ctypes.c_uint16),
+        # Input channel (u-blox: 0 EXTINT0, 1 EXTINT1).
+        ("channel", ctypes.c_uint8),
+        # The receiver's flags byte (u-blox TIM-TM2 `flags`: mode, run, new edges, time base, UTC, valid).
+        ("flags", ctypes.c_uint8),
+    ]
+
+    #: Size in bytes of the Rust type.
+    RUST_SIZE = 72
+    #: Alignment in bytes of the Rust type.
+    RUST_ALIGN = 8
+    #: Byte offset of every field in the Rust type.
+    RUST_OFFSETS = {"stamp": 0, "rising_gps_ns": 32, "falling_gps_ns": 40, "rising_host_ns": 48, "falling_host_ns": 56, "accuracy_ns": 64, "count": 68, "channel": 70, "flags": 71}
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name (with the layout version)."""
+        return "navsync.GnssEvent.v1"
+
+
+class RawMeasurement(ctypes.Structure):
+    """One signal's raw measurements (pseudorange, carrier phase, Doppler)."""
+
+    _fields_ = [
+        # Pseudorange, m.
+        ("pseudorange_m", ctypes.c_double),
+        # Carrier phase, cycles.
+        ("carrier_phase_cycles", ctypes.c_double),
+        # Doppler, Hz (positive: approaching).
+        ("doppler_hz", ctypes.c_float),
+        # Pseudorange 1-sigma, m.
+        ("pseudorange_std_m", ctypes.c_float),
+        # Carrier phase 1-sigma, cycles.
+        ("carrier_phase_std_cycles", ctypes.c_float),
+        # Doppler 1-sigma, Hz.
+        ("doppler_std_hz", ctypes.c_float),
+        # Carrier phase lock time, ms.
+        ("lock_time_ms", ctypes.c_uint16),
+        # GNSS id (u-blox: 0 GPS, 1 SBAS, 2 Galileo, 3 BeiDou, 5 QZSS, 6 GLONASS).
+        ("gnss_id", ctypes.c_uint8),
+        # Satellite id within the system.
+        ("sv_id", ctypes.c_uint8),
+        # Signal id (u-blox `sigId`).
+        ("sig_id", ctypes.c_uint8),
+        # GLONASS frequency slot + 7 (0..=13), else 0.
+        ("freq_id", ctypes.c_uint8),
+        # Carrier-to-noise density, dB-Hz.
+        ("cno_dbhz", ctypes.c_uint8),
+        # Tracking status bits (u-blox `trkStat`: pseudorange valid, carrier valid, half cycle valid, half cycle subtracted).
+        ("trk_stat", ctypes.c_uint8),
+    ]
+
+    #: Size in bytes of the Rust type.
+    RUST_SIZE = 40
+    #: Alignment in bytes of the Rust type.
+    RUST_ALIGN = 8
+    #: Byte offset of every field in the Rust type.
+    RUST_OFFSETS = {"pseudorange_m": 0, "carrier_phase_cycles": 8, "doppler_hz": 16, "pseudorange_std_m": 20, "carrier_phase_std_cycles": 24, "doppler_std_hz": 28, "lock_time_ms": 32, "gnss_id": 34, "sv_id": 35, "sig_id": 36, "freq_id": 37, "cno_dbhz": 38, "trk_stat": 39}
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name (with the layout version)."""
+        return "navsync.RawMeasurement.v1"
+
+
+class GnssRaw(ctypes.Structure):
+    """The raw measurements of one receiver epoch (navsync/gnss/{id}/raw)."""
+
+    _fields_ = [
+        # Receipt stamp of the message's first byte and the driver's epoch counter.
+        ("stamp", Stamp),
+        # Receiver time of week of the measurements, s (GPS time scale).
+        ("rcv_tow_s", ctypes.c_double),
+        # GPS week number of the receiver time.
+        ("week", ctypes.c_uint16),
+        # GPS − UTC leap seconds (when `rec_stat` says they are valid).
+        ("leap_s", ctypes.c_int16),
+        # Measurements in `meas`.
+        ("num_meas", ctypes.c_uint8),
+        # Receiver status bits (u-blox `recStat`: leap seconds valid, clock reset).
+        ("rec_stat", ctypes.c_uint8),
+        # Measurements the message held beyond [`MAX_RAW_MEASUREMENTS`] (dropped).
+        ("dropped", ctypes.c_uint8),
+        # Reserved, zero.
+        ("reserved", ctypes.c_uint8),
+        # The measurements, `num_meas` of them.
+        ("meas", (RawMeasurement * 64)),
+    ]
+
+    #: Size in bytes of the Rust type.
+    RUST_SIZE = 2608
+    #: Alignment in bytes of the Rust type.
+    RUST_ALIGN = 8
+    #: Byte offset of every field in the Rust type.
+    RUST_OFFSETS = {"stamp": 0, "rcv_tow_s": 32, "week": 40, "leap_s": 42, "num_meas": 44, "rec_stat": 45, "dropped": 46, "reserved": 47, "meas": 48}
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name (with the layout version)."""
+        return "navsync.GnssRaw.v1"
+
+
+class GnssNavData(ctypes.Structure):
+    """One broadcast navigation data subframe (navsync/gnss/{id}/nav-data)."""
+
+    _fields_ = [
+        # Receipt stamp of the message's first byte and the driver's message counter.
+        ("stamp", Stamp),
+        # The data words as the receiver delivers them (u-blox `dwrd`; GPS LNAV: 10 words of 30 bits, parity included, right-aligned).
+        ("words", (ctypes.c_uint32 * 16)),
+        # GNSS id (u-blox: 0 GPS, 1 SBAS, 2 Galileo, 3 BeiDou, 5 QZSS, 6 GLONASS).
+        ("gnss_id", ctypes.c_uint8),
+        # Satellite id within the system.
+        ("sv_id", ctypes.c_uint8),
+        # Signal id.
+        ("sig_id", ctypes.c_uint8),
+        # GLONASS frequency slot + 7, else 0.
+        ("freq_id", ctypes.c_uint8),
+        # Words in `words`.
+        ("num_words", ctypes.c_uint8),
+        # Tracking channel.
+        ("channel", ctypes.c_uint8),
+        # Message version.
+        ("version", ctypes.c_uint8),
+        # Reserved, zero.
+        ("reserved", ctypes.c_uint8),
+    ]
+
+    #: Size in bytes of the Rust type.
+    RUST_SIZE = 104
+    #: Alignment in bytes of the Rust type.
+    RUST_ALIGN = 8
+    #: Byte offset of every field in the Rust type.
+    RUST_OFFSETS = {"stamp": 0, "words": 32, "gnss_id": 96, "sv_id": 97, "sig_id": 98, "freq_id": 99, "num_words": 100, "channel": 101, "version": 102, "reserved": 103}
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name (with the layout version)."""
+        return "navsync.GnssNavData.v1"
+
+
 #: Publish-subscribe QoS per sample type: history, subscriber buffer.
 QOS = {
     "GnssFix": {"history": 1, "buffer": 64},
@@ -523,6 +714,10 @@ QOS = {
     "NavState": {"history": 1, "buffer": 512},
     "Health": {"history": 1, "buffer": 16},
     "SimTruth": {"history": 1, "buffer": 512},
+    "GnssTimePulse": {"history": 1, "buffer": 64},
+    "GnssEvent": {"history": 1, "buffer": 64},
+    "GnssRaw": {"history": 1, "buffer": 64},
+    "GnssNavData": {"history": 0, "buffer": 256},
 }
 
 
@@ -530,7 +725,9 @@ def service_type(service):
     """The ctypes class carried by a navsync service name, or None for other names."""
     p = service.split("/")
     if len(p) == 4 and p[0] == "navsync" and p[2]:
-        return {("gnss", "fix"): GnssFix, ("pps", "edge"): PpsEdge, ("imu", "sample"): ImuSample}.get((p[1], p[3]))
+        return {("gnss", "fix"): GnssFix, ("pps", "edge"): PpsEdge, ("imu", "sample"): ImuSample,
+                ("gnss", "timepulse"): GnssTimePulse, ("gnss", "event"): GnssEvent, ("gnss", "raw"): GnssRaw,
+                ("gnss", "nav-data"): GnssNavData}.get((p[1], p[3]))
     if len(p) == 3 and p[0] == "navsync":
         if p[1] == "health":
             return Health if p[2] else None

@@ -2,7 +2,11 @@
 //!
 //! | service | type | publisher |
 //! |---|---|---|
-//! | `navsync/gnss/{id}/fix` | [`GnssFix`] | `navsync gps` |
+//! | `navsync/gnss/{id}/fix` | [`GnssFix`] | `navsync gnss` |
+//! | `navsync/gnss/{id}/timepulse` | [`GnssTimePulse`] | `navsync gnss` (UBX TIM-TP) |
+//! | `navsync/gnss/{id}/event` | [`GnssEvent`] | `navsync gnss` (UBX TIM-TM2) |
+//! | `navsync/gnss/{id}/raw` | [`GnssRaw`] | `navsync gnss` (UBX RXM-RAWX) |
+//! | `navsync/gnss/{id}/nav-data` | [`GnssNavData`] | `navsync gnss` (UBX RXM-SFRBX) |
 //! | `navsync/pps/{id}/edge` | [`PpsEdge`] | `navsync pps` (or the simulator) |
 //! | `navsync/imu/{id}/sample` | [`ImuSample`] | `navsync imu` (or the simulator) |
 //! | `navsync/time/state` | [`TimeState`] | `navsync estimator` |
@@ -15,7 +19,10 @@
 //! publishers wake subscribers.
 
 use crate::reflect::Reflect;
-use crate::samples::{AnySample, GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
+use crate::samples::{
+    AnySample, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState, PpsEdge, SimTruth,
+    TimeState,
+};
 
 /// Environment variable with the iceoryx2 resource prefix (default [`DEFAULT_PREFIX`]).
 /// Tests set a unique value so that parallel tests and a running demo never meet.
@@ -26,6 +33,22 @@ pub const DEFAULT_PREFIX: &str = "navsync_";
 /// `navsync/gnss/{id}/fix`
 pub fn gnss_fix(id: &str) -> String {
     format!("navsync/gnss/{id}/fix")
+}
+/// `navsync/gnss/{id}/timepulse`
+pub fn gnss_time_pulse(id: &str) -> String {
+    format!("navsync/gnss/{id}/timepulse")
+}
+/// `navsync/gnss/{id}/event`
+pub fn gnss_event(id: &str) -> String {
+    format!("navsync/gnss/{id}/event")
+}
+/// `navsync/gnss/{id}/raw`
+pub fn gnss_raw(id: &str) -> String {
+    format!("navsync/gnss/{id}/raw")
+}
+/// `navsync/gnss/{id}/nav-data`
+pub fn gnss_nav_data(id: &str) -> String {
+    format!("navsync/gnss/{id}/nav-data")
 }
 /// `navsync/pps/{id}/edge`
 pub fn pps_edge(id: &str) -> String {
@@ -66,6 +89,14 @@ pub enum ServiceKind {
     Health,
     /// [`SimTruth`]
     SimTruth,
+    /// [`GnssTimePulse`]
+    GnssTimePulse,
+    /// [`GnssEvent`]
+    GnssEvent,
+    /// [`GnssRaw`]
+    GnssRaw,
+    /// [`GnssNavData`]
+    GnssNavData,
 }
 
 impl ServiceKind {
@@ -79,11 +110,15 @@ impl ServiceKind {
             AnySample::Nav(_) => Self::NavState,
             AnySample::Health(_) => Self::Health,
             AnySample::Truth(_) => Self::SimTruth,
+            AnySample::TimePulse(_) => Self::GnssTimePulse,
+            AnySample::Event(_) => Self::GnssEvent,
+            AnySample::Raw(_) => Self::GnssRaw,
+            AnySample::NavData(_) => Self::GnssNavData,
         }
     }
 
     /// All kinds.
-    pub const ALL: [ServiceKind; 7] = [
+    pub const ALL: [ServiceKind; 11] = [
         Self::GnssFix,
         Self::PpsEdge,
         Self::ImuSample,
@@ -91,6 +126,10 @@ impl ServiceKind {
         Self::NavState,
         Self::Health,
         Self::SimTruth,
+        Self::GnssTimePulse,
+        Self::GnssEvent,
+        Self::GnssRaw,
+        Self::GnssNavData,
     ];
 
     /// The kind of a service from its name, or `None` for a name navsync does not use.
@@ -98,6 +137,10 @@ impl ServiceKind {
         let parts: Vec<&str> = service.split('/').collect();
         match parts.as_slice() {
             ["navsync", "gnss", id, "fix"] if !id.is_empty() => Some(Self::GnssFix),
+            ["navsync", "gnss", id, "timepulse"] if !id.is_empty() => Some(Self::GnssTimePulse),
+            ["navsync", "gnss", id, "event"] if !id.is_empty() => Some(Self::GnssEvent),
+            ["navsync", "gnss", id, "raw"] if !id.is_empty() => Some(Self::GnssRaw),
+            ["navsync", "gnss", id, "nav-data"] if !id.is_empty() => Some(Self::GnssNavData),
             ["navsync", "pps", id, "edge"] if !id.is_empty() => Some(Self::PpsEdge),
             ["navsync", "imu", id, "sample"] if !id.is_empty() => Some(Self::ImuSample),
             ["navsync", "time", "state"] => Some(Self::TimeState),
@@ -119,6 +162,10 @@ impl ServiceKind {
             Self::NavState => NavState::TYPE_NAME,
             Self::Health => Health::TYPE_NAME,
             Self::SimTruth => SimTruth::TYPE_NAME,
+            Self::GnssTimePulse => GnssTimePulse::TYPE_NAME,
+            Self::GnssEvent => GnssEvent::TYPE_NAME,
+            Self::GnssRaw => GnssRaw::TYPE_NAME,
+            Self::GnssNavData => GnssNavData::TYPE_NAME,
         }
     }
 
@@ -138,7 +185,14 @@ impl ServiceKind {
                 history: 1,
                 buffer: 512,
             },
-            Self::GnssFix | Self::PpsEdge => Qos { history: 1, buffer: 64 },
+            Self::GnssFix | Self::PpsEdge | Self::GnssTimePulse | Self::GnssEvent | Self::GnssRaw => {
+                Qos { history: 1, buffer: 64 }
+            }
+            // Up to ~40 subframes per second over all tracked satellites.
+            Self::GnssNavData => Qos {
+                history: 0,
+                buffer: 256,
+            },
             Self::TimeState | Self::Health => Qos { history: 1, buffer: 16 },
         }
     }

@@ -44,6 +44,10 @@ fn all() -> Vec<String> {
         signature::<NavState>(),
         signature::<Health>(),
         signature::<SimTruth>(),
+        signature::<GnssTimePulse>(),
+        signature::<GnssEvent>(),
+        signature::<GnssRaw>(),
+        signature::<GnssNavData>(),
     ]
 }
 
@@ -61,6 +65,11 @@ fn field_tables_describe_the_real_layout() {
     check::<NavState>();
     check::<Health>();
     check::<SimTruth>();
+    check::<GnssTimePulse>();
+    check::<GnssEvent>();
+    check::<RawMeasurement>();
+    check::<GnssRaw>();
+    check::<GnssNavData>();
 }
 
 #[test]

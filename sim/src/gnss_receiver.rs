@@ -21,8 +21,9 @@ use super::inverse_mechanization::inertial_state;
 use super::nmea::{self, EpochReport, FixReport};
 use super::oscillator::Oscillator;
 use super::rng::{Rng, streams};
-use super::scenario::GnssConfig;
+use super::scenario::{GnssConfig, OutputProtocol};
 use super::trajectory::{Trajectory, wrap_pi};
+use super::ubx;
 
 /// One epoch's output.
 #[derive(Debug, Clone, PartialEq)]
@@ -129,7 +130,21 @@ impl GnssReceiver {
             sigma_lat_lon_alt_m: self.sigma_pos,
         };
         let mut bytes = Vec::with_capacity(512);
-        nmea::write_burst(self.cfg.talker.as_str(), &report, &mut bytes);
+        match self.cfg.protocol {
+            OutputProtocol::Nmea => nmea::write_burst(self.cfg.talker.as_str(), &report, &mut bytes),
+            OutputProtocol::Ubx => {
+                // The receiver's accuracy estimates are its noise model: hAcc the horizontal
+                // RMS, vAcc the 1-σ vertical error, sAcc √2 × the per-axis velocity σ (the
+                // estimator takes sAcc/√2 per axis).
+                let x = ubx::UbxExtras {
+                    h_acc_m: self.cfg.horizontal_rms_m,
+                    v_acc_m: self.cfg.vertical_sigma_m,
+                    s_acc_mps: self.cfg.velocity_sigma_mps * std::f64::consts::SQRT_2,
+                    next_pulse_q_err_ps: 0,
+                };
+                ubx::write_epoch(&report, &x, &mut bytes);
+            }
+        }
         let latency_s = (self.cfg.latency_s + self.latency_rng.gaussian(self.cfg.latency_jitter_s)).max(0.0);
         let host_ns = osc.host_ns_at_tau(tau + latency_s).max(self.last_host_ns);
         self.last_host_ns = host_ns;
@@ -170,6 +185,7 @@ impl GnssReceiver {
             geoid_sep_m: self.cfg.geoid_separation_m,
             vel_n_mps: v[0] + dvel[0],
             vel_e_mps: v[1] + dvel[1],
+            vel_d_mps: v[2] + dvel[2],
         }
     }
 }

@@ -31,6 +31,7 @@ pub mod rng;
 pub mod scenario;
 pub mod trajectory;
 pub mod truth;
+pub mod ubx;
 pub mod vibration;
 pub mod world;
 pub mod xsens_imus;

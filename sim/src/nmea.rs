@@ -28,6 +28,8 @@ pub struct FixReport {
     pub vel_n_mps: f64,
     /// Velocity east, m/s.
     pub vel_e_mps: f64,
+    /// Velocity down, m/s (UBX reports it; NMEA does not).
+    pub vel_d_mps: f64,
 }
 
 /// Everything the sentences of one epoch carry.
@@ -294,6 +296,7 @@ pub(crate) mod tests {
             geoid_sep_m: 47.0,
             vel_n_mps: 3.0,
             vel_e_mps: -4.0,
+            vel_d_mps: 0.0,
         };
         let utc = navsync_shared::time::utc_ns_from_civil(&navsync_shared::time::Civil {
             year: 2026,

@@ -48,6 +48,9 @@ pub struct SimArgs {
     /// GNSS rate, Hz (1 or 10).
     #[arg(long = "gnss-rate")]
     pub gnss_rate_hz: Option<u32>,
+    /// What the simulated receiver writes: nmea, or ubx (NAV-PVT, NAV-EOE, TIM-TP).
+    #[arg(long = "gnss-protocol")]
+    pub gnss_protocol: Option<crate::scenario::OutputProtocol>,
     /// NMEA output latency after the PPS edge, s.
     #[arg(long = "gnss-latency")]
     pub gnss_latency_s: Option<f64>,
@@ -139,6 +142,9 @@ pub fn load_config(args: &SimArgs) -> Result<SimConfig, SimError> {
     if let Some(offsets) = &args.imu_offsets_ms {
         let s: Vec<f64> = offsets.iter().map(|ms| ms * 1e-3).collect();
         cfg.set_imu_offsets_s(&s);
+    }
+    if let Some(p) = args.gnss_protocol {
+        cfg.set_gnss_protocol(p);
     }
     if let Some(r) = args.gnss_rate_hz {
         cfg.set_gnss_rate_hz(r);

@@ -291,6 +291,28 @@ pub struct ResolvedImu {
     pub clock_freq_error: f64,
 }
 
+/// The simulated receiver's output protocol.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputProtocol {
+    /// NMEA 0183 sentences.
+    #[default]
+    Nmea,
+    /// u-blox UBX messages.
+    Ubx,
+}
+
+impl std::str::FromStr for OutputProtocol {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "nmea" => Ok(Self::Nmea),
+            "ubx" => Ok(Self::Ubx),
+            _ => Err(format!("`{s}` is not a simulated receiver protocol (nmea, ubx)")),
+        }
+    }
+}
+
 /// NMEA talker identifier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 pub enum Talker {
@@ -329,6 +351,9 @@ impl std::str::FromStr for Talker {
 pub struct GnssConfig {
     /// Epoch rate, Hz: 1, 2, 4, 5, 10 or 20 (default 1).
     pub rate_hz: u32,
+    /// What the receiver writes: `nmea` (RMC, VTG, GGA, GSA, GST, ZDA) or `ubx` (NAV-PVT,
+    /// NAV-EOE, TIM-TP; `crate::ubx`) (default `nmea`).
+    pub protocol: OutputProtocol,
     /// NMEA talker, `GN` or `GP` (default `GN`).
     pub talker: Talker,
     /// Output latency d0: the epoch's first NMEA byte leaves the receiver d0 after the epoch
@@ -365,6 +390,7 @@ impl Default for GnssConfig {
     fn default() -> Self {
         Self {
             rate_hz: 1,
+            protocol: OutputProtocol::Nmea,
             talker: Talker::Gn,
             latency_s: 0.6,
             latency_jitter_s: 0.0,
@@ -589,6 +615,12 @@ impl SimConfig {
     pub fn set_nmea_latency_s(&mut self, latency_s: f64) {
         self.gnss.latency_s = latency_s;
         self.mark("gnss.latency_s");
+    }
+
+    /// Sets the receiver's output protocol.
+    pub fn set_gnss_protocol(&mut self, protocol: OutputProtocol) {
+        self.gnss.protocol = protocol;
+        self.mark("gnss.protocol");
     }
 
     /// Sets the NMEA talker.

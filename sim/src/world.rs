@@ -17,7 +17,7 @@ use super::imu_stream::ImuStream;
 use super::oscillator::Oscillator;
 use super::pps::PpsGenerator;
 use super::rng::{Rng, streams};
-use super::scenario::SimConfig;
+use super::scenario::{OutputProtocol, SimConfig};
 use super::trajectory::Trajectory;
 use super::truth::{TruthConstants, sim_truth};
 
@@ -99,6 +99,7 @@ pub struct World {
     start_utc_ns: i64,
     duration_s: f64,
     baud: u32,
+    gnss_protocol: OutputProtocol,
 }
 
 impl World {
@@ -154,6 +155,7 @@ impl World {
             start_utc_ns,
             duration_s,
             baud: cfg.gnss.baud,
+            gnss_protocol: cfg.gnss.protocol,
         };
         world.prime();
         Ok(world)
@@ -288,6 +290,11 @@ impl World {
     /// Serial baud rate at which the shell paces NMEA bytes.
     pub fn baud(&self) -> u32 {
         self.baud
+    }
+
+    /// What the simulated receiver writes.
+    pub fn gnss_protocol(&self) -> OutputProtocol {
+        self.gnss_protocol
     }
 
     /// Number of IMUs.

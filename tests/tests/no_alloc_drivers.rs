@@ -190,6 +190,7 @@ fn nmea_bytes_to_published_fix_allocate_nothing() {
                     geoid_sep_m: 47.0,
                     vel_n_mps: 1.1,
                     vel_e_mps: 0.0,
+                    vel_d_mps: 0.0,
                 }),
                 sats_used: 9,
                 hdop: 0.9,

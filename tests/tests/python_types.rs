@@ -116,6 +116,11 @@ fn generated_python_types_are_current_and_match_the_rust_layouts() {
         rust::<NavState>(),
         rust::<Health>(),
         rust::<SimTruth>(),
+        rust::<GnssTimePulse>(),
+        rust::<GnssEvent>(),
+        rust::<RawMeasurement>(),
+        rust::<GnssRaw>(),
+        rust::<GnssNavData>(),
     ];
     assert_eq!(report.as_object().unwrap().len(), rust_layouts.len(), "{report}");
     let mut fields = 0;

@@ -24,6 +24,7 @@ use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;
 use navsync_shared::services;
 use navsync_sim::process::{SimArgs, load_config};
+use navsync_sim::scenario::OutputProtocol;
 use navsync_sim::xsens_imus::SimImuOutput;
 use tracing::info;
 
@@ -44,6 +45,9 @@ pub struct DemoArgs {
     /// IMU path: `xsens` (simulator → pseudo-terminals → `navsync imu` drivers) or `direct`.
     #[arg(long, default_value = "xsens")]
     pub imu_output: SimImuOutput,
+    /// What the simulated receiver writes and the GNSS driver reads: `nmea` or `ubx`.
+    #[arg(long, default_value = "nmea")]
+    pub gnss_protocol: OutputProtocol,
     /// Extra arguments passed to `navsync sim`.
     #[arg(skip)]
     pub sim_args: Vec<String>,
@@ -313,6 +317,11 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
     if let Some(s) = &args.scenario {
         sim_args.extend(["--scenario".into(), s.display().to_string()]);
     }
+    let gnss_protocol = match args.gnss_protocol {
+        OutputProtocol::Nmea => "nmea",
+        OutputProtocol::Ubx => "ubx",
+    };
+    sim_args.extend(["--gnss-protocol".into(), gnss_protocol.into()]);
     let xsens = args.imu_output == SimImuOutput::Xsens;
     if xsens {
         sim_args.extend([
@@ -342,6 +351,8 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
                 &link.display().to_string(),
                 "--baud",
                 "115200",
+                "--protocol",
+                gnss_protocol,
                 "--id",
                 "0",
             ]

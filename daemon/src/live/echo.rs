@@ -94,6 +94,10 @@ pub fn run(args: &EchoArgs) -> Result<(), EchoError> {
         ServiceKind::NavState => echo::<NavState>(args, |s| (s.host_ns, Some(s.seq))),
         ServiceKind::Health => echo::<Health>(args, |s| (s.host_ns, Some(s.seq))),
         ServiceKind::SimTruth => echo::<SimTruth>(args, |s| (s.host_ns, Some(s.seq))),
+        ServiceKind::GnssTimePulse => echo::<GnssTimePulse>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
+        ServiceKind::GnssEvent => echo::<GnssEvent>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
+        ServiceKind::GnssRaw => echo::<GnssRaw>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
+        ServiceKind::GnssNavData => echo::<GnssNavData>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
     }
 }
 

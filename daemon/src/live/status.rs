@@ -131,6 +131,10 @@ fn open_monitor(node: &IpcNode, service: &str, kind: ServiceKind) -> Result<Box<
         ServiceKind::NavState => open_typed::<NavState>(node, service, AnySample::Nav),
         ServiceKind::Health => open_typed::<Health>(node, service, AnySample::Health),
         ServiceKind::SimTruth => open_typed::<SimTruth>(node, service, AnySample::Truth),
+        ServiceKind::GnssTimePulse => open_typed::<GnssTimePulse>(node, service, AnySample::TimePulse),
+        ServiceKind::GnssEvent => open_typed::<GnssEvent>(node, service, AnySample::Event),
+        ServiceKind::GnssRaw => open_typed::<GnssRaw>(node, service, AnySample::Raw),
+        ServiceKind::GnssNavData => open_typed::<GnssNavData>(node, service, AnySample::NavData),
     }
 }
 

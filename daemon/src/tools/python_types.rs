@@ -56,6 +56,11 @@ fn types() -> Vec<Ty> {
         ty::<NavState>("The fused navigation state (navsync/nav/state)."),
         ty::<Health>("Heartbeat and counters of one process (navsync/health/{process})."),
         ty::<SimTruth>("Simulator ground truth (navsync/sim/truth)."),
+        ty::<GnssTimePulse>("The GNSS time of a receiver's next time pulse (navsync/gnss/{id}/timepulse)."),
+        ty::<GnssEvent>("A time mark of an external event on a receiver pin (navsync/gnss/{id}/event)."),
+        ty::<RawMeasurement>("One signal's raw measurements (pseudorange, carrier phase, Doppler)."),
+        ty::<GnssRaw>("The raw measurements of one receiver epoch (navsync/gnss/{id}/raw)."),
+        ty::<GnssNavData>("One broadcast navigation data subframe (navsync/gnss/{id}/nav-data)."),
     ]
 }
 
@@ -167,7 +172,9 @@ def service_type(service):
     """The ctypes class carried by a navsync service name, or None for other names."""
     p = service.split("/")
     if len(p) == 4 and p[0] == "navsync" and p[2]:
-        return {("gnss", "fix"): GnssFix, ("pps", "edge"): PpsEdge, ("imu", "sample"): ImuSample}.get((p[1], p[3]))
+        return {("gnss", "fix"): GnssFix, ("pps", "edge"): PpsEdge, ("imu", "sample"): ImuSample,
+                ("gnss", "timepulse"): GnssTimePulse, ("gnss", "event"): GnssEvent, ("gnss", "raw"): GnssRaw,
+                ("gnss", "nav-data"): GnssNavData}.get((p[1], p[3]))
     if len(p) == 3 and p[0] == "navsync":
         if p[1] == "health":
             return Health if p[2] else None

@@ -1,6 +1,8 @@
 //! Any navsync sample, tagged with its type: what a recording holds and a replay publishes.
 
-use super::{GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
+use super::{
+    GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState,
+};
 
 /// A sample of any navsync type. Variants differ in size (a `Health` report is ~2.4 kB); the
 /// enum stays unboxed because boxing would allocate per sample on replay paths.
@@ -21,6 +23,14 @@ pub enum AnySample {
     Health(Health),
     /// `navsync/sim/truth`
     Truth(SimTruth),
+    /// `navsync/gnss/{id}/timepulse`
+    TimePulse(GnssTimePulse),
+    /// `navsync/gnss/{id}/event`
+    Event(GnssEvent),
+    /// `navsync/gnss/{id}/raw`
+    Raw(GnssRaw),
+    /// `navsync/gnss/{id}/nav-data`
+    NavData(GnssNavData),
 }
 
 impl AnySample {
@@ -34,6 +44,10 @@ impl AnySample {
             Self::Nav(n) => n.host_ns,
             Self::Health(h) => h.host_ns,
             Self::Truth(t) => t.host_ns,
+            Self::TimePulse(t) => t.stamp.host_ns,
+            Self::Event(e) => e.stamp.host_ns,
+            Self::Raw(r) => r.stamp.host_ns,
+            Self::NavData(d) => d.stamp.host_ns,
         }
     }
 }

@@ -10,7 +10,11 @@
 //! - A float that is not known is NaN (written as JSON `null`).
 
 mod any_sample;
+mod gnss_event;
 mod gnss_fix;
+mod gnss_nav_data;
+mod gnss_raw;
+mod gnss_time_pulse;
 mod health;
 mod imu_sample;
 mod nav_state;
@@ -20,7 +24,11 @@ mod stamp;
 mod time_state;
 
 pub use any_sample::AnySample;
+pub use gnss_event::GnssEvent;
 pub use gnss_fix::*;
+pub use gnss_nav_data::{GnssNavData, MAX_NAV_WORDS};
+pub use gnss_raw::{GnssRaw, MAX_RAW_MEASUREMENTS, RawMeasurement};
+pub use gnss_time_pulse::GnssTimePulse;
 pub use health::{Counter, Health, MAX_COUNTERS, MAX_RATES, RateEntry};
 pub use imu_sample::{IMU_FLAG_SATURATED, ImuSample};
 pub use nav_state::{NavState, NavStatus};

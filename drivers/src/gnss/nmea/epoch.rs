@@ -102,11 +102,13 @@ pub struct EpochCounters {
     pub repeats: u64,
     /// ZDA/GST sentences for an epoch already emitted (date used, sigmas dropped).
     pub after_epoch: u64,
+    /// Epochs whose receiver claimed a fix from 0 satellites; published as no fix.
+    pub zero_satellite_fixes: u64,
 }
 
 impl EpochCounters {
     /// The counters with short names for a `Health` report (names ≤ 24 bytes).
-    pub fn named(&self) -> [(&'static str, u64); 13] {
+    pub fn named(&self) -> [(&'static str, u64); 14] {
         [
             ("nmea_sentences_in", self.sentences),
             ("nmea_bad_checksum", self.bad_checksum),
@@ -121,6 +123,7 @@ impl EpochCounters {
             ("nmea_late_sentences", self.late_sentences),
             ("nmea_repeats", self.repeats),
             ("nmea_after_epoch", self.after_epoch),
+            ("nmea_zero_sat_fixes", self.zero_satellite_fixes),
         ]
     }
 }
@@ -618,6 +621,12 @@ impl EpochAssembler {
         let mut fix = e.fix;
         if let Some(n) = e.sats_used() {
             fix.sats_used = n;
+            if n == 0 && has_fix(fix.mode) {
+                // A position computed from no satellite (a receiver's GGA with fix quality 1
+                // and 0 satellites used) is not a fix; gpsd reports no fix too.
+                fix.mode = FixMode::NoFix as u8;
+                self.counters.zero_satellite_fixes += 1;
+            }
         }
         if let Some(tod) = e.tod_ns {
             fix.tod_ns = tod;
@@ -930,6 +939,20 @@ mod tests {
         assert!(f.lat_deg.is_nan() && f.hdop.is_nan() && f.pdop.is_nan());
         assert_eq!(f.utc_ns, i64::MIN, "RMC with status V gives no date");
         assert_eq!(f.quality, 0);
+    }
+
+    #[test]
+    fn a_fix_from_no_satellite_is_no_fix() {
+        // A Hemisphere receiver's GGA: fix quality 1, 0 satellites used.
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[nmea("GPGGA,120000,4807.0381,N,01131.0004,E,1,00,2.0,545.4,M,46.9,M,,")],
+        );
+        let f = flush(&mut asm)[0];
+        assert_eq!((f.mode, f.sats_used), (FixMode::NoFix as u8, 0));
+        assert!(!f.has_position());
+        assert_eq!(asm.counters().zero_satellite_fixes, 1);
     }
 
     #[test]

@@ -17,7 +17,7 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use navsync_shared::earth;
-use navsync_shared::samples::GnssFix;
+use navsync_shared::samples::{FIX_FLAG_INVALID_LLH, FIX_FLAG_OK, GNSS_PROTOCOL_UBX, GnssFix};
 
 use super::Measurement;
 use crate::nav::error_state::{ATT, BA, BG, DELAY, N, POS, VEL};
@@ -81,20 +81,37 @@ impl Default for GnssAccuracy {
 /// enough that the update carries no vertical information.
 pub const HELD_ALTITUDE_STD_M: f64 = 1.0e3;
 
-/// Prepares a fix for fusion; `None` when it has no usable position. Accuracy from GST when
-/// present, else from the DOPs (VDOP unknown: 1.5·HDOP; HDOP unknown: 2).
+/// Prepares a fix for fusion; `None` when it has no usable position (no 2D/3D fix, or the
+/// receiver flags it invalid). Accuracy, in order: the receiver's per-axis σ (NMEA GST); its
+/// accuracy estimates (UBX hAcc, vAcc: σ north = σ east = hAcc/√2, σ down = vAcc); else the
+/// DOPs (VDOP unknown: 1.5·HDOP; HDOP unknown: 2). Velocity σ per axis: sAcc/√2 when reported,
+/// else the configured value.
 pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Option<GnssObservation> {
     if !fix.has_position() || !fix.alt_msl_m.is_finite() {
+        return None;
+    }
+    let flagged_invalid = fix.fix_flags & FIX_FLAG_INVALID_LLH != 0
+        || (fix.protocol == GNSS_PROTOCOL_UBX && fix.fix_flags & FIX_FLAG_OK == 0);
+    if flagged_invalid {
         return None;
     }
     let hdop = if fix.hdop.is_finite() { fix.hdop } else { 2.0 };
     let vdop = if fix.vdop.is_finite() { fix.vdop } else { 1.5 * hdop };
     let gst = [fix.std_lat_m, fix.std_lon_m, fix.std_alt_m];
-    let mut pos_std = if gst.iter().all(|s| s.is_finite() && *s > 0.0) {
+    let positive = |x: f64| x.is_finite() && x > 0.0;
+    let mut pos_std = if gst.iter().all(|s| positive(*s)) {
         Vector3::from(gst)
+    } else if positive(fix.h_acc_m) && positive(fix.v_acc_m) {
+        let h = fix.h_acc_m / std::f64::consts::SQRT_2;
+        Vector3::new(h, h, fix.v_acc_m)
     } else {
         let h = hdop * acc.uere_m / std::f64::consts::SQRT_2;
         Vector3::new(h, h, vdop * acc.uere_m)
+    };
+    let vel_std_mps = if positive(fix.s_acc_mps) {
+        fix.s_acc_mps / std::f64::consts::SQRT_2
+    } else {
+        acc.vel_std_mps
     };
     pos_std = (pos_std * acc.pos_std_scale).map(|s| s.max(acc.pos_std_floor_m));
     if fix.altitude_held() {
@@ -108,7 +125,7 @@ pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Opt
         h_m: fix.height_m(),
         vel_ned_mps: Vector3::new(fix.vel_n_mps, fix.vel_e_mps, fix.vel_d_mps),
         pos_std_m: pos_std,
-        vel_std_mps: acc.vel_std_mps,
+        vel_std_mps,
         speed_mps: fix.speed_mps,
         track_rad: fix.track_deg.to_radians(),
     })
@@ -483,5 +500,21 @@ mod tests {
         assert_eq!(held.pos_std_m.x, measured.pos_std_m.x, "horizontal unchanged");
         // Unknown satellite count: the altitude counts as measured.
         assert!(observation(&fix(u16::MAX), 0, &acc).unwrap().pos_std_m.z < 10.0);
+    }
+
+    #[test]
+    fn the_receivers_accuracy_estimates_are_its_noise_and_its_flags_are_honoured() {
+        let acc = GnssAccuracy::default();
+        let mut f = fix(20);
+        f.protocol = GNSS_PROTOCOL_UBX;
+        f.fix_flags = FIX_FLAG_OK;
+        (f.h_acc_m, f.v_acc_m, f.s_acc_mps) = (0.014, 0.010, 0.028);
+        let o = observation(&f, 0, &acc).expect("usable");
+        assert!((o.pos_std_m.x - 0.014 / std::f64::consts::SQRT_2).abs() < 1e-12 && o.pos_std_m.z == 0.010);
+        assert!((o.vel_std_mps - 0.028 / std::f64::consts::SQRT_2).abs() < 1e-12);
+        f.fix_flags = 0;
+        assert!(observation(&f, 0, &acc).is_none(), "gnssFixOK not set");
+        f.fix_flags = FIX_FLAG_OK | FIX_FLAG_INVALID_LLH;
+        assert!(observation(&f, 0, &acc).is_none(), "invalidLlh");
     }
 }

@@ -1,0 +1,66 @@
+//! A receiver's raw measurements of one epoch (u-blox UBX-RXM-RAWX): pseudorange, carrier
+//! phase and Doppler of every tracked signal, for tightly coupled fusion.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use super::Stamp;
+
+/// Measurements one [`GnssRaw`] holds.
+pub const MAX_RAW_MEASUREMENTS: usize = 64;
+
+crate::sample_struct! {
+    /// One signal's raw measurements.
+    pub struct RawMeasurement = "navsync.RawMeasurement.v1" {
+        /// Pseudorange, m.
+        pub pseudorange_m: f64,
+        /// Carrier phase, cycles.
+        pub carrier_phase_cycles: f64,
+        /// Doppler, Hz (positive: approaching).
+        pub doppler_hz: f32,
+        /// Pseudorange 1-sigma, m.
+        pub pseudorange_std_m: f32,
+        /// Carrier phase 1-sigma, cycles.
+        pub carrier_phase_std_cycles: f32,
+        /// Doppler 1-sigma, Hz.
+        pub doppler_std_hz: f32,
+        /// Carrier phase lock time, ms.
+        pub lock_time_ms: u16,
+        /// GNSS id (u-blox: 0 GPS, 1 SBAS, 2 Galileo, 3 BeiDou, 5 QZSS, 6 GLONASS).
+        pub gnss_id: u8,
+        /// Satellite id within the system.
+        pub sv_id: u8,
+        /// Signal id (u-blox `sigId`).
+        pub sig_id: u8,
+        /// GLONASS frequency slot + 7 (0..=13), else 0.
+        pub freq_id: u8,
+        /// Carrier-to-noise density, dB-Hz.
+        pub cno_dbhz: u8,
+        /// Tracking status bits (u-blox `trkStat`: pseudorange valid, carrier valid, half
+        /// cycle valid, half cycle subtracted).
+        pub trk_stat: u8,
+    }
+}
+
+crate::sample_struct! {
+    /// The raw measurements of one receiver epoch.
+    pub struct GnssRaw = "navsync.GnssRaw.v1" {
+        /// Receipt stamp of the message's first byte and the driver's epoch counter.
+        pub stamp: Stamp,
+        /// Receiver time of week of the measurements, s (GPS time scale).
+        pub rcv_tow_s: f64,
+        /// GPS week number of the receiver time.
+        pub week: u16,
+        /// GPS − UTC leap seconds (when `rec_stat` says they are valid).
+        pub leap_s: i16,
+        /// Measurements in `meas`.
+        pub num_meas: u8,
+        /// Receiver status bits (u-blox `recStat`: leap seconds valid, clock reset).
+        pub rec_stat: u8,
+        /// Measurements the message held beyond [`MAX_RAW_MEASUREMENTS`] (dropped).
+        pub dropped: u8,
+        /// Reserved, zero.
+        pub reserved: u8,
+        /// The measurements, `num_meas` of them.
+        pub meas: [RawMeasurement; MAX_RAW_MEASUREMENTS],
+    }
+}

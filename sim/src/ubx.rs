@@ -1,0 +1,240 @@
+//! u-blox UBX generation for the simulated receiver (`gnss.protocol = "ubx"`): per epoch
+//! NAV-PVT then NAV-EOE, and TIM-TP (the GNSS time of the next time pulse) after each epoch on
+//! a whole second. Written from the u-blox 8 / M8 Receiver Description incl. Protocol
+//! Specification (UBX-13003221), "UBX Frame Structure", "UBX Checksum", UBX-NAV-PVT,
+//! UBX-NAV-EOE and UBX-TIM-TP; independently of navsync's decoders, which the round-trip
+//! tests check against.
+
+use navsync_shared::time::{NS_PER_S, civil_from_utc_ns, gps_ns_from_utc_ns};
+
+use super::nmea::EpochReport;
+
+/// UBX sync characters.
+pub const SYNC: [u8; 2] = [0xB5, 0x62];
+/// GPS week length, ns.
+const WEEK_NS: i64 = 604_800 * NS_PER_S;
+
+/// What a UBX epoch reports beyond the NMEA [`EpochReport`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UbxExtras {
+    /// Horizontal accuracy estimate (hAcc), m.
+    pub h_acc_m: f64,
+    /// Vertical accuracy estimate (vAcc), m.
+    pub v_acc_m: f64,
+    /// Speed accuracy estimate (sAcc), m/s.
+    pub s_acc_mps: f64,
+    /// Quantisation error of the next time pulse (TIM-TP qErr), ps.
+    pub next_pulse_q_err_ps: i32,
+}
+
+/// Appends a UBX frame: sync, class, id, little-endian length, payload, 8-bit Fletcher
+/// checksum over class..payload ("UBX Checksum": CK_A += b, CK_B += CK_A).
+pub fn frame(class: u8, id: u8, payload: &[u8], out: &mut Vec<u8>) {
+    let start = out.len();
+    out.extend_from_slice(&SYNC);
+    out.push(class);
+    out.push(id);
+    out.extend_from_slice(&(payload.len() as u16).to_le_bytes());
+    out.extend_from_slice(payload);
+    let (mut a, mut b) = (0u8, 0u8);
+    for &x in &out[start + 2..] {
+        a = a.wrapping_add(x);
+        b = b.wrapping_add(a);
+    }
+    out.push(a);
+    out.push(b);
+}
+
+/// GPS week and time of week (ns) of a UTC instant.
+fn week_tow_ns(utc_ns: i64) -> (i64, i64) {
+    let g = gps_ns_from_utc_ns(utc_ns);
+    (g.div_euclid(WEEK_NS), g.rem_euclid(WEEK_NS))
+}
+
+fn put_i32(p: &mut [u8], at: usize, v: i64) {
+    let v = v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
+    p[at..at + 4].copy_from_slice(&v.to_le_bytes());
+}
+
+fn put_u32(p: &mut [u8], at: usize, v: f64) {
+    let v = v.round().clamp(0.0, f64::from(u32::MAX)) as u32;
+    p[at..at + 4].copy_from_slice(&v.to_le_bytes());
+}
+
+/// UBX-NAV-PVT (class 0x01, id 0x07, 92 bytes) of an epoch.
+pub fn nav_pvt(e: &EpochReport, x: &UbxExtras) -> [u8; 92] {
+    let mut p = [0u8; 92];
+    let (_, tow) = week_tow_ns(e.utc_ns);
+    let tow_ms = tow.div_euclid(1_000_000);
+    p[0..4].copy_from_slice(&(tow_ms as u32).to_le_bytes());
+    // UTC date and time rounded to the second below, the rest in `nano` (≥ 0 here).
+    let c = civil_from_utc_ns(e.utc_ns);
+    p[4..6].copy_from_slice(&(c.year as u16).to_le_bytes());
+    p[6] = c.month as u8;
+    p[7] = c.day as u8;
+    p[8] = c.hour as u8;
+    p[9] = c.minute as u8;
+    p[10] = c.second as u8;
+    // valid: validDate | validTime | fullyResolved.
+    p[11] = 0b0111;
+    put_u32(&mut p, 12, 20.0); // tAcc, ns
+    put_i32(&mut p, 16, i64::from(c.nanos));
+    let sats = e.sats_used;
+    match &e.fix {
+        Some(f) => {
+            p[20] = 3; // fixType: 3D
+            p[21] = 0b0000_0001; // gnssFixOK
+            p[23] = sats;
+            put_i32(&mut p, 24, (f.lon_deg * 1e7).round() as i64);
+            put_i32(&mut p, 28, (f.lat_deg * 1e7).round() as i64);
+            put_i32(&mut p, 32, ((f.alt_msl_m + f.geoid_sep_m) * 1e3).round() as i64);
+            put_i32(&mut p, 36, (f.alt_msl_m * 1e3).round() as i64);
+            put_u32(&mut p, 40, x.h_acc_m * 1e3);
+            put_u32(&mut p, 44, x.v_acc_m * 1e3);
+            put_i32(&mut p, 48, (f.vel_n_mps * 1e3).round() as i64);
+            put_i32(&mut p, 52, (f.vel_e_mps * 1e3).round() as i64);
+            put_i32(&mut p, 56, (f.vel_d_mps * 1e3).round() as i64);
+            let speed = f.vel_n_mps.hypot(f.vel_e_mps);
+            put_i32(&mut p, 60, (speed * 1e3).round() as i64);
+            let head = f.vel_e_mps.atan2(f.vel_n_mps).to_degrees().rem_euclid(360.0);
+            put_i32(&mut p, 64, (head * 1e5).round() as i64);
+            put_u32(&mut p, 68, x.s_acc_mps * 1e3);
+            put_u32(&mut p, 72, 0.5 * 1e5); // headAcc 0.5°
+        }
+        None => {
+            // fixType 0 (no fix), flags 0; accuracies at their "unknown" maximum.
+            p[23] = 0;
+            put_u32(&mut p, 40, f64::from(u32::MAX));
+            put_u32(&mut p, 44, f64::from(u32::MAX));
+            put_u32(&mut p, 68, f64::from(u32::MAX));
+            put_u32(&mut p, 72, f64::from(u32::MAX));
+            p[78] = 0b1; // flags3: invalidLlh
+        }
+    }
+    let pdop = (e.hdop.hypot(e.vdop) * 100.0).round().clamp(0.0, 65535.0) as u16;
+    p[76..78].copy_from_slice(&pdop.to_le_bytes());
+    p
+}
+
+/// Appends the UBX output of one epoch: NAV-PVT, NAV-EOE, and TIM-TP for the pulse at the next
+/// whole GPS second when the epoch is on a whole second.
+pub fn write_epoch(e: &EpochReport, x: &UbxExtras, out: &mut Vec<u8>) {
+    frame(0x01, 0x07, &nav_pvt(e, x), out);
+    let (week, tow) = week_tow_ns(e.utc_ns);
+    let tow_ms = tow.div_euclid(1_000_000) as u32;
+    frame(0x01, 0x61, &tow_ms.to_le_bytes(), out);
+    if tow.rem_euclid(NS_PER_S) == 0 {
+        // UBX-TIM-TP (0x0D 0x01, 16 bytes): the next pulse, GNSS time base, UTC available.
+        let next = tow + NS_PER_S;
+        let (week, next) = if next >= WEEK_NS {
+            (week + 1, next - WEEK_NS)
+        } else {
+            (week, next)
+        };
+        let mut p = [0u8; 16];
+        p[0..4].copy_from_slice(&((next / 1_000_000) as u32).to_le_bytes());
+        // towSubMS (2^-32 ms) 0: pulses on whole milliseconds.
+        p[8..12].copy_from_slice(&x.next_pulse_q_err_ps.to_le_bytes());
+        p[12..14].copy_from_slice(&(week as u16).to_le_bytes());
+        p[14] = 0b10; // timeBase GNSS (bit 0 = 0), utc available (bit 1)
+        frame(0x0D, 0x01, &p, out);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nmea::FixReport;
+
+    fn checksum_ok(f: &[u8]) -> bool {
+        let (mut a, mut b) = (0u8, 0u8);
+        for &x in &f[2..f.len() - 2] {
+            a = a.wrapping_add(x);
+            b = b.wrapping_add(a);
+        }
+        (a, b) == (f[f.len() - 2], f[f.len() - 1])
+    }
+
+    #[test]
+    fn an_epoch_is_nav_pvt_then_nav_eoe_and_tim_tp_on_whole_seconds() {
+        // 2026-12-01 12:00:00 UTC.
+        let utc = navsync_shared::time::utc_ns_from_civil(&navsync_shared::time::Civil {
+            year: 2026,
+            month: 12,
+            day: 1,
+            hour: 12,
+            minute: 0,
+            second: 0,
+            nanos: 0,
+        });
+        let e = EpochReport {
+            utc_ns: utc,
+            fix: Some(FixReport {
+                lat_deg: 48.1371544,
+                lon_deg: -11.5761249,
+                alt_msl_m: 519.877,
+                geoid_sep_m: 47.1,
+                vel_n_mps: 3.0,
+                vel_e_mps: -4.0,
+                vel_d_mps: 0.25,
+            }),
+            sats_used: 14,
+            hdop: 0.8,
+            vdop: 1.2,
+            sigma_lat_lon_alt_m: [0.5, 0.5, 1.0],
+        };
+        let x = UbxExtras {
+            h_acc_m: 0.707,
+            v_acc_m: 1.0,
+            s_acc_mps: 0.07,
+            next_pulse_q_err_ps: -1234,
+        };
+        let mut out = Vec::new();
+        write_epoch(&e, &x, &mut out);
+        assert_eq!(out.len(), (8 + 92) + (8 + 4) + (8 + 16));
+        let pvt = &out[..100];
+        assert_eq!(&pvt[..6], &[0xB5, 0x62, 0x01, 0x07, 92, 0]);
+        assert!(checksum_ok(pvt));
+        let p = &pvt[6..98];
+        let i32_at = |a: usize| i32::from_le_bytes(p[a..a + 4].try_into().unwrap());
+        let u32_at = |a: usize| u32::from_le_bytes(p[a..a + 4].try_into().unwrap());
+        // GPS = UTC + 18 s; 2026-12-01 is a Tuesday: 2 days + 12 h + 18 s into the week.
+        assert_eq!(u32_at(0), (2 * 86_400 + 12 * 3600 + 18) * 1000);
+        assert_eq!(
+            (u16::from_le_bytes([p[4], p[5]]), p[6], p[7], p[8], p[9], p[10]),
+            (2026, 12, 1, 12, 0, 0)
+        );
+        assert_eq!((p[20], p[21] & 1, p[23]), (3, 1, 14));
+        assert_eq!((i32_at(24), i32_at(28)), (-115_761_249, 481_371_544));
+        assert_eq!((i32_at(32), i32_at(36)), (566_977, 519_877));
+        assert_eq!((u32_at(40), u32_at(44), u32_at(68)), (707, 1000, 70));
+        assert_eq!(
+            (i32_at(48), i32_at(52), i32_at(56), i32_at(60)),
+            (3000, -4000, 250, 5000)
+        );
+        assert_eq!(
+            i32_at(64),
+            (((-4.0f64).atan2(3.0).to_degrees() + 360.0) * 1e5).round() as i32
+        );
+        let eoe = &out[100..112];
+        assert_eq!(&eoe[..6], &[0xB5, 0x62, 0x01, 0x61, 4, 0]);
+        assert!(checksum_ok(eoe));
+        let tp = &out[112..];
+        assert_eq!(&tp[..6], &[0xB5, 0x62, 0x0D, 0x01, 16, 0]);
+        assert!(checksum_ok(tp));
+        let tp = &tp[6..22];
+        assert_eq!(u32::from_le_bytes(tp[0..4].try_into().unwrap()), u32_at(0) + 1000);
+        assert_eq!(i32::from_le_bytes(tp[8..12].try_into().unwrap()), -1234);
+        // No TIM-TP on a sub-second epoch.
+        let mut out = Vec::new();
+        write_epoch(
+            &EpochReport {
+                utc_ns: utc + 100_000_000,
+                ..e
+            },
+            &x,
+            &mut out,
+        );
+        assert_eq!(out.len(), 100 + 12);
+    }
+}
