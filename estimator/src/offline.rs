@@ -141,10 +141,15 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
                 eval.add_truth(t);
                 false
             }
+            AnySample::TimePulse(t) => {
+                let t0 = Instant::now();
+                pipeline.on_time_pulse(t);
+                in_estimator += t0.elapsed();
+                false
+            }
             AnySample::Time(_)
             | AnySample::Nav(_)
             | AnySample::Health(_)
-            | AnySample::TimePulse(_)
             | AnySample::Event(_)
             | AnySample::Raw(_)
             | AnySample::NavData(_) => false,

@@ -9,7 +9,7 @@
 //! the receiver latency. When the stamping switches, Δ is re-initialised to the new mode's prior.
 
 use navsync_shared::reflect::Reflect;
-use navsync_shared::samples::{GnssFix, ImuSample, NavState, PpsEdge, TimeState, TimeStatus};
+use navsync_shared::samples::{GnssFix, GnssTimePulse, ImuSample, NavState, PpsEdge, TimeState, TimeStatus};
 
 use crate::array::imu_array::{ArrayConfig, ImuArray};
 use crate::nav::measurements::gnss::{self, GnssAccuracy};
@@ -153,6 +153,12 @@ impl Pipeline {
     pub fn on_pps(&mut self, edge: &PpsEdge) -> bool {
         self.catch_up();
         self.time.on_pps(edge)
+    }
+
+    /// Feeds a receiver's report of its next time pulse (UBX TIM-TP): labels the next edge.
+    pub fn on_time_pulse(&mut self, tp: &GnssTimePulse) {
+        self.catch_up();
+        self.time.on_time_pulse(tp);
     }
 
     /// Feeds a GNSS fix; true when the time mapping changed.

@@ -206,12 +206,13 @@ impl Default for Settings {
 }
 
 impl Settings {
-    /// The services these settings subscribe to (PPS, GNSS, IMUs).
+    /// The services these settings subscribe to (PPS, GNSS fixes and time pulses, IMUs).
     pub fn input_services(&self) -> Vec<String> {
         let pps = self.pps_ids.iter().map(|id| services::pps_edge(id));
         let gnss = self.gnss_ids.iter().map(|id| services::gnss_fix(id));
+        let pulses = self.gnss_ids.iter().map(|id| services::gnss_time_pulse(id));
         let imus = self.imu_ids.iter().map(|id| services::imu_sample(id));
-        pps.chain(gnss).chain(imus).collect()
+        pps.chain(gnss).chain(pulses).chain(imus).collect()
     }
 
     /// Which Δ the filter should find (for the accuracy report against a simulated truth).

@@ -140,7 +140,10 @@ impl GnssReceiver {
                     h_acc_m: self.cfg.horizontal_rms_m,
                     v_acc_m: self.cfg.vertical_sigma_m,
                     s_acc_mps: self.cfg.velocity_sigma_mps * std::f64::consts::SQRT_2,
-                    next_pulse_q_err_ps: 0,
+                    next_pulse_q_err_ps: ubx::timepulse_q_err_ps(
+                        self.cfg.timepulse_quantization_ns,
+                        utc.div_euclid(1_000_000_000) + 1,
+                    ),
                 };
                 ubx::write_epoch(&report, &x, &mut bytes);
             }

@@ -1,7 +1,9 @@
 //! The receiver's 1 PPS output as the host's kernel PPS would stamp it.
 //!
 //! An assert edge at every integer UTC second T within the scenario, stamped
-//! host(T) + N(0, σ²) (σ = `clock.pps_jitter_s`), never earlier than the previous stamp.
+//! host(T + q(T)) + N(0, σ²) (σ = `clock.pps_jitter_s`; q the receiver's time-pulse
+//! quantisation, `gnss.timepulse_quantization_ns`, reported by UBX TIM-TP), never earlier than
+//! the previous stamp.
 //! During a GNSS outage whose `pps_continues` is false, and during a PPS outage
 //! (`[[clock.pps_outage]]`), there is no edge. `stamp.seq` counts the
 //! edges emitted from 0; `source_seq` is the kernel-style assert counter starting at 1.
@@ -19,6 +21,7 @@ pub struct PpsGenerator {
     next_utc_ns: i64,
     end_utc_ns: i64,
     jitter_s: f64,
+    quantization_ns: f64,
     silent: Vec<(f64, f64)>,
     seq: u64,
     last_host_ns: i64,
@@ -33,6 +36,7 @@ impl PpsGenerator {
         start_utc_ns: i64,
         duration_s: f64,
         jitter_s: f64,
+        quantization_ns: f64,
         outages: &[OutageConfig],
         pps_outages: &[PpsOutageConfig],
     ) -> Self {
@@ -42,6 +46,7 @@ impl PpsGenerator {
             next_utc_ns: first,
             end_utc_ns: start_utc_ns + (duration_s * 1e9).round() as i64,
             jitter_s,
+            quantization_ns,
             silent: outages
                 .iter()
                 .filter(|o| !o.pps_continues)
@@ -67,7 +72,9 @@ impl PpsGenerator {
             if self.silent.iter().any(|&(a, b)| tau >= a && tau < b) {
                 continue;
             }
-            let host_ns = (osc.host_ns_at_utc(utc) + jitter_ns).max(self.last_host_ns);
+            let q_ns =
+                (f64::from(super::ubx::timepulse_q_err_ps(self.quantization_ns, utc / NS_PER_S)) * 1e-3).round() as i64;
+            let host_ns = (osc.host_ns_at_utc(utc + q_ns) + jitter_ns).max(self.last_host_ns);
             self.last_host_ns = host_ns;
             let seq = self.seq;
             self.seq += 1;

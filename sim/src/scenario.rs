@@ -381,6 +381,11 @@ pub struct GnssConfig {
     pub hdop: f64,
     /// VDOP reported (default 1.2).
     pub vdop: f64,
+    /// Period of the receiver's time-pulse clock, ns: each PPS edge comes out on that grid, up
+    /// to half a period off the ideal second (a sawtooth over the seconds), and UBX output
+    /// reports the error in TIM-TP `qErr` (default 0: ideal edges; a u-blox M8T's 48 MHz:
+    /// 20.83).
+    pub timepulse_quantization_ns: f64,
     /// Outages (TOML `[[gnss.outage]]`).
     #[serde(rename = "outage")]
     pub outages: Vec<OutageConfig>,
@@ -390,6 +395,7 @@ impl Default for GnssConfig {
     fn default() -> Self {
         Self {
             rate_hz: 1,
+            timepulse_quantization_ns: 0.0,
             protocol: OutputProtocol::Nmea,
             talker: Talker::Gn,
             latency_s: 0.6,
@@ -957,6 +963,13 @@ impl SimConfig {
         self.check_range("gnss.horizontal_rms_m", g.horizontal_rms_m, 0.0, 1000.0, "m")?;
         self.check_range("gnss.vertical_sigma_m", g.vertical_sigma_m, 0.0, 1000.0, "m")?;
         self.check_range("gnss.velocity_sigma_mps", g.velocity_sigma_mps, 0.0, 100.0, "m/s")?;
+        self.check_range(
+            "gnss.timepulse_quantization_ns",
+            g.timepulse_quantization_ns,
+            0.0,
+            1000.0,
+            "ns",
+        )?;
         self.check_range("gnss.position_correlation_s", g.position_correlation_s, 0.0, 1e5, "s")?;
         self.check_range("gnss.geoid_separation_m", g.geoid_separation_m, -150.0, 150.0, "m")?;
         self.check_range("gnss.hdop", g.hdop, 0.0, 99.0, "")?;

@@ -14,6 +14,18 @@ pub const SYNC: [u8; 2] = [0xB5, 0x62];
 /// GPS week length, ns.
 const WEEK_NS: i64 = 604_800 * NS_PER_S;
 
+/// The quantisation error of the receiver's time pulse at UTC second `utc_s`, ps: the pulse
+/// comes out on a clock of `period_ns` whose phase against GNSS time drifts 313.7 ns per
+/// second (the receiver's oscillator offset), so the error is a sawtooth within ±period/2
+/// (u-blox: the pulse happens qErr after the ideal instant). 0 when `period_ns` is 0.
+pub fn timepulse_q_err_ps(period_ns: f64, utc_s: i64) -> i32 {
+    if period_ns <= 0.0 {
+        return 0;
+    }
+    let phase = (utc_s as f64 * 313.7).rem_euclid(period_ns);
+    ((phase - 0.5 * period_ns) * 1e3).round() as i32
+}
+
 /// What a UBX epoch reports beyond the NMEA [`EpochReport`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct UbxExtras {

@@ -142,6 +142,7 @@ impl World {
                 start_utc_ns,
                 duration_s,
                 cfg.clock.pps_jitter_s,
+                cfg.gnss.timepulse_quantization_ns,
                 &cfg.gnss.outages,
                 &cfg.clock.pps_outages,
             ),

@@ -14,7 +14,7 @@ use std::time::Duration;
 use navsync_shared::health_reporter::HealthReporter;
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::latency_histogram::LatencyHistogram;
-use navsync_shared::samples::{AnySample, GnssFix, ImuSample, NavState, NavStatus, PpsEdge, TimeState};
+use navsync_shared::samples::{AnySample, GnssFix, GnssTimePulse, ImuSample, NavState, NavStatus, PpsEdge, TimeState};
 use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
@@ -116,6 +116,12 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
         .iter()
         .map(|id| node.subscriber(&services::gnss_fix(id)))
         .collect::<Result<_, _>>()?;
+    // The receivers' reports of their next time pulse (UBX TIM-TP), where they send them.
+    let time_pulses: Vec<Subscriber<GnssTimePulse>> = args
+        .gnss_ids
+        .iter()
+        .map(|id| node.subscriber(&services::gnss_time_pulse(id)))
+        .collect::<Result<_, _>>()?;
     let imus: Vec<Subscriber<ImuSample>> = args
         .imu_ids
         .iter()
@@ -137,6 +143,7 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
         .iter()
         .map(|s| s.listener())
         .chain(gnss.iter().map(|s| s.listener()))
+        .chain(time_pulses.iter().map(|s| s.listener()))
         .chain(imus.iter().map(|s| s.listener()))
     {
         guards.push(waitset.attach_notification(l).map_err(|e| IpcError::Iceoryx {
@@ -256,6 +263,12 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
                 true
             })?;
         }
+        for s in &time_pulses {
+            s.drain(|tp| {
+                order.push(AnySample::TimePulse(tp), ());
+                true
+            })?;
+        }
         // NavStates say inertial-only at once when every receiver's driver is gone.
         let gnss_gone = !gnss.is_empty() && live.inputs()[n_imu + n_pps..].iter().all(|x| x.is_gone());
         // Without IMUs (or with the reference IMU silent) nothing releases the waiting samples.
@@ -288,6 +301,7 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
                 }
                 AnySample::PpsEdge(edge) => updated |= est.on_pps(&edge),
                 AnySample::GnssFix(fix) => updated |= est.on_fix(&fix),
+                AnySample::TimePulse(tp) => est.on_time_pulse(&tp),
                 _ => {}
             }
         }

@@ -21,7 +21,7 @@
 //!
 //! Pure state machine: fed with samples, no clocks or IPC inside.
 
-use navsync_shared::samples::{GnssFix, PpsEdge, TimeState, TimeStatus};
+use navsync_shared::samples::{GnssFix, GnssTimePulse, PpsEdge, TimeState, TimeStatus};
 use navsync_shared::time::{NS_PER_S, gps_minus_utc_s};
 
 use super::clock_model::{ClockModel, ClockUpdate, OscillatorNoise};
@@ -72,6 +72,8 @@ pub struct TimeSyncCounters {
     pub pps_no_fix: u64,
     /// Edges that no fix labelled while acquiring.
     pub pps_unlabelled: u64,
+    /// Edges labelled by the receiver's own report of the pulse (UBX TIM-TP), qErr applied.
+    pub pps_labelled_by_receiver: u64,
     /// Times the mapping was re-initialised after persistent rejections.
     pub resyncs: u64,
     /// Times the status went from locked to holdover (no accepted edge for
@@ -116,7 +118,23 @@ pub struct TimeSync {
     last_fix_label: Option<(i64, i64)>,
     /// Externally estimated GNSS delay (the navigation filter's Δ), s and 1-sigma s.
     gnss_delay: (f64, f64),
+    /// The receiver's report of its next time pulse, waiting for the edge it labels.
+    next_pulse: Option<NextPulse>,
 }
+
+/// What a receiver said about its next time pulse (UBX TIM-TP).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct NextPulse {
+    /// Host time the report was received, ns.
+    received_host_ns: i64,
+    /// UTC of the pulse, ns.
+    utc_ns: i64,
+    /// Quantisation error of the pulse, ns (the pulse came this much after the ideal instant).
+    q_err_ns: f64,
+}
+
+/// A time-pulse report labels the first edge within this long after its receipt, ns.
+const TIME_PULSE_WINDOW_NS: i64 = 1_500_000_000;
 
 impl TimeSync {
     /// A synchroniser with nothing known.
@@ -137,7 +155,38 @@ impl TimeSync {
             seq: 0,
             last_fix_label: None,
             gnss_delay: (f64::NAN, f64::NAN),
+            next_pulse: None,
         }
+    }
+
+    /// Feeds the receiver's report of its next time pulse (UBX TIM-TP): the next PPS edge is
+    /// labelled with its UTC directly (no inference from the fixes' epochs, any receiver
+    /// latency), and its stamp corrected by the pulse's quantisation error (the sawtooth
+    /// correction: the ideal second's host time is the stamp minus qErr).
+    pub fn on_time_pulse(&mut self, tp: &GnssTimePulse) {
+        if tp.pulse_utc_ns == i64::MIN {
+            return;
+        }
+        let q_err_ns = if tp.q_err_ps == i32::MIN {
+            0.0
+        } else {
+            f64::from(tp.q_err_ps) * 1e-3
+        };
+        self.next_pulse = Some(NextPulse {
+            received_host_ns: tp.stamp.host_ns,
+            utc_ns: tp.pulse_utc_ns,
+            q_err_ns,
+        });
+    }
+
+    /// The time-pulse report that labels an edge stamped at `host_ns`, if any (consumed).
+    fn pulse_for(&mut self, host_ns: i64) -> Option<NextPulse> {
+        let p = self.next_pulse?;
+        if host_ns < p.received_host_ns {
+            return None;
+        }
+        self.next_pulse = None;
+        (host_ns - p.received_host_ns <= TIME_PULSE_WINDOW_NS).then_some(p)
     }
 
     /// Counters so far.
@@ -184,6 +233,9 @@ impl TimeSync {
         }
         self.last_edge_host_ns = Some(h);
         let sigma = self.edge_sigma(edge);
+        if let Some(p) = self.pulse_for(h) {
+            return self.on_labelled_edge(h, p, sigma);
+        }
         if !self.clock.is_initialized() || self.status == TimeStatus::Acquiring && self.clock.updates() < 2 {
             if self.pending.iter().flatten().any(|e| e.host_ns == h) {
                 return false;
@@ -211,6 +263,40 @@ impl TimeSync {
         match self.clock.update(h, label, sigma) {
             ClockUpdate::Accepted(_) => {
                 self.accept_edge(h);
+                true
+            }
+            ClockUpdate::Rejected(_) => {
+                self.reject_edge();
+                false
+            }
+        }
+    }
+
+    /// An edge the receiver labelled itself (TIM-TP): its ideal second's host time is the stamp
+    /// minus the quantisation error. Used while a recent fix says the receiver has GNSS time.
+    fn on_labelled_edge(&mut self, h: i64, p: NextPulse, sigma: f64) -> bool {
+        if !self.fix_trusted(h) {
+            self.counters.pps_no_fix += 1;
+            return false;
+        }
+        let ideal = h - p.q_err_ns.round() as i64;
+        self.counters.pps_labelled_by_receiver += 1;
+        if !self.clock.is_initialized() {
+            self.clock.init(ideal, p.utc_ns, sigma, 1e-4);
+            self.counters.pps_used += 1;
+            self.last_used_host_ns = Some(ideal);
+            self.status = TimeStatus::Acquiring;
+            self.pending = [None; 4];
+            return true;
+        }
+        if self.clock.updates() >= 2 && (self.clock.utc_ns_at(ideal) - p.utc_ns).abs() > EDGE_GATE_NS {
+            self.reject_edge();
+            return false;
+        }
+        match self.clock.update(ideal, p.utc_ns, sigma) {
+            ClockUpdate::Accepted(_) => {
+                self.accept_edge(ideal);
+                self.pending = [None; 4];
                 true
             }
             ClockUpdate::Rejected(_) => {
@@ -426,5 +512,74 @@ impl TimeSync {
             Some(l) => (l.median_s, (l.max_s - l.min_s).max(1e-3)),
             None => (0.0, 0.5),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use navsync_shared::reflect::Reflect;
+    use navsync_shared::samples::{FixMode, Stamp, StampSource};
+
+    const U0: i64 = 1_790_000_000 * NS_PER_S;
+    const H0: i64 = 5 * NS_PER_S;
+
+    /// The receiver's pulse error at second `s`, ns: a 20.8 ns sawtooth.
+    fn q_ns(s: i64) -> f64 {
+        (s as f64 * 313.7).rem_euclid(20.8) - 10.4
+    }
+
+    /// Worst mapping error (ns) at the ideal seconds 20..40 s, with or without TIM-TP reports.
+    fn run(time_pulses: bool) -> (f64, u64) {
+        let mut ts = TimeSync::new(TimeSyncConfig {
+            default_edge_sigma_ns: 10.0,
+            ..Default::default()
+        });
+        let host_of = |utc: i64| H0 + (utc - U0);
+        let mut worst: f64 = 0.0;
+        for k in 1..40i64 {
+            let second = U0 / NS_PER_S + k;
+            let ideal = second * NS_PER_S;
+            let mut edge = PpsEdge::zeroed();
+            edge.stamp = Stamp::host(
+                host_of(ideal) + q_ns(second).round() as i64,
+                k as u64,
+                StampSource::KernelPps,
+            );
+            edge.assert_edge = 1;
+            edge.jitter_ns = 10.0;
+            ts.on_pps(&edge);
+            let mut fix = GnssFix::empty(Stamp::host(
+                host_of(ideal) + 600_000_000,
+                k as u64,
+                StampSource::Receipt,
+            ));
+            (fix.utc_ns, fix.lat_deg, fix.lon_deg, fix.alt_msl_m, fix.mode) =
+                (ideal, 48.0, 11.0, 500.0, FixMode::Fix3d as u8);
+            ts.on_fix(&fix);
+            if time_pulses {
+                let mut tp = GnssTimePulse::zeroed();
+                tp.stamp = Stamp::host(host_of(ideal) + 700_000_000, k as u64, StampSource::Receipt);
+                tp.pulse_utc_ns = ideal + NS_PER_S;
+                tp.q_err_ps = (q_ns(second + 1) * 1e3).round() as i32;
+                ts.on_time_pulse(&tp);
+            }
+            if k >= 20 {
+                let err = (ts.clock.utc_ns_at(host_of(ideal)) - ideal) as f64;
+                worst = worst.max(err.abs());
+            }
+        }
+        (worst, ts.counters().pps_labelled_by_receiver)
+    }
+
+    #[test]
+    fn time_pulse_reports_label_the_edges_and_remove_the_sawtooth() {
+        let (without, n0) = run(false);
+        let (with, n1) = run(true);
+        println!("worst mapping error at the ideal seconds: {without:.2} ns without qErr, {with:.2} ns with");
+        assert_eq!(n0, 0);
+        assert!(n1 >= 35, "{n1} edges labelled by the receiver");
+        assert!(without > 2.0, "the sawtooth shows without qErr: {without} ns");
+        assert!(with < 1.5, "with qErr applied: {with} ns");
     }
 }
