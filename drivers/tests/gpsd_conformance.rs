@@ -27,6 +27,8 @@
 //! equal; the exceptions count as not matching). The table prints raw figures (matched / excepted / unexplained) for
 //! every capture, so the share of deliberate differences is visible too.
 
+mod gpsd_common;
+
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -368,34 +370,11 @@ fn check_capture(name: &str, log: &[u8], chk: &str, used: &mut [usize]) -> Row {
 #[test]
 fn gpsd_conformance() {
     let dir = corpus_dir();
-    let entries = std::fs::read_dir(&dir).unwrap_or_else(|e| {
-        panic!(
-            "gpsd NMEA corpus not found at {} ({e}); it lives outside the repository",
-            dir.display()
-        )
-    });
-    let mut logs: Vec<PathBuf> = entries
-        .filter_map(Result::ok)
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|x| x == "log"))
-        .collect();
-    logs.sort();
-    assert!(
-        logs.len() >= EXPECTED_CAPTURES,
-        "expected {EXPECTED_CAPTURES} captures in {}, found {}",
-        dir.display(),
-        logs.len()
-    );
-
     let mut used = vec![0usize; EXCEPTIONS.len()];
-    let mut rows = Vec::new();
-    for log in &logs {
-        let name = log.file_name().and_then(|n| n.to_str()).unwrap_or("?").to_owned();
-        let bytes = std::fs::read(log).unwrap_or_else(|e| panic!("reading {}: {e}", log.display()));
-        let chk_path = log.with_extension("log.chk");
-        let chk = std::fs::read(&chk_path).unwrap_or_else(|e| panic!("reading {}: {e}", chk_path.display()));
-        rows.push(check_capture(&name, &bytes, &String::from_utf8_lossy(&chk), &mut used));
-    }
+    let rows: Vec<Row> = gpsd_common::captures(&dir, EXPECTED_CAPTURES)
+        .iter()
+        .map(|c| check_capture(&c.name, &c.bytes, &c.chk, &mut used))
+        .collect();
 
     let sum = |f: fn(&Row) -> usize| rows.iter().map(f).sum::<usize>();
     let (total, matched, shifted) = (sum(|r| r.epochs), sum(|r| r.matched), sum(|r| r.shifted));

@@ -34,6 +34,11 @@ use crate::services::{self, MAX_NODES, MAX_PUBLISHERS, MAX_SUBSCRIBERS, ServiceK
 /// The iceoryx2 service variant navsync uses: inter-process, shared memory.
 pub type Transport = ipc::Service;
 
+/// What a navsync service can carry: a reflected, zero-copy sample type (every type of
+/// `crate::samples`); for code generic over the sample type without naming iceoryx2.
+pub trait IpcSample: Reflect + ZeroCopySend + Debug {}
+impl<T: Reflect + ZeroCopySend + Debug> IpcSample for T {}
+
 /// What went wrong in the IPC layer. iceoryx2's own error is kept as text with the
 /// service it concerns.
 #[derive(Debug, thiserror::Error)]

@@ -1,6 +1,6 @@
 //! The samples the drivers would publish for a simulated world, produced as fast as the CPU
 //! allows: IMU samples and PPS edges as the simulator publishes them, GNSS fixes decoded from
-//! the world's NMEA bytes by the GNSS driver's own [`Decoder`]
+//! the world's receiver bytes (NMEA or UBX) by the GNSS driver's own [`Decoder`]
 //! with the same receipt stamps a UART at the configured baud rate would give, and the truth.
 //!
 //! Each item carries its service name and the host time at which it would be delivered
@@ -16,7 +16,9 @@ use navsync_shared::time::NS_PER_S;
 
 use super::world::{SimEvent, World};
 use navsync_drivers::gnss::driver::IDLE_FLUSH;
-use navsync_drivers::gnss::{Decoder, GnssDecoder, Protocol};
+use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra, Protocol};
+
+use crate::scenario::OutputProtocol;
 
 /// One published sample.
 #[derive(Debug, Clone)]
@@ -33,6 +35,8 @@ pub struct Published {
 pub struct PublishedStream {
     world: World,
     decoder: Decoder,
+    protocol: Protocol,
+    time_pulse_service: Rc<str>,
     char_ns: i64,
     gnss_service: Rc<str>,
     pps_service: Rc<str>,
@@ -50,9 +54,15 @@ impl PublishedStream {
             .map(|i| services::imu_sample(&i.to_string()).into())
             .collect();
         let next_event = world.next_event();
+        let protocol = match world.gnss_protocol() {
+            OutputProtocol::Nmea => Protocol::Nmea,
+            OutputProtocol::Ubx => Protocol::Ubx,
+        };
         Self {
             world,
-            decoder: Decoder::new(Protocol::Nmea),
+            decoder: Decoder::new(protocol),
+            protocol,
+            time_pulse_service: services::gnss_time_pulse("0").into(),
             char_ns,
             gnss_service: services::gnss_fix("0").into(),
             pps_service: services::pps_edge("0").into(),
@@ -71,23 +81,46 @@ impl PublishedStream {
     fn decode_burst(&mut self, host_ns: i64, bytes: &[u8]) {
         let n = bytes.len() as i64;
         let read_ns = host_ns + (n - 1) * self.char_ns;
-        let delivered_ns = read_ns + IDLE_FLUSH.as_nanos() as i64;
+        // NMEA: the driver publishes an epoch after the line has been idle (the fast path
+        // models that for every NMEA epoch); UBX: at its NAV-EOE, as soon as it is read.
+        let flushed_ns = read_ns + IDLE_FLUSH.as_nanos() as i64;
+        let pushed_ns = if self.protocol == Protocol::Nmea {
+            flushed_ns
+        } else {
+            read_ns
+        };
         let Self {
             decoder,
             fixes,
             gnss_service,
+            time_pulse_service,
             char_ns,
             ..
         } = self;
-        let mut push = |fix: &navsync_shared::samples::GnssFix| {
-            fixes.push_back(Published {
-                service: gnss_service.clone(),
-                delivered_ns,
-                sample: AnySample::GnssFix(*fix),
-            });
+        let fix_at = |fix: &navsync_shared::samples::GnssFix, delivered_ns: i64| Published {
+            service: gnss_service.clone(),
+            delivered_ns,
+            sample: AnySample::GnssFix(*fix),
         };
-        decoder.push(bytes, read_ns, *char_ns, &mut push);
-        decoder.flush(&mut push);
+        let mut extras = Vec::new();
+        decoder.push_extras(
+            bytes,
+            read_ns,
+            *char_ns,
+            &mut |fix| fixes.push_back(fix_at(fix, pushed_ns)),
+            &mut |x| {
+                if let GnssExtra::TimePulse(tp) = x {
+                    extras.push(Published {
+                        service: time_pulse_service.clone(),
+                        delivered_ns: read_ns,
+                        sample: AnySample::TimePulse(*tp),
+                    });
+                }
+            },
+        );
+        decoder.flush(&mut |fix| fixes.push_back(fix_at(fix, flushed_ns)));
+        fixes.extend(extras);
+        fixes.make_contiguous().sort_by_key(|p| p.delivered_ns);
     }
 }
 

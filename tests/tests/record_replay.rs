@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use navsync_recording::SampleReader;
 use navsync_recording::channels::sample_json;
 use navsync_recording::mcap_reader::ScanEnd;
-use navsync_shared::samples::{AnySample, Health, NavState, NavStatus, TimeStatus};
+use navsync_shared::samples::{AnySample, GNSS_PROTOCOL_UBX, GnssFix, Health, NavState, NavStatus, TimeStatus};
 use navsync_shared::services;
 use navsync_shared::time::monotonic_now_ns;
 use navsync_tests::TestEnv;
@@ -79,7 +79,19 @@ fn counter(h: &Health, name: &str) -> Option<u64> {
 
 #[test]
 fn a_live_run_and_its_replay_agree_bit_for_bit() {
-    let mut env = TestEnv::new("recreplay");
+    live_run_and_replay("recreplay", "nmea");
+}
+
+/// The same with the simulated receiver writing u-blox UBX (NAV-PVT, NAV-EOE, TIM-TP) and the
+/// GNSS driver reading it (`--protocol ubx`): the fixes carry the receiver's accuracy
+/// estimates, the edges are labelled by TIM-TP, and the replay is still bit-exact.
+#[test]
+fn a_live_ubx_run_and_its_replay_agree_bit_for_bit() {
+    live_run_and_replay("recreplayubx", "ubx");
+}
+
+fn live_run_and_replay(name: &str, protocol: &str) {
+    let mut env = TestEnv::new(name);
     let node = env.node("observer");
     let est_health = node.subscriber::<Health>(&services::health("estimator")).unwrap();
     let rec = env.dir.join("live.mcap");
@@ -96,6 +108,7 @@ fn a_live_run_and_its_replay_agree_bit_for_bit() {
             "navsync/imu/0/sample",
             "navsync/pps/0/edge",
             "navsync/gnss/0/fix",
+            "navsync/gnss/0/timepulse",
             "navsync/nav/state",
             "navsync/time/state",
             "navsync/sim/truth",
@@ -113,9 +126,34 @@ fn a_live_run_and_its_replay_agree_bit_for_bit() {
     let link = env.dir.join("gnss0");
     let link_s = link.display().to_string();
     let scen = scenario().display().to_string();
-    let mut sim = start(&env, "sim", &["sim", "--scenario", &scen, "--pty-link", &link_s]);
+    let mut sim = start(
+        &env,
+        "sim",
+        &[
+            "sim",
+            "--scenario",
+            &scen,
+            "--pty-link",
+            &link_s,
+            "--gnss-protocol",
+            protocol,
+        ],
+    );
     env.wait_for_path(&link, Duration::from_secs(20));
-    env.spawn("gps", &["gps", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+    env.spawn(
+        "gps",
+        &[
+            "gps",
+            "--port",
+            &link_s,
+            "--baud",
+            "115200",
+            "--protocol",
+            protocol,
+            "--id",
+            "0",
+        ],
+    );
     // The scenario lasts 28 s of real time.
     let st = wait_exit(&env, &mut sim, "sim", Duration::from_secs(120));
     assert!(st.success(), "sim: {st}\n{}", env.log("sim"));
@@ -138,6 +176,27 @@ fn a_live_run_and_its_replay_agree_bit_for_bit() {
         live_nav.len()
     );
     assert!(imu_samples >= 2700, "only {imu_samples} IMU samples recorded");
+    let fixes: Vec<GnssFix> = live
+        .iter()
+        .filter_map(|(_, s, ..)| match s {
+            AnySample::GnssFix(f) => Some(*f),
+            _ => None,
+        })
+        .collect();
+    assert!(fixes.len() >= 25, "{} fixes", fixes.len());
+    let pulses = live
+        .iter()
+        .filter(|(_, s, ..)| matches!(s, AnySample::TimePulse(_)))
+        .count();
+    if protocol == "ubx" {
+        // The receiver's own accuracy estimates, and its TIM-TP for every second.
+        assert!(fixes.iter().all(|f| f.protocol == GNSS_PROTOCOL_UBX), "not UBX fixes");
+        let f = fixes.last().unwrap();
+        assert!(f.h_acc_m > 0.0 && f.v_acc_m > 0.0 && f.s_acc_mps > 0.0, "{f:?}");
+        assert!(pulses >= 25, "{pulses} time pulse reports");
+    } else {
+        assert_eq!(pulses, 0);
+    }
     assert_eq!(live_nav.len(), imu_samples, "one live NavState per IMU sample");
     let last_health = live
         .iter()
@@ -148,6 +207,12 @@ fn a_live_run_and_its_replay_agree_bit_for_bit() {
         })
         .expect("estimator health recorded");
     let late = counter(&last_health, "inputs_late");
+    let by_receiver = counter(&last_health, "pps_labelled_by_rx").unwrap_or(0);
+    if protocol == "ubx" {
+        assert!(by_receiver >= 20, "{by_receiver} edges labelled by TIM-TP");
+    } else {
+        assert_eq!(by_receiver, 0);
+    }
     println!(
         "estimator: inputs_late {late:?}, imu_seq_gaps {:?}",
         counter(&last_health, "imu_seq_gaps")

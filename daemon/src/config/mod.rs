@@ -111,12 +111,16 @@ pub struct GnssConfig {
     /// Line rate or `"auto"` (default 9600).
     #[serde(default)]
     pub baud: Option<Baud>,
-    /// The receiver's protocol (default `nmea`).
+    /// The receiver's protocol: `nmea`, `ubx` or `auto` (default `nmea`).
     #[serde(default)]
     pub protocol: Option<Protocol>,
     /// Antenna position in the body frame (forward-right-down), m (the filter's GNSS lever arm).
     #[serde(default)]
     pub lever_arm_m: [f64; 3],
+    /// Publish the receiver's own IMU (UBX ESF-MEAS: NEO-M8L/M8U, ZED-F9R) as this IMU id
+    /// (default: not published).
+    #[serde(default)]
+    pub imu_id: Option<String>,
 }
 
 /// `[pps.ID]`: one 1 PPS source.

@@ -131,6 +131,7 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
     let mut health = HealthReporter::new(&node, "estimator")?;
     let c_pps = health.counter("pps_used")?;
     let c_pps_rej = health.counter("pps_rejected")?;
+    let c_pps_rx = health.counter("pps_labelled_by_rx")?;
     let c_fixes = health.counter("gnss_fixes")?;
     let c_imu = health.counter("imu_samples")?;
     let c_imu_gap = health.counter("imu_seq_gaps")?;
@@ -364,6 +365,7 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
         let tc = *est.time().counters();
         health.set(c_pps, tc.pps_used);
         health.set(c_pps_rej, tc.rejected());
+        health.set(c_pps_rx, tc.pps_labelled_by_receiver);
         health.set(c_holdovers, tc.holdovers);
         health.set(c_relocks, tc.relocks);
         let nc = *est.nav().counters();

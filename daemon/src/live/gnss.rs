@@ -1,4 +1,4 @@
-//! `navsync gnss` (alias `gps`): the GNSS receiver driver process
+//! `navsync gnss` (alias `gps`): the GNSS receiver driver process (NMEA, u-blox UBX)
 //! (`navsync_drivers::gnss::driver`) with its settings: flag, else `[gnss.ID]`, else default.
 
 use anyhow::{Context, Result, bail};
@@ -17,9 +17,14 @@ pub struct Options {
     /// Line rate, or `auto` to hunt the common rates [default: [gnss.ID].baud, else 9600].
     #[arg(long)]
     pub baud: Option<Baud>,
-    /// The receiver's protocol: nmea [default: [gnss.ID].protocol, else nmea].
+    /// The receiver's protocol: nmea, ubx (u-blox binary) or auto (UBX navigation when the
+    /// port carries it, else NMEA) [default: [gnss.ID].protocol, else nmea].
     #[arg(long)]
     pub protocol: Option<Protocol>,
+    /// Publish the receiver's own IMU readings (UBX ESF-MEAS) as this IMU id, one more IMU of
+    /// the array [default: [gnss.ID].imu_id, else not published].
+    #[arg(long, value_parser = parse_id)]
+    pub imu_id: Option<String>,
     /// Receiver id.
     #[arg(long, default_value = "0", value_parser = parse_id)]
     pub id: String,
@@ -36,6 +41,7 @@ impl Options {
             port,
             baud: self.baud.or(section.and_then(|s| s.baud)).unwrap_or(Baud::Fixed(9600)),
             protocol: self.protocol.or(section.and_then(|s| s.protocol)).unwrap_or_default(),
+            imu_id: self.imu_id.or_else(|| section.and_then(|s| s.imu_id.clone())),
             id: self.id,
         })
     }
@@ -60,6 +66,7 @@ mod tests {
             port: port.map(str::to_string),
             baud,
             protocol: None,
+            imu_id: None,
             id: id.into(),
         };
         let g = opts(None, None, "0").resolve(&cfg).unwrap();

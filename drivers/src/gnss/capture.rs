@@ -2,16 +2,23 @@
 //! port (through the same [`Decoder`]).
 //!
 //! Used by `navsync decode FILE|-` (one JSON object per epoch) and by the gpsd conformance
-//! test. Lines starting with `#` are gpsd log comments (receiver name, location), not
+//! tests. Lines starting with `#` are gpsd log comments (receiver name, location), not
 //! receiver output, and are skipped; a `# Delay-Cookie: <c> …` header makes `<c>` a read
-//! boundary rather than data, as gpsd's test player `gpsfake` treats it.
+//! boundary rather than data, as gpsd's test player `gpsfake` treats it. In a text (NMEA)
+//! capture every such line is a comment; in a binary one (`ubx`, `auto`) only the leading
+//! ones are (gpsfake skips the header, then frames the rest), since a `#` after a newline
+//! byte inside a binary message is data.
 
 use navsync_shared::samples::{FixMode, GnssFix};
 use navsync_shared::time::format_rfc3339_ms;
 use serde_json::{Map, Value};
 
 use super::nmea::NmeaDecoder;
+use super::ubx::UbxDecoder;
 use super::{Decoder, GnssDecoder, Protocol};
+
+/// Bytes per replayed read of a binary capture (a serial driver's typical read).
+pub const REPLAY_READ_BYTES: usize = 64;
 
 /// Line rate assumed when replaying a capture: 9600 Bd, 10 bits per character, so that
 /// replayed stamps are spaced as on a real serial line (`host_ns` = byte offset × this).
@@ -29,10 +36,22 @@ pub struct Capture {
 }
 
 impl Capture {
-    /// The NMEA decoder, when the capture was decoded as NMEA.
+    /// The NMEA decoder, when the capture was decoded as NMEA (or `auto`: the decoder of the
+    /// port's NMEA sentences).
     pub fn nmea(&self) -> Option<&NmeaDecoder> {
         match &self.decoder {
             Decoder::Nmea(d) => Some(d),
+            Decoder::Ubx(_) => None,
+            Decoder::Auto(d) => Some(d.nmea()),
+        }
+    }
+
+    /// The UBX decoder, when the capture was decoded as `ubx` or `auto`.
+    pub fn ubx(&self) -> Option<&UbxDecoder> {
+        match &self.decoder {
+            Decoder::Nmea(_) => None,
+            Decoder::Ubx(d) => Some(d),
+            Decoder::Auto(d) => Some(d.ubx()),
         }
     }
 
@@ -45,11 +64,18 @@ impl Capture {
     }
 }
 
-/// Decodes a whole capture as `protocol`: every line not starting with `#` (split at the delay
-/// cookie, if the log declares one) goes through the [`Decoder`] as one read, stamped as if
-/// the capture had arrived at [`REPLAY_NS_PER_BYTE`] from host time 0; the decoder is flushed
-/// at the end, as the live driver does when the line goes idle.
+/// Decodes a whole capture as `protocol`, stamped as if the capture had arrived at
+/// [`REPLAY_NS_PER_BYTE`] from host time 0 (each byte's stamp is that of its arrival,
+/// however the capture is cut into reads); the decoder is flushed at the end, as the live
+/// driver does when the line goes idle.
+///
+/// NMEA: every line not starting with `#` (split at the delay cookie, if the log declares
+/// one) goes through the [`Decoder`] as one read. `ubx`/`auto`: after the leading `#` lines,
+/// the bytes go through in reads of [`REPLAY_READ_BYTES`].
 pub fn decode_capture(bytes: &[u8], protocol: Protocol) -> Capture {
+    if protocol != Protocol::Nmea {
+        return decode_binary(bytes, protocol);
+    }
     let mut decoder = Decoder::new(protocol);
     let mut fixes = Vec::new();
     let mut comment_lines = 0;
@@ -70,6 +96,34 @@ pub fn decode_capture(bytes: &[u8], protocol: Protocol) -> Capture {
                 .saturating_mul(REPLAY_NS_PER_BYTE);
             decoder.push(chunk, read_ns, REPLAY_NS_PER_BYTE, &mut |fix| fixes.push(*fix));
         }
+    }
+    decoder.flush(&mut |fix| fixes.push(*fix));
+    Capture {
+        fixes,
+        decoder,
+        comment_lines,
+    }
+}
+
+/// [`decode_capture`] of a binary capture: the leading `#` lines are gpsd's header.
+fn decode_binary(bytes: &[u8], protocol: Protocol) -> Capture {
+    let mut decoder = Decoder::new(protocol);
+    let mut fixes = Vec::new();
+    let mut comment_lines = 0;
+    let mut offset = 0usize;
+    let mut rest = bytes;
+    while rest.first() == Some(&b'#') {
+        let len = rest.iter().position(|&b| b == b'\n').map_or(rest.len(), |i| i + 1);
+        offset += len;
+        comment_lines += 1;
+        rest = rest.get(len..).unwrap_or(&[]);
+    }
+    for chunk in rest.chunks(REPLAY_READ_BYTES) {
+        offset += chunk.len();
+        let read_ns = i64::try_from(offset)
+            .unwrap_or(i64::MAX)
+            .saturating_mul(REPLAY_NS_PER_BYTE);
+        decoder.push(chunk, read_ns, REPLAY_NS_PER_BYTE, &mut |fix| fixes.push(*fix));
     }
     decoder.flush(&mut |fix| fixes.push(*fix));
     Capture {
@@ -129,6 +183,17 @@ pub fn epoch_json(fix: &GnssFix) -> Value {
     };
     m.insert("sats_used".into(), sats);
     m.insert("hdop".into(), num(fix.hdop));
+    // The receiver's own accuracy estimates, where its protocol reports them (UBX).
+    for (key, v) in [
+        ("h_acc_m", fix.h_acc_m),
+        ("v_acc_m", fix.v_acc_m),
+        ("s_acc_mps", fix.s_acc_mps),
+        ("vel_d_mps", fix.vel_d_mps),
+    ] {
+        if v.is_finite() {
+            m.insert(key.into(), num(v));
+        }
+    }
     Value::Object(m)
 }
 
@@ -165,6 +230,32 @@ mod tests {
         assert_eq!(fixes.len(), 1);
         assert_eq!(fixes[0].alt_msl_m, 545.4);
         assert_eq!(delay_cookie(b"# Date: 2013-11-03\n"), None);
+    }
+
+    #[test]
+    fn binary_capture_skips_only_the_leading_comments() {
+        use crate::gnss::ubx::framer::ubx_frame;
+        use navsync_shared::samples::UBX_MSG_NAV_EOE;
+        let mut cap = b"# Name: test\n# more\n".to_vec();
+        let header = cap.len();
+        // NAV-TIMEGPS and NAV-EOE of iTOW 8970 ms, whose bytes start with "\n#": data, not a
+        // comment. Week 2048, 18 leap seconds, all valid.
+        let itow = [b'\n', b'#', 0, 0];
+        let mut timegps = itow.to_vec();
+        timegps.extend([0, 0, 0, 0, 0x00, 0x08, 18, 0x07, 0, 0, 0, 0]);
+        cap.extend(ubx_frame(1, 0x20, &timegps));
+        cap.extend(ubx_frame(1, 0x61, &itow));
+        for protocol in [Protocol::Ubx, Protocol::Auto] {
+            let c = decode_capture(&cap, protocol);
+            assert_eq!(c.comment_lines, 2);
+            assert_eq!(c.ubx().map(|u| u.counters().framer.noise_bytes), Some(0));
+            assert_eq!(c.fixes.len(), 1);
+            assert_eq!(c.fixes[0].stamp.host_ns, (header as i64 + 1) * REPLAY_NS_PER_BYTE);
+            assert_ne!(c.fixes[0].sentences & UBX_MSG_NAV_EOE, 0);
+            assert_eq!(format_rfc3339_ms(c.fixes[0].utc_ns), "2019-04-06T23:59:50.970Z");
+        }
+        assert!(decode_capture(&cap, Protocol::Ubx).nmea().is_none());
+        assert!(decode_capture(&cap, Protocol::Auto).nmea().is_some());
     }
 
     #[test]

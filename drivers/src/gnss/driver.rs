@@ -30,14 +30,15 @@ use std::io::{ErrorKind, Read};
 use std::time::{Duration, Instant};
 
 use navsync_shared::health_reporter::{CounterId, HealthError, HealthReporter};
-use navsync_shared::ipc::{IpcError, IpcNode};
-use navsync_shared::samples::GnssFix;
+use navsync_shared::ipc::{IpcError, IpcNode, IpcSample, Publisher};
+use navsync_shared::reflect::fixed_str;
+use navsync_shared::samples::{GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample};
 use navsync_shared::services;
 use navsync_shared::time::monotonic_now_ns;
 use serialport::{ClearBuffer, SerialPort, TTYPort};
 use tracing::{info, info_span, warn};
 
-use super::{Decoder, GnssDecoder, Protocol};
+use super::{Decoder, GnssDecoder, GnssExtra, Protocol};
 use crate::rate_log::RateLimitedLog;
 
 /// Baud rates tried by `--baud auto`, most common first (gpsd's hunt order differs; these
@@ -127,6 +128,68 @@ pub struct GnssArgs {
     pub protocol: Protocol,
     /// Receiver id (service `navsync/gnss/{id}/fix`, health `navsync/health/gnss-{id}`).
     pub id: String,
+    /// Publish the receiver's own IMU readings (UBX ESF-MEAS) as this IMU id
+    /// (`navsync/imu/{imu_id}/sample`); `None`: not published.
+    pub imu_id: Option<String>,
+}
+
+/// Publishers of what a receiver reports besides fixes (time pulses, time marks, raw
+/// measurements, subframes, its IMU), each created on its first sample, so a receiver that
+/// sends none of them creates no service for them.
+struct ExtraPublishers<'n> {
+    node: &'n IpcNode,
+    id: String,
+    imu_id: Option<String>,
+    time_pulse: Option<Publisher<GnssTimePulse>>,
+    event: Option<Publisher<GnssEvent>>,
+    raw: Option<Publisher<GnssRaw>>,
+    nav_data: Option<Publisher<GnssNavData>>,
+    imu: Option<Publisher<ImuSample>>,
+    /// Samples that could not be published (publisher creation or publishing failed).
+    errors: u64,
+}
+
+impl ExtraPublishers<'_> {
+    fn publish(&mut self, x: GnssExtra<'_>) {
+        let id = self.id.as_str();
+        let node = self.node;
+        let r = match x {
+            GnssExtra::TimePulse(s) => publish_lazily(node, &mut self.time_pulse, || services::gnss_time_pulse(id), s),
+            GnssExtra::Event(s) => publish_lazily(node, &mut self.event, || services::gnss_event(id), s),
+            GnssExtra::Raw(s) => publish_lazily(node, &mut self.raw, || services::gnss_raw(id), s),
+            GnssExtra::NavData(s) => publish_lazily(node, &mut self.nav_data, || services::gnss_nav_data(id), s),
+            GnssExtra::Imu(s) => match &self.imu_id {
+                Some(imu_id) => {
+                    let mut s = *s;
+                    s.imu_id = fixed_str::<8>(imu_id);
+                    publish_lazily(node, &mut self.imu, || services::imu_sample(imu_id), &s)
+                }
+                None => Ok(()),
+            },
+        };
+        if let Err(e) = r {
+            if self.errors == 0 {
+                warn!("publishing a receiver product: {e}");
+            }
+            self.errors += 1;
+        }
+    }
+}
+
+/// Publishes `sample` on the publisher in `slot`, creating it on `service()` first if needed.
+fn publish_lazily<T: IpcSample>(
+    node: &IpcNode,
+    slot: &mut Option<Publisher<T>>,
+    service: impl FnOnce() -> String,
+    sample: &T,
+) -> Result<(), IpcError> {
+    if slot.is_none() {
+        *slot = Some(node.publisher::<T>(&service())?);
+    }
+    match slot {
+        Some(p) => p.publish(sample),
+        None => Ok(()),
+    }
 }
 
 /// Errors that stop the GNSS driver (device errors never do: it reopens).
@@ -248,6 +311,18 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
         publish_errors: health.counter("publish_errors")?,
     };
     let mut dec = Decoder::new(args.protocol);
+    let mut extras = ExtraPublishers {
+        node: &node,
+        id: args.id.clone(),
+        imu_id: args.imu_id.clone(),
+        time_pulse: None,
+        event: None,
+        raw: None,
+        nav_data: None,
+        imu: None,
+        errors: 0,
+    };
+    let c_extra_errors = health.counter("extra_publish_errors")?;
     let mut log = RateLimitedLog::default();
     let mut hunt = BaudHunt::new(Instant::now());
     let mut backoff = Duration::from_millis(100);
@@ -305,7 +380,10 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
                 Ok(n) => {
                     backoff = Duration::from_millis(100);
                     let t = monotonic_now_ns();
-                    dec.push(&buf[..n], t, ns_per_byte, &mut |fix| emit(fix, &mut health));
+                    dec.push_extras(&buf[..n], t, ns_per_byte, &mut |fix| emit(fix, &mut health), &mut |x| {
+                        extras.publish(x)
+                    });
+                    health.set(c_extra_errors, extras.errors);
                     None
                 }
                 Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {

@@ -8,19 +8,24 @@
 //! ([`capture`], `navsync decode`), the simulator's fast path and the fuzz targets all go
 //! through it, and baud hunting asks it whether the bytes are valid frames.
 //!
-//! Protocols: [`nmea`] (NMEA 0183). Adding one: a module with its framer and decoders
-//! (pure functions on bytes), a type implementing [`GnssDecoder`], a [`Protocol`] variant and
-//! its arm in [`Decoder`].
+//! Protocols: [`nmea`] (NMEA 0183), [`ubx`] (u-blox UBX, with the NMEA sentences and RTCM3
+//! frames of the same port separated out), and `auto` ([`ubx::auto`]: UBX navigation when the
+//! port carries it, else NMEA). Adding one: a module with its framer and decoders (pure
+//! functions on bytes), a type implementing [`GnssDecoder`], a [`Protocol`] variant and its
+//! arm in [`Decoder`].
 
 pub mod capture;
 pub mod driver;
 pub mod nmea;
+pub mod ubx;
 
 use std::str::FromStr;
 
-use navsync_shared::samples::GnssFix;
+use navsync_shared::samples::{GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample};
 
 use nmea::NmeaDecoder;
+use ubx::UbxDecoder;
+use ubx::auto::AutoDecoder;
 
 /// A GNSS receiver protocol front end: bytes in, one fix per navigation epoch out. Pure: no
 /// I/O, no clock, no allocation per byte or fix.
@@ -41,6 +46,36 @@ pub trait GnssDecoder {
     fn each_counter(&self, f: &mut impl FnMut(&'static str, u64));
     /// What a growing error counter means, for the log; `None` for counters that are not errors.
     fn describe(name: &str) -> Option<&'static str>;
+    /// As [`push`](Self::push), also handing the receiver's other products to `extra` in
+    /// stream order (time pulses, time marks, raw measurements, navigation data subframes,
+    /// the receiver's own IMU readings). Default: none (NMEA has none of these).
+    fn push_extras(
+        &mut self,
+        bytes: &[u8],
+        read_host_ns: i64,
+        ns_per_byte: i64,
+        out: &mut impl FnMut(&GnssFix),
+        extra: &mut impl FnMut(GnssExtra<'_>),
+    ) {
+        let _ = extra;
+        self.push(bytes, read_host_ns, ns_per_byte, out);
+    }
+}
+
+/// A receiver's product other than a fix, as the sample published for it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum GnssExtra<'a> {
+    /// The next time pulse (UBX TIM-TP), for `navsync/gnss/{id}/timepulse`.
+    TimePulse(&'a GnssTimePulse),
+    /// A time mark of an input pin (UBX TIM-TM2), for `navsync/gnss/{id}/event`.
+    Event(&'a GnssEvent),
+    /// Raw measurements of an epoch (UBX RXM-RAWX), for `navsync/gnss/{id}/raw`.
+    Raw(&'a GnssRaw),
+    /// A navigation data subframe (UBX RXM-SFRBX), for `navsync/gnss/{id}/nav-data`.
+    NavData(&'a GnssNavData),
+    /// A reading of the receiver's own IMU (UBX ESF-MEAS), for `navsync/imu/{id}/sample`
+    /// (`imu_id` still empty: the driver names it).
+    Imu(&'a ImuSample),
 }
 
 /// The receiver protocol of a port (`navsync gnss --protocol`, `[gnss.ID] protocol`).
@@ -50,6 +85,11 @@ pub enum Protocol {
     /// NMEA 0183 sentences.
     #[default]
     Nmea,
+    /// u-blox UBX binary messages (NMEA and RTCM3 on the same port are skipped).
+    Ubx,
+    /// UBX navigation when the port carries UBX NAV messages, else its NMEA sentences,
+    /// decided from the bytes ([`ubx::auto`]).
+    Auto,
 }
 
 impl Protocol {
@@ -57,6 +97,8 @@ impl Protocol {
     pub fn name(self) -> &'static str {
         match self {
             Self::Nmea => "nmea",
+            Self::Ubx => "ubx",
+            Self::Auto => "auto",
         }
     }
 }
@@ -66,7 +108,9 @@ impl FromStr for Protocol {
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
             "nmea" => Ok(Self::Nmea),
-            _ => Err(format!("`{s}` is not a GNSS protocol (known: nmea)")),
+            "ubx" => Ok(Self::Ubx),
+            "auto" => Ok(Self::Auto),
+            _ => Err(format!("`{s}` is not a GNSS protocol (known: nmea, ubx, auto)")),
         }
     }
 }
@@ -77,11 +121,18 @@ impl std::fmt::Display for Protocol {
     }
 }
 
-/// The decoder of one [`Protocol`].
+/// The decoder of one [`Protocol`]. The UBX decoders are boxed (their framer holds a window
+/// of one maximal UBX frame, 8 kB: allocated once, with the decoder); the NMEA decoder stays
+/// inline, so that the NMEA path allocates nothing at all.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum Decoder {
     /// NMEA 0183.
     Nmea(NmeaDecoder),
+    /// u-blox UBX.
+    Ubx(Box<UbxDecoder>),
+    /// UBX with NMEA fallback.
+    Auto(Box<AutoDecoder>),
 }
 
 impl Decoder {
@@ -89,12 +140,14 @@ impl Decoder {
     pub fn new(protocol: Protocol) -> Self {
         match protocol {
             Protocol::Nmea => Self::Nmea(NmeaDecoder::new()),
+            Protocol::Ubx => Self::Ubx(Box::default()),
+            Protocol::Auto => Self::Auto(Box::default()),
         }
     }
 
     /// What a growing error counter of any protocol means.
     pub fn describe_counter(name: &str) -> Option<&'static str> {
-        NmeaDecoder::describe(name)
+        AutoDecoder::describe(name)
     }
 }
 
@@ -102,40 +155,83 @@ impl GnssDecoder for Decoder {
     fn push(&mut self, bytes: &[u8], read_host_ns: i64, ns_per_byte: i64, out: &mut impl FnMut(&GnssFix)) {
         match self {
             Self::Nmea(d) => d.push(bytes, read_host_ns, ns_per_byte, out),
+            Self::Ubx(d) => d.push(bytes, read_host_ns, ns_per_byte, out),
+            Self::Auto(d) => d.push(bytes, read_host_ns, ns_per_byte, out),
+        }
+    }
+
+    fn push_extras(
+        &mut self,
+        bytes: &[u8],
+        read_host_ns: i64,
+        ns_per_byte: i64,
+        out: &mut impl FnMut(&GnssFix),
+        extra: &mut impl FnMut(GnssExtra<'_>),
+    ) {
+        match self {
+            Self::Nmea(d) => d.push(bytes, read_host_ns, ns_per_byte, out),
+            Self::Ubx(d) => d.push_extras(bytes, read_host_ns, ns_per_byte, out, extra),
+            Self::Auto(d) => d.push_extras(bytes, read_host_ns, ns_per_byte, out, extra),
         }
     }
 
     fn flush(&mut self, out: &mut impl FnMut(&GnssFix)) {
         match self {
             Self::Nmea(d) => d.flush(out),
+            Self::Ubx(d) => d.flush(out),
+            Self::Auto(d) => d.flush(out),
         }
     }
 
     fn reset(&mut self) {
         match self {
             Self::Nmea(d) => d.reset(),
+            Self::Ubx(d) => d.reset(),
+            Self::Auto(d) => d.reset(),
         }
     }
 
     fn bytes(&self) -> u64 {
         match self {
             Self::Nmea(d) => d.bytes(),
+            Self::Ubx(d) => d.bytes(),
+            Self::Auto(d) => d.bytes(),
         }
     }
 
     fn valid_frames(&self) -> u64 {
         match self {
             Self::Nmea(d) => d.valid_frames(),
+            Self::Ubx(d) => d.valid_frames(),
+            Self::Auto(d) => d.valid_frames(),
         }
     }
 
     fn each_counter(&self, f: &mut impl FnMut(&'static str, u64)) {
         match self {
             Self::Nmea(d) => d.each_counter(f),
+            Self::Ubx(d) => d.each_counter(f),
+            Self::Auto(d) => d.each_counter(f),
         }
     }
 
     fn describe(name: &str) -> Option<&'static str> {
         Self::describe_counter(name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn protocol_names_round_trip() {
+        for p in [Protocol::Nmea, Protocol::Ubx, Protocol::Auto] {
+            assert_eq!(p.name().parse::<Protocol>(), Ok(p));
+            let json = format!("\"{}\"", p.name());
+            assert_eq!(serde_json::from_str::<Protocol>(&json).ok(), Some(p));
+        }
+        assert!("sirf".parse::<Protocol>().is_err());
+        assert_eq!(Protocol::default(), Protocol::Nmea);
     }
 }

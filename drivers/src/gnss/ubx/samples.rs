@@ -1,0 +1,215 @@
+//! UBX messages as the samples navsync publishes beside the fixes: RXM-RAWX → [`GnssRaw`],
+//! RXM-SFRBX → [`GnssNavData`], ESF-MEAS → [`ImuSample`] (the receiver's own IMU). Pure.
+//!
+//! ESF-MEAS data types and scales (u-blox 8 / M8 Receiver Description, UBX-ESF-MEAS, "data
+//! type" table): 14/13/5 gyroscope x/y/z angular rate, deg/s × 2⁻¹², 16/17/18 accelerometer
+//! x/y/z specific force, m/s² × 2⁻¹⁰, 12 gyroscope temperature, °C × 10⁻². The axes are the
+//! receiver's IMU frame as the receiver reports it (u-blox: x forward, y right, z down once
+//! installed as its integration manual says); a different mounting is the IMU's `mounting`
+//! in navsync's configuration, as for any IMU.
+
+use navsync_shared::reflect::Reflect;
+use navsync_shared::samples::{
+    GnssNavData, GnssRaw, ImuSample, MAX_NAV_WORDS, MAX_RAW_MEASUREMENTS, RawMeasurement, Stamp, StampSource,
+};
+
+use super::esf::EsfMeas;
+use super::rxm::{RxmRawx, RxmSfrbx};
+
+/// RXM-RAWX as a [`GnssRaw`] sample stamped at `host_ns` with sequence number `seq`.
+pub fn raw_sample(m: &RxmRawx, host_ns: i64, seq: u64) -> GnssRaw {
+    let mut out = GnssRaw {
+        stamp: Stamp::host(host_ns, seq, StampSource::Receipt),
+        rcv_tow_s: m.rcv_tow_s,
+        week: m.week,
+        leap_s: i16::from(m.leap_s),
+        num_meas: 0,
+        rec_stat: m.rec_stat,
+        dropped: 0,
+        reserved: 0,
+        meas: [RawMeasurement {
+            pseudorange_m: 0.0,
+            carrier_phase_cycles: 0.0,
+            doppler_hz: 0.0,
+            pseudorange_std_m: 0.0,
+            carrier_phase_std_cycles: 0.0,
+            doppler_std_hz: 0.0,
+            lock_time_ms: 0,
+            gnss_id: 0,
+            sv_id: 0,
+            sig_id: 0,
+            freq_id: 0,
+            cno_dbhz: 0,
+            trk_stat: 0,
+        }; MAX_RAW_MEASUREMENTS],
+    };
+    let valid = m.meas.get(..m.len).unwrap_or(&[]);
+    for (o, x) in out.meas.iter_mut().zip(valid) {
+        *o = RawMeasurement {
+            pseudorange_m: x.pr_mes_m,
+            carrier_phase_cycles: x.cp_mes_cycles,
+            doppler_hz: x.do_mes_hz,
+            pseudorange_std_m: x.pr_stdev_m as f32,
+            carrier_phase_std_cycles: x.cp_stdev_cycles as f32,
+            doppler_std_hz: x.do_stdev_hz as f32,
+            lock_time_ms: x.locktime_ms,
+            gnss_id: x.gnss_id,
+            sv_id: x.sv_id,
+            sig_id: x.sig_id,
+            freq_id: x.freq_id,
+            cno_dbhz: x.cno_dbhz,
+            trk_stat: x.trk_stat,
+        };
+    }
+    let kept = valid.len().min(MAX_RAW_MEASUREMENTS);
+    out.num_meas = kept as u8;
+    out.dropped = (m.dropped + valid.len() - kept).min(255) as u8;
+    out
+}
+
+/// RXM-SFRBX as a [`GnssNavData`] sample (words unchanged) stamped at `host_ns`, sequence `seq`.
+pub fn nav_data_sample(m: &RxmSfrbx, host_ns: i64, seq: u64) -> GnssNavData {
+    let mut words = [0u32; MAX_NAV_WORDS];
+    let n = m.len.min(MAX_NAV_WORDS);
+    words[..n].copy_from_slice(&m.words[..n]);
+    GnssNavData {
+        stamp: Stamp::host(host_ns, seq, StampSource::Receipt),
+        words,
+        gnss_id: m.gnss_id,
+        sv_id: m.sv_id,
+        sig_id: m.sig_id,
+        freq_id: m.freq_id,
+        num_words: n as u8,
+        channel: m.chn,
+        version: m.version,
+        reserved: 0,
+    }
+}
+
+/// Gyroscope rate scale, deg/s per LSB.
+const GYRO_DPS_PER_LSB: f64 = 1.0 / 4096.0;
+/// Accelerometer scale, m/s² per LSB.
+const ACCEL_MPS2_PER_LSB: f64 = 1.0 / 1024.0;
+
+/// Assembles the receiver's IMU readings (ESF-MEAS) into [`ImuSample`]s: one per time tag
+/// that brought all three gyroscope and accelerometer axes; the interval is the time-tag
+/// difference to the previous sample (the first one, without a predecessor, is not emitted).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct EsfImu {
+    tag_ms: Option<u32>,
+    gyro_dps: [Option<f64>; 3],
+    accel_mps2: [Option<f64>; 3],
+    temperature_c: f64,
+    last_emitted_tag_ms: Option<u32>,
+    seq: u64,
+}
+
+impl EsfImu {
+    /// Takes one ESF-MEAS received at `host_ns`; returns the sample it completes, if any.
+    /// `imu_id` is left empty (the driver names the IMU); `device_ns` carries the time tag.
+    pub fn push(&mut self, m: &EsfMeas, host_ns: i64) -> Option<ImuSample> {
+        if self.tag_ms != Some(m.time_tag_ms) {
+            *self = Self {
+                tag_ms: Some(m.time_tag_ms),
+                temperature_c: f64::NAN,
+                last_emitted_tag_ms: self.last_emitted_tag_ms,
+                seq: self.seq,
+                ..Self::default()
+            };
+        }
+        for r in m.readings() {
+            let v = f64::from(r.value);
+            match r.data_type {
+                14 => self.gyro_dps[0] = Some(v * GYRO_DPS_PER_LSB),
+                13 => self.gyro_dps[1] = Some(v * GYRO_DPS_PER_LSB),
+                5 => self.gyro_dps[2] = Some(v * GYRO_DPS_PER_LSB),
+                16 => self.accel_mps2[0] = Some(v * ACCEL_MPS2_PER_LSB),
+                17 => self.accel_mps2[1] = Some(v * ACCEL_MPS2_PER_LSB),
+                18 => self.accel_mps2[2] = Some(v * ACCEL_MPS2_PER_LSB),
+                12 => self.temperature_c = v * 1e-2,
+                _ => {}
+            }
+        }
+        let [Some(gx), Some(gy), Some(gz)] = self.gyro_dps else {
+            return None;
+        };
+        let [Some(ax), Some(ay), Some(az)] = self.accel_mps2 else {
+            return None;
+        };
+        let tag = m.time_tag_ms;
+        let prev = self.last_emitted_tag_ms.replace(tag);
+        self.gyro_dps = [None; 3];
+        self.accel_mps2 = [None; 3];
+        let dt_ms = tag.wrapping_sub(prev?);
+        if dt_ms == 0 || dt_ms > 1000 {
+            return None;
+        }
+        let mut s = ImuSample::zeroed();
+        s.stamp = Stamp::with_device(host_ns, i64::from(tag) * 1_000_000, self.seq, StampSource::Receipt);
+        self.seq += 1;
+        s.gyro_rps = [gx.to_radians(), gy.to_radians(), gz.to_radians()];
+        s.accel_mps2 = [ax, ay, az];
+        s.dt_s = f64::from(dt_ms) * 1e-3;
+        s.temperature_c = self.temperature_c;
+        Some(s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::esf::EsfData;
+    use super::super::messages::MAX_ESF;
+    use super::*;
+
+    fn meas(tag: u32, readings: &[(u8, i32)]) -> EsfMeas {
+        let mut data = [EsfData { data_type: 0, value: 0 }; MAX_ESF];
+        for (d, &(t, v)) in data.iter_mut().zip(readings) {
+            *d = EsfData { data_type: t, value: v };
+        }
+        EsfMeas {
+            time_tag_ms: tag,
+            flags: (readings.len() as u16) << 11,
+            id: 0,
+            data,
+            len: readings.len(),
+            dropped: 0,
+            calib_ttag_ms: None,
+        }
+    }
+
+    #[test]
+    fn esf_readings_become_imu_samples_in_si_units() {
+        let mut imu = EsfImu::default();
+        let all = |tag| {
+            meas(
+                tag,
+                &[
+                    (14, 4096),
+                    (13, -2048),
+                    (5, 0),
+                    (16, 1024),
+                    (17, 0),
+                    (18, -10_035),
+                    (12, 2_550),
+                ],
+            )
+        };
+        assert_eq!(imu.push(&all(1000), 5), None, "no interval before the first");
+        // Split over two messages with the same tag.
+        assert_eq!(imu.push(&meas(1010, &[(14, 4096), (13, -2048), (5, 0)]), 6), None);
+        let s = imu
+            .push(&meas(1010, &[(16, 1024), (17, 0), (18, -10_035)]), 7)
+            .expect("complete");
+        assert!(
+            (s.gyro_rps[0] - 1f64.to_radians()).abs() < 1e-12 && (s.gyro_rps[1] + 0.5f64.to_radians()).abs() < 1e-12
+        );
+        assert!((s.accel_mps2[0] - 1.0).abs() < 1e-12 && (s.accel_mps2[2] + 10_035.0 / 1024.0).abs() < 1e-12);
+        assert_eq!(
+            (s.dt_s, s.stamp.host_ns, s.stamp.device_ns, s.stamp.seq),
+            (0.01, 7, 1_010_000_000, 0)
+        );
+        assert!(s.temperature_c.is_nan(), "no temperature in that tag's messages");
+        let s = imu.push(&all(1020), 8).expect("complete");
+        assert_eq!((s.stamp.seq, s.temperature_c), (1, 25.5));
+    }
+}
