@@ -117,6 +117,16 @@ impl Pty {
         Ok(done)
     }
 
+    /// Reads what the other side wrote into the slave (a driver's commands to its device);
+    /// `Ok(0)` when nothing is waiting (the master is non-blocking).
+    pub fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        use std::io::Read;
+        match self.master.read(buf) {
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(0),
+            r => r,
+        }
+    }
+
     /// Bytes dropped because the slave's input buffer was full.
     pub fn dropped_bytes(&self) -> u64 {
         self.dropped_bytes

@@ -121,6 +121,10 @@ pub struct GnssConfig {
     /// (default: not published).
     #[serde(default)]
     pub imu_id: Option<String>,
+    /// Set a u-blox receiver up for navsync at start (RAM only; default false: navsync never
+    /// writes to a receiver unless told).
+    #[serde(default)]
+    pub configure: Option<bool>,
 }
 
 /// `[pps.ID]`: one 1 PPS source.

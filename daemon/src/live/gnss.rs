@@ -25,6 +25,12 @@ pub struct Options {
     /// the array [default: [gnss.ID].imu_id, else not published].
     #[arg(long, value_parser = parse_id)]
     pub imu_id: Option<String>,
+    /// Set a u-blox receiver up for navsync when the port opens (NAV-PVT, NAV-EOE, NAV-SAT,
+    /// TIM-TP, TIM-TM2, RXM-RAWX, RXM-SFRBX, ESF-MEAS on every epoch and a 1 Hz time pulse;
+    /// CFG-MSG/CFG-TP5 on M8, CFG-VALSET on F9; RAM only), each command checked with
+    /// ACK/NAK [default: [gnss.ID].configure, else off: navsync never writes to a receiver].
+    #[arg(long)]
+    pub configure: bool,
     /// Receiver id.
     #[arg(long, default_value = "0", value_parser = parse_id)]
     pub id: String,
@@ -42,6 +48,7 @@ impl Options {
             baud: self.baud.or(section.and_then(|s| s.baud)).unwrap_or(Baud::Fixed(9600)),
             protocol: self.protocol.or(section.and_then(|s| s.protocol)).unwrap_or_default(),
             imu_id: self.imu_id.or_else(|| section.and_then(|s| s.imu_id.clone())),
+            configure: self.configure || section.and_then(|s| s.configure).unwrap_or(false),
             id: self.id,
         })
     }
@@ -67,6 +74,7 @@ mod tests {
             baud,
             protocol: None,
             imu_id: None,
+            configure: false,
             id: id.into(),
         };
         let g = opts(None, None, "0").resolve(&cfg).unwrap();

@@ -38,6 +38,7 @@ use navsync_shared::time::monotonic_now_ns;
 use serialport::{ClearBuffer, SerialPort, TTYPort};
 use tracing::{info, info_span, warn};
 
+use super::ubx::configure as ubx_configure;
 use super::{Decoder, GnssDecoder, GnssExtra, Protocol};
 use crate::rate_log::RateLimitedLog;
 
@@ -131,6 +132,82 @@ pub struct GnssArgs {
     /// Publish the receiver's own IMU readings (UBX ESF-MEAS) as this IMU id
     /// (`navsync/imu/{imu_id}/sample`); `None`: not published.
     pub imu_id: Option<String>,
+    /// Set a u-blox receiver up for navsync once the port is open (RAM only; see
+    /// [`super::ubx::configure`]). Off: the driver never writes to the receiver.
+    pub configure: bool,
+}
+
+/// How long the receiver has to answer the MON-VER poll, and each configuration command.
+const CONFIGURE_ANSWER_TIMEOUT: Duration = Duration::from_millis(1500);
+
+/// Configures a u-blox receiver on `port` (module [`super::ubx::configure`]); what each
+/// command got as answer. An error when the receiver answers no UBX at all.
+fn configure_receiver(port: &mut TTYPort, node: &IpcNode) -> Result<ubx_configure::Report, String> {
+    use super::ubx::framer::{Frame, UbxFramer};
+    use super::ubx::messages::{Message, decode};
+    use std::io::Write;
+    let mut framer = UbxFramer::new();
+    let mut buf = [0u8; 512];
+    // Reads until `done` says so or the timeout passes; `done` sees every decoded message.
+    let mut wait = |port: &mut TTYPort, done: &mut dyn FnMut(&Message) -> bool| -> bool {
+        let until = Instant::now() + CONFIGURE_ANSWER_TIMEOUT;
+        while Instant::now() < until && !node.termination_requested() {
+            let n = match port.read(&mut buf) {
+                Ok(n) => n,
+                Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => continue,
+                Err(_) => return false,
+            };
+            let mut finished = false;
+            framer.push(&buf[..n], 0, 0, &mut |f| {
+                if let Frame::Ubx { class, id, payload, .. } = f
+                    && let Ok(m) = decode(class, id, payload)
+                {
+                    finished |= done(&m);
+                }
+            });
+            if finished {
+                return true;
+            }
+        }
+        false
+    };
+    let write = |port: &mut TTYPort, frame: &[u8]| port.write_all(frame).and_then(|()| port.flush());
+    write(port, &ubx_configure::poll_version()).map_err(|e| format!("writing the MON-VER poll: {e}"))?;
+    let mut version = None;
+    if !wait(port, &mut |m| match m {
+        Message::MonVer(v) => {
+            version = Some(*v);
+            true
+        }
+        _ => false,
+    }) {
+        return Err(format!(
+            "the receiver answered no UBX poll (MON-VER) within {CONFIGURE_ANSWER_TIMEOUT:?}: only a u-blox \
+             receiver speaking UBX can be configured (an NMEA-only receiver cannot)"
+        ));
+    }
+    let v = version.ok_or("no MON-VER")?;
+    let mut report = ubx_configure::Report {
+        version: ubx_configure::describe_version(&v),
+        answers: Vec::new(),
+    };
+    for c in ubx_configure::commands(v.protocol_version_x100()) {
+        write(port, &c.frame).map_err(|e| format!("writing {}: {e}", c.what))?;
+        let mut answer = ubx_configure::Answer::TimedOut;
+        wait(port, &mut |m| {
+            let a = match m {
+                Message::AckAck(a) => ubx_configure::answer_to(&c, a.cls_id, a.msg_id, true),
+                Message::AckNak(a) => ubx_configure::answer_to(&c, a.cls_id, a.msg_id, false),
+                _ => None,
+            };
+            if let Some(a) = a {
+                answer = a;
+            }
+            a.is_some()
+        });
+        report.answers.push((c.what, c.optional, answer));
+    }
+    Ok(report)
 }
 
 /// Publishers of what a receiver reports besides fixes (time pulses, time marks, raw
@@ -201,6 +278,14 @@ pub enum GnssError {
     /// A health counter could not be registered.
     #[error(transparent)]
     Health(#[from] navsync_shared::health_reporter::HealthError),
+    /// `--configure` could not configure the receiver.
+    #[error("--configure on {port}: {why}")]
+    Configure {
+        /// The port.
+        port: String,
+        /// Why.
+        why: String,
+    },
 }
 
 /// The baud-rate hunt of `--baud auto` (a pure state machine on counters and time).
@@ -323,6 +408,9 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
         errors: 0,
     };
     let c_extra_errors = health.counter("extra_publish_errors")?;
+    let c_cfg_acked = health.counter("configure_acked")?;
+    let c_cfg_failed = health.counter("configure_failed")?;
+    let mut configured = false;
     let mut log = RateLimitedLog::default();
     let mut hunt = BaudHunt::new(Instant::now());
     let mut backoff = Duration::from_millis(100);
@@ -361,6 +449,27 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
         health.add(pc.opens, 1);
         health.set(pc.baud, u64::from(baud));
         info!(baud, "port open");
+        if args.configure && !configured {
+            let report = configure_receiver(&mut port, &node).map_err(|why| GnssError::Configure {
+                port: args.port.clone(),
+                why,
+            })?;
+            info!(receiver = %report.version, "configuring the receiver (RAM layer)");
+            for (what, optional, answer) in &report.answers {
+                match answer {
+                    ubx_configure::Answer::Acked => health.add(c_cfg_acked, 1),
+                    _ if *optional => info!("{what}: {answer:?} (optional: the receiver may not have it)"),
+                    _ => health.add(c_cfg_failed, 1),
+                }
+            }
+            let failed = report.failed();
+            if failed.is_empty() {
+                info!("receiver configured");
+            } else {
+                warn!(?failed, "the receiver did not acknowledge these settings");
+            }
+            configured = true;
+        }
         let mut ns_per_byte = 10_000_000_000 / i64::from(baud);
         hunt.restart(Instant::now(), dec.bytes(), dec.valid_frames());
         let mut buf = [0u8; 512];

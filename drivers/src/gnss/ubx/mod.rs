@@ -11,6 +11,7 @@
 //! `drivers/tests/gpsd_ubx_conformance.rs`.
 
 pub mod auto;
+pub mod configure;
 pub mod ecef;
 pub mod epoch;
 pub mod esf;
