@@ -4,7 +4,8 @@
 //! --source xsens:…`) reads it through its real serial code.
 //!
 //! - The capture is cut into timed chunks by [`capture`]: an NMEA log epoch by epoch (paced
-//!   by the sentences' time tags), anything else by the line rate.
+//!   by the sentences' time tags), anything else (UBX, Xbus) by the line rate, a gpsd
+//!   capture's leading `#` comment lines skipped.
 //! - `--speed realtime` (default) keeps the capture's timing, `--speed N` plays N times
 //!   faster, `--speed max` writes as fast as the reader takes the bytes (nothing is dropped:
 //!   the feeder waits while the line discipline's buffer is full).
@@ -185,7 +186,11 @@ pub fn run(args: &FeedArgs) -> Result<FeedStats, FeedError> {
     let line_baud = args.baud.unwrap_or(DEFAULT_RAW_BAUD);
     let chunks: Vec<Chunk> = match kind {
         CaptureKind::Nmea => capture::nmea_chunks(&bytes),
-        CaptureKind::Raw => capture::raw_chunks(&bytes, line_baud),
+        // A binary capture from gpsd's regression suite starts with `#` comment lines.
+        CaptureKind::Raw => {
+            let (header, _) = crate::gnss::capture::gpsd_header(&bytes);
+            capture::raw_chunks(bytes.get(header..).unwrap_or(&[]), line_baud)
+        }
     };
     if chunks.is_empty() {
         return Err(FeedError::Empty(args.capture.clone()));

@@ -105,19 +105,24 @@ pub fn decode_capture(bytes: &[u8], protocol: Protocol) -> Capture {
     }
 }
 
+/// The leading gpsd header of a binary capture (its `#` comment lines, not receiver output):
+/// its length in bytes and lines.
+pub fn gpsd_header(bytes: &[u8]) -> (usize, u64) {
+    let (mut len, mut lines) = (0usize, 0u64);
+    while bytes.get(len) == Some(&b'#') {
+        let rest = bytes.get(len..).unwrap_or(&[]);
+        len += rest.iter().position(|&b| b == b'\n').map_or(rest.len(), |i| i + 1);
+        lines += 1;
+    }
+    (len, lines)
+}
+
 /// [`decode_capture`] of a binary capture: the leading `#` lines are gpsd's header.
 fn decode_binary(bytes: &[u8], protocol: Protocol) -> Capture {
     let mut decoder = Decoder::new(protocol);
     let mut fixes = Vec::new();
-    let mut comment_lines = 0;
-    let mut offset = 0usize;
-    let mut rest = bytes;
-    while rest.first() == Some(&b'#') {
-        let len = rest.iter().position(|&b| b == b'\n').map_or(rest.len(), |i| i + 1);
-        offset += len;
-        comment_lines += 1;
-        rest = rest.get(len..).unwrap_or(&[]);
-    }
+    let (mut offset, comment_lines) = gpsd_header(bytes);
+    let rest = bytes.get(offset..).unwrap_or(&[]);
     for chunk in rest.chunks(REPLAY_READ_BYTES) {
         offset += chunk.len();
         let read_ns = i64::try_from(offset)

@@ -91,15 +91,21 @@ const GYRO_DPS_PER_LSB: f64 = 1.0 / 4096.0;
 /// Accelerometer scale, m/s² per LSB.
 const ACCEL_MPS2_PER_LSB: f64 = 1.0 / 1024.0;
 
-/// Assembles the receiver's IMU readings (ESF-MEAS) into [`ImuSample`]s: one per time tag
-/// that brought all three gyroscope and accelerometer axes; the interval is the time-tag
-/// difference to the previous sample (the first one, without a predecessor, is not emitted).
+/// Gyroscope and accelerometer readings farther apart than this are not one sample, ms.
+const ESF_PAIR_MS: u32 = 25;
+
+/// Assembles the receiver's IMU readings (ESF-MEAS) into [`ImuSample`]s. Receivers send the
+/// gyroscope triad and the accelerometer triad in one message or in two with their own time
+/// tags a few ms apart (NEO-M8L: accelerometer 5 ms after the gyroscope); a sample is the
+/// latest gyroscope triad with the latest accelerometer triad within [`ESF_PAIR_MS`], at the
+/// later time tag. Other readings (wheel ticks) do not disturb the pairing. The interval is the
+/// time-tag difference to the previous sample (the first one, without a predecessor, is not
+/// emitted).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct EsfImu {
-    tag_ms: Option<u32>,
-    gyro_dps: [Option<f64>; 3],
-    accel_mps2: [Option<f64>; 3],
-    temperature_c: f64,
+    gyro: Option<(u32, [Option<f64>; 3])>,
+    accel: Option<(u32, [Option<f64>; 3])>,
+    temperature_c: Option<f64>,
     last_emitted_tag_ms: Option<u32>,
     seq: u64,
 }
@@ -108,38 +114,40 @@ impl EsfImu {
     /// Takes one ESF-MEAS received at `host_ns`; returns the sample it completes, if any.
     /// `imu_id` is left empty (the driver names the IMU); `device_ns` carries the time tag.
     pub fn push(&mut self, m: &EsfMeas, host_ns: i64) -> Option<ImuSample> {
-        if self.tag_ms != Some(m.time_tag_ms) {
-            *self = Self {
-                tag_ms: Some(m.time_tag_ms),
-                temperature_c: f64::NAN,
-                last_emitted_tag_ms: self.last_emitted_tag_ms,
-                seq: self.seq,
-                ..Self::default()
-            };
-        }
+        let tag = m.time_tag_ms;
         for r in m.readings() {
             let v = f64::from(r.value);
-            match r.data_type {
-                14 => self.gyro_dps[0] = Some(v * GYRO_DPS_PER_LSB),
-                13 => self.gyro_dps[1] = Some(v * GYRO_DPS_PER_LSB),
-                5 => self.gyro_dps[2] = Some(v * GYRO_DPS_PER_LSB),
-                16 => self.accel_mps2[0] = Some(v * ACCEL_MPS2_PER_LSB),
-                17 => self.accel_mps2[1] = Some(v * ACCEL_MPS2_PER_LSB),
-                18 => self.accel_mps2[2] = Some(v * ACCEL_MPS2_PER_LSB),
-                12 => self.temperature_c = v * 1e-2,
-                _ => {}
+            let (slot, axis, value) = match r.data_type {
+                14 => (&mut self.gyro, 0, v * GYRO_DPS_PER_LSB),
+                13 => (&mut self.gyro, 1, v * GYRO_DPS_PER_LSB),
+                5 => (&mut self.gyro, 2, v * GYRO_DPS_PER_LSB),
+                16 => (&mut self.accel, 0, v * ACCEL_MPS2_PER_LSB),
+                17 => (&mut self.accel, 1, v * ACCEL_MPS2_PER_LSB),
+                18 => (&mut self.accel, 2, v * ACCEL_MPS2_PER_LSB),
+                12 => {
+                    self.temperature_c = Some(v * 1e-2);
+                    continue;
+                }
+                _ => continue,
+            };
+            let triad = slot.get_or_insert((tag, [None; 3]));
+            if triad.0 != tag {
+                *triad = (tag, [None; 3]);
             }
+            triad.1[axis] = Some(value);
         }
-        let [Some(gx), Some(gy), Some(gz)] = self.gyro_dps else {
+        let (Some((tg, [Some(gx), Some(gy), Some(gz)])), Some((ta, [Some(ax), Some(ay), Some(az)]))) =
+            (self.gyro, self.accel)
+        else {
             return None;
         };
-        let [Some(ax), Some(ay), Some(az)] = self.accel_mps2 else {
+        if tg.abs_diff(ta) > ESF_PAIR_MS {
             return None;
-        };
-        let tag = m.time_tag_ms;
+        }
+        let tag = tg.max(ta);
+        self.gyro = None;
+        self.accel = None;
         let prev = self.last_emitted_tag_ms.replace(tag);
-        self.gyro_dps = [None; 3];
-        self.accel_mps2 = [None; 3];
         let dt_ms = tag.wrapping_sub(prev?);
         if dt_ms == 0 || dt_ms > 1000 {
             return None;
@@ -149,8 +157,8 @@ impl EsfImu {
         self.seq += 1;
         s.gyro_rps = [gx.to_radians(), gy.to_radians(), gz.to_radians()];
         s.accel_mps2 = [ax, ay, az];
-        s.dt_s = f64::from(dt_ms) * 1e-3;
-        s.temperature_c = self.temperature_c;
+        s.dt_s = f64::from(dt_ms) / 1e3;
+        s.temperature_c = self.temperature_c.unwrap_or(f64::NAN);
         Some(s)
     }
 }
@@ -180,36 +188,28 @@ mod tests {
     #[test]
     fn esf_readings_become_imu_samples_in_si_units() {
         let mut imu = EsfImu::default();
-        let all = |tag| {
-            meas(
-                tag,
-                &[
-                    (14, 4096),
-                    (13, -2048),
-                    (5, 0),
-                    (16, 1024),
-                    (17, 0),
-                    (18, -10_035),
-                    (12, 2_550),
-                ],
-            )
-        };
-        assert_eq!(imu.push(&all(1000), 5), None, "no interval before the first");
-        // Split over two messages with the same tag.
-        assert_eq!(imu.push(&meas(1010, &[(14, 4096), (13, -2048), (5, 0)]), 6), None);
-        let s = imu
-            .push(&meas(1010, &[(16, 1024), (17, 0), (18, -10_035)]), 7)
-            .expect("complete");
+        let gyro = |tag| meas(tag, &[(14, 4096), (13, -2048), (5, 0), (12, 2_550)]);
+        let accel = |tag| meas(tag, &[(16, 1024), (17, 0), (18, -10_035)]);
+        assert_eq!(imu.push(&accel(1005), 1), None);
+        assert_eq!(imu.push(&gyro(1000), 2), None, "no interval before the first");
+        // As a NEO-M8L sends them: the gyroscope, wheel ticks, then the accelerometer 5 ms later.
+        assert_eq!(imu.push(&gyro(1090), 3), None);
+        assert_eq!(imu.push(&meas(1100, &[(10, 77)]), 4), None);
+        let s = imu.push(&accel(1095), 5).expect("complete");
         assert!(
             (s.gyro_rps[0] - 1f64.to_radians()).abs() < 1e-12 && (s.gyro_rps[1] + 0.5f64.to_radians()).abs() < 1e-12
         );
         assert!((s.accel_mps2[0] - 1.0).abs() < 1e-12 && (s.accel_mps2[2] + 10_035.0 / 1024.0).abs() < 1e-12);
         assert_eq!(
             (s.dt_s, s.stamp.host_ns, s.stamp.device_ns, s.stamp.seq),
-            (0.01, 7, 1_010_000_000, 0)
+            (0.09, 5, 1_095_000_000, 0)
         );
-        assert!(s.temperature_c.is_nan(), "no temperature in that tag's messages");
-        let s = imu.push(&all(1020), 8).expect("complete");
-        assert_eq!((s.stamp.seq, s.temperature_c), (1, 25.5));
+        assert_eq!(s.temperature_c, 25.5);
+        // Triads too far apart are not one sample.
+        assert_eq!(imu.push(&gyro(1180), 6), None);
+        assert_eq!(imu.push(&accel(1240), 7), None);
+        // One message with both triads.
+        let both = meas(1300, &[(14, 0), (13, 0), (5, 0), (16, 0), (17, 0), (18, 0)]);
+        assert_eq!(imu.push(&both, 8).map(|s| (s.stamp.seq, s.dt_s)), Some((1, 0.205)));
     }
 }
