@@ -24,17 +24,20 @@
 //!   `--baud` never hunts: a wrong rate then shows as noise and checksum counters.
 //!
 //! Health counters besides the decoder's: `baud` (current rate), `baud_hunts`, `port_opens`,
-//! `port_open_failures`, `port_reopens` (read failures and hang-ups), `publish_errors`.
+//! `port_open_failures`, `port_reopens` (read failures and hang-ups), `publish_errors`,
+//! `extra_publish_errors` (time pulses, time marks, raw data, subframes, IMU samples not
+//! published), `events_unmapped` (time marks published without host times: the estimator's
+//! time mapping was not usable yet), `configure_acked`, `configure_failed`.
 
 use std::io::{ErrorKind, Read};
 use std::time::{Duration, Instant};
 
 use navsync_shared::health_reporter::{CounterId, HealthError, HealthReporter};
-use navsync_shared::ipc::{IpcError, IpcNode, IpcSample, Publisher};
+use navsync_shared::ipc::{IpcError, IpcNode, IpcSample, Publisher, Subscriber};
 use navsync_shared::reflect::fixed_str;
-use navsync_shared::samples::{GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample};
+use navsync_shared::samples::{GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, TimeState};
 use navsync_shared::services;
-use navsync_shared::time::monotonic_now_ns;
+use navsync_shared::time::{monotonic_now_ns, utc_ns_from_gps_ns};
 use serialport::{ClearBuffer, SerialPort, TTYPort};
 use tracing::{info, info_span, warn};
 
@@ -222,12 +225,27 @@ struct ExtraPublishers<'n> {
     raw: Option<Publisher<GnssRaw>>,
     nav_data: Option<Publisher<GnssNavData>>,
     imu: Option<Publisher<ImuSample>>,
+    /// The estimator's host → GNSS time mapping (`navsync/time/state`), subscribed on the
+    /// first time mark, and its latest state: a time mark's GNSS time is mapped back to the
+    /// host clock with it ([`GnssEvent::rising_host_ns`]).
+    time: Option<Subscriber<TimeState>>,
+    time_state: Option<TimeState>,
+    /// Time marks published without host times (no usable mapping yet).
+    events_unmapped: u64,
     /// Samples that could not be published (publisher creation or publishing failed).
     errors: u64,
 }
 
 impl ExtraPublishers<'_> {
     fn publish(&mut self, x: GnssExtra<'_>) {
+        let mapped;
+        let x = match x {
+            GnssExtra::Event(e) => {
+                mapped = self.map_to_host(e);
+                GnssExtra::Event(&mapped)
+            }
+            x => x,
+        };
         let id = self.id.as_str();
         let node = self.node;
         let r = match x {
@@ -250,6 +268,44 @@ impl ExtraPublishers<'_> {
             }
             self.errors += 1;
         }
+    }
+}
+
+impl ExtraPublishers<'_> {
+    /// The time mark with the host times of its edges, from the latest host → GNSS time
+    /// mapping the estimator published (GPS → UTC by the leap-second table, then
+    /// [`TimeState::host_ns_at`]); left at `i64::MIN` (and counted) while there is none.
+    fn map_to_host(&mut self, e: &GnssEvent) -> GnssEvent {
+        if self.time.is_none() {
+            match self.node.subscriber::<TimeState>(services::TIME_STATE) {
+                Ok(sub) => self.time = Some(sub),
+                Err(e) => {
+                    warn!("time marks get no host times: {e}");
+                    self.errors += 1;
+                }
+            }
+        }
+        if let Some(sub) = &self.time {
+            let latest = &mut self.time_state;
+            if sub.for_each(|t| *latest = Some(*t)).is_err() {
+                self.errors += 1;
+            }
+        }
+        let mut e = *e;
+        match self.time_state.filter(TimeState::is_valid) {
+            Some(t) => {
+                for (gps, host) in [
+                    (e.rising_gps_ns, &mut e.rising_host_ns),
+                    (e.falling_gps_ns, &mut e.falling_host_ns),
+                ] {
+                    if gps != i64::MIN {
+                        *host = t.host_ns_at(utc_ns_from_gps_ns(gps));
+                    }
+                }
+            }
+            None => self.events_unmapped += 1,
+        }
+        e
     }
 }
 
@@ -405,9 +461,13 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
         raw: None,
         nav_data: None,
         imu: None,
+        time: None,
+        time_state: None,
+        events_unmapped: 0,
         errors: 0,
     };
     let c_extra_errors = health.counter("extra_publish_errors")?;
+    let c_events_unmapped = health.counter("events_unmapped")?;
     let c_cfg_acked = health.counter("configure_acked")?;
     let c_cfg_failed = health.counter("configure_failed")?;
     let mut configured = false;
@@ -493,6 +553,7 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
                         extras.publish(x)
                     });
                     health.set(c_extra_errors, extras.errors);
+                    health.set(c_events_unmapped, extras.events_unmapped);
                     None
                 }
                 Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {

@@ -216,3 +216,30 @@ impl TimeState {
         !matches!(self.status(), TimeStatus::None | TimeStatus::Acquiring)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn host_ns_at_inverts_utc_ns_at() {
+        let mut s = TimeState::unknown();
+        s.ref_host_ns = 5_000_000_000_000;
+        s.ref_utc_ns = 1_790_000_000_000_000_000;
+        s.rate_error = -3.7e-6;
+        for dh in [
+            -86_400_000_000_000i64,
+            -1_000_000_007,
+            0,
+            999_999_937,
+            3_600_000_000_000,
+        ] {
+            let host = s.ref_host_ns + dh;
+            let back = s.host_ns_at(s.utc_ns_at(host));
+            assert!((back - host).abs() <= 1, "{dh}: {back} vs {host}");
+        }
+        // A 3.7 ppm fast host clock: one UTC hour is 3.7e-6 h less on the host.
+        let hour = 3_600_000_000_000i64;
+        assert_eq!(s.host_ns_at(s.ref_utc_ns + hour) - s.ref_host_ns, hour + 13_320_049);
+    }
+}

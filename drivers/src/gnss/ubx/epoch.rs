@@ -236,7 +236,7 @@ pub struct TimeMark {
 
 impl TimeMark {
     /// As the sample published on `navsync/gnss/{id}/event` (host times of the edges not
-    /// known here: `i64::MIN`), stamped at the message's receipt with sequence number `seq`.
+    /// known here: `i64::MIN`; the driver maps them with the estimator's time state), stamped at the message's receipt with sequence number `seq`.
     pub fn sample(&self, seq: u64) -> GnssEvent {
         GnssEvent {
             stamp: Stamp::host(self.host_ns, seq, StampSource::Receipt),
