@@ -1,13 +1,14 @@
 //! `navsync status` and `navsync echo --fields/--rate/--hz` against a live set of processes
-//! (sim, gps, pps, estimator with two IMUs): every process and service is found, rates, ages
-//! and subscriber counts are measured, the health counters, the time-sync state, d0, Δ and the
-//! per-IMU table are there, in JSON, as text and refreshing with `--watch`.
+//! (sim with a u-blox receiver, gnss, pps, estimator with two IMUs): every process and service
+//! is found, rates, ages and subscriber counts are measured, the health counters, the
+//! time-sync state, d0, Δ, the receiver's time pulse with its qErr and the per-IMU table are
+//! there, in JSON, as text and refreshing with `--watch`.
 
 mod clients_common;
 
 use std::time::Duration;
 
-use clients_common::{run_ok, start_live, wait_ready};
+use clients_common::{run_ok, start_live_speaking, wait_ready};
 use navsync_shared::samples::{ImuSample, NavState};
 use navsync_shared::services;
 use navsync_tests::TestEnv;
@@ -25,7 +26,7 @@ fn service<'a>(report: &'a Value, name: &str) -> &'a Value {
 #[test]
 fn status_and_echo_see_the_live_processes() {
     let mut env = TestEnv::new("status");
-    start_live(&mut env);
+    start_live_speaking(&mut env, "ubx");
     let node = env.node("observer");
     // This test's own subscribers: status must count them.
     let _nav_sub = node.subscriber::<NavState>(services::NAV_STATE).unwrap();
@@ -98,6 +99,16 @@ fn status_and_echo_see_the_live_processes() {
     assert!((0.0..1.0).contains(&d0), "d0 {d0}");
     assert!(t["receiver_latency_d0_s"]["epochs"].as_u64().unwrap() > 0);
     assert!(t["drift_ppm"].as_f64().is_some());
+    // The receiver's next time pulse (TIM-TP) and its quantisation error.
+    let pulses = r["time_pulses"].as_array().unwrap();
+    assert_eq!(pulses.len(), 1, "{pulses:?}");
+    assert_eq!(pulses[0]["service"], "navsync/gnss/0/timepulse");
+    assert!(pulses[0]["q_err_ns"].is_number(), "{pulses:?}");
+    assert!(
+        pulses[0]["pulse_utc_ns"]
+            .as_i64()
+            .is_some_and(|t| t > 1_600_000_000_000_000_000)
+    );
     let n = &r["nav"];
     assert!(n["lat_deg"].as_f64().is_some_and(|x| (x - 48.137).abs() < 0.01), "{n}");
     let imus = n["imu"].as_array().unwrap();
@@ -114,6 +125,7 @@ fn status_and_echo_see_the_live_processes() {
         "TIME  locked",
         "receiver latency d0",
         "GNSS delay",
+        "time pulse (navsync/gnss/0/timepulse): qErr ",
         "NAV ",
     ] {
         assert!(text.contains(needle), "`{needle}` missing:\n{text}");

@@ -9,7 +9,8 @@
 //! come from the service's dynamic configuration (this process's own subscriber not counted).
 //! The latest `Health` of each process gives its counters; the latest `TimeState` and
 //! `NavState` give the time-sync state, the receiver latency d0, the GNSS delay Δ and the
-//! per-IMU offsets.
+//! per-IMU offsets; a u-blox receiver's latest TIM-TP gives the qErr of its next pulse, its
+//! latest TIM-TM2 the last time mark.
 //!
 //! `--json` prints one JSON document (one line per refresh with `--watch`); `--watch S`
 //! refreshes every S seconds until Ctrl-C (`--count N` refreshes, then exits).
@@ -291,6 +292,7 @@ impl Status {
         let age = |h: i64| (now_ns - h) as f64 * 1e-9;
         let mut services = Vec::new();
         let (mut health, mut time, mut nav) = (Vec::new(), None, None);
+        let (mut pulses, mut marks) = (Vec::new(), Vec::new());
         for (name, w) in &mut self.services {
             let (publishers, subscribers) = w.monitor.ports();
             services.push(json!({
@@ -310,6 +312,8 @@ impl Status {
                 Some(AnySample::Health(h)) => health.push(health_json(&h, now_ns)),
                 Some(AnySample::Time(t)) => time = Some(time_json(&t, now_ns)),
                 Some(AnySample::Nav(n)) => nav = Some(nav_json(&n, now_ns)),
+                Some(AnySample::TimePulse(t)) => pulses.push(time_pulse_json(name, &t, now_ns)),
+                Some(AnySample::Event(e)) => marks.push(time_mark_json(name, &e, now_ns)),
                 _ => {}
             }
         }
@@ -339,6 +343,8 @@ impl Status {
             "other_services": self.foreign_services,
             "health": health,
             "time": time,
+            "time_pulses": pulses,
+            "time_marks": marks,
             "nav": nav,
         })
     }
@@ -411,6 +417,34 @@ fn time_json(t: &TimeState, now_ns: i64) -> Value {
         "gnss_delay_std_s": f(t.gnss_delay_std_s),
         "leap_s": t.leap_s,
         "imu": imu_table(&t.imu[..usize::from(t.imu_count).min(MAX_IMUS)]),
+    })
+}
+
+/// A receiver's latest report of its next time pulse (UBX TIM-TP): the quantisation error
+/// (qErr, the sawtooth correction the estimator applies to that PPS edge), ns.
+fn time_pulse_json(service: &str, t: &GnssTimePulse, now_ns: i64) -> Value {
+    json!({
+        "service": service,
+        "q_err_ns": (t.q_err_ps != i32::MIN).then(|| f64::from(t.q_err_ps) * 1e-3),
+        "pulse_utc_ns": (t.pulse_utc_ns != i64::MIN).then_some(t.pulse_utc_ns),
+        "time_base": match t.time_base { 0 => "gnss", _ => "utc" },
+        "age_s": (now_ns - t.stamp.host_ns) as f64 * 1e-9,
+    })
+}
+
+/// A receiver's latest time mark (UBX TIM-TM2): channel, count, accuracy, edges in GPS and host time.
+fn time_mark_json(service: &str, e: &GnssEvent, now_ns: i64) -> Value {
+    let known = |v: i64| (v != i64::MIN).then_some(v);
+    json!({
+        "service": service,
+        "channel": e.channel,
+        "count": e.count,
+        "accuracy_ns": e.accuracy_ns,
+        "rising_gps_ns": known(e.rising_gps_ns),
+        "rising_host_ns": known(e.rising_host_ns),
+        "falling_gps_ns": known(e.falling_gps_ns),
+        "falling_host_ns": known(e.falling_host_ns),
+        "age_s": (now_ns - e.stamp.host_ns) as f64 * 1e-9,
     })
 }
 
@@ -528,6 +562,32 @@ pub fn render_text(r: &Value) -> String {
         );
     } else {
         let _ = writeln!(s, "\nTIME  no time state");
+    }
+    for p in r["time_pulses"].as_array().map_or(&[][..], |v| v) {
+        let _ = writeln!(
+            s,
+            "      time pulse ({}): qErr {} ns, {} time base, reported {} ago",
+            p["service"].as_str().unwrap_or(""),
+            num(&p["q_err_ns"], 3),
+            p["time_base"].as_str().unwrap_or(""),
+            seconds(&p["age_s"])
+        );
+    }
+    for m in r["time_marks"].as_array().map_or(&[][..], |v| v) {
+        let _ = writeln!(
+            s,
+            "      time mark ({}): channel {} count {} ±{} ns, host time {}, reported {} ago",
+            m["service"].as_str().unwrap_or(""),
+            m["channel"],
+            m["count"],
+            m["accuracy_ns"],
+            if m["rising_host_ns"].is_null() {
+                "unknown"
+            } else {
+                "mapped"
+            },
+            seconds(&m["age_s"])
+        );
     }
     let n = &r["nav"];
     if n.is_object() {

@@ -25,6 +25,12 @@ pub fn repo_root() -> PathBuf {
 
 /// Starts sim, gps, pps and estimator (two IMUs).
 pub fn start_live(env: &mut TestEnv) {
+    start_live_speaking(env, "nmea");
+}
+
+/// [`start_live`] with the simulated receiver speaking `protocol` (`nmea` or `ubx`: NAV-PVT
+/// epochs and TIM-TP time pulses), read by `navsync gnss --protocol auto`.
+pub fn start_live_speaking(env: &mut TestEnv, protocol: &str) {
     let link = env.dir.join("gnss0");
     let link_s = link.display().to_string();
     let scen = scenario().display().to_string();
@@ -33,9 +39,33 @@ pub fn start_live(env: &mut TestEnv) {
         &["estimator", "--gnss", "0", "--pps", "0", "--imus", "0,1"],
     );
     env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
-    env.spawn("sim", &["sim", "--scenario", &scen, "--pty-link", &link_s]);
+    env.spawn(
+        "sim",
+        &[
+            "sim",
+            "--scenario",
+            &scen,
+            "--pty-link",
+            &link_s,
+            "--gnss-protocol",
+            protocol,
+        ],
+    );
     env.wait_for_path(&link, Duration::from_secs(20));
-    env.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+    env.spawn(
+        "gnss",
+        &[
+            "gnss",
+            "--port",
+            &link_s,
+            "--baud",
+            "115200",
+            "--id",
+            "0",
+            "--protocol",
+            "auto",
+        ],
+    );
 }
 
 /// Waits until the time mapping is locked and (with `aligned`) the filter is aligned; the last
