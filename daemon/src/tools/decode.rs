@@ -13,7 +13,7 @@ use navsync_drivers::gnss::capture::{decode_capture, epoch_json};
 pub struct Options {
     /// Capture file, or `-` for stdin.
     pub file: String,
-    /// The receiver's protocol: nmea.
+    /// The receiver's protocol: nmea, ubx (u-blox binary, NMEA on the same port skipped) or auto (UBX when the capture has UBX navigation, else NMEA).
     #[arg(long, default_value = "nmea")]
     pub protocol: Protocol,
 }

@@ -17,7 +17,7 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use navsync_shared::earth;
-use navsync_shared::samples::{FIX_FLAG_INVALID_LLH, FIX_FLAG_OK, GNSS_PROTOCOL_UBX, GnssFix};
+use navsync_shared::samples::{FIX_FLAG_INVALID_LLH, FIX_FLAG_OK, GNSS_PROTOCOL_UBX, GnssFix, UBX_MSG_HNR_PVT};
 
 use super::Measurement;
 use crate::nav::error_state::{ATT, BA, BG, DELAY, N, POS, VEL};
@@ -82,7 +82,9 @@ impl Default for GnssAccuracy {
 pub const HELD_ALTITUDE_STD_M: f64 = 1.0e3;
 
 /// Prepares a fix for fusion; `None` when it has no usable position (no 2D/3D fix, or the
-/// receiver flags it invalid). Accuracy, in order: the receiver's per-axis σ (NMEA GST); its
+/// receiver flags it invalid) or is not a GNSS solution: a u-blox HNR-PVT is the receiver's own
+/// GNSS/INS blend at up to 30 Hz, correlated from one to the next and with the receiver's
+/// IMU, and fusing it as an independent GNSS measurement would make the filter overconfident. Accuracy, in order: the receiver's per-axis σ (NMEA GST); its
 /// accuracy estimates (UBX hAcc, vAcc: σ north = σ east = hAcc/√2, σ down = vAcc); else the
 /// DOPs (VDOP unknown: 1.5·HDOP; HDOP unknown: 2). Velocity σ per axis: sAcc/√2 when reported,
 /// else the configured value.
@@ -92,7 +94,7 @@ pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Opt
     }
     let flagged_invalid = fix.fix_flags & FIX_FLAG_INVALID_LLH != 0
         || (fix.protocol == GNSS_PROTOCOL_UBX && fix.fix_flags & FIX_FLAG_OK == 0);
-    if flagged_invalid {
+    if flagged_invalid || fix.sentences & UBX_MSG_HNR_PVT != 0 {
         return None;
     }
     let hdop = if fix.hdop.is_finite() { fix.hdop } else { 2.0 };
@@ -516,5 +518,8 @@ mod tests {
         assert!(observation(&f, 0, &acc).is_none(), "gnssFixOK not set");
         f.fix_flags = FIX_FLAG_OK | FIX_FLAG_INVALID_LLH;
         assert!(observation(&f, 0, &acc).is_none(), "invalidLlh");
+        f.fix_flags = FIX_FLAG_OK;
+        f.sentences = UBX_MSG_HNR_PVT;
+        assert!(observation(&f, 0, &acc).is_none(), "HNR-PVT is the receiver's blend");
     }
 }
