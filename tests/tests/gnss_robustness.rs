@@ -2,7 +2,8 @@
 //! faults of a real serial line: malformed input (bad checksums, truncated, over-long and
 //! non-ASCII sentences, binary noise) counted exactly and logged once per kind; a wrong line
 //! rate (the feeder delivers what a UART at the reader's rate would receive) showing as noise,
-//! and `--baud auto` hunting its way to the right rate; the port vanishing (feeder killed:
+//! and `--baud auto` hunting its way to the right rate (also for a u-blox receiver in UBX with
+//! `--protocol auto`); the port vanishing (feeder killed:
 //! pseudo-terminal and link gone) and returning on the same link.
 
 use std::path::Path;
@@ -272,6 +273,45 @@ fn wrong_baud_is_noise_and_auto_hunts_to_the_right_rate() {
     let log = env.log("gnss-fixed");
     assert!(log.lines().count() < 10, "log flood:\n{log}");
     drop((fixed, auto, node));
+    env.finish();
+}
+
+/// A u-blox receiver sending UBX and NMEA at 38400 Bd (a real capture, looped) is found by
+/// `--baud auto --protocol auto`: valid UBX frames count as the right rate like NMEA
+/// sentences, and the epochs come from UBX.
+#[test]
+fn auto_baud_and_protocol_find_a_ublox_receiver() {
+    let mut env = TestEnv::new("gpsbaudubx");
+    let node = env.node("observer");
+    let capture = navsync_tests::shared_material("corpora/gpsd-ubx/ublox-neo-m8l.log");
+    let mut w = Watch::new(&env, &node, "ubx");
+    let link = env.dir.join("u");
+    spawn_feed(&mut env, "feed", &capture, &link, &["--baud", "38400", "--loop"]);
+    env.spawn(
+        "gnss",
+        &[
+            "gnss",
+            "--port",
+            &link.display().to_string(),
+            "--baud",
+            "auto",
+            "--protocol",
+            "auto",
+            "--id",
+            "ubx",
+        ],
+    );
+    assert!(
+        w.wait(Some(&mut env), |w| w.got.len() >= 8 && w.counter("baud") == 38_400),
+        "{} fixes, baud {}\n{}",
+        w.got.len(),
+        w.counter("baud"),
+        env.log("gnss")
+    );
+    assert!(w.counter("baud_hunts") >= 2, "hunts {}", w.counter("baud_hunts"));
+    assert!(w.got.iter().all(|f| f.protocol == GNSS_PROTOCOL_UBX), "epochs from UBX");
+    assert!(w.counter("ubx_frames") > 0, "UBX frames counted");
+    drop((w, node));
     env.finish();
 }
 
