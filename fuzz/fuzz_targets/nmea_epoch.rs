@@ -14,33 +14,13 @@ use navsync_drivers::gnss::Protocol;
 use navsync_drivers::gnss::capture::decode_capture;
 use navsync_drivers::gnss::nmea::epoch::EpochAssembler;
 use navsync_drivers::gnss::nmea::framer::{LineFramer, MAX_SENTENCE_LEN};
-use navsync_shared::samples::{FixMode, GnssFix};
+use navsync_fuzz::check_fix_plausible;
+use navsync_shared::samples::GnssFix;
 
 const NS_PER_DAY: i64 = 86_400_000_000_000;
 
 fn check_fix(f: &GnssFix) {
-    assert!(f.mode <= FixMode::Fix3d as u8, "mode {}", f.mode);
-    assert!(f.lat_deg.is_nan() || f.lat_deg.abs() <= 90.0, "lat {}", f.lat_deg);
-    assert!(f.lon_deg.is_nan() || f.lon_deg.abs() <= 180.0, "lon {}", f.lon_deg);
-    for (name, v) in [
-        ("lat", f.lat_deg),
-        ("lon", f.lon_deg),
-        ("alt", f.alt_msl_m),
-        ("geoid", f.geoid_sep_m),
-        ("vel_n", f.vel_n_mps),
-        ("vel_e", f.vel_e_mps),
-        ("vel_d", f.vel_d_mps),
-        ("speed", f.speed_mps),
-        ("track", f.track_deg),
-        ("hdop", f.hdop),
-        ("vdop", f.vdop),
-        ("pdop", f.pdop),
-        ("std_lat", f.std_lat_m),
-        ("std_lon", f.std_lon_m),
-        ("std_alt", f.std_alt_m),
-    ] {
-        assert!(!v.is_infinite(), "{name} is {v}");
-    }
+    check_fix_plausible(f);
     for (name, dop) in [("hdop", f.hdop), ("vdop", f.vdop), ("pdop", f.pdop)] {
         assert!(dop.is_nan() || (0.0..99.0).contains(&dop), "{name} {dop}");
     }

@@ -1,4 +1,4 @@
-//! Input formats shared by the fuzz targets.
+//! Input formats and checks shared by the fuzz targets.
 //!
 //! The IIO targets take a device description in text, as the driver reads it from sysfs, then
 //! (after the first empty line) binary records:
@@ -56,4 +56,35 @@ pub fn split_iio(data: &[u8]) -> (Vec<IioLine<'_>>, &[u8]) {
         })
         .collect();
     (lines, records)
+}
+
+/// What every emitted fix must satisfy, whatever the protocol: mode 0..=3, |lat| ≤ 90°,
+/// |lon| ≤ 180°, no infinite value (NaN is "not reported").
+pub fn check_fix_plausible(f: &navsync_shared::samples::GnssFix) {
+    use navsync_shared::samples::FixMode;
+    assert!(f.mode <= FixMode::Fix3d as u8, "mode {}", f.mode);
+    assert!(f.lat_deg.is_nan() || f.lat_deg.abs() <= 90.0, "lat {}", f.lat_deg);
+    assert!(f.lon_deg.is_nan() || f.lon_deg.abs() <= 180.0, "lon {}", f.lon_deg);
+    for (name, v) in [
+        ("lat", f.lat_deg),
+        ("lon", f.lon_deg),
+        ("alt", f.alt_msl_m),
+        ("geoid", f.geoid_sep_m),
+        ("vel_n", f.vel_n_mps),
+        ("vel_e", f.vel_e_mps),
+        ("vel_d", f.vel_d_mps),
+        ("speed", f.speed_mps),
+        ("track", f.track_deg),
+        ("hdop", f.hdop),
+        ("vdop", f.vdop),
+        ("pdop", f.pdop),
+        ("h_acc", f.h_acc_m),
+        ("v_acc", f.v_acc_m),
+        ("s_acc", f.s_acc_mps),
+        ("std_lat", f.std_lat_m),
+        ("std_lon", f.std_lon_m),
+        ("std_alt", f.std_alt_m),
+    ] {
+        assert!(!v.is_infinite(), "{name} is {v}");
+    }
 }

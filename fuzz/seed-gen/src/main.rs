@@ -44,6 +44,7 @@ fn nmea(out: &Out, repo: &Path) {
         geoid_sep_m: 47.75,
         vel_n_mps: 3.0,
         vel_e_mps: -4.0,
+        vel_d_mps: 0.5,
     };
     let report = |utc_ns: i64, fix: Option<FixReport>| EpochReport {
         utc_ns,
@@ -68,9 +69,26 @@ fn nmea(out: &Out, repo: &Path) {
         }
         cases.push((name, bytes));
     }
-    for (name, bytes) in cases {
-        out.put("nmea_epoch", name, &bytes);
+    for (name, bytes) in &cases {
+        out.put("nmea_epoch", name, bytes);
     }
+    // The simulated u-blox receiver (NAV-PVT, NAV-EOE, TIM-TP), alone and with NMEA between
+    // its epochs, as on a port configured for both.
+    let extras = navsync_sim::ubx::UbxExtras {
+        h_acc_m: 0.9,
+        v_acc_m: 1.4,
+        s_acc_mps: 0.08,
+        next_pulse_q_err_ps: -4331,
+    };
+    let (mut ubx, mut mixed) = (Vec::new(), Vec::new());
+    for k in 0..8 {
+        let r = report(epoch0 + k * 1_000_000_000, (k != 4).then(|| fix(k)));
+        navsync_sim::ubx::write_epoch(&r, &extras, &mut ubx);
+        navsync_sim::ubx::write_epoch(&r, &extras, &mut mixed);
+        write_burst("GN", &r, &mut mixed);
+    }
+    out.put("ubx_stream", "sim_ubx_1hz", &ubx);
+    out.put("ubx_stream", "sim_ubx_and_nmea", &mixed);
     out.put("nmea_epoch", "repo_sentences", &quoted_sentences(repo));
 }
 

@@ -12,6 +12,9 @@
 //!   have been completed without such a message (the receiver was reconfigured). Otherwise
 //!   it is counted (`auto_nmea_suppressed`) and dropped, so each epoch is reported once,
 //!   from UBX, the richer protocol.
+//!
+//! The fixes emitted are numbered anew (`stamp.seq` 0, 1, 2, … whichever protocol each came
+//! from), so a gap in the sequence is a lost sample as everywhere else.
 
 use navsync_shared::samples::GnssFix;
 
@@ -37,6 +40,10 @@ pub struct AutoDecoder {
     nmea_since_ubx: u32,
     /// NMEA epochs dropped because UBX navigates.
     suppressed: u64,
+    /// Fixes emitted: their sequence numbers, one count for both protocols (the two decoders
+    /// number their own epochs, and suppressed NMEA epochs would leave gaps that subscribers
+    /// take for losses).
+    emitted: u64,
 }
 
 impl AutoDecoder {
@@ -64,6 +71,14 @@ impl AutoDecoder {
     /// NMEA epochs dropped because UBX navigates.
     pub fn nmea_suppressed(&self) -> u64 {
         self.suppressed
+    }
+
+    /// Emits `fix` with the next sequence number.
+    fn renumbered(emitted: &mut u64, fix: &GnssFix, out: &mut impl FnMut(&GnssFix)) {
+        let mut f = *fix;
+        f.stamp.seq = *emitted;
+        *emitted += 1;
+        out(&f);
     }
 
     /// An NMEA epoch: emitted unless UBX navigated when it began.
@@ -109,7 +124,9 @@ impl GnssDecoder for AutoDecoder {
             ubx_since_ns,
             nmea_since_ubx,
             suppressed,
+            emitted,
         } = self;
+        let out = &mut |fix: &GnssFix| Self::renumbered(emitted, fix, out);
         ubx.push_events(bytes, read_host_ns, ns_per_byte, &mut |ev| match ev {
             Event::Fix(fix) => out(fix),
             Event::Extra(x) => extra(x),
@@ -133,15 +150,17 @@ impl GnssDecoder for AutoDecoder {
     }
 
     fn flush(&mut self, out: &mut impl FnMut(&GnssFix)) {
-        self.ubx.flush(out);
         let Self {
+            ubx,
             nmea,
             ubx_navigates,
             ubx_since_ns,
             nmea_since_ubx,
             suppressed,
-            ..
+            emitted,
         } = self;
+        let out = &mut |fix: &GnssFix| Self::renumbered(emitted, fix, out);
+        ubx.flush(out);
         let since = *ubx_since_ns;
         nmea.flush(&mut |fix| Self::nmea_fix(ubx_navigates, since, nmea_since_ubx, suppressed, fix, out));
     }
@@ -230,6 +249,12 @@ mod tests {
             vec![GNSS_PROTOCOL_NMEA, GNSS_PROTOCOL_UBX, GNSS_PROTOCOL_UBX]
         );
         assert_eq!(d.nmea_suppressed(), 2);
+        let seqs: Vec<u64> = fixes.iter().map(|f| f.stamp.seq).collect();
+        assert_eq!(
+            seqs,
+            [0, 1, 2],
+            "one numbering for both protocols, no gap for suppressed epochs"
+        );
         // UBX stops: after NMEA_TAKEOVER_EPOCHS NMEA epochs NMEA is reported again.
         let mut s = Vec::new();
         for i in 0..15 {
@@ -242,6 +267,7 @@ mod tests {
         // dropped, the 10th in a row is reported.
         let dropped = NMEA_TAKEOVER_EPOCHS as usize - 1 - 2;
         assert_eq!(fixes.len(), 15 - dropped);
+        assert!(fixes.iter().enumerate().all(|(i, f)| f.stamp.seq == 3 + i as u64));
         assert_eq!(d.nmea_suppressed(), 2 + dropped as u64);
         assert!(!d.ubx_navigates());
     }
