@@ -7,6 +7,7 @@
 //!
 //! - [`ipc`]: publisher → subscriber latency between processes, iceoryx2 against a Unix socket.
 //! - [`e2e`]: IMU driver → estimator → subscriber latency of the live pipeline, CPU and memory.
+//! - [`gnss_latency`]: a receiver's epoch → fix at a subscriber, navsync against gpsd.
 //! - [`throughput`]: IMU samples per second through the estimator library.
 //! - [`timing`]: the time synchronisation against the simulated host oscillator (offline).
 //! - [`util`]: percentiles, the machine's state, child processes, JSON.
@@ -16,6 +17,7 @@
 //! benchmark, the end-to-end subscriber).
 
 pub mod e2e;
+pub mod gnss_latency;
 pub mod ipc;
 pub mod throughput;
 pub mod timing;

@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use navsync_bench::{e2e, ipc, throughput, timing};
+use navsync_bench::{e2e, gnss_latency, ipc, throughput, timing};
 
 #[derive(Parser)]
 #[command(name = "navsync-bench", version, about = "navsync's benchmarks")]
@@ -24,6 +24,9 @@ enum Cmd {
     /// Estimator throughput (IMU samples/s, one core) for several IMU counts; `--hour`: the
     /// cost per sample per 10 minutes of a one-hour drive.
     Throughput(throughput::ThroughputArgs),
+    /// A receiver's epoch → the fix at a subscriber (Rust client, navsync echo), against gpsd
+    /// → gpspipe in the same run, on real captures written epoch by epoch into pseudo-terminals.
+    GnssLatency(gnss_latency::GnssLatencyArgs),
     /// The processes the benchmarks start (publishers and subscribers).
     #[command(subcommand, hide = true)]
     Helper(Helper),
@@ -44,6 +47,12 @@ enum Helper {
         #[arg(long)]
         duration_s: f64,
     },
+    /// Prints the receipt time of every fix on a GNSS fix service (`gnss-latency`).
+    GnssSub {
+        /// The service, e.g. navsync/gnss/0/fix.
+        #[arg(long)]
+        service: String,
+    },
 }
 
 fn main() -> Result<()> {
@@ -57,6 +66,8 @@ fn main() -> Result<()> {
         Cmd::Ipc(a) => drop(ipc::run(&a).context("IPC benchmark")?),
         Cmd::E2e(a) => drop(e2e::run(&a).context("end-to-end benchmark")?),
         Cmd::Throughput(a) => drop(throughput::run(&a).context("throughput benchmark")?),
+        Cmd::GnssLatency(a) => drop(gnss_latency::run(&a).context("GNSS latency benchmark")?),
+        Cmd::Helper(Helper::GnssSub { service }) => gnss_latency::helper_sub(&service).context("gnss-sub")?,
         Cmd::Helper(Helper::IpcPub(a)) => ipc::helper_pub(&a).context("ipc-pub")?,
         Cmd::Helper(Helper::IpcSub(a)) => ipc::helper_sub(&a).context("ipc-sub")?,
         Cmd::Helper(Helper::E2eSub { warmup_s, duration_s }) => {

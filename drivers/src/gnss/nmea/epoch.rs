@@ -8,7 +8,9 @@
 //! - as soon as the receiver's **last data sentence of the cycle** arrives, once it has been
 //!   learned from the stream: at every time-tag change the last sentence that carried fix
 //!   data (address and occurrence, e.g. the 2nd `GNGSA`) is a candidate, trusted after two
-//!   consecutive cycle boundaries agree. Sentences without fix data (GSV, TXT, proprietary)
+//!   consecutive cycle boundaries agree. An epoch emitted on [`EpochAssembler::flush`] (the
+//!   line went idle: the live driver's case when the receiver pauses between bursts) votes
+//!   too, when the next epoch's first time tag differs from its own. Sentences without fix data (GSV, TXT, proprietary)
 //!   never count, so trailing satellite views do not delay the fix. The learned ender is
 //!   forgotten (and relearned) when data for the emitted epoch arrive after it — that epoch
 //!   is then reassembled with them and emitted again, same stamp, next sequence number — and
@@ -422,6 +424,9 @@ pub struct EpochAssembler {
     ender: Option<Key>,
     candidate: Option<Key>,
     votes: u8,
+    /// The last data sentence and time tag of an epoch emitted on flush: a vote for the cycle
+    /// ender once the next epoch's time tag is seen to differ.
+    flushed: Option<(Key, i64)>,
     seq: u64,
     counters: EpochCounters,
 }
@@ -445,6 +450,7 @@ impl EpochAssembler {
             ender: None,
             candidate: None,
             votes: 0,
+            flushed: None,
             seq: 0,
             counters: EpochCounters::default(),
         }
@@ -554,6 +560,12 @@ impl EpochAssembler {
 
     /// Routing of a fix sentence (GGA, RMC, GNS, GLL) with time tag `t` (if any).
     fn route_fix(&mut self, t: Option<i64>, address: &[u8], out: &mut impl FnMut(&GnssFix)) {
+        if let (Some((key, flushed_tod)), Some(t)) = (self.flushed, t) {
+            self.flushed = None;
+            if flushed_tod != t {
+                self.learn(key);
+            }
+        }
         if self.cur.open {
             match (self.cur.tod_ns, t) {
                 (Some(c), Some(t)) if c != t => {
@@ -595,6 +607,7 @@ impl EpochAssembler {
         self.ender = None;
         self.candidate = None;
         self.votes = 0;
+        self.flushed = None;
     }
 
     /// One vote for `key` as the cycle ender (it was the last data sentence before a time-tag
@@ -614,6 +627,10 @@ impl EpochAssembler {
     /// Completes the open epoch and hands it to `out` (epochs without fix data are dropped).
     fn emit(&mut self, how: Close, out: &mut impl FnMut(&GnssFix)) {
         let e = core::mem::replace(&mut self.cur, Epoch::closed());
+        self.flushed = match (how, e.last_data_key, e.tod_ns) {
+            (Close::Flush, Some(k), Some(tod)) if !e.tod_from_zda => Some((k, tod)),
+            _ => None,
+        };
         if !e.has_data {
             return;
         }
@@ -828,6 +845,30 @@ mod tests {
         assert!(flush(&mut asm).is_empty(), "nothing left over");
         let times: Vec<i64> = out.iter().map(|o| o.1.utc_ns).collect();
         assert!(times.windows(2).all(|w| w[1] - w[0] == NS_PER_S));
+    }
+
+    #[test]
+    fn the_cycle_is_learned_from_bursts_flushed_by_the_idle_line() {
+        // The live driver's case: each burst is followed by silence, so every epoch is emitted
+        // on flush until the ender is known; then on its last data sentence.
+        let mut asm = EpochAssembler::new();
+        let mut emitted = Vec::new();
+        for s in 10..16 {
+            let t = format!("1200{s}");
+            let burst = [rmc(&t, "150326"), gga(&t), gsa(), nmea("GPGSV,1,1,01,01,40,083,46")];
+            let mut in_burst = 0;
+            for b in &burst {
+                asm.push(b.as_bytes(), 0, &mut |_| in_burst += 1);
+            }
+            let mut flushed = 0;
+            asm.flush(&mut |_| flushed += 1);
+            emitted.push((in_burst, flushed));
+        }
+        // Bursts 1 and 2 are flushed; the first time tags of bursts 2 and 3 vote GSA #1, so
+        // burst 3 on is emitted on its GSA.
+        assert_eq!(emitted, [(0, 1), (0, 1), (1, 0), (1, 0), (1, 0), (1, 0)]);
+        assert_eq!(asm.cycle_ender(), Some(("GPGSA", 1)));
+        assert_eq!((asm.counters().ender_emits, asm.counters().flush_emits), (4, 2));
     }
 
     #[test]

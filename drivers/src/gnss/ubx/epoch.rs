@@ -6,10 +6,16 @@
 //!
 //! - at **NAV-EOE** of its `iTOW` (protocol 18+ receivers send it after the epoch's last NAV
 //!   message);
+//! - else at the receiver's **last NAV message of the cycle**, once learned: whenever an
+//!   epoch ends without NAV-EOE (a NAV message of another `iTOW` arrives, or the line went
+//!   idle and the next epoch begins), its last NAV message is a candidate, trusted after
+//!   [`ENDER_VOTES`] consecutive epochs agree, and forgotten when a NAV message for the epoch
+//!   arrives after it (that epoch is then reopened and emitted again, as below);
 //! - else when a NAV message with **another `iTOW`** arrives (the first of the next epoch);
 //! - else on [`EpochAssembler::flush`] (the live driver calls it when the line goes idle).
 //!
-//! A NAV message for the epoch just emitted at NAV-EOE or on flush reopens it: it is
+//! A NAV message for the epoch just emitted at NAV-EOE, at the learned last message or on
+//! flush reopens it: it is
 //! completed and emitted once more (same time and stamp, next sequence number; consumers keep
 //! the later of two fixes with the same time); one for the epoch before the one being
 //! assembled is too late and dropped (both counted, `late_messages`). The stamp of an epoch
@@ -79,6 +85,10 @@ const NS_PER_WEEK: i64 = SECONDS_PER_WEEK * NS_PER_S;
 /// Nanoseconds per millisecond.
 const NS_PER_MS: i64 = 1_000_000;
 
+/// Consecutive epochs that must end with the same NAV message before it is trusted as the
+/// receiver's last message of the cycle.
+pub const ENDER_VOTES: u8 = 2;
+
 /// Counters of [`EpochAssembler`], since creation.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct EpochCounters {
@@ -90,6 +100,8 @@ pub struct EpochCounters {
     pub eoe_emits: u64,
     /// NAV epochs emitted by [`EpochAssembler::flush`] (subset of `epochs`).
     pub flush_emits: u64,
+    /// NAV epochs emitted at the learned last NAV message of the cycle (subset of `epochs`).
+    pub ender_emits: u64,
     /// NAV messages for an epoch already emitted: merged and the epoch emitted again when it
     /// was closed by NAV-EOE or flush, dropped when a later epoch had already begun.
     pub late_messages: u64,
@@ -107,12 +119,13 @@ pub struct EpochCounters {
 
 impl EpochCounters {
     /// The counters with short names for a `Health` report (names ≤ 23 bytes).
-    pub fn named(&self) -> [(&'static str, u64); 10] {
+    pub fn named(&self) -> [(&'static str, u64); 11] {
         [
             ("ubx_nav_messages", self.nav_messages),
             ("ubx_epochs", self.epochs),
             ("ubx_eoe_emits", self.eoe_emits),
             ("ubx_flush_emits", self.flush_emits),
+            ("ubx_ender_emits", self.ender_emits),
             ("ubx_late_messages", self.late_messages),
             ("ubx_hnr_fixes", self.hnr_fixes),
             ("ubx_no_time", self.no_time),
@@ -277,6 +290,8 @@ struct Epoch {
     /// Satellites used (`numSV`).
     num_sv: Option<u16>,
     sats: Option<SatView>,
+    /// The last NAV message merged other than NAV-EOE (its name), for learning the cycle.
+    last_msg: Option<&'static str>,
 }
 
 impl Epoch {
@@ -298,6 +313,7 @@ impl Epoch {
             ned_vel: false,
             num_sv: None,
             sats: None,
+            last_msg: None,
         }
     }
 
@@ -592,6 +608,7 @@ fn gps_from_utc(utc_ns: i64, leap_s: Option<i64>) -> i64 {
 enum Close {
     NextEpoch,
     Eoe,
+    Ender,
     Flush,
 }
 
@@ -609,6 +626,13 @@ pub struct EpochAssembler {
     sats: SatView,
     time_pulse: Option<TimePulse>,
     time_mark: Option<TimeMark>,
+    /// The learned last NAV message of the cycle, the candidate and its votes.
+    ender: Option<&'static str>,
+    candidate: Option<&'static str>,
+    votes: u8,
+    /// The last message and `iTOW` of an epoch emitted on flush: a vote once the next epoch
+    /// begins.
+    flushed: Option<(&'static str, u32)>,
     seq: u64,
     counters: EpochCounters,
 }
@@ -630,9 +654,38 @@ impl EpochAssembler {
             sats: SatView::EMPTY,
             time_pulse: None,
             time_mark: None,
+            ender: None,
+            candidate: None,
+            votes: 0,
+            flushed: None,
             seq: 0,
             counters: EpochCounters::default(),
         }
+    }
+
+    /// The learned last NAV message of the receiver's cycle (e.g. `"NAV-DOP"`); `None` while
+    /// not (or no longer) known, and for receivers that send NAV-EOE.
+    pub fn cycle_ender(&self) -> Option<&'static str> {
+        self.ender
+    }
+
+    /// One vote for `name` as the last NAV message of the cycle.
+    fn learn(&mut self, name: &'static str) {
+        if self.candidate == Some(name) {
+            self.votes = self.votes.saturating_add(1);
+        } else {
+            self.candidate = Some(name);
+            self.votes = 1;
+        }
+        if self.votes >= ENDER_VOTES {
+            self.ender = Some(name);
+        }
+    }
+
+    fn forget_ender(&mut self) {
+        self.ender = None;
+        self.candidate = None;
+        self.votes = 0;
     }
 
     /// Counters since creation.
@@ -679,8 +732,10 @@ impl EpochAssembler {
         self.counters.nav_messages += 1;
         if self.cur.open && self.cur.itow_ms != itow_ms {
             if self.last_itow_ms == Some(itow_ms) {
-                // For the epoch before the one being assembled: too late to merge.
+                // For the epoch before the one being assembled: too late to merge (and if
+                // that epoch was emitted at a learned last message, that was wrong).
                 self.counters.late_messages += 1;
+                self.forget_ender();
                 return;
             }
             self.emit(Close::NextEpoch, out);
@@ -688,11 +743,21 @@ impl EpochAssembler {
         if !self.cur.open {
             match self.prev.take() {
                 Some(prev) if prev.itow_ms == itow_ms => {
-                    // The epoch emitted at NAV-EOE or on flush was not complete after all.
+                    // The epoch emitted at NAV-EOE, the learned last message or on flush was
+                    // not complete after all.
                     self.counters.late_messages += 1;
+                    self.forget_ender();
+                    self.flushed = None;
                     self.cur = prev;
                 }
-                _ => self.cur = Epoch::start(itow_ms, host_ns),
+                _ => {
+                    if let Some((name, flushed_itow)) = self.flushed.take()
+                        && flushed_itow != itow_ms
+                    {
+                        self.learn(name);
+                    }
+                    self.cur = Epoch::start(itow_ms, host_ns);
+                }
             }
         }
         self.cur.merge(msg);
@@ -701,6 +766,11 @@ impl EpochAssembler {
         }
         if matches!(msg, Message::NavEoe(_)) {
             self.emit(Close::Eoe, out);
+        } else {
+            self.cur.last_msg = Some(msg.name());
+            if self.ender == Some(msg.name()) {
+                self.emit(Close::Ender, out);
+            }
         }
     }
 
@@ -789,11 +859,20 @@ impl EpochAssembler {
         let e = core::mem::replace(&mut self.cur, Epoch::closed());
         self.prev = (how != Close::NextEpoch).then_some(e);
         self.last_itow_ms = Some(e.itow_ms);
+        // An epoch that ended without NAV-EOE teaches the cycle: at once when the next epoch's
+        // first message closed it, when the next epoch begins if the line went idle.
+        self.flushed = None;
+        match (how, e.last_msg) {
+            (Close::NextEpoch, Some(name)) => self.learn(name),
+            (Close::Flush, Some(name)) => self.flushed = Some((name, e.itow_ms)),
+            _ => {}
+        }
         if !e.has_data() {
             return;
         }
         match how {
             Close::Eoe => self.counters.eoe_emits += 1,
+            Close::Ender => self.counters.ender_emits += 1,
             Close::Flush => self.counters.flush_emits += 1,
             Close::NextEpoch => {}
         }
@@ -1108,6 +1187,48 @@ mod tests {
     }
 
     #[test]
+    fn the_last_nav_message_of_the_cycle_is_learned() {
+        // A receiver without NAV-EOE: NAV-PVT, NAV-DOP per epoch, each epoch one burst
+        // followed by silence (flush), as on a live port.
+        let mut asm = EpochAssembler::new();
+        let mut emitted = Vec::new();
+        for k in 1..=6u32 {
+            let itow = k * 1000;
+            let mut in_burst = 0;
+            for m in [pvt_msg(itow, 3, 1), dop(itow)] {
+                asm.push(&m, 0, &mut |_| in_burst += 1);
+            }
+            let mut flushed = 0;
+            asm.flush(&mut |_| flushed += 1);
+            emitted.push((in_burst, flushed));
+        }
+        // Epochs 1 and 2 are flushed and vote NAV-DOP when the next epoch begins.
+        assert_eq!(emitted, [(0, 1), (0, 1), (1, 0), (1, 0), (1, 0), (1, 0)]);
+        assert_eq!(asm.cycle_ender(), Some("NAV-DOP"));
+        assert_eq!(asm.counters().ender_emits, 4);
+        // The receiver adds NAV-SAT after NAV-DOP: that epoch is reopened, emitted again
+        // complete, and the learned message forgotten.
+        let mut out = Vec::new();
+        for m in [pvt_msg(7000, 3, 1), dop(7000), sat(7000)] {
+            asm.push(&m, 0, &mut |f| out.push(*f));
+        }
+        asm.flush(&mut |f| out.push(*f));
+        assert_eq!(out.len(), 2, "emitted at NAV-DOP, then again complete");
+        assert_eq!(out[0].utc_ns, out[1].utc_ns);
+        assert!(out[1].sentences & UBX_MSG_NAV_SAT != 0);
+        assert_eq!(asm.cycle_ender(), None);
+        // Without NAV-EOE but with the next epoch arriving at once (no idle line), it is
+        // learned from the epoch boundaries.
+        let mut asm = EpochAssembler::new();
+        let msgs: Vec<Message> = (1..=5u32)
+            .flat_map(|k| [pvt_msg(k * 1000, 3, 1), dop(k * 1000)])
+            .collect();
+        let out = run(&mut asm, &msgs);
+        let at: Vec<usize> = out.iter().map(|o| o.0).collect();
+        assert_eq!(at, [2, 4, 5, 7, 9], "next-epoch closes, then at NAV-DOP");
+    }
+
+    #[test]
     fn late_messages_reopen_an_epoch_or_are_dropped() {
         let mut asm = EpochAssembler::new();
         let mut out = run(&mut asm, &[pvt_msg(1000, 3, 1), eoe(1000), dop(1000)]);
@@ -1287,23 +1408,6 @@ mod tests {
 
     #[test]
     fn satellites_of_the_last_epoch() {
-        let sat = |itow_ms: u32| {
-            let mut p = P::default().u4(itow_ms).u1(1).u1(2).zeros(2).0;
-            for (sv, used) in [(5u8, true), (7, false)] {
-                p.extend(
-                    P::default()
-                        .u1(0)
-                        .u1(sv)
-                        .u1(40)
-                        .i1(30)
-                        .i2(120)
-                        .i2(0)
-                        .u4(if used { 0x0F } else { 0x04 })
-                        .0,
-                );
-            }
-            decode(1, 0x35, &p).unwrap()
-        };
         let mut asm = EpochAssembler::new();
         assert_eq!(asm.satellites().len, 0);
         // NAV-SAT alone: sats_used from its flags, no time.
@@ -1328,6 +1432,25 @@ mod tests {
         let v = asm.satellites();
         assert_eq!(v.itow_ms, 2000);
         assert_ne!(v.utc_ns, i64::MIN, "the epoch's time");
+    }
+
+    /// NAV-SAT with satellite 5 used and 7 not.
+    fn sat(itow_ms: u32) -> Message {
+        let mut p = P::default().u4(itow_ms).u1(1).u1(2).zeros(2).0;
+        for (sv, used) in [(5u8, true), (7, false)] {
+            p.extend(
+                P::default()
+                    .u1(0)
+                    .u1(sv)
+                    .u1(40)
+                    .i1(30)
+                    .i2(120)
+                    .i2(0)
+                    .u4(if used { 0x0F } else { 0x04 })
+                    .0,
+            );
+        }
+        decode(1, 0x35, &p).unwrap()
     }
 
     #[test]

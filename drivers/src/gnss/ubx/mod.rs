@@ -400,6 +400,6 @@ pub(crate) mod tests {
             n += 1;
             assert!(name.len() <= MAX_NAME_LEN, "{name}");
         });
-        assert_eq!(n, 23);
+        assert_eq!(n, 24);
     }
 }
