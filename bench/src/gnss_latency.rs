@@ -3,7 +3,8 @@
 //!
 //! A real receiver capture (gpsd's regression corpora) is cut into its epochs (NMEA: a new
 //! time tag in GGA/RMC/GNS/GLL starts one; UBX: a new `iTOW` in a NAV message; everything
-//! else belongs to the epoch it follows) and each epoch is written into a pseudo-terminal in
+//! else belongs to the epoch it follows; the capture's first and last epochs, cut by the
+//! recording, are left out) and each epoch is written into a pseudo-terminal in
 //! one write, [`GnssLatencyArgs::spacing_s`] apart, the capture looped until
 //! [`GnssLatencyArgs::epochs`] have been written. The clock starts right before that write
 //! (which puts the epoch's last byte into the terminal within microseconds; a reader woken
@@ -44,7 +45,7 @@ pub struct GnssLatencyArgs {
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "gpsd-nmea/bu353s4.log,gpsd-nmea/nmea-rtk.log,gpsd-ubx/u-blox-m8t-time.log,gpsd-ubx/ublox-neo-m8n.log"
+        default_value = "gpsd-nmea/bu353s4.log,gpsd-nmea/nmea-rtk.log,gpsd-ubx/u-blox-m8t-time.log,gpsd-ubx/ublox-neo-m8n.log,gpsd-ubx/ublox-glo.log"
     )]
     pub captures: Vec<String>,
     /// Epochs written per capture (the capture is looped as needed).
@@ -315,7 +316,12 @@ fn run_capture(
         .file_name()
         .map_or(spec.into(), |n| n.to_string_lossy().to_string());
     let bytes = std::fs::read(&path).map_err(|e| GnssLatencyError::Capture(spec.into(), e.to_string()))?;
-    let epochs = epochs_of(&bytes);
+    let mut epochs = epochs_of(&bytes);
+    // A capture starts and ends mid-epoch: looped, its partial first and last epochs would be
+    // cycles the receiver never sent.
+    if epochs.len() > 4 {
+        epochs = epochs[1..epochs.len() - 1].to_vec();
+    }
     if epochs.is_empty() {
         return Err(GnssLatencyError::NoEpochs(name));
     }

@@ -7,7 +7,7 @@
 //!
 //! - as soon as the receiver's **last data sentence of the cycle** arrives, once it has been
 //!   learned from the stream: at every time-tag change the last sentence that carried fix
-//!   data (address and occurrence, e.g. the 2nd `GNGSA`) is a candidate, trusted after two
+//!   data (formatter and occurrence, e.g. the 2nd GSA, whichever talker) is a candidate, trusted after two
 //!   consecutive cycle boundaries agree. An epoch emitted on [`EpochAssembler::flush`] (the
 //!   line went idle: the live driver's case when the receiver pauses between bursts) votes
 //!   too, when the next epoch's first time tag differs from its own. Sentences without fix data (GSV, TXT, proprietary)
@@ -66,8 +66,8 @@ const HALF_DAY_NS: i64 = NS_PER_DAY / 2;
 const ENDER_VOTES: u8 = 2;
 /// Longest sentence address kept for cycle-ender keys (`GPGGA`, `PGRME`, `PMTK001`).
 const ADDR_MAX: usize = 8;
-/// Distinct sentence addresses tracked per epoch for occurrence numbering.
-const SEEN_MAX: usize = 24;
+/// Distinct sentence addresses and formatters tracked per epoch for occurrence numbering.
+const SEEN_MAX: usize = 40;
 /// Distinct (system, PRN) pairs tracked per epoch from GSA.
 const PRN_MAX: usize = 64;
 
@@ -208,9 +208,30 @@ impl Epoch {
             .map_or(0, |s| s.1)
     }
 
-    /// Records one more occurrence of `address`; returns its key.
+    /// Records one more occurrence of `address`; returns its key for learning the cycle: the
+    /// sentence formatter without the talker (`GSA`, `RMC`; proprietary addresses whole) and
+    /// its occurrence among the epoch's sentences of that formatter, so that a receiver
+    /// switching talkers with the constellations it uses (`$GNRMC` ↔ `$GPRMC`) keeps its cycle,
+    /// while `$GPGSA`, `$GLGSA` are GSA #1 and #2.
     fn note(&mut self, address: &[u8]) -> Key {
-        let addr = Key::addr_of(address);
+        self.bump(Key::addr_of(address));
+        let formatter = match address {
+            [b'P', ..] => address,
+            [_, _, rest @ ..] if address.len() == 5 => rest,
+            _ => address,
+        };
+        // Formatter entries share the table, marked by a leading '*'.
+        let mut addr = [0u8; ADDR_MAX];
+        addr[0] = b'*';
+        for (o, &b) in addr[1..].iter_mut().zip(formatter) {
+            *o = b;
+        }
+        let occurrence = self.bump(addr);
+        Key { addr, occurrence }
+    }
+
+    /// One more occurrence of `addr` in the table; returns its count.
+    fn bump(&mut self, addr: [u8; ADDR_MAX]) -> u8 {
         let n = self.n_seen;
         let occurrence = match self.seen[..n].iter_mut().find(|(a, _)| *a == addr) {
             Some(slot) => {
@@ -224,7 +245,7 @@ impl Epoch {
             }
             None => 1,
         };
-        Key { addr, occurrence }
+        occurrence
     }
 
     /// Satellites used: the larger of the GGA/GNS count and the GSA PRN count (both can
@@ -461,12 +482,12 @@ impl EpochAssembler {
         &self.counters
     }
 
-    /// The learned last data-carrying sentence of the receiver's cycle and its occurrence
-    /// within the cycle, e.g. `("GPGSA", 2)`; `None` while not (or no longer) known.
+    /// The learned last data-carrying sentence of the receiver's cycle (its formatter) and its
+    /// occurrence within the cycle, e.g. `("GSA", 2)`; `None` while not (or no longer) known.
     pub fn cycle_ender(&self) -> Option<(&str, u8)> {
         let k = self.ender.as_ref()?;
         let len = k.addr.iter().position(|&b| b == 0).unwrap_or(ADDR_MAX);
-        Some((core::str::from_utf8(&k.addr[..len]).unwrap_or("?"), k.occurrence))
+        Some((core::str::from_utf8(&k.addr[1..len]).unwrap_or("?"), k.occurrence))
     }
 
     /// Consumes one sentence (text from `$` to before CR/LF; `host_ns` the host time of its
@@ -840,7 +861,7 @@ mod tests {
         // data; GSV carries none), so from cycle 3 on each epoch is emitted on its own GSA.
         let emitted_at: Vec<usize> = out.iter().map(|o| o.0).collect();
         assert_eq!(emitted_at, vec![5, 10, 13, 18, 23, 28]);
-        assert_eq!(asm.cycle_ender(), Some(("GPGSA", 1)));
+        assert_eq!(asm.cycle_ender(), Some(("GSA", 1)));
         assert_eq!(asm.counters().ender_emits, 4);
         assert!(flush(&mut asm).is_empty(), "nothing left over");
         let times: Vec<i64> = out.iter().map(|o| o.1.utc_ns).collect();
@@ -867,7 +888,7 @@ mod tests {
         // Bursts 1 and 2 are flushed; the first time tags of bursts 2 and 3 vote GSA #1, so
         // burst 3 on is emitted on its GSA.
         assert_eq!(emitted, [(0, 1), (0, 1), (1, 0), (1, 0), (1, 0), (1, 0)]);
-        assert_eq!(asm.cycle_ender(), Some(("GPGSA", 1)));
+        assert_eq!(asm.cycle_ender(), Some(("GSA", 1)));
         assert_eq!((asm.counters().ender_emits, asm.counters().flush_emits), (4, 2));
     }
 
