@@ -82,3 +82,37 @@ fn benchmarks_run_and_report_sane_figures() {
     }
     env.finish();
 }
+
+/// `navsync-bench gnss-latency --quick` on two real captures (NMEA and UBX): every epoch's fix
+/// reaches both navsync subscribers once, the figures are ordered, and the gpsd row has
+/// figures or says why not.
+#[test]
+fn gnss_latency_runs_on_real_captures() {
+    let env = TestEnv::new("benchgnss");
+    let captures = [
+        navsync_tests::shared_material("corpora/gpsd-nmea/bu353s4.log"),
+        navsync_tests::shared_material("corpora/gpsd-ubx/u-blox-m8t-time.log"),
+    ]
+    .map(|p| p.display().to_string())
+    .join(",");
+    let json = env.dir.join("gnss.json");
+    let v = run_json(&env, &["gnss-latency", "--captures", &captures], &json);
+    let rows = v.as_array().expect("rows");
+    assert_eq!(rows.len(), 6, "{v}");
+    for r in rows {
+        let f = |k: &str| r[k].as_f64();
+        if r["path"].as_str().unwrap().starts_with("navsync") {
+            assert_eq!(r["epochs"], 20, "{r}");
+            assert_eq!(
+                (r["received"].as_u64(), r["extra"].as_u64()),
+                (Some(20), Some(0)),
+                "one fix per epoch: {r}"
+            );
+        }
+        match (f("p50_ms"), f("p90_ms"), f("p99_ms"), f("max_ms")) {
+            (Some(a), Some(b), Some(c), Some(d)) => assert!(0.0 < a && a <= b && b <= c && c <= d, "{r}"),
+            _ => assert!(r["note"].is_string(), "no figures and no reason: {r}"),
+        }
+    }
+    env.finish();
+}
