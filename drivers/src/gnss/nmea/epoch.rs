@@ -233,7 +233,7 @@ impl Epoch {
     /// One more occurrence of `addr` in the table; returns its count.
     fn bump(&mut self, addr: [u8; ADDR_MAX]) -> u8 {
         let n = self.n_seen;
-        let occurrence = match self.seen[..n].iter_mut().find(|(a, _)| *a == addr) {
+        match self.seen[..n].iter_mut().find(|(a, _)| *a == addr) {
             Some(slot) => {
                 slot.1 = slot.1.saturating_add(1);
                 slot.1
@@ -244,8 +244,7 @@ impl Epoch {
                 1
             }
             None => 1,
-        };
-        occurrence
+        }
     }
 
     /// Satellites used: the larger of the GGA/GNS count and the GSA PRN count (both can
