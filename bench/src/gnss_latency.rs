@@ -60,6 +60,11 @@ pub struct GnssLatencyArgs {
     /// Leave gpsd out.
     #[arg(long)]
     pub no_gpsd: bool,
+    /// Run both chains (navsync gnss, its subscribers; gpsd, gpspipe) under SCHED_FIFO with
+    /// this priority (1–99; needs CAP_SYS_NICE) and hold the CPU wake-up latency at 0, as a
+    /// deployment would.
+    #[arg(long, value_name = "PRIO", value_parser = clap::value_parser!(u8).range(1..=99))]
+    pub realtime: Option<u8>,
     /// Write the results as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -333,10 +338,10 @@ fn run_capture(
     let link = env.dir.join("rx-navsync");
     let mut pty = Pty::open(Some(&link)).map_err(setup("pseudo-terminal"))?;
     let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<String>>();
-    let (_, client_out) = env
+    let (client_pid, client_out) = env
         .spawn("client", &s(&["helper", "gnss-sub", "--service", &service]), true)
         .map_err(setup("client helper"))?;
-    let (_, echo_out) = env
+    let (echo_pid, echo_out) = env
         .spawn("echo", &s(&["echo", &service, "--json"]), true)
         .map_err(setup("navsync echo"))?;
     let (gnss_pid, _) = env
@@ -356,6 +361,11 @@ fn run_capture(
             false,
         )
         .map_err(setup("navsync gnss"))?;
+    let mut fifo: Vec<(u32, u8)> = Vec::new();
+    if let Some(p) = args.realtime {
+        let below = p.saturating_sub(1).max(1);
+        fifo.extend([(gnss_pid, p), (client_pid, below), (echo_pid, below)]);
+    }
     let client_lines = collect_lines(client_out.ok_or_else(|| GnssLatencyError::Setup("client stdout".into()))?);
     let echo_lines = collect_lines(echo_out.ok_or_else(|| GnssLatencyError::Setup("echo stdout".into()))?);
 
@@ -392,11 +402,17 @@ fn run_capture(
                         .take()
                         .ok_or_else(|| GnssLatencyError::Setup("gpspipe stdout".into()))?,
                 );
+                if let Some(prio) = args.realtime {
+                    fifo.extend([(d.0.id(), prio), (p.id(), prio.saturating_sub(1).max(1))]);
+                }
                 gpsd_side = Some((gpty, d, Killed(p), lines));
             }
         }
     }
 
+    for (pid, prio) in fifo {
+        crate::util::set_fifo(pid, prio).map_err(setup("SCHED_FIFO (needs CAP_SYS_NICE)"))?;
+    }
     // Wait until the subscribers are there (the helper prints "ready").
     let t0 = Instant::now();
     while !client_lines
@@ -519,6 +535,8 @@ fn ms(v: Option<f64>) -> String {
 /// the epochs of a capture (never silent).
 pub fn run(args: &GnssLatencyArgs) -> Result<Vec<PathResult>, GnssLatencyError> {
     let n = if args.quick { 20 } else { args.epochs.max(1) };
+    let mut machine = crate::util::Machine::now();
+    let _wakeup = crate::util::wakeup_hold_for_realtime(args.realtime, &mut machine);
     let gpsd = if args.no_gpsd {
         Err("--no-gpsd".into())
     } else {
