@@ -33,9 +33,11 @@
 //! caller stamps with receipt time (flag [`StampSource::Receipt`]), the fallback.
 //!
 //! Receipt stamps are late by a transport delay that varies (serial line, USB latency timer,
-//! scheduler: a one-sided distribution). The filter maps to their mean: a constant share of
-//! the delay stays in the mapped times (the estimator's IMU offset estimation takes it up),
-//! the scatter does not.
+//! scheduler: a one-sided distribution with a long tail under load). With
+//! [`DeviceClockConfig::host_stamp_window`] > 1 only the least delayed stamp of each window
+//! is fused (the lower envelope, NTP's minimum-delay filter), so the tail does not pull the
+//! mapping; otherwise the filter maps to their mean. A constant share of the delay stays in
+//! the mapped times (the estimator's IMU offset estimation takes it up), the scatter does not.
 
 use navsync_shared::samples::{StampSource, TimeState};
 
@@ -56,6 +58,11 @@ pub struct DeviceClockConfig {
     pub host_stamp_sigma_ns: f64,
     /// Mean delay of the host stamp after the device event, ns (subtracted).
     pub host_stamp_latency_ns: f64,
+    /// Host stamps taken together by [`DeviceClock::on_host_stamp`]: of each group of this
+    /// many consecutive pairs only the least delayed one (the smallest host − mapped time)
+    /// is fused, the lower envelope of a one-sided delay, as NTP's minimum-delay filter does
+    /// (1: every pair).
+    pub host_stamp_window: u32,
     /// Initial uncertainty of the device's frequency (e.g. 1e−4 for a crystal).
     pub initial_rate_sigma: f64,
 }
@@ -70,6 +77,7 @@ impl DeviceClockConfig {
             capture_sigma_ns: (tick_ns / 12f64.sqrt()).max(1.0),
             host_stamp_sigma_ns: 100_000.0,
             host_stamp_latency_ns: 0.0,
+            host_stamp_window: 1,
             initial_rate_sigma: 1e-4,
         }
     }
@@ -96,6 +104,8 @@ pub enum DeviceUpdate {
     Rejected(f64),
     /// The counter went backwards (beyond half its range) or the host mapping is not valid.
     Ignored,
+    /// Kept in the host-stamp window (see [`DeviceClockConfig::host_stamp_window`]).
+    Buffered,
 }
 
 /// Counters of the device clock.
@@ -157,6 +167,10 @@ pub struct DeviceClock {
     counters: DeviceClockCounters,
     /// Whether any PPS capture was used (the better [`StampSource`]).
     has_captures: bool,
+    /// The least delayed host stamp of the window so far (device ns, host ns, delay ns) and
+    /// the pairs seen in it.
+    window_best: Option<(i64, i64, i64)>,
+    window_n: u32,
 }
 
 impl DeviceClock {
@@ -168,6 +182,8 @@ impl DeviceClock {
             model: ClockModel::new(cfg.noise),
             counters: DeviceClockCounters::default(),
             has_captures: false,
+            window_best: None,
+            window_n: 0,
         }
     }
 
@@ -245,7 +261,29 @@ impl DeviceClock {
             return DeviceUpdate::Ignored;
         };
         let event_host = host_ns - self.cfg.host_stamp_latency_ns.round() as i64;
-        let r = self.fuse(self.device_ns(ext), event_host, self.cfg.host_stamp_sigma_ns);
+        let device_ns = self.device_ns(ext);
+        if self.cfg.host_stamp_window > 1 {
+            // The least delayed pair of the window (delay against the mapping so far, or the
+            // raw offset before there is one: the clock's drift over a window is negligible).
+            let delay = if self.model.is_initialized() {
+                event_host - self.model.utc_ns_at(device_ns)
+            } else {
+                event_host - device_ns
+            };
+            if self.window_best.is_none_or(|(_, _, d)| delay < d) {
+                self.window_best = Some((device_ns, event_host, delay));
+            }
+            self.window_n += 1;
+            if self.window_n < self.cfg.host_stamp_window {
+                return DeviceUpdate::Buffered;
+            }
+            self.window_n = 0;
+        }
+        let (device_ns, event_host) = match self.window_best.take() {
+            Some((d, h, _)) => (d, h),
+            None => (device_ns, event_host),
+        };
+        let r = self.fuse(device_ns, event_host, self.cfg.host_stamp_sigma_ns);
         if r == DeviceUpdate::Used {
             self.counters.host_pairs += 1;
         }
