@@ -13,9 +13,8 @@
 //! The bound is relative: a window's p99 may not exceed max(baseline p99 × [`P99_FACTOR`],
 //! [`P99_FLOOR_MS`]), the baseline measured over [`BASELINE`] just before the stop. Factor and
 //! floor absorb the scheduling noise of a shared 2-core machine: with nothing stopped, the
-//! p99 of a 10 s window (1000 samples) moved between 0.4 and 4.7 ms in our runs while other
-//! builds ran; a publisher that waited for the stopped subscriber would show seconds (and
-//! fewer samples). Publishing must go on: every window receives at least 90 % of the
+//! p99 of a 10 s window (1000 samples) moved between 0.4 and 10.4 ms in our runs; a publisher
+//! that waited for the stopped subscriber would show seconds (and fewer samples). Publishing must go on: every window receives at least 90 % of the
 //! baseline's rate, with no sequence gaps. After SIGCONT the echo processes print again (the
 //! stop must not end them) and the latencies stay within the same bound.
 
@@ -29,8 +28,11 @@ use navsync_tests::{HealthWatch, TestEnv, process_state, quantile, write_drive_s
 
 /// A window's latency p99 may be this many times the baseline's …
 const P99_FACTOR: f64 = 3.0;
-/// … or this much, whichever is larger, ms.
-const P99_FLOOR_MS: f64 = 10.0;
+/// … or this much, whichever is larger, ms: a publisher that waited for the stopped
+/// subscriber would show seconds; windows with nothing stopped reached 10.4 ms at p99 on this
+/// shared 2-core machine (2026-12-01, the window after SIGCONT: the estimator's own p99 rose
+/// to 1.9 ms as the echo processes printed again), so 10 ms failed on noise.
+const P99_FLOOR_MS: f64 = 50.0;
 /// Length of the stop and of the windows during and after it.
 const WINDOW: Duration = Duration::from_secs(10);
 /// Length of the baseline window before the stop.
