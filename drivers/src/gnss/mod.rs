@@ -15,6 +15,7 @@
 //! arm in [`Decoder`].
 
 pub mod capture;
+pub mod cycle;
 pub mod driver;
 pub mod nmea;
 pub mod ubx;

@@ -56,14 +56,12 @@ use navsync_shared::samples::{FixMode, GnssFix, Stamp, StampSource};
 use navsync_shared::time::{NS_PER_S, gps_ns_from_utc_ns};
 
 use super::sentence::{Kind, ModeHint, Reject, Update, check, decode};
+use crate::gnss::cycle::CycleEnder;
 
 /// Nanoseconds per day.
 const NS_PER_DAY: i64 = 86_400 * NS_PER_S;
 /// Half a day, ns: a time of day further than this from the date anchor's is on another day.
 const HALF_DAY_NS: i64 = NS_PER_DAY / 2;
-/// Cycle boundaries at which the same sentence must be last before it is trusted as the
-/// receiver's cycle ender.
-const ENDER_VOTES: u8 = 2;
 /// Longest sentence address kept for cycle-ender keys (`GPGGA`, `PGRME`, `PMTK001`).
 const ADDR_MAX: usize = 8;
 /// Distinct sentence addresses and formatters tracked per epoch for occurrence numbering.
@@ -441,9 +439,8 @@ pub struct EpochAssembler {
     last_emitted_tod: Option<i64>,
     /// Mode of the last emitted epoch.
     last_mode: u8,
-    ender: Option<Key>,
-    candidate: Option<Key>,
-    votes: u8,
+    /// The learned last data sentence of the cycle.
+    cycle: CycleEnder<Key>,
     /// The last data sentence and time tag of an epoch emitted on flush: a vote for the cycle
     /// ender once the next epoch's time tag is seen to differ.
     flushed: Option<(Key, i64)>,
@@ -467,9 +464,7 @@ impl EpochAssembler {
             last_dim: 0,
             last_emitted_tod: None,
             last_mode: FixMode::Unknown as u8,
-            ender: None,
-            candidate: None,
-            votes: 0,
+            cycle: CycleEnder::default(),
             flushed: None,
             seq: 0,
             counters: EpochCounters::default(),
@@ -484,7 +479,7 @@ impl EpochAssembler {
     /// The learned last data-carrying sentence of the receiver's cycle (its formatter) and its
     /// occurrence within the cycle, e.g. `("GSA", 2)`; `None` while not (or no longer) known.
     pub fn cycle_ender(&self) -> Option<(&str, u8)> {
-        let k = self.ender.as_ref()?;
+        let k = self.cycle.ender()?;
         let len = k.addr.iter().position(|&b| b == 0).unwrap_or(ADDR_MAX);
         Some((core::str::from_utf8(&k.addr[1..len]).unwrap_or("?"), k.occurrence))
     }
@@ -547,7 +542,7 @@ impl EpochAssembler {
         self.cur.merge(&u, self.last_dim);
         let key = self.cur.note(s.address);
         self.cur.last_data_key = Some(key);
-        if self.ender == Some(key) {
+        if self.cycle.is_ender(key) {
             if has_fix(self.cur.fix.mode) == has_fix(self.last_mode) {
                 self.emit(Close::Ender, out);
             } else {
@@ -583,14 +578,14 @@ impl EpochAssembler {
         if let (Some((key, flushed_tod)), Some(t)) = (self.flushed, t) {
             self.flushed = None;
             if flushed_tod != t {
-                self.learn(key);
+                self.cycle.vote(key);
             }
         }
         if self.cur.open {
             match (self.cur.tod_ns, t) {
                 (Some(c), Some(t)) if c != t => {
                     if let (false, Some(k)) = (self.cur.tod_from_zda, self.cur.last_data_key) {
-                        self.learn(k);
+                        self.cycle.vote(k);
                     }
                     self.emit(Close::NextEpoch, out);
                 }
@@ -624,24 +619,8 @@ impl EpochAssembler {
     }
 
     fn forget_ender(&mut self) {
-        self.ender = None;
-        self.candidate = None;
-        self.votes = 0;
+        self.cycle.forget();
         self.flushed = None;
-    }
-
-    /// One vote for `key` as the cycle ender (it was the last data sentence before a time-tag
-    /// change); trusted after [`ENDER_VOTES`] consecutive votes.
-    fn learn(&mut self, key: Key) {
-        if self.candidate == Some(key) {
-            self.votes = self.votes.saturating_add(1);
-        } else {
-            self.candidate = Some(key);
-            self.votes = 1;
-        }
-        if self.votes >= ENDER_VOTES {
-            self.ender = Some(key);
-        }
     }
 
     /// Completes the open epoch and hands it to `out` (epochs without fix data are dropped).

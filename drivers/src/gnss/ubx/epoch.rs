@@ -9,7 +9,7 @@
 //! - else at the receiver's **last NAV message of the cycle**, once learned: whenever an
 //!   epoch ends without NAV-EOE (a NAV message of another `iTOW` arrives, or the line went
 //!   idle and the next epoch begins), its last NAV message is a candidate, trusted after
-//!   [`ENDER_VOTES`] consecutive epochs agree, and forgotten when a NAV message for the epoch
+//!   [`ENDER_VOTES`](crate::gnss::cycle::ENDER_VOTES) consecutive epochs agree, and forgotten when a NAV message for the epoch
 //!   arrives after it (that epoch is then reopened and emitted again, as below);
 //! - else when a NAV message with **another `iTOW`** arrives (the first of the next epoch);
 //! - else on [`EpochAssembler::flush`] (the live driver calls it when the line goes idle).
@@ -77,6 +77,7 @@ use super::esf::HnrPvt;
 use super::messages::{MAX_SATS, Message};
 use super::nav::{NavPvt, NavSat, NavSol, NavStatus, NavSvinfo, NavTimegps, SatInfo};
 use super::tim::{TimTm2, TimTp};
+use crate::gnss::cycle::CycleEnder;
 
 /// Nanoseconds per day.
 const NS_PER_DAY: i64 = 86_400 * NS_PER_S;
@@ -84,10 +85,6 @@ const NS_PER_DAY: i64 = 86_400 * NS_PER_S;
 const NS_PER_WEEK: i64 = SECONDS_PER_WEEK * NS_PER_S;
 /// Nanoseconds per millisecond.
 const NS_PER_MS: i64 = 1_000_000;
-
-/// Consecutive epochs that must end with the same NAV message before it is trusted as the
-/// receiver's last message of the cycle.
-pub const ENDER_VOTES: u8 = 2;
 
 /// Counters of [`EpochAssembler`], since creation.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -626,10 +623,8 @@ pub struct EpochAssembler {
     sats: SatView,
     time_pulse: Option<TimePulse>,
     time_mark: Option<TimeMark>,
-    /// The learned last NAV message of the cycle, the candidate and its votes.
-    ender: Option<&'static str>,
-    candidate: Option<&'static str>,
-    votes: u8,
+    /// The learned last NAV message of the cycle (by name).
+    cycle: CycleEnder<&'static str>,
     /// The last message and `iTOW` of an epoch emitted on flush: a vote once the next epoch
     /// begins.
     flushed: Option<(&'static str, u32)>,
@@ -654,9 +649,7 @@ impl EpochAssembler {
             sats: SatView::EMPTY,
             time_pulse: None,
             time_mark: None,
-            ender: None,
-            candidate: None,
-            votes: 0,
+            cycle: CycleEnder::default(),
             flushed: None,
             seq: 0,
             counters: EpochCounters::default(),
@@ -666,26 +659,7 @@ impl EpochAssembler {
     /// The learned last NAV message of the receiver's cycle (e.g. `"NAV-DOP"`); `None` while
     /// not (or no longer) known, and for receivers that send NAV-EOE.
     pub fn cycle_ender(&self) -> Option<&'static str> {
-        self.ender
-    }
-
-    /// One vote for `name` as the last NAV message of the cycle.
-    fn learn(&mut self, name: &'static str) {
-        if self.candidate == Some(name) {
-            self.votes = self.votes.saturating_add(1);
-        } else {
-            self.candidate = Some(name);
-            self.votes = 1;
-        }
-        if self.votes >= ENDER_VOTES {
-            self.ender = Some(name);
-        }
-    }
-
-    fn forget_ender(&mut self) {
-        self.ender = None;
-        self.candidate = None;
-        self.votes = 0;
+        self.cycle.ender().copied()
     }
 
     /// Counters since creation.
@@ -735,7 +709,7 @@ impl EpochAssembler {
                 // For the epoch before the one being assembled: too late to merge (and if
                 // that epoch was emitted at a learned last message, that was wrong).
                 self.counters.late_messages += 1;
-                self.forget_ender();
+                self.cycle.forget();
                 return;
             }
             self.emit(Close::NextEpoch, out);
@@ -746,7 +720,7 @@ impl EpochAssembler {
                     // The epoch emitted at NAV-EOE, the learned last message or on flush was
                     // not complete after all.
                     self.counters.late_messages += 1;
-                    self.forget_ender();
+                    self.cycle.forget();
                     self.flushed = None;
                     self.cur = prev;
                 }
@@ -754,7 +728,7 @@ impl EpochAssembler {
                     if let Some((name, flushed_itow)) = self.flushed.take()
                         && flushed_itow != itow_ms
                     {
-                        self.learn(name);
+                        self.cycle.vote(name);
                     }
                     self.cur = Epoch::start(itow_ms, host_ns);
                 }
@@ -768,7 +742,7 @@ impl EpochAssembler {
             self.emit(Close::Eoe, out);
         } else {
             self.cur.last_msg = Some(msg.name());
-            if self.ender == Some(msg.name()) {
+            if self.cycle.is_ender(msg.name()) {
                 self.emit(Close::Ender, out);
             }
         }
@@ -863,7 +837,7 @@ impl EpochAssembler {
         // first message closed it, when the next epoch begins if the line went idle.
         self.flushed = None;
         match (how, e.last_msg) {
-            (Close::NextEpoch, Some(name)) => self.learn(name),
+            (Close::NextEpoch, Some(name)) => self.cycle.vote(name),
             (Close::Flush, Some(name)) => self.flushed = Some((name, e.itow_ms)),
             _ => {}
         }

@@ -92,7 +92,7 @@ const GYRO_DPS_PER_LSB: f64 = 1.0 / 4096.0;
 const ACCEL_MPS2_PER_LSB: f64 = 1.0 / 1024.0;
 
 /// Gyroscope and accelerometer readings farther apart than this are not one sample, ms.
-const ESF_PAIR_MS: u32 = 25;
+pub const ESF_PAIR_MS: u32 = 25;
 
 /// Assembles the receiver's IMU readings (ESF-MEAS) into [`ImuSample`]s. Receivers send the
 /// gyroscope triad and the accelerometer triad in one message or in two with their own time
