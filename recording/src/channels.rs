@@ -1,17 +1,24 @@
 //! navsync's channel conventions in MCAP: what recorders, replayers, clients and tests agree on.
+//! A navsync recording is a ROS 2 bag in MCAP storage (profile `ros2`):
 //!
-//! * One channel per service; the topic is the service name (`navsync/imu/0/sample`).
-//! * One schema per sample type: name = the type name with its layout version
-//!   (`navsync.ImuSample.v1`), encoding `jsonschema`, data = [`json::schema`](navsync_shared::json::schema) of the type
-//!   (JSON Schema draft 2020-12 with every field's units and frame as its description).
-//! * Message encoding `json`: the sample as [`json::to_json`](navsync_shared::json::to_json) writes it (UTF-8, compact).
-//!   Foxglove and the `mcap` tools display and plot these without navsync.
-//! * Decoding is [`json::from_json`](navsync_shared::json::from_json), exact to the bit for every field (floats are written in
-//!   the shortest form that parses back to the same `f64`, NaN as `null`).
-//! * Channel metadata says what the data were made with, so `navsync replay --estimate` runs
-//!   the estimator with the right models unless told otherwise: [`META_IMU_NOISE`] on IMU
-//!   channels, [`META_INITIAL_STATE`] on the reference IMU's, [`META_LEVER_ARM`] and
-//!   [`META_GNSS_VEL_STD`] on GNSS fix channels. Values are JSON.
+//! * One channel per service; the topic is the service name as a ROS 2 topic
+//!   (`/navsync/imu/0/sample` for the service `navsync/imu/0/sample`).
+//! * Message encoding `cdr` ([`cdr`](navsync_shared::cdr), exact to the bit for every field);
+//!   one schema per sample type, encoding `ros2msg`, named after the ROS 2 type
+//!   (`navsync_msgs/msg/ImuSample`), data = the full `.msg` definition with its dependencies
+//!   ([`ros2msg::definition`](navsync_shared::ros2msg::definition)), every field's units and frame in comments.
+//!   `ros2 bag`, Foxglove, PlotJuggler and rosbags open these without navsync.
+//! * Channel metadata: `offered_qos_profiles` (what rosbag2 writes: reliable, volatile,
+//!   keep last), [`META_LAYOUT`] (the layout version, `navsync.ImuSample.v1`), and what the data
+//!   were made with, so `navsync replay --estimate` runs the estimator with the right models
+//!   unless told otherwise: [`META_IMU_NOISE`] on IMU channels, [`META_INITIAL_STATE`] on the
+//!   reference IMU's, [`META_LEVER_ARM`] and [`META_GNSS_VEL_STD`] on GNSS fix channels. Values
+//!   are JSON.
+//! * Text instead of CDR (`navsync record --encoding json`, and every recording of navsync
+//!   before CDR): message encoding `json` ([`json::to_json`](navsync_shared::json::to_json)),
+//!   schema encoding `jsonschema` named `navsync.ImuSample.v1`. Both are read.
+//! * A channel written by another tool (no [`META_LAYOUT`]) is read when its schema's fields
+//!   equal navsync's definition ([`ros2msg::check_compatible`](navsync_shared::ros2msg::check_compatible)).
 
 use core::fmt::Debug;
 
@@ -25,15 +32,103 @@ use navsync_shared::samples::{
     TimeState,
 };
 use navsync_shared::services::ServiceKind;
+use navsync_shared::{cdr, ros2msg};
 
-/// Message encoding of every navsync channel.
-pub const MESSAGE_ENCODING: &str = "json";
-/// Schema encoding of every navsync schema.
-pub const SCHEMA_ENCODING: &str = "jsonschema";
-/// The MCAP profile navsync writes (none of the well-known ROS profiles applies).
-pub const PROFILE: &str = "";
+/// How the messages of a recording are encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Encoding {
+    /// CDR with `ros2msg` schemas: a ROS 2 bag (the default).
+    #[default]
+    Cdr,
+    /// JSON with JSON Schemas: text a person can read (larger, slower to replay).
+    Json,
+}
+
+impl Encoding {
+    /// The MCAP message encoding.
+    pub fn message_encoding(self) -> &'static str {
+        match self {
+            Self::Cdr => "cdr",
+            Self::Json => "json",
+        }
+    }
+
+    /// The MCAP schema encoding.
+    pub fn schema_encoding(self) -> &'static str {
+        match self {
+            Self::Cdr => "ros2msg",
+            Self::Json => "jsonschema",
+        }
+    }
+
+    /// The schema name of a kind in this encoding.
+    pub fn schema_name(self, kind: ServiceKind) -> String {
+        match self {
+            Self::Cdr => ros2msg::ros_type_name(kind.type_name()),
+            Self::Json => kind.type_name().to_string(),
+        }
+    }
+
+    /// The schema of a kind in this encoding, as the bytes of a Schema record.
+    pub fn schema_data(self, kind: ServiceKind) -> Vec<u8> {
+        match self {
+            Self::Cdr => crate::with_sample_type!(kind, T => ros2msg::definition::<T>().into_bytes()),
+            Self::Json => crate::with_sample_type!(kind, T => serde_json::to_vec(&schema::<T>()).unwrap_or_default()),
+        }
+    }
+
+    /// Encodes a sample as a message payload into `out` (cleared first; its capacity is
+    /// reused: CDR allocates nothing once it has grown).
+    pub fn encode(self, sample: &AnySample, out: &mut Vec<u8>) {
+        match self {
+            Self::Cdr => encode_cdr(sample, out),
+            Self::Json => {
+                out.clear();
+                // Writing a `Value` into a `Vec` cannot fail.
+                let _ = serde_json::to_writer(&mut *out, &sample_json(sample));
+            }
+        }
+    }
+}
+
+/// The MCAP profile navsync writes: its files are ROS 2 bags.
+pub const PROFILE: &str = "ros2";
 /// The library string in the Header of files navsync writes.
-pub const LIBRARY: &str = "navsync";
+pub const LIBRARY: &str = concat!("navsync ", env!("CARGO_PKG_VERSION"), " (mcap crate)");
+
+/// Every channel navsync writes: the sample type's layout version, e.g. `navsync.ImuSample.v1`.
+pub const META_LAYOUT: &str = "navsync.layout";
+/// Channel metadata key of the QoS profiles rosbag2 expects on every channel.
+pub const META_QOS: &str = "offered_qos_profiles";
+/// The QoS that `ros2 bag record` stores for a reliable, volatile, keep-last publisher (YAML,
+/// rosbag2's format since Humble): what `ros2 bag play` offers when it plays the file.
+pub const QOS_PROFILES: &str = "- history: 3
+  depth: 0
+  reliability: 1
+  durability: 2
+  deadline:
+    sec: 2147483647
+    nsec: 4294967295
+  lifespan:
+    sec: 2147483647
+    nsec: 4294967295
+  liveliness: 1
+  liveliness_lease_duration:
+    sec: 2147483647
+    nsec: 4294967295
+  avoid_ros_namespace_conventions: false";
+
+/// The ROS 2 topic of a navsync service: `navsync/imu/0/sample` → `/navsync/imu/0/sample`.
+pub fn topic_of(service: &str) -> String {
+    format!("/{service}")
+}
+
+/// The navsync service of a topic: `/navsync/imu/0/sample` (or the bare service name, as
+/// JSON recordings have it) → `navsync/imu/0/sample`.
+pub fn service_of(topic: &str) -> &str {
+    topic.strip_prefix('/').unwrap_or(topic)
+}
 
 /// IMU channels: the IMU's noise model, `navsync_shared::imu_spec::ImuNoise` as JSON
 /// (KF-GINS units).
@@ -142,16 +237,6 @@ macro_rules! with_sample_type {
     };
 }
 
-/// The schema name of a kind: its type name, e.g. `navsync.ImuSample.v1`.
-pub fn schema_name(kind: ServiceKind) -> &'static str {
-    kind.type_name()
-}
-
-/// The JSON Schema of a kind, as the bytes of a Schema record.
-pub fn schema_data(kind: ServiceKind) -> Vec<u8> {
-    with_sample_type!(kind, T => serde_json::to_vec(&schema::<T>()).unwrap_or_default())
-}
-
 /// The JSON value of a sample.
 pub fn sample_json(sample: &AnySample) -> serde_json::Value {
     match sample {
@@ -169,75 +254,136 @@ pub fn sample_json(sample: &AnySample) -> serde_json::Value {
     }
 }
 
-/// Encodes a sample as a message payload into `out` (cleared first; its capacity is reused).
-pub fn encode(sample: &AnySample, out: &mut Vec<u8>) {
-    out.clear();
-    // Writing a `Value` into a `Vec` cannot fail.
-    let _ = serde_json::to_writer(&mut *out, &sample_json(sample));
-}
-
-/// Decodes a message payload of a channel of `kind`.
-pub fn decode(kind: ServiceKind, data: &[u8]) -> Result<AnySample, String> {
-    decode_layout(ChannelType { kind, older: false }, data)
-}
-
-/// Decodes a message payload of a channel of type `ty`: an older layout
-/// ([`OLDER_LAYOUTS`]) onto the type's "not known" values, so the fields added since read as
-/// not known.
-pub fn decode_layout(ty: ChannelType, data: &[u8]) -> Result<AnySample, String> {
-    let v: serde_json::Value = serde_json::from_slice(data).map_err(|e| format!("not JSON: {e}"))?;
-    if ty.older {
-        return match ty.kind {
-            ServiceKind::GnssFix => from_json_onto(&v, GnssFix::empty(navsync_shared::samples::Stamp::zeroed()))
-                .map(AnySample::GnssFix)
-                .map_err(|e| e.to_string()),
-            _ => Err(format!("no older layout of {} is readable", ty.kind.type_name())),
-        };
+/// Encodes a sample as CDR into `out`.
+fn encode_cdr(sample: &AnySample, out: &mut Vec<u8>) {
+    match sample {
+        AnySample::GnssFix(x) => cdr::encode(x, out),
+        AnySample::PpsEdge(x) => cdr::encode(x, out),
+        AnySample::Imu(x) => cdr::encode(x, out),
+        AnySample::Time(x) => cdr::encode(x, out),
+        AnySample::Nav(x) => cdr::encode(x, out),
+        AnySample::Health(x) => cdr::encode(x, out),
+        AnySample::Truth(x) => cdr::encode(x, out),
+        AnySample::TimePulse(x) => cdr::encode(x, out),
+        AnySample::Event(x) => cdr::encode(x, out),
+        AnySample::Raw(x) => cdr::encode(x, out),
+        AnySample::NavData(x) => cdr::encode(x, out),
     }
-    with_sample_type!(ty.kind, T => from_json::<T>(&v).map(T::wrap).map_err(|e| e.to_string()))
 }
 
-/// Schema names of older layouts that navsync still reads, with their kind: each newer layout
-/// only added fields.
+/// Schema names of older JSON layouts that navsync still reads, with their kind: each newer
+/// layout only added fields.
 pub const OLDER_LAYOUTS: &[(&str, ServiceKind)] = &[("navsync.GnssFix.v1", ServiceKind::GnssFix)];
 
-/// A channel's sample kind, and whether its messages have an older layout ([`OLDER_LAYOUTS`]).
+/// How a channel's messages decode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Codec {
+    /// CDR of the current layout.
+    Cdr,
+    /// JSON of the current layout.
+    Json,
+    /// JSON of an older layout ([`OLDER_LAYOUTS`]): the fields added since read as not known.
+    JsonOlder,
+}
+
+/// A channel's sample kind and codec.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ChannelType {
     /// The kind of sample.
     pub kind: ServiceKind,
-    /// The messages have an older layout.
-    pub older: bool,
+    /// How its messages decode.
+    pub codec: Codec,
 }
 
-/// The sample kind of a channel, checked against navsync's conventions: a navsync service
-/// name as topic, `json` messages, and (when present) a `jsonschema` schema named after the
-/// service's type. An error says what does not match.
+/// Decodes a message payload of a channel of type `ty`.
+pub fn decode(ty: ChannelType, data: &[u8]) -> Result<AnySample, String> {
+    match ty.codec {
+        Codec::Cdr => {
+            crate::with_sample_type!(ty.kind, T => cdr::decode::<T>(data).map(T::wrap).map_err(|e| e.to_string()))
+        }
+        Codec::Json | Codec::JsonOlder => {
+            let v: serde_json::Value = serde_json::from_slice(data).map_err(|e| format!("not JSON: {e}"))?;
+            if ty.codec == Codec::JsonOlder {
+                return match ty.kind {
+                    ServiceKind::GnssFix => {
+                        from_json_onto(&v, GnssFix::empty(navsync_shared::samples::Stamp::zeroed()))
+                            .map(AnySample::GnssFix)
+                            .map_err(|e| e.to_string())
+                    }
+                    _ => Err(format!("no older layout of {} is readable", ty.kind.type_name())),
+                };
+            }
+            crate::with_sample_type!(ty.kind, T => from_json::<T>(&v).map(T::wrap).map_err(|e| e.to_string()))
+        }
+    }
+}
+
+/// The sample kind and codec of a channel, checked against navsync's conventions: a navsync
+/// service as topic (with or without the leading `/`), and either `cdr` messages with a
+/// `ros2msg` schema of the service's type (navsync's layout version in [`META_LAYOUT`], or, from
+/// another writer, the same fields), or `json` messages with a `jsonschema` schema named after
+/// the type. An error says what does not match.
 pub fn channel_kind(channel: &Channel, schema: Option<&Schema>) -> Result<ChannelType, String> {
-    let kind = ServiceKind::of(&channel.topic).ok_or_else(|| "not a navsync service name".to_string())?;
-    if channel.message_encoding != MESSAGE_ENCODING {
-        return Err(format!(
-            "message encoding `{}`, expected `{MESSAGE_ENCODING}`",
-            channel.message_encoding
-        ));
+    let kind = ServiceKind::of(service_of(&channel.topic)).ok_or_else(|| "not a navsync service name".to_string())?;
+    match channel.message_encoding.as_str() {
+        "cdr" => {
+            let Some(s) = schema else {
+                return Err("a cdr channel without a schema".into());
+            };
+            let want = ros2msg::ros_type_name(kind.type_name());
+            if s.encoding != "ros2msg" || s.name.replace("/msg/", "/") != want.replace("/msg/", "/") {
+                return Err(format!(
+                    "schema `{}` ({}), expected `{want}` (ros2msg)",
+                    s.name, s.encoding
+                ));
+            }
+            match channel.metadata.iter().find(|(k, _)| k == META_LAYOUT) {
+                Some((_, layout)) if layout != kind.type_name() => Err(format!(
+                    "layout `{layout}`, expected `{}`: a recording of another layout version",
+                    kind.type_name()
+                )),
+                Some(_) => Ok(ChannelType {
+                    kind,
+                    codec: Codec::Cdr,
+                }),
+                None => {
+                    let text = String::from_utf8_lossy(&s.data);
+                    crate::with_sample_type!(kind, T => ros2msg::check_compatible::<T>(&text))
+                        .map(|()| ChannelType {
+                            kind,
+                            codec: Codec::Cdr,
+                        })
+                        .map_err(|e| format!("schema `{}`: {e}", s.name))
+                }
+            }
+        }
+        "json" => {
+            if let Some(s) = schema
+                && s.encoding == "jsonschema"
+                && OLDER_LAYOUTS.iter().any(|(name, k)| *name == s.name && *k == kind)
+            {
+                return Ok(ChannelType {
+                    kind,
+                    codec: Codec::JsonOlder,
+                });
+            }
+            if let Some(s) = schema
+                && (s.name != kind.type_name() || s.encoding != "jsonschema")
+            {
+                return Err(format!(
+                    "schema `{}` ({}), expected `{}` (jsonschema): a recording of another layout version",
+                    s.name,
+                    s.encoding,
+                    kind.type_name()
+                ));
+            }
+            Ok(ChannelType {
+                kind,
+                codec: Codec::Json,
+            })
+        }
+        other => Err(format!("message encoding `{other}`, expected `cdr` or `json`")),
     }
-    if let Some(s) = schema
-        && s.encoding == SCHEMA_ENCODING
-        && OLDER_LAYOUTS.iter().any(|(name, k)| *name == s.name && *k == kind)
-    {
-        return Ok(ChannelType { kind, older: true });
-    }
-    if let Some(s) = schema
-        && (s.name != kind.type_name() || s.encoding != SCHEMA_ENCODING)
-    {
-        return Err(format!(
-            "schema `{}` ({}), expected `{}` ({SCHEMA_ENCODING}): a recording of another layout version",
-            s.name,
-            s.encoding,
-            kind.type_name()
-        ));
-    }
-    Ok(ChannelType { kind, older: false })
 }
 
 #[cfg(test)]
@@ -265,8 +411,15 @@ mod tests {
             imu.dt_s = f64::from_bits(next() & 0x7FEF_FFFF_FFFF_FFFF);
             imu.temperature_c = f64::NAN;
             let s = AnySample::Imu(imu);
-            encode(&s, &mut buf);
-            let back = decode(ServiceKind::ImuSample, &buf).unwrap();
+            Encoding::Json.encode(&s, &mut buf);
+            let back = decode(
+                ChannelType {
+                    kind: ServiceKind::ImuSample,
+                    codec: Codec::Json,
+                },
+                &buf,
+            )
+            .unwrap();
             let AnySample::Imu(b) = back else { panic!("wrong kind") };
             assert_eq!(b.gyro_rps.map(f64::to_bits), imu.gyro_rps.map(f64::to_bits));
             assert_eq!(b.accel_mps2.map(f64::to_bits), imu.accel_mps2.map(f64::to_bits));
@@ -275,7 +428,7 @@ mod tests {
             assert_eq!(b.stamp, imu.stamp);
         }
         for kind in ServiceKind::ALL {
-            let v: serde_json::Value = serde_json::from_slice(&schema_data(kind)).unwrap();
+            let v: serde_json::Value = serde_json::from_slice(&Encoding::Json.schema_data(kind)).unwrap();
             assert_eq!(v["title"], kind.type_name());
             assert_eq!(v["type"], "object");
         }
@@ -300,7 +453,7 @@ mod tests {
             channel_kind(&ch, Some(&good)),
             Ok(ChannelType {
                 kind: ServiceKind::ImuSample,
-                older: false
+                codec: Codec::Json
             })
         );
         let old = Schema {
@@ -313,7 +466,30 @@ mod tests {
             ..ch.clone()
         };
         assert!(channel_kind(&other, None).is_err());
-        assert!(decode(ServiceKind::NavState, b"{").unwrap_err().starts_with("not JSON"));
+        let json_nav = ChannelType {
+            kind: ServiceKind::NavState,
+            codec: Codec::Json,
+        };
+        assert!(decode(json_nav, b"{").unwrap_err().starts_with("not JSON"));
+        let cdr = Channel {
+            topic: "/navsync/imu/0/sample".into(),
+            message_encoding: "cdr".into(),
+            metadata: vec![(META_LAYOUT.into(), "navsync.ImuSample.v0".into())],
+            ..ch.clone()
+        };
+        let ros = Schema {
+            name: "navsync_msgs/msg/ImuSample".into(),
+            encoding: "ros2msg".into(),
+            data: Encoding::Cdr.schema_data(ServiceKind::ImuSample),
+            ..good.clone()
+        };
+        assert!(channel_kind(&cdr, Some(&ros)).unwrap_err().contains("layout version"));
+        let cdr = Channel {
+            metadata: vec![(META_LAYOUT.into(), "navsync.ImuSample.v1".into())],
+            ..cdr
+        };
+        assert_eq!(channel_kind(&cdr, Some(&ros)).map(|t| t.codec), Ok(Codec::Cdr));
+        assert!(channel_kind(&cdr, None).is_err());
     }
 
     #[test]
@@ -348,13 +524,17 @@ mod tests {
             data: vec![],
         };
         let ty = channel_kind(&ch, Some(&v1)).unwrap();
-        assert!(ty.older);
-        let AnySample::GnssFix(back) = decode_layout(ty, &data).unwrap() else {
+        assert_eq!(ty.codec, Codec::JsonOlder);
+        let AnySample::GnssFix(back) = decode(ty, &data).unwrap() else {
             panic!("not a fix")
         };
         assert_eq!(back.lat_deg, 48.1);
         assert_eq!(back.stamp.seq, 7);
         assert!(back.h_acc_m.is_nan(), "added since: not known");
-        assert!(decode(ServiceKind::GnssFix, &data).unwrap_err().contains("missing"));
+        let current = ChannelType {
+            kind: ServiceKind::GnssFix,
+            codec: Codec::Json,
+        };
+        assert!(decode(current, &data).unwrap_err().contains("missing"));
     }
 }

@@ -34,24 +34,12 @@ pub enum RecordingError {
         /// What was wrong.
         problem: String,
     },
-    /// A feature of MCAP that navsync does not read (e.g. compressed chunks).
-    #[error("{path}: {record} record at byte offset {offset}: {problem}")]
-    Unsupported {
-        /// The file.
-        path: PathBuf,
-        /// File offset of the record.
-        offset: u64,
-        /// Record type.
-        record: String,
-        /// What is not supported.
-        problem: String,
-    },
     /// A message does not decode as the navsync sample type of its channel.
     #[error("{path}: message on `{topic}` at byte offset {offset}: {problem}")]
     Decode {
         /// The file.
         path: PathBuf,
-        /// File offset of the Message record.
+        /// File offset the reader had reached (see [`Message::offset`](crate::mcap_reader::Message::offset)).
         offset: u64,
         /// The channel's topic.
         topic: String,
@@ -74,15 +62,6 @@ impl RecordingError {
             path: path.to_path_buf(),
             what,
             source,
-        }
-    }
-
-    pub(crate) fn corrupt(path: &Path, offset: u64, record: u8, problem: impl Into<String>) -> Self {
-        Self::Corrupt {
-            path: path.to_path_buf(),
-            offset,
-            record: super::mcap_format::opcode_name(record),
-            problem: problem.into(),
         }
     }
 }

@@ -2,10 +2,10 @@
 //! `navsync replay`, `navsync sim --fast --record`, clients and tests agree on.
 //!
 //! Read in this order:
-//! 1. [`channels`]: the conventions (topic = service name, `json` messages, one `jsonschema`
-//!    schema per sample type named `navsync.ImuSample.v1`, …).
+//! 1. [`channels`]: the conventions (a ROS 2 bag: topic = `/` + service name, `cdr` messages,
+//!    one `ros2msg` schema per sample type named `navsync_msgs/msg/ImuSample`, …; `json` too).
 //! 2. [`sample_file`]: [`SampleRecorder`] and [`SampleReader`], samples in and out by service.
-//! 3. [`mcap_writer`], [`mcap_reader`], [`mcap_format`], [`crc32`]: the container format.
+//! 3. [`mcap_writer`], [`mcap_reader`]: the container, through the `mcap` crate.
 //! 4. [`ports`], [`glob`]: what the record and replay processes need besides (pacing: `navsync_shared::pacing`).
 //!
 //! # Time stamps of the messages
@@ -27,24 +27,24 @@
 //!
 //! # Durability
 //!
-//! Recordings are chunked; the recorder closes a chunk at least every second and hands it to
+//! Recordings are chunked (zstd); the recorder closes a chunk at least every second and hands it to
 //! the operating system, so a crash or `kill -9` loses at most the last second. A clean stop
 //! writes the summary (schemas, channels, statistics, chunk indexes) and the footer.
 
 pub mod channels;
-pub mod crc32;
 mod error;
 pub mod glob;
-pub mod mcap_format;
 pub mod mcap_reader;
 pub mod mcap_writer;
 pub mod ports;
 pub mod sample_file;
 
+pub use channels::Encoding;
 pub use error::RecordingError;
 pub use mcap_reader::McapReader;
+pub use mcap_writer::ChunkCompression;
 pub use mcap_writer::McapWriter;
-pub use sample_file::{RecordedSample, SampleReader, SampleRecorder};
+pub use sample_file::{RecordedSample, RecordingOptions, SampleReader, SampleRecorder};
 
 #[cfg(test)]
 mod tests;

@@ -7,30 +7,57 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek, Write};
 use std::path::{Path, PathBuf};
 
-use super::channels::{self, LIBRARY, MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING};
+use super::channels::{self, Encoding, LIBRARY, META_LAYOUT, META_QOS, PROFILE, QOS_PROFILES};
 use super::error::RecordingError;
 use super::mcap_reader::{McapReader, ScanEnd, SummarySection};
-use super::mcap_writer::{ChannelId, McapWriter, SchemaId};
+use super::mcap_writer::{ChannelId, ChunkCompression, DEFAULT_CHUNK_SIZE, McapWriter, SchemaId};
 use navsync_shared::samples::AnySample;
 use navsync_shared::services::ServiceKind;
 
+/// How a recording is written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RecordingOptions {
+    /// Message encoding (default CDR).
+    pub encoding: Encoding,
+    /// Chunk compression (default zstd).
+    pub compression: ChunkCompression,
+    /// Bytes of records at which a chunk is closed (default [`DEFAULT_CHUNK_SIZE`]).
+    pub chunk_size: usize,
+}
+
+impl Default for RecordingOptions {
+    fn default() -> Self {
+        Self {
+            encoding: Encoding::Cdr,
+            compression: ChunkCompression::Zstd,
+            chunk_size: DEFAULT_CHUNK_SIZE,
+        }
+    }
+}
+
 /// Writes navsync samples into an MCAP file: one channel per service, one schema per type,
 /// created when a service is first seen.
-pub struct SampleRecorder<W: Write = BufWriter<File>> {
+pub struct SampleRecorder<W: Write + Seek = BufWriter<File>> {
     mcap: McapWriter<W>,
+    encoding: Encoding,
     path: PathBuf,
     schemas: [Option<SchemaId>; ServiceKind::ALL.len()],
     channels: HashMap<String, (ChannelId, ServiceKind)>,
     /// Key-value metadata for channels not created yet, by service.
     metadata: HashMap<String, Vec<(String, String)>>,
-    json: Vec<u8>,
+    buf: Vec<u8>,
 }
 
 impl SampleRecorder<BufWriter<File>> {
-    /// Creates (or truncates) `path` and writes the file header.
+    /// Creates (or truncates) `path` and writes the file header, with the default options.
     pub fn create(path: &Path) -> Result<Self, RecordingError> {
+        Self::create_with(path, RecordingOptions::default())
+    }
+
+    /// Creates (or truncates) `path` and writes the file header.
+    pub fn create_with(path: &Path, options: RecordingOptions) -> Result<Self, RecordingError> {
         let f = File::create(path).map_err(|e| RecordingError::io(path, "creating", e))?;
-        Self::new(BufWriter::with_capacity(256 * 1024, f), path)
+        Self::new(BufWriter::with_capacity(256 * 1024, f), path, options)
     }
 
     /// Closes the file properly (summary, footer) and syncs it to disk.
@@ -44,23 +71,27 @@ impl SampleRecorder<BufWriter<File>> {
     }
 }
 
-impl<W: Write> SampleRecorder<W> {
+impl<W: Write + Seek> SampleRecorder<W> {
     /// A recorder writing to `out`; `path` names it in errors.
-    pub fn new(out: W, path: &Path) -> Result<Self, RecordingError> {
+    pub fn new(out: W, path: &Path, options: RecordingOptions) -> Result<Self, RecordingError> {
+        let profile = match options.encoding {
+            Encoding::Cdr => PROFILE,
+            Encoding::Json => "",
+        };
         Ok(Self {
-            mcap: McapWriter::new(out, path, PROFILE, LIBRARY)?,
+            mcap: McapWriter::new(out, path, profile, LIBRARY, options.chunk_size, options.compression)?,
+            encoding: options.encoding,
             path: path.to_path_buf(),
             schemas: [None; ServiceKind::ALL.len()],
             channels: HashMap::new(),
             metadata: HashMap::new(),
-            json: Vec::with_capacity(4096),
+            buf: Vec::with_capacity(4096),
         })
     }
 
-    /// Closes chunks at `bytes` instead of the default.
-    pub fn with_chunk_size(mut self, bytes: usize) -> Self {
-        self.mcap = self.mcap.with_chunk_size(bytes);
-        self
+    /// The message encoding.
+    pub fn encoding(&self) -> Encoding {
+        self.encoding
     }
 
     /// Adds `key` = `value` to the metadata of `service`'s channel (what the data were made
@@ -93,17 +124,27 @@ impl<W: Write> SampleRecorder<W> {
             Some(s) => s,
             None => {
                 let s = self.mcap.add_schema(
-                    channels::schema_name(kind),
-                    SCHEMA_ENCODING,
-                    &channels::schema_data(kind),
+                    &self.encoding.schema_name(kind),
+                    self.encoding.schema_encoding(),
+                    &self.encoding.schema_data(kind),
                 )?;
                 self.schemas[slot] = Some(s);
                 s
             }
         };
         let metadata = self.metadata.remove(service).unwrap_or_default();
-        let pairs: Vec<(&str, &str)> = metadata.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
-        let id = self.mcap.add_channel(schema, service, MESSAGE_ENCODING, &pairs)?;
+        let mut pairs: Vec<(&str, &str)> = metadata.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+        let topic = match self.encoding {
+            Encoding::Cdr => {
+                pairs.push((META_QOS, QOS_PROFILES));
+                pairs.push((META_LAYOUT, kind.type_name()));
+                channels::topic_of(service)
+            }
+            Encoding::Json => service.to_string(),
+        };
+        let id = self
+            .mcap
+            .add_channel(schema, &topic, self.encoding.message_encoding(), &pairs)?;
         self.channels.insert(service.to_string(), (id, kind));
         Ok(id)
     }
@@ -134,8 +175,8 @@ impl<W: Write> SampleRecorder<W> {
                 ),
             });
         }
-        channels::encode(sample, &mut self.json);
-        self.mcap.write_message(id, log_time, publish_time, &self.json)
+        self.encoding.encode(sample, &mut self.buf);
+        self.mcap.write_message(id, log_time, publish_time, &self.buf)
     }
 
     /// Closes the open chunk and hands it to the operating system.
@@ -162,7 +203,7 @@ impl<W: Write> SampleRecorder<W> {
 /// One recorded sample.
 #[derive(Debug, Clone, Copy)]
 pub struct RecordedSample<'a> {
-    /// The service (the channel's topic).
+    /// The service (the channel's topic without the leading `/`).
     pub service: &'a str,
     /// The channel id in the file.
     pub channel_id: u16,
@@ -221,14 +262,14 @@ impl<R: Read + Seek> SampleReader<R> {
     pub fn channel_metadata(&self, service: &str) -> Vec<(String, String)> {
         let from_summary = self
             .summary()
-            .and_then(|s| s.channels.iter().find(|c| c.topic == service))
+            .and_then(|s| s.channels.iter().find(|c| channels::service_of(&c.topic) == service))
             .map(|c| c.metadata.clone());
         from_summary
             .or_else(|| {
                 (0..=u16::MAX)
                     .take(self.kinds.len())
                     .filter_map(|id| self.mcap.channel(id))
-                    .find(|c| c.topic == service)
+                    .find(|c| channels::service_of(&c.topic) == service)
                     .map(|c| c.metadata.clone())
             })
             .unwrap_or_default()
@@ -257,7 +298,11 @@ impl<R: Read + Seek> SampleReader<R> {
         let Some((channel_id, sample, log_time, publish_time)) = self.next_owned()? else {
             return Ok(None);
         };
-        let service = self.mcap.channel(channel_id).map(|c| c.topic.as_str()).unwrap_or("");
+        let service = self
+            .mcap
+            .channel(channel_id)
+            .map(|c| channels::service_of(&c.topic))
+            .unwrap_or("");
         Ok(Some(RecordedSample {
             service,
             channel_id,
@@ -288,7 +333,7 @@ impl<R: Read + Seek> SampleReader<R> {
                     }
                 }
             };
-            let sample = channels::decode_layout(kind, m.data).map_err(|problem| RecordingError::Decode {
+            let sample = channels::decode(kind, m.data).map_err(|problem| RecordingError::Decode {
                 path: self.path.clone(),
                 offset: m.offset,
                 topic: m.channel.topic.clone(),

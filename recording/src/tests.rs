@@ -1,13 +1,14 @@
-//! Writer and reader against each other: round trip, summary, truncation at every byte,
-//! corruption, foreign records.
+//! Writer and reader against each other: round trip in both encodings, summary, truncation
+//! near every chunk boundary, corruption, foreign records.
 
 use std::io::Cursor;
 use std::path::Path;
 
+use super::RecordingError;
+use super::channels::Encoding;
 use super::mcap_reader::{McapReader, ScanEnd};
-use super::mcap_writer::McapWriter;
-use super::sample_file::{SampleReader, SampleRecorder};
-use super::{RecordingError, mcap_format};
+use super::mcap_writer::{ChunkCompression, McapWriter};
+use super::sample_file::{RecordingOptions, SampleReader, SampleRecorder};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{AnySample, ImuSample, NavState, Stamp, StampSource};
 use navsync_shared::services;
@@ -32,11 +33,22 @@ fn nav(i: u64) -> AnySample {
     AnySample::Nav(s)
 }
 
+const MAGIC: [u8; 8] = [0x89, b'M', b'C', b'A', b'P', b'0', b'\r', b'\n'];
+
+fn options(chunk: usize) -> RecordingOptions {
+    RecordingOptions {
+        chunk_size: chunk,
+        ..RecordingOptions::default()
+    }
+}
+
 /// A recording of `n` IMU samples and states, closed properly, in small chunks.
 fn recording(n: u64, chunk: usize) -> Vec<u8> {
-    let mut r = SampleRecorder::new(Vec::new(), Path::new("mem.mcap"))
-        .unwrap()
-        .with_chunk_size(chunk);
+    recording_with(n, options(chunk))
+}
+
+fn recording_with(n: u64, options: RecordingOptions) -> Vec<u8> {
+    let mut r = SampleRecorder::new(Cursor::new(Vec::new()), Path::new("mem.mcap"), options).unwrap();
     for i in 0..n {
         r.write(
             &services::imu_sample("0"),
@@ -48,7 +60,7 @@ fn recording(n: u64, chunk: usize) -> Vec<u8> {
         r.write(services::NAV_STATE, &nav(i), 1_700_000_000_000_000_000 + i, 5 + i)
             .unwrap();
     }
-    r.finish().unwrap()
+    r.finish().unwrap().into_inner()
 }
 
 /// (service, sample, log_time, publish_time)
@@ -66,10 +78,27 @@ fn read_all(bytes: &[u8]) -> Result<(Vec<Read>, ScanEnd), RecordingError> {
 
 #[test]
 fn samples_round_trip_with_summary() {
-    let bytes = recording(50, 2000);
-    assert_eq!(&bytes[..8], &mcap_format::MAGIC);
-    assert_eq!(&bytes[bytes.len() - 8..], &mcap_format::MAGIC);
-    let (msgs, end) = read_all(&bytes).unwrap();
+    for (encoding, compression) in [
+        (Encoding::Cdr, ChunkCompression::Zstd),
+        (Encoding::Json, ChunkCompression::Zstd),
+        (Encoding::Cdr, ChunkCompression::None),
+    ] {
+        let bytes = recording_with(
+            50,
+            RecordingOptions {
+                encoding,
+                compression,
+                chunk_size: 2000,
+            },
+        );
+        round_trip_with_summary(&bytes, encoding, compression);
+    }
+}
+
+fn round_trip_with_summary(bytes: &[u8], encoding: Encoding, compression: ChunkCompression) {
+    assert_eq!(&bytes[..8], &MAGIC);
+    assert_eq!(&bytes[bytes.len() - 8..], &MAGIC);
+    let (msgs, end) = read_all(bytes).unwrap();
     assert_eq!(end, ScanEnd::Clean);
     assert_eq!(msgs.len(), 100);
     for (i, (svc, s, lt, pt)) in msgs.iter().enumerate() {
@@ -88,7 +117,7 @@ fn samples_round_trip_with_summary() {
             assert_eq!(a.accel_mps2.map(f64::to_bits), b.accel_mps2.map(f64::to_bits));
         }
     }
-    let mcap = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap")).unwrap();
+    let mcap = McapReader::new(Cursor::new(bytes), Path::new("mem.mcap")).unwrap();
     let summary = mcap.summary().expect("summary");
     let stats = summary.statistics.as_ref().unwrap();
     assert_eq!(stats.message_count, 100);
@@ -99,19 +128,24 @@ fn samples_round_trip_with_summary() {
     assert_eq!(stats.message_end_time, 1_700_000_000_000_000_049);
     assert!(stats.chunk_count > 3, "{} chunks", stats.chunk_count);
     assert_eq!(summary.chunk_indexes.len() as u32, stats.chunk_count);
-    assert_eq!(summary.channels[0].topic, "navsync/imu/0/sample");
-    assert_eq!(summary.schemas[1].name, "navsync.NavState.v1");
-    // The chunk indexes point at Chunk records followed by their message indexes.
+    let (topic, schema, profile) = match encoding {
+        Encoding::Cdr => ("/navsync/imu/0/sample", "navsync_msgs/msg/NavState", "ros2"),
+        Encoding::Json => ("navsync/imu/0/sample", "navsync.NavState.v1", ""),
+    };
+    assert_eq!(summary.channels[0].topic, topic);
+    assert_eq!(summary.schemas[1].name, schema);
+    assert_eq!(mcap.header().profile, profile);
+    let want = match compression {
+        ChunkCompression::Zstd => "zstd",
+        ChunkCompression::None => "",
+    };
     for ci in &summary.chunk_indexes {
+        assert_eq!(ci.compression, want);
+        // The chunk indexes point at Chunk records (opcode 0x06) of the indexed length.
         let at = ci.chunk_start_offset as usize;
-        assert_eq!(bytes[at], mcap_format::Opcode::Chunk as u8);
+        assert_eq!(bytes[at], 0x06);
         let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap());
         assert_eq!(ci.chunk_length, len + 9);
-        for &(_, off) in &ci.message_index_offsets {
-            assert_eq!(bytes[off as usize], mcap_format::Opcode::MessageIndex as u8);
-        }
-        let last_index = at as u64 + ci.chunk_length + ci.message_index_length;
-        assert!(last_index <= bytes.len() as u64);
     }
 }
 
@@ -130,6 +164,37 @@ fn keys(msgs: &[Read]) -> Vec<String> {
     msgs.iter()
         .map(|(s, x, lt, pt)| format!("{s} {lt} {pt} {}", super::channels::sample_json(x)))
         .collect()
+}
+
+#[test]
+fn a_schema_of_other_fields_is_refused_with_the_difference() {
+    let mut w = McapWriter::new(
+        Cursor::new(Vec::new()),
+        Path::new("mem.mcap"),
+        "ros2",
+        "test",
+        1 << 20,
+        ChunkCompression::Zstd,
+    )
+    .unwrap();
+    let kind = navsync_shared::services::ServiceKind::ImuSample;
+    let text = String::from_utf8(Encoding::Cdr.schema_data(kind))
+        .unwrap()
+        .replace("float64 dt_s", "float32 dt_s");
+    let s = w
+        .add_schema(&Encoding::Cdr.schema_name(kind), "ros2msg", text.as_bytes())
+        .unwrap();
+    let c = w.add_channel(s, "/navsync/imu/0/sample", "cdr", &[]).unwrap();
+    let mut cdr = Vec::new();
+    Encoding::Cdr.encode(&imu(1), &mut cdr);
+    w.write_message(c, 2, 2, &cdr).unwrap();
+    let buf = w.finish().unwrap().into_inner();
+    let mcap = McapReader::new(Cursor::new(&buf[..]), Path::new("mem.mcap")).unwrap();
+    let mut r = SampleReader::from_mcap(mcap);
+    assert!(r.next_sample().unwrap().is_none());
+    let skipped = r.skipped_channels();
+    assert_eq!(skipped.len(), 1);
+    assert!(skipped[0].1.contains("dt_s"), "{skipped:?}");
 }
 
 #[test]
@@ -175,8 +240,8 @@ fn a_truncated_file_yields_every_complete_chunk() {
                 }
             }
             Err(RecordingError::NotMcap { .. }) => assert!(cut < 8, "cut {cut}"),
-            Err(RecordingError::Corrupt { record, .. }) => {
-                assert!(cut < header_end, "cut {cut}: {record}")
+            Err(RecordingError::Corrupt { record, problem, .. }) => {
+                assert!(cut < header_end, "cut {cut}: {record}: {problem}")
             }
             Err(e) => panic!("cut {cut}: {e}"),
         }
@@ -185,31 +250,42 @@ fn a_truncated_file_yields_every_complete_chunk() {
 }
 
 #[test]
-fn a_damaged_chunk_names_its_offset() {
-    let mut bytes = recording(20, 1000);
-    let mcap = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap")).unwrap();
-    let second = mcap.summary().unwrap().chunk_indexes[1].clone();
-    // Flip a byte inside the second chunk's records.
-    let at = (second.chunk_start_offset + second.chunk_length - 10) as usize;
-    bytes[at] ^= 0x55;
-    let err = read_all(&bytes).unwrap_err();
-    match &err {
-        RecordingError::Corrupt {
-            offset,
-            record,
-            problem,
-            ..
-        } => {
-            assert_eq!(*offset, second.chunk_start_offset);
-            assert_eq!(record, "Chunk");
-            assert!(problem.contains("CRC"), "{problem}");
+fn a_damaged_chunk_is_an_error_naming_the_file() {
+    for compression in [ChunkCompression::None, ChunkCompression::Zstd] {
+        let mut bytes = recording_with(
+            20,
+            RecordingOptions {
+                compression,
+                ..options(1000)
+            },
+        );
+        let mcap = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap")).unwrap();
+        let second = mcap.summary().unwrap().chunk_indexes[1].clone();
+        // Flip a byte inside the second chunk's records.
+        let at = (second.chunk_start_offset + second.chunk_length - 10) as usize;
+        bytes[at] ^= 0x55;
+        let err = read_all(&bytes).unwrap_err();
+        match &err {
+            RecordingError::Corrupt { offset, problem, .. } => {
+                assert!(*offset > second.chunk_start_offset, "{err}");
+                assert!(!problem.is_empty());
+            }
+            e => panic!("{e}"),
         }
-        e => panic!("{e}"),
+        assert!(err.to_string().starts_with("mem.mcap: corrupt"), "{err}");
+        // No message of the damaged chunk was given out: chunks are checked before use.
+        let mcap = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap")).unwrap();
+        let mut r = SampleReader::from_mcap(mcap);
+        let mut n = 0;
+        while let Ok(Some(_)) = r.next_sample() {
+            n += 1;
+        }
+        assert_eq!(
+            n,
+            chunk_message_count(&bytes, &mcap_chunks(&bytes)[0]),
+            "{compression:?}"
+        );
     }
-    assert!(
-        err.to_string()
-            .starts_with("mem.mcap: corrupt Chunk record at byte offset")
-    );
     // A summary that does not match its CRC is an error at the footer.
     let mut bytes = recording(5, 1000);
     let n = bytes.len();
@@ -217,7 +293,7 @@ fn a_damaged_chunk_names_its_offset() {
     let err = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap"))
         .err()
         .unwrap();
-    assert!(err.to_string().contains("summary CRC"), "{err}");
+    assert!(err.to_string().contains("footer's CRC"), "{err}");
     // Not an MCAP file at all.
     let err = McapReader::new(Cursor::new(&b"hello world, not mcap"[..]), Path::new("x.txt"))
         .err()
@@ -225,26 +301,39 @@ fn a_damaged_chunk_names_its_offset() {
     assert!(matches!(err, RecordingError::NotMcap { .. }), "{err}");
 }
 
+fn mcap_chunks(bytes: &[u8]) -> Vec<super::mcap_reader::ChunkIndex> {
+    let mcap = McapReader::new(Cursor::new(bytes), Path::new("mem.mcap")).unwrap();
+    mcap.summary().unwrap().chunk_indexes.clone()
+}
+
 #[test]
 fn unknown_records_and_foreign_channels_are_skipped() {
-    let mut buf = Vec::new();
-    let mut w = McapWriter::new(&mut buf, Path::new("mem.mcap"), "", "test").unwrap();
+    let mut w = McapWriter::new(
+        Cursor::new(Vec::new()),
+        Path::new("mem.mcap"),
+        "",
+        "test",
+        1 << 20,
+        ChunkCompression::None,
+    )
+    .unwrap();
     let s = w.add_schema("foo.Bar", "protobuf", b"\x01\x02").unwrap();
     let foreign = w.add_channel(s, "/tf", "protobuf", &[("k", "v")]).unwrap();
     let kind = navsync_shared::services::ServiceKind::NavState;
     let s = w
         .add_schema(
-            super::channels::schema_name(kind),
-            super::channels::SCHEMA_ENCODING,
-            &super::channels::schema_data(kind),
+            &Encoding::Cdr.schema_name(kind),
+            Encoding::Cdr.schema_encoding(),
+            &Encoding::Cdr.schema_data(kind),
         )
         .unwrap();
-    let ours = w.add_channel(s, services::NAV_STATE, "json", &[]).unwrap();
+    // No navsync.layout: as another tool writes it; the schema's fields are checked instead.
+    let ours = w.add_channel(s, "/navsync/nav/state", "cdr", &[]).unwrap();
     w.write_message(foreign, 1, 1, b"\x00\x01").unwrap();
-    let mut json = Vec::new();
-    super::channels::encode(&nav(3), &mut json);
-    w.write_message(ours, 2, 2, &json).unwrap();
-    w.finish().unwrap();
+    let mut cdr = Vec::new();
+    Encoding::Cdr.encode(&nav(3), &mut cdr);
+    w.write_message(ours, 2, 2, &cdr).unwrap();
+    let buf = w.finish().unwrap().into_inner();
     let first_chunk = McapReader::new(Cursor::new(&buf[..]), Path::new("mem.mcap"))
         .unwrap()
         .summary()
@@ -258,12 +347,9 @@ fn unknown_records_and_foreign_channels_are_skipped() {
     let chunk_len = 9 + u64::from_le_bytes(buf[first_chunk + 1..first_chunk + 9].try_into().unwrap()) as usize;
     file.extend_from_slice(&buf[first_chunk..first_chunk + chunk_len]);
     let (msgs, end) = read_all(&file).unwrap();
-    assert_eq!(
-        end,
-        ScanEnd::Truncated {
-            offset: file.len() as u64,
-            record: "end of file".into()
-        }
+    assert!(
+        matches!(end, ScanEnd::Truncated { offset, .. } if offset == file.len() as u64),
+        "{end:?}"
     );
     assert_eq!(msgs.len(), 1);
     assert_eq!(msgs[0].0, services::NAV_STATE);
@@ -279,7 +365,7 @@ fn unknown_records_and_foreign_channels_are_skipped() {
 
 #[test]
 fn wrong_types_and_names_are_refused() {
-    let mut r = SampleRecorder::new(Vec::new(), Path::new("x.mcap")).unwrap();
+    let mut r = SampleRecorder::new(Cursor::new(Vec::new()), Path::new("x.mcap"), options(1000)).unwrap();
     let e = r.write("navsync/imu/0/sample", &nav(0), 0, 0).unwrap_err();
     assert!(e.to_string().contains("x.mcap: a Nav"), "{e}");
     let e = r.write("/tf", &nav(0), 0, 0).unwrap_err();

@@ -59,7 +59,7 @@ unsafe fn encode_value(ty: &FieldType, p: *const u8) -> Value {
                 let sz = t.size();
                 Value::Array((0..*n).map(|i| encode_value(t, p.add(i * sz))).collect())
             }
-            FieldType::Struct(fields) => encode_struct(fields, p),
+            FieldType::Struct(_, fields) => encode_struct(fields, p),
         }
     }
 }
@@ -163,7 +163,7 @@ unsafe fn decode_value(ty: &FieldType, p: *mut u8, v: &Value, path: &str, lenien
                     decode_value(t, p.add(i * t.size()), e, &format!("{path}[{i}]"), lenient)?;
                 }
             }
-            FieldType::Struct(fields) => decode_struct(fields, p, v, path, lenient)?,
+            FieldType::Struct(_, fields) => decode_struct(fields, p, v, path, lenient)?,
         }
     }
     Ok(())
@@ -211,6 +211,6 @@ fn type_schema(ty: &FieldType) -> Value {
         FieldType::Array(t, n) => {
             serde_json::json!({ "type": "array", "items": type_schema(t), "minItems": n, "maxItems": n })
         }
-        FieldType::Struct(fields) => struct_schema(fields),
+        FieldType::Struct(_, fields) => struct_schema(fields),
     }
 }

@@ -18,6 +18,7 @@
 //! Frames: navigation frame NED (north-east-down), body frame FRD (forward-right-down).
 //! Times: integer nanoseconds; `host_ns` is `CLOCK_MONOTONIC`.
 
+pub mod cdr;
 pub mod client;
 pub mod cpu_wakeup;
 pub mod earth;
@@ -28,6 +29,7 @@ pub mod json;
 pub mod latency_histogram;
 pub mod pacing;
 pub mod reflect;
+pub mod ros2msg;
 pub mod samples;
 pub mod sd_notify;
 pub mod services;

@@ -31,8 +31,9 @@ pub enum FieldType {
     Str(usize),
     /// `[T; N]`
     Array(&'static FieldType, usize),
-    /// A nested `#[repr(C)]` struct described by its own table.
-    Struct(&'static [Field]),
+    /// A nested `#[repr(C)]` struct: its type name with layout version (as
+    /// [`Reflect::TYPE_NAME`]) and its own table.
+    Struct(&'static str, &'static [Field]),
 }
 
 impl FieldType {
@@ -45,7 +46,7 @@ impl FieldType {
             FieldType::U8 => 1,
             FieldType::Str(n) => *n,
             FieldType::Array(t, n) => t.size() * n,
-            FieldType::Struct(fields) => struct_size(fields),
+            FieldType::Struct(_, fields) => struct_size(fields),
         }
     }
 
@@ -57,7 +58,7 @@ impl FieldType {
             FieldType::I16 | FieldType::U16 => 2,
             FieldType::U8 | FieldType::Str(_) => 1,
             FieldType::Array(t, _) => t.align(),
-            FieldType::Struct(fields) => fields.iter().map(|f| f.ty.align()).max().unwrap_or(1),
+            FieldType::Struct(_, fields) => fields.iter().map(|f| f.ty.align()).max().unwrap_or(1),
         }
     }
 }
@@ -120,6 +121,8 @@ pub trait Reflect: Sized + Copy + 'static {
     const FIELDS: &'static [Field];
     /// Type name including the layout version, e.g. `navsync.ImuSample.v1`.
     const TYPE_NAME: &'static str;
+    /// The type's doc comment.
+    const DOC: &'static str;
     /// A value with every byte zero (valid for all sample types: plain numbers only).
     fn zeroed() -> Self;
 }
@@ -152,6 +155,7 @@ macro_rules! sample_struct {
                 }, )*
             ];
             const TYPE_NAME: &'static str = $tyname;
+            const DOC: &'static str = concat!($($sdoc, "\n"),*);
             fn zeroed() -> Self {
                 // SAFETY: every field is an integer, float or array of them; all-zero bytes are valid.
                 unsafe { core::mem::zeroed() }
@@ -160,11 +164,17 @@ macro_rules! sample_struct {
 
         impl $crate::reflect::FieldKind for $name {
             const KIND: $crate::reflect::FieldType =
-                $crate::reflect::FieldType::Struct(<$name as $crate::reflect::Reflect>::FIELDS);
+                $crate::reflect::FieldType::Struct(
+                    <$name as $crate::reflect::Reflect>::TYPE_NAME,
+                    <$name as $crate::reflect::Reflect>::FIELDS,
+                );
         }
         impl<const N: usize> $crate::reflect::FieldKind for [$name; N] {
             const KIND: $crate::reflect::FieldType = $crate::reflect::FieldType::Array(
-                &$crate::reflect::FieldType::Struct(<$name as $crate::reflect::Reflect>::FIELDS),
+                &$crate::reflect::FieldType::Struct(
+                    <$name as $crate::reflect::Reflect>::TYPE_NAME,
+                    <$name as $crate::reflect::Reflect>::FIELDS,
+                ),
                 N,
             );
         }

@@ -12,7 +12,7 @@ fn ty(t: &FieldType) -> String {
     match t {
         FieldType::Str(n) => format!("str{n}"),
         FieldType::Array(e, n) => format!("[{};{n}]", ty(e)),
-        FieldType::Struct(fields) => format!("{{{}}}", fields_sig(fields)),
+        FieldType::Struct(_, fields) => format!("{{{}}}", fields_sig(fields)),
         other => format!("{other:?}").to_lowercase(),
     }
 }
@@ -54,7 +54,7 @@ fn all() -> Vec<String> {
 #[test]
 fn field_tables_describe_the_real_layout() {
     fn check<T: Reflect>() {
-        let described = FieldType::Struct(T::FIELDS);
+        let described = FieldType::Struct(T::TYPE_NAME, T::FIELDS);
         assert_eq!(described.size(), size_of::<T>(), "{}: table size", T::TYPE_NAME);
         assert_eq!(described.align(), align_of::<T>(), "{}: table alignment", T::TYPE_NAME);
     }

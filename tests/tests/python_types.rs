@@ -21,11 +21,11 @@ fn nested(prefix: &str, base: usize, fields: &[Field], out: &mut BTreeMap<String
     for f in fields {
         let path = format!("{prefix}{}", f.name);
         out.insert(path.clone(), base + f.offset);
-        if let FieldType::Struct(inner) = f.ty {
+        if let FieldType::Struct(_, inner) = f.ty {
             nested(&format!("{path}."), base + f.offset, inner, out);
         }
         if let FieldType::Array(t, n) = f.ty
-            && let FieldType::Struct(inner) = *t
+            && let FieldType::Struct(_, inner) = *t
         {
             for i in 0..n {
                 let at = base + f.offset + i * t.size();

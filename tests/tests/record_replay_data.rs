@@ -2,15 +2,17 @@
 //! `navsync sim --scenario tests/data/record_drive.toml --fast --record …`) replayed through the
 //! live processes: `navsync replay` → `navsync estimator` → `navsync/nav/state`, observed from
 //! this test. The live estimator's states equal `navsync replay --estimate`'s bit for bit, the
-//! replayed samples reach a recorder unchanged, and every message of the file survives a JSON
-//! decode/encode round trip byte for byte.
+//! replayed samples reach a recorder unchanged, and every message of the file (JSON, written by
+//! navsync's own MCAP writer before the `mcap` crate and CDR) survives a JSON decode/encode
+//! round trip byte for byte and a CDR one bit for bit.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::{Child, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-use navsync_recording::channels::{self, sample_json};
+use navsync_recording::Encoding;
+use navsync_recording::channels::{self, Codec, sample_json};
 use navsync_recording::mcap_reader::ScanEnd;
 use navsync_recording::{McapReader, SampleReader};
 use navsync_shared::samples::{AnySample, Health, NavState, NavStatus, TimeStatus};
@@ -68,18 +70,26 @@ const INPUTS: [&str; 4] = [
 ];
 
 #[test]
-fn the_checked_in_recording_survives_a_json_round_trip_byte_for_byte() {
+fn the_checked_in_json_recording_survives_json_and_cdr_round_trips() {
     let path = data_file();
     let size = std::fs::metadata(&path).unwrap().len();
     assert!(size <= 2_000_000, "{} is {size} bytes; keep it small", path.display());
     let mut r = McapReader::open(&path).unwrap();
     let mut n = 0;
     let mut buf = Vec::new();
+    let mut cdr = Vec::new();
     while let Some(m) = r.next_message().unwrap() {
         let ty = channels::channel_kind(m.channel, m.schema).unwrap();
-        assert!(!ty.older, "{}: an older layout", m.channel.topic);
-        let sample = channels::decode(ty.kind, m.data).unwrap();
-        channels::encode(&sample, &mut buf);
+        assert_eq!(ty.codec, Codec::Json, "{}: an older layout", m.channel.topic);
+        let sample = channels::decode(ty, m.data).unwrap();
+        Encoding::Json.encode(&sample, &mut buf);
+        Encoding::Cdr.encode(&sample, &mut cdr);
+        let cdr_type = channels::ChannelType {
+            kind: ty.kind,
+            codec: Codec::Cdr,
+        };
+        let back = channels::decode(cdr_type, &cdr).unwrap();
+        assert_eq!(sample_json(&back), sample_json(&sample), "{} via CDR", m.channel.topic);
         // The shortest text of a float is unique, so equal text means equal bits.
         assert!(
             buf == m.data,

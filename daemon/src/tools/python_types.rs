@@ -77,7 +77,7 @@ fn ctype(t: &FieldType, all: &[Ty]) -> String {
         FieldType::F32 => "ctypes.c_float".into(),
         FieldType::Str(n) => format!("(ctypes.c_char * {n})"),
         FieldType::Array(inner, n) => format!("({} * {n})", ctype(inner, all)),
-        FieldType::Struct(fields) => all
+        FieldType::Struct(_, fields) => all
             .iter()
             .find(|t| t.fields == *fields)
             .map(|t| t.class.to_string())
