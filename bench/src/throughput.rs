@@ -20,7 +20,7 @@ use navsync_sim::world::World;
 use serde::Serialize;
 
 use crate::util::{self, Machine};
-use navsync_estimator::input_order::InputOrder;
+use navsync_estimator::input_order::{Input, InputOrder};
 use navsync_estimator::pipeline::Pipeline;
 use navsync_estimator::settings::Settings;
 
@@ -203,14 +203,14 @@ pub fn run_case(args: &ThroughputArgs, imus: usize) -> Result<ThroughputCase, Si
 }
 
 /// One sample into the pipeline; true when it produced a NavState.
-fn feed(p: &mut Pipeline, s: &AnySample) -> bool {
+fn feed(p: &mut Pipeline, s: &Input) -> bool {
     match s {
-        AnySample::Imu(x) => p.on_imu(x).is_some(),
-        AnySample::GnssFix(f) => {
+        Input::Imu(x) => p.on_imu(x).is_some(),
+        Input::GnssFix(f) => {
             p.on_fix(f);
             false
         }
-        AnySample::PpsEdge(e) => {
+        Input::PpsEdge(e) => {
             p.on_pps(e);
             false
         }

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use navsync::live::{demo, echo, estimator, feed, gnss, gpsd_server, imu, ntpshm, pps, record, replay, sim, status};
-use navsync::tools::{analyze, check_config, decode, eval, install, kf_gins, python_types, report};
+use navsync::tools::{analyze, check_config, convert, decode, eval, install, kf_gins, python_types, report};
 use navsync::{config, logging};
 
 #[derive(Parser)]
@@ -47,6 +47,8 @@ enum Cmd {
     /// Publishes a recording into the live services with its original timing, or runs the
     /// estimator over it offline (--estimate).
     Replay(replay::Options),
+    /// Rewrites a recording in another encoding (e.g. an older JSON recording as a ROS 2 bag).
+    Convert(convert::Options),
     /// Exports GNSS time (`navsync/time/state`) to chrony/ntpd as an NTP shared-memory refclock.
     Ntpshm(ntpshm::NtpShmArgs),
     /// Serves the fused state to gpsd clients (gpsd JSON protocol).
@@ -93,6 +95,7 @@ fn main() -> Result<()> {
         Cmd::Status(o) => status::run(&o).context("status"),
         Cmd::Record(o) => record::main(o, &cfg),
         Cmd::Replay(o) => replay::main(o, &cfg),
+        Cmd::Convert(o) => convert::run(&o, &cfg).context("convert"),
         Cmd::Ntpshm(o) => ntpshm::main(o, &cfg),
         Cmd::GpsdServer(o) => gpsd_server::run(&o).context("gpsd-server"),
         Cmd::Analyze(c) => analyze::main(c, &cfg),

@@ -64,7 +64,7 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 
 use navsync_shared::reflect::fixed_str;
-use navsync_shared::samples::AnySample;
+use navsync_shared::samples::{AnySample, GnssFix, GnssTimePulse, ImuSample, PpsEdge, SimTruth};
 
 /// Hold of PPS edges after their stamp, ns.
 pub const PPS_HOLD_NS: i64 = 50_000_000;
@@ -107,26 +107,99 @@ pub fn order_key(s: &AnySample) -> OrderKey {
     OrderKey { at_ns, rank, id, seq }
 }
 
-struct Entry<T> {
+/// A sample as the order keeps it: the kinds the estimator consumes, and only the key of any
+/// other (an [`AnySample`] is 2.6 KiB for the sake of raw measurements and health; an IMU
+/// sample is 112 B, and every sample is moved several times on its way to the filter).
+#[derive(Debug, Clone, Copy)]
+pub enum Input {
+    /// An IMU sample.
+    Imu(ImuSample),
+    /// A PPS edge.
+    PpsEdge(PpsEdge),
+    /// A GNSS fix.
+    GnssFix(GnssFix),
+    /// A receiver's time-pulse report.
+    TimePulse(GnssTimePulse),
+    /// The simulator's truth (offline evaluation).
+    Truth(SimTruth),
+    /// Any other sample: only its place in the order.
+    Other(OrderKey),
+}
+
+impl From<AnySample> for Input {
+    fn from(s: AnySample) -> Self {
+        match s {
+            AnySample::Imu(x) => Self::Imu(x),
+            AnySample::PpsEdge(x) => Self::PpsEdge(x),
+            AnySample::GnssFix(x) => Self::GnssFix(x),
+            AnySample::TimePulse(x) => Self::TimePulse(x),
+            AnySample::Truth(x) => Self::Truth(x),
+            other => Self::Other(order_key(&other)),
+        }
+    }
+}
+
+impl Input {
+    /// Its place in the canonical order (the same as [`order_key`] of the sample).
+    pub fn key(&self) -> OrderKey {
+        match self {
+            Self::PpsEdge(e) => OrderKey {
+                at_ns: e.stamp.host_ns.saturating_add(PPS_HOLD_NS),
+                rank: 0,
+                id: [0; 8],
+                seq: e.stamp.seq,
+            },
+            Self::GnssFix(f) => OrderKey {
+                at_ns: f.stamp.host_ns.saturating_add(FIX_HOLD_NS),
+                rank: 1,
+                id: [0; 8],
+                seq: f.stamp.seq,
+            },
+            Self::Imu(x) => OrderKey {
+                at_ns: x.stamp.host_ns,
+                rank: 2,
+                id: x.imu_id,
+                seq: x.stamp.seq,
+            },
+            Self::Truth(t) => OrderKey {
+                at_ns: t.host_ns,
+                rank: 3,
+                id: [0; 8],
+                seq: t.seq,
+            },
+            Self::TimePulse(t) => OrderKey {
+                at_ns: t.stamp.host_ns.saturating_add(PPS_HOLD_NS),
+                rank: 0,
+                id: [0; 8],
+                seq: t.stamp.seq,
+            },
+            Self::Other(k) => *k,
+        }
+    }
+}
+
+/// A waiting sample's place in the heap: its key, and its slot in [`InputOrder::slots`]
+/// (samples are a few KiB: the heap moves only these small entries).
+#[derive(Clone, Copy)]
+struct Entry {
     key: OrderKey,
     /// Arrival number: orders exact duplicates.
     arrival: u64,
-    sample: AnySample,
-    tag: T,
+    slot: usize,
 }
 
-impl<T> PartialEq for Entry<T> {
+impl PartialEq for Entry {
     fn eq(&self, o: &Self) -> bool {
         (self.key, self.arrival) == (o.key, o.arrival)
     }
 }
-impl<T> Eq for Entry<T> {}
-impl<T> PartialOrd for Entry<T> {
+impl Eq for Entry {}
+impl PartialOrd for Entry {
     fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
         Some(self.cmp(o))
     }
 }
-impl<T> Ord for Entry<T> {
+impl Ord for Entry {
     fn cmp(&self, o: &Self) -> Ordering {
         (self.key, self.arrival).cmp(&(o.key, o.arrival))
     }
@@ -136,7 +209,11 @@ impl<T> Ord for Entry<T> {
 /// each sample (e.g. its recording time).
 pub struct InputOrder<T = ()> {
     reference_imu: Option<[u8; 8]>,
-    heap: BinaryHeap<Reverse<Entry<T>>>,
+    heap: BinaryHeap<Reverse<Entry>>,
+    /// The waiting samples; `None` slots are free (listed in `free`). Both keep their
+    /// capacity, so a steady state allocates nothing.
+    slots: Vec<Option<(Input, T)>>,
+    free: Vec<usize>,
     watermark: i64,
     /// Newest stamp of any IMU, host ns.
     newest_imu_ns: i64,
@@ -154,6 +231,8 @@ impl<T> InputOrder<T> {
         Self {
             reference_imu: reference_imu.map(fixed_str::<8>),
             heap: BinaryHeap::new(),
+            slots: Vec::new(),
+            free: Vec::new(),
             watermark: i64::MIN,
             newest_imu_ns: i64::MIN,
             arrivals: 0,
@@ -165,25 +244,35 @@ impl<T> InputOrder<T> {
     }
 
     /// Adds a sample.
-    pub fn push(&mut self, sample: AnySample, tag: T) {
-        if let AnySample::Imu(x) = &sample {
+    pub fn push(&mut self, sample: impl Into<Input>, tag: T) {
+        let sample: Input = sample.into();
+        if let Input::Imu(x) = &sample {
             self.newest_imu_ns = self.newest_imu_ns.max(x.stamp.host_ns);
             if self.reference_imu.is_some_and(|r| x.imu_id == r) {
                 self.watermark = self.watermark.max(x.stamp.host_ns);
             }
         }
-        let key = order_key(&sample);
+        let key = sample.key();
         self.arrivals += 1;
+        let slot = match self.free.pop() {
+            Some(i) => {
+                self.slots[i] = Some((sample, tag));
+                i
+            }
+            None => {
+                self.slots.push(Some((sample, tag)));
+                self.slots.len() - 1
+            }
+        };
         self.heap.push(Reverse(Entry {
             key,
             arrival: self.arrivals,
-            sample,
-            tag,
+            slot,
         }));
     }
 
     /// The next sample whose turn has come, in order.
-    pub fn pop(&mut self) -> Option<(AnySample, T)> {
+    pub fn pop(&mut self) -> Option<(Input, T)> {
         let due = match self.heap.peek() {
             Some(Reverse(e)) => {
                 self.reference_imu.is_none()
@@ -198,12 +287,14 @@ impl<T> InputOrder<T> {
     }
 
     /// The next sample in order, due or not (end of a stream, or a stalled reference IMU).
-    pub fn pop_any(&mut self) -> Option<(AnySample, T)> {
+    pub fn pop_any(&mut self) -> Option<(Input, T)> {
         let Reverse(e) = self.heap.pop()?;
+        let (sample, tag) = self.slots[e.slot].take()?;
+        self.free.push(e.slot);
         if self.last_popped.is_some_and(|k| e.key < k) {
-            let counts = match &e.sample {
-                AnySample::PpsEdge(_) | AnySample::GnssFix(_) => true,
-                AnySample::Imu(x) => self.reference_imu.is_none_or(|r| x.imu_id != r),
+            let counts = match &sample {
+                Input::PpsEdge(_) | Input::GnssFix(_) => true,
+                Input::Imu(x) => self.reference_imu.is_none_or(|r| x.imu_id != r),
                 _ => false,
             };
             if counts {
@@ -212,7 +303,7 @@ impl<T> InputOrder<T> {
         } else {
             self.last_popped = Some(e.key);
         }
-        Some((e.sample, e.tag))
+        Some((sample, tag))
     }
 
     /// The consumer's reference IMU changed (handover): its samples release the others from
@@ -226,8 +317,8 @@ impl<T> InputOrder<T> {
         let previous = *r;
         *r = id;
         // The new reference's newest sample so far (waiting, or consumed) is the watermark.
-        let waiting = self.heap.iter().filter_map(|Reverse(e)| match &e.sample {
-            AnySample::Imu(x) if x.imu_id == id => Some(x.stamp.host_ns),
+        let waiting = self.slots.iter().flatten().filter_map(|(s, _)| match s {
+            Input::Imu(x) if x.imu_id == id => Some(x.stamp.host_ns),
             _ => None,
         });
         let consumed = self.last_popped.map_or(i64::MIN, |k| k.at_ns);
@@ -287,20 +378,56 @@ mod tests {
     fn fix(t_ms: i64) -> AnySample {
         AnySample::GnssFix(GnssFix::empty(Stamp::host(t_ms * MS, 0, StampSource::Receipt)))
     }
-    fn name(s: &AnySample) -> String {
+    fn name(s: &Input) -> String {
         match s {
-            AnySample::Imu(x) => format!(
+            Input::Imu(x) => format!(
                 "imu{}@{}",
                 navsync_shared::reflect::str_of(&x.imu_id),
                 x.stamp.host_ns / MS
             ),
-            AnySample::PpsEdge(e) => format!("pps@{}", e.stamp.host_ns / MS),
-            AnySample::GnssFix(f) => format!("fix@{}", f.stamp.host_ns / MS),
+            Input::PpsEdge(e) => format!("pps@{}", e.stamp.host_ns / MS),
+            Input::GnssFix(f) => format!("fix@{}", f.stamp.host_ns / MS),
             _ => "?".into(),
         }
     }
 
     /// Consumes `batches` (each pushed at once, then drained) and returns the order.
+    #[test]
+    fn an_input_keeps_the_key_of_its_sample() {
+        use navsync_shared::reflect::Reflect;
+        use navsync_shared::samples::{Health, NavState, Stamp, StampSource};
+        let st = Stamp::host(123_456_789, 42, StampSource::Simulated);
+        let mut fix = GnssFix::empty(st);
+        fix.stamp.seq = 3;
+        let mut tp = GnssTimePulse::zeroed();
+        tp.stamp = st;
+        let mut truth = SimTruth::zeroed();
+        truth.host_ns = 99;
+        truth.seq = 7;
+        let mut nav = NavState::zeroed();
+        nav.host_ns = 5;
+        nav.seq = 9;
+        let mut h = Health::zeroed();
+        h.host_ns = 8;
+        for s in [
+            imu("3", 17),
+            AnySample::GnssFix(fix),
+            AnySample::TimePulse(tp),
+            AnySample::Truth(truth),
+            AnySample::Nav(nav),
+            AnySample::Health(h),
+        ] {
+            assert_eq!(Input::from(s).key(), order_key(&s), "{s:?}");
+        }
+        let mut e = PpsEdge::zeroed();
+        e.stamp = st;
+        assert_eq!(
+            Input::from(AnySample::PpsEdge(e)).key(),
+            order_key(&AnySample::PpsEdge(e))
+        );
+        assert!(size_of::<Input>() < size_of::<AnySample>() / 8);
+    }
+
     fn consume(batches: &[Vec<AnySample>]) -> (Vec<String>, u64) {
         let mut o = InputOrder::new(Some("0"));
         let mut out = Vec::new();

@@ -12,7 +12,7 @@ use navsync_shared::samples::{AnySample, NavState, TimeState};
 use navsync_shared::time::NS_PER_S;
 
 use crate::evaluation::{DelayTruth, Evaluator, Summary};
-use crate::input_order::InputOrder;
+use crate::input_order::{Input, InputOrder};
 use crate::output_check::OutputCheck;
 use crate::pipeline::Pipeline;
 use crate::settings::Settings;
@@ -38,7 +38,7 @@ pub enum Output<'a> {
 /// Builds the estimator `settings` describe and runs it over `samples` (each with a tag `T`,
 /// e.g. its recording time) in the canonical input order of its reference IMU: the one entry
 /// point of every offline tool. Outputs as for [`run_ordered`].
-pub fn estimate<T, I: IntoIterator<Item = (AnySample, T)>>(
+pub fn estimate<T, S: Into<Input>, I: IntoIterator<Item = (S, T)>>(
     settings: &Settings,
     samples: I,
     time_states: bool,
@@ -86,7 +86,7 @@ pub fn run<I: IntoIterator<Item = AnySample>>(
 /// `None`: any IMU). Every output goes to `on_output` with the tag of the sample that produced
 /// it (for a time state: of the PPS edge, fix or IMU sample after which it was computed);
 /// time states only with `time_states`.
-pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
+pub fn run_ordered<T, S: Into<Input>, I: IntoIterator<Item = (S, T)>>(
     pipeline: &mut Pipeline,
     reference_imu: Option<&str>,
     samples: I,
@@ -104,10 +104,10 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
     let mut latest_host_ns = i64::MIN;
     let mut last_time_ns = i64::MIN;
     // Returns the pipeline's reference IMU after an IMU sample (it moves on a handover).
-    let mut consume = |s: AnySample, tag: T| -> Option<[u8; 8]> {
+    let mut consume = |s: Input, tag: T| -> Option<[u8; 8]> {
         let mut reference = None;
         let updated = match &s {
-            AnySample::Imu(x) => {
+            Input::Imu(x) => {
                 imu += 1;
                 let t = Instant::now();
                 let out = pipeline.on_imu(x);
@@ -124,35 +124,30 @@ pub fn run_ordered<T, I: IntoIterator<Item = (AnySample, T)>>(
                 reference = Some(pipeline.reference_imu_id());
                 false
             }
-            AnySample::GnssFix(f) => {
+            Input::GnssFix(f) => {
                 fixes += 1;
                 let t = Instant::now();
                 let u = pipeline.on_fix(f);
                 in_estimator += t.elapsed();
                 u
             }
-            AnySample::PpsEdge(e) => {
+            Input::PpsEdge(e) => {
                 let t = Instant::now();
                 let u = pipeline.on_pps(e);
                 in_estimator += t.elapsed();
                 u
             }
-            AnySample::Truth(t) => {
+            Input::Truth(t) => {
                 eval.add_truth(t);
                 false
             }
-            AnySample::TimePulse(t) => {
+            Input::TimePulse(t) => {
                 let t0 = Instant::now();
                 pipeline.on_time_pulse(t);
                 in_estimator += t0.elapsed();
                 false
             }
-            AnySample::Time(_)
-            | AnySample::Nav(_)
-            | AnySample::Health(_)
-            | AnySample::Event(_)
-            | AnySample::Raw(_)
-            | AnySample::NavData(_) => false,
+            Input::Other(_) => false,
         };
         // Computing a time state does not change the navigation states (it only reads the
         // filter's Δ into the time synchroniser's report).

@@ -37,6 +37,7 @@ pub mod glob;
 pub mod mcap_reader;
 pub mod mcap_writer;
 pub mod ports;
+pub mod ros_std;
 pub mod sample_file;
 
 pub use channels::Encoding;

@@ -11,11 +11,15 @@ use super::channels::{self, Encoding, LIBRARY, META_LAYOUT, META_QOS, PROFILE, Q
 use super::error::RecordingError;
 use super::mcap_reader::{McapReader, ScanEnd, SummarySection};
 use super::mcap_writer::{ChannelId, ChunkCompression, DEFAULT_CHUNK_SIZE, McapWriter, SchemaId};
+use super::ros_std::{RosFrames, RosStd, StdType};
 use navsync_shared::samples::AnySample;
 use navsync_shared::services::ServiceKind;
 
+/// The standard-message converter, its channels by topic and its schemas by type.
+type StdChannels = (RosStd, HashMap<String, ChannelId>, Vec<(StdType, SchemaId)>);
+
 /// How a recording is written.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RecordingOptions {
     /// Message encoding (default CDR).
     pub encoding: Encoding,
@@ -23,6 +27,9 @@ pub struct RecordingOptions {
     pub compression: ChunkCompression,
     /// Bytes of records at which a chunk is closed (default [`DEFAULT_CHUNK_SIZE`]).
     pub chunk_size: usize,
+    /// Also write the standard ROS 2 messages ([`ros_std`](super::ros_std)) with these frame
+    /// ids (CDR recordings only; default off).
+    pub ros_std: Option<RosFrames>,
 }
 
 impl Default for RecordingOptions {
@@ -31,6 +38,7 @@ impl Default for RecordingOptions {
             encoding: Encoding::Cdr,
             compression: ChunkCompression::Zstd,
             chunk_size: DEFAULT_CHUNK_SIZE,
+            ros_std: None,
         }
     }
 }
@@ -46,6 +54,8 @@ pub struct SampleRecorder<W: Write + Seek = BufWriter<File>> {
     /// Key-value metadata for channels not created yet, by service.
     metadata: HashMap<String, Vec<(String, String)>>,
     buf: Vec<u8>,
+    /// The standard-message converter and its channels by topic.
+    ros_std: Option<StdChannels>,
 }
 
 impl SampleRecorder<BufWriter<File>> {
@@ -86,6 +96,16 @@ impl<W: Write + Seek> SampleRecorder<W> {
             channels: HashMap::new(),
             metadata: HashMap::new(),
             buf: Vec::with_capacity(4096),
+            ros_std: match (options.ros_std, options.encoding) {
+                (Some(frames), Encoding::Cdr) => Some((RosStd::new(frames), HashMap::new(), Vec::new())),
+                (Some(_), Encoding::Json) => {
+                    return Err(RecordingError::Usage {
+                        path: path.to_path_buf(),
+                        problem: "standard ROS 2 messages need the CDR encoding".into(),
+                    });
+                }
+                (None, _) => None,
+            },
         })
     }
 
@@ -176,7 +196,33 @@ impl<W: Write + Seek> SampleRecorder<W> {
             });
         }
         self.encoding.encode(sample, &mut self.buf);
-        self.mcap.write_message(id, log_time, publish_time, &self.buf)
+        self.mcap.write_message(id, log_time, publish_time, &self.buf)?;
+        if let Some((conv, channels, schemas)) = &mut self.ros_std
+            && let Some(m) = conv.convert(service, sample, log_time)
+        {
+            let id = match channels.get(&m.topic) {
+                Some(&id) => id,
+                None => {
+                    let schema = match schemas.iter().find(|(t, _)| *t == m.ty) {
+                        Some(&(_, s)) => s,
+                        None => {
+                            let s = self
+                                .mcap
+                                .add_schema(m.ty.name(), "ros2msg", m.ty.definition().as_bytes())?;
+                            schemas.push((m.ty, s));
+                            s
+                        }
+                    };
+                    let mut meta: Vec<(&str, &str)> = vec![(META_QOS, QOS_PROFILES)];
+                    meta.extend(m.metadata.iter().map(|(k, v)| (*k, v.as_str())));
+                    let id = self.mcap.add_channel(schema, &m.topic, "cdr", &meta)?;
+                    channels.insert(m.topic.clone(), id);
+                    id
+                }
+            };
+            self.mcap.write_message(id, log_time, publish_time, m.data)?;
+        }
+        Ok(())
     }
 
     /// Closes the open chunk and hands it to the operating system.

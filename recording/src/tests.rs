@@ -89,6 +89,7 @@ fn samples_round_trip_with_summary() {
                 encoding,
                 compression,
                 chunk_size: 2000,
+                ros_std: None,
             },
         );
         round_trip_with_summary(&bytes, encoding, compression);

@@ -88,6 +88,70 @@ unsafe fn encode_value(ty: &FieldType, p: *const u8, out: &mut Vec<u8>) {
     }
 }
 
+/// Writes a CDR message field by field, for messages without a [`Reflect`] table (the
+/// standard ROS 2 messages): the same rules as [`encode`].
+pub struct Writer<'a> {
+    out: &'a mut Vec<u8>,
+}
+
+impl<'a> Writer<'a> {
+    /// Starts a message in `out` (cleared first) with the CDR_LE header.
+    pub fn new(out: &'a mut Vec<u8>) -> Self {
+        out.clear();
+        out.extend_from_slice(&CDR_LE);
+        Self { out }
+    }
+    /// `int8`.
+    pub fn i8(&mut self, v: i8) -> &mut Self {
+        self.out.push(v as u8);
+        self
+    }
+    /// `uint8`.
+    pub fn u8(&mut self, v: u8) -> &mut Self {
+        self.out.push(v);
+        self
+    }
+    /// `uint16`.
+    pub fn u16(&mut self, v: u16) -> &mut Self {
+        align(self.out, 2);
+        self.out.extend_from_slice(&v.to_le_bytes());
+        self
+    }
+    /// `int32`.
+    pub fn i32(&mut self, v: i32) -> &mut Self {
+        align(self.out, 4);
+        self.out.extend_from_slice(&v.to_le_bytes());
+        self
+    }
+    /// `uint32`.
+    pub fn u32(&mut self, v: u32) -> &mut Self {
+        align(self.out, 4);
+        self.out.extend_from_slice(&v.to_le_bytes());
+        self
+    }
+    /// `float64`.
+    pub fn f64(&mut self, v: f64) -> &mut Self {
+        align(self.out, 8);
+        self.out.extend_from_slice(&v.to_le_bytes());
+        self
+    }
+    /// `float64[N]`.
+    pub fn f64s(&mut self, v: &[f64]) -> &mut Self {
+        for x in v {
+            self.f64(*x);
+        }
+        self
+    }
+    /// `string` (UTF-8, without NULs).
+    pub fn str(&mut self, v: &str) -> &mut Self {
+        align(self.out, 4);
+        self.out.extend_from_slice(&(v.len() as u32 + 1).to_le_bytes());
+        self.out.extend_from_slice(v.as_bytes());
+        self.out.push(0);
+        self
+    }
+}
+
 /// Decodes a CDR message written by [`encode`] (or by any ROS 2 writer of the same
 /// definition). Extra bytes after the last field (alignment padding) are allowed.
 pub fn decode<T: Reflect>(data: &[u8]) -> Result<T, CdrError> {

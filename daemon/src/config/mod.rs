@@ -39,6 +39,7 @@
 //! The annotated example is `systemd/navsync.toml.example`.
 
 pub mod estimator;
+pub mod recording;
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -301,6 +302,9 @@ pub struct Config {
     /// Outputs.
     #[serde(default)]
     pub outputs: Outputs,
+    /// How recordings are written.
+    #[serde(default)]
+    pub recording: recording::RecordingConfig,
 }
 
 /// Loads `--config FILE`, else `/etc/navsync/navsync.toml` when it exists, else nothing; and

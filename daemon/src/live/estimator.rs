@@ -19,7 +19,7 @@ use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
 
-use navsync_estimator::input_order::InputOrder;
+use navsync_estimator::input_order::{Input, InputOrder};
 use navsync_estimator::output_check::OutputCheck;
 use navsync_estimator::pipeline::Pipeline;
 use navsync_estimator::settings::Settings;
@@ -276,7 +276,7 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
         let release_all = imus.is_empty() || order.stalled(monotonic_now_ns());
         while let Some((s, ())) = if release_all { order.pop_any() } else { order.pop() } {
             match s {
-                AnySample::Imu(sample) => {
+                Input::Imu(sample) => {
                     let t_in = monotonic_now_ns();
                     if let Some(mut state) = est.on_imu(&sample) {
                         if gnss_gone {
@@ -300,9 +300,9 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
                         );
                     }
                 }
-                AnySample::PpsEdge(edge) => updated |= est.on_pps(&edge),
-                AnySample::GnssFix(fix) => updated |= est.on_fix(&fix),
-                AnySample::TimePulse(tp) => est.on_time_pulse(&tp),
+                Input::PpsEdge(edge) => updated |= est.on_pps(&edge),
+                Input::GnssFix(fix) => updated |= est.on_fix(&fix),
+                Input::TimePulse(tp) => est.on_time_pulse(&tp),
                 _ => {}
             }
         }

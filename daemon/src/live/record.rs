@@ -11,8 +11,9 @@
 //! Each wake-up drains every subscriber and writes what it found in stamp order (by the
 //! sample's host time, ties in drain order: within one wake-up that is the order the
 //! publishers stamped, hence published, them), all with the same times: `log_time` =
-//! `CLOCK_REALTIME` and `publish_time` = `CLOCK_MONOTONIC` at the wake-up. Apart from the JSON
-//! encoding of each sample, the loop allocates nothing per message in steady state.
+//! `CLOCK_REALTIME` and `publish_time` = `CLOCK_MONOTONIC` at the wake-up. With the default CDR
+//! encoding the loop allocates nothing per message in steady state (JSON, `--encoding json`,
+//! allocates while encoding).
 //!
 //! The open chunk is closed and handed to the operating system at least every
 //! [`CHUNK_INTERVAL`], so `kill -9` loses at most that much; SIGINT/SIGTERM or the end of
@@ -53,6 +54,9 @@ pub struct Options {
     /// Stop after this many seconds.
     #[arg(long = "duration")]
     pub duration_s: Option<f64>,
+    /// Encoding and standard messages.
+    #[command(flatten)]
+    pub format: crate::config::recording::RecordingFlags,
 }
 
 /// Runs `navsync record`: flags, else `[outputs.record]`.
@@ -74,6 +78,7 @@ pub fn main(opts: Options, cfg: &crate::config::Loaded) -> anyhow::Result<()> {
         duration_s: opts.duration_s,
         progress: true,
         metadata,
+        options: opts.format.options(&cfg.config.recording),
     })
     .with_context(|| format!("recording {}", out.display()))?;
     Ok(())
@@ -93,6 +98,8 @@ pub struct RecordArgs {
     /// Channel metadata (service, key, value): what the devices are
     /// ([`crate::config::estimator::recording_metadata`]).
     pub metadata: Vec<(String, &'static str, String)>,
+    /// Encoding, compression, standard messages.
+    pub options: navsync_recording::RecordingOptions,
 }
 
 /// Errors of `navsync record`.
@@ -153,7 +160,7 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
     let r_msgs = health.rate("messages")?;
 
     // The file appears once the initial subscriptions exist: from then on nothing is missed.
-    let mut rec = SampleRecorder::create(&args.out)?;
+    let mut rec = SampleRecorder::create_with(&args.out, args.options.clone())?;
     for (service, key, value) in &args.metadata {
         rec.set_channel_metadata(service, key, value)?;
     }

@@ -30,6 +30,9 @@ pub struct Options {
     /// Write the samples the drivers would publish, and the truth, into this MCAP file.
     #[arg(long, requires = "fast")]
     pub record: Option<PathBuf>,
+    /// With --record: encoding and standard messages.
+    #[command(flatten)]
+    pub format: crate::config::recording::RecordingFlags,
     /// The estimator's models (with --estimate; every simulated IMU is fused, the first as
     /// the reference; unless --imu-model is given the filter is told the simulated IMU class
     /// and receiver velocity noise).
@@ -48,6 +51,7 @@ pub fn run(opts: Options, cfg: &Loaded) -> Result<()> {
             estimate: opts.estimate,
             summary_json: opts.summary_json.as_deref(),
             record: opts.record.as_deref(),
+            record_options: opts.format.options(&cfg.config.recording),
         };
         return sim_fast::run(&opts.world, &opts.est, cfg, outputs).context("offline simulation");
     }

@@ -10,6 +10,7 @@ use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
 use navsync_estimator::evaluation::Summary;
+use navsync_estimator::input_order::Input;
 use navsync_estimator::offline::{self, Output};
 use navsync_estimator::settings::Settings;
 use navsync_recording::mcap_reader::ScanEnd;
@@ -47,6 +48,9 @@ pub struct EstimateOptions {
     /// The estimator's settings.
     #[command(flatten)]
     pub est: EstimatorFlags,
+    /// With --out (mcap): encoding and standard messages.
+    #[command(flatten)]
+    pub recording: crate::config::recording::RecordingFlags,
 }
 
 /// Errors of `navsync replay --estimate`.
@@ -75,41 +79,101 @@ pub enum EstimateError {
     Unusable(String),
 }
 
+/// Samples per batch handed from the reading thread to the estimator.
+const BATCH: usize = 4096;
+
+type Batch = Vec<(Input, u64)>;
+
 /// The samples of a recording that `settings` fuses, and the simulator's truth, with their
-/// `log_time`; a read error ends the stream and is kept in [`RecordedInputs::error`].
-pub struct RecordedInputs<'a> {
-    reader: &'a mut SampleReader,
-    wanted: HashSet<String>,
-    /// The read error that ended the stream, if any.
-    pub error: Option<RecordingError>,
+/// `log_time`, read and decoded by a thread of their own (decompression and decoding overlap
+/// the estimator; the order is the file's). A read error ends the stream; [`finish`]
+/// gives it back with the reader.
+///
+/// [`finish`]: RecordedInputs::finish
+pub struct RecordedInputs {
+    full: std::sync::mpsc::Receiver<Batch>,
+    empty: std::sync::mpsc::SyncSender<Batch>,
+    batch: Batch,
+    pos: usize,
+    thread: Option<std::thread::JoinHandle<(SampleReader, Option<RecordingError>)>>,
 }
 
-impl<'a> RecordedInputs<'a> {
-    /// The estimator's inputs of `reader`.
-    pub fn new(reader: &'a mut SampleReader, settings: &Settings) -> Self {
+impl RecordedInputs {
+    /// Starts reading the estimator's inputs of `reader`.
+    pub fn new(mut reader: SampleReader, settings: &Settings) -> Self {
         let mut wanted: HashSet<String> = settings.input_services().into_iter().collect();
         wanted.insert(services::SIM_TRUTH.to_string());
+        // Two batches in flight and two being recycled: bounded memory, no allocation per batch.
+        let (full_tx, full) = std::sync::mpsc::sync_channel::<Batch>(2);
+        let (empty, empty_rx) = std::sync::mpsc::sync_channel::<Batch>(4);
+        for _ in 0..3 {
+            let _ = empty.send(Vec::with_capacity(BATCH));
+        }
+        let thread = std::thread::Builder::new()
+            .name("read-recording".into())
+            .spawn(move || {
+                let mut batch = empty_rx.recv().unwrap_or_default();
+                let error = loop {
+                    match reader.next_sample() {
+                        Ok(Some(m)) if wanted.contains(m.service) => {
+                            batch.push((Input::from(m.sample), m.log_time));
+                            if batch.len() >= BATCH {
+                                let next = empty_rx.recv().unwrap_or_default();
+                                if full_tx.send(core::mem::replace(&mut batch, next)).is_err() {
+                                    break None;
+                                }
+                                batch.clear();
+                            }
+                        }
+                        Ok(Some(_)) => {}
+                        Ok(None) => break None,
+                        Err(e) => break Some(e),
+                    }
+                };
+                if !batch.is_empty() {
+                    let _ = full_tx.send(batch);
+                }
+                (reader, error)
+            })
+            .ok();
         Self {
-            reader,
-            wanted,
-            error: None,
+            full,
+            empty,
+            batch: Vec::new(),
+            pos: 0,
+            thread,
+        }
+    }
+
+    /// Waits for the reading thread: the reader (for how its scan ended) and the read error
+    /// that ended the stream, if any.
+    pub fn finish(self) -> (Option<SampleReader>, Option<RecordingError>) {
+        let Self {
+            full, empty, thread, ..
+        } = self;
+        // Unblocks the thread wherever it waits, should the stream not have been read to its end.
+        drop(full);
+        drop(empty);
+        match thread.map(|t| t.join()) {
+            Some(Ok((reader, error))) => (Some(reader), error),
+            _ => (None, None),
         }
     }
 }
 
-impl Iterator for RecordedInputs<'_> {
-    type Item = (AnySample, u64);
-    fn next(&mut self) -> Option<(AnySample, u64)> {
+impl Iterator for RecordedInputs {
+    type Item = (Input, u64);
+    fn next(&mut self) -> Option<(Input, u64)> {
         loop {
-            match self.reader.next_sample() {
-                Ok(Some(m)) if self.wanted.contains(m.service) => return Some((m.sample, m.log_time)),
-                Ok(Some(_)) => {}
-                Ok(None) => return None,
-                Err(e) => {
-                    self.error = Some(e);
-                    return None;
-                }
+            if let Some(&x) = self.batch.get(self.pos) {
+                self.pos += 1;
+                return Some(x);
             }
+            let next = self.full.recv().ok()?;
+            let mut done = core::mem::replace(&mut self.batch, next);
+            self.pos = 0;
+            done.clear();
+            let _ = self.empty.try_send(done);
         }
     }
 }
@@ -168,10 +232,13 @@ pub fn warn_if_truncated(reader: &SampleReader, path: &Path) {
 /// (to stdout) and returns it.
 pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary, EstimateError> {
     let _span = info_span!("replay-estimate").entered();
-    let mut reader = SampleReader::open(input)?;
+    let reader = SampleReader::open(input)?;
     let settings = settings_for_recording(&opts.est, cfg, &reader)?;
     let mut out = match &opts.out {
-        Some(p) if opts.format == Format::Mcap => Some(SampleRecorder::create(p)?),
+        Some(p) if opts.format == Format::Mcap => Some(SampleRecorder::create_with(
+            p,
+            opts.recording.options(&cfg.config.recording),
+        )?),
         _ => None,
     };
     let mut kf_gins = match &opts.out {
@@ -180,7 +247,7 @@ pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary
     };
     let mut kf_gins_err: Option<KfGinsError> = None;
     let mut write_err: Option<RecordingError> = None;
-    let mut inputs = RecordedInputs::new(&mut reader, &settings);
+    let mut inputs = RecordedInputs::new(reader, &settings);
     let run = offline::estimate(&settings, inputs.by_ref(), out.is_some(), |o, &log_time| {
         if kf_gins_err.is_none()
             && let (Some(w), Output::Nav(n)) = (kf_gins.as_mut(), o)
@@ -209,10 +276,13 @@ pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary
             write_err = Some(e);
         }
     });
-    if let Some(e) = inputs.error.take().or(write_err) {
+    let (reader, read_err) = inputs.finish();
+    if let Some(e) = read_err.or(write_err) {
         return Err(e.into());
     }
-    warn_if_truncated(&reader, input);
+    if let Some(reader) = &reader {
+        warn_if_truncated(reader, input);
+    }
     if let Some(rec) = out {
         rec.close()?;
     }

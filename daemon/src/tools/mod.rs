@@ -2,6 +2,7 @@
 
 pub mod analyze;
 pub mod check_config;
+pub mod convert;
 pub mod decode;
 pub mod estimate;
 pub mod eval;

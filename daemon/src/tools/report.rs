@@ -152,8 +152,8 @@ fn read(args: &ReportArgs) -> Result<Data, ReportError> {
         d.nav.clear();
         d.time.clear();
         d.estimated = true;
-        let mut reader = SampleReader::open(&args.input)?;
-        let mut inputs = RecordedInputs::new(&mut reader, &args.est);
+        let reader = SampleReader::open(&args.input)?;
+        let mut inputs = RecordedInputs::new(reader, &args.est);
         let mut nav = Vec::new();
         let mut time = Vec::new();
         let run = offline::estimate(&args.est, inputs.by_ref(), true, |o, _| match o {
@@ -167,10 +167,13 @@ fn read(args: &ReportArgs) -> Result<Data, ReportError> {
             }
             Output::Time(t) => time.push(*t),
         });
-        if let Some(e) = inputs.error.take() {
+        let (reader, read_err) = inputs.finish();
+        if let Some(e) = read_err {
             return Err(e.into());
         }
-        warn_if_truncated(&reader, &args.input);
+        if let Some(reader) = &reader {
+            warn_if_truncated(reader, &args.input);
+        }
         d.problem = run.summary.problem;
         d.nav = nav;
         d.time = time;

@@ -49,7 +49,7 @@ pub enum SimEstimateError {
 }
 
 /// What `navsync sim --fast` does with the samples.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct Outputs<'a> {
     /// Run the estimator and print the accuracy report.
     pub estimate: bool,
@@ -57,6 +57,8 @@ pub struct Outputs<'a> {
     pub summary_json: Option<&'a Path>,
     /// Write the samples into this MCAP file.
     pub record: Option<&'a Path>,
+    /// How the recording is written.
+    pub record_options: navsync_recording::RecordingOptions,
 }
 
 /// The estimator's settings for the simulated world: every simulated IMU (ids "0", "1", …;
@@ -118,7 +120,10 @@ pub fn run(sim: &SimArgs, flags: &ModelFlags, file: &Loaded, outputs: Outputs<'_
     let clock = world.clone();
     let end_host = sim.duration_s.map(|d| start_host + (d * 1e9) as i64);
     let mut recorder = match outputs.record {
-        Some(p) => Some(describe_devices(SampleRecorder::create(p)?, &cfg)?),
+        Some(p) => Some(describe_devices(
+            SampleRecorder::create_with(p, outputs.record_options.clone())?,
+            &cfg,
+        )?),
         None => None,
     };
     let mut write_err: Option<RecordingError> = None;

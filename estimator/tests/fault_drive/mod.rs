@@ -10,7 +10,7 @@
 
 #![allow(dead_code)]
 
-use navsync_estimator::input_order::InputOrder;
+use navsync_estimator::input_order::{Input, InputOrder};
 use navsync_estimator::pipeline::Pipeline;
 use navsync_estimator::settings::Settings;
 use navsync_shared::earth;
@@ -74,19 +74,19 @@ pub fn drive(
     let mut p = Pipeline::new(args.pipeline_config());
     let mut order: InputOrder = InputOrder::new(args.imu_ids.first().map(String::as_str));
     let end_ns = HOST0 + (end_s * 1e9) as i64;
-    let mut consume = |p: &mut Pipeline, s: AnySample| match s {
-        AnySample::Imu(x) => {
+    let mut consume = |p: &mut Pipeline, s: Input| match s {
+        Input::Imu(x) => {
             if let Some(n) = p.on_imu(&x) {
                 observe(p, Event::Nav(&n));
             }
         }
-        AnySample::PpsEdge(e) => {
+        Input::PpsEdge(e) => {
             p.on_pps(&e);
         }
-        AnySample::GnssFix(f) => {
+        Input::GnssFix(f) => {
             p.on_fix(&f);
         }
-        AnySample::Truth(t) => observe(p, Event::Truth(&t)),
+        Input::Truth(t) => observe(p, Event::Truth(&t)),
         _ => {}
     };
     let mut edited = Vec::with_capacity(4);
