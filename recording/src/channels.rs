@@ -324,6 +324,14 @@ pub fn decode(ty: ChannelType, data: &[u8]) -> Result<AnySample, String> {
 /// another writer, the same fields), or `json` messages with a `jsonschema` schema named after
 /// the type. An error says what does not match.
 pub fn channel_kind(channel: &Channel, schema: Option<&Schema>) -> Result<ChannelType, String> {
+    if let Some(s) = schema
+        && crate::ros_std::StdType::ALL.iter().any(|t| t.name() == s.name)
+    {
+        return Err(format!(
+            "{}: a standard ROS 2 message derived from navsync's own (--ros-std)",
+            s.name
+        ));
+    }
     let kind = ServiceKind::of(service_of(&channel.topic)).ok_or_else(|| "not a navsync service name".to_string())?;
     match channel.message_encoding.as_str() {
         "cdr" => {

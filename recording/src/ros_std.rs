@@ -89,6 +89,9 @@ pub enum StdType {
 }
 
 impl StdType {
+    /// Every standard type navsync writes.
+    pub const ALL: [StdType; 4] = [Self::Imu, Self::NavSatFix, Self::Odometry, Self::TimeReference];
+
     /// The ROS 2 type name.
     pub fn name(self) -> &'static str {
         match self {

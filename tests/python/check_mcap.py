@@ -1,15 +1,20 @@
-"""Reads an MCAP file with the `mcap` package from PyPI and decodes every message with the
-schema stored in the file alone (no navsync code): used by tests/tests/record_replay_python.rs.
+"""Reads an MCAP file with the `mcap` package from PyPI (no navsync code): used by
+tests/tests/record_replay_python.rs.
 
-Checks, with the library's CRC validation on:
+Checks, with the library's CRC validation on (zstd and lz4 chunks decompressed by the
+package):
   * the indexed reader (summary, chunk indexes) yields every message;
   * a linear StreamReader pass (data-section and chunk CRCs) yields the same messages and
     ends in a footer whose statistics match the counts;
-  * every message is JSON (encoding `json`) and conforms to its channel's schema (encoding
-    `jsonschema`): types, required properties, no undeclared properties, array lengths,
-    string lengths.
-Prints a JSON report on stdout: per-topic counts, schema names, the first and last decoded
-message of each topic. Exits non-zero with the reason on any failure.
+  * a `cdr` channel has a `ros2msg` schema and the ROS 2 channel metadata
+    (`offered_qos_profiles`), and every message starts with the CDR encapsulation header
+    (its content is decoded by check_rosbag.py with rosbags);
+  * a `json` channel (older recordings, `--encoding json`): every message is JSON and conforms
+    to its channel's schema (encoding `jsonschema`): types, required properties, no
+    undeclared properties, array lengths, string lengths.
+Prints a JSON report on stdout: per-topic counts, schema names and encodings, the profile, the
+chunk compressions, and the first and last decoded message of each JSON topic. Exits non-zero
+with the reason on any failure.
 """
 
 import json
@@ -69,7 +74,7 @@ def validate(value, schema, path):
 
 
 def main(path):
-    report = {"topics": {}, "schemas": {}, "first": {}, "last": {}}
+    report = {"topics": {}, "schemas": {}, "encodings": {}, "first": {}, "last": {}}
     schemas = {}
     with open(path, "rb") as f:
         reader = make_reader(f, validate_crcs=True)
@@ -80,26 +85,46 @@ def main(path):
             fail("no statistics in the summary")
         if not summary.chunk_indexes:
             fail("no chunk indexes in the summary")
+        report["profile"] = reader.get_header().profile
+        report["compression"] = sorted({ci.compression for ci in summary.chunk_indexes})
         for sid, s in summary.schemas.items():
-            if s.encoding != "jsonschema":
+            if s.encoding == "jsonschema":
+                schemas[sid] = json.loads(s.data)
+                report["schemas"][s.name] = schemas[sid].get("title")
+            elif s.encoding == "ros2msg":
+                text = s.data.decode()
+                if not text.strip():
+                    fail(f"schema {s.name}: empty definition")
+                report["schemas"][s.name] = s.name
+            else:
                 fail(f"schema {s.name}: encoding {s.encoding!r}")
-            schemas[sid] = json.loads(s.data)
-            report["schemas"][s.name] = schemas[sid].get("title")
+        for c in summary.channels.values():
+            report["encodings"][c.topic] = c.message_encoding
+            if c.message_encoding == "cdr" and "offered_qos_profiles" not in c.metadata:
+                fail(f"{c.topic}: a cdr channel without offered_qos_profiles")
         indexed = 0
         for schema, channel, message in reader.iter_messages(log_time_order=False):
-            if channel.message_encoding != "json":
-                fail(f"{channel.topic}: message encoding {channel.message_encoding!r}")
             if schema is None:
                 fail(f"{channel.topic}: no schema")
-            try:
-                value = json.loads(message.data)
-            except ValueError as e:
-                fail(f"{channel.topic}: message {message.sequence} is not JSON: {e}")
-            validate(value, schemas[schema.id], channel.topic)
             t = channel.topic
+            if channel.message_encoding == "json":
+                if schema.encoding != "jsonschema":
+                    fail(f"{t}: json messages with a {schema.encoding} schema")
+                try:
+                    value = json.loads(message.data)
+                except ValueError as e:
+                    fail(f"{t}: message {message.sequence} is not JSON: {e}")
+                validate(value, schemas[schema.id], t)
+                report["first"].setdefault(t, value)
+                report["last"][t] = value
+            elif channel.message_encoding == "cdr":
+                if schema.encoding != "ros2msg":
+                    fail(f"{t}: cdr messages with a {schema.encoding} schema")
+                if message.data[:4] != bytes([0, 1, 0, 0]):
+                    fail(f"{t}: message {message.sequence} does not start with the CDR_LE header")
+            else:
+                fail(f"{t}: message encoding {channel.message_encoding!r}")
             report["topics"][t] = report["topics"].get(t, 0) + 1
-            report["first"].setdefault(t, value)
-            report["last"][t] = value
             indexed += 1
         stats = summary.statistics
         if stats.message_count != indexed:

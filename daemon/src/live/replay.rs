@@ -116,13 +116,15 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayStats, ReplayError> {
     let mut pubs: Vec<Option<AnyPublisher>> = Vec::new();
     let mut stats = ReplayStats::default();
     let tty = args.progress && is_tty();
+    let started = monotonic_now_ns();
     'laps: loop {
         let mut reader = SampleReader::open(&args.input)?;
         // Create the publishers before the clock starts when the summary lists the channels.
         if let Some(summary) = reader.summary() {
             for ch in &summary.channels {
-                if ServiceKind::of(&ch.topic).is_some() && any_matches(&globs, &ch.topic) {
-                    publisher(&node, &mut pubs, ch.id, &ch.topic)?;
+                let service = navsync_recording::channels::service_of(&ch.topic);
+                if ServiceKind::of(service).is_some() && any_matches(&globs, service) {
+                    publisher(&node, &mut pubs, ch.id, service)?;
                 }
             }
         }
@@ -170,16 +172,21 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayStats, ReplayError> {
                 args.input.display()
             );
         }
-        stats.laps += 1;
         if args.progress {
             progress(tty, 1.0, 0, stats.published, args.speed, stats.laps);
         }
+        stats.laps += 1;
         if !args.looped || lap_published == 0 || node.termination_requested() {
             break;
         }
     }
     if args.progress {
-        eprintln!();
+        let s = (monotonic_now_ns() - started) as f64 / 1e9;
+        eprintln!(
+            "\nreplay: {} samples in {s:.2} s ({:.0} samples/s)",
+            stats.published,
+            stats.published as f64 / s.max(1e-9)
+        );
     }
     info!(published = stats.published, laps = stats.laps, "replay finished");
     Ok(stats)

@@ -51,7 +51,9 @@ pub fn run(opts: &Options, cfg: &Loaded) -> Result<()> {
         .scan_end()
         .is_some_and(|e| *e != navsync_recording::mcap_reader::ScanEnd::Clean);
     for (topic, why) in reader.skipped_channels() {
-        eprintln!("convert: skipped channel {topic}: {why}");
+        if !why.contains("(--ros-std)") {
+            eprintln!("convert: skipped channel {topic}: {why}");
+        }
     }
     writer.close()?;
     if n == 0 {

@@ -22,7 +22,7 @@ use navsync_drivers::imu::iio_scan::{Endian, Repr, ScanElement, ScanType};
 use navsync_sim::xsens_imus::SimXsensImu;
 use navsync_drivers::imu::xsens_frame::{MtData2, RealFormat, STATUS_CLIP_GYR, encode_mtdata2};
 use navsync_sim::nmea::{EpochReport, FixReport, frame, write_burst};
-use navsync_recording::{SampleReader, SampleRecorder};
+use navsync_recording::{RecordingOptions, SampleReader, SampleRecorder};
 use navsync_shared::samples::AnySample;
 
 struct Out(PathBuf);
@@ -312,9 +312,11 @@ fn iio(out: &Out) {
 
 fn mcap(out: &Out, samples: &[(String, AnySample, u64, u64)], drive: &[u8]) {
     let record = |n: usize, chunk: usize, flush_each: bool| -> Vec<u8> {
-        let mut r = SampleRecorder::new(Cursor::new(Vec::new()), Path::new("seed.mcap"))
-            .expect("a recorder")
-            .with_chunk_size(chunk);
+        let options = RecordingOptions {
+            chunk_size: chunk,
+            ..RecordingOptions::default()
+        };
+        let mut r = SampleRecorder::new(Cursor::new(Vec::new()), Path::new("seed.mcap"), options).expect("a recorder");
         for (service, s, log, publish) in samples.iter().take(n) {
             r.write(service, s, *log, *publish).expect("write a sample");
             if flush_each {
@@ -329,6 +331,22 @@ fn mcap(out: &Out, samples: &[(String, AnySample, u64, u64)], drive: &[u8]) {
     let per_message = record(6, 1 << 20, true);
     out.put("mcap_reader", "drive_6_samples_chunk_each", &per_message);
     out.put("mcap_reader", "empty_recording", &record(0, 2048, false));
+    // The same samples as JSON with uncompressed chunks (what navsync wrote before CDR).
+    let mut r = SampleRecorder::new(
+        Cursor::new(Vec::new()),
+        Path::new("seed.mcap"),
+        RecordingOptions {
+            encoding: navsync_recording::Encoding::Json,
+            compression: navsync_recording::ChunkCompression::None,
+            chunk_size: 2048,
+            ros_std: None,
+        },
+    )
+    .expect("a recorder");
+    for (service, s, log, publish) in samples.iter().take(24) {
+        r.write(service, s, *log, *publish).expect("write a sample");
+    }
+    out.put("mcap_reader", "drive_24_samples_json", &r.finish().expect("close").into_inner());
     // The head of the recording the tests use: a file whose writer died.
     out.put("mcap_reader", "record_drive_head", &drive[..drive.len().min(6000)]);
 }
