@@ -6,7 +6,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use navsync::live::{demo, echo, estimator, feed, gnss, gpsd_server, imu, ntpshm, pps, record, replay, sim, status};
+use navsync::live::{
+    bridge, demo, echo, estimator, feed, gnss, gpsd_server, imu, ntpshm, pps, record, replay, sim, status,
+};
 use navsync::tools::{analyze, check_config, convert, decode, eval, install, kf_gins, python_types, report};
 use navsync::{config, logging};
 
@@ -49,6 +51,9 @@ enum Cmd {
     Replay(replay::Options),
     /// Rewrites a recording in another encoding (e.g. an older JSON recording as a ROS 2 bag).
     Convert(convert::Options),
+    /// Bridges to other hosts: `navsync bridge zenoh` (needs the `zenoh` feature).
+    #[command(subcommand)]
+    Bridge(bridge::Command),
     /// Exports GNSS time (`navsync/time/state`) to chrony/ntpd as an NTP shared-memory refclock.
     Ntpshm(ntpshm::NtpShmArgs),
     /// Serves the fused state to gpsd clients (gpsd JSON protocol).
@@ -91,8 +96,15 @@ fn main() -> Result<()> {
         Cmd::Estimator(o) => estimator::main(o, &cfg),
         Cmd::Sim(o) => sim::run(o, &cfg),
         Cmd::Demo(o) => demo::run(&o).context("demo"),
-        Cmd::Echo(o) => echo::run(&o).with_context(|| format!("echo {}", o.service)),
-        Cmd::Status(o) => status::run(&o).context("status"),
+        Cmd::Echo(o) => match &o.zenoh {
+            Some(ep) => bridge::echo(ep, &o).with_context(|| format!("echo {} through {ep}", o.service)),
+            None => echo::run(&o).with_context(|| format!("echo {}", o.service)),
+        },
+        Cmd::Status(o) => match &o.zenoh {
+            Some(ep) => bridge::status(ep, o.window, o.json).with_context(|| format!("status through {ep}")),
+            None => status::run(&o).context("status"),
+        },
+        Cmd::Bridge(c) => bridge::main(c, &cfg).context("bridge"),
         Cmd::Record(o) => record::main(o, &cfg),
         Cmd::Replay(o) => replay::main(o, &cfg),
         Cmd::Convert(o) => convert::run(&o, &cfg).context("convert"),

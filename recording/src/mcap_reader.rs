@@ -395,6 +395,9 @@ impl<R: Read + Seek> McapReader<R> {
                 return Err(bad(format!("a record of {n} bytes overruns the summary section")));
             };
             let body = &buf[pos + 9..body_end as usize];
+            if !fields_fit(op, body) {
+                return Err(bad(format!("a field of record 0x{op:02x} overruns it")));
+            }
             match mcap::parse_record(op, body).map_err(|e| bad(e.to_string()))? {
                 Record::Schema { header, data } => s.schemas.push(schema_of(header, &data)),
                 Record::Channel(c) => s.channels.push(channel_of(c)),
@@ -461,6 +464,10 @@ impl<R: Read + Seek> McapReader<R> {
                     self.fed += n as u64;
                 }
                 LinearReadEvent::Record { data, opcode } => {
+                    if !fields_fit(opcode, data) {
+                        let what = format!("record 0x{opcode:02x}");
+                        return Err(self.corrupt(&what, "a field's length overruns the record"));
+                    }
                     let step = match opcode {
                         mcap::records::op::HEADER
                         | mcap::records::op::SCHEMA
@@ -539,6 +546,66 @@ impl<R: Read + Seek> McapReader<R> {
             data: &self.data,
             offset: self.fed,
         }))
+    }
+}
+
+/// Whether every length-prefixed field of a record lies inside it. The `mcap` crate's parser
+/// (binrw) allocates a string's declared length before reading it, so a corrupt length would
+/// ask for gigabytes; records are checked here first (MCAP spec, "Records": the field layouts).
+fn fields_fit(op: u8, body: &[u8]) -> bool {
+    use mcap::records::op;
+    struct Cur<'a> {
+        b: &'a [u8],
+        p: usize,
+    }
+    impl Cur<'_> {
+        fn skip(&mut self, n: usize) -> bool {
+            self.p = self.p.saturating_add(n);
+            self.p <= self.b.len()
+        }
+        fn len32(&mut self) -> Option<usize> {
+            let v = self.b.get(self.p..self.p.checked_add(4)?)?;
+            self.p += 4;
+            Some(u32::from_le_bytes(v.try_into().ok()?) as usize)
+        }
+        /// A u32-length-prefixed field (string, bytes, map) of at most `end`.
+        fn prefixed(&mut self, end: usize) -> Option<(usize, usize)> {
+            let n = self.len32()?;
+            let start = self.p;
+            let stop = start.checked_add(n).filter(|e| *e <= end)?;
+            self.p = stop;
+            Some((start, stop))
+        }
+        fn string(&mut self) -> bool {
+            self.prefixed(self.b.len()).is_some()
+        }
+        fn str_map(&mut self) -> bool {
+            let Some((start, stop)) = self.prefixed(self.b.len()) else {
+                return false;
+            };
+            let mut inner = Cur {
+                b: &self.b[..stop],
+                p: start,
+            };
+            while inner.p < stop {
+                if inner.prefixed(stop).is_none() || inner.prefixed(stop).is_none() {
+                    return false;
+                }
+            }
+            true
+        }
+    }
+    let mut c = Cur { b: body, p: 0 };
+    match op {
+        op::HEADER => c.string() && c.string(),
+        op::SCHEMA => c.skip(2) && c.string() && c.string() && c.string(),
+        op::CHANNEL => c.skip(4) && c.string() && c.string() && c.str_map(),
+        op::MESSAGE => body.len() >= 2 + 4 + 8 + 8,
+        op::STATISTICS => c.skip(8 + 2 + 4 * 4 + 8 + 8) && c.string(),
+        op::CHUNK_INDEX => c.skip(8 * 4) && c.string() && c.skip(8) && c.string() && c.skip(16),
+        op::FOOTER => body.len() >= 20,
+        op::DATA_END => body.len() >= 4,
+        _ => true,
     }
 }
 

@@ -406,3 +406,23 @@ fn damaged_files_give_errors_not_panics() {
     }
     assert!(ok > 0 && errors > 0, "{ok} read, {errors} errors");
 }
+
+#[test]
+fn a_string_longer_than_its_record_is_an_error_not_an_allocation() {
+    // Found by the fuzzer (mcap_reader): a Header whose profile claims 4 GiB; the mcap crate's
+    // parser would allocate that much before noticing the record is 38 bytes long.
+    let mut bytes = MAGIC.to_vec();
+    bytes.push(0x01);
+    bytes.extend_from_slice(&38u64.to_le_bytes());
+    bytes.extend_from_slice(&[4, 0, 255, 255]);
+    bytes.extend_from_slice(&[0u8; 34]);
+    bytes.extend_from_slice(&MAGIC);
+    let err = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap"))
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("overruns"), "{err}");
+    // The same inside a channel's metadata map.
+    let good = recording(3, 1000);
+    let mcap = McapReader::new(Cursor::new(&good[..]), Path::new("mem.mcap")).unwrap();
+    assert!(mcap.summary().is_some());
+}

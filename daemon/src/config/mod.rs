@@ -38,6 +38,7 @@
 //!
 //! The annotated example is `systemd/navsync.toml.example`.
 
+pub mod bridge;
 pub mod estimator;
 pub mod recording;
 
@@ -305,6 +306,9 @@ pub struct Config {
     /// How recordings are written.
     #[serde(default)]
     pub recording: recording::RecordingConfig,
+    /// Bridges to other hosts (`[bridge.zenoh]`).
+    #[serde(default)]
+    pub bridge: bridge::Bridges,
 }
 
 /// Loads `--config FILE`, else `/etc/navsync/navsync.toml` when it exists, else nothing; and

@@ -43,6 +43,14 @@ pub struct EchoArgs {
     /// Print only these fields, e.g. `lat_deg,lon_deg,stamp.host_ns,vel_ned_mps[2]`.
     #[arg(long, value_delimiter = ',')]
     pub fields: Vec<String>,
+    /// Receive through Zenoh from this endpoint (e.g. tcp/192.168.1.10:7447) instead of the
+    /// local iceoryx2: one JSON line per sample with its instance and sequence number (needs
+    /// the `zenoh` feature).
+    #[arg(long, value_name = "ENDPOINT", conflicts_with_all = ["measure_rate", "fields", "max_rate_hz"])]
+    pub zenoh: Option<String>,
+    /// With --zenoh: only this instance's samples [default: any].
+    #[arg(long, requires = "zenoh")]
+    pub instance: Option<String>,
 }
 
 /// A positive number of seconds.

@@ -1,6 +1,7 @@
 //! Process shells: each wires a functional core to its iceoryx2 services, or is a client of
 //! the live services.
 
+pub mod bridge;
 pub mod demo;
 pub mod echo;
 pub mod estimator;

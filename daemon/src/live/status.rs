@@ -45,6 +45,11 @@ pub struct StatusArgs {
     /// With --watch: stop after N refreshes.
     #[arg(long)]
     pub count: Option<u64>,
+    /// The instances and services heard through Zenoh at this endpoint (e.g.
+    /// tcp/192.168.1.10:7447) during --window, instead of the local ones (needs the `zenoh`
+    /// feature).
+    #[arg(long, value_name = "ENDPOINT", conflicts_with = "watch")]
+    pub zenoh: Option<String>,
 }
 
 /// Errors of `navsync status`.

@@ -60,6 +60,10 @@ const SHIPPED: &[(&str, &str)] = &[
         "navsync-gpsd-server.service",
         include_str!("../../../systemd/navsync-gpsd-server.service"),
     ),
+    (
+        "navsync-bridge-zenoh.service",
+        include_str!("../../../systemd/navsync-bridge-zenoh.service"),
+    ),
 ];
 const SYSUSERS: &str = include_str!("../../../systemd/navsync.sysusers");
 const TMPFILES: &str = include_str!("../../../systemd/navsync.tmpfiles");

@@ -1,0 +1,404 @@
+//! Two hosts on one machine: network namespaces `A` and `B` joined by a veth pair (created
+//! here, addresses inside the namespaces only), each host with its own iceoryx2 prefix.
+//! Host A runs the live pipeline (sim, drivers, estimator; processes of prefix A) and `navsync
+//! bridge zenoh` in namespace A, listening on its veth address. Host B, in namespace B, runs
+//! a bridge with `--import hostA` and a plain `navsync echo navsync/nav/state --json` on its
+//! own iceoryx2, the Python `eclipse-zenoh` subscriber (shared/python/nav_subscriber_zenoh.py)
+//! and the remote clients `echo --zenoh`, `status --zenoh`. Checked:
+//! * both of B's subscribers receive NavStates whose content equals host A's (by sequence
+//!   number), with consecutive exporter sequence numbers at 100 Hz (no loss) before the cut;
+//! * the link is cut (`ip link set down`) for 5 s and restored: both resume within 2 s, and
+//!   B's bridge counts the loss in its Health (`import_lost`);
+//! * `status --zenoh` from B sees host A's services, `echo --zenoh` prints A's states.
+//!
+//! Needs root (namespaces), `ip` (iproute2), python3 with pip and PyPI; where namespaces cannot
+//! be created the test says so and returns.
+
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use navsync_recording::channels::sample_json;
+use navsync_shared::samples::{AnySample, NavState};
+use navsync_shared::services;
+use navsync_tests::{HealthWatch, TestEnv, navsync_bin, python_with, write_drive_scenario};
+use serde_json::Value;
+
+fn ip(args: &[&str]) -> Result<(), String> {
+    let o = Command::new("ip").args(args).output().map_err(|e| format!("ip: {e}"))?;
+    if o.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "ip {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&o.stderr).trim()
+        ))
+    }
+}
+
+/// Two namespaces and a veth pair between them; removed on drop.
+struct Link {
+    ns: [String; 2],
+    veth: [String; 2],
+    addr: [String; 2],
+}
+
+impl Link {
+    fn new() -> Result<Self, String> {
+        let id = std::process::id() % 100_000;
+        let l = Link {
+            ns: [format!("nsyA{id}"), format!("nsyB{id}")],
+            veth: [format!("vzA{id}"), format!("vzB{id}")],
+            addr: [format!("10.213.{}.1", id % 250), format!("10.213.{}.2", id % 250)],
+        };
+        for n in &l.ns {
+            ip(&["netns", "add", n])?;
+        }
+        ip(&["link", "add", &l.veth[0], "type", "veth", "peer", "name", &l.veth[1]])?;
+        for i in 0..2 {
+            ip(&["link", "set", &l.veth[i], "netns", &l.ns[i]])?;
+            l.exec(
+                i,
+                &["ip", "addr", "add", &format!("{}/24", l.addr[i]), "dev", &l.veth[i]],
+            )?;
+            l.exec(i, &["ip", "link", "set", &l.veth[i], "up"])?;
+            l.exec(i, &["ip", "link", "set", "lo", "up"])?;
+        }
+        Ok(l)
+    }
+
+    fn exec(&self, i: usize, args: &[&str]) -> Result<(), String> {
+        let mut a = vec!["netns", "exec", &self.ns[i]];
+        a.extend(args);
+        ip(&a)
+    }
+
+    /// A command run in namespace `i`.
+    fn command(&self, i: usize, env: &TestEnv, program: &Path, args: &[&str]) -> Command {
+        let mut c = env.command_of(PathBuf::from("ip"), &["netns", "exec", &self.ns[i]]);
+        c.arg(program).args(args);
+        c
+    }
+
+    fn set(&self, up: bool) {
+        self.exec(0, &["ip", "link", "set", &self.veth[0], if up { "up" } else { "down" }])
+            .expect("setting the link");
+    }
+}
+
+impl Drop for Link {
+    fn drop(&mut self) {
+        for n in &self.ns {
+            let _ = ip(&["netns", "del", n]);
+        }
+    }
+}
+
+/// A child whose stdout lines are collected with their arrival time.
+struct Lines {
+    child: Child,
+    lines: Arc<Mutex<Vec<(Instant, String)>>>,
+}
+
+impl Lines {
+    fn spawn(mut c: Command, log: &Path) -> Self {
+        let mut child = c
+            .stdout(Stdio::piped())
+            .stderr(std::fs::File::create(log).expect("log"))
+            .spawn()
+            .expect("spawning");
+        let out = child.stdout.take().expect("stdout");
+        let lines = Arc::new(Mutex::new(Vec::new()));
+        let l = lines.clone();
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                l.lock().unwrap().push((Instant::now(), line));
+            }
+        });
+        Lines { child, lines }
+    }
+
+    fn snapshot(&self) -> Vec<(Instant, String)> {
+        self.lines.lock().unwrap().clone()
+    }
+}
+
+impl Drop for Lines {
+    fn drop(&mut self) {
+        // SAFETY: signalling our own child.
+        unsafe { libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM) };
+        let _ = self.child.wait();
+    }
+}
+
+struct Daemon(Child);
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        // SAFETY: signalling our own child.
+        unsafe { libc::kill(self.0.id() as libc::pid_t, libc::SIGTERM) };
+        let t0 = Instant::now();
+        while t0.elapsed() < Duration::from_secs(5) {
+            if let Ok(Some(_)) = self.0.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn daemon(c: Command, log: &Path) -> Daemon {
+    let mut c = c;
+    Daemon(
+        c.stdout(Stdio::null())
+            .stderr(std::fs::File::create(log).expect("log"))
+            .spawn()
+            .expect("spawning"),
+    )
+}
+
+/// (arrival, seq, sample JSON) of `echo --json` lines (the sample alone) or bridge-client
+/// lines (`{"instance","seq","sample"}`, seq being the exporter's).
+fn parse(lines: &[(Instant, String)]) -> Vec<(Instant, u64, Value)> {
+    lines
+        .iter()
+        .filter_map(|(t, l)| {
+            let v: Value = serde_json::from_str(l).ok()?;
+            if v.get("sample").is_some() {
+                Some((*t, v["seq"].as_u64()?, v["sample"].clone()))
+            } else {
+                Some((*t, v["seq"].as_u64()?, v))
+            }
+        })
+        .collect()
+}
+
+/// Floats compared as values (Python and Rust print the shortest text differently).
+fn same(a: &Value, b: &Value) -> bool {
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => match (x.as_i64(), y.as_i64(), x.as_u64(), y.as_u64()) {
+            (Some(p), Some(q), _, _) => p == q,
+            (_, _, Some(p), Some(q)) => p == q,
+            _ => x.as_f64() == y.as_f64(),
+        },
+        (Value::Array(x), Value::Array(y)) => x.len() == y.len() && x.iter().zip(y).all(|(p, q)| same(p, q)),
+        (Value::Object(x), Value::Object(y)) => {
+            x.len() == y.len() && x.iter().all(|(k, v)| y.get(k).is_some_and(|w| same(v, w)))
+        }
+        _ => a == b,
+    }
+}
+
+#[test]
+fn two_hosts_over_zenoh_survive_a_cut_link() {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        println!(
+            "SKIPPED: network namespaces need root; this test runs as uid {}",
+            unsafe { libc::geteuid() }
+        );
+        return;
+    }
+    let link = match Link::new() {
+        Ok(l) => l,
+        Err(e) => {
+            println!("SKIPPED: cannot create network namespaces here: {e}");
+            return;
+        }
+    };
+    let mut a = TestEnv::new("zenohA");
+    let b = TestEnv::new("zenohB");
+    let (py, pythonpath) = python_with(&b.dir, &["eclipse-zenoh==1.2.1"])
+        .unwrap_or_else(|why| panic!("cannot install eclipse-zenoh (needs python3, pip and PyPI): {why}"));
+    let endpoint = format!("tcp/{}:7447", link.addr[0]);
+    let bin = navsync_bin();
+
+    // Host A: the live pipeline (1 IMU at 100 Hz: NavStates at 100 Hz) and its bridge.
+    let scenario = a.dir.join("drive.toml");
+    write_drive_scenario(&scenario, 90.0, 1, 100.0);
+    let node_a = a.node("observer");
+    let nav_a = node_a.subscriber::<NavState>(services::NAV_STATE).unwrap();
+    a.spawn_pipeline(&scenario, 1);
+    let bridge_a = daemon(
+        link.command(
+            0,
+            &a,
+            &bin,
+            &["bridge", "zenoh", "--instance", "hostA", "--listen", &endpoint],
+        ),
+        &a.dir.join("bridge.log"),
+    );
+    // Host B: an importing bridge, a plain echo on its own iceoryx2, the Python subscriber.
+    let bridge_b = daemon(
+        link.command(
+            1,
+            &b,
+            &bin,
+            &[
+                "bridge",
+                "zenoh",
+                "--instance",
+                "hostB",
+                "--no-export",
+                "--import",
+                "hostA",
+                "--connect",
+                &endpoint,
+            ],
+        ),
+        &b.dir.join("bridge.log"),
+    );
+    let echo = Lines::spawn(
+        link.command(1, &b, &bin, &["echo", services::NAV_STATE, "--json"]),
+        &b.dir.join("echo.log"),
+    );
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/python/nav_subscriber_zenoh.py");
+    let mut pc = link.command(
+        1,
+        &b,
+        &py,
+        &[
+            &script.display().to_string(),
+            "--connect",
+            &endpoint,
+            "--instance",
+            "hostA",
+            "--json",
+        ],
+    );
+    let shared_py = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/python");
+    let pp = match &pythonpath {
+        Some(p) => format!("{}:{}", shared_py.display(), p.display()),
+        None => shared_py.display().to_string(),
+    };
+    pc.env("PYTHONPATH", pp);
+    let python = Lines::spawn(pc, &b.dir.join("python.log"));
+
+    // Collect host A's states while B receives: 12 s, then the link down for 5 s, up for 8 s.
+    let mut states_a: HashMap<u64, NavState> = HashMap::new();
+    let mut collect = |until: Instant| {
+        while Instant::now() < until {
+            if let Some(n) = nav_a.wait_next(Duration::from_millis(20)).unwrap() {
+                states_a.insert(n.seq, n);
+            }
+        }
+    };
+    collect(Instant::now() + Duration::from_secs(12));
+    let (echo_before, py_before) = (parse(&echo.snapshot()).len(), parse(&python.snapshot()).len());
+    assert!(
+        echo_before > 300 && py_before > 300,
+        "before the cut: echo {echo_before}, python {py_before} states\nbridge A: {}\nbridge B: {}\npython: {}",
+        std::fs::read_to_string(a.dir.join("bridge.log")).unwrap_or_default(),
+        std::fs::read_to_string(b.dir.join("bridge.log")).unwrap_or_default(),
+        std::fs::read_to_string(b.dir.join("python.log")).unwrap_or_default()
+    );
+    let cut = Instant::now();
+    link.set(false);
+    collect(cut + Duration::from_secs(5));
+    let restored = Instant::now();
+    link.set(true);
+    collect(restored + Duration::from_secs(8));
+
+    // The remote clients, from B's namespace.
+    let o = link
+        .command(
+            1,
+            &b,
+            &bin,
+            &["status", "--zenoh", &endpoint, "--json", "--window", "2"],
+        )
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "status --zenoh: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let st: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rate = st["services"]["hostA"]["navsync/nav/state"]["rate_hz"]
+        .as_f64()
+        .unwrap_or(0.0);
+    println!("status --zenoh: hostA navsync/nav/state at {rate:.1} Hz");
+    assert!(rate > 80.0, "{st}");
+    let o = link
+        .command(
+            1,
+            &b,
+            &bin,
+            &["echo", "--zenoh", &endpoint, services::NAV_STATE, "--count", "20"],
+        )
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "echo --zenoh: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let remote: Vec<Value> = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(remote.len(), 20);
+    assert!(remote.iter().all(|v| v["instance"] == "hostA"));
+
+    // B's bridge counted the loss.
+    let node_b = b.node("observer");
+    let mut health = HealthWatch::new(&node_b, &["bridge-zenoh"]);
+    assert!(health.wait(Duration::from_secs(3)), "no health from B's bridge");
+    std::thread::sleep(Duration::from_millis(1100));
+    health.poll();
+    let lost = health.counter("bridge-zenoh", "import_lost").unwrap_or(0);
+    let imported = health.counter("bridge-zenoh", "imported").unwrap_or(0);
+    println!("B's bridge: imported {imported}, import_lost {lost}");
+    assert!(lost > 0, "the cut link's loss is not counted");
+
+    for (name, lines, exporter_seq) in [("echo", echo.snapshot(), false), ("python", python.snapshot(), true)] {
+        let got = parse(&lines);
+        // Content equals host A's state of the same sequence number.
+        let mut compared = 0;
+        for (_, _, v) in &got {
+            let seq = v["seq"].as_u64().unwrap();
+            if let Some(n) = states_a.get(&seq) {
+                assert!(
+                    same(v, &sample_json(&AnySample::Nav(*n))),
+                    "{name}: state {seq} differs"
+                );
+                compared += 1;
+            }
+        }
+        // No loss at 100 Hz before the cut.
+        let before: Vec<u64> = got
+            .iter()
+            .filter(|(t, _, _)| *t < cut)
+            .map(|(_, s, v)| if exporter_seq { *s } else { v["seq"].as_u64().unwrap() })
+            .collect();
+        let gaps: u64 = before.windows(2).map(|w| w[1].saturating_sub(w[0] + 1)).sum();
+        // Resumed within 2 s of the link coming back.
+        let first_after = got.iter().find(|(t, _, _)| *t > restored);
+        let resume = first_after.map(|(t, _, _)| t.duration_since(restored).as_secs_f64());
+        let during = got
+            .iter()
+            .filter(|(t, _, _)| *t > cut + Duration::from_millis(1500) && *t < restored)
+            .count();
+        println!(
+            "{name}: {} states ({compared} compared with host A's), {} before the cut with {gaps} gaps, {during} during it, resumed {resume:?} s after the link came back",
+            got.len(),
+            before.len()
+        );
+        assert!(compared > 500, "{name}: only {compared} states compared");
+        assert_eq!(gaps, 0, "{name}: lost states before the cut");
+        assert!(resume.is_some_and(|r| r <= 2.0), "{name}: resumed after {resume:?} s");
+        assert!(during < 20, "{name}: {during} states arrived while the link was down");
+    }
+    drop((echo, python));
+    a.assert_running();
+    drop((bridge_b, bridge_a));
+    drop((nav_a, node_a, health, node_b));
+    a.finish();
+    b.finish();
+}
