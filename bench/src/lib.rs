@@ -10,6 +10,8 @@
 //! - [`gnss_latency`]: a receiver's epoch → fix at a subscriber, navsync against gpsd.
 //! - [`throughput`]: IMU samples per second through the estimator library.
 //! - [`timing`]: the time synchronisation against the simulated host oscillator (offline).
+//! - [`zenoh`]: a NavState across two network namespaces through two Zenoh bridges.
+//! - [`netns`]: two "hosts" on one machine (network namespaces and a veth pair).
 //! - [`util`]: percentiles, the machine's state, child processes, JSON.
 //!
 //! The processes the live benchmarks start are `navsync` roles (found beside this executable,
@@ -19,6 +21,8 @@
 pub mod e2e;
 pub mod gnss_latency;
 pub mod ipc;
+pub mod netns;
 pub mod throughput;
 pub mod timing;
 pub mod util;
+pub mod zenoh;

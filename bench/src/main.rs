@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use navsync_bench::{e2e, gnss_latency, ipc, throughput, timing};
+use navsync_bench::{e2e, gnss_latency, ipc, throughput, timing, zenoh};
 
 #[derive(Parser)]
 #[command(name = "navsync-bench", version, about = "navsync's benchmarks")]
@@ -27,6 +27,9 @@ enum Cmd {
     /// A receiver's epoch → the fix at a subscriber (Rust client, navsync echo), against gpsd
     /// → gpspipe in the same run, on real captures written epoch by epoch into pseudo-terminals.
     GnssLatency(gnss_latency::GnssLatencyArgs),
+    /// A NavState from host A's iceoryx2 to host B's through two Zenoh bridges over a veth
+    /// link between network namespaces (root; a navsync built with --features zenoh).
+    Zenoh(zenoh::ZenohBenchArgs),
     /// The processes the benchmarks start (publishers and subscribers).
     #[command(subcommand, hide = true)]
     Helper(Helper),
@@ -67,6 +70,7 @@ fn main() -> Result<()> {
         Cmd::E2e(a) => drop(e2e::run(&a).context("end-to-end benchmark")?),
         Cmd::Throughput(a) => drop(throughput::run(&a).context("throughput benchmark")?),
         Cmd::GnssLatency(a) => drop(gnss_latency::run(&a).context("GNSS latency benchmark")?),
+        Cmd::Zenoh(a) => drop(zenoh::run(&a).context("Zenoh benchmark")?),
         Cmd::Helper(Helper::GnssSub { service }) => gnss_latency::helper_sub(&service).context("gnss-sub")?,
         Cmd::Helper(Helper::IpcPub(a)) => ipc::helper_pub(&a).context("ipc-pub")?,
         Cmd::Helper(Helper::IpcSub(a)) => ipc::helper_sub(&a).context("ipc-sub")?,

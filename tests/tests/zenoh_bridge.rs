@@ -16,86 +16,24 @@
 
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use navsync_bench::netns::NetnsPair;
 use navsync_recording::channels::sample_json;
 use navsync_shared::samples::{AnySample, NavState};
 use navsync_shared::services;
 use navsync_tests::{HealthWatch, TestEnv, navsync_bin, python_with, write_drive_scenario};
 use serde_json::Value;
 
-fn ip(args: &[&str]) -> Result<(), String> {
-    let o = Command::new("ip").args(args).output().map_err(|e| format!("ip: {e}"))?;
-    if o.status.success() {
-        Ok(())
-    } else {
-        Err(format!(
-            "ip {}: {}",
-            args.join(" "),
-            String::from_utf8_lossy(&o.stderr).trim()
-        ))
-    }
-}
-
-/// Two namespaces and a veth pair between them; removed on drop.
-struct Link {
-    ns: [String; 2],
-    veth: [String; 2],
-    addr: [String; 2],
-}
-
-impl Link {
-    fn new() -> Result<Self, String> {
-        let id = std::process::id() % 100_000;
-        let l = Link {
-            ns: [format!("nsyA{id}"), format!("nsyB{id}")],
-            veth: [format!("vzA{id}"), format!("vzB{id}")],
-            addr: [format!("10.213.{}.1", id % 250), format!("10.213.{}.2", id % 250)],
-        };
-        for n in &l.ns {
-            ip(&["netns", "add", n])?;
-        }
-        ip(&["link", "add", &l.veth[0], "type", "veth", "peer", "name", &l.veth[1]])?;
-        for i in 0..2 {
-            ip(&["link", "set", &l.veth[i], "netns", &l.ns[i]])?;
-            l.exec(
-                i,
-                &["ip", "addr", "add", &format!("{}/24", l.addr[i]), "dev", &l.veth[i]],
-            )?;
-            l.exec(i, &["ip", "link", "set", &l.veth[i], "up"])?;
-            l.exec(i, &["ip", "link", "set", "lo", "up"])?;
-        }
-        Ok(l)
-    }
-
-    fn exec(&self, i: usize, args: &[&str]) -> Result<(), String> {
-        let mut a = vec!["netns", "exec", &self.ns[i]];
-        a.extend(args);
-        ip(&a)
-    }
-
-    /// A command run in namespace `i`.
-    fn command(&self, i: usize, env: &TestEnv, program: &Path, args: &[&str]) -> Command {
-        let mut c = env.command_of(PathBuf::from("ip"), &["netns", "exec", &self.ns[i]]);
-        c.arg(program).args(args);
-        c
-    }
-
-    fn set(&self, up: bool) {
-        self.exec(0, &["ip", "link", "set", &self.veth[0], if up { "up" } else { "down" }])
-            .expect("setting the link");
-    }
-}
-
-impl Drop for Link {
-    fn drop(&mut self) {
-        for n in &self.ns {
-            let _ = ip(&["netns", "del", n]);
-        }
-    }
+/// Runs `program ARGS` in namespace `i` of `link` with `env`'s iceoryx2 prefix.
+fn in_ns(link: &NetnsPair, i: usize, env: &TestEnv, program: &Path, args: &[&str]) -> Command {
+    let mut c = link.command(i, program, args);
+    c.env(navsync_shared::services::PREFIX_ENV, &env.prefix)
+        .env("RUST_LOG", "warn");
+    c
 }
 
 /// A child whose stdout lines are collected with their arrival time.
@@ -204,7 +142,7 @@ fn two_hosts_over_zenoh_survive_a_cut_link() {
         );
         return;
     }
-    let link = match Link::new() {
+    let link = match NetnsPair::new("nsy") {
         Ok(l) => l,
         Err(e) => {
             println!("SKIPPED: cannot create network namespaces here: {e}");
@@ -225,7 +163,8 @@ fn two_hosts_over_zenoh_survive_a_cut_link() {
     let nav_a = node_a.subscriber::<NavState>(services::NAV_STATE).unwrap();
     a.spawn_pipeline(&scenario, 1);
     let bridge_a = daemon(
-        link.command(
+        in_ns(
+            &link,
             0,
             &a,
             &bin,
@@ -235,7 +174,8 @@ fn two_hosts_over_zenoh_survive_a_cut_link() {
     );
     // Host B: an importing bridge, a plain echo on its own iceoryx2, the Python subscriber.
     let bridge_b = daemon(
-        link.command(
+        in_ns(
+            &link,
             1,
             &b,
             &bin,
@@ -254,11 +194,12 @@ fn two_hosts_over_zenoh_survive_a_cut_link() {
         &b.dir.join("bridge.log"),
     );
     let echo = Lines::spawn(
-        link.command(1, &b, &bin, &["echo", services::NAV_STATE, "--json"]),
+        in_ns(&link, 1, &b, &bin, &["echo", services::NAV_STATE, "--json"]),
         &b.dir.join("echo.log"),
     );
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/python/nav_subscriber_zenoh.py");
-    let mut pc = link.command(
+    let mut pc = in_ns(
+        &link,
         1,
         &b,
         &py,
@@ -298,22 +239,22 @@ fn two_hosts_over_zenoh_survive_a_cut_link() {
         std::fs::read_to_string(b.dir.join("python.log")).unwrap_or_default()
     );
     let cut = Instant::now();
-    link.set(false);
+    link.set_link(false).expect("link down");
     collect(cut + Duration::from_secs(5));
     let restored = Instant::now();
-    link.set(true);
+    link.set_link(true).expect("link up");
     collect(restored + Duration::from_secs(8));
 
     // The remote clients, from B's namespace.
-    let o = link
-        .command(
-            1,
-            &b,
-            &bin,
-            &["status", "--zenoh", &endpoint, "--json", "--window", "2"],
-        )
-        .output()
-        .unwrap();
+    let o = in_ns(
+        &link,
+        1,
+        &b,
+        &bin,
+        &["status", "--zenoh", &endpoint, "--json", "--window", "2"],
+    )
+    .output()
+    .unwrap();
     assert!(
         o.status.success(),
         "status --zenoh: {}",
@@ -325,15 +266,15 @@ fn two_hosts_over_zenoh_survive_a_cut_link() {
         .unwrap_or(0.0);
     println!("status --zenoh: hostA navsync/nav/state at {rate:.1} Hz");
     assert!(rate > 80.0, "{st}");
-    let o = link
-        .command(
-            1,
-            &b,
-            &bin,
-            &["echo", "--zenoh", &endpoint, services::NAV_STATE, "--count", "20"],
-        )
-        .output()
-        .unwrap();
+    let o = in_ns(
+        &link,
+        1,
+        &b,
+        &bin,
+        &["echo", "--zenoh", &endpoint, services::NAV_STATE, "--count", "20"],
+    )
+    .output()
+    .unwrap();
     assert!(
         o.status.success(),
         "echo --zenoh: {}",
