@@ -178,6 +178,10 @@ pub struct McapReader<R: Read + Seek> {
     channels: Vec<Option<Channel>>,
     /// The payload of the message given out last.
     data: Vec<u8>,
+    /// The current chunk's records, uncompressed (reused from chunk to chunk).
+    chunk: Vec<u8>,
+    /// Its records not handed out yet: (opcode, body range in `chunk`), in order.
+    pending: std::collections::VecDeque<(u8, core::ops::Range<usize>)>,
     end: Option<ScanEnd>,
 }
 
@@ -233,8 +237,11 @@ impl<R: Read + Seek> McapReader<R> {
         }
         src.seek(SeekFrom::Start(0))
             .map_err(|e| RecordingError::io(path, "seeking", e))?;
+        // Chunks come whole: their records are checked and unpacked here (`unpack_chunk`), not
+        // by the crate's chunk reader, whose arithmetic on a malformed uncompressed chunk
+        // overflows (found by the fuzzer in mcap 0.26).
         let options = LinearReaderOptions::default()
-            .with_prevalidate_chunk_crcs(true)
+            .with_emit_chunks(true)
             .with_record_length_limit(RECORD_LENGTH_LIMIT);
         let mut r = Self {
             src,
@@ -250,6 +257,8 @@ impl<R: Read + Seek> McapReader<R> {
             schemas: Vec::new(),
             channels: Vec::new(),
             data: Vec::new(),
+            chunk: Vec::new(),
+            pending: std::collections::VecDeque::new(),
             end: None,
         };
         r.summary = r.read_summary()?;
@@ -435,6 +444,15 @@ impl<R: Read + Seek> McapReader<R> {
     /// The next record of interest, feeding the reader from the file as it asks.
     fn next_record(&mut self) -> Result<Option<Step>, RecordingError> {
         loop {
+            if let Some((opcode, range)) = self.pending.pop_front() {
+                let chunk = core::mem::take(&mut self.chunk);
+                let step = self.record(opcode, &chunk[range]);
+                self.chunk = chunk;
+                match step? {
+                    Some(step) => return Ok(Some(step)),
+                    None => continue,
+                }
+            }
             if self.end.is_some() {
                 return Ok(None);
             }
@@ -464,55 +482,63 @@ impl<R: Read + Seek> McapReader<R> {
                     self.fed += n as u64;
                 }
                 LinearReadEvent::Record { data, opcode } => {
-                    if !fields_fit(opcode, data) {
-                        let what = format!("record 0x{opcode:02x}");
-                        return Err(self.corrupt(&what, "a field's length overruns the record"));
+                    if opcode == mcap::records::op::CHUNK {
+                        let r = unpack_chunk(data, &mut self.chunk, &mut self.pending);
+                        r.map_err(|e| self.corrupt("Chunk", e))?;
+                        continue;
                     }
-                    let step = match opcode {
-                        mcap::records::op::HEADER
-                        | mcap::records::op::SCHEMA
-                        | mcap::records::op::CHANNEL
-                        | mcap::records::op::MESSAGE
-                        | mcap::records::op::DATA_END
-                        | mcap::records::op::FOOTER => mcap::parse_record(opcode, data),
-                        _ => continue,
-                    };
-                    let record = match step {
-                        Ok(r) => r,
-                        Err(e) => {
-                            let what = format!("record 0x{opcode:02x}");
-                            return Err(self.corrupt(&what, e.to_string()));
-                        }
-                    };
-                    match record {
-                        Record::Header(h) => {
-                            return Ok(Some(Step::Header(Header {
-                                profile: h.profile,
-                                library: h.library,
-                            })));
-                        }
-                        Record::Schema { header, data } => {
-                            let s = schema_of(header, &data);
-                            put(&mut self.schemas, s.id, s);
-                        }
-                        Record::Channel(c) => {
-                            let c = channel_of(c);
-                            put(&mut self.channels, c.id, c);
-                        }
-                        Record::Message { header, data } => {
-                            self.data.clear();
-                            self.data.extend_from_slice(&data);
-                            return Ok(Some(Step::Message(header)));
-                        }
-                        Record::DataEnd(_) | Record::Footer(_) => {
-                            self.end = Some(ScanEnd::Clean);
-                            return Ok(None);
-                        }
-                        _ => {}
+                    let body = data.to_vec();
+                    match self.record(opcode, &body)? {
+                        Some(step) => return Ok(Some(step)),
+                        None => continue,
                     }
                 }
             }
         }
+    }
+
+    /// One record outside or inside a chunk: a Header or Message to hand out, a Schema or
+    /// Channel to keep, the end of the data section, or something to skip.
+    fn record(&mut self, opcode: u8, data: &[u8]) -> Result<Option<Step>, RecordingError> {
+        use mcap::records::op;
+        if !matches!(
+            opcode,
+            op::HEADER | op::SCHEMA | op::CHANNEL | op::MESSAGE | op::DATA_END | op::FOOTER
+        ) {
+            return Ok(None);
+        }
+        let what = format!("record 0x{opcode:02x}");
+        if !fields_fit(opcode, data) {
+            return Err(self.corrupt(&what, "a field's length overruns the record"));
+        }
+        let record = mcap::parse_record(opcode, data).map_err(|e| self.corrupt(&what, e.to_string()))?;
+        Ok(match record {
+            Record::Header(h) => Some(Step::Header(Header {
+                profile: h.profile,
+                library: h.library,
+            })),
+            Record::Schema { header, data } => {
+                let s = schema_of(header, &data);
+                put(&mut self.schemas, s.id, s);
+                None
+            }
+            Record::Channel(c) => {
+                let c = channel_of(c);
+                put(&mut self.channels, c.id, c);
+                None
+            }
+            Record::Message { header, data } => {
+                self.data.clear();
+                self.data.extend_from_slice(&data);
+                Some(Step::Message(header))
+            }
+            Record::DataEnd(_) | Record::Footer(_) => {
+                self.pending.clear();
+                self.end = Some(ScanEnd::Clean);
+                None
+            }
+            _ => None,
+        })
     }
 
     /// The next message in file order, `None` at the end of the data section (see
@@ -547,6 +573,81 @@ impl<R: Read + Seek> McapReader<R> {
             offset: self.fed,
         }))
     }
+}
+
+/// The records of a Chunk record's body (MCAP spec "Chunk"): decompressed (zstd, lz4 or none)
+/// within the declared size, the CRC of the uncompressed records checked (when not 0), and
+/// every record's length checked against the chunk, before any of them is used.
+fn unpack_chunk(
+    body: &[u8],
+    plain: &mut Vec<u8>,
+    out: &mut std::collections::VecDeque<(u8, core::ops::Range<usize>)>,
+) -> Result<(), String> {
+    out.clear();
+    plain.clear();
+    // message_start_time, message_end_time, uncompressed_size (u64), uncompressed_crc (u32),
+    // compression (string), records (u64 length + bytes).
+    let u64_at = |i: usize| {
+        body.get(i..i + 8)
+            .and_then(|b| b.try_into().ok())
+            .map(u64::from_le_bytes)
+    };
+    let short = || "shorter than its header".to_string();
+    let size = u64_at(16).ok_or_else(short)?;
+    let crc = u32::from_le_bytes(body.get(24..28).and_then(|b| b.try_into().ok()).ok_or_else(short)?);
+    let clen = u32::from_le_bytes(body.get(28..32).and_then(|b| b.try_into().ok()).ok_or_else(short)?) as usize;
+    let compression = body.get(32..32 + clen).ok_or_else(short)?;
+    let rlen = u64_at(32 + clen).ok_or_else(short)?;
+    let start = 32 + clen + 8;
+    let records = usize::try_from(rlen)
+        .ok()
+        .and_then(|n| body.get(start..start.checked_add(n)?))
+        .ok_or_else(|| format!("records of {rlen} bytes overrun the chunk"))?;
+    if size > RECORD_LENGTH_LIMIT as u64 {
+        return Err(format!(
+            "{size} bytes uncompressed, more than navsync reads in one chunk"
+        ));
+    }
+    match compression {
+        b"" => plain.extend_from_slice(records),
+        b"zstd" => {
+            plain.reserve(size as usize);
+            let n = zstd::bulk::Decompressor::new()
+                .and_then(|mut d| d.decompress_to_buffer(records, plain))
+                .map_err(|e| format!("zstd: {e}"))?;
+            plain.truncate(n);
+        }
+        b"lz4" => {
+            let mut d = lz4::Decoder::new(records).map_err(|e| format!("lz4: {e}"))?;
+            std::io::Read::read_to_end(&mut std::io::Read::take(&mut d, size + 1), plain)
+                .map_err(|e| format!("lz4: {e}"))?;
+        }
+        other => {
+            return Err(format!(
+                "compression `{}` is not supported",
+                String::from_utf8_lossy(other)
+            ));
+        }
+    }
+    if plain.len() as u64 != size {
+        return Err(format!("{} bytes uncompressed, the chunk says {size}", plain.len()));
+    }
+    if crc != 0 && crc32fast::hash(plain) != crc {
+        return Err("the records do not match the chunk's CRC".into());
+    }
+    let mut pos = 0usize;
+    while pos < plain.len() {
+        let head = plain.get(pos..pos + 9).ok_or("a record header overruns the chunk")?;
+        let n = u64::from_le_bytes(head[1..9].try_into().map_err(|_| "record header")?);
+        let end = usize::try_from(n)
+            .ok()
+            .and_then(|n| (pos + 9).checked_add(n))
+            .filter(|e| *e <= plain.len())
+            .ok_or_else(|| format!("a record of {n} bytes overruns the chunk"))?;
+        out.push_back((head[0], pos + 9..end));
+        pos = end;
+    }
+    Ok(())
 }
 
 /// Whether every length-prefixed field of a record lies inside it. The `mcap` crate's parser

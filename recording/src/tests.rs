@@ -426,3 +426,23 @@ fn a_string_longer_than_its_record_is_an_error_not_an_allocation() {
     let mcap = McapReader::new(Cursor::new(&good[..]), Path::new("mem.mcap")).unwrap();
     assert!(mcap.summary().is_some());
 }
+
+#[test]
+fn a_record_longer_than_its_chunk_is_an_error_not_a_panic() {
+    // Found by the fuzzer (mcap_reader): an uncompressed chunk without a CRC whose first
+    // record claims more bytes than the chunk holds made mcap 0.26's chunk reader overflow.
+    let mut bytes = recording_with(
+        10,
+        RecordingOptions {
+            compression: ChunkCompression::None,
+            ..options(1000)
+        },
+    );
+    let first = mcap_chunks(&bytes)[0].chunk_start_offset as usize;
+    let content = first + 9;
+    bytes[content + 24..content + 28].fill(0); // no CRC
+    let records = content + 8 * 3 + 4 + 4 + 8; // empty compression string
+    bytes[records + 1..records + 9].copy_from_slice(&0xFFFF_FFFFu64.to_le_bytes());
+    let err = read_all(&bytes).unwrap_err();
+    assert!(err.to_string().contains("overruns the chunk"), "{err}");
+}

@@ -116,3 +116,22 @@ fn gnss_latency_runs_on_real_captures() {
     }
     env.finish();
 }
+
+#[test]
+fn zenoh_benchmark_crosses_two_namespaces() {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        println!("SKIPPED: navsync-bench zenoh needs root for network namespaces");
+        return;
+    }
+    let env = TestEnv::new("benchz");
+    let r = run_json(&env, &["zenoh"], &env.dir.join("zenoh.json"));
+    let cases = r["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 2, "{r}");
+    for c in cases {
+        assert!(c["received"].as_u64().unwrap() > 0, "{c}");
+        assert!(c["received"].as_u64() <= c["sent"].as_u64(), "{c}");
+        percentiles_sane(&c["latency"], "zenoh");
+        assert!(c["bridge_a_cpu_us_per_msg"].as_f64().unwrap() >= 0.0, "{c}");
+    }
+}

@@ -75,6 +75,28 @@ pub fn run(explicit: Option<&Path>) -> Result<()> {
     if let Some(r) = &c.outputs.record {
         println!("  navsync record: {}", r.path.display());
     }
+    println!(
+        "  recordings: {}{}",
+        match c.recording.encoding {
+            navsync_recording::Encoding::Cdr => "CDR (a ROS 2 bag)",
+            navsync_recording::Encoding::Json => "JSON",
+        },
+        if c.recording.ros_std {
+            " with the standard ROS 2 messages"
+        } else {
+            ""
+        }
+    );
+    if let Some(z) = &c.bridge.zenoh {
+        println!(
+            "  navsync bridge zenoh: instance {}, export {:?}, import {}, listen {:?}, connect {:?}",
+            z.instance.as_deref().unwrap_or("(host name)"),
+            z.export.clone().unwrap_or_else(|| vec!["(default)".into()]),
+            z.import.as_deref().unwrap_or("none"),
+            z.listen,
+            z.connect
+        );
+    }
     for w in warnings {
         println!("warning: {w}");
     }
