@@ -9,6 +9,7 @@
 //!   number), with consecutive exporter sequence numbers at 100 Hz (no loss) before the cut;
 //! * the link is cut (`ip link set down`) for 5 s and restored: both resume within 2 s, and
 //!   B's bridge counts the loss in its Health (`import_lost`);
+//! * host A's estimator killed and restarted: B receives its states again;
 //! * `status --zenoh` from B sees host A's services, `echo --zenoh` prints A's states.
 //!
 //! Needs root (namespaces), `ip` (iproute2), python3 with pip and PyPI; where namespaces cannot
@@ -222,14 +223,14 @@ fn two_hosts_over_zenoh_survive_a_cut_link() {
 
     // Collect host A's states while B receives: 12 s, then the link down for 5 s, up for 8 s.
     let mut states_a: HashMap<u64, NavState> = HashMap::new();
-    let mut collect = |until: Instant| {
+    let collect = |states: &mut HashMap<u64, NavState>, until: Instant| {
         while Instant::now() < until {
             if let Some(n) = nav_a.wait_next(Duration::from_millis(20)).unwrap() {
-                states_a.insert(n.seq, n);
+                states.insert(n.seq, n);
             }
         }
     };
-    collect(Instant::now() + Duration::from_secs(12));
+    collect(&mut states_a, Instant::now() + Duration::from_secs(12));
     let (echo_before, py_before) = (parse(&echo.snapshot()).len(), parse(&python.snapshot()).len());
     assert!(
         echo_before > 300 && py_before > 300,
@@ -240,10 +241,36 @@ fn two_hosts_over_zenoh_survive_a_cut_link() {
     );
     let cut = Instant::now();
     link.set_link(false).expect("link down");
-    collect(cut + Duration::from_secs(5));
+    collect(&mut states_a, cut + Duration::from_secs(5));
     let restored = Instant::now();
     link.set_link(true).expect("link up");
-    collect(restored + Duration::from_secs(8));
+    collect(&mut states_a, restored + Duration::from_secs(8));
+    // What the checks below compare (before the estimator restarts its sequence numbers).
+    let (echo_lines, python_lines) = (echo.snapshot(), python.snapshot());
+
+    // Host A's estimator killed and restarted: its service comes back, the bridge keeps
+    // exporting it (the estimator starts its sequence numbers again at 1).
+    let echo_before_restart = parse(&echo.snapshot()).len();
+    a.kill9("estimator");
+    std::thread::sleep(Duration::from_millis(500));
+    let restarted = Instant::now();
+    a.respawn("estimator");
+    collect(&mut HashMap::new(), restarted + Duration::from_secs(6));
+    let after_restart: Vec<Instant> = parse(&echo.snapshot())
+        .into_iter()
+        .skip(echo_before_restart)
+        .map(|(t, _, _)| t)
+        .filter(|t| *t > restarted)
+        .collect();
+    let first = after_restart.first().map(|t| t.duration_since(restarted).as_secs_f64());
+    println!(
+        "estimator restarted on host A: host B's echo got {} states in 6 s, the first {first:?} s after the restart",
+        after_restart.len()
+    );
+    assert!(
+        after_restart.len() > 100,
+        "the bridge lost the restarted estimator's states"
+    );
 
     // The remote clients, from B's namespace.
     let o = in_ns(
@@ -298,7 +325,7 @@ fn two_hosts_over_zenoh_survive_a_cut_link() {
     println!("B's bridge: imported {imported}, import_lost {lost}");
     assert!(lost > 0, "the cut link's loss is not counted");
 
-    for (name, lines, exporter_seq) in [("echo", echo.snapshot(), false), ("python", python.snapshot(), true)] {
+    for (name, lines, exporter_seq) in [("echo", echo_lines, false), ("python", python_lines, true)] {
         let got = parse(&lines);
         // Content equals host A's state of the same sequence number.
         let mut compared = 0;
