@@ -404,6 +404,13 @@ impl<R: Read + Seek> McapReader<R> {
                 return Err(bad(format!("a record of {n} bytes overruns the summary section")));
             };
             let body = &buf[pos + 9..body_end as usize];
+            pos = body_end as usize;
+            // Only what the summary is read for; anything else (allowed or not) is skipped
+            // unparsed.
+            use mcap::records::op as o;
+            if !matches!(op, o::SCHEMA | o::CHANNEL | o::STATISTICS | o::CHUNK_INDEX) {
+                continue;
+            }
             if !fields_fit(op, body) {
                 return Err(bad(format!("a field of record 0x{op:02x} overruns it")));
             }
@@ -436,7 +443,6 @@ impl<R: Read + Seek> McapReader<R> {
                 }),
                 _ => {}
             }
-            pos = body_end as usize;
         }
         Ok(Some(s))
     }
@@ -705,6 +711,15 @@ fn fields_fit(op: u8, body: &[u8]) -> bool {
         op::STATISTICS => c.skip(8 + 2 + 4 * 4 + 8 + 8) && c.string(),
         op::CHUNK_INDEX => c.skip(8 * 4) && c.string() && c.skip(8) && c.string() && c.skip(16),
         op::FOOTER => body.len() >= 20,
+        op::CHUNK => {
+            c.skip(8 * 3 + 4) && c.string() && {
+                let n = body
+                    .get(c.p..c.p + 8)
+                    .and_then(|b| b.try_into().ok())
+                    .map(u64::from_le_bytes);
+                n.is_some_and(|n| n <= (body.len() - c.p - 8) as u64)
+            }
+        }
         op::DATA_END => body.len() >= 4,
         _ => true,
     }
@@ -714,4 +729,35 @@ fn fields_fit(op: u8, body: &[u8]) -> bool {
 enum Step {
     Header(Header),
     Message(mcap::records::MessageHeader),
+}
+
+#[cfg(test)]
+mod field_tests {
+    use super::fields_fit;
+    use mcap::records::op;
+
+    #[test]
+    fn declared_lengths_beyond_the_record_are_caught() {
+        // Header: two strings.
+        let mut h = 4u32.to_le_bytes().to_vec();
+        h.extend_from_slice(b"ros2");
+        h.extend_from_slice(&0u32.to_le_bytes());
+        assert!(fields_fit(op::HEADER, &h));
+        h[0..4].copy_from_slice(&0xFFFF_FFFFu32.to_le_bytes());
+        assert!(!fields_fit(op::HEADER, &h));
+        // Chunk: 28 bytes, the compression string, the records' u64 length (found by the
+        // fuzzer in a summary section: a 4 GiB compression name).
+        let mut c = vec![0u8; 28];
+        c.extend_from_slice(&4u32.to_le_bytes());
+        c.extend_from_slice(b"zstd");
+        c.extend_from_slice(&3u64.to_le_bytes());
+        c.extend_from_slice(&[1, 2, 3]);
+        assert!(fields_fit(op::CHUNK, &c));
+        let mut long = c.clone();
+        long[28..32].copy_from_slice(&0xFFFF_FFFFu32.to_le_bytes());
+        assert!(!fields_fit(op::CHUNK, &long));
+        let mut overrun = c.clone();
+        overrun[36..44].copy_from_slice(&4u64.to_le_bytes());
+        assert!(!fields_fit(op::CHUNK, &overrun));
+    }
 }
