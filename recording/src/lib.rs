@@ -6,7 +6,8 @@
 //!    one `ros2msg` schema per sample type named `navsync_msgs/msg/ImuSample`, …; `json` too).
 //! 2. [`sample_file`]: [`SampleRecorder`] and [`SampleReader`], samples in and out by service.
 //! 3. [`mcap_writer`], [`mcap_reader`]: the container, through the `mcap` crate.
-//! 4. [`ports`], [`glob`]: what the record and replay processes need besides (pacing: `navsync_shared::pacing`).
+//! 4. [`ros_std`]: the standard ROS 2 messages written next to navsync's own (`--ros-std`).
+//! 5. [`ports`], [`glob`]: what the record and replay processes need besides (pacing: `navsync_shared::pacing`).
 //!
 //! # Time stamps of the messages
 //!
