@@ -9,6 +9,8 @@
 //!   number), with consecutive exporter sequence numbers at 100 Hz (no loss) before the cut;
 //! * the link is cut (`ip link set down`) for 5 s and restored: both resume within 2 s, and
 //!   B's bridge counts the loss in its Health (`import_lost`);
+//! * a slow remote subscriber (an `echo --zenoh` nobody reads) neither slows host B's import
+//!   nor grows host A's bridge;
 //! * host A's estimator killed and restarted: B receives its states again;
 //! * `status --zenoh` from B sees host A's services, `echo --zenoh` prints A's states.
 //!
@@ -244,7 +246,38 @@ fn two_hosts_over_zenoh_survive_a_cut_link() {
     collect(&mut states_a, cut + Duration::from_secs(5));
     let restored = Instant::now();
     link.set_link(true).expect("link up");
-    collect(&mut states_a, restored + Duration::from_secs(8));
+    collect(&mut states_a, restored + Duration::from_secs(3));
+    // A slow remote subscriber: `echo --zenoh` on B whose output nobody reads (it blocks once
+    // the pipe is full). Host A's bridge must neither block nor grow, and host B's own import
+    // must keep its rate.
+    let rss = |pid: u32| navsync_tests::rss_kib(pid).unwrap_or(0);
+    let rss_a0 = rss(bridge_a.0.id());
+    let mut slow = in_ns(&link, 1, &b, &bin, &["echo", "--zenoh", &endpoint, services::NAV_STATE])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let slow_from = Instant::now();
+    collect(&mut states_a, slow_from + Duration::from_secs(6));
+    let slow_to = Instant::now();
+    let rss_a1 = rss(bridge_a.0.id());
+    let during_slow = parse(&echo.snapshot())
+        .iter()
+        .filter(|(t, _, _)| *t > slow_from + Duration::from_secs(1) && *t < slow_to)
+        .count();
+    println!(
+        "slow remote subscriber for 6 s: host B's echo got {during_slow} states in the last 5 s; host A's bridge {rss_a0} -> {rss_a1} KiB"
+    );
+    assert!(
+        during_slow > 400,
+        "a slow remote subscriber slowed host B's import: {during_slow} in 5 s"
+    );
+    assert!(
+        rss_a1 < rss_a0 + 32 * 1024,
+        "host A's bridge grew from {rss_a0} to {rss_a1} KiB"
+    );
+    let _ = slow.kill();
+    let _ = slow.wait();
     // What the checks below compare (before the estimator restarts its sequence numbers).
     let (echo_lines, python_lines) = (echo.snapshot(), python.snapshot());
 
