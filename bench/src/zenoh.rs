@@ -13,7 +13,7 @@ use navsync_shared::services::{NAV_STATE, PREFIX_ENV};
 use navsync_shared::time::monotonic_now_ns;
 use serde::Serialize;
 
-use crate::netns::NetnsPair;
+use crate::netns::{NetnsPair, StopOnDrop as Child};
 use crate::util::{BenchEnv, Machine, Percentiles, cpu_time_s, navsync_exe, write_json};
 
 /// `navsync-bench zenoh`.
@@ -69,24 +69,6 @@ pub enum ZenohBenchError {
 
 fn setup<E: std::fmt::Display>(what: &str) -> impl Fn(E) -> ZenohBenchError + '_ {
     move |e| ZenohBenchError::Setup(format!("{what}: {e}"))
-}
-
-/// Kills a child on drop.
-struct Child(std::process::Child);
-impl Drop for Child {
-    fn drop(&mut self) {
-        // SAFETY: signalling our own child.
-        unsafe { libc::kill(self.0.id() as libc::pid_t, libc::SIGTERM) };
-        let t0 = Instant::now();
-        while t0.elapsed() < Duration::from_secs(5) {
-            if let Ok(Some(_)) = self.0.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
 }
 
 /// Runs every rate; prints the table.
