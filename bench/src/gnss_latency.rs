@@ -15,8 +15,16 @@
 //!   (`Client<GnssFix>`), which stamps each fix with `CLOCK_MONOTONIC` as `next()` returns;
 //! - the same fixes → `navsync echo navsync/gnss/{id}/fix --json`, stamped when its line is
 //!   read from the pipe;
+//! - the same fixes → `navsync gpsd-server --report fix` → TCP (loopback) → `gpspipe -w`,
+//!   stamped when a TPV line is read: navsync as a drop-in for gpsd;
 //! - `gpsd -N -n -b` (read-only) on a second pseudo-terminal fed the same epochs half a
-//!   spacing later → TCP (loopback) → `gpspipe -w`, stamped when a TPV line is read.
+//!   spacing later → TCP (loopback) → `gpspipe -w`, stamped when a TPV line is read;
+//! - the machine's floor, on a third terminal fed a quarter spacing after navsync's: a bare
+//!   reader process (`helper pty-read`, a blocking `read(2)`, no decoding) stamps the read that
+//!   completes the epoch ("floor: 1 wake-up": what any daemon pays before it can decode), and
+//!   this benchmark stamps the line in which the reader reports it ("floor: 2 wake-ups": the
+//!   least any daemon-plus-subscriber design pays; navsync's client path has two wake-ups,
+//!   pty → driver → subscriber, the echo and gpspipe paths three).
 //!
 //! A fix is attributed to the latest epoch written before it arrived (the spacing is longer
 //! than any latency measured); a second output for the same epoch is counted as extra, an
@@ -304,9 +312,64 @@ fn gpsd_binary() -> Result<PathBuf, String> {
     }
 }
 
+/// Per epoch written (`sizes`, bytes, in order), the stamp of the reader's report whose
+/// running byte count completes it; `reads` are `(stamp ns, bytes)` in order.
+fn completions(sizes: &[usize], reads: &[(i64, usize)]) -> Vec<i64> {
+    let mut out = Vec::with_capacity(sizes.len());
+    let (mut got, mut end, mut last) = (0usize, 0usize, 0i64);
+    let mut reads = reads.iter();
+    'epochs: for &n in sizes {
+        end += n;
+        while got < end {
+            let Some(&(t, k)) = reads.next() else { break 'epochs };
+            got += k;
+            last = t;
+        }
+        out.push(last);
+    }
+    out
+}
+
 /// A free loopback TCP port.
 fn free_port() -> std::io::Result<u16> {
     Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+}
+
+/// What a lane measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LaneKind {
+    /// `navsync gnss` → the Rust client (`helper gnss-sub`).
+    Client,
+    /// `navsync gnss` → `navsync echo --json`.
+    Echo,
+    /// `navsync gnss` → `navsync gpsd-server --report fix` → `gpspipe -w`.
+    Server,
+    /// `gpsd` → `gpspipe -w`.
+    Gpsd,
+    /// A bare reader (`helper pty-read`).
+    Floor,
+}
+
+/// One measured path: a terminal of its own and the processes behind it. Lanes are written
+/// one after the other within each spacing, so no two paths compete for the CPUs.
+struct Lane {
+    kind: LaneKind,
+    pty: Pty,
+    /// Stamps of the measured writes, ns.
+    writes: Vec<i64>,
+    /// Sizes of every epoch written (warm-up included), bytes.
+    sizes: Vec<usize>,
+    /// The output lines, stamped as read by this process.
+    lines: Lines,
+    /// The daemon processes whose CPU time is the path's.
+    cpu_pids: Vec<u32>,
+    cpu_start: Option<f64>,
+}
+
+impl Lane {
+    fn cpu_s(&self) -> Option<f64> {
+        self.cpu_pids.iter().map(|&p| cpu_time_s(p)).sum()
+    }
 }
 
 /// Runs the benchmark on one capture.
@@ -331,94 +394,161 @@ fn run_capture(
         return Err(GnssLatencyError::NoEpochs(name));
     }
     let mut env = BenchEnv::new("gnsslat").map_err(setup("bench environment"))?;
-    let id = "lat";
-    let service = navsync_shared::services::gnss_fix(id);
-
-    // navsync: driver, the client helper, echo.
-    let link = env.dir.join("rx-navsync");
-    let mut pty = Pty::open(Some(&link)).map_err(setup("pseudo-terminal"))?;
     let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<String>>();
-    let (client_pid, client_out) = env
-        .spawn("client", &s(&["helper", "gnss-sub", "--service", &service]), true)
-        .map_err(setup("client helper"))?;
-    let (echo_pid, echo_out) = env
-        .spawn("echo", &s(&["echo", &service, "--json"]), true)
-        .map_err(setup("navsync echo"))?;
-    let (gnss_pid, _) = env
-        .spawn(
-            "gnss",
-            &s(&[
-                "gnss",
-                "--port",
-                &link.display().to_string(),
-                "--baud",
-                "115200",
-                "--protocol",
-                "auto",
-                "--id",
-                id,
-            ]),
-            false,
-        )
-        .map_err(setup("navsync gnss"))?;
+    let below = |p: u8| p.saturating_sub(1).max(1);
+    // Processes outside the BenchEnv (not navsync): killed when the run ends.
+    let mut others: Vec<Killed> = Vec::new();
     let mut fifo: Vec<(u32, u8)> = Vec::new();
-    if let Some(p) = args.realtime {
-        let below = p.saturating_sub(1).max(1);
-        fifo.extend([(gnss_pid, p), (client_pid, below), (echo_pid, below)]);
-    }
-    let client_lines = collect_lines(client_out.ok_or_else(|| GnssLatencyError::Setup("client stdout".into()))?);
-    let echo_lines = collect_lines(echo_out.ok_or_else(|| GnssLatencyError::Setup("echo stdout".into()))?);
+    let mut lanes: Vec<Lane> = Vec::new();
+    // Lanes left out, with the reason (their rows say it).
+    let mut skipped: Vec<(&str, String)> = Vec::new();
+    let have_gpspipe = Command::new("gpspipe").arg("-V").output().is_ok();
+    // gpspipe clients to start once the servers listen: (lane index, port).
+    let mut pipes: Vec<(usize, String)> = Vec::new();
 
-    // gpsd on a second terminal.
-    let mut gpsd_side = None;
-    let mut gpsd_note = None;
-    if args.no_gpsd {
-        gpsd_note = Some("--no-gpsd".to_string());
-    } else {
-        match gpsd {
-            Err(why) => gpsd_note = Some(why.clone()),
-            Ok(bin) => {
-                let glink = env.dir.join("rx-gpsd");
-                let gpty = Pty::open(Some(&glink)).map_err(setup("pseudo-terminal"))?;
-                let port = free_port().map_err(setup("loopback port"))?.to_string();
-                let d = Command::new(bin)
-                    .args(["-N", "-n", "-b", "-S", &port, "-F"])
-                    .arg(env.dir.join("gpsd.sock"))
-                    .arg(&glink)
-                    .stdout(Stdio::null())
-                    .stderr(Stdio::null())
-                    .spawn()
-                    .map_err(setup("gpsd"))?;
-                let d = Killed(d);
-                std::thread::sleep(Duration::from_millis(300));
-                let mut p = Command::new("gpspipe")
-                    .args(["-w", &format!("127.0.0.1:{port}")])
+    for kind in [
+        LaneKind::Client,
+        LaneKind::Echo,
+        LaneKind::Server,
+        LaneKind::Gpsd,
+        LaneKind::Floor,
+    ] {
+        let tag = format!("{kind:?}").to_lowercase();
+        let link = env.dir.join(format!("rx-{tag}"));
+        let port = link.display().to_string();
+        let mut cpu_pids = Vec::new();
+        let mut out = None;
+        match kind {
+            LaneKind::Server if !have_gpspipe => {
+                skipped.push((
+                    "navsync gpsd-server",
+                    "gpspipe missing: apt-get install gpsd-clients".into(),
+                ));
+            }
+            LaneKind::Client | LaneKind::Echo | LaneKind::Server => {
+                let id = format!("lat-{tag}");
+                let service = navsync_shared::services::gnss_fix(&id);
+                let pty = Pty::open(Some(&link)).map_err(setup("pseudo-terminal"))?;
+                let (gnss_pid, _) = env
+                    .spawn(
+                        &format!("gnss-{tag}"),
+                        &s(&[
+                            "gnss",
+                            "--port",
+                            &port,
+                            "--baud",
+                            "115200",
+                            "--protocol",
+                            "auto",
+                            "--id",
+                            &id,
+                        ]),
+                        false,
+                    )
+                    .map_err(setup("navsync gnss"))?;
+                cpu_pids.push(gnss_pid);
+                let (sub_pid, sub_out) = match kind {
+                    LaneKind::Client => env
+                        .spawn("client", &s(&["helper", "gnss-sub", "--service", &service]), true)
+                        .map_err(setup("client helper"))?,
+                    LaneKind::Echo => env
+                        .spawn("echo", &s(&["echo", &service, "--json"]), true)
+                        .map_err(setup("navsync echo"))?,
+                    _ => {
+                        let tcp = free_port().map_err(setup("loopback port"))?.to_string();
+                        let (pid, _) = env
+                            .spawn(
+                                "gpsd-server",
+                                &s(&[
+                                    "gpsd-server",
+                                    "--listen",
+                                    &format!("127.0.0.1:{tcp}"),
+                                    "--report",
+                                    "fix",
+                                    "--gnss-id",
+                                    &id,
+                                ]),
+                                false,
+                            )
+                            .map_err(setup("navsync gpsd-server"))?;
+                        cpu_pids.push(pid);
+                        pipes.push((lanes.len(), tcp));
+                        (pid, None)
+                    }
+                };
+                if let Some(p) = args.realtime {
+                    fifo.extend([(gnss_pid, p), (sub_pid, below(p))]);
+                }
+                let lines = match sub_out {
+                    Some(o) => collect_lines(o),
+                    None => Lines::default(),
+                };
+                out = Some((pty, lines));
+            }
+            LaneKind::Gpsd => match (args.no_gpsd, gpsd) {
+                (true, _) => skipped.push(("gpsd gpspipe", "--no-gpsd".to_string())),
+                (_, Err(why)) => skipped.push(("gpsd gpspipe", why.clone())),
+                (false, Ok(bin)) => {
+                    let pty = Pty::open(Some(&link)).map_err(setup("pseudo-terminal"))?;
+                    let tcp = free_port().map_err(setup("loopback port"))?.to_string();
+                    let d = Command::new(bin)
+                        .args(["-N", "-n", "-b", "-S", &tcp, "-F"])
+                        .arg(env.dir.join("gpsd.sock"))
+                        .arg(&link)
+                        .stdout(Stdio::null())
+                        .stderr(Stdio::null())
+                        .spawn()
+                        .map_err(setup("gpsd"))?;
+                    cpu_pids.push(d.id());
+                    if let Some(p) = args.realtime {
+                        fifo.push((d.id(), p));
+                    }
+                    others.push(Killed(d));
+                    pipes.push((lanes.len(), tcp));
+                    out = Some((pty, Lines::default()));
+                }
+            },
+            LaneKind::Floor => {
+                let pty = Pty::open(Some(&link)).map_err(setup("pseudo-terminal"))?;
+                let mut r = env
+                    .command(&s(&["helper", "pty-read", "--port", &port]))
+                    .map_err(setup("floor reader"))?
                     .stdout(Stdio::piped())
                     .stderr(Stdio::null())
                     .spawn()
-                    .map_err(setup("gpspipe"))?;
-                let lines = collect_lines(
-                    p.stdout
-                        .take()
-                        .ok_or_else(|| GnssLatencyError::Setup("gpspipe stdout".into()))?,
-                );
-                if let Some(prio) = args.realtime {
-                    fifo.extend([(d.0.id(), prio), (p.id(), prio.saturating_sub(1).max(1))]);
+                    .map_err(setup("floor reader"))?;
+                let o = r.stdout.take();
+                if let Some(p) = args.realtime {
+                    fifo.push((r.id(), p));
                 }
-                gpsd_side = Some((gpty, d, Killed(p), lines));
+                others.push(Killed(r));
+                let o = o.ok_or_else(|| GnssLatencyError::Setup("floor reader stdout".into()))?;
+                out = Some((pty, collect_lines(o)));
             }
         }
+        if let Some((pty, lines)) = out {
+            lanes.push(Lane {
+                kind,
+                pty,
+                writes: Vec::new(),
+                sizes: Vec::new(),
+                lines,
+                cpu_pids,
+                cpu_start: None,
+            });
+        }
     }
-
     for (pid, prio) in fifo {
         crate::util::set_fifo(pid, prio).map_err(setup("SCHED_FIFO (needs CAP_SYS_NICE)"))?;
     }
-    // Wait until the subscribers are there (the helper prints "ready").
+    // Wait until the subscribers are there (the client helper prints "ready"), then connect
+    // gpspipe to navsync's gpsd-server and to gpsd.
+    let ready = |l: &Lines| l.lock().map(|v| v.iter().any(|(_, x)| x == "ready")).unwrap_or(false);
     let t0 = Instant::now();
-    while !client_lines
-        .lock()
-        .map(|v| v.iter().any(|(_, l)| l == "ready"))
-        .unwrap_or(false)
+    while !lanes
+        .iter()
+        .filter(|l| l.kind == LaneKind::Client)
+        .all(|l| ready(&l.lines))
     {
         env.check_running().map_err(GnssLatencyError::Setup)?;
         if t0.elapsed() > Duration::from_secs(20) {
@@ -430,101 +560,138 @@ fn run_capture(
         std::thread::sleep(Duration::from_millis(20));
     }
     std::thread::sleep(Duration::from_millis(500));
+    for (i, tcp) in pipes {
+        let mut p = Command::new("gpspipe")
+            .args(["-w", &format!("127.0.0.1:{tcp}")])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(setup("gpspipe"))?;
+        let o = p
+            .stdout
+            .take()
+            .ok_or_else(|| GnssLatencyError::Setup("gpspipe stdout".into()))?;
+        lanes[i].lines = collect_lines(o);
+        if let Some(prio) = args.realtime {
+            crate::util::set_fifo(p.id(), below(prio)).map_err(setup("SCHED_FIFO (needs CAP_SYS_NICE)"))?;
+        }
+        others.push(Killed(p));
+    }
+    std::thread::sleep(Duration::from_millis(300));
 
     // Warm-up: a few epochs that are not measured (the decoders learn the cycle, gpsd its
-    // device), then the measured ones.
+    // device), then the measured ones; each epoch goes to every lane in turn, a slot apart.
     let warmup = 5.min(epochs.len());
     let spacing = Duration::from_secs_f64(args.spacing_s);
-    let cpu0 = (
-        cpu_time_s(gnss_pid),
-        gpsd_side.as_ref().and_then(|g| cpu_time_s(g.1.0.id())),
-    );
-    let mut writes = Vec::new();
-    let mut gwrites = Vec::new();
-    let mut cpu_start = cpu0;
+    let slot = spacing / lanes.len() as u32;
     let mut next = Instant::now();
     for k in 0..warmup + n_epochs {
         if k == warmup {
-            cpu_start = (
-                cpu_time_s(gnss_pid),
-                gpsd_side.as_ref().and_then(|g| cpu_time_s(g.1.0.id())),
-            );
-        }
-        let e = &epochs[k % epochs.len()];
-        std::thread::sleep(next.saturating_duration_since(Instant::now()));
-        next += spacing;
-        let t = monotonic_now_ns();
-        pty.write(e).map_err(setup("writing the epoch"))?;
-        if k >= warmup {
-            writes.push(t);
-        }
-        if let Some(g) = &mut gpsd_side {
-            std::thread::sleep(spacing / 2);
-            let t = monotonic_now_ns();
-            g.0.write(e).map_err(setup("writing the epoch for gpsd"))?;
-            if k >= warmup {
-                gwrites.push(t);
+            for l in &mut lanes {
+                l.cpu_start = l.cpu_s();
             }
         }
+        let e = &epochs[k % epochs.len()];
+        for (i, l) in lanes.iter_mut().enumerate() {
+            std::thread::sleep((next + slot * i as u32).saturating_duration_since(Instant::now()));
+            let t = monotonic_now_ns();
+            l.pty.write(e).map_err(setup("writing the epoch"))?;
+            l.sizes.push(e.len());
+            if k >= warmup {
+                l.writes.push(t);
+            }
+        }
+        next += spacing;
         if k % 20 == 0 {
             env.check_running().map_err(GnssLatencyError::Setup)?;
         }
     }
     std::thread::sleep(spacing.max(Duration::from_millis(200)));
-    let cpu_end = (
-        cpu_time_s(gnss_pid),
-        gpsd_side.as_ref().and_then(|g| cpu_time_s(g.1.0.id())),
-    );
-    let per_epoch = |a: Option<f64>, b: Option<f64>| Some((b? - a?) * 1e6 / n_epochs as f64);
 
     let mut results = Vec::new();
-    let client: Vec<i64> = client_lines
-        .lock()
-        .map(|v| v.iter().filter_map(|(_, l)| l.parse::<i64>().ok()).collect())
-        .unwrap_or_default();
-    let mut r = attribute(&name, "navsync client", &writes, &client);
-    r.driver_cpu_us_per_epoch = per_epoch(cpu_start.0, cpu_end.0);
-    results.push(r);
-    let echo: Vec<i64> = echo_lines
-        .lock()
-        .map(|v| v.iter().filter(|(_, l)| l.starts_with('{')).map(|(t, _)| *t).collect())
-        .unwrap_or_default();
-    results.push(attribute(&name, "navsync echo", &writes, &echo));
-    match gpsd_side {
-        Some((_, _, _, lines)) => {
-            let tpv: Vec<i64> = lines
+    for l in &lanes {
+        let cpu = l.cpu_start.zip(l.cpu_s()).map(|(a, b)| (b - a) * 1e6 / n_epochs as f64);
+        let stamps = |f: &dyn Fn(&(i64, String)) -> Option<i64>| -> Vec<i64> {
+            l.lines
                 .lock()
-                .map(|v| {
-                    v.iter()
-                        .filter(|(_, l)| l.contains("\"class\":\"TPV\""))
-                        .map(|(t, _)| *t)
-                        .collect()
-                })
-                .unwrap_or_default();
-            let mut r = attribute(&name, "gpsd gpspipe", &gwrites, &tpv);
-            r.driver_cpu_us_per_epoch = per_epoch(cpu_start.1, cpu_end.1);
+                .map(|v| v.iter().filter_map(f).collect())
+                .unwrap_or_default()
+        };
+        let mut row = |path: &str, arrivals: &[i64], cpu: Option<f64>| {
+            let mut r = attribute(&name, path, &l.writes, arrivals);
+            r.driver_cpu_us_per_epoch = cpu;
             results.push(r);
+        };
+        match l.kind {
+            LaneKind::Client => row("navsync client", &stamps(&|(_, x)| x.parse().ok()), cpu),
+            LaneKind::Echo => row("navsync echo", &stamps(&|(t, x)| x.starts_with('{').then_some(*t)), cpu),
+            LaneKind::Server => row("navsync gpsd-server", &tpv_times(&l.lines), cpu),
+            LaneKind::Gpsd => row("gpsd gpspipe", &tpv_times(&l.lines), cpu),
+            LaneKind::Floor => {
+                // The reader's own stamps (1 wake-up) and this process's (2 wake-ups).
+                let reads: Vec<((i64, i64), usize)> = l
+                    .lines
+                    .lock()
+                    .map(|v| {
+                        v.iter()
+                            .filter_map(|(bench_t, x)| {
+                                let (t, n) = x.split_once(' ')?;
+                                Some(((t.parse().ok()?, *bench_t), n.parse().ok()?))
+                            })
+                            .collect()
+                    })
+                    .unwrap_or_default();
+                for (path, second) in [("floor: 1 wake-up", false), ("floor: 2 wake-ups", true)] {
+                    let stamped: Vec<(i64, usize)> = reads
+                        .iter()
+                        .map(|&((a, b), n)| (if second { b } else { a }, n))
+                        .collect();
+                    let done = completions(&l.sizes, &stamped);
+                    row(path, done.get(warmup..).unwrap_or(&[]), None);
+                }
+            }
         }
-        None => results.push(PathResult {
-            capture: name.clone(),
-            path: "gpsd gpspipe".into(),
-            epochs: 0,
-            received: 0,
-            missing: 0,
-            extra: 0,
-            p50_ms: None,
-            p90_ms: None,
-            p99_ms: None,
-            max_ms: None,
-            driver_cpu_us_per_epoch: None,
-            note: gpsd_note,
-        }),
     }
+    for (path, why) in skipped {
+        results.push(empty_row(&name, path, Some(why)));
+    }
+    drop(others);
     let bad = env.stop_all();
     if !bad.is_empty() {
         return Err(GnssLatencyError::Setup(format!("{bad:?} did not exit cleanly")));
     }
     Ok(results)
+}
+
+/// The stamps of the TPV lines gpspipe printed.
+fn tpv_times(lines: &Lines) -> Vec<i64> {
+    lines
+        .lock()
+        .map(|v| {
+            v.iter()
+                .filter(|(_, l)| l.contains("\"class\":\"TPV\""))
+                .map(|(t, _)| *t)
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// A row without figures, saying why.
+fn empty_row(capture: &str, path: &str, note: Option<String>) -> PathResult {
+    PathResult {
+        capture: capture.into(),
+        path: path.into(),
+        epochs: 0,
+        received: 0,
+        missing: 0,
+        extra: 0,
+        p50_ms: None,
+        p90_ms: None,
+        p99_ms: None,
+        max_ms: None,
+        driver_cpu_us_per_epoch: None,
+        note,
+    }
 }
 
 fn ms(v: Option<f64>) -> String {
@@ -547,14 +714,14 @@ pub fn run(args: &GnssLatencyArgs) -> Result<Vec<PathResult>, GnssLatencyError> 
     }
     let mut all = Vec::new();
     println!(
-        "{:<24} {:<15} {:>6} {:>8} {:>5} {:>8} {:>8} {:>8} {:>8} {:>12}",
+        "{:<24} {:<19} {:>6} {:>8} {:>5} {:>8} {:>8} {:>8} {:>8} {:>12}",
         "capture", "path", "epochs", "received", "extra", "p50 ms", "p90 ms", "p99 ms", "max ms", "CPU µs/epoch"
     );
     for spec in &args.captures {
         let rows = run_capture(args, spec, &gpsd, n)?;
         for r in &rows {
             println!(
-                "{:<24} {:<15} {:>6} {:>8} {:>5} {:>8} {:>8} {:>8} {:>8} {:>12}{}",
+                "{:<24} {:<19} {:>6} {:>8} {:>5} {:>8} {:>8} {:>8} {:>8} {:>12}{}",
                 r.capture,
                 r.path,
                 r.epochs,
@@ -580,6 +747,34 @@ pub fn run(args: &GnssLatencyArgs) -> Result<Vec<PathResult>, GnssLatencyError> 
         write_json(p, &all).map_err(setup("writing the JSON"))?;
     }
     Ok(all)
+}
+
+/// `navsync-bench helper pty-read --port PATH`: prints "ready", then for every `read(2)` on the
+/// terminal the `CLOCK_MONOTONIC` time (ns) right after it returned and the bytes read, until
+/// the terminal closes or a signal ends it. Nothing else: the floor of `gnss-latency`.
+pub fn helper_pty_read(port: &Path) -> std::io::Result<()> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOCTTY)
+        .open(port)?;
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "ready")?;
+    out.flush()?;
+    let mut buf = [0u8; 8192];
+    loop {
+        match f.read(&mut buf) {
+            Ok(0) => return Ok(()),
+            Ok(n) => {
+                let t = monotonic_now_ns();
+                writeln!(out, "{t} {n}")?;
+                out.flush()?;
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
 }
 
 /// `navsync-bench helper gnss-sub`: prints "ready", then the `CLOCK_MONOTONIC` time (ns) at
@@ -642,6 +837,15 @@ mod tests {
         let e = epochs_of(&s);
         assert_eq!(e.len(), 2);
         assert_eq!(e[0].len(), 2 * 24 + 24);
+    }
+
+    #[test]
+    fn an_epoch_is_complete_with_the_read_that_brings_its_last_byte() {
+        // Epochs of 10, 5, 7 bytes; read as 4+6, 5, 3+4.
+        let reads = [(1, 4), (2, 6), (3, 5), (4, 3), (5, 4)];
+        assert_eq!(completions(&[10, 5, 7], &reads), vec![2, 3, 5]);
+        // Two epochs in one read; a last epoch never completed.
+        assert_eq!(completions(&[3, 3, 9], &[(7, 6), (8, 1)]), vec![7, 7]);
     }
 
     #[test]

@@ -56,6 +56,12 @@ enum Helper {
         #[arg(long)]
         service: String,
     },
+    /// Prints the time and size of every read on a terminal (`gnss-latency`'s floor).
+    PtyRead {
+        /// The terminal, e.g. /dev/pts/7.
+        #[arg(long)]
+        port: std::path::PathBuf,
+    },
 }
 
 fn main() -> Result<()> {
@@ -72,6 +78,7 @@ fn main() -> Result<()> {
         Cmd::GnssLatency(a) => drop(gnss_latency::run(&a).context("GNSS latency benchmark")?),
         Cmd::Zenoh(a) => drop(zenoh::run(&a).context("Zenoh benchmark")?),
         Cmd::Helper(Helper::GnssSub { service }) => gnss_latency::helper_sub(&service).context("gnss-sub")?,
+        Cmd::Helper(Helper::PtyRead { port }) => gnss_latency::helper_pty_read(&port).context("pty-read")?,
         Cmd::Helper(Helper::IpcPub(a)) => ipc::helper_pub(&a).context("ipc-pub")?,
         Cmd::Helper(Helper::IpcSub(a)) => ipc::helper_sub(&a).context("ipc-sub")?,
         Cmd::Helper(Helper::E2eSub { warmup_s, duration_s }) => {

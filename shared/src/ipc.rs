@@ -23,7 +23,7 @@ use core::time::Duration;
 use core::sync::atomic::{AtomicBool, Ordering};
 
 use iceoryx2::node::NodeWaitFailure;
-use iceoryx2::port::listener::{Listener, ListenerWaitError};
+use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
@@ -402,20 +402,40 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
     /// earlier when a signal interrupts the wait: a termination request (the caller checks
     /// [`IpcNode::termination_requested`]) or SIGCONT after the process was stopped, which must
     /// not end a subscriber.
+    ///
+    /// Waits with `poll(2)` on the listener's descriptor and takes the sample as soon as it
+    /// returns; the wake-up events are consumed on the next call, before looking again, so
+    /// the path from the publisher's signal to the sample in hand has no syscall besides the
+    /// wait itself (iceoryx2's own `timed_wait` consumes them first: `fcntl`, `recvfrom`,
+    /// `fcntl`). A sample published after that look signals after the events were consumed,
+    /// so none is left waiting.
     pub fn wait_next(&self, timeout: Duration) -> Result<Option<T>, IpcError> {
         if let Some(s) = self.receive()? {
             return Ok(Some(s));
         }
         let deadline = std::time::Instant::now() + timeout;
         loop {
+            self.clear_events();
+            if let Some(s) = self.receive()? {
+                return Ok(Some(s));
+            }
             let now = std::time::Instant::now();
             if now >= deadline {
                 return Ok(None);
             }
-            match self.listener.timed_wait(|_| {}, deadline - now) {
-                Ok(_) => {}
-                Err(ListenerWaitError::InterruptSignal) => return self.receive(),
-                Err(e) => return Err(err("waiting on", &self.service, e)),
+            let ms = (deadline - now).as_micros().div_ceil(1000).min(i32::MAX as u128) as i32;
+            let mut pfd = libc::pollfd {
+                fd: self.wake_fd(),
+                events: libc::POLLIN,
+                revents: 0,
+            };
+            // SAFETY: one valid pollfd for the call's duration.
+            if unsafe { libc::poll(&mut pfd, 1, ms) } < 0 {
+                let e = std::io::Error::last_os_error();
+                if e.kind() == std::io::ErrorKind::Interrupted {
+                    return self.receive();
+                }
+                return Err(err("waiting on", &self.service, e));
             }
             if let Some(s) = self.receive()? {
                 return Ok(Some(s));
@@ -427,6 +447,15 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
     /// some node reclaims the dead node ([`IpcNode::reclaim_dead_nodes`]).
     pub fn publisher_count(&self) -> usize {
         self.port_factory.dynamic_config().number_of_publishers()
+    }
+
+    /// The file descriptor that becomes readable when a publisher signals a new sample, for a
+    /// `poll(2)` loop that also waits on sockets; after it fired, [`drain`](Self::drain) (or
+    /// [`clear_events`](Self::clear_events)) consumes the signal.
+    pub fn wake_fd(&self) -> std::os::fd::RawFd {
+        // SAFETY: the descriptor is only read (polled), never closed; it lives as long as the
+        // listener, which `self` owns.
+        unsafe { self.listener.file_descriptor().native_handle() }
     }
 
     /// The listener to attach to a WaitSet.

@@ -84,8 +84,9 @@ fn benchmarks_run_and_report_sane_figures() {
 }
 
 /// `navsync-bench gnss-latency --quick` on two real captures (NMEA and UBX): every epoch's fix
-/// reaches both navsync subscribers once, the figures are ordered, and the gpsd row has
-/// figures or says why not.
+/// reaches each navsync subscriber (client, echo, gpsd-server through gpspipe) once, the bare
+/// reader of the floor rows sees every epoch, the figures are ordered, and a row without
+/// figures (gpsd's, gpsd-server's when gpspipe is missing) says why.
 #[test]
 fn gnss_latency_runs_on_real_captures() {
     let env = TestEnv::new("benchgnss");
@@ -98,10 +99,11 @@ fn gnss_latency_runs_on_real_captures() {
     let json = env.dir.join("gnss.json");
     let v = run_json(&env, &["gnss-latency", "--captures", &captures], &json);
     let rows = v.as_array().expect("rows");
-    assert_eq!(rows.len(), 6, "{v}");
+    assert_eq!(rows.len(), 12, "{v}");
     for r in rows {
         let f = |k: &str| r[k].as_f64();
-        if r["path"].as_str().unwrap().starts_with("navsync") {
+        let path = r["path"].as_str().unwrap();
+        if (path.starts_with("navsync") || path.starts_with("floor")) && r["note"].is_null() {
             assert_eq!(r["epochs"], 20, "{r}");
             assert_eq!(
                 (r["received"].as_u64(), r["extra"].as_u64()),

@@ -282,3 +282,87 @@ fn gpsd_clients_read_the_fused_state() {
     drop((c, slow, health, node));
     env.finish();
 }
+
+/// `--report fix` with a receiver alone (no estimator): one TPV (then SKY) per receiver epoch,
+/// as gpsd sends them, carrying that epoch's fix: a real capture (bu353s4, NMEA) played into a
+/// pseudo-terminal, `navsync gnss` on it.
+#[test]
+fn fix_reports_follow_the_receivers_epochs() {
+    let mut env = TestEnv::new("gpsdfix");
+    let node = env.node("observer");
+    let fixes = node
+        .subscriber::<navsync_shared::samples::GnssFix>(&services::gnss_fix("rx"))
+        .unwrap();
+    let capture = navsync_tests::shared_material("corpora/gpsd-nmea/bu353s4.log");
+    let link = env.dir.join("ttyUSB0");
+    let (capture, link_s) = (capture.display().to_string(), link.display().to_string());
+    env.spawn(
+        "feed",
+        &[
+            "feed",
+            &capture,
+            "--pty",
+            "--link",
+            &link_s,
+            "--wait-reader",
+            "--speed",
+            "5",
+            "--loop",
+        ],
+    );
+    env.wait_for_path(&link, Duration::from_secs(20));
+    env.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "4800", "--id", "rx"]);
+    env.spawn(
+        "gpsd",
+        &[
+            "gpsd-server",
+            "--listen",
+            "127.0.0.1:0",
+            "--report",
+            "fix",
+            "--gnss-id",
+            "rx",
+        ],
+    );
+    let port = listening_port(&mut env);
+    let mut c = Conn::open(port);
+    assert_eq!(c.next().unwrap()["class"], "VERSION");
+    c.send("?WATCH={\"enable\":true,\"json\":true};\n");
+    let mut tpvs: Vec<Value> = Vec::new();
+    let mut got: Vec<navsync_shared::samples::GnssFix> = Vec::new();
+    while tpvs.len() < 12 {
+        let v = c.next().expect("connection closed");
+        if v["class"] == "TPV" {
+            tpvs.push(v);
+            let sky = c.next().expect("connection closed");
+            assert_eq!(sky["class"], "SKY", "SKY right after the TPV of its epoch: {sky}");
+        }
+        while let Some(f) = fixes.receive().unwrap() {
+            got.push(f);
+        }
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    while let Some(f) = fixes.receive().unwrap() {
+        got.push(f);
+    }
+    // The first TPV may belong to an epoch before the observer subscribed.
+    for t in &tpvs[1..] {
+        let time = t["time"].as_str().unwrap_or_else(|| panic!("no time: {t}"));
+        let f = got
+            .iter()
+            .find(|f| navsync_shared::time::format_rfc3339_ms(f.utc_ns) == time)
+            .unwrap_or_else(|| panic!("no fix of {time} among {} fixes", got.len()));
+        assert_eq!(t["mode"].as_u64(), Some(u64::from(f.mode.max(1))), "{t}");
+        if f.mode >= 2 {
+            assert_eq!(t["lat"].as_f64(), Some(f.lat_deg), "{t}");
+            assert_eq!(t["lon"].as_f64(), Some(f.lon_deg), "{t}");
+        }
+    }
+    let mut times: Vec<&str> = tpvs.iter().filter_map(|t| t["time"].as_str()).collect();
+    let n = times.len();
+    times.dedup();
+    assert_eq!(times.len(), n, "one report per epoch");
+    println!("{} TPVs, each its epoch's fix ({} fixes seen)", tpvs.len(), got.len());
+    drop((c, fixes, node));
+    env.finish();
+}

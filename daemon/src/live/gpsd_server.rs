@@ -6,7 +6,8 @@
 //!
 //! * On connect the server sends `VERSION`.
 //! * `?WATCH={"enable":true,"json":true};` answers `DEVICES` and `WATCH`, then streams `TPV`,
-//!   `ATT`, `IMU` (and `SKY` when a GNSS fix was seen) once per report period;
+//!   `ATT`, `IMU` (and `SKY` when a GNSS fix was seen) once per report period, or with
+//!   `--report fix` once per GNSS epoch, the moment the receiver's fix arrives (as gpsd does);
 //!   `?WATCH={"enable":false};` stops it; `?WATCH;` reports the watch state.
 //! * `?POLL;` answers one `POLL` with the latest `TPV` and `SKY`; `?VERSION;`, `?DEVICES;`,
 //!   `?DEVICE;` as gpsd. Anything else gets an `ERROR` object, as from gpsd.
@@ -20,7 +21,12 @@
 //! specific force (m/s²) and rate (°/s) in body FRD axes; `SKY` the receiver's DOPs and
 //! satellites used.
 //!
-//! One thread, one `poll(2)` loop over the listening socket and the clients (no async
+//! With `--report fix`, `TPV` is the fused state while the estimator's state is aligned and
+//! fresh (under [`FRESH_NAV_NS`] old), otherwise the receiver's own fix ([`tpv_of_fix`]), so a
+//! receiver alone serves gpsd clients too; `ATT` and `IMU` come with the fused state only.
+//!
+//! One thread, one `poll(2)` loop over the listening socket, the clients and the fix
+//! subscriber's wake-up descriptor (no async
 //! runtime): sockets are non-blocking; each client has a bounded output queue, and a client
 //! that lets it fill (a slow reader) is dropped instead of blocking the others; at most
 //! `--max-clients` clients at once (one more gets an `ERROR` and is closed). Listens on
@@ -63,10 +69,30 @@ pub struct GpsdArgs {
     /// Most clients at once.
     #[arg(long, default_value_t = 32, value_parser = at_least_one)]
     pub max_clients: usize,
-    /// Reports (TPV, ATT, IMU, SKY) per second, in (0, 1000].
+    /// Reports (TPV, ATT, IMU, SKY) per second, in (0, 1000] (with `--report period`).
     #[arg(long = "rate", default_value_t = 1.0, value_parser = report_rate)]
     pub rate_hz: f64,
+    /// When reports go out.
+    #[arg(long, value_enum, default_value_t = ReportOn::Period)]
+    pub report: ReportOn,
+    /// The receiver whose fixes give SKY, the geoid separation and, with `--report fix`, the
+    /// report times (`navsync/gnss/{id}/fix`).
+    #[arg(long, default_value = "0")]
+    pub gnss_id: String,
 }
+
+/// When `navsync gpsd-server` reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ReportOn {
+    /// At `--rate`, on the first fused state of each period (UTC when known).
+    Period,
+    /// Once per epoch of the receiver `--gnss-id`, as its fix arrives (gpsd's cadence).
+    Fix,
+}
+
+/// With `--report fix`, a fused state at most this old (host `CLOCK_MONOTONIC`, ns) is reported
+/// instead of the receiver's fix.
+pub const FRESH_NAV_NS: i64 = 500_000_000;
 
 fn at_least_one(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
@@ -337,6 +363,59 @@ pub fn tpv(n: &NavState, fix: Option<&GnssFix>, time: Option<&TimeState>) -> Val
     Value::Object(m)
 }
 
+/// The `TPV` object of the receiver's own fix (no estimator, or its state not aligned or
+/// stale): mode as the receiver's, status from its quality (gpsd_json(5): 2 DGPS, 3 RTK fixed,
+/// 4 RTK float, 5 dead reckoning), `eph`/`epv`/`eps` the receiver's own accuracy estimates
+/// (UBX hAcc/vAcc/sAcc, as gpsd reports them), or 2σ of NMEA GST.
+pub fn tpv_of_fix(f: &GnssFix, time: Option<&TimeState>) -> Value {
+    let mut m = Map::new();
+    m.insert("class".into(), json!("TPV"));
+    m.insert("device".into(), json!(DEVICE));
+    let mode = if f.mode == 0 { 1 } else { f.mode.min(3) };
+    m.insert("mode".into(), json!(mode));
+    let status = match f.quality {
+        2 => Some(2),
+        4 => Some(3),
+        5 => Some(4),
+        6 => Some(5),
+        1 => Some(1),
+        _ => None,
+    };
+    put(&mut m, "status", status.filter(|_| mode >= 2).map(|s| json!(s)));
+    put(&mut m, "time", iso_time(f.utc_ns));
+    if let Some(t) = time.filter(|t| t.is_valid()) {
+        put(&mut m, "leapseconds", Some(json!(t.leap_s)));
+    }
+    if mode < 2 {
+        return Value::Object(m);
+    }
+    put(&mut m, "lat", num(f.lat_deg));
+    put(&mut m, "lon", num(f.lon_deg));
+    if mode == 3 {
+        put(&mut m, "altMSL", num(f.alt_msl_m));
+        put(&mut m, "alt", num(f.alt_msl_m));
+        put(&mut m, "altHAE", num(f.alt_msl_m + f.geoid_sep_m));
+        put(&mut m, "geoidSep", num(f.geoid_sep_m));
+        put(&mut m, "climb", num(-f.vel_d_mps));
+        put(&mut m, "velD", num(f.vel_d_mps));
+    }
+    put(&mut m, "speed", num(f.speed_mps));
+    put(&mut m, "track", num(f.track_deg));
+    put(&mut m, "velN", num(f.vel_n_mps));
+    put(&mut m, "velE", num(f.vel_e_mps));
+    let gst = |s: f64| num(2.0 * s);
+    put(
+        &mut m,
+        "eph",
+        num(f.h_acc_m).or_else(|| num(2.0 * f.std_lat_m.hypot(f.std_lon_m))),
+    );
+    put(&mut m, "epv", num(f.v_acc_m).or_else(|| gst(f.std_alt_m)));
+    put(&mut m, "epx", gst(f.std_lon_m));
+    put(&mut m, "epy", gst(f.std_lat_m));
+    put(&mut m, "eps", num(f.s_acc_mps));
+    Value::Object(m)
+}
+
 /// The `ATT` object: roll, pitch, heading in degrees.
 pub fn att(n: &NavState) -> Value {
     let [r, p, y] = n.rpy_rad.map(f64::to_degrees);
@@ -441,6 +520,39 @@ impl Latest {
     }
 }
 
+/// A report of the fused state: TPV, ATT, IMU, and SKY once a fix was seen.
+fn period_report(n: &NavState, latest: &Latest) -> Vec<String> {
+    let mut lines = vec![
+        tpv(n, latest.fix.as_ref(), latest.time.as_ref()).to_string(),
+        att(n).to_string(),
+        imu(n).to_string(),
+    ];
+    if let Some(f) = &latest.fix {
+        lines.push(sky(f).to_string());
+    }
+    lines
+}
+
+/// The report of the latest fix's epoch (`--report fix`): the fused state's TPV, ATT and IMU
+/// when it is aligned and under [`FRESH_NAV_NS`] old at `now_ns` (host monotonic), else the
+/// fix's own TPV; then SKY.
+fn fix_report(latest: &Latest, now_ns: i64) -> Option<Vec<String>> {
+    let fix = latest.fix.as_ref()?;
+    let fused = latest.nav.filter(|n| {
+        n.status != NavStatus::Aligning as u8 && n.lat_deg.is_finite() && (now_ns - n.host_ns).abs() < FRESH_NAV_NS
+    });
+    let mut lines = match fused {
+        Some(n) => vec![
+            tpv(&n, Some(fix), latest.time.as_ref()).to_string(),
+            att(&n).to_string(),
+            imu(&n).to_string(),
+        ],
+        None => vec![tpv_of_fix(fix, latest.time.as_ref()).to_string()],
+    };
+    lines.push(sky(fix).to_string());
+    Some(lines)
+}
+
 /// Answers the commands of one client.
 fn handle(c: &mut Client, cmds: Vec<Command>, latest: &Latest) {
     for cmd in cmds {
@@ -463,11 +575,12 @@ fn handle(c: &mut Client, cmds: Vec<Command>, latest: &Latest) {
                 c.queue(&watch_json(c.watch).to_string());
             }
             ("POLL", _) => {
-                let tpvs: Vec<Value> = latest
-                    .nav
-                    .iter()
-                    .map(|n| tpv(n, latest.fix.as_ref(), latest.time.as_ref()))
-                    .collect();
+                // The fused state; without one, the receiver's fix.
+                let tpvs: Vec<Value> = match (&latest.nav, &latest.fix) {
+                    (Some(n), fix) => vec![tpv(n, fix.as_ref(), latest.time.as_ref())],
+                    (None, Some(f)) => vec![tpv_of_fix(f, latest.time.as_ref())],
+                    (None, None) => Vec::new(),
+                };
                 let skies: Vec<Value> = latest.fix.iter().map(sky).collect();
                 let time = latest
                     .nav
@@ -477,7 +590,7 @@ fn handle(c: &mut Client, cmds: Vec<Command>, latest: &Latest) {
                     &json!({
                         "class": "POLL",
                         "time": time,
-                        "active": usize::from(latest.nav.is_some()),
+                        "active": usize::from(!tpvs.is_empty()),
                         "tpv": tpvs,
                         "gst": [],
                         "sky": skies,
@@ -498,7 +611,7 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
     };
     let node = IpcNode::new("gpsd-server")?;
     let nav_sub = node.subscriber::<NavState>(services::NAV_STATE)?;
-    let fix_sub = node.subscriber::<GnssFix>(&services::gnss_fix("0"))?;
+    let fix_sub = node.subscriber::<GnssFix>(&services::gnss_fix(&args.gnss_id))?;
     let time_sub = node.subscriber::<TimeState>(services::TIME_STATE)?;
     let mut health = HealthReporter::new(&node, "gpsd-server")?;
     let c_accepted = health.counter("clients_accepted")?;
@@ -517,15 +630,28 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
     info!(%local, max_clients = args.max_clients, "gpsd server");
 
     let period_ns = (1e9 / args.rate_hz.clamp(0.01, 1000.0)) as i64;
+    // Period reports go out within 10 ms of their state; fix reports are woken by the fix
+    // itself, and the wait only paces the draining of the fused state (its buffer holds more).
+    let poll_ms = match args.report {
+        ReportOn::Period => 10,
+        ReportOn::Fix => 100,
+    };
     let mut clients: Vec<Client> = Vec::new();
     let mut latest = Latest::default();
     let mut last_slot: Option<i64> = None;
     let mut rx = [0u8; 2048];
     while !node.termination_requested() {
-        // poll(2): the listener and every client (writable only while output is pending).
-        let mut fds: Vec<libc::pollfd> = Vec::with_capacity(1 + clients.len());
+        // poll(2): the listener, the fix subscriber's wake-up (a fix is reported the moment
+        // it arrives with `--report fix`) and every client (writable only while output is
+        // pending). The timeout paces the period reports and the fused state's draining.
+        let mut fds: Vec<libc::pollfd> = Vec::with_capacity(2 + clients.len());
         fds.push(libc::pollfd {
             fd: listener.as_raw_fd(),
+            events: libc::POLLIN,
+            revents: 0,
+        });
+        fds.push(libc::pollfd {
+            fd: fix_sub.wake_fd(),
             events: libc::POLLIN,
             revents: 0,
         });
@@ -541,7 +667,7 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
             });
         }
         // SAFETY: fds is a valid array of pollfd for the call's duration.
-        let n = unsafe { libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, 10) };
+        let n = unsafe { libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, poll_ms) };
         if n < 0 {
             let e = std::io::Error::last_os_error();
             if e.kind() != ErrorKind::Interrupted {
@@ -580,7 +706,7 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
             }
         }
         // Requests and writable sockets.
-        for (c, pfd) in clients.iter_mut().zip(fds.iter().skip(1)) {
+        for (c, pfd) in clients.iter_mut().zip(fds.iter().skip(2)) {
             if pfd.revents & (libc::POLLIN | libc::POLLHUP | libc::POLLERR) != 0 {
                 loop {
                     match c.stream.read(&mut rx) {
@@ -613,12 +739,9 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
                 c.closing = true;
             }
         }
-        // Inputs.
+        // Inputs: the fused state before the fixes, so a fix's report has the newest state.
         while let Some(t) = time_sub.receive()? {
             latest.time = Some(t);
-        }
-        while let Some(f) = fix_sub.receive()? {
-            latest.fix = Some(f);
         }
         let mut due = None;
         while let Some(n) = nav_sub.receive()? {
@@ -631,15 +754,18 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
             }
             latest.nav = Some(n);
         }
-        if let Some(n) = due {
-            let mut lines = vec![
-                tpv(&n, latest.fix.as_ref(), latest.time.as_ref()).to_string(),
-                att(&n).to_string(),
-                imu(&n).to_string(),
-            ];
-            if let Some(f) = &latest.fix {
-                lines.push(sky(f).to_string());
-            }
+        let mut new_fixes = 0usize;
+        fix_sub.drain(|f| {
+            latest.fix = Some(f);
+            new_fixes += 1;
+            true
+        })?;
+        let lines = match args.report {
+            ReportOn::Period => due.map(|n| period_report(&n, &latest)),
+            ReportOn::Fix if new_fixes > 0 => fix_report(&latest, monotonic_now_ns()),
+            ReportOn::Fix => None,
+        };
+        if let Some(lines) = lines {
             health.tick(r_tpv);
             for c in clients
                 .iter_mut()
@@ -777,6 +903,53 @@ mod tests {
         let (c, used) = parse_commands(b"garbage\n?version;");
         assert_eq!(c[0].name, "VERSION");
         assert_eq!(used, 17);
+    }
+
+    #[test]
+    fn a_receivers_fix_becomes_a_tpv_and_a_stale_state_is_not_reported() {
+        let mut f = GnssFix::empty(navsync_shared::samples::Stamp::host(
+            0,
+            0,
+            navsync_shared::samples::StampSource::Receipt,
+        ));
+        f.mode = 3;
+        f.quality = 4;
+        f.utc_ns = 1_700_000_000_000_000_000;
+        f.lat_deg = 48.1;
+        f.lon_deg = 11.5;
+        f.alt_msl_m = 500.0;
+        f.geoid_sep_m = 47.0;
+        f.vel_d_mps = -0.25;
+        f.h_acc_m = 0.02;
+        let v = tpv_of_fix(&f, None);
+        assert_eq!((v["mode"].as_u64(), v["status"].as_u64()), (Some(3), Some(3)), "{v}");
+        assert_eq!(v["altHAE"], 547.0);
+        assert_eq!(v["climb"], 0.25);
+        assert_eq!(v["eph"], 0.02);
+        assert!(v.get("epx").is_none(), "no GST: no epx");
+        f.mode = 1;
+        let v = tpv_of_fix(&f, None);
+        assert!(v.get("lat").is_none() && v.get("status").is_none(), "{v}");
+        f.mode = 3;
+
+        // A fused state is reported only while aligned and fresh.
+        let mut n = NavState::zeroed();
+        n.status = NavStatus::Aligned as u8;
+        n.lat_deg = 1.0;
+        n.lon_deg = 2.0;
+        n.host_ns = 10_000_000_000;
+        let latest = Latest {
+            nav: Some(n),
+            fix: Some(f),
+            time: None,
+        };
+        let fused = fix_report(&latest, n.host_ns + 1_000_000).unwrap();
+        assert_eq!(fused.len(), 4, "TPV ATT IMU SKY");
+        assert!(fused[0].contains("\"lat\":1.0"), "{}", fused[0]);
+        let stale = fix_report(&latest, n.host_ns + FRESH_NAV_NS + 1).unwrap();
+        assert_eq!(stale.len(), 2, "TPV SKY");
+        assert!(stale[0].contains("\"lat\":48.1"), "{}", stale[0]);
+        assert!(fix_report(&Latest::default(), 0).is_none());
     }
 
     #[test]

@@ -55,8 +55,15 @@ pub const HUNT_DWELL: Duration = Duration::from_millis(2500);
 /// Bytes that must have arrived at a rate without a valid sentence before it is abandoned.
 pub const HUNT_MIN_BYTES: u64 = 64;
 
-/// Read timeout; after this much silence the epoch being assembled is emitted.
+/// Read timeout after a byte; after this much silence the epoch being assembled is emitted
+/// (the fallback for receivers whose cycle is not learnt: a learnt cycle's epoch goes out with
+/// its last message).
 pub const IDLE_FLUSH: Duration = Duration::from_millis(50);
+
+/// Read timeout once the line has been silent for [`IDLE_FLUSH`] and the epoch was flushed:
+/// nothing is pending, so the driver sleeps until the next byte (a signal ends the wait at
+/// once; this only bounds the health report's and the watchdog's period).
+pub const IDLE_WAIT: Duration = Duration::from_millis(1000);
 
 /// Serial line rate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -532,7 +539,11 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
         }
         let mut ns_per_byte = 10_000_000_000 / i64::from(baud);
         hunt.restart(Instant::now(), dec.bytes(), dec.valid_frames());
-        let mut buf = [0u8; 512];
+        // One read takes a whole burst (an epoch of NMEA with GSV is 1–2 KiB): the epoch's end
+        // is seen on the first wake-up.
+        let mut buf = [0u8; 4096];
+        // Silent since the last idle flush: nothing pending, wait long.
+        let mut idle = false;
         let mut emit = |fix: &GnssFix, health: &mut HealthReporter| match publisher.publish(fix) {
             Ok(()) => health.tick(r_fix),
             Err(e) => {
@@ -549,6 +560,10 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
                 Ok(n) => {
                     backoff = Duration::from_millis(100);
                     let t = monotonic_now_ns();
+                    if idle {
+                        idle = false;
+                        let _ = port.set_timeout(IDLE_FLUSH);
+                    }
                     dec.push_extras(&buf[..n], t, ns_per_byte, &mut |fix| emit(fix, &mut health), &mut |x| {
                         extras.publish(x)
                     });
@@ -556,10 +571,15 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
                     health.set(c_events_unmapped, extras.events_unmapped);
                     None
                 }
-                Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {
+                Err(e) if e.kind() == ErrorKind::TimedOut => {
                     dec.flush(&mut |fix| emit(fix, &mut health));
+                    if !idle {
+                        idle = true;
+                        let _ = port.set_timeout(IDLE_WAIT);
+                    }
                     None
                 }
+                Err(e) if e.kind() == ErrorKind::Interrupted => None,
                 Err(e) => Some(format!("read failed: {e}")),
             };
             if let Some(why) = closed {
