@@ -45,8 +45,11 @@ pub enum Kind {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Transport {
-    /// navsync's iceoryx2 services.
+    /// navsync's iceoryx2 services, the subscriber asleep in a WaitSet (as the estimator).
     Iceoryx2,
+    /// navsync's iceoryx2 services, the subscriber asleep in `poll(2)` on the listener's
+    /// descriptor (`Subscriber::wait_next`, as the clients and `navsync echo`).
+    Iceoryx2Poll,
     /// A Unix-domain SOCK_SEQPACKET socket per subscriber.
     Socket,
 }
@@ -155,7 +158,7 @@ pub struct IpcBenchArgs {
     /// Subscriber process counts, comma-separated (at most 16).
     #[arg(long, value_delimiter = ',', default_value = "1", value_parser = crate::util::subscriber_count)]
     pub subscribers: Vec<usize>,
-    /// Transports, comma-separated: iceoryx2, socket.
+    /// Transports, comma-separated: iceoryx2 (WaitSet), iceoryx2-poll, socket.
     #[arg(long, value_delimiter = ',', default_value = "iceoryx2,socket")]
     pub transports: Vec<Transport>,
     /// Run publisher (PRIO) and subscribers (PRIO − 1) under SCHED_FIFO (needs CAP_SYS_NICE).
@@ -275,6 +278,7 @@ fn kind_name(k: Kind) -> &'static str {
 fn transport_name(t: Transport) -> &'static str {
     match t {
         Transport::Iceoryx2 => "iceoryx2",
+        Transport::Iceoryx2Poll => "iceoryx2-poll",
         Transport::Socket => "socket",
     }
 }
@@ -537,7 +541,7 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
         );
     };
     match a.transport {
-        Transport::Iceoryx2 => {
+        Transport::Iceoryx2 | Transport::Iceoryx2Poll => {
             let node = IpcNode::new("bench-pub")?;
             let mut p = node.publisher::<T>(&T::service())?;
             // Let the subscribers' ports settle before the first sample.
@@ -606,6 +610,23 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
                     done = seq >= last;
                     !done
                 })?;
+            }
+        }
+        Transport::Iceoryx2Poll => {
+            let node = IpcNode::new(&format!("bench-sub-{}", a.index))?;
+            let sub = node.subscriber::<T>(&T::service())?;
+            ready();
+            cpu0 = util::own_cpu_time_s();
+            while !node.termination_requested() {
+                let Some(s) = sub.wait_next(Duration::from_secs(1))? else {
+                    continue;
+                };
+                let now = monotonic_now_ns();
+                let (host_ns, seq) = s.stamp();
+                lat.push(now - host_ns);
+                if seq >= last {
+                    break;
+                }
             }
         }
         Transport::Socket => {
