@@ -34,7 +34,7 @@
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -43,7 +43,7 @@ use navsync_drivers::pty::Pty;
 use navsync_shared::time::monotonic_now_ns;
 use serde::Serialize;
 
-use crate::util::{BenchEnv, cpu_time_s, write_json};
+use crate::util::{BenchEnv, StopOnDrop, cpu_time_s, write_json};
 
 /// Settings of `navsync-bench gnss-latency`.
 #[derive(Debug, Clone, clap::Args)]
@@ -265,25 +265,6 @@ fn attribute(capture: &str, path: &str, writes: &[i64], arrivals: &[i64]) -> Pat
     }
 }
 
-/// A child that is killed (and reaped) when dropped.
-struct Killed(Child);
-
-impl Drop for Killed {
-    fn drop(&mut self) {
-        // SAFETY: signalling our own child by pid.
-        unsafe { libc::kill(self.0.id() as libc::pid_t, libc::SIGTERM) };
-        let t0 = Instant::now();
-        while t0.elapsed() < Duration::from_secs(3) {
-            if let Ok(Some(_)) = self.0.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 /// The gpsd binary, installed with apt when missing and possible; Err says why not.
 fn gpsd_binary() -> Result<PathBuf, String> {
     let find = || {
@@ -397,7 +378,7 @@ fn run_capture(
     let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<String>>();
     let below = |p: u8| p.saturating_sub(1).max(1);
     // Processes outside the BenchEnv (not navsync): killed when the run ends.
-    let mut others: Vec<Killed> = Vec::new();
+    let mut others: Vec<StopOnDrop> = Vec::new();
     let mut fifo: Vec<(u32, u8)> = Vec::new();
     let mut lanes: Vec<Lane> = Vec::new();
     // Lanes left out, with the reason (their rows say it).
@@ -503,7 +484,7 @@ fn run_capture(
                     if let Some(p) = args.realtime {
                         fifo.push((d.id(), p));
                     }
-                    others.push(Killed(d));
+                    others.push(StopOnDrop(d));
                     pipes.push((lanes.len(), tcp));
                     out = Some((pty, Lines::default()));
                 }
@@ -521,7 +502,7 @@ fn run_capture(
                 if let Some(p) = args.realtime {
                     fifo.push((r.id(), p));
                 }
-                others.push(Killed(r));
+                others.push(StopOnDrop(r));
                 let o = o.ok_or_else(|| GnssLatencyError::Setup("floor reader stdout".into()))?;
                 out = Some((pty, collect_lines(o)));
             }
@@ -575,7 +556,7 @@ fn run_capture(
         if let Some(prio) = args.realtime {
             crate::util::set_fifo(p.id(), below(prio)).map_err(setup("SCHED_FIFO (needs CAP_SYS_NICE)"))?;
         }
-        others.push(Killed(p));
+        others.push(StopOnDrop(p));
     }
     std::thread::sleep(Duration::from_millis(300));
 

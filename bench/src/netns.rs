@@ -3,7 +3,6 @@
 
 use std::path::Path;
 use std::process::Command;
-use std::time::{Duration, Instant};
 
 fn ip(args: &[&str]) -> Result<(), String> {
     let o = Command::new("ip").args(args).output().map_err(|e| format!("ip: {e}"))?;
@@ -84,22 +83,4 @@ impl Drop for NetnsPair {
     }
 }
 
-/// A child process (a bridge in a namespace) stopped on drop: SIGTERM, up to 5 s to exit,
-/// then SIGKILL.
-pub struct StopOnDrop(pub std::process::Child);
-
-impl Drop for StopOnDrop {
-    fn drop(&mut self) {
-        // SAFETY: signalling our own child.
-        unsafe { libc::kill(self.0.id() as libc::pid_t, libc::SIGTERM) };
-        let t0 = Instant::now();
-        while t0.elapsed() < Duration::from_secs(5) {
-            if let Ok(Some(_)) = self.0.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+pub use crate::util::StopOnDrop;

@@ -193,6 +193,25 @@ pub struct BenchEnv {
     children: Vec<(String, Child)>,
 }
 
+/// A child process stopped (and reaped) on drop: SIGTERM, up to 5 s to exit, then SIGKILL.
+pub struct StopOnDrop(pub std::process::Child);
+
+impl Drop for StopOnDrop {
+    fn drop(&mut self) {
+        // SAFETY: signalling our own child.
+        unsafe { libc::kill(self.0.id() as libc::pid_t, libc::SIGTERM) };
+        let t0 = Instant::now();
+        while t0.elapsed() < Duration::from_secs(5) {
+            if let Ok(Some(_)) = self.0.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// The `navsync` binary the benchmarks start: `$NAVSYNC_BIN`, else the one beside this
 /// executable (`cargo build --release` puts both into `target/release/`).
 pub fn navsync_exe() -> std::io::Result<PathBuf> {
