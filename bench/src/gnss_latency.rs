@@ -101,7 +101,8 @@ pub struct PathResult {
     pub p99_ms: Option<f64>,
     /// Largest, ms.
     pub max_ms: Option<f64>,
-    /// CPU time of the driver process (navsync gnss, or gpsd) per epoch, µs.
+    /// CPU time of the path's daemon processes per epoch, µs: navsync gnss (with
+    /// gpsd-server on that path), or gpsd; none for the floor.
     pub driver_cpu_us_per_epoch: Option<f64>,
     /// Why the path has no figures, when it has none.
     pub note: Option<String>,
