@@ -471,12 +471,9 @@ const RING: usize = 1024;
 pub fn helper_sub(warmup_s: f64, duration_s: f64) -> Result<(), E2eError> {
     use std::io::Write;
     let node = IpcNode::new("bench-e2e-sub")?;
-    let nav = node.subscriber::<NavState>(services::NAV_STATE)?;
-    let imu = node.subscriber::<ImuSample>(&services::imu_sample("0"))?;
-    let waitset = node.waitset()?;
-    let attach_err = |e| E2eError::Child(format!("attaching to waitset: {e:?}"));
-    let _g1 = waitset.attach_notification(imu.listener()).map_err(attach_err)?;
-    let _g2 = waitset.attach_notification(nav.listener()).map_err(attach_err)?;
+    let nav = node.input::<NavState>(services::NAV_STATE)?;
+    let imu = node.input::<ImuSample>(&services::imu_sample("0"))?;
+    let wake = node.wake()?;
     let say = |l: &str| {
         let mut o = std::io::stdout().lock();
         let _ = writeln!(o, "{l}");
@@ -493,7 +490,7 @@ pub fn helper_sub(warmup_s: f64, duration_s: f64) -> Result<(), E2eError> {
     let (mut start, mut end): (Option<i64>, Option<i64>) = (None, None);
     let (mut navs, mut gaps, mut last_seq) = (0u64, 0u64, None::<u64>);
     let mut measuring_since = 0i64;
-    while node.wait_on(&waitset, Duration::from_millis(100))? {
+    while node.wait(&wake, Duration::from_millis(100))? {
         imu.drain(|x| {
             let now = monotonic_now_ns();
             ring[x.stamp.seq as usize % RING] = (x.stamp.host_ns, now);

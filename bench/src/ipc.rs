@@ -45,11 +45,12 @@ pub enum Kind {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Transport {
-    /// navsync's iceoryx2 services, the subscriber asleep in a WaitSet (as the estimator).
+    /// navsync's iceoryx2 services, the subscriber asleep on the service's own event
+    /// (`Subscriber::wait_next`, as the clients and `navsync echo`).
     Iceoryx2,
-    /// navsync's iceoryx2 services, the subscriber asleep in `poll(2)` on the listener's
-    /// descriptor (`Subscriber::wait_next`, as the clients and `navsync echo`).
-    Iceoryx2Poll,
+    /// navsync's iceoryx2 services, the subscriber asleep on the one wake-up of a process
+    /// with many inputs (`IpcNode::wait` on `navsync/wake`, as the estimator).
+    Iceoryx2Wake,
     /// A Unix-domain SOCK_SEQPACKET socket per subscriber.
     Socket,
 }
@@ -158,7 +159,7 @@ pub struct IpcBenchArgs {
     /// Subscriber process counts, comma-separated (at most 16).
     #[arg(long, value_delimiter = ',', default_value = "1", value_parser = crate::util::subscriber_count)]
     pub subscribers: Vec<usize>,
-    /// Transports, comma-separated: iceoryx2 (WaitSet), iceoryx2-poll, socket.
+    /// Transports, comma-separated: iceoryx2 (the service's event), iceoryx2-wake (the one wake-up), socket.
     #[arg(long, value_delimiter = ',', default_value = "iceoryx2,socket")]
     pub transports: Vec<Transport>,
     /// Run publisher (PRIO) and subscribers (PRIO − 1) under SCHED_FIFO (needs CAP_SYS_NICE).
@@ -278,7 +279,7 @@ fn kind_name(k: Kind) -> &'static str {
 fn transport_name(t: Transport) -> &'static str {
     match t {
         Transport::Iceoryx2 => "iceoryx2",
-        Transport::Iceoryx2Poll => "iceoryx2-poll",
+        Transport::Iceoryx2Wake => "iceoryx2-wake",
         Transport::Socket => "socket",
     }
 }
@@ -541,7 +542,7 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
         );
     };
     match a.transport {
-        Transport::Iceoryx2 | Transport::Iceoryx2Poll => {
+        Transport::Iceoryx2 | Transport::Iceoryx2Wake => {
             let node = IpcNode::new("bench-pub")?;
             let mut p = node.publisher::<T>(&T::service())?;
             // Let the subscribers' ports settle before the first sample.
@@ -594,27 +595,6 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
         Transport::Iceoryx2 => {
             let node = IpcNode::new(&format!("bench-sub-{}", a.index))?;
             let sub = node.subscriber::<T>(&T::service())?;
-            let waitset = node.waitset()?;
-            let _guard = waitset
-                .attach_notification(sub.listener())
-                .map_err(|e| child_err(format!("attaching to waitset: {e:?}")))?;
-            ready();
-            cpu0 = util::own_cpu_time_s();
-            let mut done = false;
-            while !done && node.wait_on(&waitset, Duration::from_secs(1))? {
-                // Samples first, then the wake-up events (as the estimator drains its inputs).
-                sub.drain(|s| {
-                    let now = monotonic_now_ns();
-                    let (host_ns, seq) = s.stamp();
-                    lat.push(now - host_ns);
-                    done = seq >= last;
-                    !done
-                })?;
-            }
-        }
-        Transport::Iceoryx2Poll => {
-            let node = IpcNode::new(&format!("bench-sub-{}", a.index))?;
-            let sub = node.subscriber::<T>(&T::service())?;
             ready();
             cpu0 = util::own_cpu_time_s();
             while !node.termination_requested() {
@@ -627,6 +607,23 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
                 if seq >= last {
                     break;
                 }
+            }
+        }
+        Transport::Iceoryx2Wake => {
+            let node = IpcNode::new(&format!("bench-sub-{}", a.index))?;
+            let sub = node.input::<T>(&T::service())?;
+            let wake = node.wake()?;
+            ready();
+            cpu0 = util::own_cpu_time_s();
+            let mut done = false;
+            while !done && node.wait(&wake, Duration::from_secs(1))? {
+                sub.drain(|s| {
+                    let now = monotonic_now_ns();
+                    let (host_ns, seq) = s.stamp();
+                    lat.push(now - host_ns);
+                    done = seq >= last;
+                    !done
+                })?;
             }
         }
         Transport::Socket => {

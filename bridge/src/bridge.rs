@@ -4,7 +4,7 @@
 //!
 //! Export: one subscriber per matching service (names, or patterns matched against the
 //! existing services every [`DISCOVERY_INTERVAL`], so services that appear later, or come back
-//! with a restarted process, are exported from then on), one WaitSet, one Zenoh publisher per
+//! with a restarted process, are exported from then on), one wake-up (`ipc::Wake`), one Zenoh publisher per
 //! key with congestion control `Drop`: a slow network or subscriber drops samples on the Zenoh
 //! side and never blocks the local publishers. Per-service rate limits decimate by the samples'
 //! host stamps (e.g. NavState to 50 Hz over a radio link).
@@ -277,7 +277,8 @@ pub fn run(s: &BridgeSettings) -> Result<(), BridgeError> {
 
     // Export.
     let globs: Vec<ServiceGlob> = s.export.iter().map(|p| ServiceGlob::new(p)).collect();
-    // Subscribers apart from the export state: the WaitSet guards borrow the subscribers.
+    // One wake-up for every exported service: each navsync publisher notifies it.
+    let wake = node.wake()?;
     let mut subs: Vec<AnySubscriber> = Vec::new();
     let mut exported: Vec<Exported> = Vec::new();
     let mut refused: std::collections::HashSet<String> = Default::default();
@@ -305,27 +306,9 @@ pub fn run(s: &BridgeSettings) -> Result<(), BridgeError> {
             }
         }
         // Wait for samples (or the next discovery / health report).
-        let waitset = node.waitset()?;
-        let mut guards = Vec::with_capacity(subs.len());
-        for sub in &subs {
-            guards.push(
-                waitset
-                    .attach_notification(sub.listener())
-                    .map_err(|err| IpcError::Iceoryx {
-                        what: "attaching to waitset",
-                        service: sub.service().to_string(),
-                        detail: format!("{err:?}"),
-                    })?,
-            );
-        }
         loop {
-            let alive = if guards.is_empty() {
-                node.sleep(Duration::from_millis(100))
-            } else {
-                node.wait_on(&waitset, Duration::from_millis(100))?
-            };
+            let alive = node.wait(&wake, Duration::from_millis(100))?;
             for (sub, e) in subs.iter().zip(exported.iter_mut()) {
-                sub.clear_events();
                 let (mut sent, mut limited, mut errors) = (0u64, 0u64, 0u64);
                 sub.drain(|x| match e.offer(&x, &mut payload, &mut att) {
                     Offer::Sent => sent += 1,
@@ -354,7 +337,7 @@ pub fn run(s: &BridgeSettings) -> Result<(), BridgeError> {
                 break 'outer;
             }
             if now.saturating_sub(last_discovery) >= DISCOVERY_INTERVAL.as_nanos() as i64 {
-                break; // rebuild the WaitSet after discovery
+                break; // discover again
             }
         }
     }

@@ -1,10 +1,8 @@
 //! Publishers and subscribers for any navsync service, typed by the service's name: what a
 //! recorder subscribes with and a replayer publishes with.
 
-use iceoryx2::port::listener::Listener;
-
 use super::channels::SampleType;
-use navsync_shared::ipc::{IpcError, IpcNode, Publisher, Subscriber, Transport};
+use navsync_shared::ipc::{IpcError, IpcNode, Publisher, Subscriber};
 use navsync_shared::samples::AnySample;
 use navsync_shared::services::ServiceKind;
 
@@ -57,36 +55,27 @@ fn unknown(service: &str) -> IpcError {
 }
 
 impl AnySubscriber {
-    /// Subscribes to `service` (creating it if it does not exist yet).
+    /// Subscribes to `service` (creating it if it does not exist yet) as one of the inputs of
+    /// a process that sleeps on its `ipc::Wake`.
     pub fn open(node: &IpcNode, service: &str) -> Result<Self, IpcError> {
         Ok(match ServiceKind::of(service).ok_or_else(|| unknown(service))? {
-            ServiceKind::GnssFix => Self::GnssFix(node.subscriber(service)?),
-            ServiceKind::PpsEdge => Self::PpsEdge(node.subscriber(service)?),
-            ServiceKind::ImuSample => Self::Imu(node.subscriber(service)?),
-            ServiceKind::TimeState => Self::Time(node.subscriber(service)?),
-            ServiceKind::NavState => Self::Nav(node.subscriber(service)?),
-            ServiceKind::Health => Self::Health(node.subscriber(service)?),
-            ServiceKind::SimTruth => Self::Truth(node.subscriber(service)?),
-            ServiceKind::GnssTimePulse => Self::TimePulse(node.subscriber(service)?),
-            ServiceKind::GnssEvent => Self::Event(node.subscriber(service)?),
-            ServiceKind::GnssRaw => Self::Raw(node.subscriber(service)?),
-            ServiceKind::GnssNavData => Self::NavData(node.subscriber(service)?),
+            ServiceKind::GnssFix => Self::GnssFix(node.input(service)?),
+            ServiceKind::PpsEdge => Self::PpsEdge(node.input(service)?),
+            ServiceKind::ImuSample => Self::Imu(node.input(service)?),
+            ServiceKind::TimeState => Self::Time(node.input(service)?),
+            ServiceKind::NavState => Self::Nav(node.input(service)?),
+            ServiceKind::Health => Self::Health(node.input(service)?),
+            ServiceKind::SimTruth => Self::Truth(node.input(service)?),
+            ServiceKind::GnssTimePulse => Self::TimePulse(node.input(service)?),
+            ServiceKind::GnssEvent => Self::Event(node.input(service)?),
+            ServiceKind::GnssRaw => Self::Raw(node.input(service)?),
+            ServiceKind::GnssNavData => Self::NavData(node.input(service)?),
         })
     }
 
     /// The service name.
     pub fn service(&self) -> &str {
         each_subscriber!(self, s => s.service())
-    }
-
-    /// The listener to attach to a WaitSet.
-    pub fn listener(&self) -> &Listener<Transport> {
-        each_subscriber!(self, s => s.listener())
-    }
-
-    /// Consumes pending wake-up events (call before draining).
-    pub fn clear_events(&self) {
-        each_subscriber!(self, s => s.clear_events())
     }
 
     /// Calls `f` with every buffered sample (copied out of shared memory); returns how many.

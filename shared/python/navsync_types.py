@@ -30,6 +30,10 @@ MAX_IMUS = 8
 
 NAV_STATE = "navsync/nav/state"
 TIME_STATE = "navsync/time/state"
+#: The stock iceoryx2 events (Unix datagram) that NAV_STATE's and TIME_STATE's publishers
+#: notify for programs on iceoryx2's own service types: navsync's own events are futexes.
+NAV_STATE_WAKE = "navsync/nav/state/wake"
+TIME_STATE_WAKE = "navsync/time/state/wake"
 SIM_TRUTH = "navsync/sim/truth"
 
 

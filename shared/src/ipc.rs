@@ -1,10 +1,15 @@
 //! iceoryx2 plumbing: one node per process, publishers that wake their subscribers,
-//! subscribers that can be attached to a `WaitSet`.
+//! subscribers that sleep until a sample arrives, one wake-up for a process with many inputs.
 //!
 //! Every navsync service is a pair: a publish-subscribe service carrying the samples and an
 //! event service of the same name. [`Publisher::publish`] writes the sample straight into a
-//! shared-memory slot loaned from iceoryx2 and then notifies the event service, so a
-//! subscriber sleeping in a [`WaitSet`] wakes up without polling.
+//! shared-memory slot loaned from iceoryx2, then notifies the event service (a subscriber
+//! asleep in [`Subscriber::wait_next`] wakes) and the wake-up event [`services::WAKE`] with
+//! the sample's kind: a process with many inputs (the estimator, the recorder, the bridge)
+//! sleeps on that one event ([`Wake`], [`IpcNode::wait`]) and drains its inputs when it fires.
+//! Events use navsync's own iceoryx2 service type, a futex in shared memory instead of a
+//! Unix datagram ([`futex`]): a wake-up is one `FUTEX_WAKE`, and none while the listener is
+//! awake.
 //!
 //! ```no_run
 //! use navsync_shared::{ipc::IpcNode, samples::NavState, services};
@@ -22,17 +27,44 @@ use core::time::Duration;
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
-use iceoryx2::node::NodeWaitFailure;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
+use iceoryx2_bb_posix::signal::SignalHandler;
+use iceoryx2_cal::event::ListenerWaitError;
 
 use crate::reflect::Reflect;
 use crate::services::{self, MAX_NODES, MAX_PUBLISHERS, MAX_SUBSCRIBERS, ServiceKind};
 
-/// The iceoryx2 service variant navsync uses: inter-process, shared memory.
-pub type Transport = ipc::Service;
+pub mod futex;
+
+/// The iceoryx2 service type navsync uses: inter-process, shared memory, futex wake-ups
+/// ([`futex::Service`]).
+pub type Transport = futex::Service;
+
+/// iceoryx2's stock inter-process service type (Unix-datagram events): the wake-up of programs
+/// built on iceoryx2's own service types, which cannot load navsync's futex trigger (the
+/// `iceoryx2` Python package). Publishers of [`services::has_stock_wake`] kinds also notify the
+/// stock event [`services::stock_wake`] of their service; with no listener that costs no
+/// system call.
+pub type StockTransport = iceoryx2::service::ipc::Service;
+
+/// The longest a wait sleeps before it looks at the termination latch again: iceoryx2's
+/// SIGINT/SIGTERM handler is installed with `SA_RESTART`, under which the kernel resumes an
+/// interrupted futex wait, so a termination request is noticed within this time.
+pub const WAIT_SLICE: Duration = Duration::from_millis(50);
+
+/// Process-wide latch of a termination request: iceoryx2 reports (and clears) the signal
+/// once, to whichever check sees it first.
+static TERMINATED: AtomicBool = AtomicBool::new(false);
+
+/// True once SIGINT or SIGTERM was received (latched; an atomic load, no system call).
+pub fn termination_requested() -> bool {
+    if SignalHandler::termination_requested() {
+        TERMINATED.store(true, Ordering::Relaxed);
+    }
+    TERMINATED.load(Ordering::Relaxed)
+}
 
 /// What a navsync service can carry: a reflected, zero-copy sample type (every type of
 /// `crate::samples`); for code generic over the sample type without naming iceoryx2.
@@ -120,9 +152,10 @@ fn restrict_global_segment(prefix: &str) {
 /// One process's iceoryx2 node.
 pub struct IpcNode {
     node: Node<Transport>,
-    /// Latched termination request: iceoryx2 reports (and clears) the signal once, to whichever
-    /// wait sees it first; the latch keeps it for every later check.
-    terminated: AtomicBool,
+    config: Config,
+    name: String,
+    /// A node of [`StockTransport`], made with the first publisher that needs one.
+    stock: core::cell::OnceCell<Node<StockTransport>>,
 }
 
 impl IpcNode {
@@ -145,9 +178,11 @@ impl IpcNode {
             .map_err(|e| err("creating node", process, e))?;
         let node = Self {
             node,
-            terminated: AtomicBool::new(false),
+            config,
+            name: process.to_string(),
+            stock: core::cell::OnceCell::new(),
         };
-        // iceoryx2 installs its SIGINT/SIGTERM handler on the first wait; do it now, so a
+        // iceoryx2 installs its SIGINT/SIGTERM handler on the first look; do it now, so a
         // termination request that arrives before the first wait is latched, not fatal.
         node.termination_requested();
         // Reclaim what processes that died without cleaning up (kill -9) left behind.
@@ -172,31 +207,101 @@ impl IpcNode {
         &self.node
     }
 
-    /// True once SIGINT or SIGTERM was received (latched).
+    /// True once SIGINT or SIGTERM was received (latched; see [`termination_requested`]).
     pub fn termination_requested(&self) -> bool {
-        if let Err(NodeWaitFailure::TerminationRequest) = self.node.wait(Duration::ZERO) {
-            self.terminated.store(true, Ordering::Relaxed);
-        }
-        self.terminated.load(Ordering::Relaxed)
+        termination_requested()
     }
 
     /// Sleeps up to `d` (less when a signal arrives); returns false once termination was requested.
     pub fn sleep(&self, d: Duration) -> bool {
-        if let Err(NodeWaitFailure::TerminationRequest) = self.node.wait(d) {
-            self.terminated.store(true, Ordering::Relaxed);
-        }
-        !self.terminated.load(Ordering::Relaxed)
+        let _ = self.node.wait(d);
+        !termination_requested()
     }
 
-    /// Waits on `waitset` until an attachment fires or `timeout` passes; returns false once
-    /// termination was requested.
-    pub fn wait_on(&self, waitset: &WaitSet<Transport>, timeout: Duration) -> Result<bool, IpcError> {
-        match waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout) {
-            Ok(WaitSetRunResult::TerminationRequest) => self.terminated.store(true, Ordering::Relaxed),
-            Ok(_) => {}
-            Err(e) => return Err(err("waiting on waitset", "-", e)),
+    /// Sleeps on `wake` until a sample of any kind is published under this prefix or `timeout`
+    /// passes; returns false once termination was requested. What fired is in
+    /// [`Wake::fired`]; the caller drains its inputs (a wake-up can stand for several samples,
+    /// and samples published while the caller was awake wake it at once next time).
+    pub fn wait(&self, wake: &Wake, timeout: Duration) -> Result<bool, IpcError> {
+        let deadline = std::time::Instant::now() + timeout;
+        let mut fired = 0u32;
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match wake
+                .listener
+                .timed_wait(|a| fired |= 1 << a.id.as_value().min(31), left.min(WAIT_SLICE))
+            {
+                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+                Err(e) => return Err(err("waiting on", services::WAKE, e)),
+            }
+            if termination_requested() {
+                return Ok(false);
+            }
+            if fired != 0 || left <= WAIT_SLICE {
+                wake.fired.set(fired);
+                return Ok(true);
+            }
         }
-        Ok(!self.termination_requested())
+    }
+
+    /// The wake-up of a process with many inputs: a listener on [`services::WAKE`], which every
+    /// navsync publisher notifies after publishing, with its kind as the event id. Subscribe
+    /// to the inputs with [`input`](Self::input), wait with [`wait`](Self::wait).
+    pub fn wake(&self) -> Result<Wake, IpcError> {
+        let listener = self
+            .wake_service()?
+            .listener_builder()
+            .create()
+            .map_err(|e| err("creating listener", services::WAKE, e))?;
+        Ok(Wake {
+            listener,
+            fired: core::cell::Cell::new(0),
+        })
+    }
+
+    fn wake_service(&self) -> Result<iceoryx2::service::port_factory::event::PortFactory<Transport>, IpcError> {
+        let name: ServiceName = services::WAKE
+            .try_into()
+            .map_err(|_| IpcError::InvalidName(services::WAKE.to_string()))?;
+        self.node
+            .service_builder(&name)
+            .event()
+            .max_nodes(services::MAX_WAKE_NODES)
+            .max_listeners(MAX_SUBSCRIBERS)
+            .max_notifiers(services::MAX_WAKE_NOTIFIERS)
+            .event_id_max_value(ServiceKind::ALL.len())
+            .open_or_create()
+            .map_err(|e| err("opening event service", services::WAKE, e))
+    }
+
+    fn stock_notifier(&self, service: &str) -> Result<Notifier<StockTransport>, IpcError> {
+        if self.stock.get().is_none() {
+            let name = NodeName::new(&self.name).map_err(|_| IpcError::InvalidName(self.name.clone()))?;
+            let node = NodeBuilder::new()
+                .name(&name)
+                .config(&self.config)
+                .create::<StockTransport>()
+                .map_err(|e| err("creating node", &self.name, e))?;
+            let _ = self.stock.set(node);
+        }
+        let Some(node) = self.stock.get() else {
+            return Err(err("creating node", &self.name, "stock node missing"));
+        };
+        let event = services::stock_wake(service);
+        let name: ServiceName = event
+            .as_str()
+            .try_into()
+            .map_err(|_| IpcError::InvalidName(event.clone()))?;
+        node.service_builder(&name)
+            .event()
+            .max_nodes(MAX_NODES)
+            .max_listeners(MAX_SUBSCRIBERS)
+            .max_notifiers(MAX_PUBLISHERS)
+            .open_or_create()
+            .map_err(|e| err("opening event service", &event, e))?
+            .notifier_builder()
+            .create()
+            .map_err(|e| err("creating notifier", &event, e))
     }
 
     fn event_service(
@@ -212,6 +317,8 @@ impl IpcNode {
             .max_nodes(MAX_NODES)
             .max_listeners(MAX_SUBSCRIBERS)
             .max_notifiers(MAX_PUBLISHERS)
+            // One event: "a sample was published".
+            .event_id_max_value(0)
             .open_or_create()
             .map_err(|e| err("opening event service", service, e))
     }
@@ -259,39 +366,74 @@ impl IpcNode {
             .notifier_builder()
             .create()
             .map_err(|e| err("creating notifier", service, e))?;
+        let kind = ServiceKind::of(service).map_or(ServiceKind::ALL.len(), ServiceKind::index);
+        let wake = self
+            .wake_service()?
+            .notifier_builder()
+            .default_event_id(EventId::new(kind))
+            .create()
+            .map_err(|e| err("creating notifier", services::WAKE, e))?;
+        let stock = match ServiceKind::of(service) {
+            Some(k) if services::has_stock_wake(k) => Some(self.stock_notifier(service)?),
+            _ => None,
+        };
         Ok(Publisher {
             publisher,
             notifier,
+            wake,
+            stock,
             service: service.to_string(),
             sent: 0,
         })
     }
 
-    /// A subscriber on `service`; the service is created if it does not exist yet.
+    /// A subscriber on `service` that can sleep until its next sample
+    /// ([`Subscriber::wait_next`]); the service is created if it does not exist yet.
     pub fn subscriber<T: Reflect + ZeroCopySend + Debug>(&self, service: &str) -> Result<Subscriber<T>, IpcError> {
+        let mut s = self.input(service)?;
+        s.listener = Some(
+            self.event_service(service)?
+                .listener_builder()
+                .create()
+                .map_err(|e| err("creating listener", service, e))?,
+        );
+        Ok(s)
+    }
+
+    /// A subscriber on `service` without a wake-up of its own: one of the inputs of a process
+    /// that sleeps on its [`Wake`].
+    pub fn input<T: Reflect + ZeroCopySend + Debug>(&self, service: &str) -> Result<Subscriber<T>, IpcError> {
         let ps = self.pubsub_service::<T>(service)?;
         let subscriber = ps
             .subscriber_builder()
             .create()
             .map_err(|e| err("creating subscriber", service, e))?;
-        let listener = self
-            .event_service(service)?
-            .listener_builder()
-            .create()
-            .map_err(|e| err("creating listener", service, e))?;
         Ok(Subscriber {
             subscriber,
-            listener,
+            listener: None,
             service: service.to_string(),
             port_factory: ps,
         })
     }
+}
 
-    /// A WaitSet that returns on SIGINT/SIGTERM.
-    pub fn waitset(&self) -> Result<WaitSet<Transport>, IpcError> {
-        WaitSetBuilder::new()
-            .create::<Transport>()
-            .map_err(|e| err("creating waitset", "-", e))
+/// The one wake-up of a process with many inputs (see [`IpcNode::wake`]).
+pub struct Wake {
+    listener: Listener<Transport>,
+    fired: core::cell::Cell<u32>,
+}
+
+impl Wake {
+    /// The kinds of sample published before the last [`IpcNode::wait`] returned, as a bit
+    /// set over [`ServiceKind::index`] (bit 31: services of no navsync kind); 0 after a
+    /// timeout.
+    pub fn fired(&self) -> u32 {
+        self.fired.get()
+    }
+
+    /// True if a sample of `kind` was among what woke the last wait.
+    pub fn fired_kind(&self, kind: ServiceKind) -> bool {
+        self.fired.get() & (1 << kind.index()) != 0
     }
 }
 
@@ -299,6 +441,10 @@ impl IpcNode {
 pub struct Publisher<T: Reflect + ZeroCopySend + Debug> {
     publisher: iceoryx2::port::publisher::Publisher<Transport, T, ()>,
     notifier: Notifier<Transport>,
+    /// On [`services::WAKE`], with this service's kind as the event id.
+    wake: Notifier<Transport>,
+    /// On [`services::stock_wake`] for the kinds that have one.
+    stock: Option<Notifier<StockTransport>>,
     service: String,
     sent: u64,
 }
@@ -324,6 +470,11 @@ impl<T: Reflect + ZeroCopySend + Debug> Publisher<T> {
         self.notifier
             .notify()
             .map_err(|e| err("notifying on", &self.service, e))?;
+        self.wake.notify().map_err(|e| err("notifying on", services::WAKE, e))?;
+        if let Some(n) = &self.stock {
+            n.notify()
+                .map_err(|e| err("notifying the stock event of", &self.service, e))?;
+        }
         self.sent += 1;
         Ok(())
     }
@@ -342,7 +493,9 @@ impl<T: Reflect + ZeroCopySend + Debug> Publisher<T> {
 /// Receives samples of one type from one service.
 pub struct Subscriber<T: Reflect + ZeroCopySend + Debug> {
     subscriber: iceoryx2::port::subscriber::Subscriber<Transport, T, ()>,
-    listener: Listener<Transport>,
+    /// The service's event, for [`wait_next`](Self::wait_next); none for an input of a
+    /// process that sleeps on its [`Wake`].
+    listener: Option<Listener<Transport>>,
     service: String,
     port_factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, T, ()>,
 }
@@ -371,74 +524,47 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
         Ok(n)
     }
 
-    /// After a wake-up: hands every buffered sample to `f` (by value), consumes the wake-up
-    /// events, then hands over what arrived meanwhile. Samples before events, so the first
-    /// sample is in hand right after the wake-up, with no event syscalls in between; a sample
-    /// published while the events were consumed is not left waiting for the next wake-up.
-    /// `f` returns false to stop early (the events are then left for the next wait).
+    /// Hands every buffered sample to `f` (by value) until it returns false; returns how
+    /// many it was given.
     pub fn drain(&self, mut f: impl FnMut(T) -> bool) -> Result<usize, IpcError> {
         let mut n = 0;
-        for clear in [true, false] {
-            while let Some(s) = self.receive()? {
-                n += 1;
-                if !f(s) {
-                    return Ok(n);
-                }
-            }
-            if clear {
-                self.clear_events();
+        while let Some(s) = self.receive()? {
+            n += 1;
+            if !f(s) {
+                break;
             }
         }
         Ok(n)
     }
 
-    /// Consumes pending wake-up events. After a wake-up, [`drain`](Self::drain) calls it
-    /// between taking the samples, which keeps it off the wake-up path.
-    pub fn clear_events(&self) {
-        let _ = self.listener.try_wait(|_| {});
-    }
-
     /// Blocks until a sample is available or `timeout` passes; `Ok(None)` on timeout, or
-    /// earlier when a signal interrupts the wait: a termination request (the caller checks
-    /// [`IpcNode::termination_requested`]) or SIGCONT after the process was stopped, which must
-    /// not end a subscriber.
-    ///
-    /// Waits with `poll(2)` on the listener's descriptor and takes the sample as soon as it
-    /// returns; the wake-up events are consumed on the next call, before looking again, so
-    /// the path from the publisher's signal to the sample in hand has no syscall besides the
-    /// wait itself (iceoryx2's own `timed_wait` consumes them first: `fcntl`, `recvfrom`,
-    /// `fcntl`). A sample published after that look signals after the events were consumed,
-    /// so none is left waiting.
+    /// earlier on a termination request (the caller checks [`termination_requested`]).
+    /// Sleeps in `FUTEX_WAIT` on the service's event; a publisher's `FUTEX_WAKE` puts the
+    /// sample in hand with no other system call. Needs a subscriber made by
+    /// [`IpcNode::subscriber`] (an [`IpcNode::input`] has no wake-up of its own).
     pub fn wait_next(&self, timeout: Duration) -> Result<Option<T>, IpcError> {
         if let Some(s) = self.receive()? {
             return Ok(Some(s));
         }
+        let Some(listener) = &self.listener else {
+            return Err(err(
+                "waiting on",
+                &self.service,
+                "an input of a Wake has no wake-up of its own",
+            ));
+        };
         let deadline = std::time::Instant::now() + timeout;
         loop {
-            self.clear_events();
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match listener.timed_wait(|_| {}, left.min(WAIT_SLICE)) {
+                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+                Err(e) => return Err(err("waiting on", &self.service, e)),
+            }
             if let Some(s) = self.receive()? {
                 return Ok(Some(s));
             }
-            let now = std::time::Instant::now();
-            if now >= deadline {
+            if left <= WAIT_SLICE || termination_requested() {
                 return Ok(None);
-            }
-            let ms = (deadline - now).as_micros().div_ceil(1000).min(i32::MAX as u128) as i32;
-            let mut pfd = libc::pollfd {
-                fd: self.wake_fd(),
-                events: libc::POLLIN,
-                revents: 0,
-            };
-            // SAFETY: one valid pollfd for the call's duration.
-            if unsafe { libc::poll(&mut pfd, 1, ms) } < 0 {
-                let e = std::io::Error::last_os_error();
-                if e.kind() == std::io::ErrorKind::Interrupted {
-                    return self.receive();
-                }
-                return Err(err("waiting on", &self.service, e));
-            }
-            if let Some(s) = self.receive()? {
-                return Ok(Some(s));
             }
         }
     }
@@ -449,23 +575,104 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
         self.port_factory.dynamic_config().number_of_publishers()
     }
 
-    /// The file descriptor that becomes readable when a publisher signals a new sample, for a
-    /// `poll(2)` loop that also waits on sockets; after it fired, [`drain`](Self::drain) (or
-    /// [`clear_events`](Self::clear_events)) consumes the signal.
-    pub fn wake_fd(&self) -> std::os::fd::RawFd {
-        // SAFETY: the descriptor is only read (polled), never closed; it lives as long as the
-        // listener, which `self` owns.
-        unsafe { self.listener.file_descriptor().native_handle() }
-    }
-
-    /// The listener to attach to a WaitSet.
-    pub fn listener(&self) -> &Listener<Transport> {
-        &self.listener
-    }
-
     /// The service name.
     pub fn service(&self) -> &str {
         &self.service
+    }
+}
+
+/// A file descriptor that becomes readable when a sample is published on a service, for a
+/// `poll(2)` loop that also waits on sockets (navsync's events are futexes, without a
+/// descriptor): a thread with a node of its own sleeps on the service's event and counts an
+/// `eventfd` up on every wake-up. One hop more than [`Subscriber::wait_next`] (a thread
+/// wake-up, some µs); the samples are taken by the caller's own subscriber
+/// ([`IpcNode::input`]) once the descriptor fired, after [`clear`](Self::clear).
+pub struct WakeFd {
+    fd: std::os::fd::OwnedFd,
+    stop: std::sync::Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl WakeFd {
+    /// Starts the thread, whose node is named `{process}-wake`, on `service`'s event.
+    pub fn new(process: &str, service: &str) -> Result<Self, IpcError> {
+        use std::os::fd::{AsRawFd, FromRawFd};
+        // SAFETY: eventfd has no preconditions; the descriptor is owned below.
+        let raw = unsafe { libc::eventfd(0, libc::EFD_CLOEXEC | libc::EFD_NONBLOCK) };
+        if raw < 0 {
+            return Err(err("creating eventfd for", service, std::io::Error::last_os_error()));
+        }
+        // SAFETY: a fresh descriptor that nothing else owns.
+        let fd = unsafe { std::os::fd::OwnedFd::from_raw_fd(raw) };
+        let stop = std::sync::Arc::new(AtomicBool::new(false));
+        let (tx, rx) = std::sync::mpsc::channel();
+        let (name, service_name, prefix, stop2) =
+            (format!("{process}-wake"), service.to_string(), prefix(), stop.clone());
+        let efd = fd.as_raw_fd();
+        let thread = std::thread::Builder::new()
+            .name(name.clone())
+            .spawn(move || {
+                let listener = IpcNode::with_prefix(&name, &prefix).and_then(|node| {
+                    let l = node
+                        .event_service(&service_name)?
+                        .listener_builder()
+                        .create()
+                        .map_err(|e| err("creating listener", &service_name, e))?;
+                    Ok((node, l))
+                });
+                let (_node, listener) = match listener {
+                    Ok(x) => {
+                        let _ = tx.send(Ok(()));
+                        x
+                    }
+                    Err(e) => {
+                        let _ = tx.send(Err(e));
+                        return;
+                    }
+                };
+                while !stop2.load(Ordering::Relaxed) {
+                    if let Ok(n) = listener.timed_wait(|_| {}, WAIT_SLICE)
+                        && n > 0
+                    {
+                        let one = 1u64;
+                        // SAFETY: writing 8 bytes from a live u64 to our eventfd, which outlives
+                        // this thread (joined before it is closed).
+                        unsafe { libc::write(efd, (&one as *const u64).cast(), 8) };
+                    }
+                }
+            })
+            .map_err(|e| err("starting wake-up thread for", service, e))?;
+        match rx.recv() {
+            Ok(Ok(())) => Ok(Self {
+                fd,
+                stop,
+                thread: Some(thread),
+            }),
+            Ok(Err(e)) => Err(e),
+            Err(_) => Err(err("starting wake-up thread for", service, "the thread ended")),
+        }
+    }
+
+    /// The descriptor to poll for `POLLIN`.
+    pub fn fd(&self) -> std::os::fd::RawFd {
+        use std::os::fd::AsRawFd;
+        self.fd.as_raw_fd()
+    }
+
+    /// Consumes the wake-ups counted so far (before draining the subscriber).
+    pub fn clear(&self) {
+        let mut v = 0u64;
+        // SAFETY: reading 8 bytes into a live u64 from our non-blocking eventfd.
+        unsafe { libc::read(self.fd(), (&mut v as *mut u64).cast(), 8) };
+    }
+}
+
+impl Drop for WakeFd {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
     }
 }
 

@@ -132,6 +132,11 @@ impl ServiceKind {
         Self::GnssNavData,
     ];
 
+    /// The kind's position in [`ALL`](Self::ALL): its event id on [`WAKE`].
+    pub fn index(self) -> usize {
+        Self::ALL.iter().position(|&k| k == self).unwrap_or(Self::ALL.len())
+    }
+
     /// The kind of a service from its name, or `None` for a name navsync does not use.
     pub fn of(service: &str) -> Option<Self> {
         let parts: Vec<&str> = service.split('/').collect();
@@ -207,6 +212,27 @@ pub struct Qos {
     pub history: usize,
     /// Samples buffered per subscriber.
     pub buffer: usize,
+}
+
+/// The event every navsync publisher notifies after publishing, with its service's
+/// [`ServiceKind::index`] as the event id: the one wake-up of a process with many inputs
+/// (`ipc::Wake`).
+pub const WAKE: &str = "navsync/wake";
+/// Maximum notifiers on [`WAKE`]: one per publisher of every process under a prefix.
+pub const MAX_WAKE_NOTIFIERS: usize = 128;
+/// Maximum nodes on [`WAKE`]: every process under a prefix.
+pub const MAX_WAKE_NODES: usize = 64;
+
+/// The stock iceoryx2 event (Unix-datagram trigger, `iceoryx2::service::ipc::Service`) that
+/// publishers of `service` also notify, for subscribers built on iceoryx2's own service types
+/// (the `iceoryx2` Python package), which cannot wait on navsync's futex events: `{service}/wake`.
+pub fn stock_wake(service: &str) -> String {
+    format!("{service}/wake")
+}
+
+/// Kinds whose publishers notify a [`stock_wake`] event too: the outputs other programs read.
+pub fn has_stock_wake(kind: ServiceKind) -> bool {
+    matches!(kind, ServiceKind::NavState | ServiceKind::TimeState)
 }
 
 /// Maximum subscribers per service.

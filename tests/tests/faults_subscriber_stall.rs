@@ -83,18 +83,14 @@ struct Probe {
 }
 
 impl Probe {
-    /// Collects for `d`; wakes on the subscribers' events.
+    /// Collects for `d`; wakes on the one wake-up of every publisher.
     fn collect(&mut self, env: &mut TestEnv, node: &navsync_shared::ipc::IpcNode, d: Duration) -> Window {
-        let ws = node.waitset().unwrap();
-        let _g1 = ws.attach_notification(self.nav.listener()).unwrap();
-        let _g2 = ws.attach_notification(self.imu.listener()).unwrap();
+        let wake = node.wake().unwrap();
         let mut w = Window::default();
         let t0 = Instant::now();
         let mut checked = Instant::now();
         while t0.elapsed() < d {
-            node.wait_on(&ws, Duration::from_millis(10)).unwrap();
-            self.nav.clear_events();
-            self.imu.clear_events();
+            node.wait(&wake, Duration::from_millis(10)).unwrap();
             let now = monotonic_now_ns();
             while let Some(n) = self.nav.receive().unwrap() {
                 w.nav_latency_ms.push((now - n.host_ns) as f64 * 1e-6);
@@ -137,8 +133,8 @@ fn stopped_subscriber_delays_no_publisher_and_blocks_nothing() {
     write_drive_scenario(&scen, 240.0, 2, 100.0);
     let node = env.node("observer");
     let mut probe = Probe {
-        nav: node.subscriber(services::NAV_STATE).unwrap(),
-        imu: node.subscriber(&services::imu_sample("0")).unwrap(),
+        nav: node.input(services::NAV_STATE).unwrap(),
+        imu: node.input(&services::imu_sample("0")).unwrap(),
         health: HealthWatch::new(&node, &["estimator", "imu-0"]),
         last_nav: None,
         last_imu_seq: None,

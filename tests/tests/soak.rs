@@ -77,20 +77,19 @@ fn soak_memory_flat_latency_flat_every_loss_reported() {
     // Alignment and the end of the run need scenario time on top of the soak.
     write_drive_scenario(&scen, secs as f64 + 180.0, IMUS, IMU_RATE_HZ);
     let node = env.node("observer");
-    let nav = node.subscriber::<NavState>(services::NAV_STATE).unwrap();
+    let nav = node.input::<NavState>(services::NAV_STATE).unwrap();
     let imus: Vec<Subscriber<ImuSample>> = (0..IMUS)
-        .map(|i| node.subscriber(&services::imu_sample(&i.to_string())).unwrap())
+        .map(|i| node.input(&services::imu_sample(&i.to_string())).unwrap())
         .collect();
-    let fix = node.subscriber::<GnssFix>(&services::gnss_fix("0")).unwrap();
-    let pps = node.subscriber::<PpsEdge>(&services::pps_edge("0")).unwrap();
+    let fix = node.input::<GnssFix>(&services::gnss_fix("0")).unwrap();
+    let pps = node.input::<PpsEdge>(&services::pps_edge("0")).unwrap();
     let drivers: Vec<String> = (0..IMUS).map(|i| format!("imu-{i}")).collect();
     let mut processes = vec!["estimator", "sim", "gps-0", "pps-0"];
     processes.extend(drivers.iter().map(String::as_str));
     let mut health = HealthWatch::new(&node, &processes);
     env.spawn_pipeline(&scen, IMUS);
 
-    let ws = node.waitset().unwrap();
-    let guard = ws.attach_notification(nav.listener()).unwrap();
+    let wake = node.wake().unwrap();
     let (mut nav_seq, mut imu_seq) = (Seqs::default(), [Seqs::default(); IMUS]);
     let (mut fixes, mut edges) = (0u64, 0u64);
     let mut last_nav: Option<NavState> = None;
@@ -101,7 +100,6 @@ fn soak_memory_flat_latency_flat_every_loss_reported() {
                      imu_seq: &mut [Seqs; IMUS],
                      latency: &mut Vec<(f64, f64)>,
                      last_nav: &mut Option<NavState>| {
-        nav.clear_events();
         let now = monotonic_now_ns();
         while let Some(n) = nav.receive().unwrap() {
             nav_seq.see(n.seq);
@@ -122,7 +120,7 @@ fn soak_memory_flat_latency_flat_every_loss_reported() {
     // Aligned and locked first.
     let t_start = Instant::now();
     loop {
-        node.wait_on(&ws, Duration::from_millis(10)).unwrap();
+        node.wait(&wake, Duration::from_millis(10)).unwrap();
         drain(None, &mut nav_seq, &mut imu_seq, &mut latency, &mut last_nav);
         if last_nav.is_some_and(|n| n.status == NavStatus::Aligned as u8 && n.time_status == TimeStatus::Locked as u8) {
             break;
@@ -147,7 +145,7 @@ fn soak_memory_flat_latency_flat_every_loss_reported() {
     let mut next_rss = soak_t0;
     let mut statuses = [0u64; 4];
     while monotonic_now_ns() < soak_end {
-        node.wait_on(&ws, Duration::from_millis(10)).unwrap();
+        node.wait(&wake, Duration::from_millis(10)).unwrap();
         drain(Some(soak_t0), &mut nav_seq, &mut imu_seq, &mut latency, &mut last_nav);
         if let Some(n) = &last_nav {
             statuses[usize::from(n.status.min(3))] += 1;
@@ -169,7 +167,7 @@ fn soak_memory_flat_latency_flat_every_loss_reported() {
     env.signal("sim", libc::SIGTERM);
     let quiet = Instant::now();
     while quiet.elapsed() < Duration::from_millis(3000) {
-        node.wait_on(&ws, Duration::from_millis(10)).unwrap();
+        node.wait(&wake, Duration::from_millis(10)).unwrap();
         drain(None, &mut nav_seq, &mut imu_seq, &mut latency, &mut last_nav);
         health.poll();
     }
@@ -294,8 +292,6 @@ fn soak_memory_flat_latency_flat_every_loss_reported() {
         l50 <= (f50 * 2.0).max(2.0),
         "NavState latency p50 grew: first quarter {f50:.3} ms, last {l50:.3} ms"
     );
-    drop(guard);
-    drop(ws);
     drop((nav, imus, fix, pps, health, node));
     env.finish();
 }

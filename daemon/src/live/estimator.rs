@@ -2,8 +2,9 @@
 //! library and publishes `navsync/time/state` (and, with the navigation filter,
 //! `navsync/nav/state`).
 //!
-//! The loop sleeps in a WaitSet on the subscribers' events; on every wake-up it drains the
-//! services (IMUs first, then PPS and GNSS) into [`InputOrder`], which hands them to the
+//! The loop sleeps on one event, [`navsync_shared::services::WAKE`], which every driver
+//! notifies after publishing (with its sample's kind); on every wake-up by an input it drains
+//! the services (IMUs first, then PPS and GNSS) into [`InputOrder`], which hands them to the
 //! pipeline in an order that depends on the samples alone (a PPS edge or fix goes in right
 //! before the first reference-IMU sample stamped a fixed hold after it; see
 //! [`navsync_estimator::input_order`]), so the results are the same whatever the scheduling, and
@@ -15,7 +16,7 @@ use navsync_shared::health_reporter::HealthReporter;
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::latency_histogram::LatencyHistogram;
 use navsync_shared::samples::{AnySample, GnssFix, GnssTimePulse, ImuSample, NavState, NavStatus, PpsEdge, TimeState};
-use navsync_shared::services;
+use navsync_shared::services::{self, ServiceKind};
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
 
@@ -109,23 +110,23 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
     let pps: Vec<Subscriber<PpsEdge>> = args
         .pps_ids
         .iter()
-        .map(|id| node.subscriber(&services::pps_edge(id)))
+        .map(|id| node.input(&services::pps_edge(id)))
         .collect::<Result<_, _>>()?;
     let gnss: Vec<Subscriber<GnssFix>> = args
         .gnss_ids
         .iter()
-        .map(|id| node.subscriber(&services::gnss_fix(id)))
+        .map(|id| node.input(&services::gnss_fix(id)))
         .collect::<Result<_, _>>()?;
     // The receivers' reports of their next time pulse (UBX TIM-TP), where they send them.
     let time_pulses: Vec<Subscriber<GnssTimePulse>> = args
         .gnss_ids
         .iter()
-        .map(|id| node.subscriber(&services::gnss_time_pulse(id)))
+        .map(|id| node.input(&services::gnss_time_pulse(id)))
         .collect::<Result<_, _>>()?;
     let imus: Vec<Subscriber<ImuSample>> = args
         .imu_ids
         .iter()
-        .map(|id| node.subscriber(&services::imu_sample(id)))
+        .map(|id| node.input(&services::imu_sample(id)))
         .collect::<Result<_, _>>()?;
     let mut time_pub = node.publisher::<TimeState>(services::TIME_STATE)?;
     let mut health = HealthReporter::new(&node, "estimator")?;
@@ -138,21 +139,14 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
     let r_imu = health.rate("imu_samples")?;
     let r_fix = health.rate("gnss_fixes")?;
 
-    let waitset = node.waitset()?;
-    let mut guards = Vec::new();
-    for l in pps
-        .iter()
-        .map(|s| s.listener())
-        .chain(gnss.iter().map(|s| s.listener()))
-        .chain(time_pulses.iter().map(|s| s.listener()))
-        .chain(imus.iter().map(|s| s.listener()))
-    {
-        guards.push(waitset.attach_notification(l).map_err(|e| IpcError::Iceoryx {
-            what: "attaching to waitset",
-            service: "-".into(),
-            detail: format!("{e:?}"),
-        })?);
-    }
+    // One wake-up for every input: each publisher notifies `navsync/wake` with its kind.
+    let wake = node.wake()?;
+    const INPUT_KINDS: [ServiceKind; 4] = [
+        ServiceKind::ImuSample,
+        ServiceKind::PpsEdge,
+        ServiceKind::GnssFix,
+        ServiceKind::GnssTimePulse,
+    ];
 
     let mut est = Pipeline::new(args.pipeline_config());
     let mut nav_pub = node.publisher::<NavState>(services::NAV_STATE)?;
@@ -225,8 +219,13 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
             .map_or(next_publisher_check_ns, |d| d.min(next_publisher_check_ns))
             .saturating_sub(now)
             .clamp(1_000_000, 100_000_000);
-        if !node.wait_on(&waitset, Duration::from_nanos(wait_ns as u64))? {
+        if !node.wait(&wake, Duration::from_nanos(wait_ns as u64))? {
             break;
+        }
+        // Woken only by other samples (its own outputs, other processes' health): nothing to
+        // drain unless a deadline is due.
+        if wake.fired() != 0 && !INPUT_KINDS.iter().any(|&k| wake.fired_kind(k)) && monotonic_now_ns() < now + wait_ns {
+            continue;
         }
         let mut updated = false;
         let rx_ns = monotonic_now_ns();
@@ -392,7 +391,6 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
         }
     }
     navsync_shared::sd_notify::stopping();
-    drop(guards);
     health.publish_final()?;
     info!("estimator stopped");
     Ok(())

@@ -610,9 +610,12 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
         move |source| GpsdError::Io { what, source }
     };
     let node = IpcNode::new("gpsd-server")?;
-    let nav_sub = node.subscriber::<NavState>(services::NAV_STATE)?;
-    let fix_sub = node.subscriber::<GnssFix>(&services::gnss_fix(&args.gnss_id))?;
-    let time_sub = node.subscriber::<TimeState>(services::TIME_STATE)?;
+    let nav_sub = node.input::<NavState>(services::NAV_STATE)?;
+    let fix_service = services::gnss_fix(&args.gnss_id);
+    let fix_sub = node.input::<GnssFix>(&fix_service)?;
+    // The fix's wake-up as a descriptor for the poll(2) set below.
+    let fix_wake = navsync_shared::ipc::WakeFd::new("gpsd-server", &fix_service)?;
+    let time_sub = node.input::<TimeState>(services::TIME_STATE)?;
     let mut health = HealthReporter::new(&node, "gpsd-server")?;
     let c_accepted = health.counter("clients_accepted")?;
     let c_rejected = health.counter("clients_rejected")?;
@@ -651,7 +654,7 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
             revents: 0,
         });
         fds.push(libc::pollfd {
-            fd: fix_sub.wake_fd(),
+            fd: fix_wake.fd(),
             events: libc::POLLIN,
             revents: 0,
         });
@@ -755,6 +758,7 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
             latest.nav = Some(n);
         }
         let mut new_fixes = 0usize;
+        fix_wake.clear();
         fix_sub.drain(|f| {
             latest.fix = Some(f);
             new_fixes += 1;

@@ -151,7 +151,7 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
     }
     let found = new_services(&patterns, &subs, &refused)?;
     subscribe_all(&node, &mut subs, &mut refused, found);
-    // Messages per subscriber (kept apart: the WaitSet guards borrow the subscribers).
+    // Messages per subscriber.
     let mut counts: Vec<u64> = vec![0; subs.len()];
     let mut health = HealthReporter::new(&node, "record")?;
     let c_msgs = health.counter("messages")?;
@@ -178,22 +178,10 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
     let tty = args.progress && is_tty();
     let mut batch: Vec<(usize, AnySample)> = Vec::with_capacity(1024);
     let mut order: Vec<(i64, usize)> = Vec::with_capacity(1024);
+    // One wake-up for every service: each navsync publisher notifies it after publishing.
+    let wake = node.wake()?;
     let mut running = true;
     while running {
-        // (Re)build the WaitSet over the current subscribers; rebuilt when discovery adds one.
-        let waitset = node.waitset()?;
-        let mut guards = Vec::with_capacity(subs.len());
-        for s in &subs {
-            guards.push(
-                waitset
-                    .attach_notification(s.listener())
-                    .map_err(|e| IpcError::Iceoryx {
-                        what: "attaching to waitset",
-                        service: s.service().to_string(),
-                        detail: format!("{e:?}"),
-                    })?,
-            );
-        }
         loop {
             let now = monotonic_now_ns();
             let next_due = [last_flush + ns(CHUNK_INTERVAL), last_discovery + ns(DISCOVERY_INTERVAL)]
@@ -202,16 +190,11 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
                 .min()
                 .unwrap_or(now);
             let timeout = Duration::from_nanos((next_due - now).clamp(1_000_000, 200_000_000) as u64);
-            let alive = if guards.is_empty() {
-                node.sleep(timeout)
-            } else {
-                node.wait_on(&waitset, timeout)?
-            };
+            let alive = node.wait(&wake, timeout)?;
             let rx_mono = monotonic_now_ns();
             let rx_real = realtime_now_ns();
             batch.clear();
             for (i, s) in subs.iter().enumerate() {
-                s.clear_events();
                 s.drain(|x| batch.push((i, x)))?;
             }
             // Stamp order, ties in drain order; an index sort (no allocation, no large moves).
@@ -246,14 +229,13 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
                 last_discovery = now;
                 let found = new_services(&patterns, &subs, &refused)?;
                 if !found.is_empty() {
-                    drop(guards);
                     let before = subs.len();
                     subscribe_all(&node, &mut subs, &mut refused, found);
                     for s in &subs[before..] {
                         rec.channel(s.service())?;
                     }
                     counts.resize(subs.len(), 0);
-                    break; // rebuild the WaitSet with the new subscribers
+                    break; // restart the wait loop with the new subscribers
                 }
             }
         }

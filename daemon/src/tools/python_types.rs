@@ -127,6 +127,13 @@ DEFAULT_PREFIX = "navsync_"
     let _ = writeln!(s, "MAX_IMUS = {MAX_IMUS}");
     let _ = writeln!(s, "\nNAV_STATE = {:?}", services::NAV_STATE);
     let _ = writeln!(s, "TIME_STATE = {:?}", services::TIME_STATE);
+    let _ = writeln!(
+        s,
+        "#: The stock iceoryx2 events (Unix datagram) that NAV_STATE's and TIME_STATE's publishers\n\
+         #: notify for programs on iceoryx2's own service types: navsync's own events are futexes."
+    );
+    let _ = writeln!(s, "NAV_STATE_WAKE = {:?}", services::stock_wake(services::NAV_STATE));
+    let _ = writeln!(s, "TIME_STATE_WAKE = {:?}", services::stock_wake(services::TIME_STATE));
     let _ = writeln!(s, "SIM_TRUTH = {:?}", services::SIM_TRUTH);
 
     for t in &all {

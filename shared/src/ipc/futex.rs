@@ -1,0 +1,262 @@
+//! navsync's iceoryx2 service type: iceoryx2's inter-process concepts with a futex wake-up.
+//!
+//! iceoryx2 composes a service type from `iceoryx2-cal` concepts; `ipc::Service` wakes a
+//! listener through a Unix datagram (`sendto` at the notifier; `epoll`/`poll`, then `fcntl`,
+//! `recvfrom`, `fcntl` at the listener). [`Service`] is the same composition with one concept
+//! replaced: the event trigger is a 32-bit futex word in the listener's shared management
+//! segment (`futex(2)`, `FUTEX_WAIT`/`FUTEX_WAKE` on a shared mapping):
+//!
+//! * word = `count << 1 | sleeping`; a notifier adds 2 and calls `FUTEX_WAKE` only when the
+//!   listener set `sleeping`, so a notification to a listener that is busy costs two atomic
+//!   operations and no system call;
+//! * the listener waits only after setting `sleeping` and seeing no new count; the kernel's
+//!   `FUTEX_WAIT` compares the word with what it saw, so a notification between the two is
+//!   never lost (Drepper, "Futexes Are Tricky", 2011, §5);
+//! * one listener per trigger (iceoryx2 gives every listener port its own), any number of
+//!   notifiers.
+//!
+//! The trigger has no file descriptor, so listeners of this type cannot be attached to a
+//! `WaitSet`; a process waiting on several inputs waits on one event instead
+//! ([`super::Wake`]). Everything else (payload segments, connections, node monitoring) is
+//! iceoryx2's `ipc::Service` as is, so other iceoryx2 programs can open navsync's
+//! publish-subscribe services, only not its events.
+
+use core::fmt::Debug;
+use core::marker::PhantomData;
+use core::mem::MaybeUninit;
+use core::ptr::NonNull;
+use core::sync::atomic::{AtomicU32, Ordering};
+use core::time::Duration;
+
+use iceoryx2::prelude::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::testing::abandonable::Abandonable;
+use iceoryx2_bb_lock_free::mpmc::counting_bit_set::RelocatableCountingBitSet;
+use iceoryx2_bb_system_types::file_name::FileName;
+use iceoryx2_bb_system_types::path::Path;
+use iceoryx2_cal::dynamic_storage::DynamicStorage;
+use iceoryx2_cal::event::common::EventImpl;
+use iceoryx2_cal::event::event_state::EventState;
+use iceoryx2_cal::event::trigger::{Configuration, HandlerInterface, State, WaiterInterface};
+use iceoryx2_cal::event::{ListenerCreateError, ListenerWaitError, NotifierNotifyError, NotifierOpenError};
+use iceoryx2_cal::named_concept::{NamedConceptPathHintRemoveError, NamedConceptRemoveError};
+use iceoryx2_cal::shm_allocator::bump_allocator::BumpAllocator;
+use iceoryx2_cal::shm_allocator::pool_allocator::PoolAllocator;
+use iceoryx2_cal::{
+    arc_sync_policy, bag, dynamic_storage as storage, hash, monitoring, reactor, resizable_shared_memory, serialize,
+    shared_memory, static_storage, zero_copy_connection,
+};
+
+/// Bit 0 of the futex word: the listener is in (or about to enter) `FUTEX_WAIT`.
+const SLEEPING: u32 = 1;
+/// What a notification adds to the futex word (the count lives above bit 0).
+const COUNT_STEP: u32 = 2;
+
+/// The trigger's state in the listener's shared management segment.
+#[derive(Debug)]
+#[repr(C)]
+pub struct FutexMgmt {
+    /// `count << 1 | sleeping`.
+    word: AtomicU32,
+}
+
+// SAFETY: one `AtomicU32`, no pointers: valid in any process that maps it.
+unsafe impl ZeroCopySend for FutexMgmt {}
+
+/// `futex(2)` on a word of a shared mapping (not `FUTEX_PRIVATE_FLAG`: the word is shared
+/// between processes).
+fn futex(word: &AtomicU32, op: libc::c_int, val: u32, timeout: Option<&libc::timespec>) -> libc::c_long {
+    let ts = timeout.map_or(core::ptr::null(), |t| t as *const libc::timespec);
+    // SAFETY: `word` is a valid, aligned u32 for the call's duration; `ts` is null or points
+    // to a live timespec; the remaining arguments are unused by FUTEX_WAIT and FUTEX_WAKE.
+    unsafe {
+        libc::syscall(
+            libc::SYS_futex,
+            word.as_ptr(),
+            op,
+            val,
+            ts,
+            core::ptr::null::<u32>(),
+            0u32,
+        )
+    }
+}
+
+/// The notifier's side: bumps the count and wakes a sleeping listener.
+#[derive(Debug)]
+pub struct FutexHandle<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> {
+    /// Into the listener's management segment, which the iceoryx2 handle that owns this keeps
+    /// mapped for this value's lifetime.
+    word: NonNull<AtomicU32>,
+    _p: PhantomData<(E, S)>,
+}
+
+// SAFETY: the pointee is an atomic in shared memory; all access is atomic.
+unsafe impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> Send for FutexHandle<E, S> {}
+// SAFETY: as above.
+unsafe impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> Sync for FutexHandle<E, S> {}
+
+impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> Abandonable for FutexHandle<E, S> {
+    unsafe fn abandon_in_place(_this: NonNull<Self>) {}
+}
+
+impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> HandlerInterface<E, FutexMgmt, S> for FutexHandle<E, S> {
+    fn open(_name: &FileName, _config: &Configuration, mgmt: &FutexMgmt) -> Result<Self, NotifierOpenError> {
+        Ok(Self {
+            word: NonNull::from(&mgmt.word),
+            _p: PhantomData,
+        })
+    }
+
+    fn notify(&self) -> Result<(), NotifierNotifyError> {
+        // SAFETY: see `word`.
+        let word = unsafe { self.word.as_ref() };
+        if word.fetch_add(COUNT_STEP, Ordering::SeqCst) & SLEEPING != 0 {
+            futex(word, libc::FUTEX_WAKE, 1, None);
+        }
+        Ok(())
+    }
+}
+
+/// The listener's side: sleeps in `FUTEX_WAIT` until the count moves.
+#[derive(Debug)]
+pub struct FutexWaiter<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> {
+    /// Into this listener's own management segment (see [`FutexHandle::word`]).
+    word: NonNull<AtomicU32>,
+    /// The count (bits above 0) this listener has consumed.
+    seen: AtomicU32,
+    _p: PhantomData<(E, S)>,
+}
+
+// SAFETY: see `FutexHandle`.
+unsafe impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> Send for FutexWaiter<E, S> {}
+// SAFETY: as above.
+unsafe impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> Sync for FutexWaiter<E, S> {}
+
+impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> Abandonable for FutexWaiter<E, S> {
+    unsafe fn abandon_in_place(_this: NonNull<Self>) {}
+}
+
+impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> FutexWaiter<E, S> {
+    fn word(&self) -> &AtomicU32 {
+        // SAFETY: see `FutexHandle::word`.
+        unsafe { self.word.as_ref() }
+    }
+
+    /// Consumes pending notifications; true if there were any.
+    fn consume(&self) -> bool {
+        let now = self.word().load(Ordering::SeqCst) & !SLEEPING;
+        self.seen.swap(now, Ordering::Relaxed) != now
+    }
+
+    /// Sleeps until a notification or `timeout` (None: no limit). Under `SA_RESTART` signal
+    /// handlers (iceoryx2's) the kernel resumes an interrupted `FUTEX_WAIT` with the time left,
+    /// so a termination request is seen when the wait ends; callers bound their waits.
+    fn sleep(&self, timeout: Option<Duration>) -> Result<(), ListenerWaitError> {
+        if self.consume() {
+            return Ok(());
+        }
+        let seen = self.seen.load(Ordering::Relaxed);
+        let before = self.word().fetch_or(SLEEPING, Ordering::SeqCst);
+        if before & !SLEEPING == seen {
+            let ts = timeout.map(|t| libc::timespec {
+                tv_sec: t.as_secs().min(i32::MAX as u64) as libc::time_t,
+                tv_nsec: t.subsec_nanos() as libc::c_long,
+            });
+            if futex(self.word(), libc::FUTEX_WAIT, seen | SLEEPING, ts.as_ref()) < 0 {
+                let e = std::io::Error::last_os_error().raw_os_error();
+                // EAGAIN: notified before the wait; ETIMEDOUT: nothing came.
+                if e == Some(libc::EINTR) {
+                    self.word().fetch_and(!SLEEPING, Ordering::SeqCst);
+                    return Err(ListenerWaitError::InterruptSignal);
+                }
+            }
+        }
+        let now = self.word().fetch_and(!SLEEPING, Ordering::SeqCst) & !SLEEPING;
+        self.seen.store(now, Ordering::Relaxed);
+        Ok(())
+    }
+}
+
+impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> WaiterInterface<E, FutexMgmt, S> for FutexWaiter<E, S> {
+    const IS_FILE_DESCRIPTOR_BASED: bool = false;
+
+    unsafe fn remove(_name: &FileName, _config: &Configuration) -> Result<bool, NamedConceptRemoveError> {
+        // Nothing besides the management segment, which iceoryx2 removes itself.
+        Ok(true)
+    }
+
+    fn remove_path_hint(_value: &Path) -> Result<(), NamedConceptPathHintRemoveError> {
+        Ok(())
+    }
+
+    fn create(
+        _name: &FileName,
+        _config: &Configuration,
+        mgmt: &mut MaybeUninit<FutexMgmt>,
+    ) -> Result<Self, ListenerCreateError> {
+        let mgmt = mgmt.write(FutexMgmt {
+            word: AtomicU32::new(0),
+        });
+        Ok(Self {
+            word: NonNull::from(&mgmt.word),
+            seen: AtomicU32::new(0),
+            _p: PhantomData,
+        })
+    }
+
+    fn try_wait(&self) -> Result<(), ListenerWaitError> {
+        self.consume();
+        Ok(())
+    }
+
+    fn timed_wait(&self, timeout: Duration) -> Result<(), ListenerWaitError> {
+        self.sleep(Some(timeout))
+    }
+
+    fn blocking_wait(&self) -> Result<(), ListenerWaitError> {
+        self.sleep(None)
+    }
+
+    fn empty_buffer(&self) -> Result<(), ListenerWaitError> {
+        self.consume();
+        Ok(())
+    }
+}
+
+type FutexStorage = storage::posix_shared_memory::Storage<State<RelocatableCountingBitSet, FutexMgmt>>;
+
+/// The futex event concept: iceoryx2's event state (a counting bit set of event ids and the
+/// notified/idle hand-shake) with the futex trigger.
+pub type FutexEvent = EventImpl<
+    RelocatableCountingBitSet,
+    FutexMgmt,
+    FutexStorage,
+    FutexHandle<RelocatableCountingBitSet, FutexStorage>,
+    FutexWaiter<RelocatableCountingBitSet, FutexStorage>,
+>;
+
+/// navsync's iceoryx2 service type: `iceoryx2::service::ipc::Service` with [`FutexEvent`].
+#[derive(Debug, Clone)]
+pub struct Service {}
+
+impl iceoryx2::service::Service for Service {
+    type StaticStorage = static_storage::recommended::Ipc;
+    type ConfigSerializer = serialize::recommended::Recommended;
+    type PersistentDynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
+        storage::recommended::PersistentIpc<T>;
+    type Bag = bag::recommended::Recommended;
+    type DynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> = storage::recommended::Ipc<T>;
+    type ServiceNameHasher = hash::recommended::Recommended;
+    type SharedMemory = shared_memory::recommended::Ipc<PoolAllocator>;
+    type ResizableSharedMemory = resizable_shared_memory::recommended::Ipc<PoolAllocator>;
+    type Connection = zero_copy_connection::recommended::Ipc;
+    type Event = FutexEvent;
+    type Monitoring = monitoring::recommended::Ipc;
+    type Reactor = reactor::recommended::Ipc;
+    type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> = arc_sync_policy::single_threaded::SingleThreaded<T>;
+    type BlackboardMgmt<KeyType: Send + Sync + Debug + ZeroCopySend + 'static> = storage::recommended::Ipc<KeyType>;
+    type BlackboardPayload = shared_memory::recommended::Ipc<BumpAllocator>;
+    type UniqueId = iceoryx2::unique_id_generator::unique_system_id::UniqueSystemId;
+}
+
+impl iceoryx2::service::internal::ServiceInternal<Service> for Service {}
