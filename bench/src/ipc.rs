@@ -17,10 +17,11 @@ use std::io::BufReader;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use iceoryx2::prelude::ZeroCopySend;
 use navsync_shared::ipc::{IpcError, IpcNode};
 use navsync_shared::pacing;
 use navsync_shared::reflect::Reflect;
-use navsync_shared::samples::{ImuSample, NavState};
+use navsync_shared::samples::{GnssRaw, ImuSample, NavState};
 use navsync_shared::services;
 use navsync_shared::time::monotonic_now_ns;
 use serde::Serialize;
@@ -39,7 +40,41 @@ pub enum Kind {
     Imu,
     /// `NavState` on `navsync/nav/state`.
     Nav,
+    /// `GnssRaw` (a raw-measurement epoch, 4 KiB) on `navsync/gnss/bench/raw`.
+    Raw,
+    /// [`Blob64k`] (64 KiB, an image-sized message) on [`BLOB_SERVICE`].
+    Blob,
 }
+
+/// A 64 KiB message for the IPC benchmark (where copying through the kernel costs most).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, iceoryx2::prelude::ZeroCopySend)]
+#[type_name("navsync.bench.Blob64k.v1")]
+pub struct Blob64k {
+    /// Publish time, CLOCK_MONOTONIC ns.
+    pub host_ns: i64,
+    /// Sequence number.
+    pub seq: u64,
+    /// Filler, bytes.
+    pub data: [u8; 65520],
+}
+
+impl Reflect for Blob64k {
+    // Not recorded or bridged (a benchmark service): no field table needed.
+    const FIELDS: &'static [navsync_shared::reflect::Field] = &[];
+    const TYPE_NAME: &'static str = "navsync.bench.Blob64k.v1";
+    const DOC: &'static str = "A 64 KiB message for the IPC benchmark.";
+    fn zeroed() -> Self {
+        Self {
+            host_ns: 0,
+            seq: 0,
+            data: [0; 65520],
+        }
+    }
+}
+
+/// The service [`Blob64k`] travels on (a benchmark service, see `services::BENCH_PREFIX`).
+pub const BLOB_SERVICE: &str = "navsync/bench/blob";
 
 /// The transport of a case.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
@@ -51,6 +86,9 @@ pub enum Transport {
     /// navsync's iceoryx2 services, the subscriber asleep on the one wake-up of a process
     /// with many inputs (`IpcNode::wait` on `navsync/wake`, as the estimator).
     Iceoryx2Wake,
+    /// navsync's iceoryx2 services, the subscriber spinning on its queue (`--busy-poll`:
+    /// `Subscriber::set_busy_poll`); a core per subscriber.
+    Iceoryx2Busy,
     /// A Unix-domain SOCK_SEQPACKET socket per subscriber.
     Socket,
 }
@@ -115,6 +153,42 @@ impl Payload for ImuSample {
     }
     fn stamp(&self) -> (i64, u64) {
         (self.stamp.host_ns, self.stamp.seq)
+    }
+}
+
+impl Payload for GnssRaw {
+    fn service() -> String {
+        services::gnss_raw("bench")
+    }
+    fn make(host_ns: i64, seq: u64) -> Self {
+        let mut s = Self::zeroed();
+        s.stamp.host_ns = host_ns;
+        s.stamp.seq = seq;
+        s.num_meas = s.meas.len() as u8;
+        for (i, m) in s.meas.iter_mut().enumerate() {
+            m.pseudorange_m = 2.2e7 + i as f64;
+            m.cno_dbhz = 40;
+        }
+        s
+    }
+    fn stamp(&self) -> (i64, u64) {
+        (self.stamp.host_ns, self.stamp.seq)
+    }
+}
+
+impl Payload for Blob64k {
+    fn service() -> String {
+        BLOB_SERVICE.to_string()
+    }
+    fn make(host_ns: i64, seq: u64) -> Self {
+        let mut s = Self::zeroed();
+        s.host_ns = host_ns;
+        s.seq = seq;
+        s.data[0] = seq as u8;
+        s
+    }
+    fn stamp(&self) -> (i64, u64) {
+        (self.host_ns, self.seq)
     }
 }
 
@@ -273,6 +347,8 @@ fn kind_name(k: Kind) -> &'static str {
     match k {
         Kind::Imu => "imu",
         Kind::Nav => "nav",
+        Kind::Raw => "raw",
+        Kind::Blob => "blob",
     }
 }
 
@@ -280,6 +356,7 @@ fn transport_name(t: Transport) -> &'static str {
     match t {
         Transport::Iceoryx2 => "iceoryx2",
         Transport::Iceoryx2Wake => "iceoryx2-wake",
+        Transport::Iceoryx2Busy => "iceoryx2-busy",
         Transport::Socket => "socket",
     }
 }
@@ -393,6 +470,8 @@ pub fn run_case(
         payload_bytes: match kind {
             Kind::Imu => size_of::<ImuSample>(),
             Kind::Nav => size_of::<NavState>(),
+            Kind::Raw => size_of::<GnssRaw>(),
+            Kind::Blob => size_of::<Blob64k>(),
         },
         rate,
         subscribers,
@@ -427,6 +506,8 @@ fn row(c: &IpcCase) -> String {
         match c.kind {
             Kind::Imu => "ImuSample",
             Kind::Nav => "NavState",
+            Kind::Raw => "GnssRaw",
+            Kind::Blob => "Blob64k",
         },
         c.payload_bytes,
         rate,
@@ -508,6 +589,8 @@ pub fn helper_pub(a: &PubArgs) -> Result<(), IpcBenchError> {
     match a.kind {
         Kind::Imu => publish::<ImuSample>(a),
         Kind::Nav => publish::<NavState>(a),
+        Kind::Raw => publish::<GnssRaw>(a),
+        Kind::Blob => publish::<Blob64k>(a),
     }
 }
 
@@ -517,6 +600,8 @@ pub fn helper_sub(a: &SubArgs) -> Result<(), IpcBenchError> {
     match a.kind {
         Kind::Imu => subscribe::<ImuSample>(a),
         Kind::Nav => subscribe::<NavState>(a),
+        Kind::Raw => subscribe::<GnssRaw>(a),
+        Kind::Blob => subscribe::<Blob64k>(a),
     }
 }
 
@@ -542,7 +627,7 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
         );
     };
     match a.transport {
-        Transport::Iceoryx2 | Transport::Iceoryx2Wake => {
+        Transport::Iceoryx2 | Transport::Iceoryx2Wake | Transport::Iceoryx2Busy => {
             let node = IpcNode::new("bench-pub")?;
             let mut p = node.publisher::<T>(&T::service())?;
             // Let the subscribers' ports settle before the first sample.
@@ -592,17 +677,21 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
     let last = a.count.saturating_sub(1);
     let cpu0;
     match a.transport {
-        Transport::Iceoryx2 => {
+        Transport::Iceoryx2 | Transport::Iceoryx2Busy => {
             let node = IpcNode::new(&format!("bench-sub-{}", a.index))?;
             let sub = node.subscriber::<T>(&T::service())?;
+            sub.set_busy_poll(a.transport == Transport::Iceoryx2Busy);
             ready();
             cpu0 = util::own_cpu_time_s();
-            while !node.termination_requested() {
-                let Some(s) = sub.wait_next(Duration::from_secs(1))? else {
+            loop {
+                // In place in shared memory: the stamp is read where the publisher wrote it.
+                let Some((host_ns, seq)) = sub.wait_with(Duration::from_secs(1), |s| s.stamp())? else {
+                    if node.termination_requested() {
+                        break;
+                    }
                     continue;
                 };
                 let now = monotonic_now_ns();
-                let (host_ns, seq) = s.stamp();
                 lat.push(now - host_ns);
                 if seq >= last {
                     break;
@@ -617,12 +706,11 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
             cpu0 = util::own_cpu_time_s();
             let mut done = false;
             while !done && node.wait(&wake, Duration::from_secs(1))? {
-                sub.drain(|s| {
+                sub.for_each(|s| {
                     let now = monotonic_now_ns();
                     let (host_ns, seq) = s.stamp();
                     lat.push(now - host_ns);
-                    done = seq >= last;
-                    !done
+                    done |= seq >= last;
                 })?;
             }
         }

@@ -214,6 +214,12 @@ pub struct Qos {
     pub buffer: usize,
 }
 
+/// Services under this prefix carry benchmark payloads of any type (`navsync-bench ipc`), with
+/// [`BENCH_QOS`]; they are no [`ServiceKind`], so recorders and bridges leave them alone.
+pub const BENCH_PREFIX: &str = "navsync/bench/";
+/// Publish-subscribe settings of the benchmark services.
+pub const BENCH_QOS: Qos = Qos { history: 0, buffer: 16 };
+
 /// The event every navsync publisher notifies after publishing, with its service's
 /// [`ServiceKind::index`] as the event id: the one wake-up of a process with many inputs
 /// (`ipc::Wake`).

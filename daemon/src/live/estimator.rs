@@ -40,6 +40,11 @@ pub struct Options {
     /// halted CPU. For low-latency deployments, with SCHED_FIFO; costs an idle core's power.
     #[arg(long)]
     pub idle_polling: bool,
+    /// Spin on the inputs instead of sleeping between samples: no wake-up latency and no
+    /// wake-up system call for the drivers, for an estimator pinned to an isolated core
+    /// (`taskset`, `isolcpus`); costs that whole core. Off by default.
+    #[arg(long)]
+    pub busy_poll: bool,
 }
 
 /// Runs the estimator process with its settings (flags, else the file, else defaults).
@@ -51,7 +56,7 @@ pub fn main(opts: Options, cfg: &Loaded) -> anyhow::Result<()> {
         .then(navsync_shared::cpu_wakeup::CpuWakeupHold::take)
         .transpose()
         .context("--idle-polling: holding /dev/cpu_dma_latency at 0")?;
-    run(&settings).context("estimator")
+    run(&settings, opts.busy_poll).context("estimator")
 }
 
 /// How often the estimator's reclaimer thread ([`super::reclaimer`]) removes dead nodes, so a
@@ -101,8 +106,8 @@ pub enum EstimatorError {
     Health(#[from] navsync_shared::health_reporter::HealthError),
 }
 
-/// Runs the estimator until SIGINT/SIGTERM.
-pub fn run(args: &Settings) -> Result<(), EstimatorError> {
+/// Runs the estimator until SIGINT/SIGTERM; `busy_poll`: see [`Options::busy_poll`].
+pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     let _span = info_span!("estimator").entered();
     let node = IpcNode::new("estimator")?;
     // Dead drivers' publishers stop counting once their node is reclaimed: off this loop.
@@ -141,6 +146,7 @@ pub fn run(args: &Settings) -> Result<(), EstimatorError> {
 
     // One wake-up for every input: each publisher notifies `navsync/wake` with its kind.
     let wake = node.wake()?;
+    wake.set_busy_poll(busy_poll);
     const INPUT_KINDS: [ServiceKind; 4] = [
         ServiceKind::ImuSample,
         ServiceKind::PpsEdge,

@@ -1,4 +1,5 @@
-//! navsync's iceoryx2 service type: iceoryx2's inter-process concepts with a futex wake-up.
+//! navsync's iceoryx2 service type: iceoryx2's inter-process concepts with a futex wake-up
+//! (and a thread-safety policy that recycles its memory, [`super::pooled`]).
 //!
 //! iceoryx2 composes a service type from `iceoryx2-cal` concepts; `ipc::Service` wakes a
 //! listener through a Unix datagram (`sendto` at the notifier; `epoll`/`poll`, then `fcntl`,
@@ -42,8 +43,8 @@ use iceoryx2_cal::named_concept::{NamedConceptPathHintRemoveError, NamedConceptR
 use iceoryx2_cal::shm_allocator::bump_allocator::BumpAllocator;
 use iceoryx2_cal::shm_allocator::pool_allocator::PoolAllocator;
 use iceoryx2_cal::{
-    arc_sync_policy, bag, dynamic_storage as storage, hash, monitoring, reactor, resizable_shared_memory, serialize,
-    shared_memory, static_storage, zero_copy_connection,
+    bag, dynamic_storage as storage, hash, monitoring, reactor, resizable_shared_memory, serialize, shared_memory,
+    static_storage, zero_copy_connection,
 };
 
 /// Bit 0 of the futex word: the listener is in (or about to enter) `FUTEX_WAIT`.
@@ -235,7 +236,8 @@ pub type FutexEvent = EventImpl<
     FutexWaiter<RelocatableCountingBitSet, FutexStorage>,
 >;
 
-/// navsync's iceoryx2 service type: `iceoryx2::service::ipc::Service` with [`FutexEvent`].
+/// navsync's iceoryx2 service type: `iceoryx2::service::ipc::Service` with [`FutexEvent`] and
+/// a reference count with recycled memory ([`super::pooled::Pooled`]: no allocation per loan).
 #[derive(Debug, Clone)]
 pub struct Service {}
 
@@ -253,7 +255,7 @@ impl iceoryx2::service::Service for Service {
     type Event = FutexEvent;
     type Monitoring = monitoring::recommended::Ipc;
     type Reactor = reactor::recommended::Ipc;
-    type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> = arc_sync_policy::single_threaded::SingleThreaded<T>;
+    type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> = super::pooled::Pooled<T>;
     type BlackboardMgmt<KeyType: Send + Sync + Debug + ZeroCopySend + 'static> = storage::recommended::Ipc<KeyType>;
     type BlackboardPayload = shared_memory::recommended::Ipc<BumpAllocator>;
     type UniqueId = iceoryx2::unique_id_generator::unique_system_id::UniqueSystemId;
