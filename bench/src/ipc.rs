@@ -1,8 +1,11 @@
 //! `navsync-bench ipc`: publisher → subscriber latency between separate processes, iceoryx2
-//! (navsync's services: shared-memory sample + event notification, the subscriber asleep in a
-//! WaitSet as the estimator is) against a Unix-domain socket carrying the same bytes
-//! (SOCK_SEQPACKET, the subscriber asleep in a blocking `recv`), for `ImuSample` and
-//! `NavState`, paced at a fixed rate and unpaced.
+//! (navsync's services: shared-memory sample + futex wake-up; the subscriber asleep on the
+//! service's event as a client is, on the one wake-up as the estimator is, or spinning)
+//! against a Unix-domain socket carrying the same bytes (SOCK_SEQPACKET, the subscriber asleep
+//! in a blocking `recv`), for `ImuSample` (112 B), `NavState` (640 B), `GnssRaw` (4 KiB) and
+//! a 64 KiB message, 1 to 16 subscriber processes, paced at a fixed rate and unpaced. The
+//! iceoryx2 subscribers read the stamp in place in shared memory; the socket's receive the
+//! whole message.
 //!
 //! Every case starts its own processes (`navsync-bench helper ipc-pub|ipc-sub`) under a
 //! fresh iceoryx2 prefix: the subscribers first (they print `ready` once listening), then the

@@ -627,18 +627,26 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
                 "an input of a Wake has no wake-up of its own",
             ));
         };
-        let deadline = std::time::Instant::now() + timeout;
+        // The clock is read only once a wait has come back empty: a sample that wakes the
+        // first wait is in hand without it.
+        let mut deadline: Option<std::time::Instant> = None;
         loop {
-            let left = deadline.saturating_duration_since(std::time::Instant::now());
-            match listener.timed_wait(|_| {}, left.min(WAIT_SLICE)) {
-                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+            let left = deadline.map_or(timeout, |d| d.saturating_duration_since(std::time::Instant::now()));
+            let woken = match listener.timed_wait(|_| {}, left.min(WAIT_SLICE)) {
+                Ok(n) => n > 0,
+                Err(ListenerWaitError::InterruptSignal) => true,
                 Err(e) => return Err(err("waiting on", &self.service, e)),
-            }
+            };
             if let Some(s) = self.receive_with(&mut f)? {
                 return Ok(Some(s));
             }
             if left <= WAIT_SLICE || termination_requested() {
                 return Ok(None);
+            }
+            if deadline.is_none() {
+                // A slice that ended without an event took all of it; one woken took ~0.
+                let used = if woken { Duration::ZERO } else { WAIT_SLICE };
+                deadline = Some(std::time::Instant::now() + (timeout - used));
             }
         }
     }

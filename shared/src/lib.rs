@@ -8,8 +8,10 @@
 //!    [`samples::TimeState`], [`samples::NavState`], [`samples::Health`], [`samples::SimTruth`]),
 //!    with units and frames on every field.
 //! 2. [`services`]: the service names (`navsync/imu/{id}/sample`, …) and their QoS.
-//! 3. [`ipc`]: the iceoryx2 plumbing: [`ipc::IpcNode`], [`ipc::Publisher`] (zero-copy publish
-//!    with wake-up), [`ipc::Subscriber`] (WaitSet-friendly, blocking wait with timeout).
+//! 3. [`ipc`]: the iceoryx2 plumbing on navsync's own service type (futex wake-ups):
+//!    [`ipc::IpcNode`], [`ipc::Publisher`] (zero-copy publish with wake-up),
+//!    [`ipc::Subscriber`] (blocking wait with timeout), [`ipc::Wake`] (one wake-up for many
+//!    inputs).
 //! 4. [`time`]: host monotonic time, UTC, GPS time, leap seconds.
 //! 5. [`earth`]: the WGS-84 model (radii, normal gravity, earth rate, transport rate).
 //! 6. [`reflect`] and [`json`]: the field tables behind the layout contract and the JSON codec.

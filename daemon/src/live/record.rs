@@ -1,9 +1,9 @@
 //! `navsync record OUT.mcap [--services GLOB …] [--duration S]`: records navsync services into
 //! an MCAP file (see `navsync_recording` for the format and conventions).
 //!
-//! One subscriber per service, all attached to one WaitSet: the recorder sleeps until a
-//! publisher wakes it (no polling per sample). Services are found by name: patterns without
-//! wildcards are subscribed at start (so nothing published after the recorder started is
+//! One subscriber per service and one wake-up for all ([`navsync_shared::ipc::Wake`]): the
+//! recorder sleeps until a publisher wakes it (no polling per sample). Services are found by
+//! name: patterns without wildcards are subscribed at start (so nothing published after the recorder started is
 //! missed), wildcard patterns (default `navsync/**`: every sensor sample, time state, nav
 //! state, health, sim truth) are matched against `list_services()` every
 //! [`DISCOVERY_INTERVAL`], so services that appear later are recorded from then on.
