@@ -172,8 +172,14 @@ impl<T: Stamped> Client<T> {
         s
     }
 
-    /// The next sample in arrival order, waiting up to `timeout`; `None` on timeout, when
-    /// SIGINT/SIGTERM arrived, or early when another signal (e.g. SIGCONT) interrupted the wait. Samples are buffered between calls (up to the service's buffer,
+    /// Busy polling: [`next`](Self::next) spins instead of sleeping (lowest latency, a whole
+    /// core; for a subscriber on an isolated core). Off by default.
+    pub fn set_busy_poll(&self, on: bool) {
+        self.sub.set_busy_poll(on);
+    }
+
+    /// The next sample in arrival order, waiting up to `timeout`; `None` on timeout or when
+    /// SIGINT/SIGTERM arrived. Samples are buffered between calls (up to the service's buffer,
     /// oldest lost first), so a loop over `next` sees every sample of a steady stream.
     pub fn next(&mut self, timeout: Duration) -> Result<Option<T>, ClientError> {
         if self.node.termination_requested() {

@@ -292,6 +292,6 @@ fn soak_memory_flat_latency_flat_every_loss_reported() {
         l50 <= (f50 * 2.0).max(2.0),
         "NavState latency p50 grew: first quarter {f50:.3} ms, last {l50:.3} ms"
     );
-    drop((nav, imus, fix, pps, health, node));
+    drop((nav, imus, fix, pps, health, wake, node));
     env.finish();
 }

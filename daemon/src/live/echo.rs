@@ -51,6 +51,10 @@ pub struct EchoArgs {
     /// With --zenoh: only this instance's samples [default: any].
     #[arg(long, requires = "zenoh")]
     pub instance: Option<String>,
+    /// Spin on the service instead of sleeping between samples (lowest latency, a whole core:
+    /// for a subscriber on an isolated core). Off by default.
+    #[arg(long, conflicts_with = "zenoh")]
+    pub busy_poll: bool,
 }
 
 /// A positive number of seconds.
@@ -265,6 +269,7 @@ fn echo<T: Reflect + ZeroCopySend + core::fmt::Debug>(
     };
     let node = IpcNode::new(&format!("echo-{}", std::process::id()))?;
     let sub = node.subscriber::<T>(&args.service)?;
+    sub.set_busy_poll(args.busy_poll);
     let mut out = std::io::stdout().lock();
     let mut printed = 0u64;
     let mut last = Instant::now();
