@@ -2,7 +2,7 @@
 //! (navsync's services: shared-memory sample + futex wake-up; the subscriber asleep on the
 //! service's event as a client is, on the one wake-up as the estimator is, or spinning)
 //! against a Unix-domain socket carrying the same bytes (SOCK_SEQPACKET, the subscriber asleep
-//! in a blocking `recv`), for `ImuSample` (112 B), `NavState` (640 B), `GnssRaw` (4 KiB) and
+//! in a blocking `recv`), for `ImuSample` (112 B), `NavState` (640 B), `GnssRaw` (2608 B) and
 //! a 64 KiB message, 1 to 16 subscriber processes, paced at a fixed rate and unpaced. The
 //! iceoryx2 subscribers read the stamp in place in shared memory; the socket's receive the
 //! whole message.
@@ -43,7 +43,7 @@ pub enum Kind {
     Imu,
     /// `NavState` on `navsync/nav/state`.
     Nav,
-    /// `GnssRaw` (a raw-measurement epoch, 4 KiB) on `navsync/gnss/bench/raw`.
+    /// `GnssRaw` (a raw-measurement epoch, 2608 B) on `navsync/gnss/bench/raw`.
     Raw,
     /// [`Blob64k`] (64 KiB, an image-sized message) on [`BLOB_SERVICE`].
     Blob,
@@ -227,7 +227,7 @@ pub struct IpcBenchArgs {
     /// Samples per case.
     #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..))]
     pub samples: u64,
-    /// Sample types, comma-separated: imu, nav.
+    /// Sample types, comma-separated: imu (112 B), nav (640 B), raw (GnssRaw, 2.6 KiB), blob (64 KiB).
     #[arg(long, value_delimiter = ',', default_value = "imu,nav")]
     pub kinds: Vec<Kind>,
     /// Publishing rates, Hz or `max` (back to back), comma-separated.
