@@ -19,9 +19,12 @@
 //! - [`offline`]: the pipeline over a stream of samples as fast as the CPU allows.
 //! - [`evaluation`]: accuracy against a truth (the simulator's, or another trajectory).
 //! - [`settings`]: every setting with its default.
+//! - [`gnss`]: GNSS signal-in-space models (GPS LNAV subframe decoding, checked against gpsd),
+//!   the first pieces of tightly coupled fusion; not used by the pipeline yet.
 
 pub mod array;
 pub mod evaluation;
+pub mod gnss;
 pub mod input_order;
 pub mod nav;
 pub mod offline;

@@ -1,0 +1,204 @@
+//! GPS satellite position and clock from the broadcast ephemeris and almanac (IS-GPS-200N
+//! §20.3.3.4.3, Table 20-IV "Elements of Coordinate Systems"; §20.3.3.5.2.1, Table 20-VI for
+//! the almanac; §20.3.3.3.3.1 for the clock with the relativistic term and T_GD). Positions
+//! are ECEF (WGS-84) in m at the given GPS time of transmission, seconds of week; the Earth's
+//! rotation during the signal's travel (Sagnac) is the user's, who knows the receiver.
+
+use super::lnav::{Almanac, Ephem1, Ephem2, Ephem3};
+
+/// WGS-84 value of the Earth's gravitational constant for GPS, m³/s² (IS-GPS-200 Table 20-IV).
+pub const MU_M3_S2: f64 = 3.986005e14;
+/// WGS-84 Earth rotation rate, rad/s (IS-GPS-200 Table 20-IV).
+pub const OMEGA_E_RAD_S: f64 = 7.292_115_146_7e-5;
+/// π as IS-GPS-200 defines it for the semicircle conversions (deliberately this truncated
+/// value, which the control segment's fit uses, not `core::f64::consts::PI`).
+#[allow(clippy::approx_constant)]
+pub const GPS_PI: f64 = 3.141_592_653_589_8;
+/// Relativistic constant F = −2√μ/c², s/√m (IS-GPS-200 §20.3.3.3.3.1).
+pub const F_S_SQRT_M: f64 = -4.442_807_633e-10;
+/// Half a GPS week, s: time differences are wrapped into ±this.
+const HALF_WEEK_S: f64 = 302_400.0;
+
+/// A satellite's broadcast orbit and clock in physical units (angles in rad).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Orbit {
+    /// Reference time of the orbit (t_oe, or t_oa for an almanac), s of week.
+    pub toe_s: f64,
+    /// √A, √m.
+    pub sqrt_a: f64,
+    /// Eccentricity.
+    pub e: f64,
+    /// Inclination at t_oe, rad.
+    pub i0_rad: f64,
+    /// Rate of inclination, rad/s.
+    pub idot_rad_s: f64,
+    /// Longitude of the ascending node at the week's start, rad.
+    pub omega0_rad: f64,
+    /// Rate of right ascension, rad/s.
+    pub omega_dot_rad_s: f64,
+    /// Argument of perigee, rad.
+    pub omega_rad: f64,
+    /// Mean anomaly at t_oe, rad.
+    pub m0_rad: f64,
+    /// Mean motion correction, rad/s.
+    pub delta_n_rad_s: f64,
+    /// Harmonic corrections: C_uc, C_us (rad), C_rc, C_rs (m), C_ic, C_is (rad).
+    pub cuc: f64,
+    /// See `cuc`.
+    pub cus: f64,
+    /// See `cuc`.
+    pub crc: f64,
+    /// See `cuc`.
+    pub crs: f64,
+    /// See `cuc`.
+    pub cic: f64,
+    /// See `cuc`.
+    pub cis: f64,
+    /// Clock reference time t_oc, s of week.
+    pub toc_s: f64,
+    /// Clock polynomial a_f0 (s), a_f1 (s/s), a_f2 (s/s²).
+    pub af: [f64; 3],
+    /// Group delay T_GD, s (0 for an almanac).
+    pub tgd_s: f64,
+}
+
+fn p2(n: i32) -> f64 {
+    2f64.powi(n)
+}
+
+impl Orbit {
+    /// The ephemeris of subframes 1–3 (scale factors of IS-GPS-200 Tables 20-I and 20-III).
+    /// The caller pairs subframes of one issue (IODC's 8 LSBs = IODE of 2 and 3).
+    pub fn from_ephemeris(s1: &Ephem1, s2: &Ephem2, s3: &Ephem3) -> Self {
+        let sc = GPS_PI;
+        Self {
+            toe_s: f64::from(s2.toe) * 16.0,
+            sqrt_a: f64::from(s2.sqrt_a) * p2(-19),
+            e: f64::from(s2.e) * p2(-33),
+            i0_rad: f64::from(s3.i0) * p2(-31) * sc,
+            idot_rad_s: f64::from(s3.idot) * p2(-43) * sc,
+            omega0_rad: f64::from(s3.omega0) * p2(-31) * sc,
+            omega_dot_rad_s: f64::from(s3.omega_dot) * p2(-43) * sc,
+            omega_rad: f64::from(s3.omega) * p2(-31) * sc,
+            m0_rad: f64::from(s2.m0) * p2(-31) * sc,
+            delta_n_rad_s: f64::from(s2.delta_n) * p2(-43) * sc,
+            cuc: f64::from(s2.cuc) * p2(-29),
+            cus: f64::from(s2.cus) * p2(-29),
+            crc: f64::from(s3.crc) * p2(-5),
+            crs: f64::from(s2.crs) * p2(-5),
+            cic: f64::from(s3.cic) * p2(-29),
+            cis: f64::from(s3.cis) * p2(-29),
+            toc_s: f64::from(s1.toc) * 16.0,
+            af: [
+                f64::from(s1.af0) * p2(-31),
+                f64::from(s1.af1) * p2(-43),
+                f64::from(s1.af2) * p2(-55),
+            ],
+            tgd_s: f64::from(s1.tgd) * p2(-31),
+        }
+    }
+
+    /// An almanac page (IS-GPS-200 Table 20-VI): a Keplerian orbit without harmonic
+    /// corrections, inclination 0.30 semicircles + δ_i.
+    pub fn from_almanac(a: &Almanac) -> Self {
+        let sc = GPS_PI;
+        let toa = f64::from(a.toa) * 4096.0;
+        Self {
+            toe_s: toa,
+            sqrt_a: f64::from(a.sqrt_a) * p2(-11),
+            e: f64::from(a.e) * p2(-21),
+            i0_rad: (0.30 + f64::from(a.delta_i) * p2(-19)) * sc,
+            omega0_rad: f64::from(a.omega0) * p2(-23) * sc,
+            omega_dot_rad_s: f64::from(a.omega_dot) * p2(-38) * sc,
+            omega_rad: f64::from(a.omega) * p2(-23) * sc,
+            m0_rad: f64::from(a.m0) * p2(-23) * sc,
+            toc_s: toa,
+            af: [f64::from(a.af0) * p2(-20), f64::from(a.af1) * p2(-38), 0.0],
+            ..Self::default()
+        }
+    }
+
+    /// Eccentric anomaly (rad) at GPS time `t_s` (s of week), by fixed-point iteration of
+    /// Kepler's equation M = E − e·sin E.
+    fn eccentric_anomaly(&self, t_s: f64) -> (f64, f64) {
+        let a = self.sqrt_a * self.sqrt_a;
+        let tk = wrap(t_s - self.toe_s);
+        let n = (MU_M3_S2 / (a * a * a)).sqrt() + self.delta_n_rad_s;
+        let m = self.m0_rad + n * tk;
+        let mut e_anom = m;
+        for _ in 0..30 {
+            let next = m + self.e * e_anom.sin();
+            if (next - e_anom).abs() < 1e-15 {
+                e_anom = next;
+                break;
+            }
+            e_anom = next;
+        }
+        (e_anom, tk)
+    }
+
+    /// Satellite position, ECEF at the time of transmission `t_s` (GPS s of week), m
+    /// (IS-GPS-200 Table 20-IV).
+    pub fn position_ecef_m(&self, t_s: f64) -> [f64; 3] {
+        let (ek, tk) = self.eccentric_anomaly(t_s);
+        let a = self.sqrt_a * self.sqrt_a;
+        let nu = ((1.0 - self.e * self.e).sqrt() * ek.sin()).atan2(ek.cos() - self.e);
+        let phi = nu + self.omega_rad;
+        let (s2, c2) = (2.0 * phi).sin_cos();
+        let u = phi + self.cus * s2 + self.cuc * c2;
+        let r = a * (1.0 - self.e * ek.cos()) + self.crs * s2 + self.crc * c2;
+        let i = self.i0_rad + self.cis * s2 + self.cic * c2 + self.idot_rad_s * tk;
+        let (xp, yp) = (r * u.cos(), r * u.sin());
+        let om = self.omega0_rad + (self.omega_dot_rad_s - OMEGA_E_RAD_S) * tk - OMEGA_E_RAD_S * self.toe_s;
+        let (so, co) = om.sin_cos();
+        let (si, ci) = i.sin_cos();
+        [xp * co - yp * ci * so, xp * so + yp * ci * co, yp * si]
+    }
+
+    /// Satellite clock offset for L1 C/A at `t_s` (GPS s of week), s: the polynomial, the
+    /// relativistic term F·e·√A·sin E_k and −T_GD (IS-GPS-200 §20.3.3.3.3.1–2).
+    pub fn clock_offset_s(&self, t_s: f64) -> f64 {
+        let dt = wrap(t_s - self.toc_s);
+        let (ek, _) = self.eccentric_anomaly(t_s);
+        self.af[0] + self.af[1] * dt + self.af[2] * dt * dt + F_S_SQRT_M * self.e * self.sqrt_a * ek.sin() - self.tgd_s
+    }
+}
+
+/// A time difference wrapped into ±half a week (IS-GPS-200 Table 20-IV, t_k).
+fn wrap(dt: f64) -> f64 {
+    if dt > HALF_WEEK_S {
+        dt - 2.0 * HALF_WEEK_S
+    } else if dt < -HALF_WEEK_S {
+        dt + 2.0 * HALF_WEEK_S
+    } else {
+        dt
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_circular_orbit_keeps_its_radius_and_period() {
+        // e = 0, no corrections: |r| = A at any time, and the satellite returns after 2π/n.
+        let o = Orbit {
+            sqrt_a: 5153.7,
+            i0_rad: 0.3 * GPS_PI,
+            ..Orbit::default()
+        };
+        let a = 5153.7f64 * 5153.7;
+        let period = 2.0 * std::f64::consts::PI / (MU_M3_S2 / (a * a * a)).sqrt();
+        for t in [0.0, 1000.0, 20_000.0] {
+            let p = o.position_ecef_m(t);
+            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            assert!((r - a).abs() < 1e-6, "r {r} vs A {a}");
+        }
+        // In the orbital plane the angle advances by 2π per period; ECEF adds the Earth's
+        // rotation over the period, which the node's term −Ω̇e·t_k undoes.
+        let (p0, p1) = (o.position_ecef_m(100.0), o.position_ecef_m(100.0 + period));
+        let z_diff = (p0[2] - p1[2]).abs();
+        assert!(z_diff < 1e-3, "z after one period differs by {z_diff} m");
+        assert_eq!(wrap(400_000.0), 400_000.0 - 604_800.0);
+    }
+}
