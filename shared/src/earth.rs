@@ -76,6 +76,60 @@ pub fn ned_between(lat1: f64, lon1: f64, h1: f64, lat2: f64, lon2: f64, h2: f64)
     ]
 }
 
+/// A geodetic position on the WGS-84 ellipsoid.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Geodetic {
+    /// Latitude, degrees north.
+    pub lat_deg: f64,
+    /// Longitude, degrees east.
+    pub lon_deg: f64,
+    /// Height above the ellipsoid, m.
+    pub height_m: f64,
+}
+
+/// The geodetic position of the ECEF point (`x_m`, `y_m`, `z_m`); `None` for a point within
+/// 1 km of the Earth's centre (a receiver's "no solution" zeros) or a non-finite one. Iterates
+/// the geodetic latitude to convergence (NIMA TR8350.2 ellipsoid; the height formula
+/// `p·cos φ + z·sin φ − a·√(1 − e²·sin² φ)` holds at the poles too), exact to well below a
+/// centimetre.
+pub fn geodetic_from_ecef(x_m: f64, y_m: f64, z_m: f64) -> Option<Geodetic> {
+    if !(x_m.is_finite() && y_m.is_finite() && z_m.is_finite()) || x_m.hypot(y_m).hypot(z_m) < 1_000.0 {
+        return None;
+    }
+    let p = x_m.hypot(y_m);
+    let lon = y_m.atan2(x_m);
+    let mut lat = z_m.atan2(p * (1.0 - WGS84_E2));
+    for _ in 0..8 {
+        let (s, c) = lat.sin_cos();
+        let n = WGS84_A / (1.0 - WGS84_E2 * s * s).sqrt();
+        let height = p * c + z_m * s - WGS84_A * (1.0 - WGS84_E2 * s * s).sqrt();
+        let next = z_m.atan2(p * (1.0 - WGS84_E2 * n / (n + height)));
+        let done = (next - lat).abs() < 1e-15;
+        lat = next;
+        if done {
+            break;
+        }
+    }
+    let (s, c) = lat.sin_cos();
+    let height = p * c + z_m * s - WGS84_A * (1.0 - WGS84_E2 * s * s).sqrt();
+    Some(Geodetic {
+        lat_deg: lat.to_degrees(),
+        lon_deg: lon.to_degrees(),
+        height_m: height,
+    })
+}
+
+/// The ECEF velocity (`vx`, `vy`, `vz`, m/s) in the local north-east-down frame at
+/// (`lat_deg`, `lon_deg`): `[north, east, down]`, m/s.
+pub fn ned_from_ecef_velocity(lat_deg: f64, lon_deg: f64, vx: f64, vy: f64, vz: f64) -> [f64; 3] {
+    let (sin_lat, cos_lat) = lat_deg.to_radians().sin_cos();
+    let (sin_lon, cos_lon) = lon_deg.to_radians().sin_cos();
+    let north = -vx * sin_lat * cos_lon - vy * sin_lat * sin_lon + vz * cos_lat;
+    let east = -vx * sin_lon + vy * cos_lon;
+    let up = vx * cos_lat * cos_lon + vy * cos_lat * sin_lon + vz * sin_lat;
+    [north, east, -up]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

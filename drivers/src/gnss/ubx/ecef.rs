@@ -1,67 +1,8 @@
 //! WGS-84 Earth-centred, Earth-fixed (ECEF) coordinates to geodetic ones, for receivers that
-//! report their solution in ECEF only (UBX-NAV-SOL).
-//!
-//! The conversion iterates the geodetic latitude to convergence (NIMA TR8350.2 ellipsoid; the
-//! height formula `p·cos φ + z·sin φ − a·√(1 − e²·sin² φ)` holds at the poles too), exact to
-//! well below the centimetre resolution of the input.
+//! report their solution in ECEF only (UBX-NAV-SOL): the conversion lives in
+//! `navsync_shared::earth` (the GNSS models use it too); its tests are here.
 
-/// WGS-84 semi-major axis, m.
-const A_M: f64 = 6_378_137.0;
-/// WGS-84 flattening.
-const F: f64 = 1.0 / 298.257_223_563;
-/// First eccentricity squared.
-const E2: f64 = F * (2.0 - F);
-
-/// A geodetic position on the WGS-84 ellipsoid.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Geodetic {
-    /// Latitude, degrees north.
-    pub lat_deg: f64,
-    /// Longitude, degrees east.
-    pub lon_deg: f64,
-    /// Height above the ellipsoid, m.
-    pub height_m: f64,
-}
-
-/// The geodetic position of the ECEF point (`x_m`, `y_m`, `z_m`); `None` for a point within
-/// 1 km of the Earth's centre (a receiver's "no solution" zeros) or a non-finite one.
-pub fn geodetic_from_ecef(x_m: f64, y_m: f64, z_m: f64) -> Option<Geodetic> {
-    if !(x_m.is_finite() && y_m.is_finite() && z_m.is_finite()) || x_m.hypot(y_m).hypot(z_m) < 1_000.0 {
-        return None;
-    }
-    let p = x_m.hypot(y_m);
-    let lon = y_m.atan2(x_m);
-    let mut lat = z_m.atan2(p * (1.0 - E2));
-    for _ in 0..8 {
-        let (s, c) = lat.sin_cos();
-        let n = A_M / (1.0 - E2 * s * s).sqrt();
-        let height = p * c + z_m * s - A_M * (1.0 - E2 * s * s).sqrt();
-        let next = z_m.atan2(p * (1.0 - E2 * n / (n + height)));
-        let done = (next - lat).abs() < 1e-15;
-        lat = next;
-        if done {
-            break;
-        }
-    }
-    let (s, c) = lat.sin_cos();
-    let height = p * c + z_m * s - A_M * (1.0 - E2 * s * s).sqrt();
-    Some(Geodetic {
-        lat_deg: lat.to_degrees(),
-        lon_deg: lon.to_degrees(),
-        height_m: height,
-    })
-}
-
-/// The ECEF velocity (`vx`, `vy`, `vz`, m/s) in the local north-east-down frame at
-/// (`lat_deg`, `lon_deg`): `[north, east, down]`, m/s.
-pub fn ned_from_ecef_velocity(lat_deg: f64, lon_deg: f64, vx: f64, vy: f64, vz: f64) -> [f64; 3] {
-    let (sin_lat, cos_lat) = lat_deg.to_radians().sin_cos();
-    let (sin_lon, cos_lon) = lon_deg.to_radians().sin_cos();
-    let north = -vx * sin_lat * cos_lon - vy * sin_lat * sin_lon + vz * cos_lat;
-    let east = -vx * sin_lon + vy * cos_lon;
-    let up = vx * cos_lat * cos_lon + vy * cos_lat * sin_lon + vz * sin_lat;
-    [north, east, -up]
-}
+pub use navsync_shared::earth::{Geodetic, geodetic_from_ecef, ned_from_ecef_velocity};
 
 #[cfg(test)]
 mod tests {
@@ -69,10 +10,8 @@ mod tests {
 
     /// Geodetic → ECEF (closed form), to check the inverse.
     fn ecef(lat_deg: f64, lon_deg: f64, h: f64) -> (f64, f64, f64) {
-        let (s, c) = lat_deg.to_radians().sin_cos();
-        let (sl, cl) = lon_deg.to_radians().sin_cos();
-        let n = A_M / (1.0 - E2 * s * s).sqrt();
-        ((n + h) * c * cl, (n + h) * c * sl, (n * (1.0 - E2) + h) * s)
+        let [x, y, z] = navsync_shared::earth::geodetic_to_ecef(lat_deg.to_radians(), lon_deg.to_radians(), h);
+        (x, y, z)
     }
 
     #[test]
