@@ -155,6 +155,20 @@ impl Orbit {
         [xp * co - yp * ci * so, xp * so + yp * ci * co, yp * si]
     }
 
+    /// Satellite velocity, ECEF, m/s: the central difference of [`position_ecef_m`] over
+    /// ±0.5 s (the orbit's curvature makes that exact to ~0.1 mm/s).
+    ///
+    /// [`position_ecef_m`]: Self::position_ecef_m
+    pub fn velocity_ecef_mps(&self, t_s: f64) -> [f64; 3] {
+        let (a, b) = (self.position_ecef_m(t_s + 0.5), self.position_ecef_m(t_s - 0.5));
+        [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+    }
+
+    /// Satellite clock drift at `t_s`, s/s (the derivative of the polynomial).
+    pub fn clock_drift(&self, t_s: f64) -> f64 {
+        self.af[1] + 2.0 * self.af[2] * wrap(t_s - self.toc_s)
+    }
+
     /// Satellite clock offset for L1 C/A at `t_s` (GPS s of week), s: the polynomial, the
     /// relativistic term F·e·√A·sin E_k and −T_GD (IS-GPS-200 §20.3.3.3.3.1–2).
     pub fn clock_offset_s(&self, t_s: f64) -> f64 {

@@ -3,7 +3,8 @@
 //! (IS-GPS-200N §20.3.3.5.2.5), a standard-atmosphere Saastamoinen troposphere, and a
 //! weighted least-squares solution of ECEF position and receiver clock bias (Gauss-Newton on
 //! the normal equations, statically sized) with a chi-square residual check that excludes the
-//! worst satellite once (RAIM-style fault detection and exclusion).
+//! worst satellite once (RAIM-style fault detection and exclusion); velocity and clock drift
+//! from Doppler by weighted least squares at a known position.
 
 use nalgebra::{Matrix4, Vector4};
 
@@ -260,6 +261,71 @@ fn solve_excluding(
         }
     }
     Err(SppError::NoConvergence)
+}
+
+/// One satellite's Doppler for [`solve_velocity`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RangeRate {
+    /// Satellite (PRN).
+    pub sv: u8,
+    /// Measured range rate, m/s: −λ_L1 × Doppler (Hz), λ_L1 = c / 1575.42 MHz.
+    pub range_rate_mps: f64,
+    /// Satellite position and velocity at transmission, ECEF, m and m/s.
+    pub sat_ecef_m: [f64; 3],
+    /// See `sat_ecef_m`.
+    pub sat_vel_mps: [f64; 3],
+    /// Satellite clock drift, s/s.
+    pub sat_clock_drift: f64,
+    /// Range-rate noise, 1σ, m/s.
+    pub sigma_mps: f64,
+}
+
+/// A velocity and clock-drift solution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VelocitySolution {
+    /// Receiver velocity, ECEF, m/s.
+    pub vel_ecef_mps: [f64; 3],
+    /// Receiver clock drift, m/s (c·δṫ).
+    pub clock_drift_mps: f64,
+    /// Covariance of (v_x, v_y, v_z, c·δṫ), m²/s².
+    pub cov: Matrix4<f64>,
+    /// Satellites used.
+    pub used: usize,
+}
+
+/// Receiver velocity and clock drift from range rates, at the receiver position `rx` (ECEF, m):
+/// ρ̇ = (v_sat − v_rx)·u + c·(δṫ_rx − δṫ_sat), u the unit vector receiver → satellite, solved
+/// by weighted least squares (linear: one step).
+pub fn solve_velocity(obs: &[RangeRate], rx: [f64; 3], settings: &SppSettings) -> Result<VelocitySolution, SppError> {
+    let (mut n, mut b, mut used) = (Matrix4::zeros(), Vector4::zeros(), 0usize);
+    for o in obs {
+        let r0 = dist(o.sat_ecef_m, rx);
+        let sat = rotate_for_flight(o.sat_ecef_m, r0 / C_M_S);
+        let (el, _) = elevation_azimuth(rx, sat);
+        if el < settings.elevation_mask_rad {
+            continue;
+        }
+        let r = dist(sat, rx);
+        let u = [(sat[0] - rx[0]) / r, (sat[1] - rx[1]) / r, (sat[2] - rx[2]) / r];
+        let vs = rotate_for_flight(o.sat_vel_mps, r0 / C_M_S);
+        let known = vs[0] * u[0] + vs[1] * u[1] + vs[2] * u[2] - C_M_S * o.sat_clock_drift;
+        let h = Vector4::new(-u[0], -u[1], -u[2], 1.0);
+        let w = (el.sin() / o.sigma_mps).powi(2);
+        n += h * h.transpose() * w;
+        b += h * (w * (o.range_rate_mps - known));
+        used += 1;
+    }
+    if used < 4 {
+        return Err(SppError::TooFew(used));
+    }
+    let cov = n.try_inverse().ok_or(SppError::NoConvergence)?;
+    let x = cov * b;
+    Ok(VelocitySolution {
+        vel_ecef_mps: [x[0], x[1], x[2]],
+        clock_drift_mps: x[3],
+        cov,
+        used,
+    })
 }
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
