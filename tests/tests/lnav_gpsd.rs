@@ -419,3 +419,164 @@ fn single_point_positioning_on_the_real_constellation() {
     let s = spp::solve(&obs, Some(&iono), t_rx, [0.0; 3], &settings).unwrap();
     assert_eq!(s.excluded, Some(faulty), "{} used", s.used);
 }
+
+/// Real geometry, where the corpus allows it: `ublox-zed-f9p-sfrbx` is the only capture with
+/// both subframes and NAV-SAT/NAV-PVT, and its only complete GPS page is SV 17's almanac.
+/// Seen from the receiver's NAV-PVT position at the NAV-SAT epochs, a satellite the receiver
+/// lists must have the receiver's elevation and azimuth within 1° (it rounds to whole
+/// degrees); SV 17 is not listed, and the decoded almanac puts it 19.5° below the horizon.
+#[test]
+fn a_decoded_almanac_puts_the_satellite_where_the_receiver_sees_it() {
+    use navsync_drivers::gnss::ubx::framer::{Frame, UbxFramer};
+    use navsync_drivers::gnss::ubx::messages::{self, Message};
+    use navsync_estimator::gnss::orbit::Orbit;
+    use navsync_estimator::gnss::spp;
+    let dir = shared_material("corpora/gpsd-ubx");
+    let bytes = std::fs::read(dir.join("ublox-zed-f9p-sfrbx.log")).unwrap();
+    let (header, _) = gpsd_header(&bytes);
+    let mut framer = UbxFramer::new();
+    let (mut pvt, mut sats, mut alm) = (None, Vec::new(), None);
+    framer.push(&bytes[header..], 0, 0, &mut |f| {
+        if let Frame::Ubx { class, id, payload, .. } = f {
+            match messages::decode(class, id, payload) {
+                Ok(Message::NavPvt(p)) => pvt = Some(p),
+                Ok(Message::NavSat(s)) => sats.push(s),
+                Ok(Message::RxmSfrbx(x)) if x.gnss_id == 0 => {
+                    if let Ok(lnav::Decoded {
+                        subframe: Subframe::Almanac(a),
+                        ..
+                    }) = lnav::decode(x.data_words())
+                    {
+                        alm = Some(a);
+                    }
+                }
+                _ => {}
+            }
+        }
+    });
+    let (pvt, alm) = (pvt.expect("NAV-PVT"), alm.expect("an almanac page"));
+    assert!(!sats.is_empty(), "NAV-SAT");
+    let orbit = Orbit::from_almanac(&alm);
+    let rx = navsync_shared::earth::geodetic_to_ecef(pvt.lat_deg.to_radians(), pvt.lon_deg.to_radians(), pvt.height_m);
+    let mut compared = 0;
+    for s in &sats {
+        let t = f64::from(s.itow_ms) * 1e-3;
+        for sat in s.satellites().iter().filter(|x| x.gnss_id == 0 && x.sv_id == alm.sv) {
+            let tau = 0.075;
+            let pos = spp::rotate_for_flight(orbit.position_ecef_m(t - tau), tau);
+            let (el, az) = spp::elevation_azimuth(rx, pos);
+            let (el, az) = (el.to_degrees(), az.to_degrees());
+            let daz = (az - f64::from(sat.azim_deg) + 540.0).rem_euclid(360.0) - 180.0;
+            println!(
+                "SV {} at TOW {t}: almanac el {el:.2}° az {az:.2}°, receiver el {}° az {}°",
+                alm.sv, sat.elev_deg, sat.azim_deg
+            );
+            assert!(
+                (el - f64::from(sat.elev_deg)).abs() <= 1.0,
+                "elevation {el} vs {}",
+                sat.elev_deg
+            );
+            assert!(daz.abs() <= 1.0, "azimuth {az} vs {}", sat.azim_deg);
+            compared += 1;
+        }
+    }
+    if compared == 0 {
+        // Not tracked: the almanac must put it below the horizon, while every satellite the
+        // receiver lists is above it (its own elevations).
+        for s in &sats {
+            let t = f64::from(s.itow_ms) * 1e-3;
+            let (el, az) = spp::elevation_azimuth(rx, orbit.position_ecef_m(t));
+            let listed: Vec<(u8, i8)> = s
+                .satellites()
+                .iter()
+                .filter(|x| x.gnss_id == 0)
+                .map(|x| (x.sv_id, x.elev_deg))
+                .collect();
+            println!(
+                "SV {} at TOW {t}: almanac el {:.1}° az {:.1}°, not in the receiver's list {listed:?}",
+                alm.sv,
+                el.to_degrees(),
+                az.to_degrees()
+            );
+            assert!(
+                el < 0.0,
+                "SV {} is above the horizon ({:.1}°) but not listed",
+                alm.sv,
+                el.to_degrees()
+            );
+        }
+    }
+}
+
+/// Real geometry for every satellite the receiver sees: the almanac decoded from
+/// `ublox-ned-m8t-sbfrx3` (GPS week 2117) propagated back 8 weeks to `ublox-zed-f9p-sfrbx`'s
+/// NAV-SAT epochs (week 2109), seen from that receiver's NAV-PVT position: elevation and
+/// azimuth of every GPS satellite in NAV-SAT (listed with its elevation) against the
+/// receiver's own. (The corpus has no capture with both complete ephemerides and NAV-SAT; the
+/// issue's "within 1° from the ephemerides" needs one.)
+#[test]
+fn an_almanac_weeks_old_still_points_at_every_satellite() {
+    use navsync_drivers::gnss::ubx::framer::{Frame, UbxFramer};
+    use navsync_drivers::gnss::ubx::messages::{self, Message};
+    use navsync_estimator::gnss::orbit::Orbit;
+    use navsync_estimator::gnss::spp;
+    let dir = shared_material("corpora/gpsd-ubx");
+    let m8t = std::fs::read(dir.join("ublox-ned-m8t-sbfrx3.log")).unwrap();
+    let mut almanac = std::collections::BTreeMap::new();
+    let mut week = None;
+    for n in nav_data(&m8t).iter().filter(|n| n.gnss_id == 0) {
+        let len = usize::from(n.num_words).min(n.words.len());
+        match lnav::decode(&n.words[..len]).map(|d| d.subframe) {
+            Ok(Subframe::Almanac(a)) if a.sqrt_a > 0 => {
+                almanac.insert(a.sv, Orbit::from_almanac(&a));
+            }
+            Ok(Subframe::Ephem1(e)) => week = Some(2048 + i64::from(e.wn)),
+            _ => {}
+        }
+    }
+    let alm_week = week.expect("a week number");
+    let bytes = std::fs::read(dir.join("ublox-zed-f9p-sfrbx.log")).unwrap();
+    let (header, _) = gpsd_header(&bytes);
+    let (mut pvt, mut sats) = (None, Vec::new());
+    UbxFramer::new().push(&bytes[header..], 0, 0, &mut |f| {
+        if let Frame::Ubx { class, id, payload, .. } = f {
+            match messages::decode(class, id, payload) {
+                Ok(Message::NavPvt(p)) => pvt = Some(p),
+                Ok(Message::NavSat(s)) => sats.push(s),
+                _ => {}
+            }
+        }
+    });
+    let pvt = pvt.expect("NAV-PVT");
+    // 2020-06-10 is in GPS week 2109.
+    let rx_week = 2109i64;
+    let rx = navsync_shared::earth::geodetic_to_ecef(pvt.lat_deg.to_radians(), pvt.lon_deg.to_radians(), pvt.height_m);
+    let (mut worst_el, mut worst_az, mut n) = (0f64, 0f64, 0);
+    for s in &sats {
+        let tow = f64::from(s.itow_ms) * 1e-3;
+        for sat in s.satellites().iter().filter(|x| x.gnss_id == 0 && x.elev_deg > 0) {
+            let Some(orbit) = almanac.get(&sat.sv_id) else { continue };
+            let tk = (rx_week - alm_week) as f64 * 604_800.0 + tow - 0.075 - orbit.toe_s;
+            let pos = spp::rotate_for_flight(orbit.position_ecef_m_tk(tk), 0.075);
+            let (el, az) = spp::elevation_azimuth(rx, pos);
+            let (el, az) = (el.to_degrees(), az.to_degrees());
+            let del = el - f64::from(sat.elev_deg);
+            let daz = (az - f64::from(sat.azim_deg) + 540.0).rem_euclid(360.0) - 180.0;
+            println!(
+                "SV {:2}: almanac el {el:5.1}° az {az:5.1}°, receiver {:2}° {:3}° (Δ {del:+.2}°, {daz:+.2}°)",
+                sat.sv_id, sat.elev_deg, sat.azim_deg
+            );
+            worst_el = worst_el.max(del.abs());
+            worst_az = worst_az.max(daz.abs() * el.to_radians().cos());
+            n += 1;
+        }
+    }
+    println!("{n} satellite sightings, worst |Δel| {worst_el:.2}°, worst |Δaz|·cos el {worst_az:.2}°");
+    assert!(n >= 8, "{n} compared");
+    // 8 weeks beyond its t_oa an almanac has drifted along track (measured: 7 of the 8
+    // satellites within 1.2°, SV 29 3.3°); a wrong orbit, frame or time would be tens of degrees off.
+    assert!(
+        worst_el < 5.0 && worst_az < 5.0,
+        "worst Δel {worst_el}°, Δaz·cos el {worst_az}°"
+    );
+}

@@ -121,8 +121,11 @@ impl Orbit {
     /// Eccentric anomaly (rad) at GPS time `t_s` (s of week), by fixed-point iteration of
     /// Kepler's equation M = E − e·sin E.
     fn eccentric_anomaly(&self, t_s: f64) -> (f64, f64) {
+        self.eccentric_anomaly_tk(wrap(t_s - self.toe_s))
+    }
+
+    fn eccentric_anomaly_tk(&self, tk: f64) -> (f64, f64) {
         let a = self.sqrt_a * self.sqrt_a;
-        let tk = wrap(t_s - self.toe_s);
         let n = (MU_M3_S2 / (a * a * a)).sqrt() + self.delta_n_rad_s;
         let m = self.m0_rad + n * tk;
         let mut e_anom = m;
@@ -140,7 +143,13 @@ impl Orbit {
     /// Satellite position, ECEF at the time of transmission `t_s` (GPS s of week), m
     /// (IS-GPS-200 Table 20-IV).
     pub fn position_ecef_m(&self, t_s: f64) -> [f64; 3] {
-        let (ek, tk) = self.eccentric_anomaly(t_s);
+        self.position_ecef_m_tk(wrap(t_s - self.toe_s))
+    }
+
+    /// Like [`position_ecef_m`](Self::position_ecef_m) at `tk_s` seconds from the orbit's
+    /// reference time, not wrapped to a week (an almanac used weeks away from its t_oa).
+    pub fn position_ecef_m_tk(&self, tk_s: f64) -> [f64; 3] {
+        let (ek, tk) = self.eccentric_anomaly_tk(tk_s);
         let a = self.sqrt_a * self.sqrt_a;
         let nu = ((1.0 - self.e * self.e).sqrt() * ek.sin()).atan2(ek.cos() - self.e);
         let phi = nu + self.omega_rad;
