@@ -420,23 +420,21 @@ fn single_point_positioning_on_the_real_constellation() {
     assert_eq!(s.excluded, Some(faulty), "{} used", s.used);
 }
 
-/// Real geometry, where the corpus allows it: `ublox-zed-f9p-sfrbx` is the only capture with
-/// both subframes and NAV-SAT/NAV-PVT, and its only complete GPS page is SV 17's almanac.
-/// Seen from the receiver's NAV-PVT position at the NAV-SAT epochs, a satellite the receiver
-/// lists must have the receiver's elevation and azimuth within 1° (it rounds to whole
-/// degrees); SV 17 is not listed, and the decoded almanac puts it 19.5° below the horizon.
-#[test]
-fn a_decoded_almanac_puts_the_satellite_where_the_receiver_sees_it() {
+/// NAV-PVT (the last), every NAV-SAT and the GPS almanac pages of a capture, by navsync's
+/// UBX framer and decoders.
+fn pvt_sats_almanac(
+    capture: &str,
+) -> (
+    navsync_drivers::gnss::ubx::nav::NavPvt,
+    Vec<navsync_drivers::gnss::ubx::nav::NavSat>,
+    Vec<lnav::Almanac>,
+) {
     use navsync_drivers::gnss::ubx::framer::{Frame, UbxFramer};
     use navsync_drivers::gnss::ubx::messages::{self, Message};
-    use navsync_estimator::gnss::orbit::Orbit;
-    use navsync_estimator::gnss::spp;
-    let dir = shared_material("corpora/gpsd-ubx");
-    let bytes = std::fs::read(dir.join("ublox-zed-f9p-sfrbx.log")).unwrap();
+    let bytes = std::fs::read(shared_material("corpora/gpsd-ubx").join(capture)).unwrap();
     let (header, _) = gpsd_header(&bytes);
-    let mut framer = UbxFramer::new();
-    let (mut pvt, mut sats, mut alm) = (None, Vec::new(), None);
-    framer.push(&bytes[header..], 0, 0, &mut |f| {
+    let (mut pvt, mut sats, mut alm) = (None, Vec::new(), Vec::new());
+    UbxFramer::new().push(&bytes[header..], 0, 0, &mut |f| {
         if let Frame::Ubx { class, id, payload, .. } = f {
             match messages::decode(class, id, payload) {
                 Ok(Message::NavPvt(p)) => pvt = Some(p),
@@ -447,14 +445,27 @@ fn a_decoded_almanac_puts_the_satellite_where_the_receiver_sees_it() {
                         ..
                     }) = lnav::decode(x.data_words())
                     {
-                        alm = Some(a);
+                        alm.push(a);
                     }
                 }
                 _ => {}
             }
         }
     });
-    let (pvt, alm) = (pvt.expect("NAV-PVT"), alm.expect("an almanac page"));
+    (pvt.expect("NAV-PVT"), sats, alm)
+}
+
+/// Real geometry, where the corpus allows it: `ublox-zed-f9p-sfrbx` is the only capture with
+/// both subframes and NAV-SAT/NAV-PVT, and its only complete GPS page is SV 17's almanac.
+/// Seen from the receiver's NAV-PVT position at the NAV-SAT epochs, a satellite the receiver
+/// lists must have the receiver's elevation and azimuth within 1° (it rounds to whole
+/// degrees); SV 17 is not listed, and the decoded almanac puts it 19.5° below the horizon.
+#[test]
+fn a_decoded_almanac_puts_the_satellite_where_the_receiver_sees_it() {
+    use navsync_estimator::gnss::orbit::Orbit;
+    use navsync_estimator::gnss::spp;
+    let (pvt, sats, alm) = pvt_sats_almanac("ublox-zed-f9p-sfrbx.log");
+    let alm = *alm.last().expect("an almanac page");
     assert!(!sats.is_empty(), "NAV-SAT");
     let orbit = Orbit::from_almanac(&alm);
     let rx = navsync_shared::earth::geodetic_to_ecef(pvt.lat_deg.to_radians(), pvt.lon_deg.to_radians(), pvt.height_m);
@@ -516,8 +527,6 @@ fn a_decoded_almanac_puts_the_satellite_where_the_receiver_sees_it() {
 /// issue's "within 1° from the ephemerides" needs one.)
 #[test]
 fn an_almanac_weeks_old_still_points_at_every_satellite() {
-    use navsync_drivers::gnss::ubx::framer::{Frame, UbxFramer};
-    use navsync_drivers::gnss::ubx::messages::{self, Message};
     use navsync_estimator::gnss::orbit::Orbit;
     use navsync_estimator::gnss::spp;
     let dir = shared_material("corpora/gpsd-ubx");
@@ -535,19 +544,7 @@ fn an_almanac_weeks_old_still_points_at_every_satellite() {
         }
     }
     let alm_week = week.expect("a week number");
-    let bytes = std::fs::read(dir.join("ublox-zed-f9p-sfrbx.log")).unwrap();
-    let (header, _) = gpsd_header(&bytes);
-    let (mut pvt, mut sats) = (None, Vec::new());
-    UbxFramer::new().push(&bytes[header..], 0, 0, &mut |f| {
-        if let Frame::Ubx { class, id, payload, .. } = f {
-            match messages::decode(class, id, payload) {
-                Ok(Message::NavPvt(p)) => pvt = Some(p),
-                Ok(Message::NavSat(s)) => sats.push(s),
-                _ => {}
-            }
-        }
-    });
-    let pvt = pvt.expect("NAV-PVT");
+    let (pvt, sats, _) = pvt_sats_almanac("ublox-zed-f9p-sfrbx.log");
     // 2020-06-10 is in GPS week 2109.
     let rx_week = 2109i64;
     let rx = navsync_shared::earth::geodetic_to_ecef(pvt.lat_deg.to_radians(), pvt.lon_deg.to_radians(), pvt.height_m);
