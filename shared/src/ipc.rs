@@ -218,7 +218,10 @@ impl IpcNode {
 
     /// Sleeps up to `d` (less when a signal arrives); returns false once termination was requested.
     pub fn sleep(&self, d: Duration) -> bool {
-        let _ = self.node.wait(d);
+        // iceoryx2 reports (and clears) the signal to this wait: latch it.
+        if let Err(iceoryx2::node::NodeWaitFailure::TerminationRequest) = self.node.wait(d) {
+            TERMINATED.store(true, Ordering::Relaxed);
+        }
         !termination_requested()
     }
 
