@@ -577,3 +577,38 @@ fn an_almanac_weeks_old_still_points_at_every_satellite() {
         "worst Δel {worst_el}°, Δaz·cos el {worst_az}°"
     );
 }
+
+/// `navsync decode --subframes` prints the same decoding, one JSON object per GPS subframe
+/// (here: every one of the capture's 165 RXM-SFRBX decodes; SV 3's ephemeris among them), and
+/// fails with a reason on a capture without subframes.
+#[test]
+fn navsync_decode_prints_the_subframes() {
+    let dir = shared_material("corpora/gpsd-ubx");
+    let out = std::process::Command::new(navsync_tests::navsync_bin())
+        .args(["decode", "--subframes"])
+        .arg(dir.join("ublox-ned-m8t-sbfrx3.log"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let lines: Vec<Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 165);
+    assert!(lines.iter().all(|l| l["decoded"].is_object()), "all decoded");
+    let e2 = lines
+        .iter()
+        .find(|l| l["decoded"]["subframe"]["ephem2"].is_object())
+        .expect("an EPHEM2");
+    assert_eq!(
+        e2["decoded"]["subframe"]["ephem2"]["sqrt_a"], 2_702_062_248u64,
+        "gpsd's sqrtA"
+    );
+    let out = std::process::Command::new(navsync_tests::navsync_bin())
+        .args(["decode", "--subframes"])
+        .arg(dir.join("ublox-neo-m8n.log"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success(), "a capture without subframes must fail");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no GPS LNAV subframe"));
+}

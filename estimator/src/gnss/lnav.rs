@@ -28,7 +28,7 @@ pub enum LnavError {
 }
 
 /// Subframe 1: clock, week, health (IS-GPS-200 §20.3.3.3, Table 20-I).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 pub struct Ephem1 {
     /// GPS week number mod 1024.
     pub wn: u16,
@@ -55,7 +55,7 @@ pub struct Ephem1 {
 }
 
 /// Subframe 2: ephemeris part 1 (Table 20-III).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 pub struct Ephem2 {
     /// Issue of data, ephemeris.
     pub iode: u8,
@@ -82,7 +82,7 @@ pub struct Ephem2 {
 }
 
 /// Subframe 3: ephemeris part 2 (Table 20-III).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 pub struct Ephem3 {
     /// C_ic, 2⁻²⁹ rad.
     pub cic: i16,
@@ -105,7 +105,7 @@ pub struct Ephem3 {
 }
 
 /// An almanac page (subframe 4 pages 2–5, 7–10; subframe 5 pages 1–24; Table 20-VI).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 pub struct Almanac {
     /// SV (PRN) the almanac is for (the page's SV ID, 1..=32).
     pub sv: u8,
@@ -134,7 +134,7 @@ pub struct Almanac {
 }
 
 /// Subframe 4 page 18 (SV ID 56): ionosphere and UTC (§20.3.3.5.1.6–7, Table 20-X).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 pub struct IonoUtc {
     /// Klobuchar α_0..α_3 (2⁻³⁰ s, 2⁻²⁷ s/semicircle, 2⁻²⁴ s/semicircle², 2⁻²⁴ s/semicircle³).
     pub alpha: [i8; 4],
@@ -159,7 +159,8 @@ pub struct IonoUtc {
 }
 
 /// A decoded subframe.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Subframe {
     /// Subframe 1.
     Ephem1(Ephem1),
@@ -182,7 +183,7 @@ pub enum Subframe {
 }
 
 /// A subframe with its HOW.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub struct Decoded {
     /// Subframe id (1..=5).
     pub id: u8,
