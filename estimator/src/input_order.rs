@@ -64,7 +64,7 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 
 use navsync_shared::reflect::fixed_str;
-use navsync_shared::samples::{AnySample, GnssFix, GnssTimePulse, ImuSample, PpsEdge, SimTruth};
+use navsync_shared::samples::{AnySample, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, PpsEdge, SimTruth};
 
 /// Hold of PPS edges after their stamp, ns.
 pub const PPS_HOLD_NS: i64 = 50_000_000;
@@ -101,7 +101,9 @@ pub fn order_key(s: &AnySample) -> OrderKey {
         // A time pulse report comes before the edge it labels: held like an edge.
         AnySample::TimePulse(t) => (t.stamp.host_ns.saturating_add(PPS_HOLD_NS), 0, [0; 8], t.stamp.seq),
         AnySample::Event(e) => (e.stamp.host_ns, 7, [0; 8], e.stamp.seq),
-        AnySample::Raw(r) => (r.stamp.host_ns, 7, [1; 8], r.stamp.seq),
+        // Raw measurements are held like the fix of their epoch (the time mapping needs the
+        // epoch's PPS edge first).
+        AnySample::Raw(r) => (r.stamp.host_ns.saturating_add(FIX_HOLD_NS), 1, [1; 8], r.stamp.seq),
         AnySample::NavData(d) => (d.stamp.host_ns, 7, [2; 8], d.stamp.seq),
     };
     OrderKey { at_ns, rank, id, seq }
@@ -109,8 +111,9 @@ pub fn order_key(s: &AnySample) -> OrderKey {
 
 /// A sample as the order keeps it: the kinds the estimator consumes, and only the key of any
 /// other (an [`AnySample`] is 2.6 KiB for the sake of raw measurements and health; an IMU
-/// sample is 112 B, and every sample is moved several times on its way to the filter).
-#[derive(Debug, Clone, Copy)]
+/// sample is 112 B, and every sample is moved several times on its way to the filter: the
+/// raw measurements, one epoch a second, are boxed).
+#[derive(Debug, Clone)]
 pub enum Input {
     /// An IMU sample.
     Imu(ImuSample),
@@ -120,6 +123,10 @@ pub enum Input {
     GnssFix(GnssFix),
     /// A receiver's time-pulse report.
     TimePulse(GnssTimePulse),
+    /// A receiver's raw measurements of one epoch.
+    Raw(Box<GnssRaw>),
+    /// A receiver's navigation data (one subframe).
+    NavData(GnssNavData),
     /// The simulator's truth (offline evaluation).
     Truth(SimTruth),
     /// Any other sample: only its place in the order.
@@ -134,6 +141,8 @@ impl From<AnySample> for Input {
             AnySample::GnssFix(x) => Self::GnssFix(x),
             AnySample::TimePulse(x) => Self::TimePulse(x),
             AnySample::Truth(x) => Self::Truth(x),
+            AnySample::Raw(x) => Self::Raw(Box::new(x)),
+            AnySample::NavData(x) => Self::NavData(x),
             other => Self::Other(order_key(&other)),
         }
     }
@@ -172,6 +181,18 @@ impl Input {
                 rank: 0,
                 id: [0; 8],
                 seq: t.stamp.seq,
+            },
+            Self::Raw(r) => OrderKey {
+                at_ns: r.stamp.host_ns.saturating_add(FIX_HOLD_NS),
+                rank: 1,
+                id: [1; 8],
+                seq: r.stamp.seq,
+            },
+            Self::NavData(d) => OrderKey {
+                at_ns: d.stamp.host_ns,
+                rank: 7,
+                id: [2; 8],
+                seq: d.stamp.seq,
             },
             Self::Other(k) => *k,
         }
@@ -293,7 +314,7 @@ impl<T> InputOrder<T> {
         self.free.push(e.slot);
         if self.last_popped.is_some_and(|k| e.key < k) {
             let counts = match &sample {
-                Input::PpsEdge(_) | Input::GnssFix(_) => true,
+                Input::PpsEdge(_) | Input::GnssFix(_) | Input::Raw(_) => true,
                 Input::Imu(x) => self.reference_imu.is_none_or(|r| x.imu_id != r),
                 _ => false,
             };

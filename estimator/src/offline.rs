@@ -147,6 +147,18 @@ pub fn run_ordered<T, S: Into<Input>, I: IntoIterator<Item = (S, T)>>(
                 in_estimator += t0.elapsed();
                 false
             }
+            Input::Raw(r) => {
+                let t = Instant::now();
+                pipeline.on_raw(r);
+                in_estimator += t.elapsed();
+                false
+            }
+            Input::NavData(d) => {
+                let t = Instant::now();
+                pipeline.on_nav_data(d);
+                in_estimator += t.elapsed();
+                false
+            }
             Input::Other(_) => false,
         };
         // Computing a time state does not change the navigation states (it only reads the

@@ -9,7 +9,12 @@
 //! the receiver latency. When the stamping switches, Δ is re-initialised to the new mode's prior.
 
 use navsync_shared::reflect::Reflect;
-use navsync_shared::samples::{GnssFix, GnssTimePulse, ImuSample, NavState, PpsEdge, TimeState, TimeStatus};
+use navsync_shared::samples::{
+    GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, NavState, PpsEdge, TimeState, TimeStatus,
+};
+
+use crate::gnss::ranges::{EphemerisStore, RangeBuildCounts, RangeEpoch};
+use crate::gnss::spp::{self, SppSettings};
 
 use crate::array::imu_array::{ArrayConfig, ImuArray};
 use crate::nav::measurements::gnss::{self, GnssAccuracy};
@@ -64,8 +69,15 @@ pub struct PipelineCounters {
     pub imu_other: u64,
     /// Fixes that reached the estimator.
     pub fixes: u64,
-    /// Fixes held back while the PPS clock was acquiring.
+    /// Fixes (and raw epochs) held back while the PPS clock was acquiring.
     pub fixes_waiting_for_time: u64,
+    /// Raw measurement epochs (UBX RXM-RAWX) that reached the estimator.
+    pub raw_epochs: u64,
+    /// Raw epochs not used: loosely coupled, or before alignment without a single-point
+    /// solution (fewer than four satellites with ephemerides).
+    pub raw_unused: u64,
+    /// Navigation-data messages (UBX RXM-SFRBX) that reached the estimator.
+    pub nav_data: u64,
     /// IMU samples rejected by the array (non-finite values or interval, time going backwards,
     /// saturated: [`ArrayCounters`](crate::array::imu_array::ArrayCounters) says which). A rejected
     /// sample yields no `NavState`; the next accepted one bridges its interval.
@@ -85,6 +97,10 @@ pub struct Pipeline {
     nav_seq: u64,
     /// A `NavState` was produced and the output catch-up step after it is not done yet.
     catch_up_due: bool,
+    /// Broadcast ephemerides for tightly coupled fusion.
+    ephemerides: EphemerisStore,
+    /// What the raw epochs left out, by reason.
+    range_counts: RangeBuildCounts,
 }
 
 impl Pipeline {
@@ -110,6 +126,8 @@ impl Pipeline {
             counters: PipelineCounters::default(),
             nav_seq: 0,
             catch_up_due: false,
+            ephemerides: EphemerisStore::default(),
+            range_counts: RangeBuildCounts::default(),
         }
     }
 
@@ -167,29 +185,8 @@ impl Pipeline {
         self.counters.fixes += 1;
         let changed = self.time.on_fix(fix);
         self.time.tick(fix.stamp.host_ns);
-        let stamping = match self.time.status() {
-            TimeStatus::Locked | TimeStatus::Holdover if !self.cfg.time.software_sync => FixStamping::Epoch,
-            TimeStatus::Software => FixStamping::Receipt,
-            _ if self.cfg.time.software_sync => FixStamping::Receipt,
-            _ => {
-                self.counters.fixes_waiting_for_time += 1;
-                return changed;
-            }
-        };
-        if self.stamping != Some(stamping) {
-            let (prior, std) = match stamping {
-                FixStamping::Epoch => self.cfg.hardware_delay_prior,
-                FixStamping::Receipt => self.cfg.software_delay_prior,
-            };
-            self.nav.reset_delay(prior, std);
-            self.stamping = Some(stamping);
-        }
-        let stamp = match stamping {
-            FixStamping::Epoch => match self.time.host_ns_at_utc(fix.utc_ns) {
-                Some(h) if fix.utc_ns != i64::MIN => h,
-                _ => return changed,
-            },
-            FixStamping::Receipt => fix.stamp.host_ns,
+        let Some(stamp) = self.epoch_stamp(fix.utc_ns, fix.stamp.host_ns) else {
+            return changed;
         };
         if self.cfg.initial_state.is_some() && !self.nav.is_aligned() {
             // With a known initial state the filter does not align itself: fixes before its
@@ -200,6 +197,96 @@ impl Pipeline {
             self.nav.on_gnss(obs, fix.stamp.host_ns);
         }
         changed
+    }
+
+    /// The host time stamp of a GNSS epoch at `utc_ns` received at `receipt_ns` (see the
+    /// module docs), re-initialising Δ when the stamping changes; `None` while the PPS clock
+    /// is acquiring or when the epoch's time is unknown.
+    fn epoch_stamp(&mut self, utc_ns: i64, receipt_ns: i64) -> Option<i64> {
+        let stamping = match self.time.status() {
+            TimeStatus::Locked | TimeStatus::Holdover if !self.cfg.time.software_sync => FixStamping::Epoch,
+            TimeStatus::Software => FixStamping::Receipt,
+            _ if self.cfg.time.software_sync => FixStamping::Receipt,
+            _ => {
+                self.counters.fixes_waiting_for_time += 1;
+                return None;
+            }
+        };
+        if self.stamping != Some(stamping) {
+            let (prior, std) = match stamping {
+                FixStamping::Epoch => self.cfg.hardware_delay_prior,
+                FixStamping::Receipt => self.cfg.software_delay_prior,
+            };
+            self.nav.reset_delay(prior, std);
+            self.stamping = Some(stamping);
+        }
+        match stamping {
+            FixStamping::Epoch if utc_ns != i64::MIN => self.time.host_ns_at_utc(utc_ns),
+            FixStamping::Epoch => None,
+            FixStamping::Receipt => Some(receipt_ns),
+        }
+    }
+
+    /// Feeds one navigation-data message (UBX RXM-SFRBX): the broadcast ephemerides and
+    /// ionosphere of tightly coupled fusion.
+    pub fn on_nav_data(&mut self, d: &GnssNavData) {
+        self.catch_up();
+        self.counters.nav_data += 1;
+        self.ephemerides.on_nav_data(d);
+    }
+
+    /// Feeds a receiver's raw measurements of one epoch (UBX RXM-RAWX). Tightly coupled, each
+    /// GPS satellite with an ephemeris is fused at the epoch; before alignment, a single-point
+    /// solution from them (≥ 4 satellites) aligns the filter as a fix would. Loosely coupled
+    /// they are counted and not used.
+    pub fn on_raw(&mut self, raw: &GnssRaw) {
+        self.catch_up();
+        self.counters.raw_epochs += 1;
+        if !self.nav.is_tight() {
+            self.counters.raw_unused += 1;
+            return;
+        }
+        self.time.tick(raw.stamp.host_ns);
+        let gps_ns = (i64::from(raw.week) * navsync_shared::time::SECONDS_PER_WEEK) * 1_000_000_000
+            + (raw.rcv_tow_s * 1e9).round() as i64;
+        let utc_ns = navsync_shared::time::utc_ns_from_gps_ns(gps_ns);
+        let Some(stamp) = self.epoch_stamp(utc_ns, raw.stamp.host_ns) else {
+            return;
+        };
+        // The receiver's time runs c·δt_r ahead of GPS time: the epoch is that much earlier
+        // (under software sync Δ absorbs it with the receiver's latency).
+        let bias_m = self.nav.receiver_clock(stamp).map_or(0.0, |c| c.bias_m);
+        let stamp = if self.stamping == Some(FixStamping::Epoch) {
+            stamp - (bias_m / spp::C_M_S * 1e9).round() as i64
+        } else {
+            stamp
+        };
+        let epoch = self.ephemerides.range_epoch(raw, stamp, bias_m, &mut self.range_counts);
+        if self.nav.is_aligned() {
+            self.nav.on_ranges(epoch, raw.stamp.host_ns);
+        } else if self.cfg.initial_state.is_none()
+            && let Some(obs) = single_point_observation(&epoch)
+        {
+            self.nav.on_gnss(obs, raw.stamp.host_ns);
+        } else {
+            self.counters.raw_unused += 1;
+        }
+    }
+
+    /// The broadcast ephemerides collected so far.
+    pub fn ephemerides(&self) -> &EphemerisStore {
+        &self.ephemerides
+    }
+
+    /// The ephemeris store, to give it orbits from elsewhere than the receiver's navigation
+    /// data (another receiver, a file, a simulation).
+    pub fn ephemerides_mut(&mut self) -> &mut EphemerisStore {
+        &mut self.ephemerides
+    }
+
+    /// What the raw epochs left out, by reason.
+    pub fn range_counts(&self) -> &RangeBuildCounts {
+        &self.range_counts
     }
 
     /// Feeds an IMU sample of any IMU of the array; returns the navigation state for it when it
@@ -306,4 +393,73 @@ impl Pipeline {
         (t.imu, t.imu_count) = self.array.table();
         t
     }
+}
+
+/// A fix from a raw epoch's single-point solution (position, clock, then Doppler velocity),
+/// for the alignment of a tightly coupled filter: its σ from the least-squares covariance
+/// rotated into NED. `None` with fewer than four satellites or without convergence.
+fn single_point_observation(e: &RangeEpoch) -> Option<gnss::GnssObservation> {
+    const PR_STD_M: f64 = 3.0;
+    const RATE_STD_MPS: f64 = 0.1;
+    let settings = SppSettings::default();
+    let mut obs = [spp::Observation {
+        sv: 0,
+        pseudorange_m: 0.0,
+        sat_ecef_m: [0.0; 3],
+        sat_clock_s: 0.0,
+        sigma_zenith_m: PR_STD_M,
+    }; crate::gnss::ranges::MAX_RANGE_SATS];
+    let mut rates = [spp::RangeRate {
+        sv: 0,
+        range_rate_mps: 0.0,
+        sat_ecef_m: [0.0; 3],
+        sat_vel_mps: [0.0; 3],
+        sat_clock_drift: 0.0,
+        sigma_mps: RATE_STD_MPS,
+    }; crate::gnss::ranges::MAX_RANGE_SATS];
+    let (mut n, mut m) = (0, 0);
+    for s in e.sats() {
+        // The satellite clock is already in the measurements (`SatRange`).
+        obs[n].sv = s.sv;
+        obs[n].pseudorange_m = s.pseudorange_m;
+        obs[n].sat_ecef_m = s.sat_ecef_m;
+        obs[n].sigma_zenith_m = PR_STD_M.max(s.pseudorange_std_m);
+        n += 1;
+        if s.range_rate_mps.is_finite() {
+            rates[m].sv = s.sv;
+            rates[m].range_rate_mps = s.range_rate_mps;
+            rates[m].sat_ecef_m = s.sat_ecef_m;
+            rates[m].sat_vel_mps = s.sat_vel_mps;
+            rates[m].sigma_mps = RATE_STD_MPS.max(s.range_rate_std_mps);
+            m += 1;
+        }
+    }
+    let sol = spp::solve(&obs[..n], e.iono.as_ref(), e.tow_s, [0.0; 3], &settings).ok()?;
+    let vel = spp::solve_velocity(&rates[..m], sol.ecef_m, &settings).ok();
+    let g = navsync_shared::earth::geodetic_from_ecef(sol.ecef_m[0], sol.ecef_m[1], sol.ecef_m[2])?;
+    let (lat, lon) = (g.lat_deg.to_radians(), g.lon_deg.to_radians());
+    let c_en = spp::ned_from_ecef(lat, lon);
+    let ned_std = |cov: &nalgebra::Matrix4<f64>| {
+        let c = c_en * cov.fixed_view::<3, 3>(0, 0) * c_en.transpose();
+        nalgebra::Vector3::new(c[(0, 0)].sqrt(), c[(1, 1)].sqrt(), c[(2, 2)].sqrt())
+    };
+    let (vel_ned, vel_std) = match vel {
+        Some(v) => {
+            let ned = c_en * nalgebra::Vector3::from(v.vel_ecef_mps);
+            let sd = ned_std(&v.cov);
+            (ned, (sd.x * sd.x + sd.y * sd.y).sqrt() / std::f64::consts::SQRT_2)
+        }
+        None => (nalgebra::Vector3::repeat(f64::NAN), f64::NAN),
+    };
+    Some(gnss::GnssObservation {
+        stamp_host_ns: e.stamp_host_ns,
+        lat_rad: lat,
+        lon_rad: lon,
+        h_m: g.height_m,
+        vel_ned_mps: vel_ned,
+        pos_std_m: ned_std(&sol.cov),
+        vel_std_mps: vel_std,
+        speed_mps: vel_ned.x.hypot(vel_ned.y),
+        track_rad: vel_ned.y.atan2(vel_ned.x).rem_euclid(2.0 * std::f64::consts::PI),
+    })
 }

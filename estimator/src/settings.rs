@@ -24,6 +24,62 @@ use crate::time::clock_model::OscillatorNoise;
 use crate::time::device_timing::DeviceTimingConfig;
 use crate::time::time_sync::TimeSyncConfig;
 
+/// How GNSS aids the filter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Coupling {
+    /// The receiver's position and velocity fixes (the default).
+    #[default]
+    Loose,
+    /// Each satellite's pseudorange and Doppler (UBX RXM-RAWX with the ephemerides of
+    /// RXM-SFRBX), with the receiver's clock bias and drift as filter states
+    /// ([`crate::nav::measurements::ranges`]).
+    Tight,
+}
+
+impl std::str::FromStr for Coupling {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "loose" => Ok(Self::Loose),
+            "tight" => Ok(Self::Tight),
+            _ => Err(format!("unknown coupling `{s}`, expected loose or tight")),
+        }
+    }
+}
+
+/// The receiver's oscillator: the process noise of its clock states when tightly coupled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ReceiverOscillator {
+    /// A TCXO ([`OscillatorNoise::tcxo`]; the default: what GNSS receivers carry).
+    #[default]
+    Tcxo,
+    /// A plain 0.5 ppm crystal ([`OscillatorNoise::crystal`]).
+    Crystal,
+}
+
+impl ReceiverOscillator {
+    /// The oscillator's noise.
+    pub fn noise(self) -> OscillatorNoise {
+        match self {
+            Self::Tcxo => OscillatorNoise::tcxo(),
+            Self::Crystal => OscillatorNoise::crystal(),
+        }
+    }
+}
+
+impl std::str::FromStr for ReceiverOscillator {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "tcxo" => Ok(Self::Tcxo),
+            "crystal" => Ok(Self::Crystal),
+            _ => Err(format!("unknown receiver oscillator `{s}`, expected tcxo or crystal")),
+        }
+    }
+}
+
 /// Where one IMU sits in the body frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ImuMounting {
@@ -171,6 +227,10 @@ pub struct Settings {
     pub hardware_delay_prior_s: (f64, f64),
     /// The IMU array's tuning.
     pub array: ArrayTuning,
+    /// How GNSS aids the filter (default loosely coupled).
+    pub coupling: Coupling,
+    /// The receiver's oscillator, for the clock states when tightly coupled (default TCXO).
+    pub receiver_oscillator: ReceiverOscillator,
 }
 
 impl Default for Settings {
@@ -201,18 +261,27 @@ impl Default for Settings {
             software_delay_prior_s: (0.5, 0.5),
             hardware_delay_prior_s: (0.0, 0.02),
             array: ArrayTuning::default(),
+            coupling: Coupling::Loose,
+            receiver_oscillator: ReceiverOscillator::Tcxo,
         }
     }
 }
 
 impl Settings {
-    /// The services these settings subscribe to (PPS, GNSS fixes and time pulses, IMUs).
+    /// The services these settings subscribe to (PPS, GNSS fixes and time pulses, IMUs; the
+    /// raw measurements and navigation data when tightly coupled).
     pub fn input_services(&self) -> Vec<String> {
         let pps = self.pps_ids.iter().map(|id| services::pps_edge(id));
         let gnss = self.gnss_ids.iter().map(|id| services::gnss_fix(id));
         let pulses = self.gnss_ids.iter().map(|id| services::gnss_time_pulse(id));
         let imus = self.imu_ids.iter().map(|id| services::imu_sample(id));
-        pps.chain(gnss).chain(pulses).chain(imus).collect()
+        let tight = self.coupling == Coupling::Tight;
+        let raw = self
+            .gnss_ids
+            .iter()
+            .filter(|_| tight)
+            .flat_map(|id| [services::gnss_raw(id), services::gnss_nav_data(id)]);
+        pps.chain(gnss).chain(pulses).chain(imus).chain(raw).collect()
     }
 
     /// Which Δ the filter should find (for the accuracy report against a simulated truth).
@@ -286,6 +355,7 @@ impl Settings {
     pub fn pipeline_config(&self) -> PipelineConfig {
         let mut noise = ProcessNoise::from_imu_noise(&self.noise());
         noise.estimate_delay = self.estimate_delay;
+        noise.clock = (self.coupling == Coupling::Tight).then(|| self.receiver_oscillator.noise());
         let mut nav = NavConfig {
             lever_arm_b_m: Vector3::from(self.gnss_lever_arm_m),
             gate_scale: self.gate_scale,

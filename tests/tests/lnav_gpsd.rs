@@ -8,25 +8,14 @@
 //! through an unsigned 32-bit integer (IDOT −569 as 4294966727); values are compared modulo
 //! 2³².
 
+mod gps_sky;
+
 use navsync_drivers::gnss::capture::gpsd_header;
-use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra, Protocol};
+
+use gps_sky::{Normal, RealSky, nav_data};
 use navsync_estimator::gnss::lnav::{self, Subframe};
-use navsync_shared::samples::GnssNavData;
 use navsync_tests::shared_material;
 use serde_json::Value;
-
-/// The RXM-SFRBX of a capture, as the GNSS driver publishes them.
-fn nav_data(bytes: &[u8]) -> Vec<GnssNavData> {
-    let (header, _) = gpsd_header(bytes);
-    let mut d = Decoder::new(Protocol::Auto);
-    let mut out = Vec::new();
-    d.push_extras(bytes.get(header..).unwrap_or(&[]), 0, 0, &mut |_| {}, &mut |x| {
-        if let GnssExtra::NavData(n) = x {
-            out.push(*n);
-        }
-    });
-    out
-}
 
 /// gpsd's field → navsync's value, for the page kinds with numbers.
 fn ours(s: &Subframe) -> Option<(&'static str, Vec<(&'static str, i64)>)> {
@@ -245,22 +234,6 @@ fn ephemeris_and_almanac_of_one_satellite_agree() {
     }
 }
 
-/// Deterministic standard normal numbers (xorshift64*, Box–Muller): the test's own noise.
-struct Normal(u64);
-
-impl Normal {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn next(&mut self) -> f64 {
-        let (u1, u2) = (self.uniform(), self.uniform());
-        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-    }
-}
-
 /// Single-point positioning (`gnss::spp`) on pseudoranges generated here from the real GPS
 /// constellation (every almanac page of `ublox-ned-m8t-sbfrx3`) for a receiver in Munich over
 /// 2.5 h: ranges with the Earth's rotation during the flight, satellite clocks, the capture's
@@ -271,24 +244,8 @@ impl Normal {
 /// a 100 m fault on one satellite is excluded.
 #[test]
 fn single_point_positioning_on_the_real_constellation() {
-    use navsync_estimator::gnss::orbit::Orbit;
-    use navsync_estimator::gnss::spp::{self, C_M_S, Klobuchar, Observation, RangeRate, SppSettings};
-    let dir = shared_material("corpora/gpsd-ubx");
-    let bytes = std::fs::read(dir.join("ublox-ned-m8t-sbfrx3.log")).unwrap();
-    let mut almanac = std::collections::BTreeMap::new();
-    let mut iono = None;
-    for n in nav_data(&bytes).iter().filter(|n| n.gnss_id == 0) {
-        let len = usize::from(n.num_words).min(n.words.len());
-        match lnav::decode(&n.words[..len]).map(|d| d.subframe) {
-            Ok(Subframe::Almanac(a)) if a.health == 0 && a.sqrt_a > 0 => {
-                almanac.insert(a.sv, Orbit::from_almanac(&a));
-            }
-            Ok(Subframe::IonoUtc(u)) => iono = Some(Klobuchar::from_page(&u)),
-            _ => {}
-        }
-    }
-    let iono = iono.expect("the ionosphere page");
-    assert!(almanac.len() >= 28, "{} healthy almanac pages", almanac.len());
+    use navsync_estimator::gnss::spp::{self, C_M_S, Observation, RangeRate, SppSettings};
+    let RealSky { almanac, iono } = RealSky::m8t();
     let (lat, lon, h) = (48.137f64.to_radians(), 11.575f64.to_radians(), 520.0);
     let truth = navsync_shared::earth::geodetic_to_ecef(lat, lon, h);
     // 10 m/s north, 5 m/s east, as ECEF.

@@ -4,7 +4,7 @@
 //! [`Settings`]. The live `navsync estimator` and every offline tool (`replay --estimate`,
 //! `sim --fast --estimate`, `report`, `analyze`) take the same flags ([`EstimatorFlags`]).
 
-use navsync_estimator::settings::{ImuMounting, Settings};
+use navsync_estimator::settings::{Coupling, ImuMounting, ReceiverOscillator, Settings};
 use navsync_shared::imu_spec::{ImuNoise, ImuPreset, PerAxis};
 
 use super::{ConfigError, Loaded};
@@ -102,6 +102,15 @@ pub struct ModelFlags {
     /// measurements at their epoch (≥ the largest receiver latency + 0.25 s) [default 1.5].
     #[arg(long = "horizon")]
     pub fusion_horizon_s: Option<f64>,
+    /// How GNSS aids the filter: loose (the receiver's fixes) or tight (each satellite's
+    /// pseudorange and Doppler from UBX RXM-RAWX/RXM-SFRBX, the receiver clock in the filter)
+    /// [default: [estimator].coupling, else loose].
+    #[arg(long)]
+    pub coupling: Option<Coupling>,
+    /// The receiver's oscillator for the clock states when tightly coupled: tcxo or crystal
+    /// [default: [estimator].receiver_oscillator, else tcxo].
+    #[arg(long)]
+    pub receiver_oscillator: Option<ReceiverOscillator>,
     /// The IMU's noise (KF-GINS units; each a number or x,y,z; over [estimator.imu_noise],
     /// the recording's, else --imu-model's).
     #[command(flatten)]
@@ -268,6 +277,12 @@ impl ModelFlags {
         if let Some(v) = self.delay_prior_std_s {
             s.hardware_delay_prior_s.1 = v;
         }
+        if let Some(v) = self.coupling {
+            s.coupling = v;
+        }
+        if let Some(v) = self.receiver_oscillator {
+            s.receiver_oscillator = v;
+        }
         if self.noise.any() {
             // Flags refine the model in force: the file's or the recording's, else the preset's
             // (after --imu-model).
@@ -335,6 +350,12 @@ pub fn apply_file(s: &mut Settings, cfg: &Loaded) -> Result<(), ConfigError> {
     }
     if let Some(v) = e.delay_prior_std_s {
         s.hardware_delay_prior_s.1 = v;
+    }
+    if let Some(v) = e.coupling {
+        s.coupling = v;
+    }
+    if let Some(v) = e.receiver_oscillator {
+        s.receiver_oscillator = v;
     }
     if let Some(v) = e.fusion_horizon_s {
         s.fusion_horizon_s = v;

@@ -51,7 +51,7 @@ use navsync_drivers::gnss::driver::Baud;
 use navsync_drivers::imu::ImuSource;
 use navsync_drivers::imu::axes::AxisMap;
 use navsync_drivers::pps::SourceSpec;
-use navsync_estimator::settings::InitialState;
+use navsync_estimator::settings::{Coupling, InitialState, ReceiverOscillator};
 use navsync_shared::imu_spec::{ImuNoise, ImuPreset};
 use navsync_shared::source_map::SourceMap;
 use serde::Deserialize;
@@ -243,6 +243,11 @@ pub struct EstimatorConfig {
     pub delay_prior_std_s: Option<f64>,
     /// Largest fusion horizon, s (default 1.5).
     pub fusion_horizon_s: Option<f64>,
+    /// How GNSS aids the filter: `loose` (fixes, the default) or `tight` (each satellite's
+    /// pseudorange and Doppler, with the receiver clock in the filter).
+    pub coupling: Option<Coupling>,
+    /// The receiver's oscillator when tightly coupled: `tcxo` (default) or `crystal`.
+    pub receiver_oscillator: Option<ReceiverOscillator>,
 }
 
 /// `[outputs.ntpshm]`.

@@ -15,7 +15,9 @@ use std::time::Duration;
 use navsync_shared::health_reporter::HealthReporter;
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::latency_histogram::LatencyHistogram;
-use navsync_shared::samples::{AnySample, GnssFix, GnssTimePulse, ImuSample, NavState, NavStatus, PpsEdge, TimeState};
+use navsync_shared::samples::{
+    AnySample, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, NavState, NavStatus, PpsEdge, TimeState,
+};
 use navsync_shared::services::{self, ServiceKind};
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
@@ -23,7 +25,7 @@ use tracing::{info, info_span, warn};
 use navsync_estimator::input_order::{Input, InputOrder};
 use navsync_estimator::output_check::OutputCheck;
 use navsync_estimator::pipeline::Pipeline;
-use navsync_estimator::settings::Settings;
+use navsync_estimator::settings::{Coupling, Settings};
 
 use super::liveness::{Change, Liveness, STALE_MARGIN_NS};
 use crate::config::Loaded;
@@ -128,6 +130,21 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         .iter()
         .map(|id| node.input(&services::gnss_time_pulse(id)))
         .collect::<Result<_, _>>()?;
+    // Tightly coupled: the receivers' raw measurements (UBX RXM-RAWX) and navigation data
+    // (RXM-SFRBX).
+    let tight = args.coupling == Coupling::Tight;
+    let raws: Vec<Subscriber<GnssRaw>> = args
+        .gnss_ids
+        .iter()
+        .filter(|_| tight)
+        .map(|id| node.input(&services::gnss_raw(id)))
+        .collect::<Result<_, _>>()?;
+    let nav_data: Vec<Subscriber<GnssNavData>> = args
+        .gnss_ids
+        .iter()
+        .filter(|_| tight)
+        .map(|id| node.input(&services::gnss_nav_data(id)))
+        .collect::<Result<_, _>>()?;
     let imus: Vec<Subscriber<ImuSample>> = args
         .imu_ids
         .iter()
@@ -147,11 +164,13 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     // One wake-up for every input: each publisher notifies `navsync/wake` with its kind.
     let wake = node.wake()?;
     wake.set_busy_poll(busy_poll);
-    const INPUT_KINDS: [ServiceKind; 4] = [
+    const INPUT_KINDS: [ServiceKind; 6] = [
         ServiceKind::ImuSample,
         ServiceKind::PpsEdge,
         ServiceKind::GnssFix,
         ServiceKind::GnssTimePulse,
+        ServiceKind::GnssRaw,
+        ServiceKind::GnssNavData,
     ];
 
     let mut est = Pipeline::new(args.pipeline_config());
@@ -275,6 +294,18 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
                 true
             })?;
         }
+        for s in &raws {
+            s.drain(|raw| {
+                order.push(AnySample::Raw(raw), ());
+                true
+            })?;
+        }
+        for s in &nav_data {
+            s.drain(|d| {
+                order.push(AnySample::NavData(d), ());
+                true
+            })?;
+        }
         // NavStates say inertial-only at once when every receiver's driver is gone.
         let gnss_gone = !gnss.is_empty() && live.inputs()[n_imu + n_pps..].iter().all(|x| x.is_gone());
         // Without IMUs (or with the reference IMU silent) nothing releases the waiting samples.
@@ -308,6 +339,8 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
                 Input::PpsEdge(edge) => updated |= est.on_pps(&edge),
                 Input::GnssFix(fix) => updated |= est.on_fix(&fix),
                 Input::TimePulse(tp) => est.on_time_pulse(&tp),
+                Input::Raw(raw) => est.on_raw(&raw),
+                Input::NavData(d) => est.on_nav_data(&d),
                 _ => {}
             }
         }

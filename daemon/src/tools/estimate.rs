@@ -165,9 +165,11 @@ impl Iterator for RecordedInputs {
     type Item = (Input, u64);
     fn next(&mut self) -> Option<(Input, u64)> {
         loop {
-            if let Some(&x) = self.batch.get(self.pos) {
+            if let Some(x) = self.batch.get_mut(self.pos) {
                 self.pos += 1;
-                return Some(x);
+                // Taken out (the batch's storage is reused); a key stays in its place.
+                let key = x.0.key();
+                return Some(std::mem::replace(x, (Input::Other(key), 0)));
             }
             let next = self.full.recv().ok()?;
             let mut done = core::mem::replace(&mut self.batch, next);

@@ -6,7 +6,7 @@
 //! worst satellite once (RAIM-style fault detection and exclusion); velocity and clock drift
 //! from Doppler by weighted least squares at a known position.
 
-use nalgebra::{Matrix4, Vector4};
+use nalgebra::{Matrix3, Matrix4, Vector4};
 
 use super::lnav::IonoUtc;
 use super::orbit::{GPS_PI, OMEGA_E_RAD_S};
@@ -30,6 +30,14 @@ pub fn elevation_azimuth(rx: [f64; 3], sat: [f64; 3]) -> (f64, f64) {
     let el = u.atan2(e.hypot(n));
     let az = e.atan2(n).rem_euclid(2.0 * std::f64::consts::PI);
     (el, az)
+}
+
+/// The rotation from ECEF to the local NED frame at geodetic latitude/longitude (rad), C_e^n
+/// (Groves eq. 2.150): its rows are the north, east and down axes in ECEF.
+pub fn ned_from_ecef(lat_rad: f64, lon_rad: f64) -> Matrix3<f64> {
+    let (sl, cl) = lat_rad.sin_cos();
+    let (so, co) = lon_rad.sin_cos();
+    Matrix3::new(-sl * co, -sl * so, cl, -so, co, 0.0, -cl * co, -cl * so, -sl)
 }
 
 /// The satellite position at transmission (ECEF of that instant) expressed in the ECEF frame

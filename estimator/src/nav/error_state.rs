@@ -4,7 +4,7 @@
 //! Inertial Navigation*, ch. 2): position and velocity errors are *computed − true* (NED, m and
 //! m/s); the attitude error φ is the phi angle with C_b^n(true) = exp([φ×]) C_b^n(computed); the
 //! sensor errors (biases, scale factors) and the GNSS delay are *true − estimated*, fed back by
-//! addition. Error state (N = 22):
+//! addition. Error state (N = 24):
 //!
 //! | index | state | unit |
 //! |---|---|---|
@@ -16,15 +16,22 @@
 //! | 15–17 | gyro scale factor s_g | — |
 //! | 18–20 | accelerometer scale factor s_a | — |
 //! | 21 | GNSS time-synchronisation error Δ | s |
+//! | 22 | receiver clock bias c·δt_r (tightly coupled only) | m |
+//! | 23 | receiver clock drift c·δṫ_r (tightly coupled only) | m/s |
+//!
+//! The clock states are frozen (zero covariance, no process noise) unless the filter is
+//! tightly coupled ([`ProcessNoise::clock`]); loosely coupled, the receiver solved its clock.
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use navsync_shared::earth::{self, OMEGA_IE};
 use navsync_shared::imu_spec::{ImuErrorSpec, ImuNoise, PerAxis};
 
+use crate::time::clock_model::OscillatorNoise;
+
 use super::mechanization::{Pva, skew};
 
 /// Error-state dimension.
-pub const N: usize = 22;
+pub const N: usize = 24;
 /// Position error.
 pub const POS: usize = 0;
 /// Velocity error.
@@ -41,6 +48,10 @@ pub const SG: usize = 15;
 pub const SA: usize = 18;
 /// GNSS delay.
 pub const DELAY: usize = 21;
+/// Receiver clock bias, m.
+pub const CLK_BIAS: usize = 22;
+/// Receiver clock drift, m/s.
+pub const CLK_DRIFT: usize = 23;
 
 /// Error-state vector.
 pub type StateVec = SVector<f64, N>;
@@ -78,6 +89,9 @@ pub struct ProcessNoise {
     pub estimate_scale: bool,
     /// Estimate the GNSS delay Δ (else frozen).
     pub estimate_delay: bool,
+    /// The receiver's oscillator when its clock bias and drift are estimated (tightly
+    /// coupled); `None`: the clock states are frozen (loosely coupled, the default).
+    pub clock: Option<OscillatorNoise>,
 }
 
 impl ProcessNoise {
@@ -105,6 +119,7 @@ impl ProcessNoise {
             estimate_scale: n.gyro_scale_init_std_ppm.0.iter().any(|x| *x > 0.0)
                 || n.accel_scale_init_std_ppm.0.iter().any(|x| *x > 0.0),
             estimate_delay: true,
+            clock: None,
         }
     }
 
@@ -209,6 +224,11 @@ pub fn system_matrix(pva: &Pva, f_b: &Vector3<f64>, w_b: &Vector3<f64>, noise: &
             f[(i, i)] = decay;
         }
     }
+
+    // Receiver clock: the bias integrates the drift (Brown & Hwang eq. 9.3.10).
+    if noise.clock.is_some() {
+        f[(CLK_BIAS, CLK_DRIFT)] = 1.0;
+    }
     f
 }
 
@@ -236,6 +256,10 @@ pub fn process_noise(noise: &ProcessNoise, c_bn: &Matrix3<f64>, dt: f64, imu_sca
     }
     if noise.estimate_delay {
         q[(DELAY, DELAY)] = noise.delay_rw * noise.delay_rw * dt;
+    }
+    if let Some(osc) = noise.clock {
+        q.fixed_view_mut::<2, 2>(CLK_BIAS, CLK_BIAS)
+            .copy_from(&osc.process_noise_m(dt));
     }
     q
 }

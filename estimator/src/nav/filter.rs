@@ -4,7 +4,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use navsync_shared::earth;
 
-use super::error_state::{self, ATT, BA, BG, DELAY, POS, SA, SG, StateMat, StateVec, VEL};
+use super::error_state::{self, ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, POS, SA, SG, StateMat, StateVec, VEL};
 use super::eskf::Eskf;
 use super::imu_buffer::ImuRecord;
 use super::mechanization::{ImuIncrement, Pva, propagate};
@@ -33,6 +33,13 @@ pub struct DelayedFilter {
     pub scale_a: Vector3<f64>,
     /// GNSS delay estimate Δ̂, s.
     pub delay_s: f64,
+    /// Receiver clock bias estimate c·δt_r at [`t_ns`](Self::t_ns), m (tightly coupled; the
+    /// receiver's time minus GPS time, times c).
+    pub clock_bias_m: f64,
+    /// Receiver clock drift estimate c·δṫ_r, m/s.
+    pub clock_drift_mps: f64,
+    /// The clock states hold an estimate (set by the first tightly coupled measurement).
+    pub clock_valid: bool,
     /// NED acceleration over the last step, m/s².
     pub acc_ned: Vector3<f64>,
     /// Compensated angular rate of the last step (body FRD), rad/s.
@@ -59,6 +66,9 @@ impl DelayedFilter {
             scale_g: Vector3::zeros(),
             scale_a: Vector3::zeros(),
             delay_s,
+            clock_bias_m: 0.0,
+            clock_drift_mps: 0.0,
+            clock_valid: false,
             acc_ned: Vector3::zeros(),
             last_w: Vector3::zeros(),
             q_scale: 1.0,
@@ -81,6 +91,9 @@ impl DelayedFilter {
         let v0 = self.pva.vel_ned_mps;
         self.pva = propagate(&self.pva, &self.pre, &inc);
         self.pre = inc;
+        if self.clock_valid {
+            self.clock_bias_m += self.clock_drift_mps * (r.host_ns - self.t_ns) as f64 * 1e-9;
+        }
         self.t_ns = r.host_ns;
         if r.dt_s > 0.0 {
             self.acc_ned = (self.pva.vel_ned_mps - v0) / r.dt_s;
@@ -127,5 +140,7 @@ impl DelayedFilter {
         self.scale_g += dx.fixed_rows::<3>(SG);
         self.scale_a += dx.fixed_rows::<3>(SA);
         self.delay_s = (self.delay_s + dx[DELAY]).clamp(-0.5, horizon_s - 0.05);
+        self.clock_bias_m += dx[CLK_BIAS];
+        self.clock_drift_mps += dx[CLK_DRIFT];
     }
 }

@@ -18,13 +18,14 @@ use nalgebra::Vector3;
 use navsync_shared::samples::{ImuSync, MAX_IMUS, NavState, NavStatus};
 
 use super::alignment::{AlignConfig, Aligner};
-use super::error_state::{ATT, BA, BG, DELAY, N, POS, ProcessNoise, SA, SG, StateMat, VEL};
+use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, ProcessNoise, SA, SG, StateMat, VEL};
 use super::eskf::Eskf;
 use super::filter::DelayedFilter;
 use super::imu_buffer::{ImuBuffer, ImuRecord};
 use super::measurements::gnss::GnssObservation;
 use super::measurements::{Measurement, MeasurementConfig, MeasurementQueue, MeasurementStates};
 use super::mechanization::{ImuIncrement, Pva, propagate};
+use crate::gnss::ranges::RangeEpoch;
 use crate::settings::InitialState;
 
 /// Shortest adaptive fusion horizon, s.
@@ -124,6 +125,21 @@ pub struct NavCounters {
 }
 
 pub use super::measurements::gnss::RESET_AFTER_REJECTS;
+
+/// The receiver clock as the tightly coupled filter knows it ([`Navigator::receiver_clock`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReceiverClock {
+    /// Clock bias c·δt_r (receiver time minus GPS time, times c), m.
+    pub bias_m: f64,
+    /// Clock drift c·δṫ_r, m/s.
+    pub drift_mps: f64,
+    /// 1σ of the bias, m.
+    pub bias_std_m: f64,
+    /// 1σ of the drift, m/s.
+    pub drift_std_mps: f64,
+    /// Host time of the last epoch with a satellite fused, ns (0: none yet).
+    pub last_fused_ns: i64,
+}
 
 /// Output re-propagation after a correction: the state, last increment, host time (ns) and
 /// last compensated rates of the records integrated so far.
@@ -247,31 +263,95 @@ impl Navigator {
     }
 
     /// Queues a fix for fusion at its epoch (receipt host time `rx_ns` only marks GNSS as alive).
+    /// Tightly coupled ([`Self::is_tight`]), fixes only align the filter: afterwards the
+    /// satellites' own measurements ([`Self::on_ranges`]) carry the same information.
     pub fn on_gnss(&mut self, obs: GnssObservation, rx_ns: i64) {
         self.last_fix_rx_ns = Some(rx_ns);
         if self.filt.is_none() {
             self.try_align(&obs);
             return;
         }
-        let Some(f) = &self.filt else { return };
-        if self.cfg.adaptive_horizon
-            && let Some(now) = self.last_imu_ns
-        {
-            // The delay this fix needed from its epoch (with Δ's doubt) to its release now.
-            let (d, sd) = (f.delay_s, f.eskf.std(DELAY));
-            let doubt = if self.cfg.noise.estimate_delay { d + 3.0 * sd } else { d };
-            let needed = now - obs.stamp_host_ns + (doubt.max(0.0) * 1e9) as i64;
-            self.fix_delay_ns = needed.max(self.fix_delay_ns - (HORIZON_DECAY_S * 1e9) as i64);
-            let max = (self.cfg.horizon_s * 1e9) as i64;
-            let min = (MIN_HORIZON_S * 1e9) as i64;
-            self.horizon_ns = (self.fix_delay_ns + (HORIZON_MARGIN_S * 1e9) as i64).clamp(min, max);
+        if self.is_tight() {
+            return;
         }
+        self.adapt_horizon(obs.stamp_host_ns);
+        let Some(f) = &self.filt else { return };
         // Behind the delayed filter by more than one covariance step: the horizon was too short.
         if f.t_ns - obs.epoch_ns(f.delay_s) > (self.cfg.cov_step_s * 1e9) as i64 {
             self.counters.fixes_too_old += 1;
             return;
         }
         self.queue.push(obs.into(), &mut self.counters);
+    }
+
+    /// Queues a receiver epoch's pseudoranges and Doppler for fusion at its epoch (tightly
+    /// coupled; receipt host time `rx_ns` marks GNSS as alive when a satellite is in it).
+    /// Before alignment, or loosely coupled, the epoch is counted and dropped.
+    pub fn on_ranges(&mut self, epoch: RangeEpoch, rx_ns: i64) {
+        if !self.is_tight() || self.filt.is_none() {
+            self.states.ranges.epochs_not_tight += 1;
+            return;
+        }
+        if epoch.count > 0 {
+            self.last_fix_rx_ns = Some(rx_ns);
+        }
+        self.adapt_horizon(epoch.stamp_host_ns);
+        let Some(f) = &self.filt else { return };
+        if f.t_ns - epoch.epoch_ns(f.delay_s) > (self.cfg.cov_step_s * 1e9) as i64 {
+            self.counters.fixes_too_old += 1;
+            return;
+        }
+        self.queue.push(epoch.into(), &mut self.counters);
+    }
+
+    /// The adaptive horizon after a GNSS epoch stamped `stamp_host_ns` (before Δ) arrived.
+    fn adapt_horizon(&mut self, stamp_host_ns: i64) {
+        let (Some(f), Some(now)) = (&self.filt, self.last_imu_ns) else {
+            return;
+        };
+        if !self.cfg.adaptive_horizon {
+            return;
+        }
+        // The delay this epoch needed from its epoch (with Δ's doubt) to its release now.
+        let (d, sd) = (f.delay_s, f.eskf.std(DELAY));
+        let doubt = if self.cfg.noise.estimate_delay { d + 3.0 * sd } else { d };
+        let needed = now - stamp_host_ns + (doubt.max(0.0) * 1e9) as i64;
+        self.fix_delay_ns = needed.max(self.fix_delay_ns - (HORIZON_DECAY_S * 1e9) as i64);
+        let max = (self.cfg.horizon_s * 1e9) as i64;
+        let min = (MIN_HORIZON_S * 1e9) as i64;
+        self.horizon_ns = (self.fix_delay_ns + (HORIZON_MARGIN_S * 1e9) as i64).clamp(min, max);
+    }
+
+    /// True when the filter estimates the receiver clock and fuses satellites' measurements
+    /// (tightly coupled: [`ProcessNoise::clock`] set).
+    pub fn is_tight(&self) -> bool {
+        self.cfg.noise.clock.is_some()
+    }
+
+    /// The receiver clock at host time `now_ns` from the tightly coupled filter: the delayed
+    /// filter's bias extrapolated with its drift, σ grown by the covariance over the interval
+    /// and the oscillator's process noise (holdover while no satellite is fused). `None` when
+    /// loosely coupled or before the clock was anchored.
+    pub fn receiver_clock(&self, now_ns: i64) -> Option<ReceiverClock> {
+        let (f, osc) = (self.filt.as_ref()?, self.cfg.noise.clock?);
+        if !f.clock_valid {
+            return None;
+        }
+        let dt = ((now_ns - f.t_ns) as f64 * 1e-9).max(0.0);
+        let p = &f.eskf.p;
+        let q = osc.process_noise_m(dt);
+        let var_b = p[(CLK_BIAS, CLK_BIAS)]
+            + 2.0 * dt * p[(CLK_BIAS, CLK_DRIFT)]
+            + dt * dt * p[(CLK_DRIFT, CLK_DRIFT)]
+            + q[(0, 0)];
+        let var_d = p[(CLK_DRIFT, CLK_DRIFT)] + q[(1, 1)];
+        Some(ReceiverClock {
+            bias_m: f.clock_bias_m + f.clock_drift_mps * dt,
+            drift_mps: f.clock_drift_mps,
+            bias_std_m: var_b.max(0.0).sqrt(),
+            drift_std_mps: var_d.max(0.0).sqrt(),
+            last_fused_ns: self.states.ranges.last_fused_ns,
+        })
     }
 
     /// Starts the filter from a known state (instead of [`Self::on_gnss`]'s alignment) at host

@@ -38,6 +38,39 @@ impl OscillatorNoise {
     }
 }
 
+impl OscillatorNoise {
+    /// A GNSS receiver's temperature-compensated crystal oscillator: Brown & Hwang,
+    /// *Introduction to Random Signals and Applied Kalman Filtering*, 4th ed., Table 9.1
+    /// "typical TCXO" (h₀ = 2·10⁻¹⁹ s, h₋₂ = 2·10⁻²⁰ /s, flicker left out), i.e. white FM
+    /// σ_y(1 s) = √(h₀/2) = 3.2·10⁻¹⁰ and random-walk FM σ_y(1 s) = √(2π²h₋₂/3) = 3.6·10⁻¹⁰.
+    pub fn tcxo() -> Self {
+        Self::from_allan(3.2e-10, 3.6e-10)
+    }
+
+    /// A plain (uncompensated) 0.5 ppm crystal, navsync's figures: three times the TCXO's
+    /// white FM and ten times its random-walk FM (its frequency follows the temperature).
+    pub fn crystal() -> Self {
+        Self::from_allan(1.0e-9, 3.6e-9)
+    }
+
+    /// Allan deviation of the model at averaging time `tau_s`:
+    /// σ_y²(τ) = q_φ/τ + q_f·τ/3.
+    pub fn allan_deviation(&self, tau_s: f64) -> f64 {
+        (self.q_offset_ns2_per_s * 1e-18 / tau_s + self.q_rate_per_s * tau_s / 3.0).sqrt()
+    }
+
+    /// Discrete process noise over `dt_s` of the clock as a range, (c·δt, c·δṫ) in m and m/s
+    /// (Brown & Hwang eq. 9.3.11; Groves, *Principles of GNSS, Inertial, and Multisensor
+    /// Integrated Navigation Systems*, 2nd ed., eq. 9.152):
+    /// Q = c²·[[q_φ·Δt + q_f·Δt³/3, q_f·Δt²/2], [q_f·Δt²/2, q_f·Δt]] with q_φ in s²/s.
+    pub fn process_noise_m(&self, dt_s: f64) -> Matrix2<f64> {
+        const C_M_S: f64 = 299_792_458.0;
+        let (q1, q2) = (self.q_offset_ns2_per_s * 1e-18, self.q_rate_per_s);
+        let (t, t2, t3) = (dt_s, dt_s * dt_s, dt_s * dt_s * dt_s);
+        Matrix2::new(q1 * t + q2 * t3 / 3.0, q2 * t2 / 2.0, q2 * t2 / 2.0, q2 * t) * (C_M_S * C_M_S)
+    }
+}
+
 impl Default for OscillatorNoise {
     /// A TCXO-class host oscillator: white FM σ_y(1 s) = 1e−10 and random-walk FM
     /// σ_y(1 s) = 1e−10 (the simulator's default oscillator, `[clock] freq_rw_adev_1s`).
@@ -198,6 +231,25 @@ impl ClockModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn receiver_oscillator_presets_match_their_allan_coefficients() {
+        // Brown & Hwang's TCXO: σ_y²(τ) = h₀/(2τ) + (2π²/3)·h₋₂·τ.
+        let adev = |h0: f64, hm2: f64, tau: f64| {
+            (h0 / (2.0 * tau) + 2.0 * std::f64::consts::PI.powi(2) / 3.0 * hm2 * tau).sqrt()
+        };
+        let tcxo = OscillatorNoise::tcxo();
+        for tau in [1.0, 10.0, 100.0] {
+            let want = adev(2e-19, 2e-20, tau);
+            assert!((tcxo.allan_deviation(tau) / want - 1.0).abs() < 0.02, "τ {tau}");
+        }
+        assert!(OscillatorNoise::crystal().allan_deviation(100.0) > 5.0 * tcxo.allan_deviation(100.0));
+        // The drift's σ after 60 s of holdover is c·√(q_f·60 s).
+        let q = tcxo.process_noise_m(60.0);
+        let want = 299_792_458.0 * (tcxo.q_rate_per_s * 60.0).sqrt();
+        assert!((q[(1, 1)].sqrt() / want - 1.0).abs() < 1e-12);
+        assert!(q.determinant() > 0.0);
+    }
 
     /// Deterministic noise for tests (splitmix64 → uniform → sum of 12 ≈ Gaussian).
     fn gauss(state: &mut u64) -> f64 {

@@ -51,8 +51,11 @@ macro_rules! measurement_kinds {
     ($($(#[$doc:meta])* $field:ident: $variant:ident($t:ty),)*) => {
         $(pub mod $field;)*
 
-        /// A measurement of any kind, waiting in the queue for its epoch.
+        /// A measurement of any kind, waiting in the queue for its epoch. Its size is the
+        /// largest kind's (a receiver epoch's satellites, ~1.5 KiB): the queue's fixed slots
+        /// hold them without allocating.
         #[derive(Debug, Clone, Copy, PartialEq)]
+        #[allow(clippy::large_enum_variant)]
         pub enum Queued {
             $($(#[$doc])* $variant($t),)*
         }
@@ -125,10 +128,13 @@ measurement_kinds! {
     gnss: Gnss(gnss::GnssObservation),
     /// Zero velocity and zero angular rate while the vehicle stands still ([`zupt`]).
     zupt: Zupt(zupt::Zupt),
+    /// Pseudoranges and Doppler of each satellite, tightly coupled ([`ranges`]).
+    ranges: Ranges(crate::gnss::ranges::RangeEpoch),
 }
 
 /// Measurements waiting for the delayed filter to reach their epochs. Fixed capacity, no
-/// allocation: 32 slots hold a 1.5 s horizon of 10 Hz fixes and the standstill updates.
+/// allocation: 32 slots hold a 1.5 s horizon of 10 Hz fixes (or raw epochs) and the
+/// standstill updates.
 #[derive(Debug, Clone, Default)]
 pub struct MeasurementQueue {
     slots: [Option<Queued>; 32],

@@ -1,0 +1,379 @@
+//! Tightly coupled GNSS aiding: every satellite's pseudorange and Doppler fused one by one
+//! (scalar updates, each gated on its own), with the receiver clock bias and drift as filter
+//! states ([`crate::nav::error_state::CLK_BIAS`], `CLK_DRIFT`); one [`Measurement`] kind of
+//! the navigator's queue, active when the filter estimates the clock
+//! ([`crate::nav::error_state::ProcessNoise::clock`]). One satellite helps: with 1–3 in view
+//! the filter still bounds the inertial drift along their lines of sight, where a loosely
+//! coupled filter has no fix.
+//!
+//! Measurement model (Groves 2013, §14.3.3, eq. 14.127 and 14.128, in this filter's NED error
+//! state). With u the unit line of sight from the antenna to the satellite (the satellite at
+//! transmission rotated into the reception's ECEF frame, IS-GPS-200 §20.3.3.4.3.3.2) and the
+//! antenna at the epoch t_f = t_stamp − Δ̂:
+//!   ρ̂ = |r_sat − r_ant| + c·δt̂_r + I + T     (Klobuchar I, Saastamoinen T, from `gnss::spp`)
+//!   ρ̇̂ = (v_sat − v_ant)·u + c·δṫ̂_r
+//! measured against the receiver's ρ + c·δt_sv and −λ·D + c·δṫ_sv ([`SatRange`]). Since
+//! ∂ρ/∂r_ant = −uᵀ, the Jacobians are −u_nᵀ times the loosely coupled ones of
+//! [`super::gnss`] (lever arm, attitude, gyro bias and Δ columns included) and −1 on the clock
+//! state; innovation dz = computed − measured (KF-GINS sign).
+
+use nalgebra::{Matrix1, Matrix3, SMatrix, Vector1, Vector3};
+use navsync_shared::earth;
+
+use super::Measurement;
+use crate::gnss::ranges::{MAX_RANGE_SATS, RangeEpoch, SatRange};
+use crate::gnss::spp::{C_M_S, ned_from_ecef, rotate_for_flight, troposphere_delay_m};
+use crate::nav::error_state::{ATT, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, VEL};
+use crate::nav::eskf::Update;
+use crate::nav::filter::DelayedFilter;
+use crate::nav::mechanization::skew;
+use crate::nav::navigator::{NavConfig, NavCounters};
+
+/// 1σ of the L1 ionospheric delay at zenith when the broadcast model is not known yet, m.
+const UNMODELLED_IONO_ZENITH_M: f64 = 10.0;
+
+/// Settings of the pseudorange and Doppler updates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RangingConfig {
+    /// Satellites below this elevation are not used, rad (default 10°).
+    pub elevation_mask_rad: f64,
+    /// Signals weaker than this are not used, dB-Hz (default 25).
+    pub cno_mask_dbhz: f64,
+    /// Pseudorange 1σ at zenith, m (default 3): code noise, multipath, the broadcast orbit
+    /// and clock errors and what the atmosphere models leave, over sin(elevation) (the
+    /// weighting the receivers' own single-point solutions use); the receiver's own σ when
+    /// larger. Weak signals are weighted down further (see [`Self::reference_cno_dbhz`]).
+    pub pseudorange_std_m: f64,
+    /// Range-rate 1σ at zenith and at the reference C/N0, m/s (default 0.1), scaled likewise.
+    pub range_rate_std_mps: f64,
+    /// Below this C/N0 the σ above grow by √(10^((C/N0_ref − C/N0)/10)) (the code-tracking
+    /// noise variance goes with 1/(C/N0)), dB-Hz (default 35: a signal that strong is as
+    /// good as the elevation model says; fading under foliage or in a canyon is weaker).
+    pub reference_cno_dbhz: f64,
+    /// 1σ given to the clock bias when it is (re)initialised from the residuals, m (default 30).
+    pub clock_init_std_m: f64,
+    /// 1σ given to the clock drift when it is initialised, m/s (default 2).
+    pub drift_init_std_mps: f64,
+    /// A median pseudorange residual beyond this re-initialises the clock bias, m (default
+    /// 1000: a receiver's millisecond clock jump is 299.8 km, a drift model's error after a
+    /// minute of holdover a few hundred metres at most).
+    pub clock_reset_m: f64,
+}
+
+impl Default for RangingConfig {
+    fn default() -> Self {
+        Self {
+            elevation_mask_rad: 10f64.to_radians(),
+            cno_mask_dbhz: 25.0,
+            pseudorange_std_m: 3.0,
+            range_rate_std_mps: 0.1,
+            reference_cno_dbhz: 35.0,
+            clock_init_std_m: 30.0,
+            drift_init_std_mps: 2.0,
+            clock_reset_m: 1000.0,
+        }
+    }
+}
+
+/// What the ranging updates count.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RangingState {
+    /// Epochs fused (at least one satellite accepted).
+    pub epochs_used: u64,
+    /// Epochs that reached the filter while it did not estimate the clock (loosely coupled).
+    pub epochs_not_tight: u64,
+    /// Pseudoranges fused.
+    pub ranges_used: u64,
+    /// Pseudoranges that failed the innovation gate.
+    pub ranges_rejected: u64,
+    /// Range rates fused.
+    pub rates_used: u64,
+    /// Range rates that failed the innovation gate.
+    pub rates_rejected: u64,
+    /// Satellites below the elevation mask.
+    pub below_mask: u64,
+    /// Satellites below the C/N0 mask.
+    pub weak_signal: u64,
+    /// Clock initialisations from the residuals.
+    pub clock_inits: u64,
+    /// Clock bias re-initialisations after a jump of the receiver's clock.
+    pub clock_resets: u64,
+    /// Satellites fused in the last epoch.
+    pub last_sats: u64,
+    /// Host time of the last epoch with a fused satellite, ns (0: none yet).
+    pub last_fused_ns: i64,
+}
+
+/// The antenna at the measurement epoch.
+struct Antenna {
+    ecef_m: [f64; 3],
+    vel_ecef_mps: Vector3<f64>,
+    lat_rad: f64,
+    lon_rad: f64,
+    h_m: f64,
+    /// Columns: the N, E, D axes in ECEF (C_n^e).
+    c_ne: Matrix3<f64>,
+    /// Lever arm in NED, m.
+    lever_n: Vector3<f64>,
+    /// Lever-arm velocity C_b^n (ω × l) in NED, m/s.
+    lever_vel_n: Vector3<f64>,
+    c_bn: Matrix3<f64>,
+}
+
+impl Antenna {
+    /// The antenna of filter `f` `eps_s` before its time.
+    fn of(f: &DelayedFilter, lever_b: &Vector3<f64>, eps_s: f64) -> Self {
+        let c_bn = f.pva.q_nb.to_rotation_matrix().into_inner();
+        let lever_n = c_bn * lever_b;
+        let (rm, rn) = earth::radii(f.pva.lat_rad);
+        let d = lever_n - f.pva.vel_ned_mps * eps_s;
+        let lat = f.pva.lat_rad + d.x / (rm + f.pva.h_m);
+        let lon = f.pva.lon_rad + d.y / ((rn + f.pva.h_m) * f.pva.lat_rad.cos());
+        let h = f.pva.h_m - d.z;
+        let c_ne = ned_from_ecef(lat, lon).transpose();
+        let lever_vel_n = c_bn * f.last_w.cross(lever_b);
+        let v_ned = f.pva.vel_ned_mps - f.acc_ned * eps_s + lever_vel_n;
+        Self {
+            ecef_m: earth::geodetic_to_ecef(lat, lon, h),
+            vel_ecef_mps: c_ne * v_ned,
+            lat_rad: lat,
+            lon_rad: lon,
+            h_m: h,
+            c_ne,
+            lever_n,
+            lever_vel_n,
+            c_bn,
+        }
+    }
+}
+
+/// One satellite's geometry from the antenna.
+struct Sight {
+    /// Geometric range, m.
+    range_m: f64,
+    /// Unit line of sight, ECEF and NED.
+    u_ecef: Vector3<f64>,
+    u_ned: Vector3<f64>,
+    /// Satellite velocity in the reception's ECEF frame, m/s.
+    sat_vel: Vector3<f64>,
+    el_rad: f64,
+    /// Ionosphere plus troposphere, m.
+    atmosphere_m: f64,
+    /// Variance of the ionosphere when no model corrects it, m².
+    atmosphere_var_m2: f64,
+}
+
+fn sight(a: &Antenna, s: &SatRange, e: &RangeEpoch) -> Sight {
+    let d0 = Vector3::from(s.sat_ecef_m) - Vector3::from(a.ecef_m);
+    let tau = d0.norm() / C_M_S;
+    let sat = Vector3::from(rotate_for_flight(s.sat_ecef_m, tau));
+    let d = sat - Vector3::from(a.ecef_m);
+    let range_m = d.norm();
+    let u_ecef = d / range_m;
+    let u_ned = a.c_ne.transpose() * u_ecef;
+    let el_rad = (-u_ned.z).clamp(-1.0, 1.0).asin();
+    let az_rad = u_ned.y.atan2(u_ned.x).rem_euclid(2.0 * std::f64::consts::PI);
+    let iono = e
+        .iono
+        .map_or(0.0, |k| C_M_S * k.delay_s(a.lat_rad, a.lon_rad, el_rad, az_rad, e.tow_s));
+    let tropo = if el_rad > 0.0 {
+        troposphere_delay_m(a.lat_rad, a.h_m, el_rad)
+    } else {
+        0.0
+    };
+    // Without the broadcast ionosphere the whole delay is error: ≈ 10 m at zenith by day.
+    let iono_unmodelled = if e.iono.is_some() {
+        0.0
+    } else {
+        UNMODELLED_IONO_ZENITH_M / el_rad.sin().max(0.1)
+    };
+    Sight {
+        range_m,
+        u_ecef,
+        u_ned,
+        sat_vel: Vector3::from(rotate_for_flight(s.sat_vel_mps, tau)),
+        el_rad,
+        atmosphere_m: iono + tropo,
+        atmosphere_var_m2: iono_unmodelled * iono_unmodelled,
+    }
+}
+
+/// The σ of a measurement with zenith value `zenith` at elevation `el_rad` and C/N0 `cno`.
+fn sigma(zenith: f64, reported: f64, el_rad: f64, cno: f64, rc: &RangingConfig) -> f64 {
+    let weak = 10f64.powf(((rc.reference_cno_dbhz - cno) / 10.0).max(0.0));
+    (zenith / el_rad.sin().max(0.05) * weak.sqrt()).max(reported)
+}
+
+/// Median of the first `n` values (n ≥ 1), without allocating.
+fn median(v: &mut [f64; MAX_RANGE_SATS], n: usize) -> f64 {
+    let s = &mut v[..n];
+    s.sort_by(f64::total_cmp);
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
+}
+
+impl RangeEpoch {
+    fn usable(&self, a: &Antenna, s: &SatRange, cfg: &NavConfig) -> Option<Sight> {
+        let rc = &cfg.measurements.ranges;
+        let g = sight(a, s, self);
+        (g.el_rad >= rc.elevation_mask_rad && f64::from(s.cno_dbhz) >= rc.cno_mask_dbhz).then_some(g)
+    }
+
+    /// Sets the clock from the median residuals of the satellites in view (≥ 1), or resets
+    /// the bias after a jump. Returns false when no satellite is usable.
+    fn anchor_clock(&self, f: &mut DelayedFilter, cfg: &NavConfig, eps: f64, st: &mut RangingState) -> bool {
+        let rc = &cfg.measurements.ranges;
+        let a = Antenna::of(f, &cfg.lever_arm_b_m, eps);
+        let (mut res, mut rates) = ([0.0; MAX_RANGE_SATS], [0.0; MAX_RANGE_SATS]);
+        let (mut n, mut m) = (0, 0);
+        for s in self.sats() {
+            let Some(g) = self.usable(&a, s, cfg) else { continue };
+            res[n] = s.pseudorange_m - g.range_m - g.atmosphere_m;
+            n += 1;
+            if s.range_rate_mps.is_finite() {
+                rates[m] = s.range_rate_mps - (g.sat_vel - a.vel_ecef_mps).dot(&g.u_ecef);
+                m += 1;
+            }
+        }
+        if n == 0 {
+            return f.clock_valid;
+        }
+        let bias = median(&mut res, n);
+        let bias_now = f.clock_bias_m - f.clock_drift_mps * eps;
+        if f.clock_valid && (bias - bias_now).abs() <= rc.clock_reset_m {
+            return true;
+        }
+        let reset_drift = !f.clock_valid;
+        if reset_drift {
+            f.clock_drift_mps = if m > 0 { median(&mut rates, m) } else { 0.0 };
+            st.clock_inits += 1;
+        } else {
+            st.clock_resets += 1;
+        }
+        f.clock_bias_m = bias + f.clock_drift_mps * eps;
+        for i in [CLK_BIAS, CLK_DRIFT] {
+            if i == CLK_DRIFT && !reset_drift {
+                continue;
+            }
+            for j in 0..N {
+                f.eskf.p[(i, j)] = 0.0;
+                f.eskf.p[(j, i)] = 0.0;
+            }
+        }
+        let pos_var: f64 = (0..3).map(|i| f.eskf.p[(POS + i, POS + i)]).sum();
+        f.eskf.p[(CLK_BIAS, CLK_BIAS)] = rc.clock_init_std_m.powi(2) + pos_var;
+        if reset_drift {
+            f.eskf.p[(CLK_DRIFT, CLK_DRIFT)] = rc.drift_init_std_mps.powi(2);
+        }
+        f.clock_valid = true;
+        true
+    }
+}
+
+impl Measurement for RangeEpoch {
+    type Config = RangingConfig;
+    type State = RangingState;
+
+    fn epoch_ns(&self, delay_s: f64) -> i64 {
+        self.stamp_host_ns - (delay_s * 1e9) as i64
+    }
+
+    fn fuse(
+        &self,
+        f: &mut DelayedFilter,
+        eps: f64,
+        cfg: &NavConfig,
+        st: &mut RangingState,
+        _counters: &mut NavCounters,
+    ) -> bool {
+        if cfg.noise.clock.is_none() {
+            st.epochs_not_tight += 1;
+            return false;
+        }
+        if !self.anchor_clock(f, cfg, eps, st) {
+            return false;
+        }
+        let rc = &cfg.measurements.ranges;
+        let lever_b = cfg.lever_arm_b_m;
+        let mut used = 0u64;
+        for s in self.sats() {
+            let a = Antenna::of(f, &lever_b, eps);
+            let Some(g) = self.usable(&a, s, cfg) else {
+                if sight(&a, s, self).el_rad < rc.elevation_mask_rad {
+                    st.below_mask += 1;
+                } else {
+                    st.weak_signal += 1;
+                }
+                continue;
+            };
+            let cno = f64::from(s.cno_dbhz);
+            let un = g.u_ned.transpose();
+
+            // Pseudorange.
+            let mut h = SMatrix::<f64, 1, N>::zeros();
+            h.fixed_view_mut::<1, 3>(0, POS).copy_from(&(-un));
+            h.fixed_view_mut::<1, 3>(0, ATT).copy_from(&(-un * skew(&a.lever_n)));
+            h[(0, DELAY)] = -g.u_ned.dot(&f.pva.vel_ned_mps);
+            h[(0, CLK_BIAS)] = -1.0;
+            let bias = f.clock_bias_m - f.clock_drift_mps * eps;
+            let dz = Vector1::new(g.range_m + bias + g.atmosphere_m - s.pseudorange_m);
+            let sd = sigma(rc.pseudorange_std_m, s.pseudorange_std_m, g.el_rad, cno, rc);
+            let var = sd * sd + g.atmosphere_var_m2;
+            match f.eskf.update(&dz, &h, &Matrix1::new(var), cfg.gate_scale) {
+                Update::Accepted { dx, .. } => {
+                    f.feedback(&dx, cfg.horizon_s);
+                    st.ranges_used += 1;
+                    used += 1;
+                }
+                Update::Rejected { .. } => st.ranges_rejected += 1,
+            }
+
+            // Range rate.
+            if !s.range_rate_mps.is_finite() {
+                continue;
+            }
+            let a = Antenna::of(f, &lever_b, eps);
+            let g = sight(&a, s, self);
+            let un = g.u_ned.transpose();
+            let mut h = SMatrix::<f64, 1, N>::zeros();
+            h.fixed_view_mut::<1, 3>(0, VEL).copy_from(&(-un));
+            h.fixed_view_mut::<1, 3>(0, ATT).copy_from(&(-un * skew(&a.lever_vel_n)));
+            h.fixed_view_mut::<1, 3>(0, BG)
+                .copy_from(&(un * a.c_bn * skew(&lever_b)));
+            h[(0, DELAY)] = -g.u_ned.dot(&f.acc_ned);
+            h[(0, CLK_DRIFT)] = -1.0;
+            let rate = (g.sat_vel - a.vel_ecef_mps).dot(&g.u_ecef) + f.clock_drift_mps;
+            let dz = Vector1::new(rate - s.range_rate_mps);
+            let sd = sigma(rc.range_rate_std_mps, s.range_rate_std_mps, g.el_rad, cno, rc);
+            match f.eskf.update(&dz, &h, &Matrix1::new(sd * sd), cfg.gate_scale) {
+                Update::Accepted { dx, .. } => {
+                    f.feedback(&dx, cfg.horizon_s);
+                    st.rates_used += 1;
+                }
+                Update::Rejected { .. } => st.rates_rejected += 1,
+            }
+        }
+        st.last_sats = used;
+        if used > 0 {
+            st.epochs_used += 1;
+            st.last_fused_ns = self.epoch_ns(f.delay_s);
+        }
+        used > 0
+    }
+
+    fn counters(st: &RangingState, out: &mut dyn FnMut(&'static str, u64)) {
+        out("ranges_epochs_used", st.epochs_used);
+        out("ranges_epochs_not_tight", st.epochs_not_tight);
+        out("ranges_used", st.ranges_used);
+        out("ranges_rejected", st.ranges_rejected);
+        out("range_rates_used", st.rates_used);
+        out("range_rates_rejected", st.rates_rejected);
+        out("ranges_below_mask", st.below_mask);
+        out("ranges_weak_signal", st.weak_signal);
+        out("clock_inits", st.clock_inits);
+        out("clock_resets", st.clock_resets);
+    }
+}
