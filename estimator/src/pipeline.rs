@@ -385,12 +385,20 @@ impl Pipeline {
         s
     }
 
-    /// The time state at host time `now_ns`, with the filter's Δ estimate.
+    /// The time state at host time `now_ns`, with the filter's Δ estimate and, tightly
+    /// coupled, the receiver's clock.
     pub fn time_state(&mut self, now_ns: i64) -> TimeState {
         let (d, ds) = self.nav.gnss_delay();
         self.time.set_gnss_delay(d, ds);
         let mut t = self.time.time_state(now_ns);
         (t.imu, t.imu_count) = self.array.table();
+        if let Some(c) = self.nav.receiver_clock(now_ns) {
+            t.rx_clock_bias_ns = c.bias_m / spp::C_M_S * 1e9;
+            t.rx_clock_bias_std_ns = c.bias_std_m / spp::C_M_S * 1e9;
+            t.rx_clock_drift = c.drift_mps / spp::C_M_S;
+            t.rx_clock_drift_std = c.drift_std_mps / spp::C_M_S;
+            t.rx_clock_last_fused_host_ns = c.last_fused_ns;
+        }
         t
     }
 }

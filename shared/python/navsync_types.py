@@ -328,6 +328,16 @@ class TimeState(ctypes.Structure):
         ("gnss_delay_s", ctypes.c_double),
         # 1-sigma of `gnss_delay_s`, s.
         ("gnss_delay_std_s", ctypes.c_double),
+        # The GNSS receiver's clock bias at `computed_host_ns` (receiver time − GPS time) from the tightly coupled filter, ns: extrapolated with its drift while no satellite is fused (holdover; see `rx_clock_last_fused_host_ns`). NaN when loosely coupled or before the clock is anchored.
+        ("rx_clock_bias_ns", ctypes.c_double),
+        # 1-sigma of `rx_clock_bias_ns` (grows in holdover), ns.
+        ("rx_clock_bias_std_ns", ctypes.c_double),
+        # The receiver clock's drift (fractional frequency offset, s/s); NaN as the bias.
+        ("rx_clock_drift", ctypes.c_double),
+        # 1-sigma of `rx_clock_drift`.
+        ("rx_clock_drift_std", ctypes.c_double),
+        # Host time of the last receiver epoch with a satellite fused, ns (0: none).
+        ("rx_clock_last_fused_host_ns", ctypes.c_int64),
         # Number of epochs in the latency statistics.
         ("latency_count", ctypes.c_uint64),
         # PPS edges accepted.
@@ -347,16 +357,16 @@ class TimeState(ctypes.Structure):
     ]
 
     #: Size in bytes of the Rust type.
-    RUST_SIZE = 424
+    RUST_SIZE = 464
     #: Alignment in bytes of the Rust type.
     RUST_ALIGN = 8
     #: Byte offset of every field in the Rust type.
-    RUST_OFFSETS = {"ref_host_ns": 0, "ref_utc_ns": 8, "computed_host_ns": 16, "last_pps_host_ns": 24, "seq": 32, "rate_error": 40, "offset_std_ns": 48, "rate_std": 56, "offset_rate_cov_ns": 64, "q_offset_ns2_per_s": 72, "q_rate_per_s": 80, "latency_min_s": 88, "latency_median_s": 96, "latency_p99_s": 104, "latency_max_s": 112, "gnss_delay_s": 120, "gnss_delay_std_s": 128, "latency_count": 136, "pps_used": 144, "pps_rejected": 152, "imu": 160, "status": 416, "imu_count": 417, "leap_s": 418, "reserved": 420}
+    RUST_OFFSETS = {"ref_host_ns": 0, "ref_utc_ns": 8, "computed_host_ns": 16, "last_pps_host_ns": 24, "seq": 32, "rate_error": 40, "offset_std_ns": 48, "rate_std": 56, "offset_rate_cov_ns": 64, "q_offset_ns2_per_s": 72, "q_rate_per_s": 80, "latency_min_s": 88, "latency_median_s": 96, "latency_p99_s": 104, "latency_max_s": 112, "gnss_delay_s": 120, "gnss_delay_std_s": 128, "rx_clock_bias_ns": 136, "rx_clock_bias_std_ns": 144, "rx_clock_drift": 152, "rx_clock_drift_std": 160, "rx_clock_last_fused_host_ns": 168, "latency_count": 176, "pps_used": 184, "pps_rejected": 192, "imu": 200, "status": 456, "imu_count": 457, "leap_s": 458, "reserved": 460}
 
     @staticmethod
     def type_name():
         """The iceoryx2 type name (with the layout version)."""
-        return "navsync.TimeState.v1"
+        return "navsync.TimeState.v2"
 
 
 class NavState(ctypes.Structure):

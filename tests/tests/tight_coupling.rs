@@ -264,8 +264,13 @@ struct Outcome {
     /// (epoch index = drive time s, clock error m, clock 1σ m) at each raw epoch as it
     /// arrives, before it is fused (tight only).
     clock: Vec<(u64, f64, f64)>,
+    /// (epoch index, `TimeState::rx_clock_bias_std_ns`, `rx_clock_last_fused_host_ns`) there.
+    time_states: Vec<(u64, f64, i64)>,
     /// Bits of every NavState's position and velocity (determinism).
     digest: u64,
+    /// Time spent in the estimator (IMU samples, raw epochs, their catch-up) and IMU samples.
+    estimator_time: std::time::Duration,
+    imu_samples: u64,
     pipeline: Pipeline,
 }
 
@@ -303,7 +308,10 @@ fn run(coupling: Coupling, sky: Sky) -> Outcome {
     let mut out = Outcome {
         horizontal: Vec::new(),
         clock: Vec::new(),
+        time_states: Vec::new(),
         digest: 0xcbf2_9ce4_8422_2325,
+        estimator_time: std::time::Duration::ZERO,
+        imu_samples: 0,
         pipeline: Pipeline::new(settings.pipeline_config()),
     };
     let mut epochs_true_bias = std::collections::VecDeque::new();
@@ -313,7 +321,12 @@ fn run(coupling: Coupling, sky: Sky) -> Outcome {
                        out: &mut Outcome,
                        biases: &mut std::collections::VecDeque<(u64, f64, i64)>| match input {
         Input::Imu(x) => {
-            if let Some(n) = p.on_imu(&x) {
+            let t0 = std::time::Instant::now();
+            let state = p.on_imu(&x);
+            p.catch_up();
+            out.estimator_time += t0.elapsed();
+            out.imu_samples += 1;
+            if let Some(n) = state {
                 for v in [
                     n.lat_deg,
                     n.lon_deg,
@@ -328,7 +341,6 @@ fn run(coupling: Coupling, sky: Sky) -> Outcome {
                     next_second_ns += 1_000_000_000;
                     record(&n, &truth, out);
                 }
-                p.catch_up();
             }
         }
         Input::PpsEdge(e) => {
@@ -339,7 +351,9 @@ fn run(coupling: Coupling, sky: Sky) -> Outcome {
         }
         Input::TimePulse(t) => p.on_time_pulse(&t),
         Input::Raw(r) => {
+            let t0 = std::time::Instant::now();
             p.on_raw(&r);
+            out.estimator_time += t0.elapsed();
             while let Some(&(seq, bias, host)) = biases.front() {
                 if seq > r.stamp.seq {
                     break;
@@ -349,6 +363,9 @@ fn run(coupling: Coupling, sky: Sky) -> Outcome {
                     && let Some(c) = p.nav().receiver_clock(host)
                 {
                     out.clock.push((seq, c.bias_m - bias, c.bias_std_m));
+                    let t = p.time_state(host);
+                    out.time_states
+                        .push((seq, t.rx_clock_bias_std_ns, t.rx_clock_last_fused_host_ns));
                 }
             }
         }
@@ -452,6 +469,14 @@ fn with_the_full_sky_tight_is_as_accurate_as_loose() {
         tight.clock.last().unwrap().1,
         tight.clock.last().unwrap().2
     );
+    for (name, o) in [("loose", &loose), ("tight", &tight)] {
+        let secs = o.estimator_time.as_secs_f64();
+        println!(
+            "estimator, {name}: {} IMU samples in {secs:.2} s: {:.0} samples/s (measured, not asserted)",
+            o.imu_samples,
+            o.imu_samples as f64 / secs
+        );
+    }
     assert!(
         tight.horizontal.len() > 500,
         "{} states with a position",
@@ -517,6 +542,20 @@ fn the_clock_holds_over_a_blockage_and_recovers_on_one_satellite() {
     );
     assert!(first.1.abs() < 3.0 * first.2, "error {} m vs σ {} m", first.1, first.2);
     // With that one satellite σ grows only with the INS's drift along it, well below holdover.
+    // The published TimeState carries the same clock, and how long it has held over.
+    let ts = *tight.time_states.iter().find(|t| t.0 == 360).expect("a time state");
+    assert!(
+        (ts.1 - end.2 / C_M_S * 1e9).abs() < 1e-6 * ts.1,
+        "{} ns vs {} m",
+        ts.1,
+        end.2
+    );
+    let held_s = (START_HOST_NS as f64 * 1e-9 + 360.0) - ts.2 as f64 * 1e-9;
+    println!(
+        "TimeState at the end: receiver clock σ {:.1} ns, last satellite fused {held_s:.1} s before",
+        ts.1
+    );
+    assert!((59.0..62.0).contains(&held_s), "held over for {held_s} s");
     let last = epoch(419);
     assert!(
         last.2 < end.2,

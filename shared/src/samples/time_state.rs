@@ -65,7 +65,7 @@ crate::sample_struct! {
     ///
     /// Mapping (a first-order clock model, linear in host time):
     /// `utc_ns(h) = ref_utc_ns + (h − ref_host_ns) · (1 + rate_error)`; see [`TimeState::utc_ns_at`].
-    pub struct TimeState = "navsync.TimeState.v1" {
+    pub struct TimeState = "navsync.TimeState.v2" {
         /// Host time (`CLOCK_MONOTONIC` ns) of the reference point of the mapping.
         pub ref_host_ns: i64,
         /// Estimated UTC (ns since 1970) at `ref_host_ns`.
@@ -100,6 +100,19 @@ crate::sample_struct! {
         pub gnss_delay_s: f64,
         /// 1-sigma of `gnss_delay_s`, s.
         pub gnss_delay_std_s: f64,
+        /// The GNSS receiver's clock bias at `computed_host_ns` (receiver time − GPS time) from
+        /// the tightly coupled filter, ns: extrapolated with its drift while no satellite is
+        /// fused (holdover; see `rx_clock_last_fused_host_ns`). NaN when loosely coupled or
+        /// before the clock is anchored.
+        pub rx_clock_bias_ns: f64,
+        /// 1-sigma of `rx_clock_bias_ns` (grows in holdover), ns.
+        pub rx_clock_bias_std_ns: f64,
+        /// The receiver clock's drift (fractional frequency offset, s/s); NaN as the bias.
+        pub rx_clock_drift: f64,
+        /// 1-sigma of `rx_clock_drift`.
+        pub rx_clock_drift_std: f64,
+        /// Host time of the last receiver epoch with a satellite fused, ns (0: none).
+        pub rx_clock_last_fused_host_ns: i64,
         /// Number of epochs in the latency statistics.
         pub latency_count: u64,
         /// PPS edges accepted.
@@ -170,6 +183,10 @@ impl TimeState {
             &mut s.latency_max_s,
             &mut s.gnss_delay_s,
             &mut s.gnss_delay_std_s,
+            &mut s.rx_clock_bias_ns,
+            &mut s.rx_clock_bias_std_ns,
+            &mut s.rx_clock_drift,
+            &mut s.rx_clock_drift_std,
             &mut s.offset_std_ns,
             &mut s.rate_std,
         ] {
