@@ -70,6 +70,21 @@ impl Sky {
     }
 }
 
+/// Faults of the receiver and of the time base.
+#[derive(Debug, Clone, Copy, Default)]
+struct Faults {
+    /// At this epoch the receiver's clock steps by 1 ms (u-blox receivers keep their clock
+    /// within a millisecond of GPS time by such steps).
+    clock_jump_at: Option<u64>,
+    /// (first epoch, epochs, elevation rank of the satellite (0: highest), m added to its
+    /// pseudorange): a reflection-only signal.
+    satellite_fault: Option<(u64, u64, usize, f64)>,
+    /// No PPS: the estimator stamps the epochs by their receipt and estimates Δ.
+    software_sync: bool,
+    /// The receiver sends its fixes but not its raw measurements.
+    no_raw: bool,
+}
+
 /// This file's GPS receiver.
 struct Receiver {
     sky: RealSky,
@@ -81,6 +96,7 @@ struct Receiver {
     sat_bias_m: [f64; 33],
     multipath_m: [f64; 33],
     tow0_s: f64,
+    faults: Faults,
 }
 
 /// One generated epoch.
@@ -95,7 +111,7 @@ struct Epoch {
 }
 
 impl Receiver {
-    fn new(tow0_s: f64) -> Self {
+    fn new(tow0_s: f64, faults: Faults) -> Self {
         let mut rng = Normal(0x5DEE_CE66_D1CE_4E5B);
         let mut sat_bias_m = [0.0; 33];
         for b in sat_bias_m.iter_mut() {
@@ -109,11 +125,15 @@ impl Receiver {
             sat_bias_m,
             multipath_m: [0.0; 33],
             tow0_s,
+            faults,
         }
     }
 
     /// The epoch at receiver time `tow0 + k` s, `None` past the drive.
     fn epoch(&mut self, k: u64, world: &World, sky: Sky) -> Option<Epoch> {
+        if self.faults.clock_jump_at == Some(k) {
+            self.bias_m += 1e-3 * C_M_S;
+        }
         let rcv_tow = self.tow0_s + k as f64;
         let t_true = rcv_tow - self.bias_m / C_M_S;
         let gps_ns = i64::from(WEEK) * SECONDS_PER_WEEK * 1_000_000_000 + (t_true * 1e9).round() as i64;
@@ -157,7 +177,11 @@ impl Receiver {
         raw.leap_s = 18;
         let mut obs = Vec::new();
         let mut rates = Vec::new();
-        for &(sv, tau, rot, el, az) in &seen {
+        for (rank, &(sv, tau, rot, el, az)) in seen.iter().enumerate() {
+            let fault = match self.faults.satellite_fault {
+                Some((from, n, r, add_m)) if (from..from + n).contains(&k) && r == rank => add_m,
+                _ => 0.0,
+            };
             let orbit = &self.sky.almanac[&sv];
             let i = usize::from(sv);
             let a = (-1.0f64 / 20.0).exp();
@@ -169,7 +193,8 @@ impl Receiver {
                 + 1.05 * spp::troposphere_delay_m(tr.lat_rad, tr.height_m, el)
                 + self.sat_bias_m[i]
                 + 0.5 / el.sin() * self.multipath_m[i]
-                + 0.4 / el.sin() * self.rng.next();
+                + 0.4 / el.sin() * self.rng.next()
+                + fault;
             let vs = spp::rotate_for_flight(orbit.velocity_ecef_mps(t_true - tau), tau);
             let r = dist(rot, rx);
             let rr = (0..3).map(|j| (vs[j] - vel[j]) * (rot[j] - rx[j]) / r).sum::<f64>() + self.drift_mps
@@ -280,6 +305,11 @@ fn world(cfg: &SimConfig, start_utc_ns: i64) -> World {
 
 /// Runs the default drive with `coupling` under `sky`.
 fn run(coupling: Coupling, sky: Sky) -> Outcome {
+    run_with(coupling, sky, Faults::default())
+}
+
+/// Runs the default drive with `coupling` under `sky` with the receiver's `faults`.
+fn run_with(coupling: Coupling, sky: Sky, faults: Faults) -> Outcome {
     let mut cfg = SimConfig::default_drive();
     cfg.set_imu_count(1);
     cfg.set_imu_preset(ImuPreset::Industrial);
@@ -292,12 +322,13 @@ fn run(coupling: Coupling, sky: Sky) -> Outcome {
     let stream = PublishedStream::new(world(&cfg, start_utc_ns));
     let settings = Settings {
         coupling,
+        software_sync: faults.software_sync,
         imu_model: ImuPreset::Industrial,
         gnss_vel_std_mps: 0.1,
         ..Default::default()
     };
     let mut pipeline = Pipeline::new(settings.pipeline_config());
-    let mut receiver = Receiver::new(tow0);
+    let mut receiver = Receiver::new(tow0, faults);
     if coupling == Coupling::Tight {
         for (&sv, orbit) in &receiver.sky.almanac {
             pipeline.ephemerides_mut().insert_orbit(sv, *orbit);
@@ -386,11 +417,11 @@ fn run(coupling: Coupling, sky: Sky) -> Outcome {
         };
         while let Some(e) = next.as_ref().filter(|e| e.raw.stamp.host_ns <= s.host_ns()) {
             match coupling {
-                Coupling::Tight => {
+                Coupling::Tight if !faults.no_raw => {
                     epochs_true_bias.push_back((k, e.bias_m, e.host_ns));
                     order.push(AnySample::Raw(e.raw), ());
                 }
-                Coupling::Loose => {
+                _ => {
                     if let Some(f) = e.fix {
                         order.push(AnySample::GnssFix(f), ());
                     }
@@ -563,4 +594,69 @@ fn the_clock_holds_over_a_blockage_and_recovers_on_one_satellite() {
         last.2,
         end.2
     );
+}
+
+#[test]
+fn a_millisecond_clock_step_and_a_reflected_signal_are_caught() {
+    let faults = Faults {
+        clock_jump_at: Some(200),
+        satellite_fault: Some((250, 10, 1, 80.0)),
+        ..Faults::default()
+    };
+    let o = run_with(Coupling::Tight, Sky::Full, faults);
+    let st = o.pipeline.nav().measurement_states().ranges;
+    let (e_jump, _) = at(&o, 205.0);
+    let (e_fault, _) = at(&o, 262.0);
+    println!(
+        "1 ms clock step at 200 s: {} clock re-anchoring(s), horizontal error 5 s later {e_jump:.2} m; \
+         +80 m on the second-highest satellite 250–259 s: {} pseudoranges rejected, error at 262 s {e_fault:.2} m; \
+         RMS after 60 s {:.2} m",
+        st.clock_resets,
+        st.ranges_rejected,
+        rms(&o, 60.0)
+    );
+    assert_eq!(st.clock_resets, 1, "the clock step re-anchors the clock once");
+    assert!(st.ranges_rejected >= 8, "{} pseudoranges rejected", st.ranges_rejected);
+    assert!(e_jump < 5.0 && e_fault < 5.0, "errors {e_jump} m, {e_fault} m");
+}
+
+#[test]
+fn under_software_sync_the_epochs_are_found_by_the_delay_state() {
+    let o = run_with(
+        Coupling::Tight,
+        Sky::Full,
+        Faults {
+            software_sync: true,
+            ..Faults::default()
+        },
+    );
+    let (d, d_sd) = o.pipeline.nav().gnss_delay();
+    let h = rms(&o, 120.0);
+    println!(
+        "software sync, tight: Δ {:.1} ms ± {:.1} ms (the receipt is 80 ms after the epoch), horizontal RMS after 120 s {h:.2} m",
+        d * 1e3,
+        d_sd * 1e3
+    );
+    assert!((d - 0.08).abs() < 3.0 * d_sd + 0.005, "Δ {d} s ± {d_sd}");
+    assert!(h < 3.0, "horizontal RMS {h} m");
+}
+
+#[test]
+fn without_raw_measurements_tight_falls_back_to_the_fixes() {
+    let o = run_with(
+        Coupling::Tight,
+        Sky::Full,
+        Faults {
+            no_raw: true,
+            ..Faults::default()
+        },
+    );
+    let st = o.pipeline.nav().measurement_states().ranges;
+    let h = rms(&o, 60.0);
+    println!(
+        "tight without raw epochs: {} fixes fused loosely, horizontal RMS {h:.2} m",
+        st.fallback_fixes
+    );
+    assert!(st.fallback_fixes > 400, "{} fixes fused", st.fallback_fixes);
+    assert!(h < 2.0, "horizontal RMS {h} m");
 }

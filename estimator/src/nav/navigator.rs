@@ -176,6 +176,8 @@ pub struct Navigator {
     counters: NavCounters,
     last_imu_ns: Option<i64>,
     last_fix_rx_ns: Option<i64>,
+    /// Receipt of the last raw epoch (tightly coupled), host ns.
+    last_ranges_rx_ns: Option<i64>,
     /// The fusion horizon in force, ns.
     horizon_ns: i64,
     /// The longest recent delay of a fix from its epoch to its release, ns (fading).
@@ -201,6 +203,7 @@ impl Navigator {
             counters: NavCounters::default(),
             last_imu_ns: None,
             last_fix_rx_ns: None,
+            last_ranges_rx_ns: None,
             horizon_ns: (cfg.horizon_s * 1e9) as i64,
             fix_delay_ns: 0,
         }
@@ -263,7 +266,9 @@ impl Navigator {
     }
 
     /// Queues a fix for fusion at its epoch (receipt host time `rx_ns` only marks GNSS as alive).
-    /// Tightly coupled ([`Self::is_tight`]), fixes only align the filter: afterwards the
+    /// Tightly coupled ([`Self::is_tight`]), fixes align the filter, and afterwards are fused
+    /// only while no raw epoch has come for [`NavConfig::outage_after_s`] (a receiver that does
+    /// not send its raw measurements: counted as `ranges_fallback_fixes`); otherwise the
     /// satellites' own measurements ([`Self::on_ranges`]) carry the same information.
     pub fn on_gnss(&mut self, obs: GnssObservation, rx_ns: i64) {
         self.last_fix_rx_ns = Some(rx_ns);
@@ -272,7 +277,13 @@ impl Navigator {
             return;
         }
         if self.is_tight() {
-            return;
+            let raw_recent = self
+                .last_ranges_rx_ns
+                .is_some_and(|t| (rx_ns - t) as f64 * 1e-9 <= self.cfg.outage_after_s);
+            if raw_recent {
+                return;
+            }
+            self.states.ranges.fallback_fixes += 1;
         }
         self.adapt_horizon(obs.stamp_host_ns);
         let Some(f) = &self.filt else { return };
@@ -292,6 +303,7 @@ impl Navigator {
             self.states.ranges.epochs_not_tight += 1;
             return;
         }
+        self.last_ranges_rx_ns = Some(rx_ns);
         if epoch.count > 0 {
             self.last_fix_rx_ns = Some(rx_ns);
         }

@@ -98,6 +98,9 @@ pub struct RangingState {
     pub clock_inits: u64,
     /// Clock bias re-initialisations after a jump of the receiver's clock.
     pub clock_resets: u64,
+    /// Fixes fused loosely while tightly coupled because no raw epoch came
+    /// ([`crate::nav::navigator::Navigator::on_gnss`]).
+    pub fallback_fixes: u64,
     /// Satellites fused in the last epoch.
     pub last_sats: u64,
     /// Host time of the last epoch with a fused satellite, ns (0: none yet).
@@ -375,5 +378,6 @@ impl Measurement for RangeEpoch {
         out("ranges_weak_signal", st.weak_signal);
         out("clock_inits", st.clock_inits);
         out("clock_resets", st.clock_resets);
+        out("ranges_fallback_fixes", st.fallback_fixes);
     }
 }
