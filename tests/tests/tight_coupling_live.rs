@@ -1,0 +1,248 @@
+//! The live estimator tightly coupled (`navsync estimator --coupling tight`) over iceoryx2:
+//! the simulator drives the IMU, the PPS and an NMEA receiver through `navsync gnss` as in
+//! the other live tests; this test plays a u-blox receiver's raw side on the receiver's
+//! services: the real RXM-SFRBX subframes of SV 3 (its broadcast ephemeris) and the
+//! ionosphere page from gpsd's `ublox-ned-m8t-sbfrx3` capture on `navsync/gnss/0/nav-data`,
+//! and one RXM-RAWX epoch per second on `navsync/gnss/0/raw` with SV 3's pseudorange and
+//! Doppler computed from that ephemeris, the simulator's truth and a receiver clock (bias
+//! 10 µs, drift 0.2 ppm). The simulated GNSS time is set (`--utc-offset`) to SV 3's t_oe
+//! and the drive starts right under it. The estimator aligns on the receiver's fixes, then fuses
+//! the one satellite: its `Health` counts the ranges and the clock's anchoring, its
+//! `TimeState` carries the receiver clock.
+
+mod gps_sky;
+
+use std::time::{Duration, Instant};
+
+use navsync_estimator::gnss::lnav::{self, Subframe};
+use navsync_estimator::gnss::ranges::{EphemerisStore, L1_HZ};
+use navsync_estimator::gnss::spp::{self, C_M_S};
+use navsync_shared::earth;
+use navsync_shared::reflect::Reflect;
+use navsync_shared::samples::{GnssNavData, GnssRaw, RawMeasurement, SimTruth, Stamp, StampSource, TimeState};
+use navsync_shared::services;
+use navsync_shared::time::{gps_ns_from_utc_ns, monotonic_now_ns, realtime_now_ns};
+use navsync_tests::{HealthWatch, TestEnv, shared_material, write_drive_scenario};
+
+const WEEK_NS: i64 = 604_800 * 1_000_000_000;
+/// The scenario's start as `write_drive_scenario` writes it (replaced by SV 3's
+/// sub-satellite point).
+const START: (f64, f64) = (48.137154, 11.576124);
+/// The receiver clock: bias at the first epoch (m) and drift (m/s).
+const BIAS0_M: f64 = 2998.0;
+const DRIFT_MPS: f64 = 60.0;
+
+#[test]
+fn the_live_estimator_fuses_one_real_satellite() {
+    let bytes = std::fs::read(shared_material("corpora/gpsd-ubx").join("ublox-ned-m8t-sbfrx3.log")).unwrap();
+    let nav: Vec<GnssNavData> = gps_sky::nav_data(&bytes)
+        .into_iter()
+        .filter(|n| n.gnss_id == 0)
+        .collect();
+    // SV 3's subframes 1–3 and the ionosphere page: what the estimator will be sent.
+    let mut sent = Vec::new();
+    let mut toe_s = None;
+    for n in &nav {
+        let len = usize::from(n.num_words).min(n.words.len());
+        match lnav::decode(&n.words[..len]).map(|d| d.subframe) {
+            Ok(Subframe::Ephem1(_) | Subframe::Ephem3(_)) if n.sv_id == 3 => sent.push(*n),
+            Ok(Subframe::Ephem2(e)) if n.sv_id == 3 => {
+                toe_s = Some(f64::from(e.toe) * 16.0);
+                sent.push(*n);
+            }
+            Ok(Subframe::IonoUtc(_)) => sent.push(*n),
+            _ => {}
+        }
+    }
+    let toe_s = toe_s.expect("SV 3's subframe 2");
+    let mut store = EphemerisStore::default();
+    for n in &sent {
+        store.on_nav_data(n);
+    }
+    let orbit = *store.orbit(3, toe_s).expect("SV 3's ephemeris");
+    // The drive starts under SV 3 at its t_oe (the scenario's start moved there).
+    let best_tow = toe_s;
+    let sat = orbit.position_ecef_m(toe_s);
+    let under = earth::geodetic_from_ecef(sat[0], sat[1], sat[2]).expect("a sub-satellite point");
+    // The simulated GNSS time starts 10 s before that (the same week as now).
+    let now_gps = gps_ns_from_utc_ns(realtime_now_ns());
+    let target_gps = now_gps.div_euclid(WEEK_NS) * WEEK_NS + ((best_tow - 10.0) * 1e9) as i64;
+    let offset_s = (target_gps - now_gps) as f64 * 1e-9;
+
+    let mut env = TestEnv::new("tightlive");
+    let scenario = env.dir.join("drive.toml");
+    write_drive_scenario(&scenario, 60.0, 1, 100.0);
+    let text = std::fs::read_to_string(&scenario).unwrap();
+    let moved = text.replace(
+        &format!("lat_deg = {}\nlon_deg = {}", START.0, START.1),
+        &format!("lat_deg = {:.6}\nlon_deg = {:.6}", under.lat_deg, under.lon_deg),
+    );
+    assert_ne!(moved, text, "the scenario's start was not found");
+    std::fs::write(&scenario, moved).unwrap();
+    let node = env.node("rawrx");
+    let mut raw_pub = node.publisher::<GnssRaw>(&services::gnss_raw("0")).unwrap();
+    let mut nav_pub = node.publisher::<GnssNavData>(&services::gnss_nav_data("0")).unwrap();
+    let truth = node.subscriber::<SimTruth>(services::SIM_TRUTH).unwrap();
+    let time = node.subscriber::<TimeState>(services::TIME_STATE).unwrap();
+    let mut health = HealthWatch::new(&node, &["estimator"]);
+    env.spawn(
+        "estimator",
+        &[
+            "estimator",
+            "--gnss",
+            "0",
+            "--pps",
+            "0",
+            "--imus",
+            "0",
+            "--coupling",
+            "tight",
+        ],
+    );
+    env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
+    let link = env.dir.join("gnss0");
+    let (link_s, scen) = (link.display().to_string(), scenario.display().to_string());
+    let offset = format!("{offset_s:.3}");
+    env.spawn(
+        "sim",
+        &[
+            "sim",
+            "--scenario",
+            &scen,
+            "--imus",
+            "1",
+            "--pty-link",
+            &link_s,
+            "--imu-output",
+            "direct",
+            "--utc-offset",
+            &offset,
+        ],
+    );
+    env.wait_for_path(&link, Duration::from_secs(30));
+    env.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+
+    let lambda = C_M_S / L1_HZ;
+    let (mut seq, mut first_tow) = (0u64, None::<f64>);
+    let mut last_nav = None::<Instant>;
+    let mut latest_time = None::<TimeState>;
+    let mut last_second = None::<i64>;
+    let t0 = Instant::now();
+    let done = loop {
+        env.assert_running();
+        if last_nav.is_none_or(|t| t.elapsed() > Duration::from_secs(2)) {
+            for n in &sent {
+                let mut m = *n;
+                m.stamp = Stamp::host(monotonic_now_ns(), seq, StampSource::Receipt);
+                nav_pub.publish(&m).unwrap();
+            }
+            last_nav = Some(Instant::now());
+        }
+        while let Some(tr) = truth.receive().unwrap() {
+            // One raw epoch a second, at the first truth sample of each second.
+            let second = tr.utc_ns.div_euclid(1_000_000_000);
+            if last_second.replace(second) == Some(second) {
+                continue;
+            }
+            let gps_ns = gps_ns_from_utc_ns(tr.utc_ns);
+            let t = gps_ns.rem_euclid(WEEK_NS) as f64 * 1e-9;
+            let since = t - *first_tow.get_or_insert(t);
+            let bias = BIAS0_M + DRIFT_MPS * since;
+            let (lat, lon) = (tr.lat_deg.to_radians(), tr.lon_deg.to_radians());
+            let rx = earth::geodetic_to_ecef(lat, lon, tr.height_m);
+            let v = nalgebra::Vector3::from(tr.vel_ned_mps);
+            let vel = spp::ned_from_ecef(lat, lon).transpose() * v;
+            let mut tau = 0.07;
+            let mut rot = [0.0; 3];
+            for _ in 0..4 {
+                rot = spp::rotate_for_flight(orbit.position_ecef_m(t - tau), tau);
+                tau = ((rot[0] - rx[0]).powi(2) + (rot[1] - rx[1]).powi(2) + (rot[2] - rx[2]).powi(2)).sqrt() / C_M_S;
+            }
+            let (el, az) = spp::elevation_azimuth(rx, rot);
+            let r = tau * C_M_S;
+            let pr = r + bias - C_M_S * orbit.clock_offset_s(t - tau)
+                + C_M_S * store_iono(&sent).delay_s(lat, lon, el, az, t)
+                + spp::troposphere_delay_m(lat, tr.height_m, el);
+            let vs = spp::rotate_for_flight(orbit.velocity_ecef_mps(t - tau), tau);
+            let rr = (0..3).map(|j| (vs[j] - vel[j]) * (rot[j] - rx[j]) / r).sum::<f64>() + DRIFT_MPS
+                - C_M_S * orbit.clock_drift(t - tau);
+            let mut raw = GnssRaw::zeroed();
+            seq += 1;
+            raw.stamp = Stamp::host(monotonic_now_ns(), seq, StampSource::Receipt);
+            raw.rcv_tow_s = t + bias / C_M_S;
+            raw.week = (gps_ns.div_euclid(WEEK_NS)) as u16;
+            raw.leap_s = 18;
+            let mut m = RawMeasurement::zeroed();
+            m.pseudorange_m = pr;
+            m.doppler_hz = (-rr / lambda) as f32;
+            m.sv_id = 3;
+            m.cno_dbhz = 45;
+            m.trk_stat = 1;
+            raw.meas[0] = m;
+            raw.num_meas = 1;
+            raw_pub.publish(&raw).unwrap();
+        }
+        while let Some(ts) = time.receive().unwrap() {
+            latest_time = Some(ts);
+        }
+        health.poll();
+        let used = health.counter("estimator", "ranges_used").unwrap_or(0);
+        if used >= 10 && latest_time.is_some_and(|t| t.rx_clock_bias_ns.is_finite()) {
+            break true;
+        }
+        if t0.elapsed() > Duration::from_secs(75) {
+            break false;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let h = health.latest("estimator").cloned();
+    let counter = |name: &str| h.as_ref().and_then(|h| h.counter(name)).unwrap_or(0);
+    assert!(
+        done,
+        "ranges_used {}, clock_inits {}, epochs_not_tight {}, time state {:?}\nestimator log:\n{}",
+        counter("ranges_used"),
+        counter("clock_inits"),
+        counter("ranges_epochs_not_tight"),
+        latest_time.map(|t| t.rx_clock_bias_ns),
+        env.log("estimator")
+    );
+    let ts = latest_time.unwrap();
+    // The true bias at the time state's instant (its own host → GNSS time mapping).
+    let at_gps = gps_ns_from_utc_ns(ts.utc_ns_at(ts.computed_host_ns));
+    let since = at_gps.rem_euclid(WEEK_NS) as f64 * 1e-9 - first_tow.unwrap();
+    let truth_bias_ns = (BIAS0_M + DRIFT_MPS * since) / C_M_S * 1e9;
+    println!(
+        "live, one satellite: ranges_used {}, range_rates_used {}, clock_inits {}; receiver clock {:.0} ns ± {:.0} (truth {truth_bias_ns:.0} ns), drift {:.3} ppm",
+        counter("ranges_used"),
+        counter("range_rates_used"),
+        counter("clock_inits"),
+        ts.rx_clock_bias_ns,
+        ts.rx_clock_bias_std_ns,
+        ts.rx_clock_drift * 1e6
+    );
+    assert_eq!(counter("clock_inits"), 1);
+    // One satellite: the bias is known to the INS's position along its line of sight.
+    assert!(
+        (ts.rx_clock_bias_ns - truth_bias_ns).abs() < 3.0 * ts.rx_clock_bias_std_ns + 50.0,
+        "clock {} ns ± {} vs {truth_bias_ns} ns",
+        ts.rx_clock_bias_ns,
+        ts.rx_clock_bias_std_ns
+    );
+    assert!(
+        (ts.rx_clock_drift * C_M_S - DRIFT_MPS).abs() < 5.0,
+        "drift {}",
+        ts.rx_clock_drift
+    );
+    drop((raw_pub, nav_pub, truth, time, health, node));
+    env.finish();
+}
+
+/// The ionosphere of the subframes sent.
+fn store_iono(sent: &[GnssNavData]) -> spp::Klobuchar {
+    sent.iter()
+        .find_map(|n| match lnav::decode(&n.words[..10]).map(|d| d.subframe) {
+            Ok(Subframe::IonoUtc(p)) => Some(spp::Klobuchar::from_page(&p)),
+            _ => None,
+        })
+        .expect("the ionosphere page")
+}
