@@ -76,6 +76,9 @@ pub struct PipelineCounters {
     /// Raw epochs not used: loosely coupled, or before alignment without a single-point
     /// solution (fewer than four satellites with ephemerides).
     pub raw_unused: u64,
+    /// Raw epochs without a usable receiver time (time of week outside the week or NaN,
+    /// week 0).
+    pub raw_invalid: u64,
     /// Navigation-data messages (UBX RXM-SFRBX) that reached the estimator.
     pub nav_data: u64,
     /// IMU samples rejected by the array (non-finite values or interval, time going backwards,
@@ -247,6 +250,11 @@ impl Pipeline {
             return;
         }
         self.time.tick(raw.stamp.host_ns);
+        if !(0.0..navsync_shared::time::SECONDS_PER_WEEK as f64).contains(&raw.rcv_tow_s) || raw.week == 0 {
+            // No receiver time (NaN, out of the week, or the week unknown).
+            self.counters.raw_invalid += 1;
+            return;
+        }
         let gps_ns = (i64::from(raw.week) * navsync_shared::time::SECONDS_PER_WEEK) * 1_000_000_000
             + (raw.rcv_tow_s * 1e9).round() as i64;
         let utc_ns = navsync_shared::time::utc_ns_from_gps_ns(gps_ns);
@@ -282,6 +290,23 @@ impl Pipeline {
     /// data (another receiver, a file, a simulation).
     pub fn ephemerides_mut(&mut self) -> &mut EphemerisStore {
         &mut self.ephemerides
+    }
+
+    /// The counters of the raw-measurement path by name (tightly coupled): epochs in, invalid
+    /// and unused; navigation data in, subframes failing parity, ephemerides completed; and
+    /// what the epochs left out, by reason.
+    pub fn each_raw_counter(&self, out: &mut dyn FnMut(&'static str, u64)) {
+        let (c, r, e) = (&self.counters, &self.range_counts, &self.ephemerides);
+        out("raw_epochs", c.raw_epochs);
+        out("raw_invalid", c.raw_invalid);
+        out("raw_unused", c.raw_unused);
+        out("nav_data", c.nav_data);
+        out("nav_data_bad", e.bad_subframes);
+        out("ephemerides", e.ephemerides);
+        out("raw_other_signals", r.other_signals);
+        out("raw_invalid_ranges", r.invalid);
+        out("raw_no_ephemeris", r.no_ephemeris);
+        out("raw_over_capacity", r.over_capacity);
     }
 
     /// What the raw epochs left out, by reason.

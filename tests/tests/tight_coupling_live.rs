@@ -221,6 +221,9 @@ fn the_live_estimator_fuses_one_real_satellite() {
         ts.rx_clock_drift * 1e6
     );
     assert_eq!(counter("clock_inits"), 1);
+    assert_eq!(counter("ephemerides"), 1, "SV 3's ephemeris");
+    assert!(counter("raw_epochs") >= 10 && counter("nav_data") >= 4);
+    assert_eq!(counter("nav_data_bad"), 0);
     // One satellite: the bias is known to the INS's position along its line of sight.
     assert!(
         (ts.rx_clock_bias_ns - truth_bias_ns).abs() < 3.0 * ts.rx_clock_bias_std_ns + 50.0,

@@ -225,6 +225,15 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         .into_iter()
         .map(|name| health.counter(name))
         .collect::<Result<Vec<_>, _>>()?;
+    // Tightly coupled: the raw-measurement path's counters (`raw_no_ephemeris`, …).
+    let mut c_raw = Vec::new();
+    if tight {
+        est.each_raw_counter(&mut |name, _| c_raw.push(name));
+    }
+    let c_raw = c_raw
+        .into_iter()
+        .map(|name| health.counter(name))
+        .collect::<Result<Vec<_>, _>>()?;
     let c_stale_n = health.counter("stale_inputs")?;
     let c_stale_events = health.counter("stale_events")?;
     let (n_imu, n_pps) = (imus.len(), pps.len());
@@ -419,6 +428,13 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         let mut k = 0;
         est.nav().measurement_states().each_counter(&mut |_, v| {
             if let Some(c) = c_measurements.get(k) {
+                health.set(*c, v);
+            }
+            k += 1;
+        });
+        let mut k = 0;
+        est.each_raw_counter(&mut |_, v| {
+            if let Some(c) = c_raw.get(k) {
                 health.set(*c, v);
             }
             k += 1;
