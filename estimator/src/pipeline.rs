@@ -15,6 +15,7 @@ use navsync_shared::samples::{
 
 use crate::gnss::ranges::{EphemerisStore, RangeBuildCounts, RangeEpoch};
 use crate::gnss::spp::{self, SppSettings};
+use crate::nav::measurements::ranges::RangingConfig;
 
 use crate::array::imu_array::{ArrayConfig, ImuArray};
 use crate::nav::measurements::gnss::{self, GnssAccuracy};
@@ -273,17 +274,12 @@ impl Pipeline {
         if self.nav.is_aligned() {
             self.nav.on_ranges(epoch, raw.stamp.host_ns);
         } else if self.cfg.initial_state.is_none()
-            && let Some(obs) = single_point_observation(&epoch)
+            && let Some(obs) = single_point_observation(&epoch, &self.cfg.nav.measurements.ranges)
         {
             self.nav.on_gnss(obs, raw.stamp.host_ns);
         } else {
             self.counters.raw_unused += 1;
         }
-    }
-
-    /// The broadcast ephemerides collected so far.
-    pub fn ephemerides(&self) -> &EphemerisStore {
-        &self.ephemerides
     }
 
     /// The ephemeris store, to give it orbits from elsewhere than the receiver's navigation
@@ -307,11 +303,6 @@ impl Pipeline {
         out("raw_invalid_ranges", r.invalid);
         out("raw_no_ephemeris", r.no_ephemeris);
         out("raw_over_capacity", r.over_capacity);
-    }
-
-    /// What the raw epochs left out, by reason.
-    pub fn range_counts(&self) -> &RangeBuildCounts {
-        &self.range_counts
     }
 
     /// Feeds an IMU sample of any IMU of the array; returns the navigation state for it when it
@@ -431,16 +422,18 @@ impl Pipeline {
 /// A fix from a raw epoch's single-point solution (position, clock, then Doppler velocity),
 /// for the alignment of a tightly coupled filter: its σ from the least-squares covariance
 /// rotated into NED. `None` with fewer than four satellites or without convergence.
-fn single_point_observation(e: &RangeEpoch) -> Option<gnss::GnssObservation> {
-    const PR_STD_M: f64 = 3.0;
-    const RATE_STD_MPS: f64 = 0.1;
-    let settings = SppSettings::default();
+fn single_point_observation(e: &RangeEpoch, rc: &RangingConfig) -> Option<gnss::GnssObservation> {
+    let (pr_std_m, rate_std_mps) = (rc.pseudorange_std_m, rc.range_rate_std_mps);
+    let settings = SppSettings {
+        elevation_mask_rad: rc.elevation_mask_rad,
+        ..SppSettings::default()
+    };
     let mut obs = [spp::Observation {
         sv: 0,
         pseudorange_m: 0.0,
         sat_ecef_m: [0.0; 3],
         sat_clock_s: 0.0,
-        sigma_zenith_m: PR_STD_M,
+        sigma_zenith_m: pr_std_m,
     }; crate::gnss::ranges::MAX_RANGE_SATS];
     let mut rates = [spp::RangeRate {
         sv: 0,
@@ -448,7 +441,7 @@ fn single_point_observation(e: &RangeEpoch) -> Option<gnss::GnssObservation> {
         sat_ecef_m: [0.0; 3],
         sat_vel_mps: [0.0; 3],
         sat_clock_drift: 0.0,
-        sigma_mps: RATE_STD_MPS,
+        sigma_mps: rate_std_mps,
     }; crate::gnss::ranges::MAX_RANGE_SATS];
     let (mut n, mut m) = (0, 0);
     for s in e.sats() {
@@ -456,14 +449,14 @@ fn single_point_observation(e: &RangeEpoch) -> Option<gnss::GnssObservation> {
         obs[n].sv = s.sv;
         obs[n].pseudorange_m = s.pseudorange_m;
         obs[n].sat_ecef_m = s.sat_ecef_m;
-        obs[n].sigma_zenith_m = PR_STD_M.max(s.pseudorange_std_m);
+        obs[n].sigma_zenith_m = pr_std_m.max(s.pseudorange_std_m);
         n += 1;
         if s.range_rate_mps.is_finite() {
             rates[m].sv = s.sv;
             rates[m].range_rate_mps = s.range_rate_mps;
             rates[m].sat_ecef_m = s.sat_ecef_m;
             rates[m].sat_vel_mps = s.sat_vel_mps;
-            rates[m].sigma_mps = RATE_STD_MPS.max(s.range_rate_std_mps);
+            rates[m].sigma_mps = rate_std_mps.max(s.range_rate_std_mps);
             m += 1;
         }
     }

@@ -286,13 +286,18 @@ impl Navigator {
             self.states.ranges.fallback_fixes += 1;
         }
         self.adapt_horizon(obs.stamp_host_ns);
+        self.enqueue(obs);
+    }
+
+    /// Queues a GNSS measurement, unless its epoch is behind the delayed filter by more than
+    /// one covariance step (the horizon was too short: counted).
+    fn enqueue<M: Measurement>(&mut self, m: M) {
         let Some(f) = &self.filt else { return };
-        // Behind the delayed filter by more than one covariance step: the horizon was too short.
-        if f.t_ns - obs.epoch_ns(f.delay_s) > (self.cfg.cov_step_s * 1e9) as i64 {
+        if f.t_ns - m.epoch_ns(f.delay_s) > (self.cfg.cov_step_s * 1e9) as i64 {
             self.counters.fixes_too_old += 1;
             return;
         }
-        self.queue.push(obs.into(), &mut self.counters);
+        self.queue.push(m.into(), &mut self.counters);
     }
 
     /// Queues a receiver epoch's pseudoranges and Doppler for fusion at its epoch (tightly
@@ -308,12 +313,7 @@ impl Navigator {
             self.last_fix_rx_ns = Some(rx_ns);
         }
         self.adapt_horizon(epoch.stamp_host_ns);
-        let Some(f) = &self.filt else { return };
-        if f.t_ns - epoch.epoch_ns(f.delay_s) > (self.cfg.cov_step_s * 1e9) as i64 {
-            self.counters.fixes_too_old += 1;
-            return;
-        }
-        self.queue.push(epoch.into(), &mut self.counters);
+        self.enqueue(epoch);
     }
 
     /// The adaptive horizon after a GNSS epoch stamped `stamp_host_ns` (before Δ) arrived.
