@@ -18,6 +18,8 @@ fn the_example_is_valid_and_complete() {
     assert_eq!(c.imu["1"].mounting.rotation_deg, [0.0, 0.0, 90.0]);
     assert_eq!(c.imu["1"].mounting.lever_arm_m, [0.35, -0.20, 0.05]);
     assert_eq!(l.estimator_imus(), Some(vec!["0".to_string(), "1".to_string()]));
+    assert_eq!(c.estimator.coupling, Some(Coupling::Loose));
+    assert_eq!(c.estimator.receiver_oscillator, Some(ReceiverOscillator::Tcxo));
     assert_eq!(c.outputs.ntpshm, Some(NtpShmOutput { unit: 0 }));
     assert_eq!(c.logging.level.as_deref(), Some("info"));
 }
@@ -133,4 +135,39 @@ fn rotation_matrix() {
     );
     let id = Mounting::default().c_b_s();
     assert_eq!(id, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+}
+
+#[test]
+fn a_coupling_that_does_not_exist_names_the_field() {
+    let e = err("[estimator]\ncoupling = \"tigth\"\n");
+    assert_eq!(e.field.as_deref(), Some("estimator.coupling"), "{e}");
+    assert!(e.message.contains("tight"), "lists what is expected: {e}");
+}
+
+#[test]
+fn the_coupling_flows_flag_over_file_over_default() {
+    let mut flags = super::estimator::EstimatorFlags::default();
+    let s = flags.settings(&Loaded::none()).unwrap();
+    assert_eq!(
+        (s.coupling, s.receiver_oscillator),
+        (Coupling::Loose, ReceiverOscillator::Tcxo)
+    );
+    assert!(
+        s.pipeline_config().nav.noise.clock.is_none(),
+        "loose: the clock states are frozen"
+    );
+    let file = Loaded::parse(
+        "[estimator]\ncoupling = \"tight\"\nreceiver_oscillator = \"crystal\"\n",
+        Path::new("f.toml"),
+    )
+    .unwrap();
+    let s = flags.settings(&file).unwrap();
+    assert_eq!(
+        (s.coupling, s.receiver_oscillator),
+        (Coupling::Tight, ReceiverOscillator::Crystal)
+    );
+    assert!(s.pipeline_config().nav.noise.clock.is_some());
+    assert!(s.input_services().iter().any(|x| x.ends_with("/raw")));
+    flags.model.coupling = Some(Coupling::Loose);
+    assert_eq!(flags.settings(&file).unwrap().coupling, Coupling::Loose);
 }
