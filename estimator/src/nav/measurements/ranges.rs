@@ -225,8 +225,9 @@ impl RangeEpoch {
         (g.el_rad >= rc.elevation_mask_rad && f64::from(s.cno_dbhz) >= rc.cno_mask_dbhz).then_some(g)
     }
 
-    /// Sets the clock from the median residuals of the satellites in view (≥ 1), or resets
-    /// the bias after a jump. Returns false when no satellite is usable.
+    /// Sets the clock from the median residuals of the satellites in view (≥ 1) the first
+    /// time, or re-anchors the bias after a jump. Returns false while the clock has never been
+    /// anchored (no usable satellite yet).
     fn anchor_clock(&self, f: &mut DelayedFilter, cfg: &NavConfig, eps: f64, st: &mut RangingState) -> bool {
         let rc = &cfg.measurements.ranges;
         let a = Antenna::of(f, &cfg.lever_arm_b_m, eps);
@@ -257,10 +258,8 @@ impl RangeEpoch {
             st.clock_resets += 1;
         }
         f.clock_bias_m = bias + f.clock_drift_mps * eps;
-        for i in [CLK_BIAS, CLK_DRIFT] {
-            if i == CLK_DRIFT && !reset_drift {
-                continue;
-            }
+        let reopened: &[usize] = if reset_drift { &[CLK_BIAS, CLK_DRIFT] } else { &[CLK_BIAS] };
+        for &i in reopened {
             for j in 0..N {
                 f.eskf.p[(i, j)] = 0.0;
                 f.eskf.p[(j, i)] = 0.0;
