@@ -18,7 +18,7 @@
 
 mod gps_sky;
 
-use gps_sky::{Normal, RealSky};
+use gps_sky::{Normal, RealSky, Sight};
 use navsync_estimator::gnss::ranges::L1_HZ;
 use navsync_estimator::gnss::spp::{self, C_M_S, Observation, RangeRate, SppSettings};
 use navsync_estimator::input_order::{Input, InputOrder};
@@ -143,29 +143,16 @@ impl Receiver {
         }
         let tr = world.truth_at_utc(utc_ns);
         let rx = earth::geodetic_to_ecef(tr.lat_rad, tr.lon_rad, tr.height_m);
-        let (sl, cl) = tr.lat_rad.sin_cos();
-        let (so, co) = tr.lon_rad.sin_cos();
-        let v = tr.v_ned;
-        let vel = [
-            -sl * co * v.x - so * v.y - cl * co * v.z,
-            -sl * so * v.x + co * v.y - cl * so * v.z,
-            cl * v.x - sl * v.z,
-        ];
+        let vel: [f64; 3] = (spp::ned_from_ecef(tr.lat_rad, tr.lon_rad).transpose() * tr.v_ned).into();
         // Every satellite above the tracking mask, highest first.
-        let mut seen = Vec::new();
-        for (&sv, orbit) in &self.sky.almanac {
-            let mut tau = 0.075;
-            let mut rot = [0.0; 3];
-            for _ in 0..4 {
-                rot = spp::rotate_for_flight(orbit.position_ecef_m(t_true - tau), tau);
-                tau = dist(rot, rx) / C_M_S;
-            }
-            let (el, az) = spp::elevation_azimuth(rx, rot);
-            if el >= TRACK_MASK_DEG.to_radians() {
-                seen.push((sv, tau, rot, el, az));
-            }
-        }
-        seen.sort_by(|a, b| b.3.total_cmp(&a.3));
+        let mut seen: Vec<(u8, Sight)> = self
+            .sky
+            .almanac
+            .iter()
+            .map(|(&sv, orbit)| (sv, gps_sky::sight(orbit, rx, vel, t_true)))
+            .filter(|(_, g)| g.el_rad >= TRACK_MASK_DEG.to_radians())
+            .collect();
+        seen.sort_by(|a, b| b.1.el_rad.total_cmp(&a.1.el_rad));
         seen.truncate(sky.limit(k as f64));
 
         let lambda = C_M_S / L1_HZ;
@@ -177,7 +164,8 @@ impl Receiver {
         raw.leap_s = 18;
         let mut obs = Vec::new();
         let mut rates = Vec::new();
-        for (rank, &(sv, tau, rot, el, az)) in seen.iter().enumerate() {
+        for (rank, (sv, g)) in seen.iter().enumerate() {
+            let (sv, tau, el, az) = (*sv, g.tau_s, g.el_rad, g.az_rad);
             let fault = match self.faults.satellite_fault {
                 Some((from, n, r, add_m)) if (from..from + n).contains(&k) && r == rank => add_m,
                 _ => 0.0,
@@ -195,10 +183,7 @@ impl Receiver {
                 + 0.5 / el.sin() * self.multipath_m[i]
                 + 0.4 / el.sin() * self.rng.next()
                 + fault;
-            let vs = spp::rotate_for_flight(orbit.velocity_ecef_mps(t_true - tau), tau);
-            let r = dist(rot, rx);
-            let rr = (0..3).map(|j| (vs[j] - vel[j]) * (rot[j] - rx[j]) / r).sum::<f64>() + self.drift_mps
-                - C_M_S * orbit.clock_drift(t_true - tau)
+            let rr = g.range_rate_mps + self.drift_mps - C_M_S * orbit.clock_drift(t_true - tau)
                 + 0.03 / el.sin() * self.rng.next();
             let m = &mut raw.meas[usize::from(raw.num_meas)];
             *m = RawMeasurement::zeroed();
@@ -276,10 +261,6 @@ impl Receiver {
         f.protocol = GNSS_PROTOCOL_UBX;
         Some(f)
     }
-}
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// What one run measured.

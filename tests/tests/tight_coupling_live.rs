@@ -123,6 +123,7 @@ fn the_live_estimator_fuses_one_real_satellite() {
     env.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"]);
 
     let lambda = C_M_S / L1_HZ;
+    let iono = store_iono(&sent);
     let (mut seq, mut first_tow) = (0u64, None::<f64>);
     let mut last_nav = None::<Instant>;
     let mut latest_time = None::<TimeState>;
@@ -151,21 +152,13 @@ fn the_live_estimator_fuses_one_real_satellite() {
             let (lat, lon) = (tr.lat_deg.to_radians(), tr.lon_deg.to_radians());
             let rx = earth::geodetic_to_ecef(lat, lon, tr.height_m);
             let v = nalgebra::Vector3::from(tr.vel_ned_mps);
-            let vel = spp::ned_from_ecef(lat, lon).transpose() * v;
-            let mut tau = 0.07;
-            let mut rot = [0.0; 3];
-            for _ in 0..4 {
-                rot = spp::rotate_for_flight(orbit.position_ecef_m(t - tau), tau);
-                tau = ((rot[0] - rx[0]).powi(2) + (rot[1] - rx[1]).powi(2) + (rot[2] - rx[2]).powi(2)).sqrt() / C_M_S;
-            }
-            let (el, az) = spp::elevation_azimuth(rx, rot);
-            let r = tau * C_M_S;
-            let pr = r + bias - C_M_S * orbit.clock_offset_s(t - tau)
-                + C_M_S * store_iono(&sent).delay_s(lat, lon, el, az, t)
+            let vel: [f64; 3] = (spp::ned_from_ecef(lat, lon).transpose() * v).into();
+            let g = gps_sky::sight(&orbit, rx, vel, t);
+            let (tau, el, az) = (g.tau_s, g.el_rad, g.az_rad);
+            let pr = tau * C_M_S + bias - C_M_S * orbit.clock_offset_s(t - tau)
+                + C_M_S * iono.delay_s(lat, lon, el, az, t)
                 + spp::troposphere_delay_m(lat, tr.height_m, el);
-            let vs = spp::rotate_for_flight(orbit.velocity_ecef_mps(t - tau), tau);
-            let rr = (0..3).map(|j| (vs[j] - vel[j]) * (rot[j] - rx[j]) / r).sum::<f64>() + DRIFT_MPS
-                - C_M_S * orbit.clock_drift(t - tau);
+            let rr = g.range_rate_mps + DRIFT_MPS - C_M_S * orbit.clock_drift(t - tau);
             let mut raw = GnssRaw::zeroed();
             seq += 1;
             raw.stamp = Stamp::host(monotonic_now_ns(), seq, StampSource::Receipt);

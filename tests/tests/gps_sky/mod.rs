@@ -80,3 +80,41 @@ impl Normal {
         (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
     }
 }
+
+/// A satellite seen from a receiver at GPS time `t` (s of week): what the tests' receivers
+/// measure before their errors.
+pub struct Sight {
+    /// Signal travel time, s (iterated on the geometric range, Sagnac included).
+    pub tau_s: f64,
+    /// Satellite position at transmission in the reception's ECEF frame, m.
+    pub sat_ecef_m: [f64; 3],
+    /// Elevation and azimuth, rad.
+    pub el_rad: f64,
+    /// See `el_rad`.
+    pub az_rad: f64,
+    /// Geometric range rate (satellite minus receiver velocity along the line of sight), m/s.
+    pub range_rate_mps: f64,
+}
+
+/// Satellite `orbit` seen at GPS time `t_s` from a receiver at `rx` (ECEF, m) moving at
+/// `vel` (ECEF, m/s).
+pub fn sight(orbit: &Orbit, rx: [f64; 3], vel: [f64; 3], t_s: f64) -> Sight {
+    use navsync_estimator::gnss::spp::{C_M_S, elevation_azimuth, rotate_for_flight};
+    let dist = |a: [f64; 3]| ((a[0] - rx[0]).powi(2) + (a[1] - rx[1]).powi(2) + (a[2] - rx[2]).powi(2)).sqrt();
+    let mut tau = 0.075;
+    let mut rot = [0.0; 3];
+    for _ in 0..4 {
+        rot = rotate_for_flight(orbit.position_ecef_m(t_s - tau), tau);
+        tau = dist(rot) / C_M_S;
+    }
+    let (el_rad, az_rad) = elevation_azimuth(rx, rot);
+    let vs = rotate_for_flight(orbit.velocity_ecef_mps(t_s - tau), tau);
+    let r = dist(rot);
+    Sight {
+        tau_s: tau,
+        sat_ecef_m: rot,
+        el_rad,
+        az_rad,
+        range_rate_mps: (0..3).map(|j| (vs[j] - vel[j]) * (rot[j] - rx[j]) / r).sum(),
+    }
+}
