@@ -17,6 +17,7 @@
 use nalgebra::Vector3;
 use navsync_shared::earth;
 
+use super::gps::Sky;
 use super::inverse_mechanization::inertial_state;
 use super::nmea::{self, EpochReport, FixReport};
 use super::oscillator::Oscillator;
@@ -69,6 +70,7 @@ pub struct GnssReceiver {
     noise_rng: Rng,
     latency_rng: Rng,
     last_host_ns: i64,
+    sky: Option<Sky>,
 }
 
 impl GnssReceiver {
@@ -95,6 +97,7 @@ impl GnssReceiver {
             noise_rng: Rng::stream(seed, streams::GNSS_NOISE),
             latency_rng: Rng::stream(seed, streams::NMEA_LATENCY),
             last_host_ns: i64::MIN,
+            sky: Sky::new(&cfg.sky, seed, start_utc_ns),
         }
     }
 
@@ -120,16 +123,25 @@ impl GnssReceiver {
         self.next_epoch_utc_ns += self.period_ns;
         let tau = osc.tau_of_utc(utc);
         let (dpos, dvel) = self.draw_noise();
-        let fix = (!self.in_outage(tau)).then(|| self.fix_report(traj, tau, dpos, dvel));
+        let mut bytes = Vec::with_capacity(512);
+        // The raw side first (a u-blox receiver sends RXM messages before the navigation
+        // solution); with it, no fix while fewer than four satellites are tracked.
+        let tracked = self.sky.as_mut().map(|sky| {
+            let (p, v) = antenna_truth(traj, &self.lever_arm_b, tau);
+            let c = traj.kinematics(tau).c_b_n;
+            let heading = c[(1, 0)].atan2(c[(0, 0)]);
+            sky.write_epoch(utc, tau, p, v, heading, &mut bytes).tracked
+        });
+        let fix =
+            (!self.in_outage(tau) && tracked.is_none_or(|n| n >= 4)).then(|| self.fix_report(traj, tau, dpos, dvel));
         let report = EpochReport {
             utc_ns: utc,
             fix,
-            sats_used: self.cfg.sats_used,
+            sats_used: tracked.map_or(self.cfg.sats_used, |n| n as u8),
             hdop: self.cfg.hdop,
             vdop: self.cfg.vdop,
             sigma_lat_lon_alt_m: self.sigma_pos,
         };
-        let mut bytes = Vec::with_capacity(512);
         match self.cfg.protocol {
             OutputProtocol::Nmea => nmea::write_burst(self.cfg.talker.as_str(), &report, &mut bytes),
             OutputProtocol::Ubx => {

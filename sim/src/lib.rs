@@ -3,7 +3,8 @@
 //! The simulated sensor world that stands in for the hardware: a drive on WGS-84
 //! ([`trajectory`], [`scenario`]), its exact IMU increments by inverse mechanization
 //! ([`inverse_mechanization`], [`vibration`], [`quadrature`]), IMU errors ([`imu_errors`],
-//! [`imu_stream`]), a GNSS receiver writing NMEA ([`gnss_receiver`], [`nmea`]), a drifting host
+//! [`imu_stream`]), a GNSS receiver writing NMEA or UBX ([`gnss_receiver`], [`nmea`], [`ubx`]) with GPS raw
+//! measurements and navigation data from a real almanac ([`gps`]), a drifting host
 //! oscillator and its PPS edges ([`oscillator`], [`pps`]) and the truth ([`truth`]), all
 //! advanced together by [`world::World`].
 //!
@@ -17,6 +18,7 @@
 
 pub mod error;
 pub mod gnss_receiver;
+pub mod gps;
 pub mod imu_errors;
 pub mod imu_stream;
 pub mod inverse_mechanization;

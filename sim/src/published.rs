@@ -1,6 +1,7 @@
 //! The samples the drivers would publish for a simulated world, produced as fast as the CPU
-//! allows: IMU samples and PPS edges as the simulator publishes them, GNSS fixes decoded from
-//! the world's receiver bytes (NMEA or UBX) by the GNSS driver's own [`Decoder`]
+//! allows: IMU samples and PPS edges as the simulator publishes them, GNSS fixes, time pulses,
+//! raw measurements and navigation data decoded from the world's receiver bytes (NMEA or UBX)
+//! by the GNSS driver's own [`Decoder`]
 //! with the same receipt stamps a UART at the configured baud rate would give, and the truth.
 //!
 //! Each item carries its service name and the host time at which it would be delivered
@@ -37,6 +38,8 @@ pub struct PublishedStream {
     decoder: Decoder,
     protocol: Protocol,
     time_pulse_service: Rc<str>,
+    raw_service: Rc<str>,
+    nav_data_service: Rc<str>,
     char_ns: i64,
     gnss_service: Rc<str>,
     pps_service: Rc<str>,
@@ -63,6 +66,8 @@ impl PublishedStream {
             decoder: Decoder::new(protocol),
             protocol,
             time_pulse_service: services::gnss_time_pulse("0").into(),
+            raw_service: services::gnss_raw("0").into(),
+            nav_data_service: services::gnss_nav_data("0").into(),
             char_ns,
             gnss_service: services::gnss_fix("0").into(),
             pps_service: services::pps_edge("0").into(),
@@ -94,6 +99,8 @@ impl PublishedStream {
             fixes,
             gnss_service,
             time_pulse_service,
+            raw_service,
+            nav_data_service,
             char_ns,
             ..
         } = self;
@@ -109,13 +116,17 @@ impl PublishedStream {
             *char_ns,
             &mut |fix| fixes.push_back(fix_at(fix, pushed_ns)),
             &mut |x| {
-                if let GnssExtra::TimePulse(tp) = x {
-                    extras.push(Published {
-                        service: time_pulse_service.clone(),
-                        delivered_ns: read_ns,
-                        sample: AnySample::TimePulse(*tp),
-                    });
-                }
+                let (service, sample) = match x {
+                    GnssExtra::TimePulse(tp) => (&*time_pulse_service, AnySample::TimePulse(*tp)),
+                    GnssExtra::Raw(r) => (&*raw_service, AnySample::Raw(*r)),
+                    GnssExtra::NavData(n) => (&*nav_data_service, AnySample::NavData(*n)),
+                    _ => return,
+                };
+                extras.push(Published {
+                    service: service.clone(),
+                    delivered_ns: read_ns,
+                    sample,
+                });
             },
         );
         decoder.flush(&mut |fix| fixes.push_back(fix_at(fix, flushed_ns)));

@@ -47,6 +47,12 @@ pub mod streams {
     pub const IMU_ERRORS: u64 = 0x100;
     /// IMU `i` stamp jitter uses `IMU_STAMPS + i`.
     pub const IMU_STAMPS: u64 = 0x200;
+    /// GPS pseudorange, multipath and range-rate noise.
+    pub const GPS_NOISE: u64 = 5;
+    /// The GPS receiver's clock frequency random walk.
+    pub const GPS_CLOCK: u64 = 6;
+    /// Broadcast orbit-and-clock errors: `GPS_BROADCAST ^ (prn << 32) ^ iode`.
+    pub const GPS_BROADCAST: u64 = 0x300;
 }
 
 /// xoshiro256++ with Gaussian deviates (polar method).

@@ -389,6 +389,10 @@ pub struct GnssConfig {
     /// Outages (TOML `[[gnss.outage]]`).
     #[serde(rename = "outage")]
     pub outages: Vec<OutageConfig>,
+    /// The receiver's GPS signals: raw measurements and navigation data from a real almanac
+    /// (TOML `[gnss.sky]`; [`crate::gps`]). With an almanac the receiver has no fix while it
+    /// sees fewer than four satellites.
+    pub sky: crate::gps::SkyConfig,
 }
 
 impl Default for GnssConfig {
@@ -411,6 +415,7 @@ impl Default for GnssConfig {
             hdop: 0.8,
             vdop: 1.2,
             outages: Vec::new(),
+            sky: crate::gps::SkyConfig::default(),
         }
     }
 }
@@ -492,8 +497,29 @@ impl SimConfig {
         let mut cfg: SimConfig = toml::from_str(text).map_err(|e| parse_error(&e, &source, origin))?;
         cfg.source = Some(source);
         cfg.origin = origin.to_owned();
+        cfg.load_almanac()?;
         cfg.validate()?;
         Ok(cfg)
+    }
+
+    /// Reads `gnss.sky.almanac` (a path relative to the scenario file's folder when the
+    /// origin is a file) into `gnss.sky.constellation`.
+    fn load_almanac(&mut self) -> Result<(), SimError> {
+        let Some(name) = self.gnss.sky.almanac.clone() else {
+            return Ok(());
+        };
+        let path = Path::new(&name);
+        let path = match Path::new(&self.origin).parent() {
+            Some(dir) if path.is_relative() && !self.origin.starts_with('<') => dir.join(path),
+            _ => path.to_path_buf(),
+        };
+        match crate::gps::read_yuma(&path) {
+            Ok(c) => {
+                self.gnss.sky.constellation = c;
+                Ok(())
+            }
+            Err(e) => Err(self.invalid("gnss.sky.almanac", format!("the YUMA almanac: {e}"))),
+        }
     }
 
     /// Reads, parses and validates a scenario file.
@@ -987,6 +1013,68 @@ impl SimConfig {
         }
         for (i, o) in g.outages.iter().enumerate() {
             self.check_window(&format!("gnss.outage[{i}]"), o.start_s, o.duration_s)?;
+        }
+        self.validate_sky()
+    }
+
+    fn validate_sky(&self) -> Result<(), SimError> {
+        let (g, s) = (&self.gnss, &self.gnss.sky);
+        if s.almanac.is_some() && g.protocol != OutputProtocol::Ubx {
+            return Err(self.invalid(
+                "gnss.sky.almanac",
+                "raw measurements are written as UBX-RXM-RAWX and RXM-SFRBX, expected gnss.protocol = \"ubx\"",
+            ));
+        }
+        self.check_range("gnss.sky.elevation_mask_deg", s.elevation_mask_deg, -5.0, 60.0, "deg")?;
+        self.check_range("gnss.sky.pseudorange_sigma_m", s.pseudorange_sigma_m, 0.0, 100.0, "m")?;
+        self.check_range("gnss.sky.multipath_sigma_m", s.multipath_sigma_m, 0.0, 100.0, "m")?;
+        self.check_range(
+            "gnss.sky.multipath_correlation_s",
+            s.multipath_correlation_s,
+            0.001,
+            1e5,
+            "s",
+        )?;
+        self.check_range(
+            "gnss.sky.range_rate_sigma_mps",
+            s.range_rate_sigma_mps,
+            0.0,
+            10.0,
+            "m/s",
+        )?;
+        self.check_range("gnss.sky.broadcast_error_m", s.broadcast_error_m, 0.0, 100.0, "m")?;
+        self.check_range("gnss.sky.ionosphere_scale", s.ionosphere_scale, 0.0, 10.0, "")?;
+        self.check_range("gnss.sky.clock_bias_s", s.clock_bias_s, -1e-3, 1e-3, "s")?;
+        self.check_range("gnss.sky.clock_drift", s.clock_drift, -1e-5, 1e-5, "")?;
+        self.check_range(
+            "gnss.sky.clock_drift_random_walk",
+            s.clock_drift_random_walk,
+            0.0,
+            1e-7,
+            "1/√s",
+        )?;
+        for (i, w) in s.windows.iter().enumerate() {
+            let at = format!("gnss.sky.window[{i}]");
+            self.check_window(&at, w.start_s, w.duration_s)?;
+            if let Some(half) = w.corridor_half_width_deg {
+                self.check_range(&format!("{at}.corridor_half_width_deg"), half, 0.0, 90.0, "deg")?;
+            }
+            if let Some(m) = w.elevation_mask_deg {
+                self.check_range(&format!("{at}.elevation_mask_deg"), m, -5.0, 90.0, "deg")?;
+            }
+        }
+        // RXM-RAWX of 16 satellites and 16 RXM-SFRBX: ~1.4 kB more per epoch.
+        let burst_s = (MAX_BURST_BYTES + 1400) as f64 * 10.0 / f64::from(g.baud.max(1));
+        if s.almanac.is_some() && burst_s >= 1.0 / f64::from(g.rate_hz) {
+            return Err(self.invalid(
+                "gnss.baud",
+                format!(
+                    "{} baud cannot carry an epoch with raw measurements (~{} bytes) per {} s, expected a faster baud",
+                    g.baud,
+                    MAX_BURST_BYTES + 1400,
+                    1.0 / f64::from(g.rate_hz)
+                ),
+            ));
         }
         Ok(())
     }
