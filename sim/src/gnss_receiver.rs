@@ -126,32 +126,41 @@ impl GnssReceiver {
         let mut bytes = Vec::with_capacity(512);
         // The raw side first (a u-blox receiver sends RXM messages before the navigation
         // solution); with it, no fix while fewer than four satellites are tracked.
-        let tracked = self.sky.as_mut().map(|sky| {
+        // The receiver's own solution replaces the configured fix noise.
+        let sky = self.sky.as_mut().map(|sky| {
             let (p, v) = antenna_truth(traj, &self.lever_arm_b, tau);
             let c = traj.kinematics(tau).c_b_n;
             let heading = c[(1, 0)].atan2(c[(0, 0)]);
-            sky.write_epoch(utc, tau, p, v, heading, &mut bytes).tracked
+            sky.write_epoch(utc, tau, p, v, heading, &mut bytes)
         });
-        let fix =
-            (!self.in_outage(tau) && tracked.is_none_or(|n| n >= 4)).then(|| self.fix_report(traj, tau, dpos, dvel));
+        let solved = sky.and_then(|s| s.fix);
+        let (dpos, dvel, sigma_pos) = match solved {
+            Some(f) => {
+                let sh = f.h_acc_m / std::f64::consts::SQRT_2;
+                (f.pos_err_ned_m, f.vel_err_ned_mps, [sh, sh, f.v_acc_m])
+            }
+            None => (dpos, dvel, self.sigma_pos),
+        };
+        let fix = (!self.in_outage(tau) && sky.is_none_or(|s| s.fix.is_some()))
+            .then(|| self.fix_report(traj, tau, dpos, dvel));
         let report = EpochReport {
             utc_ns: utc,
             fix,
-            sats_used: tracked.map_or(self.cfg.sats_used, |n| n as u8),
+            sats_used: sky.map_or(self.cfg.sats_used, |s| s.tracked as u8),
             hdop: self.cfg.hdop,
             vdop: self.cfg.vdop,
-            sigma_lat_lon_alt_m: self.sigma_pos,
+            sigma_lat_lon_alt_m: sigma_pos,
         };
         match self.cfg.protocol {
             OutputProtocol::Nmea => nmea::write_burst(self.cfg.talker.as_str(), &report, &mut bytes),
             OutputProtocol::Ubx => {
                 // The receiver's accuracy estimates are its noise model: hAcc the horizontal
                 // RMS, vAcc the 1-σ vertical error, sAcc √2 × the per-axis velocity σ (the
-                // estimator takes sAcc/√2 per axis).
+                // estimator takes sAcc/√2 per axis); with a sky, its solution's covariance.
                 let x = ubx::UbxExtras {
-                    h_acc_m: self.cfg.horizontal_rms_m,
-                    v_acc_m: self.cfg.vertical_sigma_m,
-                    s_acc_mps: self.cfg.velocity_sigma_mps * std::f64::consts::SQRT_2,
+                    h_acc_m: solved.map_or(self.cfg.horizontal_rms_m, |f| f.h_acc_m),
+                    v_acc_m: solved.map_or(self.cfg.vertical_sigma_m, |f| f.v_acc_m),
+                    s_acc_mps: solved.map_or(self.cfg.velocity_sigma_mps * std::f64::consts::SQRT_2, |f| f.s_acc_mps),
                     next_pulse_q_err_ps: ubx::timepulse_q_err_ps(
                         self.cfg.timepulse_quantization_ns,
                         utc.div_euclid(1_000_000_000) + 1,

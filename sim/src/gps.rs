@@ -18,7 +18,8 @@
 //!   oscillator: bias, drift, random-walk frequency), satellite clock δt_s from the broadcast
 //!   polynomial plus the relativistic term, the ionosphere I (the broadcast Klobuchar model ×
 //!   `ionosphere_scale`: what the broadcast model misses), the troposphere T (a zenith delay
-//!   from height with the Black–Eisner mapping, a different model than the estimator's), the
+//!   from height with the Black–Eisner mapping, a different model than the estimator's,
+//!   × `troposphere_scale`), the
 //!   broadcast orbit-and-clock error e_s (one draw per satellite and ephemeris issue), a
 //!   multipath-like first-order Gauss–Markov error m and white noise ε, the last two scaled by
 //!   1/sin(elevation);
@@ -562,6 +563,9 @@ pub struct SkyConfig {
     pub broadcast_error_m: f64,
     /// True ionosphere = the broadcast Klobuchar delay × this (default 1.3).
     pub ionosphere_scale: f64,
+    /// True troposphere = this simulator's zenith-delay-and-mapping model × this (default
+    /// 1.05: the receiver, which corrects with that model, keeps 5 %).
+    pub troposphere_scale: f64,
     /// Broadcast Klobuchar α₀..α₃, s, s/semicircle, s/semicircle², s/semicircle³.
     pub klobuchar_alpha: [f64; 4],
     /// Broadcast Klobuchar β₀..β₃, s, s/semicircle, …
@@ -589,6 +593,7 @@ impl Default for SkyConfig {
             range_rate_sigma_mps: 0.03,
             broadcast_error_m: 1.0,
             ionosphere_scale: 1.3,
+            troposphere_scale: 1.05,
             klobuchar_alpha: [1.1176e-8, 7.4506e-9, -5.9605e-8, -5.9605e-8],
             klobuchar_beta: [90_112.0, 0.0, -196_608.0, -65_536.0],
             clock_bias_s: 50e-6,
@@ -617,12 +622,47 @@ pub struct SkyWindow {
 }
 
 /// What the receiver's GPS side wrote for one epoch.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SkyEpoch {
     /// Satellites measured (in RXM-RAWX).
     pub tracked: usize,
     /// Subframes sent (RXM-SFRBX).
     pub subframes: usize,
+    /// The receiver's own solution from these measurements (≥ 4 satellites).
+    pub fix: Option<SkyFix>,
+}
+
+/// The error of the receiver's own position/velocity solution: the weighted least-squares
+/// solution (position + clock, velocity + drift) of the measurement errors it does not
+/// correct (broadcast error, unmodelled ionosphere, multipath, noise), linearised at the
+/// truth — ranges of 20 000 km make the metre-level errors linear to ~10⁻⁷.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SkyFix {
+    /// Position error, NED m.
+    pub pos_err_ned_m: [f64; 3],
+    /// Velocity error, NED m/s.
+    pub vel_err_ned_mps: [f64; 3],
+    /// 1σ horizontal (RSS of north and east), m, from the solution's covariance.
+    pub h_acc_m: f64,
+    /// 1σ vertical, m.
+    pub v_acc_m: f64,
+    /// √2 × the mean 1σ per velocity axis, m/s (u-blox sAcc as the estimator reads it).
+    pub s_acc_mps: f64,
+}
+
+/// Weighted least squares of errors `e` with rows (line of sight u in ECEF, σ):
+/// ((HᵀWH)⁻¹HᵀW e, (HᵀWH)⁻¹) for the states (δr ECEF, δ clock), H = [−uᵀ 1].
+fn wls_error(rows: &[(Vector3<f64>, f64, f64)]) -> Option<(nalgebra::Vector4<f64>, nalgebra::Matrix4<f64>)> {
+    let mut n = nalgebra::Matrix4::zeros();
+    let mut b = nalgebra::Vector4::zeros();
+    for (u, sigma, e) in rows {
+        let h = nalgebra::Vector4::new(-u[0], -u[1], -u[2], 1.0);
+        let w = 1.0 / (sigma * sigma).max(1e-12);
+        n += h * h.transpose() * w;
+        b += h * (w * e);
+    }
+    let p = n.try_inverse()?;
+    Some((p * b, p))
 }
 
 /// The receiver's GPS side: constellation, clock and error processes.
@@ -757,7 +797,9 @@ impl Sky {
             .and_then(|w| w.elevation_mask_deg)
             .unwrap_or(self.cfg.elevation_mask_deg)
             .to_radians();
-        let mut seen: Vec<(f64, Measured)> = Vec::with_capacity(MAX_PRN);
+        // (elevation, measurement, line of sight, pseudorange error the receiver does not
+        // correct, range-rate error).
+        let mut seen: Vec<(f64, Measured, Vector3<f64>, f64, f64)> = Vec::with_capacity(MAX_PRN);
         for k in 0..self.cfg.constellation.len() {
             let a = self.cfg.constellation[k];
             if a.health != 0 {
@@ -792,23 +834,28 @@ impl Sky {
             let sin_el = el.sin().max(0.1);
             let i = usize::from(a.prn) - 1;
             let iono_m = self.cfg.ionosphere_scale * C_M_S * self.iono.delay_s(lat, lon, el, az, tow_s);
-            let tropo_m = (2.3 * (-1.16e-4 * h).exp() + 0.1) * 1.001 / (0.002_001 + sin_el * sin_el).sqrt();
+            let tropo_model_m = (2.3 * (-1.16e-4 * h).exp() + 0.1) * 1.001 / (0.002_001 + sin_el * sin_el).sqrt();
+            let tropo_m = self.cfg.troposphere_scale * tropo_model_m;
             let sisre_m = Rng::stream(
                 self.seed,
                 streams::GPS_BROADCAST ^ (u64::from(a.prn) << 32) ^ u64::from(eph.iode),
             )
             .gaussian(self.cfg.broadcast_error_m);
-            let pr = range
-                + C_M_S * (bias_s - sat.clock_s)
-                + iono_m
-                + tropo_m
+            // What the receiver's own solution does not correct: all but the broadcast
+            // ionosphere (iono_m / scale) and the troposphere model.
+            let pr_err = (self.cfg.ionosphere_scale - 1.0) / self.cfg.ionosphere_scale.max(1e-9) * iono_m
+                + (tropo_m - tropo_model_m)
                 + sisre_m
                 + self.cfg.multipath_sigma_m / sin_el * self.multipath[i]
                 + self.cfg.pseudorange_sigma_m / sin_el * white[i].0;
+            let pr = range
+                + C_M_S * (bias_s - sat.clock_s)
+                + iono_m / self.cfg.ionosphere_scale.max(1e-9)
+                + tropo_model_m
+                + pr_err;
             let v_sat = rotate_z(&sat.vel_mps, OMEGA_E_RAD_S * tau_s);
-            let rr = (v_sat - v_rx).dot(&u)
-                + C_M_S * (drift - sat.clock_drift)
-                + self.cfg.range_rate_sigma_mps / sin_el * white[i].1;
+            let rr_err = self.cfg.range_rate_sigma_mps / sin_el * white[i].1;
+            let rr = (v_sat - v_rx).dot(&u) + C_M_S * (drift - sat.clock_drift) + rr_err;
             let pr_sigma = self.cfg.pseudorange_sigma_m.hypot(self.cfg.multipath_sigma_m) / sin_el;
             let rr_sigma = self.cfg.range_rate_sigma_mps / sin_el;
             seen.push((
@@ -821,12 +868,16 @@ impl Sky {
                     pr_sigma_m: pr_sigma,
                     doppler_sigma_hz: rr_sigma * L1_HZ / C_M_S,
                 },
+                u,
+                pr_err,
+                rr_err,
             ));
         }
         seen.sort_by(|a, b| b.0.total_cmp(&a.0));
         let max = window.as_ref().and_then(|w| w.max_sats).unwrap_or(MAX_CHANNELS);
         seen.truncate(max.min(MAX_CHANNELS));
-        let meas: Vec<Measured> = seen.into_iter().map(|(_, m)| m).collect();
+        let fix = self.solution(&seen, &c_e_n);
+        let meas: Vec<Measured> = seen.into_iter().map(|(_, m, ..)| m).collect();
         write_rawx(tow_s + bias_s, week, &meas, out);
         // Subframes whose transmission ended since the last epoch (at multiples of 6 s).
         let now_s = gps_ns.div_euclid(NS_PER_S);
@@ -851,7 +902,38 @@ impl Sky {
         SkyEpoch {
             tracked: meas.len(),
             subframes,
+            fix,
         }
+    }
+
+    /// The receiver's own solution error from the tracked satellites (≥ 4), see [`SkyFix`].
+    fn solution(
+        &self,
+        seen: &[(f64, Measured, Vector3<f64>, f64, f64)],
+        c_e_n: &nalgebra::Matrix3<f64>,
+    ) -> Option<SkyFix> {
+        if seen.len() < 4 {
+            return None;
+        }
+        let rr_sigma = |el: f64| self.cfg.range_rate_sigma_mps.max(1e-3) / el.sin().max(0.1);
+        let pr_rows: Vec<_> = seen
+            .iter()
+            .map(|(_, m, u, e, _)| (*u, m.pr_sigma_m.max(0.01), *e))
+            .collect();
+        let rr_rows: Vec<_> = seen.iter().map(|(el, _, u, _, e)| (*u, rr_sigma(*el), *e)).collect();
+        let (dx, p) = wls_error(&pr_rows)?;
+        let (dv, pv) = wls_error(&rr_rows)?;
+        let pos = c_e_n * dx.fixed_rows::<3>(0);
+        let vel = c_e_n * dv.fixed_rows::<3>(0);
+        let p_ned = c_e_n * p.fixed_view::<3, 3>(0, 0) * c_e_n.transpose();
+        let trace_v = pv.fixed_view::<3, 3>(0, 0).trace();
+        Some(SkyFix {
+            pos_err_ned_m: pos.into(),
+            vel_err_ned_mps: vel.into(),
+            h_acc_m: (p_ned[(0, 0)] + p_ned[(1, 1)]).sqrt(),
+            v_acc_m: p_ned[(2, 2)].sqrt(),
+            s_acc_mps: std::f64::consts::SQRT_2 * (trace_v / 3.0).sqrt(),
+        })
     }
 }
 

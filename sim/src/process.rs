@@ -80,6 +80,11 @@ pub struct SimArgs {
     /// Simulated GNSS time minus the system clock, s (default 0: GNSS time ≈ system time).
     #[arg(long = "utc-offset", default_value_t = 0.0, allow_hyphen_values = true)]
     pub utc_offset_s: f64,
+    /// With `--fast`: the scenario's start, UTC seconds since 1970 (default: now, rounded to
+    /// the second, plus `--utc-offset`); fixes the GPS sky of `[gnss.sky]` for reproducible
+    /// runs.
+    #[arg(long = "start-utc")]
+    pub start_utc_s: Option<i64>,
     /// A GNSS outage START:DURATION in seconds of scenario time (repeatable), added to the
     /// scenario's.
     #[arg(long = "gnss-outage", value_parser = parse_outage)]

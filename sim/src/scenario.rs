@@ -1043,7 +1043,8 @@ impl SimConfig {
             "m/s",
         )?;
         self.check_range("gnss.sky.broadcast_error_m", s.broadcast_error_m, 0.0, 100.0, "m")?;
-        self.check_range("gnss.sky.ionosphere_scale", s.ionosphere_scale, 0.0, 10.0, "")?;
+        self.check_range("gnss.sky.ionosphere_scale", s.ionosphere_scale, 0.01, 10.0, "")?;
+        self.check_range("gnss.sky.troposphere_scale", s.troposphere_scale, 0.5, 2.0, "")?;
         self.check_range("gnss.sky.clock_bias_s", s.clock_bias_s, -1e-3, 1e-3, "s")?;
         self.check_range("gnss.sky.clock_drift", s.clock_drift, -1e-5, 1e-5, "")?;
         self.check_range(

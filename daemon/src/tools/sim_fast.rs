@@ -114,7 +114,12 @@ pub fn run(sim: &SimArgs, flags: &ModelFlags, file: &Loaded, outputs: Outputs<'_
     let cfg = load_config(sim)?;
     let est = settings(&cfg, flags, file)?;
     let start_host = 1_000_000_000_000;
-    let start_utc = navsync_shared::time::realtime_now_ns() / 1_000_000_000 * 1_000_000_000;
+    let start_utc = match sim.start_utc_s {
+        Some(s) => s * 1_000_000_000,
+        None => {
+            (navsync_shared::time::realtime_now_ns() + (sim.utc_offset_s * 1e9) as i64) / 1_000_000_000 * 1_000_000_000
+        }
+    };
     let world = World::new(&cfg, start_host, start_utc)?;
     // The world's clock, for the UTC of each delivery instant (a pure function of the world).
     let clock = world.clone();

@@ -35,7 +35,7 @@ const UNMODELLED_IONO_ZENITH_M: f64 = 10.0;
 /// Settings of the pseudorange and Doppler updates.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RangingConfig {
-    /// Satellites below this elevation are not used, rad (default 10°).
+    /// Satellites below this elevation are not used, rad (default 5°, a receiver's usual tracking mask; the σ grows as 1/sin(elevation)).
     pub elevation_mask_rad: f64,
     /// Signals weaker than this are not used, dB-Hz (default 25).
     pub cno_mask_dbhz: f64,
@@ -63,7 +63,7 @@ pub struct RangingConfig {
 impl Default for RangingConfig {
     fn default() -> Self {
         Self {
-            elevation_mask_rad: 10f64.to_radians(),
+            elevation_mask_rad: 5f64.to_radians(),
             cno_mask_dbhz: 25.0,
             pseudorange_std_m: 3.0,
             range_rate_std_mps: 0.1,
