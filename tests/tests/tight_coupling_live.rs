@@ -9,6 +9,11 @@
 //! and the drive starts right under it. The estimator aligns on the receiver's fixes, then fuses
 //! the one satellite: its `Health` counts the ranges and the clock's anchoring, its
 //! `TimeState` carries the receiver clock.
+//!
+//! A second test runs the whole chain with the simulator's own GPS sky: `sim` with
+//! `[gnss.sky]` (the m8t capture's almanac through `navsync decode --yuma`) writes RXM-RAWX,
+//! RXM-SFRBX and NAV-PVT into a pseudo-terminal, `gnss --protocol ubx` decodes and publishes
+//! them, the estimator fuses them tightly coupled.
 
 mod gps_sky;
 
@@ -241,4 +246,135 @@ fn store_iono(sent: &[GnssNavData]) -> spp::Klobuchar {
             _ => None,
         })
         .expect("the ionosphere page")
+}
+
+#[test]
+fn sim_to_ubx_driver_to_tight_estimator() {
+    let mut env = TestEnv::new("tightchain");
+    let capture = shared_material("corpora/gpsd-ubx").join("ublox-ned-m8t-sbfrx3.log");
+    let out = env
+        .command(&["decode", "--yuma", capture.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let almanac = env.dir.join("m8t.yuma");
+    std::fs::write(&almanac, &out.stdout).unwrap();
+    let scenario = env.dir.join("drive.toml");
+    write_drive_scenario(&scenario, 60.0, 1, 100.0);
+    let mut text = std::fs::read_to_string(&scenario).unwrap();
+    text.push_str(&format!(
+        "\n[gnss]\nprotocol = \"ubx\"\n\n[gnss.sky]\nalmanac = \"{}\"\n",
+        almanac.display()
+    ));
+    std::fs::write(&scenario, text).unwrap();
+    let node = env.node("chain");
+    let time = node.subscriber::<TimeState>(services::TIME_STATE).unwrap();
+    let mut health = HealthWatch::new(&node, &["estimator", "gnss-0"]);
+    env.spawn(
+        "estimator",
+        &[
+            "estimator",
+            "--gnss",
+            "0",
+            "--pps",
+            "0",
+            "--imus",
+            "0",
+            "--coupling",
+            "tight",
+        ],
+    );
+    env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
+    let link = env.dir.join("gnss0");
+    let (link_s, scen) = (link.display().to_string(), scenario.display().to_string());
+    env.spawn(
+        "sim",
+        &[
+            "sim",
+            "--scenario",
+            &scen,
+            "--imus",
+            "1",
+            "--pty-link",
+            &link_s,
+            "--imu-output",
+            "direct",
+        ],
+    );
+    env.wait_for_path(&link, Duration::from_secs(30));
+    env.spawn(
+        "gnss",
+        &[
+            "gnss",
+            "--port",
+            &link_s,
+            "--baud",
+            "115200",
+            "--id",
+            "0",
+            "--protocol",
+            "ubx",
+        ],
+    );
+    let mut latest = None::<TimeState>;
+    let t0 = Instant::now();
+    let done = loop {
+        env.assert_running();
+        while let Some(ts) = time.receive().unwrap() {
+            latest = Some(ts);
+        }
+        health.poll();
+        let epochs = health.counter("estimator", "ranges_epochs_used").unwrap_or(0);
+        if epochs >= 15 && latest.is_some_and(|t| t.rx_clock_bias_ns.is_finite()) {
+            break true;
+        }
+        if t0.elapsed() > Duration::from_secs(75) {
+            break false;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let h = health.latest("estimator").cloned();
+    let counter = |name: &str| h.as_ref().and_then(|h| h.counter(name)).unwrap_or(0);
+    assert!(
+        done,
+        "raw_epochs {}, nav_data {}, ephemerides {}, ranges_epochs_used {}, clock_inits {}\nestimator log:\n{}\ngnss log:\n{}",
+        counter("raw_epochs"),
+        counter("nav_data"),
+        counter("ephemerides"),
+        counter("ranges_epochs_used"),
+        counter("clock_inits"),
+        env.log("estimator"),
+        env.log("gnss")
+    );
+    let ts = latest.unwrap();
+    println!(
+        "sim → gnss --protocol ubx → estimator --coupling tight: raw epochs {}, subframes {}, ephemerides {}, ranges used {} in {} epochs, rejected {}; receiver clock {:.0} ± {:.0} ns, drift {:.3} ppm",
+        counter("raw_epochs"),
+        counter("nav_data"),
+        counter("ephemerides"),
+        counter("ranges_used"),
+        counter("ranges_epochs_used"),
+        counter("ranges_rejected"),
+        ts.rx_clock_bias_ns,
+        ts.rx_clock_bias_std_ns,
+        ts.rx_clock_drift * 1e6
+    );
+    assert_eq!(counter("nav_data_bad"), 0);
+    assert!(counter("ephemerides") >= 4, "ephemerides from the simulated subframes");
+    assert!(counter("ranges_used") >= 4 * counter("ranges_epochs_used"));
+    // The simulated receiver clock: 50 µs at the simulator's start, then 0.2 ppm (and a TCXO's
+    // random walk): between 50 µs and 50 µs + 0.2 ppm × the time since the sim was spawned.
+    let most_ns = 50_000.0 + 0.2e-6 * (t0.elapsed().as_secs_f64() + 2.0) * 1e9;
+    assert!(
+        (49_700.0..most_ns + 300.0).contains(&ts.rx_clock_bias_ns),
+        "clock {} ns, expected 50 000 to {most_ns:.0} ns",
+        ts.rx_clock_bias_ns
+    );
+    assert!(
+        (ts.rx_clock_drift - 2e-7).abs() < 0.05e-6,
+        "drift {}",
+        ts.rx_clock_drift
+    );
+    drop((time, health, node));
+    env.finish();
 }
