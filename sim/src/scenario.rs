@@ -1274,6 +1274,29 @@ mod tests {
     }
 
     #[test]
+    fn sky_errors_name_the_field_and_the_almanac_line() {
+        let dir = std::env::temp_dir().join(format!("navsync-sky-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("bad.yuma"), "**** Week 1 almanac ****\nID: 03\nHealth: x\n").unwrap();
+        let origin = dir.join("s.toml").display().to_string();
+        let text = minimal("\n[gnss]\nprotocol = \"ubx\"\n\n[gnss.sky]\nalmanac = \"bad.yuma\"\n");
+        let msg = SimConfig::from_toml_str(&text, &origin)
+            .expect_err("bad almanac")
+            .to_string();
+        println!("{msg}");
+        assert!(
+            msg.contains("gnss.sky.almanac") && msg.contains("bad.yuma: line 3"),
+            "{msg}"
+        );
+        let text = minimal("\n[gnss.sky]\nalmanac = \"bad.yuma\"\n");
+        let msg = SimConfig::from_toml_str(&text, "<text>")
+            .expect_err("no file")
+            .to_string();
+        assert!(msg.contains("gnss.sky.almanac"), "{msg}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
     fn syntax_error_has_line() {
         let err = SimConfig::from_toml_str("seed = 1\n[x", "s.toml").expect_err("syntax");
         assert!(err.to_string().starts_with("s.toml:2:"), "{err}");
