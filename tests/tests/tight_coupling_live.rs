@@ -90,42 +90,8 @@ fn the_live_estimator_fuses_one_real_satellite() {
     let truth = node.subscriber::<SimTruth>(services::SIM_TRUTH).unwrap();
     let time = node.subscriber::<TimeState>(services::TIME_STATE).unwrap();
     let mut health = HealthWatch::new(&node, &["estimator"]);
-    env.spawn(
-        "estimator",
-        &[
-            "estimator",
-            "--gnss",
-            "0",
-            "--pps",
-            "0",
-            "--imus",
-            "0",
-            "--coupling",
-            "tight",
-        ],
-    );
-    env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
-    let link = env.dir.join("gnss0");
-    let (link_s, scen) = (link.display().to_string(), scenario.display().to_string());
     let offset = format!("{offset_s:.3}");
-    env.spawn(
-        "sim",
-        &[
-            "sim",
-            "--scenario",
-            &scen,
-            "--imus",
-            "1",
-            "--pty-link",
-            &link_s,
-            "--imu-output",
-            "direct",
-            "--utc-offset",
-            &offset,
-        ],
-    );
-    env.wait_for_path(&link, Duration::from_secs(30));
-    env.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"]);
+    spawn_tight_chain(&mut env, &scenario, &["--utc-offset", &offset], &[]);
 
     let lambda = C_M_S / L1_HZ;
     let iono = store_iono(&sent);
@@ -238,6 +204,46 @@ fn the_live_estimator_fuses_one_real_satellite() {
     env.finish();
 }
 
+/// Spawns `estimator --coupling tight` (GNSS 0, PPS 0, IMU 0), `pps --source sim`, `sim` on
+/// `scenario` (one IMU straight into its service, the receiver on a pseudo-terminal, plus
+/// `sim_args`) and `gnss` on that pseudo-terminal (plus `gnss_args`).
+fn spawn_tight_chain(env: &mut TestEnv, scenario: &std::path::Path, sim_args: &[&str], gnss_args: &[&str]) {
+    env.spawn(
+        "estimator",
+        &[
+            "estimator",
+            "--gnss",
+            "0",
+            "--pps",
+            "0",
+            "--imus",
+            "0",
+            "--coupling",
+            "tight",
+        ],
+    );
+    env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
+    let link = env.dir.join("gnss0");
+    let (link_s, scen) = (link.display().to_string(), scenario.display().to_string());
+    let mut sim = vec![
+        "sim",
+        "--scenario",
+        &scen,
+        "--imus",
+        "1",
+        "--pty-link",
+        &link_s,
+        "--imu-output",
+        "direct",
+    ];
+    sim.extend_from_slice(sim_args);
+    env.spawn("sim", &sim);
+    env.wait_for_path(&link, Duration::from_secs(30));
+    let mut gnss = vec!["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"];
+    gnss.extend_from_slice(gnss_args);
+    env.spawn("gnss", &gnss);
+}
+
 /// The ionosphere of the subframes sent.
 fn store_iono(sent: &[GnssNavData]) -> spp::Klobuchar {
     sent.iter()
@@ -270,52 +276,7 @@ fn sim_to_ubx_driver_to_tight_estimator() {
     let node = env.node("chain");
     let time = node.subscriber::<TimeState>(services::TIME_STATE).unwrap();
     let mut health = HealthWatch::new(&node, &["estimator", "gnss-0"]);
-    env.spawn(
-        "estimator",
-        &[
-            "estimator",
-            "--gnss",
-            "0",
-            "--pps",
-            "0",
-            "--imus",
-            "0",
-            "--coupling",
-            "tight",
-        ],
-    );
-    env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
-    let link = env.dir.join("gnss0");
-    let (link_s, scen) = (link.display().to_string(), scenario.display().to_string());
-    env.spawn(
-        "sim",
-        &[
-            "sim",
-            "--scenario",
-            &scen,
-            "--imus",
-            "1",
-            "--pty-link",
-            &link_s,
-            "--imu-output",
-            "direct",
-        ],
-    );
-    env.wait_for_path(&link, Duration::from_secs(30));
-    env.spawn(
-        "gnss",
-        &[
-            "gnss",
-            "--port",
-            &link_s,
-            "--baud",
-            "115200",
-            "--id",
-            "0",
-            "--protocol",
-            "ubx",
-        ],
-    );
+    spawn_tight_chain(&mut env, &scenario, &[], &["--protocol", "ubx"]);
     let mut latest = None::<TimeState>;
     let t0 = Instant::now();
     let done = loop {
