@@ -133,7 +133,7 @@ fn tight_coupling_bridges_a_canyon_on_the_simulated_sky() {
     }
     // Full sky: the receiver's own solution (its troposphere model is the simulator's, its
     // mask 5°) against the filter's per-satellite updates, which treat the broadcast and
-    // multipath errors as white; measured 0.99–1.18 × (README).
+    // multipath errors as white; measured 0.99–1.14 × (README).
     assert!(
         full_ratio.iter().all(|r| *r < 1.4),
         "tight / loose RMS with full sky: {full_ratio:?}"
