@@ -3,7 +3,8 @@
 //! the decoder's counters on stderr; with `--subframes`, one JSON object per GPS LNAV
 //! subframe of its RXM-SFRBX instead (`navsync_estimator::gnss::lnav`, unscaled fields); with
 //! `--yuma`, the GPS almanac of those subframes as a YUMA file (what `[gnss.sky] almanac` of a
-//! simulator scenario reads).
+//! simulator scenario reads); with `--sky`, each GPS satellite of the receiver's NAV-SAT with
+//! the elevation and azimuth computed from broadcast orbits next to the receiver's own.
 
 use std::io::{Read, Write};
 
@@ -25,8 +26,154 @@ pub struct Options {
     pub subframes: bool,
     /// Print the GPS almanac of the capture's subframes (subframes 4 and 5; the latest page of
     /// each PRN) in the YUMA format, its week modulo 1024 from the capture's subframe 1.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "sky")]
     pub yuma: bool,
+    /// Print, for every GPS satellite in the capture's UBX-NAV-SAT, its elevation and azimuth
+    /// computed from an orbit (the capture's own ephemeris, else its almanac page, else
+    /// `--almanac`) at the receiver's NAV-PVT position, next to the receiver's own: one JSON
+    /// object per satellite and epoch; the largest differences on stderr.
+    #[arg(long)]
+    pub sky: bool,
+    /// With `--sky`: a YUMA almanac for the satellites the capture has no orbit of.
+    #[arg(long, requires = "sky")]
+    pub almanac: Option<String>,
+}
+
+/// `--sky`: computed against reported satellite geometry (IS-GPS-200 Table 20-IV orbits,
+/// elevation/azimuth at the receiver's position for a signal sent 75 ms before the epoch).
+fn sky(bytes: &[u8], file: &str, almanac: Option<&str>) -> Result<()> {
+    use navsync_drivers::gnss::capture::gpsd_header;
+    use navsync_drivers::gnss::ubx::framer::{Frame, UbxFramer};
+    use navsync_drivers::gnss::ubx::messages::{self, Message};
+    use navsync_estimator::gnss::lnav::{self, Subframe};
+    use navsync_estimator::gnss::orbit::Orbit;
+    use navsync_estimator::gnss::ranges::EphemerisStore;
+    use navsync_estimator::gnss::spp;
+    use navsync_shared::time::{Civil, gps_ns_from_utc_ns, utc_ns_from_civil};
+    const WEEK_S: i64 = 604_800;
+    let (header, _) = gpsd_header(bytes);
+    let mut store = EphemerisStore::default();
+    let mut pages = std::collections::BTreeMap::new();
+    // (NAV-SAT, the latest NAV-PVT with a fix before it: position and GPS week)
+    let mut epochs = Vec::new();
+    let mut pvt: Option<([f64; 3], i64)> = None;
+    UbxFramer::new().push(bytes.get(header..).unwrap_or(&[]), 0, 0, &mut |f| {
+        let Frame::Ubx { class, id, payload, .. } = f else {
+            return;
+        };
+        match messages::decode(class, id, payload) {
+            Ok(Message::NavPvt(p)) if p.fix_type >= 2 => {
+                let utc = utc_ns_from_civil(&Civil {
+                    year: i64::from(p.year),
+                    month: u32::from(p.month),
+                    day: u32::from(p.day),
+                    hour: u32::from(p.hour),
+                    minute: u32::from(p.min),
+                    second: u32::from(p.sec),
+                    nanos: 0,
+                });
+                let week = gps_ns_from_utc_ns(utc).div_euclid(WEEK_S * 1_000_000_000);
+                let rx =
+                    navsync_shared::earth::geodetic_to_ecef(p.lat_deg.to_radians(), p.lon_deg.to_radians(), p.height_m);
+                pvt = Some((rx, week));
+            }
+            Ok(Message::NavSat(s)) => {
+                if let Some(p) = pvt {
+                    epochs.push((s, p));
+                }
+            }
+            Ok(Message::RxmSfrbx(x)) if x.gnss_id == 0 => {
+                if let Ok(d) = lnav::decode(x.data_words()) {
+                    match d.subframe {
+                        Subframe::Almanac(a) if a.sqrt_a > 0 => {
+                            pages.insert(a.sv, Orbit::from_almanac(&a));
+                        }
+                        other => store.on_subframe(x.sv_id, &other),
+                    }
+                }
+            }
+            _ => {}
+        }
+    });
+    anyhow::ensure!(!epochs.is_empty(), "{file}: no UBX-NAV-SAT after a NAV-PVT with a fix");
+    // A YUMA almanac: orbits with their full week (a week modulo 1024 resolved near the capture).
+    let yuma: std::collections::BTreeMap<u8, (Orbit, i64)> = match almanac {
+        None => Default::default(),
+        Some(path) => {
+            let capture_week = epochs[0].1.1;
+            navsync_sim::gps::read_yuma(std::path::Path::new(path))
+                .map_err(anyhow::Error::msg)?
+                .iter()
+                .map(|a| {
+                    let w = i64::from(a.week);
+                    let week = if w >= 1024 {
+                        w
+                    } else {
+                        w + ((capture_week - w) as f64 / 1024.0).round() as i64 * 1024
+                    };
+                    let orbit = Orbit {
+                        toe_s: a.toa_s,
+                        sqrt_a: a.sqrt_a,
+                        e: a.e,
+                        i0_rad: a.i_rad,
+                        omega0_rad: a.omega0_rad,
+                        omega_dot_rad_s: a.omega_dot_rad_s,
+                        omega_rad: a.omega_rad,
+                        m0_rad: a.m0_rad,
+                        toc_s: a.toa_s,
+                        af: [a.af0_s, a.af1, 0.0],
+                        ..Orbit::default()
+                    };
+                    (a.prn, (orbit, week))
+                })
+                .collect()
+        }
+    };
+    let mut out = std::io::stdout().lock();
+    // Per source: (satellites compared, largest |Δel|, largest |Δaz|·cos el), degrees.
+    let mut worst: std::collections::BTreeMap<&str, (u64, f64, f64)> = Default::default();
+    for (nav_sat, (rx, week)) in &epochs {
+        let tow = f64::from(nav_sat.itow_ms) * 1e-3;
+        let t_tx = tow - 0.075;
+        for sat in nav_sat.satellites().iter().filter(|x| x.gnss_id == 0) {
+            let pos = if let Some(o) = store.orbit(sat.sv_id, tow) {
+                Some(("ephemeris", o.position_ecef_m(t_tx)))
+            } else if let Some(o) = pages.get(&sat.sv_id) {
+                Some(("almanac", o.position_ecef_m(t_tx)))
+            } else {
+                yuma.get(&sat.sv_id).map(|(o, w)| {
+                    let tk = (week - w) as f64 * WEEK_S as f64 + t_tx - o.toe_s;
+                    ("yuma", o.position_ecef_m_tk(tk))
+                })
+            };
+            let Some((source, pos)) = pos else { continue };
+            let (el, az) = spp::elevation_azimuth(*rx, spp::rotate_for_flight(pos, 0.075));
+            let (el, az) = (el.to_degrees(), az.to_degrees().rem_euclid(360.0));
+            let d_el = el - f64::from(sat.elev_deg);
+            let d_az = (az - f64::from(sat.azim_deg) + 540.0).rem_euclid(360.0) - 180.0;
+            let w = worst.entry(source).or_default();
+            *w = (
+                w.0 + 1,
+                w.1.max(d_el.abs()),
+                w.2.max(d_az.abs() * el.to_radians().cos()),
+            );
+            let line = serde_json::json!({
+                "tow_s": tow, "sv": sat.sv_id, "source": source,
+                "el_deg": el, "az_deg": az,
+                "receiver_el_deg": sat.elev_deg, "receiver_az_deg": sat.azim_deg,
+                "d_el_deg": d_el, "d_az_deg": d_az,
+            });
+            writeln!(out, "{line}").context("writing stdout")?;
+        }
+    }
+    for (source, (n, el, az)) in &worst {
+        eprintln!("{source}: {n} satellite sightings, largest |Δel| {el:.2}°, largest |Δaz|·cos(el) {az:.2}°");
+    }
+    anyhow::ensure!(
+        !worst.is_empty(),
+        "{file}: no GPS satellite of NAV-SAT has an orbit (no ephemeris or almanac page in the capture; give --almanac)"
+    );
+    Ok(())
 }
 
 /// The GPS LNAV subframes of a capture's RXM-SFRBX, decoded, with the number rejected.
@@ -161,6 +308,9 @@ pub fn run(opts: Options) -> Result<()> {
     }
     if opts.yuma {
         return yuma(&bytes, &opts.file);
+    }
+    if opts.sky {
+        return sky(&bytes, &opts.file, opts.almanac.as_deref());
     }
     let cap = decode_capture(&bytes, opts.protocol);
     let mut out = std::io::stdout().lock();
