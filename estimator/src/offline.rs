@@ -190,6 +190,11 @@ pub fn run_ordered<T, S: Into<Input>, I: IntoIterator<Item = (S, T)>>(
     pipeline.nav().measurement_states().each_counter(&mut |name, v| {
         summary.measurement_counters.insert(name.to_string(), v);
     });
+    if pipeline.nav().is_tight() {
+        pipeline.each_raw_counter(&mut |name, v| {
+            summary.measurement_counters.insert(name.to_string(), v);
+        });
+    }
     summary.nav_states = check.states;
     summary.usable_states = check.usable;
     summary.problem = check.problem(&pipeline.inputs_seen());

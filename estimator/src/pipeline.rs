@@ -10,7 +10,8 @@
 
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{
-    GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, NavState, PpsEdge, TimeState, TimeStatus,
+    GnssFix, GnssNavData, GnssRaw, GnssTimePulse, IMU_FLAG_RECEIVER_CLOCK, ImuSample, NavState, PpsEdge, TimeState,
+    TimeStatus,
 };
 
 use crate::gnss::ranges::{EphemerisStore, RangeBuildCounts, RangeEpoch};
@@ -289,10 +290,15 @@ impl Pipeline {
     }
 
     /// The counters of the raw-measurement path by name (tightly coupled): epochs in, invalid
-    /// and unused; navigation data in, subframes failing parity, ephemerides completed; and
-    /// what the epochs left out, by reason.
+    /// and unused; navigation data in, subframes failing parity, ephemerides completed; what
+    /// the epochs left out, by reason; and the IMU samples on the receiver's clock, timed by
+    /// it or not.
     pub fn each_raw_counter(&self, out: &mut dyn FnMut(&'static str, u64)) {
         let (c, r, e) = (&self.counters, &self.range_counts, &self.ephemerides);
+        let d = self.device_timing.counters();
+        out("rx_clock_imu", d.receiver_clock);
+        out("rx_clock_imu_waiting", d.receiver_clock_waiting);
+        out("rx_clock_imu_outliers", d.receiver_clock_outliers);
         out("raw_epochs", c.raw_epochs);
         out("raw_invalid", c.raw_invalid);
         out("raw_unused", c.raw_unused);
@@ -306,7 +312,9 @@ impl Pipeline {
     }
 
     /// Feeds an IMU sample of any IMU of the array; returns the navigation state for it when it
-    /// is the reference IMU. A sample of the reference IMU advances the present-time output at
+    /// is the reference IMU. Its time: its device clock mapped to host time where it carries
+    /// one, or, for an IMU on the GNSS receiver's clock once the tightly coupled filter has
+    /// the clock, that clock (see [`DeviceTiming`]). A sample of the reference IMU advances the present-time output at
     /// once; the array's fusion into the virtual IMU that drives the delayed filter follows
     /// in [`catch_up`](Self::catch_up), after the `NavState`.
     pub fn on_imu(&mut self, s: &ImuSample) -> Option<NavState> {
@@ -316,7 +324,25 @@ impl Pipeline {
             self.counters.imu_other += 1;
             return None;
         };
-        let retimed = self.device_timing.retime(index, s);
+        let mut retimed = self.device_timing.retime(index, s);
+        if s.flags & IMU_FLAG_RECEIVER_CLOCK != 0 {
+            // One crystal: the receiver clock's reading less its bias is GPS time (hardware
+            // time mapping only: under software sync the mapping is the fixes' receipt).
+            let hardware =
+                !self.cfg.time.software_sync && matches!(self.time.status(), TimeStatus::Locked | TimeStatus::Holdover);
+            let bias = self
+                .nav
+                .receiver_clock(s.stamp.host_ns)
+                .filter(|_| hardware)
+                .map(|c| (c.bias_m / spp::C_M_S * 1e9, c.bias_std_m / spp::C_M_S * 1e9));
+            let time = &self.time;
+            if let Some(r) = self
+                .device_timing
+                .retime_on_receiver_clock(s, bias, |utc| time.host_ns_at_utc(utc))
+            {
+                retimed = r;
+            }
+        }
         let s = &retimed;
         let reference = self.array.reference();
         let accepted = self.array.accept(index, s);

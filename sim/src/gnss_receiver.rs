@@ -97,7 +97,7 @@ impl GnssReceiver {
             noise_rng: Rng::stream(seed, streams::GNSS_NOISE),
             latency_rng: Rng::stream(seed, streams::NMEA_LATENCY),
             last_host_ns: i64::MIN,
-            sky: Sky::new(&cfg.sky, seed, start_utc_ns),
+            sky: Sky::new(&cfg.sky, seed, start_utc_ns, duration_s),
         }
     }
 

@@ -40,6 +40,7 @@ use navsync_shared::earth;
 use navsync_shared::time::{NS_PER_S, SECONDS_PER_WEEK, gps_ns_from_utc_ns};
 use serde::Deserialize;
 
+use super::oscillator::Oscillator;
 use super::rng::{Rng, streams};
 use super::ubx;
 
@@ -665,6 +666,69 @@ fn wls_error(rows: &[(Vector3<f64>, f64, f64)]) -> Option<(nalgebra::Vector4<f64
     Some((p * b, p))
 }
 
+/// The receiver's oscillator: what its clock reads against GPS time. The receiver's time is
+/// t_r = t_GPS + b(τ) with the clock bias b(τ) = b₀ + ∫₀^τ y ds, its fractional frequency error
+/// y (the clock drift) starting at `clock_drift` and wandering as a random walk of
+/// `clock_drift_random_walk`/√s — the host clock's model ([`Oscillator`], RWFM with Allan
+/// deviation σ_y(1 s) = q/√3 for a random-walk step q·√Δ). A deterministic function of
+/// scenario time τ, so the GPS side and an IMU sampling on the same crystal
+/// (`imu.unit[i].receiver_clock`) see one clock.
+#[derive(Debug, Clone)]
+pub struct ReceiverClock {
+    bias0_s: f64,
+    start_gps_ns: i64,
+    osc: Oscillator,
+}
+
+impl ReceiverClock {
+    /// The clock of `cfg` for a scenario starting at UTC `start_utc_ns` and lasting
+    /// `duration_s`, drawn over it and 10 s more (beyond, the frequency stays constant) from
+    /// the seed's GPS-clock stream: the same arguments give the same clock.
+    pub fn new(cfg: &SkyConfig, seed: u64, start_utc_ns: i64, duration_s: f64) -> Self {
+        let osc = Oscillator::new(
+            0,
+            0,
+            cfg.clock_drift,
+            cfg.clock_drift_random_walk / 3f64.sqrt(),
+            duration_s + 10.0,
+            &mut Rng::stream(seed, streams::GPS_CLOCK),
+        );
+        Self {
+            bias0_s: cfg.clock_bias_s,
+            start_gps_ns: gps_ns_from_utc_ns(start_utc_ns),
+            osc,
+        }
+    }
+
+    /// Clock bias b at scenario time `tau`, s (receiver time − GPS time).
+    pub fn bias_s(&self, tau: f64) -> f64 {
+        self.bias0_s + self.osc.offset_s(tau)
+    }
+
+    /// Clock drift ḃ (fractional frequency error) at scenario time `tau`.
+    pub fn drift(&self, tau: f64) -> f64 {
+        self.osc.freq_error(tau)
+    }
+
+    /// What the receiver's clock reads at scenario time `tau`: GPS time + b, ns since the
+    /// GPS epoch (rounded to the ns).
+    pub fn reading_ns(&self, tau: f64) -> i64 {
+        self.start_gps_ns + ((tau + self.bias_s(tau)) * 1e9).round() as i64
+    }
+
+    /// The scenario time at which the receiver's clock reads `reading_ns` (ns since the GPS
+    /// epoch), s: Newton's iteration on τ + b(τ) = reading, exact to < 1 ps in 3 steps since
+    /// |ḃ| ≪ 1.
+    pub fn tau_at_reading(&self, reading_ns: i64) -> f64 {
+        let target = (reading_ns - self.start_gps_ns) as f64 * 1e-9;
+        let mut tau = target - self.bias_s(target);
+        for _ in 0..3 {
+            tau -= (tau + self.bias_s(tau) - target) / (1.0 + self.drift(tau));
+        }
+        tau
+    }
+}
+
 /// The receiver's GPS side: constellation, clock and error processes.
 #[derive(Debug, Clone)]
 pub struct Sky {
@@ -673,17 +737,19 @@ pub struct Sky {
     iono: KlobucharRaw,
     seed: u64,
     noise: Rng,
-    clock_rng: Rng,
-    clock_bias_s: f64,
-    clock_drift: f64,
-    clock_at_gps_ns: Option<i64>,
+    clock: ReceiverClock,
+    /// GPS time of the last epoch written, ns.
+    last_epoch_gps_ns: Option<i64>,
+    /// Scenario time of the last epoch written, s.
+    last_epoch_tau: f64,
     multipath: [f64; MAX_PRN],
     last_subframe_tow: Option<i64>,
 }
 
 impl Sky {
-    /// The sky of `cfg` for a scenario starting at `start_utc_ns`; `None` without an almanac.
-    pub fn new(cfg: &SkyConfig, seed: u64, start_utc_ns: i64) -> Option<Self> {
+    /// The sky of `cfg` for a scenario starting at `start_utc_ns` and lasting `duration_s`
+    /// (its receiver clock: [`ReceiverClock::new`]); `None` without an almanac.
+    pub fn new(cfg: &SkyConfig, seed: u64, start_utc_ns: i64, duration_s: f64) -> Option<Self> {
         if cfg.constellation.is_empty() {
             return None;
         }
@@ -709,10 +775,9 @@ impl Sky {
             iono: KlobucharRaw::from_si(cfg.klobuchar_alpha, cfg.klobuchar_beta),
             seed,
             noise,
-            clock_rng: Rng::stream(seed, streams::GPS_CLOCK),
-            clock_bias_s: cfg.clock_bias_s,
-            clock_drift: cfg.clock_drift,
-            clock_at_gps_ns: None,
+            clock: ReceiverClock::new(cfg, seed, start_utc_ns, duration_s),
+            last_epoch_gps_ns: None,
+            last_epoch_tau: 0.0,
             multipath,
             last_subframe_tow: None,
         })
@@ -732,23 +797,18 @@ impl Sky {
         Ephemeris::from_almanac(a, self.almanac_weeks[k], week, toe_s, iode)
     }
 
-    /// The receiver clock (bias s, drift) at GPS time `gps_ns`, advanced from the last call.
-    fn clock(&mut self, gps_ns: i64) -> (f64, f64) {
-        if let Some(last) = self.clock_at_gps_ns.replace(gps_ns) {
-            let dt = (gps_ns - last) as f64 * 1e-9;
-            if dt > 0.0 {
-                let d0 = self.clock_drift;
-                self.clock_drift += self.clock_rng.gaussian(self.cfg.clock_drift_random_walk * dt.sqrt());
-                self.clock_bias_s += 0.5 * (d0 + self.clock_drift) * dt;
-            }
-        }
-        (self.clock_bias_s, self.clock_drift)
-    }
-
     /// The receiver clock at the last epoch written: bias (s) and drift (s/s), the truth its
     /// pseudoranges carry.
     pub fn receiver_clock(&self) -> (f64, f64) {
-        (self.clock_bias_s, self.clock_drift)
+        (
+            self.clock.bias_s(self.last_epoch_tau),
+            self.clock.drift(self.last_epoch_tau),
+        )
+    }
+
+    /// The receiver's oscillator.
+    pub fn clock(&self) -> &ReceiverClock {
+        &self.clock
     }
 
     /// The window in force at scenario time `tau`, if any.
@@ -776,9 +836,11 @@ impl Sky {
         let (week, tow_ns) = (gps_ns.div_euclid(week_ns), gps_ns.rem_euclid(week_ns));
         let tow_s = tow_ns as f64 * 1e-9;
         let dt = self
-            .clock_at_gps_ns
+            .last_epoch_gps_ns
+            .replace(gps_ns)
             .map_or(1.0, |last| ((gps_ns - last) as f64 * 1e-9).max(0.0));
-        let (bias_s, drift) = self.clock(gps_ns);
+        self.last_epoch_tau = tau;
+        let (bias_s, drift) = (self.clock.bias_s(tau), self.clock.drift(tau));
         let (lat, lon, h) = (antenna[0], antenna[1], antenna[2]);
         let rx = Vector3::from(earth::geodetic_to_ecef(lat, lon, h));
         let c_e_n = ned_from_ecef(lat, lon);
@@ -999,6 +1061,35 @@ fn ned_from_ecef(lat: f64, lon: f64) -> nalgebra::Matrix3<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_receiver_clock_is_one_invertible_function_of_time() {
+        let cfg = SkyConfig::default();
+        let start = 1_796_083_200_000_000_000;
+        let (a, b) = (
+            ReceiverClock::new(&cfg, 3, start, 600.0),
+            ReceiverClock::new(&cfg, 3, start, 600.0),
+        );
+        let gps0 = gps_ns_from_utc_ns(start);
+        for k in 0..600 {
+            let tau = k as f64 * 1.0137;
+            assert_eq!(a.bias_s(tau), b.bias_s(tau), "same arguments, same clock");
+            // Reading = GPS time + bias; its inverse within a ns (the reading's rounding).
+            let r = a.reading_ns(tau);
+            assert!((r - gps0 - (tau * 1e9).round() as i64 - (a.bias_s(tau) * 1e9).round() as i64).abs() <= 1);
+            assert!((a.tau_at_reading(r) - tau).abs() < 1.1e-9, "{k}");
+        }
+        // Bias 50 µs + 0.2 ppm drift; the random walk (1e-10/√s) moves the frequency by
+        // 2.4e-9 and the time by 0.85 µs (1σ) over 10 min.
+        let predicted = cfg.clock_bias_s + cfg.clock_drift * 600.0;
+        assert!(
+            (a.bias_s(600.0) - predicted).abs() < 5e-6,
+            "{}",
+            a.bias_s(600.0) - predicted
+        );
+        assert!((a.drift(600.0) - cfg.clock_drift).abs() < 1e-8);
+        assert!((a.bias_s(600.0) - predicted).abs() > 0.0, "it wanders");
+    }
 
     const YUMA: &str = "******** Week 1015 almanac for PRN-03 ********
 ID:                         03

@@ -257,6 +257,12 @@ pub struct ImuUnitConfig {
     pub mount_rpy_deg: [f64; 3],
     /// Lever arm from the body origin to the sensor, body (FRD) axes, m; default 0.
     pub lever_arm_m: [f64; 3],
+    /// The IMU samples on the GNSS receiver's oscillator (one crystal: an IMU in the
+    /// receiver's chip, or one triggered by its time pulse): sample k ends when the receiver's
+    /// clock reads a multiple of the period (plus `phase_s`), and its stamp carries that
+    /// reading as device time with [`IMU_FLAG_RECEIVER_CLOCK`](navsync_shared::samples::IMU_FLAG_RECEIVER_CLOCK).
+    /// Needs `[gnss.sky]` (the receiver's clock lives there); default false.
+    pub receiver_clock: bool,
 }
 
 /// Default stamp delay of IMU `index` relative to true time, s: 0, 10, 15, 20 ms for the
@@ -289,6 +295,9 @@ pub struct ResolvedImu {
     pub lever_arm_m: [f64; 3],
     /// Fractional frequency error of the crystal the IMU samples on (0: the exact grid).
     pub clock_freq_error: f64,
+    /// Samples on the GNSS receiver's oscillator ([`ImuUnitConfig::receiver_clock`]; then
+    /// `clock_freq_error` is unused).
+    pub receiver_clock: bool,
 }
 
 /// The simulated receiver's output protocol.
@@ -564,6 +573,7 @@ impl SimConfig {
             } else {
                 0.0
             },
+            receiver_clock: unit.receiver_clock,
         }
     }
 
@@ -972,6 +982,12 @@ impl SimConfig {
         }
         for (k, l) in unit.lever_arm_m.iter().enumerate() {
             self.check_range(&format!("{}[{k}]", at("lever_arm_m")), *l, -10.0, 10.0, "m")?;
+        }
+        if unit.receiver_clock && self.gnss.sky.almanac.is_none() {
+            return Err(self.invalid(
+                &at("receiver_clock"),
+                format!("IMU {i} samples on the GNSS receiver's clock, which needs [gnss.sky] with an almanac"),
+            ));
         }
         Ok(())
     }

@@ -117,8 +117,11 @@ impl World {
             oscillator_span_s(cfg, duration_s),
             &mut Rng::stream(cfg.seed, streams::OSCILLATOR),
         );
+        // The GNSS receiver's oscillator, for IMUs sampling on it (the receiver's sky draws the
+        // same clock from the same arguments).
+        let receiver_clock = crate::gps::ReceiverClock::new(&cfg.gnss.sky, cfg.seed, start_utc_ns, duration_s);
         let imus: Vec<ImuStream> = (0..cfg.imu.count)
-            .map(|i| ImuStream::new(i, cfg.imu_unit(i), cfg.seed, duration_s))
+            .map(|i| ImuStream::new(i, cfg.imu_unit(i), cfg.seed, duration_s, Some(&receiver_clock)))
             .collect();
         let mut imu_offset_s = [0.0; MAX_IMUS];
         for (slot, imu) in imu_offset_s.iter_mut().zip(&imus) {

@@ -268,8 +268,10 @@ fn sim_to_ubx_driver_to_tight_estimator() {
     let scenario = env.dir.join("drive.toml");
     write_drive_scenario(&scenario, 60.0, 1, 100.0);
     let mut text = std::fs::read_to_string(&scenario).unwrap();
+    // The IMU samples on the receiver's crystal and arrives 4 ms late (one crystal: the
+    // estimator times it by the receiver clock it estimates).
     text.push_str(&format!(
-        "\n[gnss]\nprotocol = \"ubx\"\n\n[gnss.sky]\nalmanac = \"{}\"\n",
+        "\n[gnss]\nprotocol = \"ubx\"\n\n[gnss.sky]\nalmanac = \"{}\"\n\n[[imu.unit]]\nreceiver_clock = true\noffset_s = 0.004\n",
         almanac.display()
     ));
     std::fs::write(&scenario, text).unwrap();
@@ -286,7 +288,8 @@ fn sim_to_ubx_driver_to_tight_estimator() {
         }
         health.poll();
         let epochs = health.counter("estimator", "ranges_epochs_used").unwrap_or(0);
-        if epochs >= 15 && latest.is_some_and(|t| t.rx_clock_bias_ns.is_finite()) {
+        let imu_timed = health.counter("estimator", "rx_clock_imu").unwrap_or(0);
+        if epochs >= 15 && imu_timed > 0 && latest.is_some_and(|t| t.rx_clock_bias_ns.is_finite()) {
             break true;
         }
         if t0.elapsed() > Duration::from_secs(75) {
@@ -298,18 +301,19 @@ fn sim_to_ubx_driver_to_tight_estimator() {
     let counter = |name: &str| h.as_ref().and_then(|h| h.counter(name)).unwrap_or(0);
     assert!(
         done,
-        "raw_epochs {}, nav_data {}, ephemerides {}, ranges_epochs_used {}, clock_inits {}\nestimator log:\n{}\ngnss log:\n{}",
+        "raw_epochs {}, nav_data {}, ephemerides {}, ranges_epochs_used {}, clock_inits {}, rx_clock_imu {}\nestimator log:\n{}\ngnss log:\n{}",
         counter("raw_epochs"),
         counter("nav_data"),
         counter("ephemerides"),
         counter("ranges_epochs_used"),
         counter("clock_inits"),
+        counter("rx_clock_imu"),
         env.log("estimator"),
         env.log("gnss")
     );
     let ts = latest.unwrap();
     println!(
-        "sim → gnss --protocol ubx → estimator --coupling tight: raw epochs {}, subframes {}, ephemerides {}, ranges used {} in {} epochs, rejected {}; receiver clock {:.0} ± {:.0} ns, drift {:.3} ppm",
+        "sim → gnss --protocol ubx → estimator --coupling tight: raw epochs {}, subframes {}, ephemerides {}, ranges used {} in {} epochs, rejected {}; receiver clock {:.0} ± {:.0} ns, drift {:.3} ppm; IMU samples timed by it {} (waiting {}, outliers {})",
         counter("raw_epochs"),
         counter("nav_data"),
         counter("ephemerides"),
@@ -318,9 +322,13 @@ fn sim_to_ubx_driver_to_tight_estimator() {
         counter("ranges_rejected"),
         ts.rx_clock_bias_ns,
         ts.rx_clock_bias_std_ns,
-        ts.rx_clock_drift * 1e6
+        ts.rx_clock_drift * 1e6,
+        counter("rx_clock_imu"),
+        counter("rx_clock_imu_waiting"),
+        counter("rx_clock_imu_outliers")
     );
     assert_eq!(counter("nav_data_bad"), 0);
+    assert_eq!(counter("rx_clock_imu_outliers"), 0);
     assert!(counter("ephemerides") >= 4, "ephemerides from the simulated subframes");
     assert!(counter("ranges_used") >= 4 * counter("ranges_epochs_used"));
     // The simulated receiver clock: 50 µs at the simulator's start, then 0.2 ppm (and a TCXO's

@@ -6,8 +6,16 @@
 //!
 //! A mapped time far from the stamp (beyond any transport delay: a device reset, a counter
 //! jump) is not used; [`RESET_AFTER_OUTLIERS`] of those in a row start the clock afresh.
+//!
+//! One crystal: an IMU sampling on the GNSS receiver's oscillator
+//! ([`IMU_FLAG_RECEIVER_CLOCK`]) carries the receiver clock's reading t_r = t_GPS + b_r as
+//! device time. With the receiver clock bias b̂_r of the tightly coupled filter and the PPS
+//! clock model, t_r − b̂_r is GPS time and maps to host time absolutely
+//! ([`DeviceTiming::retime_on_receiver_clock`]): no transport delay is left in it, where the
+//! device-clock regression above keeps the least delay of its windows.
 
-use navsync_shared::samples::{ImuSample, MAX_IMUS, StampSource};
+use navsync_shared::samples::{IMU_FLAG_RECEIVER_CLOCK, ImuSample, MAX_IMUS, StampSource};
+use navsync_shared::time::utc_ns_from_gps_ns;
 
 use super::device_clock::{DeviceClock, DeviceClockConfig, DeviceUpdate};
 
@@ -33,6 +41,10 @@ pub struct DeviceTimingConfig {
     pub max_sigma_ns: f64,
     /// Largest |mapped − stamp| accepted, ns (default 50 ms: longer than any transport delay).
     pub max_residual_ns: i64,
+    /// Largest 1-sigma of the receiver clock bias at which an IMU on the receiver's clock is
+    /// timed by it, ns (default 1 µs: any fused clock is far better; a TCXO in holdover
+    /// reaches it after several minutes without satellites, then the device clock takes over).
+    pub receiver_clock_max_sigma_ns: f64,
 }
 
 impl Default for DeviceTimingConfig {
@@ -43,6 +55,7 @@ impl Default for DeviceTimingConfig {
             host_stamp_window: 40,
             max_sigma_ns: 100_000.0,
             max_residual_ns: 50_000_000,
+            receiver_clock_max_sigma_ns: 1_000.0,
         }
     }
 }
@@ -58,6 +71,13 @@ pub struct DeviceTimingCounters {
     pub outliers: u64,
     /// Device clocks restarted after [`RESET_AFTER_OUTLIERS`] outliers in a row.
     pub resets: u64,
+    /// Samples on the receiver's clock timed by it (GPS time through the PPS clock model).
+    pub receiver_clock: u64,
+    /// Samples on the receiver's clock not timed by it: no receiver clock solution within
+    /// its σ limit, or no hardware time mapping (they keep the device-clock time).
+    pub receiver_clock_waiting: u64,
+    /// Samples on the receiver's clock whose time disagreed with the stamp beyond the limit.
+    pub receiver_clock_outliers: u64,
 }
 
 /// One device clock per IMU slot.
@@ -130,6 +150,42 @@ impl DeviceTiming {
     }
 }
 
+impl DeviceTiming {
+    /// The sample with its host time from the GNSS receiver's clock, when it samples on it
+    /// ([`IMU_FLAG_RECEIVER_CLOCK`]): GPS time t_r − b̂_r, with `receiver_bias_ns` the
+    /// receiver clock bias and its 1-sigma (ns) at the sample, mapped to host time by
+    /// `host_ns_at_utc` (the PPS clock model; `None` without a hardware time mapping). `None`
+    /// (keep the device-clock time of [`Self::retime`]) for other samples, without a clock
+    /// solution within [`DeviceTimingConfig::receiver_clock_max_sigma_ns`], or when the time
+    /// is further than [`DeviceTimingConfig::max_residual_ns`] from the stamp.
+    pub fn retime_on_receiver_clock(
+        &mut self,
+        s: &ImuSample,
+        receiver_bias_ns: Option<(f64, f64)>,
+        host_ns_at_utc: impl FnOnce(i64) -> Option<i64>,
+    ) -> Option<ImuSample> {
+        if !self.cfg.enabled || s.flags & IMU_FLAG_RECEIVER_CLOCK == 0 || s.stamp.has_device_time == 0 {
+            return None;
+        }
+        let mapped = receiver_bias_ns
+            .filter(|(b, sd)| b.is_finite() && *sd <= self.cfg.receiver_clock_max_sigma_ns)
+            .and_then(|(b, _)| host_ns_at_utc(utc_ns_from_gps_ns(s.stamp.device_ns - b.round() as i64)));
+        let Some(host_ns) = mapped else {
+            self.counters.receiver_clock_waiting += 1;
+            return None;
+        };
+        if (host_ns - s.stamp.host_ns).abs() > self.cfg.max_residual_ns {
+            self.counters.receiver_clock_outliers += 1;
+            return None;
+        }
+        self.counters.receiver_clock += 1;
+        let mut out = *s;
+        out.stamp.host_ns = host_ns;
+        out.stamp.source = StampSource::ReceiverClock as u8;
+        Some(out)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -180,6 +236,49 @@ mod tests {
         let out = t.retime(0, &s);
         assert_eq!(out.stamp.source, StampSource::DeviceCounter as u8);
         assert!((out.stamp.host_ns - truth - 650_000).abs() < 200_000);
+    }
+
+    #[test]
+    fn a_sample_on_the_receivers_clock_is_its_reading_less_the_bias_in_host_time() {
+        use navsync_shared::samples::IMU_FLAG_RECEIVER_CLOCK;
+        use navsync_shared::time::gps_ns_from_utc_ns;
+        let mut t = DeviceTiming::new(DeviceTimingConfig::default());
+        // Host time = UTC − 1.7e18 ns + 3 µs (the PPS clock model's mapping).
+        let host_at = |utc: i64| Some(utc - 1_700_000_000_000_000_000 + 3_000);
+        let utc = 1_796_083_200_000_000_000;
+        let mut s = ImuSample::zeroed();
+        s.stamp.has_device_time = 1;
+        s.flags = IMU_FLAG_RECEIVER_CLOCK;
+        // The receiver's clock runs 57.5 µs ahead of GPS time.
+        s.stamp.device_ns = gps_ns_from_utc_ns(utc) + 57_500;
+        let true_host = host_at(utc).unwrap();
+        s.stamp.host_ns = true_host + 4_000_000;
+        let out = t.retime_on_receiver_clock(&s, Some((57_500.0, 20.0)), host_at).unwrap();
+        assert_eq!(out.stamp.host_ns, true_host);
+        assert_eq!(out.stamp.source, StampSource::ReceiverClock as u8);
+        // No clock, a clock beyond its σ limit, no time mapping, a time far from the stamp,
+        // a sample not on the receiver's clock: the device-clock time is kept.
+        assert!(t.retime_on_receiver_clock(&s, None, host_at).is_none());
+        assert!(
+            t.retime_on_receiver_clock(&s, Some((57_500.0, 2_000.0)), host_at)
+                .is_none()
+        );
+        assert!(
+            t.retime_on_receiver_clock(&s, Some((57_500.0, 20.0)), |_| None)
+                .is_none()
+        );
+        assert!(t.retime_on_receiver_clock(&s, Some((-60e6, 20.0)), host_at).is_none());
+        let c = *t.counters();
+        assert_eq!(
+            (c.receiver_clock, c.receiver_clock_waiting, c.receiver_clock_outliers),
+            (1, 3, 1)
+        );
+        s.flags = 0;
+        assert!(
+            t.retime_on_receiver_clock(&s, Some((57_500.0, 20.0)), host_at)
+                .is_none()
+        );
+        assert_eq!(*t.counters(), c);
     }
 
     #[test]

@@ -23,7 +23,7 @@ crate::sample_struct! {
         pub temperature_c: f64,
         /// IMU id (NUL-padded ASCII, e.g. "0").
         pub imu_id: [u8; 8],
-        /// Flags: bit 0 saturated.
+        /// Flags: bit 0 saturated, bit 1 sampled on the GNSS receiver's clock.
         pub flags: u32,
         /// Reserved, zero.
         pub reserved: u32,
@@ -32,3 +32,9 @@ crate::sample_struct! {
 
 /// [`ImuSample::flags`] bit: at least one axis reached the sensor's range.
 pub const IMU_FLAG_SATURATED: u32 = 1;
+
+/// [`ImuSample::flags`] bit: the IMU samples on the GNSS receiver's oscillator (one crystal),
+/// and `stamp.device_ns` is what the receiver's clock read at the sample: GPS time plus the
+/// receiver clock bias, ns since the GPS epoch (1980-01-06). The tightly coupled estimator
+/// removes the bias it estimates and maps the GPS time to host time.
+pub const IMU_FLAG_RECEIVER_CLOCK: u32 = 2;

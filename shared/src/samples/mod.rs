@@ -30,7 +30,7 @@ pub use gnss_nav_data::{GnssNavData, MAX_NAV_WORDS};
 pub use gnss_raw::{GnssRaw, MAX_RAW_MEASUREMENTS, RawMeasurement};
 pub use gnss_time_pulse::GnssTimePulse;
 pub use health::{Counter, Health, MAX_COUNTERS, MAX_RATES, RateEntry};
-pub use imu_sample::{IMU_FLAG_SATURATED, ImuSample};
+pub use imu_sample::{IMU_FLAG_RECEIVER_CLOCK, IMU_FLAG_SATURATED, ImuSample};
 pub use nav_state::{NavState, NavStatus};
 pub use pps_edge::PpsEdge;
 pub use sim_truth::SimTruth;

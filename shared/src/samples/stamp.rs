@@ -39,6 +39,9 @@ pub enum StampSource {
     Receipt = 5,
     /// Computed by the simulator from its oscillator model.
     Simulated = 6,
+    /// Device time on the GNSS receiver's clock, less the receiver clock bias the tightly
+    /// coupled filter estimates (GPS time), mapped to host time through the PPS clock model.
+    ReceiverClock = 7,
 }
 
 impl StampSource {
@@ -51,6 +54,7 @@ impl StampSource {
             4 => Self::SerialLine,
             5 => Self::Receipt,
             6 => Self::Simulated,
+            7 => Self::ReceiverClock,
             _ => Self::Unknown,
         }
     }
@@ -65,6 +69,7 @@ impl StampSource {
             Self::SerialLine => "serial-line",
             Self::Receipt => "receipt",
             Self::Simulated => "simulated",
+            Self::ReceiverClock => "receiver-clock",
         }
     }
 }
