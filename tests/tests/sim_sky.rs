@@ -4,8 +4,8 @@
 //! default drive with a u-blox receiver (RXM-RAWX, RXM-SFRBX, and a NAV-PVT solved from the
 //! same measurements) into a recording, and `navsync replay --estimate --coupling loose|tight`
 //! runs the estimator over it. A canyon window (120 s, at most 3 satellites within ±30° of
-//! the street) leaves the receiver without a fix: loose coasts, tight fuses the satellites.
-//! Two start times (two skies) of 2026-12-01.
+//! the street) leaves the receiver without a fix: loose coasts, tight fuses the satellites;
+//! with the full sky, tight is no worse than loose. Two start times (two skies) of 2026-12-01.
 
 use std::path::Path;
 
@@ -131,11 +131,10 @@ fn tight_coupling_bridges_a_canyon_on_the_simulated_sky() {
             }
         }
     }
-    // Full sky: the receiver's own solution (its troposphere model is the simulator's, its
-    // mask 5°) against the filter's per-satellite updates, which treat the broadcast and
-    // multipath errors as white; measured 0.99–1.14 × (README).
+    // Full sky: tightly coupled no worse than the receiver's own solution fused loosely
+    // (measured 0.87–0.99 × at four starts, README).
     assert!(
-        full_ratio.iter().all(|r| *r < 1.4),
+        full_ratio.iter().all(|r| *r <= 1.0),
         "tight / loose RMS with full sky: {full_ratio:?}"
     );
     // A replay is bit-identical.

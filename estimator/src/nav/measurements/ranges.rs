@@ -35,20 +35,23 @@ const UNMODELLED_IONO_ZENITH_M: f64 = 10.0;
 /// Settings of the pseudorange and Doppler updates.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RangingConfig {
-    /// Satellites below this elevation are not used, rad (default 5°, a receiver's usual tracking mask; the σ grows as 1/sin(elevation)).
+    /// Satellites below this elevation are not used, rad (default 5°, a receiver's usual
+    /// tracking mask; the σ grows towards the horizon, see [`Self::pseudorange_std_m`]).
     pub elevation_mask_rad: f64,
     /// Signals weaker than this are not used, dB-Hz (default 25).
     pub cno_mask_dbhz: f64,
     /// Pseudorange 1σ at zenith, m (default 3): code noise, multipath, the broadcast orbit
-    /// and clock errors and what the atmosphere models leave, over sin(elevation) (the
-    /// weighting the receivers' own single-point solutions use); the receiver's own σ when
-    /// larger. Weak signals are weighted down further (see [`Self::reference_cno_dbhz`]).
+    /// and clock errors and what the atmosphere models leave; at elevation el it is
+    /// σ·√((1 + 1/sin²el)/2) (RTKLIB's a² + b²/sin²el with a = b: 2.3 × at 20°, 8.1 × at
+    /// 5°); the receiver's own σ when larger. Weak signals are weighted down further (see
+    /// [`Self::reference_cno_dbhz`]).
     pub pseudorange_std_m: f64,
     /// Range-rate 1σ at zenith and at the reference C/N0, m/s (default 0.1), scaled likewise.
     pub range_rate_std_mps: f64,
     /// Below this C/N0 the σ above grow by √(10^((C/N0_ref − C/N0)/10)) (the code-tracking
-    /// noise variance goes with 1/(C/N0)), dB-Hz (default 35: a signal that strong is as
-    /// good as the elevation model says; fading under foliage or in a canyon is weaker).
+    /// noise variance goes with 1/(C/N0)), dB-Hz (default 30: open sky gives a patch antenna
+    /// 30–35 dB-Hz at 5–15° elevation, which the elevation model already carries; a signal
+    /// weaker than that, under foliage or diffracted in a canyon, is weighted down more).
     pub reference_cno_dbhz: f64,
     /// 1σ given to the clock bias when it is (re)initialised from the residuals, m (default 30).
     pub clock_init_std_m: f64,
@@ -67,7 +70,7 @@ impl Default for RangingConfig {
             cno_mask_dbhz: 25.0,
             pseudorange_std_m: 3.0,
             range_rate_std_mps: 0.1,
-            reference_cno_dbhz: 35.0,
+            reference_cno_dbhz: 30.0,
             clock_init_std_m: 30.0,
             drift_init_std_mps: 2.0,
             clock_reset_m: 1000.0,
@@ -201,10 +204,14 @@ fn sight(a: &Antenna, s: &SatRange, e: &RangeEpoch) -> Sight {
     }
 }
 
-/// The σ of a measurement with zenith value `zenith` at elevation `el_rad` and C/N0 `cno`.
+/// The σ of a measurement with zenith value `zenith` at elevation `el_rad` and C/N0 `cno`:
+/// σ² = σ_z²·(1 + 1/sin²el)/2, the a² + b²/sin²(el) model of RTKLIB (T. Takasu, RTKLIB 2.4.2
+/// manual, Appendix E) with a = b — part of the error (the broadcast orbit and clock) does not
+/// grow towards the horizon — times the weak-signal factor.
 fn sigma(zenith: f64, reported: f64, el_rad: f64, cno: f64, rc: &RangingConfig) -> f64 {
     let weak = 10f64.powf(((rc.reference_cno_dbhz - cno) / 10.0).max(0.0));
-    (zenith / el_rad.sin().max(0.05) * weak.sqrt()).max(reported)
+    let sin_el = el_rad.sin().max(0.05);
+    (zenith * ((1.0 + 1.0 / (sin_el * sin_el)) / 2.0).sqrt() * weak.sqrt()).max(reported)
 }
 
 /// Median of the first `n` values (n ≥ 1), without allocating.
