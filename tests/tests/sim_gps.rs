@@ -188,7 +188,9 @@ fn a_single_point_solution_on_the_simulated_raw_data_finds_the_antenna() {
 /// it by its receiver clock estimate and the PPS clock model; the device-clock regression,
 /// which is all a loosely coupled estimator has, keeps the least transport delay of its
 /// windows. Against the simulator's truth (the host time of each sample's instant), with a
-/// 60 s blockage (300–360 s) and then one satellite for 60 s.
+/// 60 s blockage (300–360 s) and then one satellite for 60 s; the receiver clock itself in
+/// `TimeState` against the simulated oscillator through the blockage (holdover) and its
+/// recovery on one satellite.
 #[test]
 fn an_imu_on_the_receivers_crystal_is_timed_by_the_tightly_coupled_clock() {
     use navsync_estimator::offline::{self, Output};
@@ -196,7 +198,7 @@ fn an_imu_on_the_receivers_crystal_is_timed_by_the_tightly_coupled_clock() {
     use navsync_estimator::settings::{Coupling, Settings};
     use navsync_estimator::time::device_timing::{DeviceTiming, DeviceTimingConfig};
     use navsync_shared::samples::{AnySample, IMU_FLAG_RECEIVER_CLOCK};
-    use navsync_sim::gps::SkyWindow;
+    use navsync_sim::gps::{ReceiverClock, SkyWindow};
     use navsync_sim::published::PublishedStream;
     use navsync_sim::scenario::{ImuUnitConfig, OutputProtocol, SimConfig};
     use navsync_sim::world::World;
@@ -240,6 +242,9 @@ fn an_imu_on_the_receivers_crystal_is_timed_by_the_tightly_coupled_clock() {
     let tau_of = |host_ns: i64| truth.oscillator().tau_at_host(host_ns);
     // (scenario time, estimator error ns, regression error ns, receipt error ns)
     let mut rows: Vec<(f64, f64, f64, f64)> = Vec::new();
+    // (scenario time, estimated receiver clock bias ns, its σ ns, true bias ns)
+    let true_clock = ReceiverClock::new(&cfg.gnss.sky, cfg.seed, start_utc, truth.duration_s());
+    let mut clocks: Vec<(f64, f64, f64, f64)> = Vec::new();
     let mut flagged = 0u64;
     let samples = stream.map(|p| {
         let mut tag = None;
@@ -255,8 +260,19 @@ fn an_imu_on_the_receivers_crystal_is_timed_by_the_tightly_coupled_clock() {
         Some("0"),
         samples,
         settings.delay_truth(),
-        false,
+        true,
         |o, tag| {
+            if let Output::Time(t) = o
+                && t.rx_clock_bias_ns.is_finite()
+            {
+                let tau = tau_of(t.computed_host_ns);
+                clocks.push((
+                    tau,
+                    t.rx_clock_bias_ns,
+                    t.rx_clock_bias_std_ns,
+                    true_clock.bias_s(tau) * 1e9,
+                ));
+            }
             if let (Output::Nav(n), Some((seq, regressed, receipt))) = (o, tag) {
                 let t = true_host(*seq);
                 rows.push((
@@ -295,6 +311,31 @@ fn an_imu_on_the_receivers_crystal_is_timed_by_the_tightly_coupled_clock() {
             e.0, e.1, e.2, r.0, r.1, d.0, d.1
         );
     }
+    // The clock in TimeState: the last state before scenario time `t`.
+    let clock_at = |t: f64| *clocks.iter().rfind(|c| c.0 < t).expect("a clock state");
+    let (before, held) = (clock_at(BLOCKAGE.0), clock_at(BLOCKAGE.1));
+    eprintln!(
+        "receiver clock before the blockage: error {:.1} ns σ {:.1} ns; after 60 s of holdover: error {:.1} ns σ {:.1} ns",
+        before.1 - before.3,
+        before.2,
+        held.1 - held.3,
+        held.2
+    );
+    for after in [1.0, 5.0, 10.0, 30.0, 59.0] {
+        let c = clock_at(BLOCKAGE.1 + after);
+        eprintln!(
+            "  one satellite for {after:>2} s: clock error {:.1} ns σ {:.1} ns",
+            c.1 - c.3,
+            c.2
+        );
+    }
+    // Holdover: the error stays within its grown σ; one satellite brings σ down again.
+    assert!((held.1 - held.3).abs() < 3.0 * held.2, "{held:?}");
+    assert!(held.2 > before.2, "σ grows in holdover: {before:?} {held:?}");
+    assert!(
+        clock_at(BLOCKAGE.1 + 10.0).2 < held.2,
+        "one satellite re-anchors the clock"
+    );
     assert_eq!(flagged, pipeline.counters().imu_used + pipeline.counters().imu_invalid);
     // Every sample once the clock is anchored, through the blockage too (a TCXO's σ stays
     // far below the 1 µs limit for 60 s).
