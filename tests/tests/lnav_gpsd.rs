@@ -480,8 +480,8 @@ fn a_decoded_almanac_puts_the_satellite_where_the_receiver_sees_it() {
 /// almanac decoded from `ublox-ned-m8t-sbfrx3` (GPS week 2117; `navsync decode --yuma`)
 /// propagated back 8 weeks to `ublox-zed-f9p-sfrbx`'s NAV-SAT epochs (week 2109), seen from
 /// that receiver's NAV-PVT position: elevation and azimuth of every GPS satellite in NAV-SAT
-/// against the receiver's own. (The corpus has no capture with both complete ephemerides and
-/// NAV-SAT; the "within 1° from the ephemerides" needs one.)
+/// against the receiver's own. (The corpus has no GPS capture with both complete ephemerides
+/// and NAV-SAT; GLONASS's, below, has.)
 #[test]
 fn an_almanac_weeks_old_still_points_at_every_satellite() {
     let dir = shared_material("corpora/gpsd-ubx");
@@ -541,16 +541,55 @@ fn an_almanac_weeks_old_still_points_at_every_satellite() {
         worst_el < 5.0 && worst_az < 5.0,
         "worst Δel {worst_el}°, Δaz·cos el {worst_az}°"
     );
-    // GLONASS only: no GPS orbit to compare, a failure that says why.
+    // A capture with NAV-SAT but no subframes: a failure that says why.
     let out = std::process::Command::new(navsync_tests::navsync_bin())
         .args(["decode", "--sky"])
-        .arg(dir.join("ublox-glo.log"))
+        .arg(dir.join("ublox-neo-m8n.log"))
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        !out.status.success() && err.contains("no GPS satellite of NAV-SAT has an orbit"),
+        !out.status.success() && err.contains("no GPS or GLONASS satellite of NAV-SAT has an orbit"),
         "{err}"
+    );
+}
+
+/// Real geometry from broadcast ephemerides: `ublox-glo` (GLONASS only, 2023-06-28 in Moscow)
+/// has complete immediate data (strings 1–4) of four satellites with the receiver's NAV-SAT
+/// and NAV-PVT. `navsync decode --sky` integrates each ephemeris (GLONASS ICD Appendix
+/// A.3.1.2) to every NAV-SAT epoch: every satellite within 1° of the receiver's elevation and
+/// azimuth (which it reports in whole degrees).
+#[test]
+fn glonass_ephemerides_point_at_every_satellite_within_a_degree() {
+    let capture = shared_material("corpora/gpsd-ubx").join("ublox-glo.log");
+    let out = std::process::Command::new(navsync_tests::navsync_bin())
+        .args(["decode", "--sky"])
+        .arg(&capture)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    print!("{err}");
+    let (mut worst_el, mut worst_az, mut n) = (0f64, 0f64, 0);
+    let mut svs = std::collections::BTreeSet::new();
+    for l in String::from_utf8_lossy(&out.stdout).lines() {
+        let v: Value = serde_json::from_str(l).unwrap();
+        assert_eq!(v["source"], "glonass-ephemeris");
+        let (el, d_el, d_az) = (
+            v["el_deg"].as_f64().unwrap(),
+            v["d_el_deg"].as_f64().unwrap(),
+            v["d_az_deg"].as_f64().unwrap(),
+        );
+        worst_el = worst_el.max(d_el.abs());
+        worst_az = worst_az.max(d_az.abs() * el.to_radians().cos());
+        svs.insert(v["sv"].as_u64().unwrap());
+        n += 1;
+    }
+    println!("GLONASS: {n} sightings of slots {svs:?}, worst |Δel| {worst_el:.2}°, worst |Δaz|·cos el {worst_az:.2}°");
+    assert!(n >= 4 * 290 && svs.len() == 4, "{n} sightings of {svs:?}");
+    assert!(
+        worst_el < 1.0 && worst_az < 1.0,
+        "Δel {worst_el}°, Δaz·cos el {worst_az}°"
     );
 }
 

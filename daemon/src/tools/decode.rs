@@ -3,7 +3,7 @@
 //! the decoder's counters on stderr; with `--subframes`, one JSON object per GPS LNAV
 //! subframe of its RXM-SFRBX instead (`navsync_estimator::gnss::lnav`, unscaled fields); with
 //! `--yuma`, the GPS almanac of those subframes as a YUMA file (what `[gnss.sky] almanac` of a
-//! simulator scenario reads); with `--sky`, each GPS satellite of the receiver's NAV-SAT with
+//! simulator scenario reads); with `--sky`, each GPS and GLONASS satellite of the receiver's NAV-SAT with
 //! the elevation and azimuth computed from broadcast orbits next to the receiver's own.
 
 use std::io::{Read, Write};
@@ -28,10 +28,11 @@ pub struct Options {
     /// each PRN) in the YUMA format, its week modulo 1024 from the capture's subframe 1.
     #[arg(long, conflicts_with = "sky")]
     pub yuma: bool,
-    /// Print, for every GPS satellite in the capture's UBX-NAV-SAT, its elevation and azimuth
-    /// computed from an orbit (the capture's own ephemeris, else its almanac page, else
-    /// `--almanac`) at the receiver's NAV-PVT position, next to the receiver's own: one JSON
-    /// object per satellite and epoch; the largest differences on stderr.
+    /// Print, for every GPS and GLONASS satellite in the capture's UBX-NAV-SAT, its elevation
+    /// and azimuth computed from an orbit (GPS: the capture's own ephemeris, else its almanac
+    /// page, else `--almanac`; GLONASS: the capture's immediate data, strings 1–4, integrated)
+    /// at the receiver's NAV-PVT position, next to the receiver's own: one JSON object per
+    /// satellite and epoch; the largest differences on stderr.
     #[arg(long)]
     pub sky: bool,
     /// With `--sky`: a YUMA almanac for the satellites the capture has no orbit of.
@@ -39,12 +40,14 @@ pub struct Options {
     pub almanac: Option<String>,
 }
 
-/// `--sky`: computed against reported satellite geometry (IS-GPS-200 Table 20-IV orbits,
-/// elevation/azimuth at the receiver's position for a signal sent 75 ms before the epoch).
+/// `--sky`: computed against reported satellite geometry (IS-GPS-200 Table 20-IV orbits, the
+/// GLONASS ICD's integrated orbits; elevation/azimuth at the receiver's position for a signal
+/// sent 75 ms before the epoch).
 fn sky(bytes: &[u8], file: &str, almanac: Option<&str>) -> Result<()> {
     use navsync_drivers::gnss::capture::gpsd_header;
     use navsync_drivers::gnss::ubx::framer::{Frame, UbxFramer};
     use navsync_drivers::gnss::ubx::messages::{self, Message};
+    use navsync_estimator::gnss::glonass::{self, GloStore};
     use navsync_estimator::gnss::lnav::{self, Subframe};
     use navsync_estimator::gnss::orbit::Orbit;
     use navsync_estimator::gnss::ranges::EphemerisStore;
@@ -53,6 +56,7 @@ fn sky(bytes: &[u8], file: &str, almanac: Option<&str>) -> Result<()> {
     const WEEK_S: i64 = 604_800;
     let (header, _) = gpsd_header(bytes);
     let mut store = EphemerisStore::default();
+    let mut glo = GloStore::default();
     let mut pages = std::collections::BTreeMap::new();
     // (NAV-SAT, the latest NAV-PVT with a fix before it: position and GPS week)
     let mut epochs = Vec::new();
@@ -82,6 +86,7 @@ fn sky(bytes: &[u8], file: &str, almanac: Option<&str>) -> Result<()> {
                     epochs.push((s, p));
                 }
             }
+            Ok(Message::RxmSfrbx(x)) if x.gnss_id == 6 => glo.on_words(x.sv_id, x.data_words()),
             Ok(Message::RxmSfrbx(x)) if x.gnss_id == 0 => {
                 if let Ok(d) = lnav::decode(x.data_words()) {
                     match d.subframe {
@@ -135,8 +140,17 @@ fn sky(bytes: &[u8], file: &str, almanac: Option<&str>) -> Result<()> {
     for (nav_sat, (rx, week)) in &epochs {
         let tow = f64::from(nav_sat.itow_ms) * 1e-3;
         let t_tx = tow - 0.075;
-        for sat in nav_sat.satellites().iter().filter(|x| x.gnss_id == 0) {
-            let pos = if let Some(o) = store.orbit(sat.sv_id, tow) {
+        let utc_tx_ns = navsync_shared::time::utc_ns_from_gps_ns(
+            week * WEEK_S * 1_000_000_000 + i64::from(nav_sat.itow_ms) * 1_000_000 - 75_000_000,
+        );
+        for sat in nav_sat.satellites().iter().filter(|x| x.gnss_id == 0 || x.gnss_id == 6) {
+            let pos = if sat.gnss_id == 6 {
+                // GLONASS: the slot's immediate data integrated from t_b (PZ-90 taken as WGS-84).
+                glo.ephemeris(sat.sv_id).map(|e| {
+                    let dt = glonass::seconds_since_tb(e.tb_s, utc_tx_ns);
+                    ("glonass-ephemeris", e.state_at(dt).0)
+                })
+            } else if let Some(o) = store.orbit(sat.sv_id, tow) {
                 Some(("ephemeris", o.position_ecef_m(t_tx)))
             } else if let Some(o) = pages.get(&sat.sv_id) {
                 Some(("almanac", o.position_ecef_m(t_tx)))
@@ -158,7 +172,7 @@ fn sky(bytes: &[u8], file: &str, almanac: Option<&str>) -> Result<()> {
                 w.2.max(d_az.abs() * el.to_radians().cos()),
             );
             let line = serde_json::json!({
-                "tow_s": tow, "sv": sat.sv_id, "source": source,
+                "tow_s": tow, "gnss_id": sat.gnss_id, "sv": sat.sv_id, "source": source,
                 "el_deg": el, "az_deg": az,
                 "receiver_el_deg": sat.elev_deg, "receiver_az_deg": sat.azim_deg,
                 "d_el_deg": d_el, "d_az_deg": d_az,
@@ -171,7 +185,7 @@ fn sky(bytes: &[u8], file: &str, almanac: Option<&str>) -> Result<()> {
     }
     anyhow::ensure!(
         !worst.is_empty(),
-        "{file}: no GPS satellite of NAV-SAT has an orbit (no ephemeris or almanac page in the capture; give --almanac)"
+        "{file}: no GPS or GLONASS satellite of NAV-SAT has an orbit (no ephemeris or almanac page in the capture; give --almanac)"
     );
     Ok(())
 }
