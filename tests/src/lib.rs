@@ -378,6 +378,50 @@ pub fn leftovers(prefix: &str) -> Vec<PathBuf> {
 // ---------------------------------------------------------------------------------------------
 // Live pipelines, fault injection and soak measurements.
 
+/// Heap allocations counted by [`CountingAllocator`] since the process started.
+static ALLOCATIONS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// A global allocator that forwards to the system's and counts every allocation and
+/// reallocation, for the no-allocation tests (each such test binary installs it with
+/// `#[global_allocator] static GLOBAL: CountingAllocator = CountingAllocator;`).
+pub struct CountingAllocator;
+
+// SAFETY: forwards to the system allocator; only counts.
+unsafe impl std::alloc::GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: the caller's contract is the system allocator's.
+        unsafe { std::alloc::System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+        // SAFETY: as above.
+        unsafe { std::alloc::System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: as above.
+        unsafe { std::alloc::System.realloc(ptr, layout, new_size) }
+    }
+}
+
+/// Allocations counted so far by [`CountingAllocator`] (0 when it is not installed).
+pub fn allocations() -> u64 {
+    ALLOCATIONS.load(Ordering::Relaxed)
+}
+
+/// `navsync decode --yuma` of gpsd's `ublox-ned-m8t-sbfrx3` capture: the real GPS almanac as
+/// YUMA text, for simulator scenarios with `[gnss.sky]` (the simulator parses it).
+pub fn m8t_yuma() -> String {
+    let capture = shared_material("corpora/gpsd-ubx").join("ublox-ned-m8t-sbfrx3.log");
+    let out = Command::new(navsync_bin())
+        .args(["decode", "--yuma"])
+        .arg(&capture)
+        .output()
+        .expect("navsync decode");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).expect("YUMA is text")
+}
+
 /// Writes a drive scenario for live tests lasting at least `duration_s` of scenario time: 8 s
 /// standing still (levelling), a drive-off and a turn (the filter aligns after ~15 s), then
 /// 60° turns alternating with 12 s cruises to the end, so the IMU offsets stay observable and

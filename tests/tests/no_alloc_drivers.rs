@@ -16,9 +16,6 @@
 //! drivers must not). The driver's own glue between `decode_mtdata2` and `offer` (interval from
 //! the device clock, axis map) is plain arithmetic on the stack and is not reproduced here.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicU64, Ordering};
-
 use navsync_drivers::gnss::{Decoder, GnssDecoder, Protocol};
 use navsync_drivers::imu::output::{Extras, SampleOutput};
 use navsync_drivers::imu::sample_checks::{Candidate, CounterReading, Limits, Sequence};
@@ -30,27 +27,8 @@ use navsync_sim::nmea::{EpochReport, FixReport, write_burst};
 use navsync_sim::xsens_imus::SimXsensImu;
 use navsync_tests::TestEnv;
 
-struct Counting;
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-// SAFETY: forwards to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: navsync_tests::CountingAllocator = navsync_tests::CountingAllocator;
 
 /// The allocation counter is process-wide: the tests take turns.
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
@@ -70,9 +48,9 @@ macro_rules! iceoryx2_allocations_per_publish {
             }
         };
         cycle(100);
-        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        let before = navsync_tests::allocations();
         cycle(1000);
-        let per_publish = (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / 1000.0;
+        let per_publish = (navsync_tests::allocations() - before) as f64 / 1000.0;
         assert_eq!(per_publish, 0.0, "heap allocations per publish of a bare publisher");
         per_publish
     }};
@@ -151,9 +129,9 @@ fn xsens_bytes_to_published_sample_allocate_nothing() {
         }
     };
     run(&frames[..warm], &mut out);
-    let (before, published0) = (ALLOCATIONS.load(Ordering::Relaxed), out.published());
+    let (before, published0) = (navsync_tests::allocations(), out.published());
     run(&frames[warm..], &mut out);
-    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let allocations = navsync_tests::allocations() - before;
     let published = out.published() - published0;
     println!(
         "xsens → publish: {measured} samples, {allocations} heap allocations for {published} published \
@@ -221,9 +199,9 @@ fn nmea_bytes_to_published_fix_allocate_nothing() {
         }
     };
     run(&bursts[..warm]);
-    let (before, published0) = (ALLOCATIONS.load(Ordering::Relaxed), published.get());
+    let (before, published0) = (navsync_tests::allocations(), published.get());
     run(&bursts[warm..]);
-    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let allocations = navsync_tests::allocations() - before;
     let (published, received) = (published.get(), received.get());
     let in_window = published - published0;
     println!(

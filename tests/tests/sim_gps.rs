@@ -7,8 +7,6 @@
 
 mod gps_sky;
 
-use std::process::Command;
-
 use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra, Protocol};
 use navsync_estimator::gnss::lnav::{self, Subframe};
 use navsync_estimator::gnss::orbit::Orbit;
@@ -17,19 +15,10 @@ use navsync_estimator::gnss::spp::{self, C_M_S};
 use navsync_shared::earth;
 use navsync_shared::samples::{GnssNavData, GnssRaw};
 use navsync_sim::gps::{self, Ephemeris, KlobucharRaw, Sky, SkyConfig};
-use navsync_tests::{navsync_bin, shared_material};
 
 /// `navsync decode --yuma` of the m8t capture, parsed by the simulator.
 fn m8t_almanac() -> Vec<gps::AlmanacSat> {
-    let capture = shared_material("corpora/gpsd-ubx").join("ublox-ned-m8t-sbfrx3.log");
-    let out = Command::new(navsync_bin())
-        .args(["decode", "--yuma"])
-        .arg(&capture)
-        .output()
-        .expect("navsync decode");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let text = String::from_utf8(out.stdout).unwrap();
-    gps::parse_yuma(&text).expect("the YUMA navsync wrote")
+    gps::parse_yuma(&navsync_tests::m8t_yuma()).expect("the YUMA navsync wrote")
 }
 
 /// The GPS raw measurements and navigation data of UBX bytes, through the driver's decoder.
