@@ -314,9 +314,9 @@ impl Pipeline {
     /// Feeds an IMU sample of any IMU of the array; returns the navigation state for it when it
     /// is the reference IMU. Its time: its device clock mapped to host time where it carries
     /// one, or, for an IMU on the GNSS receiver's clock once the tightly coupled filter has
-    /// the clock, that clock (see [`DeviceTiming`]). A sample of the reference IMU advances the present-time output at
-    /// once; the array's fusion into the virtual IMU that drives the delayed filter follows
-    /// in [`catch_up`](Self::catch_up), after the `NavState`.
+    /// the clock, that clock (see [`DeviceTiming`]). A sample of the reference IMU advances
+    /// the present-time output at once; the array's fusion into the virtual IMU that drives
+    /// the delayed filter follows in [`catch_up`](Self::catch_up), after the `NavState`.
     pub fn on_imu(&mut self, s: &ImuSample) -> Option<NavState> {
         self.catch_up();
         let id = navsync_shared::reflect::str_of(&s.imu_id);

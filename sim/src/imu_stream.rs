@@ -6,9 +6,9 @@
 //! increment / T (the nominal period, as a device reports it), with the intervals tiling
 //! time exactly (sample k's interval starts at t_{k−1} as computed for sample k − 1). An IMU
 //! on the GNSS receiver's oscillator (`imu.unit[i].receiver_clock`) instead ends sample k
-//! when the receiver's clock reads R_k = R₀ + k·T (R₀ the first multiple of T after the
-//! start, plus the phase): t_k solves t + b(t) = R_k ([`ReceiverClock::tau_at_reading`]),
-//! and R_k is the stamp's device time. Each sample is
+//! when the receiver's clock reads R_k = R + (k + 1)·T (R the first multiple of T at or
+//! after its reading at the start, plus the phase): t_k solves t + b(t) = R_k
+//! ([`ReceiverClock::tau_at_reading`]), and R_k is the stamp's device time. Each sample is
 //! stamped at host(t_k + Td) + N(0, σ²): stamps
 //! are late by the IMU's offset Td (its delay relative to true time; IMU 0 is the reference
 //! with Td = 0 by default). A stamp is never earlier than the previous one of the same IMU.
@@ -18,7 +18,6 @@ use nalgebra::Vector3;
 use navsync_shared::samples::{IMU_FLAG_RECEIVER_CLOCK, IMU_FLAG_SATURATED, ImuSample, Stamp, StampSource};
 
 use super::gps::ReceiverClock;
-
 use super::imu_errors::ImuErrorState;
 use super::inverse_mechanization::{ImuMount, SAMPLE_RULE, increments};
 use super::oscillator::Oscillator;
@@ -40,9 +39,9 @@ pub struct ImuStream {
     k: u64,
     end_s: f64,
     last_host_ns: i64,
-    /// The receiver's clock and the reading R₀ − T at the start of sample 0 (the first
-    /// multiple of T at or after the scenario start, plus the phase), ns, when the IMU samples
-    /// on it.
+    /// The receiver's clock and R, its reading at the start of sample 0 (the first multiple
+    /// of T at or after its reading at the scenario start, plus the phase), ns, when the IMU
+    /// samples on it.
     receiver: Option<(ReceiverClock, i64)>,
 }
 
