@@ -271,7 +271,7 @@ class ImuSample(ctypes.Structure):
         ("temperature_c", ctypes.c_double),
         # IMU id (NUL-padded ASCII, e.g. "0").
         ("imu_id", (ctypes.c_char * 8)),
-        # Flags: bit 0 saturated.
+        # Flags: bit 0 saturated, bit 1 sampled on the GNSS receiver's clock.
         ("flags", ctypes.c_uint32),
         # Reserved, zero.
         ("reserved", ctypes.c_uint32),

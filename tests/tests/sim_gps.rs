@@ -128,7 +128,8 @@ fn a_single_point_solution_on_the_simulated_raw_data_finds_the_antenna() {
     }
     assert_eq!(store.bad_subframes, 0);
     let (mut n, mut sum_h2, mut sum_v2, mut sats) = (0usize, 0.0, 0.0, 0usize);
-    let mut bias_err = Vec::new();
+    let (mut bias_err, mut nees) = (Vec::new(), 0.0);
+    let truth_ecef = nalgebra::Vector3::from(earth::geodetic_to_ecef(lat, lon, h));
     for (raw, true_bias_m) in raws.iter().zip(&clocks) {
         let mut counts = RangeBuildCounts::default();
         let epoch = store.range_epoch(raw, 0, 0.0, &mut counts);
@@ -156,18 +157,29 @@ fn a_single_point_solution_on_the_simulated_raw_data_finds_the_antenna() {
         sum_h2 += d[0] * d[0] + d[1] * d[1];
         sum_v2 += d[2] * d[2];
         bias_err.push(sol.clock_bias_m - true_bias_m);
+        // Covariance consistency: the position error (ECEF) normalised by the solution's own
+        // covariance; 3 on average for a σ model that matches the errors.
+        let e = nalgebra::Vector3::from(sol.ecef_m) - truth_ecef;
+        let cov = sol.cov.fixed_view::<3, 3>(0, 0).into_owned();
+        nees += cov
+            .try_inverse()
+            .map_or(f64::NAN, |inv| (e.transpose() * inv * e)[(0, 0)]);
         n += 1;
     }
+    let nees = nees / n as f64;
     assert!(n >= 250, "{n} solutions of 300");
     let (hr, vr) = ((sum_h2 / n as f64).sqrt(), (sum_v2 / n as f64).sqrt());
     let clock = (bias_err.iter().map(|b| b * b).sum::<f64>() / n as f64).sqrt();
     println!(
-        "SPP on the simulator's RAWX: {n} epochs, {:.1} satellites, horizontal RMS {hr:.2} m, vertical {vr:.2} m, clock {clock:.2} m RMS",
+        "SPP on the simulator's RAWX: {n} epochs, {:.1} satellites, horizontal RMS {hr:.2} m, vertical {vr:.2} m, clock {clock:.2} m RMS; mean NEES {nees:.2} (3 expected)",
         sats as f64 / n as f64
     );
     // Errors per satellite: 1 m broadcast, 1 m multipath, 0.5 m noise at zenith, ~30 % of
     // the ionosphere unmodelled; with HDOP ~1–2 a few metres.
     assert!(hr < 8.0 && vr < 15.0 && clock < 15.0, "{hr} {vr} {clock}");
+    // The σ model (2 m at zenith over sin(elevation)) against the simulated errors: neither
+    // far too optimistic nor far too pessimistic.
+    assert!((0.3..10.0).contains(&nees), "mean NEES {nees}");
 }
 
 /// One crystal (issue 17): the default drive's IMU samples on the simulated receiver's
