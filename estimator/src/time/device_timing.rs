@@ -167,9 +167,13 @@ impl DeviceTiming {
         if !self.cfg.enabled || s.flags & IMU_FLAG_RECEIVER_CLOCK == 0 || s.stamp.has_device_time == 0 {
             return None;
         }
+        // GPS time within 1980 … 2126 (2⁶² ns): a device time far outside is no receiver's
+        // reading, and the time conversions stay clear of overflow.
         let mapped = receiver_bias_ns
             .filter(|(b, sd)| b.is_finite() && *sd <= self.cfg.receiver_clock_max_sigma_ns)
-            .and_then(|(b, _)| host_ns_at_utc(utc_ns_from_gps_ns(s.stamp.device_ns - b.round() as i64)));
+            .and_then(|(b, _)| s.stamp.device_ns.checked_sub(b.round() as i64))
+            .filter(|gps_ns| (0..1i64 << 62).contains(gps_ns))
+            .and_then(|gps_ns| host_ns_at_utc(utc_ns_from_gps_ns(gps_ns)));
         let Some(host_ns) = mapped else {
             self.counters.receiver_clock_waiting += 1;
             return None;
@@ -273,6 +277,16 @@ mod tests {
             (c.receiver_clock, c.receiver_clock_waiting, c.receiver_clock_outliers),
             (1, 3, 1)
         );
+        // Device times no receiver reads: kept, counted, no overflow.
+        for d in [i64::MIN, -1, i64::MAX] {
+            s.stamp.device_ns = d;
+            assert!(
+                t.retime_on_receiver_clock(&s, Some((57_500.0, 20.0)), host_at)
+                    .is_none()
+            );
+        }
+        assert_eq!(t.counters().receiver_clock_waiting, c.receiver_clock_waiting + 3);
+        let c = *t.counters();
         s.flags = 0;
         assert!(
             t.retime_on_receiver_clock(&s, Some((57_500.0, 20.0)), host_at)
