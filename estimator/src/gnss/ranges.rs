@@ -40,7 +40,8 @@ pub struct SatRange {
     pub sat_ecef_m: [f64; 3],
     /// Satellite velocity at transmission, ECEF, m/s.
     pub sat_vel_mps: [f64; 3],
-    /// 1σ of the pseudorange the receiver reports (0 when it reports none), m.
+    /// 1σ of the pseudorange the receiver reports (0 when it reports none), at least the
+    /// ephemeris's user range accuracy, m.
     pub pseudorange_std_m: f64,
     /// 1σ of the range rate the receiver reports (0 when it reports none), m/s.
     pub range_rate_std_mps: f64,
@@ -77,7 +78,8 @@ pub struct RangeBuildCounts {
     pub other_signals: u64,
     /// GPS signals whose pseudorange the receiver marks invalid.
     pub invalid: u64,
-    /// GPS satellites without a complete, healthy, current ephemeris.
+    /// GPS satellites without a complete, healthy, current ephemeris (URA index 15, no
+    /// accuracy prediction, counts as unhealthy).
     pub no_ephemeris: u64,
     /// Satellites beyond [`MAX_RANGE_SATS`] (the weakest are dropped).
     pub over_capacity: u64,
@@ -91,6 +93,19 @@ struct SatEphemeris {
     s3: Option<Ephem3>,
     orbit: Option<Orbit>,
     healthy: bool,
+    /// The user range accuracy of the issue, m (0: not broadcast, an orbit from elsewhere).
+    ura_m: f64,
+}
+
+/// The nominal user range accuracy of URA index `n`, m (IS-GPS-200 §20.3.3.3.1.3:
+/// X = 2^(1 + N/2) for N ≤ 6, 2^(N − 2) for 6 < N < 15); `None` for N = 15, "no accuracy
+/// prediction available", which the store treats as an unusable satellite.
+pub fn ura_m(n: u8) -> Option<f64> {
+    match n {
+        0..=6 => Some(2f64.powf(1.0 + f64::from(n) / 2.0)),
+        7..=14 => Some(2f64.powi(i32::from(n) - 2)),
+        _ => None,
+    }
 }
 
 /// The broadcast ephemerides and ionosphere collected from a receiver's navigation data.
@@ -154,7 +169,9 @@ impl EphemerisStore {
             }
             e.orbit = Some(orbit);
             // IS-GPS-200 §20.3.3.3.1.4: the six-bit health's MSB summarises the navigation data.
-            e.healthy = s1.health & 0x20 == 0;
+            let ura = ura_m(s1.ura);
+            e.healthy = s1.health & 0x20 == 0 && ura.is_some();
+            e.ura_m = ura.unwrap_or(f64::INFINITY);
         }
     }
 
@@ -163,6 +180,7 @@ impl EphemerisStore {
         if let Some(e) = usize::from(prn).checked_sub(1).and_then(|i| self.sats.get_mut(i)) {
             e.orbit = Some(orbit);
             e.healthy = true;
+            e.ura_m = 0.0;
         }
     }
 
@@ -173,11 +191,17 @@ impl EphemerisStore {
 
     /// The usable orbit of satellite `prn` at GPS time `tow_s`.
     pub fn orbit(&self, prn: u8, tow_s: f64) -> Option<&Orbit> {
+        self.usable_ephemeris(prn, tow_s).map(|(o, _)| o)
+    }
+
+    /// The usable orbit of satellite `prn` at GPS time `tow_s` (healthy, with an accuracy
+    /// prediction, within its validity) and its user range accuracy, m.
+    fn usable_ephemeris(&self, prn: u8, tow_s: f64) -> Option<(&Orbit, f64)> {
         let e = self.sats.get(usize::from(prn).checked_sub(1)?)?;
         let o = e.orbit.as_ref().filter(|_| e.healthy)?;
         let mut dt = tow_s - o.toe_s;
         dt -= (dt / 604_800.0).round() * 604_800.0;
-        (dt.abs() <= EPHEMERIS_VALID_S).then_some(o)
+        (dt.abs() <= EPHEMERIS_VALID_S).then_some((o, e.ura_m))
     }
 
     /// Satellites with a usable ephemeris at `tow_s`.
@@ -216,7 +240,7 @@ impl EphemerisStore {
                 continue;
             }
             let t0 = raw.rcv_tow_s - m.pseudorange_m / C_M_S;
-            let Some(orbit) = self.orbit(m.sv_id, t0) else {
+            let Some((orbit, ura)) = self.usable_ephemeris(m.sv_id, t0) else {
                 counts.no_ephemeris += 1;
                 continue;
             };
@@ -234,7 +258,8 @@ impl EphemerisStore {
                 },
                 sat_ecef_m: orbit.position_ecef_m(t_tx),
                 sat_vel_mps: orbit.velocity_ecef_mps(t_tx),
-                pseudorange_std_m: f64::from(m.pseudorange_std_m).max(0.0),
+                // The receiver's σ, at least the broadcast user range accuracy.
+                pseudorange_std_m: f64::from(m.pseudorange_std_m).max(ura),
                 range_rate_std_mps: (f64::from(m.doppler_std_hz) * lambda).max(0.0),
             };
             let count = usize::from(out.count);
@@ -252,5 +277,53 @@ impl EphemerisStore {
             }
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gnss::lnav::{Ephem1, Ephem2, Ephem3};
+
+    #[test]
+    fn user_range_accuracy_follows_is_gps_200() {
+        let x: Vec<Option<f64>> = [0u8, 1, 2, 6, 7, 14, 15].iter().map(|&n| ura_m(n)).collect();
+        assert_eq!(x[0], Some(2.0));
+        assert!((x[1].unwrap() - 2.828).abs() < 1e-3 && (x[2].unwrap() - 4.0).abs() < 1e-12);
+        assert_eq!((x[3], x[4], x[5], x[6]), (Some(16.0), Some(32.0), Some(4096.0), None));
+    }
+
+    /// An ephemeris of one issue with URA index `ura`: usable (its accuracy as the σ floor)
+    /// unless the index is 15.
+    #[test]
+    fn an_ephemeris_without_accuracy_prediction_is_not_used() {
+        for (ura, usable) in [(0u8, true), (9, true), (15, false)] {
+            let mut st = EphemerisStore::default();
+            let s1 = Ephem1 {
+                iodc: 7,
+                ura,
+                ..Ephem1::default()
+            };
+            st.on_subframe(5, &Subframe::Ephem1(s1));
+            st.on_subframe(
+                5,
+                &Subframe::Ephem2(Ephem2 {
+                    iode: 7,
+                    ..Ephem2::default()
+                }),
+            );
+            st.on_subframe(
+                5,
+                &Subframe::Ephem3(Ephem3 {
+                    iode: 7,
+                    ..Ephem3::default()
+                }),
+            );
+            assert_eq!(st.ephemerides, 1);
+            assert_eq!(st.orbit(5, 0.0).is_some(), usable, "URA index {ura}");
+            if usable {
+                assert_eq!(st.usable_ephemeris(5, 0.0).unwrap().1, ura_m(ura).unwrap());
+            }
+        }
     }
 }
