@@ -31,6 +31,8 @@ use serde::Serialize;
 
 use crate::util::{self, BenchEnv, Machine, Percentiles};
 
+mod floor;
+
 /// How long a bench publisher stays after its last sample unless stopped earlier: longer than
 /// the bench waits for its subscribers.
 const PUBLISHER_LINGER: Duration = Duration::from_secs(30);
@@ -94,6 +96,9 @@ pub enum Transport {
     Iceoryx2Busy,
     /// A Unix-domain SOCK_SEQPACKET socket per subscriber.
     Socket,
+    /// The floor of any shared-memory transport: a ring in `/dev/shm` and one futex word for
+    /// all subscribers, woken by one `FUTEX_WAKE` (`ipc/floor.rs`; not a product transport).
+    FutexFloor,
 }
 
 /// A publishing rate: Hz, or `max` (back to back, no pacing).
@@ -236,7 +241,8 @@ pub struct IpcBenchArgs {
     /// Subscriber process counts, comma-separated (at most 16).
     #[arg(long, value_delimiter = ',', default_value = "1", value_parser = crate::util::subscriber_count)]
     pub subscribers: Vec<usize>,
-    /// Transports, comma-separated: iceoryx2 (the service's event), iceoryx2-wake (the one wake-up), socket.
+    /// Transports, comma-separated: iceoryx2 (the service's event), iceoryx2-wake (the one wake-up),
+    /// iceoryx2-busy, socket, futex-floor (the floor of any shared-memory transport).
     #[arg(long, value_delimiter = ',', default_value = "iceoryx2,socket")]
     pub transports: Vec<Transport>,
     /// Run publisher (PRIO) and subscribers (PRIO − 1) under SCHED_FIFO (needs CAP_SYS_NICE).
@@ -361,6 +367,7 @@ fn transport_name(t: Transport) -> &'static str {
         Transport::Iceoryx2Wake => "iceoryx2-wake",
         Transport::Iceoryx2Busy => "iceoryx2-busy",
         Transport::Socket => "socket",
+        Transport::FutexFloor => "futex-floor",
     }
 }
 
@@ -374,6 +381,21 @@ pub fn run_case(
     realtime: Option<u8>,
 ) -> Result<IpcCase, IpcBenchError> {
     let mut env = BenchEnv::new("ipc")?;
+    let payload_bytes = match kind {
+        Kind::Imu => size_of::<ImuSample>(),
+        Kind::Nav => size_of::<NavState>(),
+        Kind::Raw => size_of::<GnssRaw>(),
+        Kind::Blob => size_of::<Blob64k>(),
+    };
+    // The futex floor's ring, in /dev/shm (tmpfs) as iceoryx2's segments; removed on return.
+    let ring = RemoveOnDrop(PathBuf::from(format!(
+        "/dev/shm/navsync-bench-floor-{}-{}",
+        std::process::id(),
+        monotonic_now_ns()
+    )));
+    if transport == Transport::FutexFloor {
+        floor::create(&ring.0, payload_bytes)?;
+    }
     let mut outs = Vec::new();
     let mut sockets = Vec::new();
     for i in 0..subscribers {
@@ -395,6 +417,9 @@ pub fn run_case(
         ];
         if transport == Transport::Socket {
             a.extend([arg("--socket"), sock.display().to_string()]);
+        }
+        if transport == Transport::FutexFloor {
+            a.extend([arg("--shm"), ring.0.display().to_string()]);
         }
         let name = format!("sub-{i}");
         let (pid, out) = env.spawn(&name, &a, true)?;
@@ -424,6 +449,9 @@ pub fn run_case(
         a.push(arg("--sockets"));
         a.push(sockets.join(","));
     }
+    if transport == Transport::FutexFloor {
+        a.extend([arg("--shm"), ring.0.display().to_string()]);
+    }
     let (pid, pub_out) = env.spawn("pub", &a, true)?;
     if let Some(p) = realtime {
         // The publisher above its subscribers, as a driver above the estimator.
@@ -438,8 +466,9 @@ pub fn run_case(
             env.log("pub")
         )));
     };
-    if transport == Transport::Socket {
-        // Nothing to stay for: it closes its connections (ending the subscribers) and exits.
+    if matches!(transport, Transport::Socket | Transport::FutexFloor) {
+        // Nothing to stay for: it closes its connections (ending the subscribers) or leaves
+        // the ring file (the bench's), and exits.
         let st = env.wait_exit("pub", Duration::from_secs(10));
         if !st.is_some_and(|st| st.success()) {
             return Err(child_err(format!("publisher failed ({st:?}):\n{}", env.log("pub"))));
@@ -470,12 +499,7 @@ pub fn run_case(
     let case = IpcCase {
         transport,
         kind,
-        payload_bytes: match kind {
-            Kind::Imu => size_of::<ImuSample>(),
-            Kind::Nav => size_of::<NavState>(),
-            Kind::Raw => size_of::<GnssRaw>(),
-            Kind::Blob => size_of::<Blob64k>(),
-        },
+        payload_bytes,
         rate,
         subscribers,
         realtime,
@@ -561,6 +585,9 @@ pub struct PubArgs {
     /// Socket paths of the subscribers (socket transport), comma-separated.
     #[arg(long, value_delimiter = ',')]
     pub sockets: Vec<PathBuf>,
+    /// The ring file (futex-floor transport).
+    #[arg(long)]
+    pub shm: Option<PathBuf>,
 }
 
 /// `navsync-bench helper ipc-sub`: receives the samples of `ipc-pub` and writes their
@@ -585,6 +612,9 @@ pub struct SubArgs {
     /// Socket path to listen on (socket transport).
     #[arg(long)]
     pub socket: Option<PathBuf>,
+    /// The ring file (futex-floor transport).
+    #[arg(long)]
+    pub shm: Option<PathBuf>,
 }
 
 /// Publishes `count` samples and prints a JSON summary.
@@ -616,7 +646,6 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
         Rate::Hz(r) => Some(1e9 / r),
         Rate::Max => None,
     };
-    let mut errors = 0u64;
     // The summary goes out as soon as the last sample is sent; the publisher then stays until
     // the bench stops it, as a driver does: a subscriber woken only after the burst (at `max`
     // rate) still finds the publisher's data segment to connect to. A publisher that left
@@ -629,23 +658,26 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
             serde_json::json!({ "sent": a.count, "errors": errors, "wall_s": wall, "cpu_s": cpu })
         );
     };
+    // Sends sample 0..count with `send` at the paced instants; the summary after the last.
+    let paced = |send: &mut dyn FnMut(u64) -> u64| {
+        let cpu0 = util::own_cpu_time_s();
+        let t0 = monotonic_now_ns();
+        let mut errors = 0;
+        for i in 0..a.count {
+            if let Some(p) = period_ns {
+                pacing::sleep_until(t0 + (i as f64 * p) as i64, 0);
+            }
+            errors += send(i);
+        }
+        summary(errors, t0, cpu0);
+    };
     match a.transport {
         Transport::Iceoryx2 | Transport::Iceoryx2Wake | Transport::Iceoryx2Busy => {
             let node = IpcNode::new("bench-pub")?;
             let mut p = node.publisher::<T>(&T::service())?;
             // Let the subscribers' ports settle before the first sample.
             std::thread::sleep(Duration::from_millis(100));
-            let cpu0 = util::own_cpu_time_s();
-            let t0 = monotonic_now_ns();
-            for i in 0..a.count {
-                if let Some(p) = period_ns {
-                    pacing::sleep_until(t0 + (i as f64 * p) as i64, 0);
-                }
-                if p.publish_with(|| T::make(monotonic_now_ns(), i)).is_err() {
-                    errors += 1;
-                }
-            }
-            summary(errors, t0, cpu0);
+            paced(&mut |i| u64::from(p.publish_with(|| T::make(monotonic_now_ns(), i)).is_err()));
             let t_end = std::time::Instant::now();
             while t_end.elapsed() < PUBLISHER_LINGER && node.sleep(Duration::from_millis(50)) {}
         }
@@ -653,23 +685,26 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
             // The sent bytes stay in the subscribers' socket buffers: closing ends their loops.
             let fds: Vec<Fd> = a.sockets.iter().map(|p| connect(p)).collect::<Result<_, _>>()?;
             std::thread::sleep(Duration::from_millis(100));
-            let cpu0 = util::own_cpu_time_s();
-            let t0 = monotonic_now_ns();
-            for i in 0..a.count {
-                if let Some(p) = period_ns {
-                    pacing::sleep_until(t0 + (i as f64 * p) as i64, 0);
-                }
+            paced(&mut |i| {
                 let v = T::make(monotonic_now_ns(), i);
                 let b = bytes_of(&v);
+                let mut errors = 0;
                 for fd in &fds {
                     // SAFETY: sending our buffer on our socket.
                     let n = unsafe { libc::send(fd.0, b.as_ptr().cast(), b.len(), libc::MSG_NOSIGNAL) };
-                    if n != b.len() as isize {
-                        errors += 1;
-                    }
+                    errors += u64::from(n != b.len() as isize);
                 }
-            }
-            summary(errors, t0, cpu0);
+                errors
+            });
+        }
+        Transport::FutexFloor => {
+            let path = a.shm.as_deref().ok_or_else(|| child_err("--shm needed"))?;
+            let ring = floor::Ring::open(path, size_of::<T>())?;
+            std::thread::sleep(Duration::from_millis(100));
+            paced(&mut |i| {
+                ring.publish(i, || T::make(monotonic_now_ns(), i));
+                0
+            });
         }
     }
     Ok(())
@@ -745,6 +780,22 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
                 }
             }
         }
+        Transport::FutexFloor => {
+            let path = a.shm.as_deref().ok_or_else(|| child_err("--shm needed"))?;
+            let ring = floor::Ring::open(path, size_of::<T>())?;
+            let stop = floor::stop_flag();
+            ready();
+            cpu0 = util::own_cpu_time_s();
+            let mut next = 0;
+            // In place in shared memory, as the iceoryx2 subscriber reads it.
+            while let Some((seq, host_ns)) = ring.wait_with(next, stop, |s: &T| s.stamp().0) {
+                lat.push(monotonic_now_ns() - host_ns);
+                next = seq + 1;
+                if seq >= last {
+                    break;
+                }
+            }
+        }
     }
     let cpu = util::own_cpu_time_s() - cpu0;
     util::write_latencies(&a.out, &lat)?;
@@ -757,6 +808,15 @@ fn ready() {
     let mut o = std::io::stdout().lock();
     let _ = writeln!(o, "ready");
     let _ = o.flush();
+}
+
+/// A file removed on drop.
+struct RemoveOnDrop(PathBuf);
+
+impl Drop for RemoveOnDrop {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
 }
 
 /// An owned file descriptor, closed on drop.

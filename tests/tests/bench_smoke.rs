@@ -58,6 +58,39 @@ fn benchmarks_run_and_report_sane_figures() {
         assert_eq!(c["latency"]["count"].as_u64(), c["received"].as_u64(), "{c}");
     }
 
+    // The futex floor (a ring in /dev/shm, one wake-up for all subscribers): every sample
+    // reaches every subscriber at 1 kHz (a 64-slot ring loses only behind a 64 ms stall), and
+    // the ring file is gone afterwards.
+    let floor = run_json(
+        &env,
+        &[
+            "ipc",
+            "--transports",
+            "futex-floor",
+            "--kinds",
+            "imu",
+            "--rates",
+            "1000",
+            "--subscribers",
+            "1,4",
+        ],
+        &env.dir.join("floor.json"),
+    );
+    let cases = floor["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 2, "{floor}");
+    for c in cases {
+        let expected = c["sent"].as_u64().unwrap() * c["subscribers"].as_u64().unwrap();
+        let received = c["received"].as_u64().unwrap();
+        assert!(expected > 0 && received * 100 >= expected * 99, "{c}");
+        percentiles_sane(&c["latency"], "futex-floor");
+    }
+    let left: Vec<_> = std::fs::read_dir("/dev/shm")
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("navsync-bench-floor-"))
+        .collect();
+    assert!(left.is_empty(), "ring files left behind: {left:?}");
+
     let e2e = run_json(&env, &["e2e"], &env.dir.join("e2e.json"));
     for c in e2e["cases"].as_array().unwrap() {
         assert!(c["nav_states"].as_u64().unwrap() > 100, "{c}");

@@ -64,8 +64,8 @@ pub struct FutexMgmt {
 unsafe impl ZeroCopySend for FutexMgmt {}
 
 /// `futex(2)` on a word of a shared mapping (not `FUTEX_PRIVATE_FLAG`: the word is shared
-/// between processes).
-fn futex(word: &AtomicU32, op: libc::c_int, val: u32, timeout: Option<&libc::timespec>) -> libc::c_long {
+/// between processes). Also the benchmark's yardstick ring (`navsync-bench`, `ipc/floor.rs`).
+pub fn futex(word: &AtomicU32, op: libc::c_int, val: u32, timeout: Option<&libc::timespec>) -> libc::c_long {
     let ts = timeout.map_or(core::ptr::null(), |t| t as *const libc::timespec);
     // SAFETY: `word` is a valid, aligned u32 for the call's duration; `ts` is null or points
     // to a live timespec; the remaining arguments are unused by FUTEX_WAIT and FUTEX_WAKE.
