@@ -388,14 +388,18 @@ pub fn run_case(
         Kind::Blob => size_of::<Blob64k>(),
     };
     // The futex floor's ring, in /dev/shm (tmpfs) as iceoryx2's segments; removed on return.
-    let ring = RemoveOnDrop(PathBuf::from(format!(
-        "/dev/shm/navsync-bench-floor-{}-{}",
-        std::process::id(),
-        monotonic_now_ns()
-    )));
-    if transport == Transport::FutexFloor {
-        floor::create(&ring.0, payload_bytes)?;
-    }
+    let ring = match transport {
+        Transport::FutexFloor => {
+            let path = PathBuf::from(format!(
+                "/dev/shm/navsync-bench-floor-{}-{}",
+                std::process::id(),
+                monotonic_now_ns()
+            ));
+            floor::create(&path, payload_bytes)?;
+            Some(RemoveOnDrop(path))
+        }
+        _ => None,
+    };
     let mut outs = Vec::new();
     let mut sockets = Vec::new();
     for i in 0..subscribers {
@@ -418,8 +422,8 @@ pub fn run_case(
         if transport == Transport::Socket {
             a.extend([arg("--socket"), sock.display().to_string()]);
         }
-        if transport == Transport::FutexFloor {
-            a.extend([arg("--shm"), ring.0.display().to_string()]);
+        if let Some(r) = &ring {
+            a.extend([arg("--shm"), r.0.display().to_string()]);
         }
         let name = format!("sub-{i}");
         let (pid, out) = env.spawn(&name, &a, true)?;
@@ -449,8 +453,8 @@ pub fn run_case(
         a.push(arg("--sockets"));
         a.push(sockets.join(","));
     }
-    if transport == Transport::FutexFloor {
-        a.extend([arg("--shm"), ring.0.display().to_string()]);
+    if let Some(r) = &ring {
+        a.extend([arg("--shm"), r.0.display().to_string()]);
     }
     let (pid, pub_out) = env.spawn("pub", &a, true)?;
     if let Some(p) = realtime {
@@ -646,19 +650,11 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
         Rate::Hz(r) => Some(1e9 / r),
         Rate::Max => None,
     };
-    // The summary goes out as soon as the last sample is sent; the publisher then stays until
-    // the bench stops it, as a driver does: a subscriber woken only after the burst (at `max`
-    // rate) still finds the publisher's data segment to connect to. A publisher that left
-    // first would take its unread samples with it.
-    let summary = |errors: u64, t0: i64, cpu0: f64| {
-        let wall = (monotonic_now_ns() - t0) as f64 * 1e-9;
-        let cpu = util::own_cpu_time_s() - cpu0;
-        println!(
-            "{}",
-            serde_json::json!({ "sent": a.count, "errors": errors, "wall_s": wall, "cpu_s": cpu })
-        );
-    };
-    // Sends sample 0..count with `send` at the paced instants; the summary after the last.
+    // Sends samples 0..count with `send` (returning its errors) at the paced instants and
+    // prints the summary as soon as the last one is sent; the iceoryx2 publisher then stays
+    // until the bench stops it, as a driver does: a subscriber woken only after the burst (at
+    // `max` rate) still finds the publisher's data segment to connect to. A publisher that
+    // left first would take its unread samples with it.
     let paced = |send: &mut dyn FnMut(u64) -> u64| {
         let cpu0 = util::own_cpu_time_s();
         let t0 = monotonic_now_ns();
@@ -669,7 +665,12 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
             }
             errors += send(i);
         }
-        summary(errors, t0, cpu0);
+        let wall = (monotonic_now_ns() - t0) as f64 * 1e-9;
+        let cpu = util::own_cpu_time_s() - cpu0;
+        println!(
+            "{}",
+            serde_json::json!({ "sent": a.count, "errors": errors, "wall_s": wall, "cpu_s": cpu })
+        );
     };
     match a.transport {
         Transport::Iceoryx2 | Transport::Iceoryx2Wake | Transport::Iceoryx2Busy => {
