@@ -74,6 +74,11 @@ pub struct E2eArgs {
     /// `CPUSchedulingPolicy=fifo`; the simulator (the "hardware") stays SCHED_OTHER.
     #[arg(long, value_name = "PRIO", value_parser = clap::value_parser!(u8).range(1..=99))]
     pub realtime: Option<u8>,
+    /// Hold the CPU wake-up latency at 0 µs (idle CPUs poll instead of halting) without
+    /// SCHED_FIFO: separates the wake-up of halted CPUs from scheduling (`--realtime` holds
+    /// it too). The product's equivalent is `navsync estimator --idle-polling`.
+    #[arg(long)]
+    pub idle_polling: bool,
     /// A short run (2 IMUs, 3 s warm-up, 5 s measured) for smoke tests.
     #[arg(long)]
     pub quick: bool,
@@ -381,7 +386,7 @@ pub fn run(args: &E2eArgs) -> Result<E2eReport, E2eError> {
         machine: Machine::now(),
         cases: Vec::new(),
     };
-    let _wakeup = util::wakeup_hold_for_realtime(args.realtime, &mut report.machine);
+    let _wakeup = util::wakeup_hold(args.realtime.is_some() || args.idle_polling, &mut report.machine);
     for &n in &args.imus {
         let c = run_case(args, n)?;
         eprintln!("{}", latency_row(&c));

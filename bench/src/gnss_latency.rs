@@ -685,7 +685,7 @@ fn ms(v: Option<f64>) -> String {
 pub fn run(args: &GnssLatencyArgs) -> Result<Vec<PathResult>, GnssLatencyError> {
     let n = if args.quick { 20 } else { args.epochs.max(1) };
     let mut machine = crate::util::Machine::now();
-    let _wakeup = crate::util::wakeup_hold_for_realtime(args.realtime, &mut machine);
+    let _wakeup = crate::util::wakeup_hold(args.realtime.is_some(), &mut machine);
     let gpsd = if args.no_gpsd {
         Err("--no-gpsd".into())
     } else {

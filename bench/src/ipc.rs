@@ -327,7 +327,7 @@ pub fn run(args: &IpcBenchArgs) -> Result<IpcReport, IpcBenchError> {
         machine: Machine::now(),
         cases: Vec::new(),
     };
-    let _wakeup = util::wakeup_hold_for_realtime(args.realtime, &mut report.machine);
+    let _wakeup = util::wakeup_hold(args.realtime.is_some(), &mut report.machine);
     for &kind in &args.kinds {
         for &rate in &args.rates {
             for &subs in &args.subscribers {

@@ -75,6 +75,15 @@ pub struct Machine {
     pub cpuidle: String,
     /// True while the run held the CPU wake-up latency request at 0 ([`CpuWakeupHold`]).
     pub idle_polling: bool,
+    /// Time the hypervisor kept the vCPUs from running while they had work, % of their busy
+    /// time over the run (`/proc/stat` steal ÷ (user + nice + system + irq + softirq +
+    /// steal)); `NaN` where not reported. On a VM whose idle vCPUs halt, waking one goes
+    /// through the host, and that wait is counted here: the wake-up latency no scheduling
+    /// setting inside the guest removes.
+    pub steal_percent: f64,
+    /// `/proc/stat` counters at the start (busy, steal), jiffies.
+    #[serde(skip)]
+    cpu_ticks_start: Option<(u64, u64)>,
 }
 
 impl Machine {
@@ -105,18 +114,26 @@ impl Machine {
             load_end: load,
             cpuidle,
             idle_polling: false,
+            steal_percent: f64::NAN,
+            cpu_ticks_start: busy_and_steal_ticks(),
         }
     }
 
-    /// Records the load at the end.
+    /// Records the load and the stolen time at the end.
     pub fn finish(&mut self) {
         self.load_end = load_average();
+        if let (Some((b0, s0)), Some((b1, s1))) = (self.cpu_ticks_start, busy_and_steal_ticks())
+            && b1 > b0
+        {
+            self.steal_percent = 100.0 * s1.saturating_sub(s0) as f64 / (b1 - b0) as f64;
+        }
     }
 
     /// One line for the tables.
     pub fn line(&self) -> String {
         format!(
-            "machine: {} × {}, Linux {}, cpuidle {}{}; load average {:.2} at start, {:.2} at end",
+            "machine: {} × {}, Linux {}, cpuidle {}{}; load average {:.2} at start, {:.2} at end; \
+             host steal {:.1} % of busy time",
             self.cpus,
             self.cpu,
             self.kernel,
@@ -127,9 +144,26 @@ impl Machine {
                 ""
             },
             self.load_start,
-            self.load_end
+            self.load_end,
+            self.steal_percent
         )
     }
+}
+
+/// All CPUs' busy time (user + nice + system + irq + softirq + steal) and stolen time so far,
+/// jiffies (`/proc/stat`, first line).
+fn busy_and_steal_ticks() -> Option<(u64, u64)> {
+    let stat = std::fs::read_to_string("/proc/stat").ok()?;
+    let f: Vec<u64> = stat
+        .lines()
+        .next()?
+        .split_whitespace()
+        .skip(1)
+        .map(|v| v.parse().ok())
+        .collect::<Option<_>>()?;
+    // user nice system idle iowait irq softirq steal ...
+    let (user, nice, system, irq, softirq, steal) = (f[0], f[1], f[2], *f.get(5)?, *f.get(6)?, *f.get(7)?);
+    Some((user + nice + system + irq + softirq + steal, steal))
 }
 
 /// 1-minute load average.
@@ -472,10 +506,12 @@ pub fn read_latencies(path: &Path) -> std::io::Result<Vec<i64>> {
         .collect())
 }
 
-/// Takes the [`CpuWakeupHold`] for a `--realtime` run: `None` (with a warning) when not
+/// Takes the [`CpuWakeupHold`] when `hold` (a `--realtime` or `--idle-polling` run): `None` (with a warning) when not
 /// allowed; records in `machine` whether it is held.
-pub fn wakeup_hold_for_realtime(realtime: Option<u8>, machine: &mut Machine) -> Option<CpuWakeupHold> {
-    realtime?;
+pub fn wakeup_hold(hold: bool, machine: &mut Machine) -> Option<CpuWakeupHold> {
+    if !hold {
+        return None;
+    }
     match CpuWakeupHold::take() {
         Ok(h) => {
             machine.idle_polling = true;
@@ -489,8 +525,8 @@ pub fn wakeup_hold_for_realtime(realtime: Option<u8>, machine: &mut Machine) -> 
 }
 
 /// Puts the main thread of process `pid` under SCHED_FIFO with priority `prio` (threads it
-/// starts later inherit it; helper threads such as the estimator's dead-node reclaimer stay
-/// under SCHED_OTHER).
+/// starts later inherit it; helper threads such as the estimator's dead-node reclaimer put
+/// themselves under SCHED_IDLE).
 pub fn set_fifo(pid: u32, prio: u8) -> std::io::Result<()> {
     let param = libc::sched_param {
         sched_priority: i32::from(prio),

@@ -92,6 +92,13 @@ fn benchmarks_run_and_report_sane_figures() {
     assert!(left.is_empty(), "ring files left behind: {left:?}");
 
     let e2e = run_json(&env, &["e2e"], &env.dir.join("e2e.json"));
+    // The host's share of the vCPUs' busy time over the run, from /proc/stat (Linux has it).
+    let steal = e2e["machine"]["steal_percent"].as_f64();
+    assert!(
+        steal.is_some_and(|v| (0.0..=100.0).contains(&v)),
+        "steal: {}",
+        e2e["machine"]
+    );
     for c in e2e["cases"].as_array().unwrap() {
         assert!(c["nav_states"].as_u64().unwrap() > 100, "{c}");
         assert!(c["matched"].as_u64().unwrap() > 0, "{c}");

@@ -5,9 +5,13 @@
 //! within tens of ms to flag the input stale, but a reclaim pass lists every node of the
 //! prefix (directory scans, file reads, a few hundred µs on the 2-core benchmark machine); run
 //! in the estimator's loop every 50 ms it delayed the `NavState`s that arrived meanwhile (the
-//! end-to-end p99). So a background thread with its own node does it, under `SCHED_OTHER`
-//! whatever the process runs under: it uses idle CPU time and never preempts the loop, which
-//! only reads the (cheap) publisher counts.
+//! end-to-end p99). So a background thread with its own node does it, under `SCHED_IDLE`
+//! whatever the process runs under; the loop only reads the (cheap) publisher counts. Not
+//! `SCHED_OTHER`: a pass takes ~1 ms of CPU here, and EEVDF lets a running `SCHED_OTHER` task
+//! finish its slice before a woken one (`RUN_TO_PARITY`), so every task woken on that CPU
+//! meanwhile (drivers, the estimator, subscribers) waited up to 1.7 ms (`perf sched timehist`
+//! under `navsync-bench e2e --imus 4`); any non-idle wake-up preempts a `SCHED_IDLE` task at
+//! once. Under full CPU load a pass waits for idle time (dead nodes are found later).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -30,10 +34,16 @@ impl Reclaimer {
         let stop = Arc::new(AtomicBool::new(false));
         let (flag, name) = (stop.clone(), node_name.to_string());
         let handle = std::thread::Builder::new().name(name.clone()).spawn(move || {
-            // Below any real-time policy the process was given (threads inherit it).
+            // Below any policy the process was given (threads inherit it), preempted by any
+            // other wake-up.
             let param = libc::sched_param { sched_priority: 0 };
             // SAFETY: sched_setscheduler on the calling thread with a valid sched_param.
-            unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) };
+            if unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) } != 0 {
+                warn!(
+                    "dead-node reclaimer: SCHED_IDLE refused ({}); runs at the process's policy",
+                    std::io::Error::last_os_error()
+                );
+            }
             let node = match IpcNode::new(&name) {
                 Ok(n) => n,
                 Err(e) => {
