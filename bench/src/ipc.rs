@@ -15,6 +15,10 @@
 //! percentiles, nothing binned). Lost samples (iceoryx2's publisher never blocks: a full
 //! subscriber buffer loses its oldest sample) are counted from the sequence numbers; the
 //! socket's sender blocks instead.
+//!
+//! With `--rounds N` every case runs N times with a share of the samples, the transports
+//! alternating round by round in a rotated order, and its figures pool the rounds: on a
+//! shared VM whose host noise drifts over minutes, the transports then see the same host.
 
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
@@ -248,6 +252,12 @@ pub struct IpcBenchArgs {
     /// Run publisher (PRIO) and subscribers (PRIO − 1) under SCHED_FIFO (needs CAP_SYS_NICE).
     #[arg(long, value_name = "PRIO", value_parser = clap::value_parser!(u8).range(1..=99))]
     pub realtime: Option<u8>,
+    /// Split every case's samples into this many rounds and run the transports round by
+    /// round, each round in another order (round r starts with the r-th transport), fresh
+    /// processes each time; a case's figures pool its rounds. On a shared host whose noise
+    /// drifts over minutes, this puts the transports under the same conditions.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    pub rounds: u64,
     /// A short run (2000 samples per case) for smoke tests.
     #[arg(long)]
     pub quick: bool,
@@ -328,12 +338,24 @@ pub fn run(args: &IpcBenchArgs) -> Result<IpcReport, IpcBenchError> {
         cases: Vec::new(),
     };
     let _wakeup = util::wakeup_hold(args.realtime.is_some(), &mut report.machine);
+    let rounds = args.rounds.min(args.samples);
+    let n_t = args.transports.len();
     for &kind in &args.kinds {
         for &rate in &args.rates {
             for &subs in &args.subscribers {
-                // Transports alternate case by case, so that both see the same load.
-                for &transport in &args.transports {
-                    let case = run_case(transport, kind, rate, subs, args.samples, args.realtime)?;
+                // Transports alternate case by case (and round by round, each round in a
+                // rotated order), so that all see the same load.
+                let mut runs: Vec<Vec<CaseRun>> = vec![Vec::new(); n_t];
+                for r in 0..rounds {
+                    let samples = args.samples / rounds + u64::from(r < args.samples % rounds);
+                    for k in 0..n_t {
+                        let i = (k + r as usize) % n_t;
+                        let run = run_case(args.transports[i], kind, rate, subs, samples, args.realtime)?;
+                        runs[i].push(run);
+                    }
+                }
+                for (&transport, runs) in args.transports.iter().zip(&mut runs) {
+                    let case = pool(transport, kind, rate, subs, args.realtime, runs);
                     eprintln!("{}", row(&case));
                     report.cases.push(case);
                 }
@@ -371,22 +393,82 @@ fn transport_name(t: Transport) -> &'static str {
     }
 }
 
+/// What one run of a case (fresh processes) measured, before pooling into an [`IpcCase`].
+#[derive(Debug, Clone, Default)]
+struct CaseRun {
+    sent: u64,
+    received: u64,
+    publish_errors: u64,
+    /// The publisher's time from first to last sample, s.
+    wall_s: f64,
+    /// CPU time, s.
+    publisher_cpu_s: f64,
+    /// CPU time summed over the subscribers, s.
+    subscriber_cpu_s: f64,
+    /// Every received sample's latency at every subscriber, ns.
+    latencies_ns: Vec<i64>,
+}
+
+fn payload_bytes(kind: Kind) -> usize {
+    match kind {
+        Kind::Imu => size_of::<ImuSample>(),
+        Kind::Nav => size_of::<NavState>(),
+        Kind::Raw => size_of::<GnssRaw>(),
+        Kind::Blob => size_of::<Blob64k>(),
+    }
+}
+
+/// A case's figures over its runs (rounds).
+fn pool(
+    transport: Transport,
+    kind: Kind,
+    rate: Rate,
+    subscribers: usize,
+    realtime: Option<u8>,
+    runs: &mut [CaseRun],
+) -> IpcCase {
+    let sum = |f: fn(&CaseRun) -> u64| runs.iter().map(f).sum::<u64>();
+    let sumf = |f: fn(&CaseRun) -> f64| runs.iter().map(f).sum::<f64>();
+    let (sent, received) = (sum(|r| r.sent), sum(|r| r.received));
+    let (wall, pub_cpu, sub_cpu) = (
+        sumf(|r| r.wall_s),
+        sumf(|r| r.publisher_cpu_s),
+        sumf(|r| r.subscriber_cpu_s),
+    );
+    let errors = sum(|r| r.publish_errors);
+    let mut all: Vec<i64> = runs
+        .iter_mut()
+        .flat_map(|r| std::mem::take(&mut r.latencies_ns))
+        .collect();
+    IpcCase {
+        transport,
+        kind,
+        payload_bytes: payload_bytes(kind),
+        rate,
+        subscribers,
+        realtime,
+        sent,
+        received,
+        lost: (sent * subscribers as u64).saturating_sub(received),
+        publish_errors: errors,
+        achieved_rate_hz: sent as f64 / wall,
+        latency: Percentiles::from_ns(&mut all),
+        publisher_cpu_us_per_sample: pub_cpu / sent.max(1) as f64 * 1e6,
+        subscriber_cpu_us_per_sample: sub_cpu / received.max(1) as f64 * 1e6,
+    }
+}
+
 /// Runs one case in fresh processes.
-pub fn run_case(
+fn run_case(
     transport: Transport,
     kind: Kind,
     rate: Rate,
     subscribers: usize,
     samples: u64,
     realtime: Option<u8>,
-) -> Result<IpcCase, IpcBenchError> {
+) -> Result<CaseRun, IpcBenchError> {
     let mut env = BenchEnv::new("ipc")?;
-    let payload_bytes = match kind {
-        Kind::Imu => size_of::<ImuSample>(),
-        Kind::Nav => size_of::<NavState>(),
-        Kind::Raw => size_of::<GnssRaw>(),
-        Kind::Blob => size_of::<Blob64k>(),
-    };
+    let payload_bytes = payload_bytes(kind);
     // The futex floor's ring, in /dev/shm (tmpfs) as iceoryx2's segments; removed on return.
     let ring = match transport {
         Transport::FutexFloor => {
@@ -498,23 +580,14 @@ pub fn run_case(
         received += v.len() as u64;
         all.extend(v);
     }
-    let sent = pub_summary["sent"].as_u64().unwrap_or(0);
-    let wall = pub_summary["wall_s"].as_f64().unwrap_or(f64::NAN);
-    let case = IpcCase {
-        transport,
-        kind,
-        payload_bytes,
-        rate,
-        subscribers,
-        realtime,
-        sent,
+    let case = CaseRun {
+        sent: pub_summary["sent"].as_u64().unwrap_or(0),
         received,
-        lost: (sent * subscribers as u64).saturating_sub(received),
         publish_errors: pub_summary["errors"].as_u64().unwrap_or(0),
-        achieved_rate_hz: sent as f64 / wall,
-        latency: Percentiles::from_ns(&mut all),
-        publisher_cpu_us_per_sample: pub_summary["cpu_s"].as_f64().unwrap_or(f64::NAN) / sent.max(1) as f64 * 1e6,
-        subscriber_cpu_us_per_sample: sub_cpu / received.max(1) as f64 * 1e6,
+        wall_s: pub_summary["wall_s"].as_f64().unwrap_or(f64::NAN),
+        publisher_cpu_s: pub_summary["cpu_s"].as_f64().unwrap_or(f64::NAN),
+        subscriber_cpu_s: sub_cpu,
+        latencies_ns: all,
     };
     let bad = env.stop_all();
     if !bad.is_empty() {
