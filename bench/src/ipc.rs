@@ -797,7 +797,8 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
             cpu0 = util::own_cpu_time_s();
             loop {
                 // In place in shared memory: the stamp is read where the publisher wrote it.
-                let Some((host_ns, seq)) = sub.wait_with(Duration::from_secs(1), |s| s.stamp())? else {
+                // No timeout, as the socket's blocking `recv`: ends on the last sample or SIGTERM.
+                let Some((host_ns, seq)) = sub.wait_with(Duration::MAX, |s| s.stamp())? else {
                     if node.termination_requested() {
                         break;
                     }

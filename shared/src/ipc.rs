@@ -594,6 +594,8 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
 
     /// Blocks until a sample is available or `timeout` passes; `Ok(None)` on timeout, or
     /// earlier on a termination request (the caller checks [`termination_requested`]).
+    /// `Duration::MAX` waits without a timeout and without arming a kernel timer per wait
+    /// (cheaper per sample); it returns `Ok(None)` only on SIGINT/SIGTERM.
     /// Sleeps in `FUTEX_WAIT` on the service's event; a publisher's `FUTEX_WAKE` puts the
     /// sample in hand with no other system call. Needs a subscriber made by
     /// [`IpcNode::subscriber`] (an [`IpcNode::input`] has no wake-up of its own).
@@ -608,7 +610,8 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
             return Ok(Some(s));
         }
         if self.busy.get() {
-            let deadline = std::time::Instant::now() + timeout;
+            // None: no deadline (`Duration::MAX`).
+            let deadline = std::time::Instant::now().checked_add(timeout);
             let mut spins = 0u32;
             loop {
                 if let Some(s) = self.receive_with(&mut f)? {
@@ -616,7 +619,7 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
                 }
                 spins = spins.wrapping_add(1);
                 if spins.is_multiple_of(BUSY_CHECK_EVERY)
-                    && (termination_requested() || std::time::Instant::now() >= deadline)
+                    && (termination_requested() || deadline.is_some_and(|d| std::time::Instant::now() >= d))
                 {
                     return Ok(None);
                 }
@@ -630,6 +633,21 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
                 "an input of a Wake has no wake-up of its own",
             ));
         };
+        if timeout == Duration::MAX {
+            // No timeout: no kernel timer per wait; a termination signal wakes the wait.
+            loop {
+                match listener.blocking_wait(|_| {}) {
+                    Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+                    Err(e) => return Err(err("waiting on", &self.service, e)),
+                }
+                if let Some(s) = self.receive_with(&mut f)? {
+                    return Ok(Some(s));
+                }
+                if termination_requested() {
+                    return Ok(None);
+                }
+            }
+        }
         // The clock is read only once a wait has come back empty: a sample that wakes the
         // first wait is in hand without it.
         let mut deadline: Option<std::time::Instant> = None;
