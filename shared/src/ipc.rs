@@ -50,9 +50,11 @@ pub type Transport = futex::Service;
 /// system call.
 pub type StockTransport = iceoryx2::service::ipc::Service;
 
-/// The longest a wait sleeps before it looks at the termination latch again: iceoryx2's
-/// SIGINT/SIGTERM handler is installed with `SA_RESTART`, under which the kernel resumes an
-/// interrupted futex wait, so a termination request is noticed within this time.
+/// The longest a timed wait sleeps before it looks at the termination latch again: a
+/// SIGINT/SIGTERM reaches one thread of the process, not necessarily the waiting one, and
+/// iceoryx2's handler only records it, so a termination request is noticed within this time.
+/// (Untimed waits, `Duration::MAX`, are woken by the handler navsync chains in front,
+/// [`futex::termination_wakes_sleepers`].)
 pub const WAIT_SLICE: Duration = Duration::from_millis(50);
 
 /// How many polls a busy wait makes between looks at the clock and the termination latch.

@@ -1,7 +1,7 @@
-//! A SIGTERM that arrives while a navsync process sleeps in a futex wait ends the wait:
-//! iceoryx2's handler is installed with `SA_RESTART`, under which the kernel resumes an
-//! interrupted `FUTEX_WAIT`, so every wait looks at the termination latch at least every
-//! `ipc::WAIT_SLICE`. Its own test binary: the signal goes to the whole process.
+//! A SIGTERM that arrives while a navsync process sleeps in a timed futex wait ends the
+//! wait: the signal reaches one thread (here the signaller, not the sleeper) and iceoryx2's
+//! handler only records it, so every timed wait looks at the termination latch at least
+//! every `ipc::WAIT_SLICE` (`termination_untimed.rs`: waits without a timeout). Its own test binary: the signal goes to the whole process.
 
 use std::time::{Duration, Instant};
 
