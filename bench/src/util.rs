@@ -161,9 +161,10 @@ fn busy_and_steal_ticks() -> Option<(u64, u64)> {
         .skip(1)
         .map(|v| v.parse().ok())
         .collect::<Option<_>>()?;
-    // user nice system idle iowait irq softirq steal ...
-    let (user, nice, system, irq, softirq, steal) = (f[0], f[1], f[2], *f.get(5)?, *f.get(6)?, *f.get(7)?);
-    Some((user + nice + system + irq + softirq + steal, steal))
+    // user nice system idle iowait irq softirq steal ...; all but idle and iowait are busy.
+    let steal = *f.get(7)?;
+    let busy: u64 = [0, 1, 2, 5, 6].iter().map(|&i| f[i]).sum::<u64>() + steal;
+    Some((busy, steal))
 }
 
 /// 1-minute load average.
@@ -506,8 +507,8 @@ pub fn read_latencies(path: &Path) -> std::io::Result<Vec<i64>> {
         .collect())
 }
 
-/// Takes the [`CpuWakeupHold`] when `hold` (a `--realtime` or `--idle-polling` run): `None` (with a warning) when not
-/// allowed; records in `machine` whether it is held.
+/// Takes the [`CpuWakeupHold`] when `hold` (a `--realtime` or `--idle-polling` run): `None`
+/// (with a warning) when not allowed; records in `machine` whether it is held.
 pub fn wakeup_hold(hold: bool, machine: &mut Machine) -> Option<CpuWakeupHold> {
     if !hold {
         return None;

@@ -146,7 +146,7 @@ extern "C" fn on_termination(sig: libc::c_int) {
 }
 
 /// Installs [`on_termination`] in front of the SIGINT/SIGTERM handlers once; false if they
-/// are not iceoryx2's (left alone: untimed waits then fall back to 50 ms slices).
+/// are not iceoryx2's (left alone: untimed waits then fall back to `WAIT_SLICE` slices).
 pub fn termination_wakes_sleepers() -> bool {
     *INSTALLED.get_or_init(|| {
         // iceoryx2 installs its handlers on first use; make sure they are there to chain to,
@@ -267,8 +267,8 @@ impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> FutexWaiter<E, S> {
 
     /// Sleeps until a notification or `timeout`. `None`: no timeout and no kernel timer; a
     /// SIGINT/SIGTERM to any thread of the process ends the wait ([`on_termination`]), and
-    /// where that cannot be arranged the wait is sliced at 50 ms. A timed wait interrupted by
-    /// a signal on another thread ends at its timeout; callers bound those.
+    /// where that cannot be arranged the wait is sliced at `WAIT_SLICE`. A timed wait ends at
+    /// its timeout whatever thread a signal reaches; callers bound those.
     fn sleep(&self, timeout: Option<Duration>) -> Result<(), ListenerWaitError> {
         if self.consume() {
             return Ok(());
@@ -279,17 +279,17 @@ impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> FutexWaiter<E, S> {
             None
         };
         let timeout = match (timeout, slot) {
-            (None, None) => Some(Duration::from_millis(50)),
+            (None, None) => Some(super::WAIT_SLICE),
             (t, _) => t,
         };
-        let r = self.sleep_registered(timeout);
+        let r = self.sleep_on_word(timeout);
         if let Some(slot) = slot {
             unregister_untimed(slot);
         }
         r
     }
 
-    fn sleep_registered(&self, timeout: Option<Duration>) -> Result<(), ListenerWaitError> {
+    fn sleep_on_word(&self, timeout: Option<Duration>) -> Result<(), ListenerWaitError> {
         let seen = self.seen.load(Ordering::Relaxed);
         let before = self.word().fetch_or(SLEEPING, Ordering::SeqCst);
         // A termination before this sleeper was registered woke nobody: do not sleep.
