@@ -394,7 +394,7 @@ fn transport_name(t: Transport) -> &'static str {
 }
 
 /// What one run of a case (fresh processes) measured, before pooling into an [`IpcCase`].
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 struct CaseRun {
     sent: u64,
     received: u64,
@@ -429,13 +429,12 @@ fn pool(
 ) -> IpcCase {
     let sum = |f: fn(&CaseRun) -> u64| runs.iter().map(f).sum::<u64>();
     let sumf = |f: fn(&CaseRun) -> f64| runs.iter().map(f).sum::<f64>();
-    let (sent, received) = (sum(|r| r.sent), sum(|r| r.received));
+    let (sent, received, errors) = (sum(|r| r.sent), sum(|r| r.received), sum(|r| r.publish_errors));
     let (wall, pub_cpu, sub_cpu) = (
         sumf(|r| r.wall_s),
         sumf(|r| r.publisher_cpu_s),
         sumf(|r| r.subscriber_cpu_s),
     );
-    let errors = sum(|r| r.publish_errors);
     let mut all: Vec<i64> = runs
         .iter_mut()
         .flat_map(|r| std::mem::take(&mut r.latencies_ns))
