@@ -93,8 +93,12 @@ pub enum Transport {
     /// (`Subscriber::wait_next`, as the clients and `navsync echo`).
     Iceoryx2,
     /// navsync's iceoryx2 services, the subscriber asleep on the one wake-up of a process
-    /// with many inputs (`IpcNode::wait` on `navsync/wake`, as the estimator).
+    /// with many inputs (`IpcNode::wait` on `navsync/wake` with a timeout, as the estimator;
+    /// the timeout through the alarm thread, `ipc::futex`).
     Iceoryx2Wake,
+    /// As `iceoryx2-wake`, but every timed wait arms the kernel's timer
+    /// (`futex::timeouts_by_kernel`): what the alarm thread saves.
+    Iceoryx2WakeTimer,
     /// navsync's iceoryx2 services, the subscriber spinning on its queue (`--busy-poll`:
     /// `Subscriber::set_busy_poll`); a core per subscriber.
     Iceoryx2Busy,
@@ -246,7 +250,8 @@ pub struct IpcBenchArgs {
     #[arg(long, value_delimiter = ',', default_value = "1", value_parser = crate::util::subscriber_count)]
     pub subscribers: Vec<usize>,
     /// Transports, comma-separated: iceoryx2 (the service's event), iceoryx2-wake (the one wake-up),
-    /// iceoryx2-busy, socket, futex-floor (the floor of any shared-memory transport).
+    /// iceoryx2-wake-timer (the same, timeouts on kernel timers), iceoryx2-busy, socket,
+    /// futex-floor (the floor of any shared-memory transport).
     #[arg(long, value_delimiter = ',', default_value = "iceoryx2,socket")]
     pub transports: Vec<Transport>,
     /// Run publisher (PRIO) and subscribers (PRIO − 1) under SCHED_FIFO (needs CAP_SYS_NICE).
@@ -387,6 +392,7 @@ fn transport_name(t: Transport) -> &'static str {
     match t {
         Transport::Iceoryx2 => "iceoryx2",
         Transport::Iceoryx2Wake => "iceoryx2-wake",
+        Transport::Iceoryx2WakeTimer => "iceoryx2-wake-timer",
         Transport::Iceoryx2Busy => "iceoryx2-busy",
         Transport::Socket => "socket",
         Transport::FutexFloor => "futex-floor",
@@ -745,7 +751,7 @@ fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
         );
     };
     match a.transport {
-        Transport::Iceoryx2 | Transport::Iceoryx2Wake | Transport::Iceoryx2Busy => {
+        Transport::Iceoryx2 | Transport::Iceoryx2Wake | Transport::Iceoryx2WakeTimer | Transport::Iceoryx2Busy => {
             let node = IpcNode::new("bench-pub")?;
             let mut p = node.publisher::<T>(&T::service())?;
             // Let the subscribers' ports settle before the first sample.
@@ -810,7 +816,8 @@ fn subscribe<T: Payload>(a: &SubArgs) -> Result<(), IpcBenchError> {
                 }
             }
         }
-        Transport::Iceoryx2Wake => {
+        Transport::Iceoryx2Wake | Transport::Iceoryx2WakeTimer => {
+            navsync_shared::ipc::futex::timeouts_by_kernel(a.transport == Transport::Iceoryx2WakeTimer);
             let node = IpcNode::new(&format!("bench-sub-{}", a.index))?;
             let sub = node.input::<T>(&T::service())?;
             let wake = node.wake()?;

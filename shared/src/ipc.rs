@@ -53,8 +53,9 @@ pub type StockTransport = iceoryx2::service::ipc::Service;
 /// The longest a timed wait sleeps before it looks at the termination latch again: a
 /// SIGINT/SIGTERM reaches one thread of the process, not necessarily the waiting one, and
 /// iceoryx2's handler only records it, so a termination request is noticed within this time.
-/// (Untimed waits, `Duration::MAX`, are woken by the handler navsync chains in front,
-/// [`futex::termination_wakes_sleepers`].)
+/// (Waits registered as sleepers, untimed ones and those of at least [`futex::ALARM_MIN`]
+/// where navsync's handler is chained in front, [`futex::termination_wakes_sleepers`], are
+/// woken by it at once; the slice bounds the others.)
 pub const WAIT_SLICE: Duration = Duration::from_millis(50);
 
 /// How many polls a busy wait makes between looks at the clock and the termination latch.

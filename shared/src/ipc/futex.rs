@@ -26,7 +26,7 @@ use core::fmt::Debug;
 use core::marker::PhantomData;
 use core::mem::MaybeUninit;
 use core::ptr::NonNull;
-use core::sync::atomic::{AtomicBool, AtomicPtr, AtomicU32, AtomicUsize, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicPtr, AtomicU8, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use core::time::Duration;
 
 use iceoryx2::prelude::ZeroCopySend;
@@ -82,28 +82,40 @@ pub fn futex(word: &AtomicU32, op: libc::c_int, val: u32, timeout: Option<&libc:
     }
 }
 
-/// Listeners asleep without a timeout, which a termination signal must wake: `FUTEX_WAIT`
-/// without a timeout arms no kernel timer (with one, every wait arms and cancels an hrtimer,
-/// which cost 0.3–2 µs of subscriber CPU per sample on the benchmark VM), but nothing ends
-/// it except a notification, and SIGTERM may be delivered to another thread.
-const UNTIMED_SLOTS: usize = 64;
+/// Listeners asleep without a kernel timer. `FUTEX_WAIT` with a timeout arms and cancels an
+/// hrtimer per wait, i.e. per sample (0.3–2 µs of subscriber CPU per sample on the benchmark
+/// VM); the socket's blocking `recv` arms none. So every wait registers here instead and
+/// sleeps without a timeout: a termination signal wakes all of them ([`on_termination`], SIGTERM
+/// may reach another thread), and the process's alarm thread ([`alarm_loop`]) wakes those whose
+/// deadline passed. The alarm re-arms only when a deadline earlier than its own comes in, so
+/// a listener that is woken by samples long before its timeout (the estimator's liveness
+/// deadlines, a client's `recv(timeout)`) costs one timer per timeout period, not per sample.
+const SLEEPER_SLOTS: usize = 64;
 
-/// One untimed sleeper's futex word, and whether a signal handler is looking at it.
-struct UntimedSlot {
+/// Timeouts shorter than this arm the kernel's timer (`FUTEX_WAIT` with a timeout): a second
+/// thread's wake-up would cost more than the timer, and their precision matters.
+pub const ALARM_MIN: Duration = Duration::from_millis(1);
+
+/// One sleeper's futex word and deadline, and whether someone else is looking at the word.
+struct SleeperSlot {
     word: AtomicPtr<AtomicU32>,
-    /// Handlers reading `word` now; the sleeper leaves only when 0 (its word's mapping must
-    /// outlive the handler's use of it).
+    /// CLOCK_MONOTONIC ns at which the alarm wakes `word`; 0: none (woken by notifications and
+    /// termination only).
+    deadline_ns: AtomicU64,
+    /// Signal handlers and the alarm thread using `word` now; the sleeper leaves only when 0
+    /// (its word's mapping must outlive their use of it).
     busy: AtomicUsize,
 }
 
-static UNTIMED: [UntimedSlot; UNTIMED_SLOTS] = [const {
-    UntimedSlot {
+static SLEEPERS: [SleeperSlot; SLEEPER_SLOTS] = [const {
+    SleeperSlot {
         word: AtomicPtr::new(core::ptr::null_mut()),
+        deadline_ns: AtomicU64::new(0),
         busy: AtomicUsize::new(0),
     }
-}; UNTIMED_SLOTS];
+}; SLEEPER_SLOTS];
 
-/// Set by [`on_termination`] before it wakes the untimed sleepers.
+/// Set by [`on_termination`] before it wakes the sleepers.
 static TERMINATING: AtomicBool = AtomicBool::new(false);
 /// The SIGINT and SIGTERM handlers [`on_termination`] replaced (iceoryx2's), called first.
 static PREVIOUS_SIGINT: AtomicUsize = AtomicUsize::new(0);
@@ -111,10 +123,24 @@ static PREVIOUS_SIGTERM: AtomicUsize = AtomicUsize::new(0);
 /// True once [`on_termination`] is installed for both signals.
 static INSTALLED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
 
+/// `*w += COUNT_STEP` and wake its waiters in one `FUTEX_WAKE_OP`: the kernel does the add
+/// under the futex bucket lock, so a `FUTEX_WAIT` about to start sees the new value and does
+/// not sleep (no lost wake-up), and no user-space store touches a mapping that may be going
+/// away. Async-signal-safe.
+///
+/// # Safety
+/// `w` points to a futex word whose mapping stays for the call (the slot's `busy` count).
+unsafe fn bump_and_wake(w: *mut AtomicU32) {
+    let op = (libc::FUTEX_OP_ADD << 28) | ((COUNT_STEP as libc::c_int & 0xfff) << 12);
+    // SAFETY: per the caller; the kernel reports a fault as EFAULT instead of raising it.
+    unsafe {
+        libc::syscall(libc::SYS_futex, w, libc::FUTEX_WAKE_OP, i32::MAX, 0usize, w, op);
+    }
+}
+
 /// SIGINT/SIGTERM: the handler that was there (iceoryx2's, which records the signal for
-/// `termination_requested`), then every untimed sleeper woken. Async-signal-safe: atomics and
-/// `futex(2)`; the word is bumped by the kernel (`FUTEX_WAKE_OP`), so a sleeper about to wait
-/// sees the change and does not sleep.
+/// `termination_requested`), then every registered sleeper woken. Async-signal-safe: atomics
+/// and `futex(2)`.
 extern "C" fn on_termination(sig: libc::c_int) {
     let previous = if sig == libc::SIGINT {
         &PREVIOUS_SIGINT
@@ -128,25 +154,21 @@ extern "C" fn on_termination(sig: libc::c_int) {
         f(sig);
     }
     TERMINATING.store(true, Ordering::SeqCst);
-    for slot in &UNTIMED {
+    for slot in &SLEEPERS {
         slot.busy.fetch_add(1, Ordering::SeqCst);
         let w = slot.word.load(Ordering::SeqCst);
         if !w.is_null() {
-            // FUTEX_WAKE_OP: *w += COUNT_STEP and wake its waiters; the kernel does the add
-            // under the futex bucket lock, so a FUTEX_WAIT about to start sees the new value.
-            let op = (libc::FUTEX_OP_ADD << 28) | ((COUNT_STEP as libc::c_int & 0xfff) << 12);
             // SAFETY: the slot is registered, so its sleeper keeps the mapping until `busy`
-            // is 0 again; the kernel reports a fault as EFAULT instead of raising it.
-            unsafe {
-                libc::syscall(libc::SYS_futex, w, libc::FUTEX_WAKE_OP, i32::MAX, 0usize, w, op);
-            }
+            // is 0 again.
+            unsafe { bump_and_wake(w) };
         }
         slot.busy.fetch_sub(1, Ordering::SeqCst);
     }
 }
 
 /// Installs [`on_termination`] in front of the SIGINT/SIGTERM handlers once; false if they
-/// are not iceoryx2's (left alone: untimed waits then fall back to `WAIT_SLICE` slices).
+/// are not iceoryx2's (left alone: waits then keep kernel timeouts, untimed ones sliced at
+/// `WAIT_SLICE`).
 pub fn termination_wakes_sleepers() -> bool {
     *INSTALLED.get_or_init(|| {
         // iceoryx2 installs its handlers on first use; make sure they are there to chain to,
@@ -173,25 +195,156 @@ pub fn termination_wakes_sleepers() -> bool {
                 }
             }
         }
+        // A child forked without exec has none of the parent's other threads: no alarm
+        // thread and no sleepers; it starts its own alarm on its first timed wait.
+        // SAFETY: registers a plain function; failure only leaves that reset out.
+        unsafe { libc::pthread_atfork(None, None, Some(after_fork_in_child)) };
         true
     })
 }
 
-/// Registers `word` as an untimed sleeper; None if every slot is taken or termination
-/// cannot wake it (the caller then waits with a timeout).
-fn register_untimed(word: &AtomicU32) -> Option<&'static UntimedSlot> {
-    if !termination_wakes_sleepers() {
+/// The alarm thread: not started (0), running (1), could not be started (2).
+static ALARM_STATE: AtomicU8 = AtomicU8::new(0);
+/// Bumped (and woken) when a deadline earlier than [`ALARM_TARGET`] is registered.
+static ALARM_WORD: AtomicU32 = AtomicU32::new(0);
+/// The deadline (CLOCK_MONOTONIC ns) the alarm sleeps towards; `u64::MAX`: none; 0: it is
+/// scanning the slots, so every new deadline must wake it.
+static ALARM_TARGET: AtomicU64 = AtomicU64::new(0);
+/// `timeouts_by_kernel(true)`: every timed wait arms the kernel's timer (benchmark A/B).
+static KERNEL_TIMEOUTS: AtomicBool = AtomicBool::new(false);
+
+/// Timed waits arm the kernel's timer per wait (`true`) or register with the alarm thread
+/// (`false`, the default). For measuring what the alarm saves (`navsync-bench ipc
+/// --kernel-timeouts`); both end a wait at its timeout.
+pub fn timeouts_by_kernel(on: bool) {
+    KERNEL_TIMEOUTS.store(on, Ordering::SeqCst);
+}
+
+extern "C" fn after_fork_in_child() {
+    for slot in &SLEEPERS {
+        slot.deadline_ns.store(0, Ordering::SeqCst);
+        slot.word.store(core::ptr::null_mut(), Ordering::SeqCst);
+        slot.busy.store(0, Ordering::SeqCst);
+    }
+    ALARM_TARGET.store(0, Ordering::SeqCst);
+    ALARM_STATE.store(0, Ordering::SeqCst);
+}
+
+fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: a valid timespec; CLOCK_MONOTONIC cannot fail.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+/// True once the alarm thread runs (started here on first use).
+fn alarm_running() -> bool {
+    match ALARM_STATE.load(Ordering::SeqCst) {
+        1 => true,
+        2 => false,
+        _ => {
+            if ALARM_STATE
+                .compare_exchange(0, 3, Ordering::SeqCst, Ordering::SeqCst)
+                .is_ok()
+            {
+                let ok = std::thread::Builder::new()
+                    .name("navsync-alarm".into())
+                    .spawn(alarm_loop)
+                    .is_ok();
+                ALARM_STATE.store(if ok { 1 } else { 2 }, Ordering::SeqCst);
+                ok
+            } else {
+                // Another thread is starting it (state 3): use the kernel's timer this once.
+                false
+            }
+        }
+    }
+}
+
+/// Sleeps until the earliest registered deadline, wakes the sleepers whose deadline passed
+/// (each once: its deadline is cleared), and again. Never returns.
+///
+/// No lost deadline: a sleeper stores its deadline, then reads [`ALARM_TARGET`] and wakes the
+/// alarm if that is 0 (scanning) or later. The alarm sets 0 and reads [`ALARM_WORD`] before it
+/// scans, and publishes its target after; so a deadline the scan missed was stored after the
+/// scan's read of it, and its sleeper reads 0 (and bumps the word the alarm will wait on) or
+/// the new target (bumping the word if it is later, else the alarm wakes first and rescans).
+fn alarm_loop() {
+    loop {
+        ALARM_TARGET.store(0, Ordering::SeqCst);
+        let seen = ALARM_WORD.load(Ordering::SeqCst);
+        let now = monotonic_ns();
+        let mut next = u64::MAX;
+        for slot in &SLEEPERS {
+            let d = slot.deadline_ns.load(Ordering::SeqCst);
+            if d == 0 {
+                continue;
+            }
+            if d > now {
+                next = next.min(d);
+                continue;
+            }
+            slot.busy.fetch_add(1, Ordering::SeqCst);
+            let w = slot.word.load(Ordering::SeqCst);
+            if !w.is_null()
+                && slot
+                    .deadline_ns
+                    .compare_exchange(d, 0, Ordering::SeqCst, Ordering::SeqCst)
+                    .is_ok()
+            {
+                // SAFETY: registered, and `busy` keeps its sleeper (and the mapping) there.
+                unsafe { bump_and_wake(w) };
+            }
+            slot.busy.fetch_sub(1, Ordering::SeqCst);
+        }
+        ALARM_TARGET.store(next, Ordering::SeqCst);
+        let at = (next != u64::MAX).then_some(libc::timespec {
+            tv_sec: (next / 1_000_000_000) as libc::time_t,
+            tv_nsec: (next % 1_000_000_000) as libc::c_long,
+        });
+        let ts = at.as_ref().map_or(core::ptr::null(), |t| t as *const libc::timespec);
+        // FUTEX_WAIT_BITSET takes an absolute CLOCK_MONOTONIC time (no drift over rescans).
+        // SAFETY: a static word, a live timespec or null; val3 is the match-any bitset.
+        unsafe {
+            libc::syscall(
+                libc::SYS_futex,
+                ALARM_WORD.as_ptr(),
+                libc::FUTEX_WAIT_BITSET | libc::FUTEX_PRIVATE_FLAG,
+                seen,
+                ts,
+                core::ptr::null::<u32>(),
+                libc::FUTEX_BITSET_MATCH_ANY,
+            );
+        }
+    }
+}
+
+/// Registers `word` as a sleeper, with an alarm at `deadline_ns` (CLOCK_MONOTONIC) if not 0;
+/// None if termination cannot wake it or every slot is taken (the caller then arms the
+/// kernel's timer).
+fn register(word: &AtomicU32, deadline_ns: u64) -> Option<&'static SleeperSlot> {
+    if !termination_wakes_sleepers() || (deadline_ns != 0 && !alarm_running()) {
         return None;
     }
     let p = word as *const AtomicU32 as *mut AtomicU32;
-    UNTIMED.iter().find(|slot| {
+    let slot = SLEEPERS.iter().find(|slot| {
         slot.word
             .compare_exchange(core::ptr::null_mut(), p, Ordering::SeqCst, Ordering::SeqCst)
             .is_ok()
-    })
+    })?;
+    if deadline_ns != 0 {
+        slot.deadline_ns.store(deadline_ns, Ordering::SeqCst);
+        let target = ALARM_TARGET.load(Ordering::SeqCst);
+        if target == 0 || deadline_ns < target {
+            ALARM_WORD.fetch_add(1, Ordering::SeqCst);
+            futex(&ALARM_WORD, libc::FUTEX_WAKE | libc::FUTEX_PRIVATE_FLAG, 1, None);
+        }
+    }
+    Some(slot)
 }
 
-fn unregister_untimed(slot: &UntimedSlot) {
+fn unregister(slot: &SleeperSlot) {
+    slot.deadline_ns.store(0, Ordering::SeqCst);
     slot.word.store(core::ptr::null_mut(), Ordering::SeqCst);
     while slot.busy.load(Ordering::SeqCst) != 0 {
         core::hint::spin_loop();
@@ -265,28 +418,32 @@ impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> FutexWaiter<E, S> {
         self.seen.swap(now, Ordering::Relaxed) != now
     }
 
-    /// Sleeps until a notification or `timeout`. `None`: no timeout and no kernel timer; a
-    /// SIGINT/SIGTERM to any thread of the process ends the wait ([`on_termination`]), and
-    /// where that cannot be arranged the wait is sliced at `WAIT_SLICE`. A timed wait ends at
-    /// its timeout whatever thread a signal reaches; callers bound those.
+    /// Sleeps until a notification or `timeout` (`None`: none), without a kernel timer where
+    /// it can: registered as a sleeper, which a SIGINT/SIGTERM to any thread of the process
+    /// wakes ([`on_termination`]) and, for a timeout of at least [`ALARM_MIN`], the alarm
+    /// thread at the deadline. Otherwise a timed `FUTEX_WAIT` (an untimed wait sliced at
+    /// `WAIT_SLICE`, so that termination is still noticed).
     fn sleep(&self, timeout: Option<Duration>) -> Result<(), ListenerWaitError> {
         if self.consume() {
             return Ok(());
         }
-        let slot = if timeout.is_none() {
-            register_untimed(self.word())
-        } else {
-            None
+        let deadline_ns = match timeout {
+            None => Some(0),
+            Some(t) if t >= ALARM_MIN && !KERNEL_TIMEOUTS.load(Ordering::Relaxed) => {
+                Some(monotonic_ns().saturating_add(t.as_nanos().min(u64::MAX as u128) as u64))
+            }
+            Some(_) => None,
         };
-        let timeout = match (timeout, slot) {
-            (None, None) => Some(super::WAIT_SLICE),
-            (t, _) => t,
-        };
-        let r = self.sleep_on_word(timeout);
-        if let Some(slot) = slot {
-            unregister_untimed(slot);
+        let slot = deadline_ns.and_then(|d| register(self.word(), d));
+        match (timeout, slot) {
+            (_, Some(slot)) => {
+                let r = self.sleep_on_word(None);
+                unregister(slot);
+                r
+            }
+            (None, None) => self.sleep_on_word(Some(super::WAIT_SLICE)),
+            (Some(t), None) => self.sleep_on_word(Some(t)),
         }
-        r
     }
 
     fn sleep_on_word(&self, timeout: Option<Duration>) -> Result<(), ListenerWaitError> {
