@@ -79,6 +79,11 @@ pub struct E2eArgs {
     /// it too). The product's equivalent is `navsync estimator --idle-polling`.
     #[arg(long)]
     pub idle_polling: bool,
+    /// Pin the latency chain (drivers, estimator, subscriber) to this CPU and the simulator
+    /// to the others, as a deployment would with `CPUAffinity=` (no privileges needed): the
+    /// chain's wake-ups then stay on one CPU instead of waking a halted one.
+    #[arg(long, value_name = "CPU")]
+    pub pin_chain: Option<usize>,
     /// A short run (2 IMUs, 3 s warm-up, 5 s measured) for smoke tests.
     #[arg(long)]
     pub quick: bool,
@@ -118,6 +123,8 @@ pub struct E2eCase {
     pub imu_path: ImuPath,
     /// SCHED_FIFO priority of the latency chain, if it ran under it.
     pub realtime: Option<u8>,
+    /// The CPU the latency chain was pinned to, if it was.
+    pub pin_chain: Option<usize>,
     /// Measured window, s.
     pub window_s: f64,
     /// NavStates received in the window.
@@ -157,6 +164,9 @@ pub enum E2eError {
     /// IPC.
     #[error(transparent)]
     Ipc(#[from] IpcError),
+    /// An option that cannot be applied on this machine.
+    #[error("{0}")]
+    Option(String),
 }
 
 fn s<T: ToString>(v: T) -> String {
@@ -331,6 +341,21 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
         }
     }
 
+    if let Some(cpu) = args.pin_chain {
+        let others: Vec<usize> = (0..util::online_cpus()).filter(|&c| c != cpu).collect();
+        for (name, pid) in &pids {
+            let cpus = if name == "sim" {
+                others.as_slice()
+            } else {
+                std::slice::from_ref(&cpu)
+            };
+            if !cpus.is_empty() {
+                util::set_affinity(*pid, cpus)
+                    .map_err(|e| E2eError::Child(format!("CPU affinity {cpus:?} for {name}: {e}")))?;
+            }
+        }
+    }
+
     wait_line(
         &lines,
         &mut env,
@@ -368,6 +393,7 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
         imus,
         imu_path: args.imu_path,
         realtime: args.realtime,
+        pin_chain: args.pin_chain,
         window_s: v["window_s"].as_f64().unwrap_or(f64::NAN),
         nav_states: v["nav_states"].as_u64().unwrap_or(0),
         matched: v["matched"].as_u64().unwrap_or(0),
@@ -382,6 +408,14 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
 /// Runs every IMU count, prints the tables, writes the JSON.
 pub fn run(args: &E2eArgs) -> Result<E2eReport, E2eError> {
     let args = &args.effective();
+    if let Some(cpu) = args.pin_chain
+        && cpu >= util::online_cpus()
+    {
+        return Err(E2eError::Option(format!(
+            "--pin-chain {cpu}: this machine has CPUs 0–{}",
+            util::online_cpus() - 1
+        )));
+    }
     let mut report = E2eReport {
         machine: Machine::now(),
         cases: Vec::new(),
@@ -416,11 +450,18 @@ fn latency_row(c: &E2eCase) -> String {
     format!(
         "| {} × 1 kHz ({}) | {} | {:.0} / {:.0} / {:.0} | {:.0} / {:.0} / {:.0} | {:.0} / {:.0} / {:.0} | {:.1} % | {:.1} % | {:.1} % |",
         c.imus,
-        match (c.imu_path, c.realtime) {
-            (ImuPath::Xsens, None) => "xsens".to_string(),
-            (ImuPath::Direct, None) => "direct".to_string(),
-            (ImuPath::Xsens, Some(p)) => format!("xsens, FIFO {p}"),
-            (ImuPath::Direct, Some(p)) => format!("direct, FIFO {p}"),
+        {
+            let mut label = match c.imu_path {
+                ImuPath::Xsens => "xsens".to_string(),
+                ImuPath::Direct => "direct".to_string(),
+            };
+            if let Some(p) = c.realtime {
+                label += &format!(", FIFO {p}");
+            }
+            if let Some(cpu) = c.pin_chain {
+                label += &format!(", chain on CPU {cpu}");
+            }
+            label
         },
         c.nav_states,
         c.end_to_end.p50_us,

@@ -525,6 +525,37 @@ pub fn wakeup_hold(hold: bool, machine: &mut Machine) -> Option<CpuWakeupHold> {
     }
 }
 
+/// CPUs online (`sysconf(_SC_NPROCESSORS_ONLN)`), at least 1.
+pub fn online_cpus() -> usize {
+    // SAFETY: sysconf has no preconditions.
+    let n = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) };
+    usize::try_from(n).unwrap_or(1).max(1)
+}
+
+/// Restricts every thread of process `pid` to `cpus` (threads it starts later inherit it).
+pub fn set_affinity(pid: u32, cpus: &[usize]) -> std::io::Result<()> {
+    // SAFETY: an all-zero cpu_set_t is the empty set.
+    let mut set: libc::cpu_set_t = unsafe { core::mem::zeroed() };
+    for &c in cpus {
+        // SAFETY: CPU_SET on a valid set; indices beyond its size are ignored by libc.
+        unsafe { libc::CPU_SET(c, &mut set) };
+    }
+    for task in std::fs::read_dir(format!("/proc/{pid}/task"))? {
+        let Some(tid) = task?.file_name().to_str().and_then(|t| t.parse::<libc::pid_t>().ok()) else {
+            continue;
+        };
+        // SAFETY: a valid set for the call's duration.
+        if unsafe { libc::sched_setaffinity(tid, size_of::<libc::cpu_set_t>(), &set) } != 0 {
+            let e = std::io::Error::last_os_error();
+            // A thread that ended meanwhile is not an error.
+            if e.raw_os_error() != Some(libc::ESRCH) {
+                return Err(e);
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Puts the main thread of process `pid` under SCHED_FIFO with priority `prio` (threads it
 /// starts later inherit it; helper threads such as the estimator's dead-node reclaimer put
 /// themselves under SCHED_IDLE).

@@ -116,6 +116,22 @@ fn benchmarks_run_and_report_sane_figures() {
         assert!(est["cpu_percent"].as_f64().unwrap() > 0.0, "{est}");
     }
 
+    // The chain pinned to one CPU (`CPUAffinity=`-like): it still runs and says so.
+    let pinned = run_json(&env, &["e2e", "--pin-chain", "0"], &env.dir.join("e2e-pinned.json"));
+    for c in pinned["cases"].as_array().unwrap() {
+        assert_eq!(c["pin_chain"].as_u64(), Some(0), "{c}");
+        assert!(c["nav_states"].as_u64().unwrap() > 100, "{c}");
+        percentiles_sane(&c["end_to_end"], "e2e pinned");
+    }
+    // A CPU the machine does not have is refused before anything starts.
+    let o = env
+        .command_of(bench_bin(), &["e2e", "--quick", "--pin-chain", "4096"])
+        .env("NAVSYNC_BIN", navsync_bin())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--pin-chain 4096"), "{err}");
+
     let thr = run_json(&env, &["throughput"], &env.dir.join("throughput.json"));
     let cases = thr["cases"].as_array().unwrap();
     assert_eq!(cases.len(), 2, "{thr}");
