@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use navsync_bench::{e2e, gnss_latency, ipc, throughput, timing, zenoh};
+use navsync_bench::{e2e, gnss_latency, host, ipc, throughput, timing, zenoh};
 
 #[derive(Parser)]
 #[command(name = "navsync-bench", version, about = "navsync's benchmarks")]
@@ -30,6 +30,9 @@ enum Cmd {
     /// A NavState from host A's iceoryx2 to host B's through two Zenoh bridges over a veth
     /// link between network namespaces (root; a navsync built with --features zenoh).
     Zenoh(zenoh::ZenohBenchArgs),
+    /// The machine's own wake-up stalls: a sleeper per CPU at a fixed rate, no navsync code
+    /// (read beside the latency benchmarks; finds stalls that keep the phase of a 100 ms cycle).
+    Host(host::HostArgs),
     /// The processes the benchmarks start (publishers and subscribers).
     #[command(subcommand, hide = true)]
     Helper(Helper),
@@ -77,6 +80,7 @@ fn main() -> Result<()> {
         Cmd::Throughput(a) => drop(throughput::run(&a).context("throughput benchmark")?),
         Cmd::GnssLatency(a) => drop(gnss_latency::run(&a).context("GNSS latency benchmark")?),
         Cmd::Zenoh(a) => drop(zenoh::run(&a).context("Zenoh benchmark")?),
+        Cmd::Host(a) => drop(host::run(&a).context("host benchmark")?),
         Cmd::Helper(Helper::GnssSub { service }) => gnss_latency::helper_sub(&service).context("gnss-sub")?,
         Cmd::Helper(Helper::PtyRead { port }) => gnss_latency::helper_pty_read(&port).context("pty-read")?,
         Cmd::Helper(Helper::IpcPub(a)) => ipc::helper_pub(&a).context("ipc-pub")?,

@@ -532,25 +532,41 @@ pub fn online_cpus() -> usize {
     usize::try_from(n).unwrap_or(1).max(1)
 }
 
-/// Restricts every thread of process `pid` to `cpus` (threads it starts later inherit it).
-pub fn set_affinity(pid: u32, cpus: &[usize]) -> std::io::Result<()> {
+fn cpu_set(cpus: &[usize]) -> libc::cpu_set_t {
     // SAFETY: an all-zero cpu_set_t is the empty set.
     let mut set: libc::cpu_set_t = unsafe { core::mem::zeroed() };
     for &c in cpus {
         // SAFETY: CPU_SET on a valid set; indices beyond its size are ignored by libc.
         unsafe { libc::CPU_SET(c, &mut set) };
     }
+    set
+}
+
+/// Restricts thread `tid` (0: the calling thread) to `cpus`.
+fn set_thread_affinity(tid: libc::pid_t, cpus: &[usize]) -> std::io::Result<()> {
+    let set = cpu_set(cpus);
+    // SAFETY: a valid set for the call's duration.
+    if unsafe { libc::sched_setaffinity(tid, size_of::<libc::cpu_set_t>(), &set) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}
+
+/// Restricts the calling thread to `cpus`.
+pub fn pin_this_thread(cpus: &[usize]) -> std::io::Result<()> {
+    set_thread_affinity(0, cpus)
+}
+
+/// Restricts every thread of process `pid` to `cpus` (threads it starts later inherit it).
+pub fn set_affinity(pid: u32, cpus: &[usize]) -> std::io::Result<()> {
     for task in std::fs::read_dir(format!("/proc/{pid}/task"))? {
         let Some(tid) = task?.file_name().to_str().and_then(|t| t.parse::<libc::pid_t>().ok()) else {
             continue;
         };
-        // SAFETY: a valid set for the call's duration.
-        if unsafe { libc::sched_setaffinity(tid, size_of::<libc::cpu_set_t>(), &set) } != 0 {
-            let e = std::io::Error::last_os_error();
+        match set_thread_affinity(tid, cpus) {
             // A thread that ended meanwhile is not an error.
-            if e.raw_os_error() != Some(libc::ESRCH) {
-                return Err(e);
-            }
+            Err(e) if e.raw_os_error() != Some(libc::ESRCH) => return Err(e),
+            _ => {}
         }
     }
     Ok(())

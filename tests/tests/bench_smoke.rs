@@ -132,6 +132,26 @@ fn benchmarks_run_and_report_sane_figures() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("--pin-chain 4096"), "{err}");
 
+    // The machine's own wake-up stalls: every CPU's sleeper woke as often as asked, and
+    // every stall is in one phase bin.
+    let host = run_json(&env, &["host"], &env.dir.join("host.json"));
+    let expected = host["expected_per_cpu"].as_u64().unwrap();
+    assert!(expected > 1000, "{host}");
+    let cpus = host["cpus"].as_array().unwrap();
+    assert!(!cpus.is_empty(), "{host}");
+    for c in cpus {
+        assert_eq!(c["lateness"]["count"].as_u64(), Some(expected), "{c}");
+        percentiles_sane(&c["lateness"], "host");
+        let bins: u64 = c["stall_phase_bins"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|b| b.as_u64().unwrap())
+            .sum();
+        assert_eq!(bins, c["stalls"].as_u64().unwrap(), "{c}");
+        assert!(bins <= expected, "{c}");
+    }
+
     let thr = run_json(&env, &["throughput"], &env.dir.join("throughput.json"));
     let cases = thr["cases"].as_array().unwrap();
     assert_eq!(cases.len(), 2, "{thr}");
