@@ -203,7 +203,8 @@ pub fn termination_wakes_sleepers() -> bool {
     })
 }
 
-/// The alarm thread: not started (0), running (1), could not be started (2).
+/// The alarm thread: not started (0), running (1), could not be started (2), being started
+/// by another thread (3).
 static ALARM_STATE: AtomicU8 = AtomicU8::new(0);
 /// Bumped (and woken) when a deadline earlier than [`ALARM_TARGET`] is registered.
 static ALARM_WORD: AtomicU32 = AtomicU32::new(0);
@@ -215,7 +216,7 @@ static KERNEL_TIMEOUTS: AtomicBool = AtomicBool::new(false);
 
 /// Timed waits arm the kernel's timer per wait (`true`) or register with the alarm thread
 /// (`false`, the default). For measuring what the alarm saves (`navsync-bench ipc
-/// --kernel-timeouts`); both end a wait at its timeout.
+/// --transports iceoryx2-wake,iceoryx2-wake-timer`); both end a wait at its timeout.
 pub fn timeouts_by_kernel(on: bool) {
     KERNEL_TIMEOUTS.store(on, Ordering::SeqCst);
 }
