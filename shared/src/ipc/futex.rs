@@ -231,11 +231,9 @@ extern "C" fn after_fork_in_child() {
     ALARM_STATE.store(0, Ordering::SeqCst);
 }
 
+/// CLOCK_MONOTONIC now, ns (never negative).
 fn monotonic_ns() -> u64 {
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    // SAFETY: a valid timespec; CLOCK_MONOTONIC cannot fail.
-    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+    crate::time::monotonic_now_ns().max(0) as u64
 }
 
 /// True once the alarm thread runs (started here on first use).
