@@ -87,7 +87,7 @@ pub const BLOB_SERVICE: &str = "navsync/bench/blob";
 
 /// The transport of a case.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
+#[serde(rename_all = "kebab-case")]
 pub enum Transport {
     /// navsync's iceoryx2 services, the subscriber asleep on the service's own event
     /// (`Subscriber::wait_next`, as the clients and `navsync echo`).
@@ -311,6 +311,119 @@ pub struct IpcReport {
     pub machine: Machine,
     /// The cases in the order they ran.
     pub cases: Vec<IpcCase>,
+    /// With `--rounds` ≥ 2: the first transport against each other one, round by round.
+    pub paired: Vec<Paired>,
+}
+
+/// Which metrics [`Paired`] compares, in its arrays' order.
+pub const PAIRED_METRICS: [&str; 4] = ["p50", "p99", "p99.9", "subscriber CPU"];
+
+/// The first transport of a run against another, round by round. Both ran in every round,
+/// back to back, so a round's pair saw the same host; a pooled percentile can be decided by
+/// a few rounds the host disturbed, the per-round comparison shows whether a difference is
+/// systematic. Arrays follow [`PAIRED_METRICS`].
+#[derive(Debug, Clone, Serialize)]
+pub struct Paired {
+    /// Sample type.
+    pub kind: Kind,
+    /// Requested rate.
+    pub rate: Rate,
+    /// Subscriber processes.
+    pub subscribers: usize,
+    /// The transport compared (the run's first).
+    pub transport: Transport,
+    /// The transport it is compared against.
+    pub against: Transport,
+    /// Rounds compared.
+    pub rounds: u64,
+    /// Rounds in which `transport`'s figure was at or below `against`'s.
+    pub at_or_below: [u64; 4],
+    /// Median over the rounds of `transport`'s figure / `against`'s.
+    pub median_ratio: [f64; 4],
+    /// One-sided sign test of "`transport` is worse": the probability of at least as many
+    /// rounds above `against` if either were equally likely to be above (ties left out).
+    pub p_worse: [f64; 4],
+}
+
+/// One round's figures of one transport: p50, p99, p99.9 latency (µs) and subscriber CPU
+/// per received sample (µs).
+fn round_figures(run: &mut CaseRun) -> [f64; 4] {
+    let p = Percentiles::from_ns(&mut run.latencies_ns);
+    [
+        p.p50_us,
+        p.p99_us,
+        p.p999_us,
+        run.subscriber_cpu_s / run.received.max(1) as f64 * 1e6,
+    ]
+}
+
+/// P(X ≥ k) for X ~ Binomial(n, ½): the one-sided sign test.
+pub fn sign_test_p(k: u64, n: u64) -> f64 {
+    if k == 0 {
+        return 1.0;
+    }
+    if k > n {
+        return 0.0;
+    }
+    // pmf(i + 1) = pmf(i) · (n − i)/(i + 1), from pmf(0) = 2⁻ⁿ (n ≤ 1000: no underflow).
+    let mut pmf = 0.5f64.powi(n.min(1000) as i32);
+    let mut tail = 0.0;
+    for i in 0..=n {
+        if i >= k {
+            tail += pmf;
+        }
+        pmf *= (n - i) as f64 / (i + 1) as f64;
+    }
+    tail.min(1.0)
+}
+
+impl Paired {
+    fn of(
+        (kind, rate, subscribers): (Kind, Rate, usize),
+        (transport, against): (Transport, Transport),
+        a: &[[f64; 4]],
+        b: &[[f64; 4]],
+    ) -> Self {
+        let mut at_or_below = [0u64; 4];
+        let mut median_ratio = [f64::NAN; 4];
+        let mut p_worse = [1.0; 4];
+        for m in 0..4 {
+            let (mut above, mut below) = (0u64, 0u64);
+            let mut ratios: Vec<f64> = Vec::with_capacity(a.len());
+            for (x, y) in a.iter().zip(b) {
+                let (x, y) = (x[m], y[m]);
+                if x <= y {
+                    at_or_below[m] += 1;
+                }
+                above += u64::from(x > y);
+                below += u64::from(x < y);
+                if y > 0.0 {
+                    ratios.push(x / y);
+                }
+            }
+            ratios.sort_by(f64::total_cmp);
+            if !ratios.is_empty() {
+                let h = ratios.len() / 2;
+                median_ratio[m] = if ratios.len() % 2 == 1 {
+                    ratios[h]
+                } else {
+                    0.5 * (ratios[h - 1] + ratios[h])
+                };
+            }
+            p_worse[m] = sign_test_p(above, above + below);
+        }
+        Self {
+            kind,
+            rate,
+            subscribers,
+            transport,
+            against,
+            rounds: a.len().min(b.len()) as u64,
+            at_or_below,
+            median_ratio,
+            p_worse,
+        }
+    }
 }
 
 /// Errors of the benchmark.
@@ -341,6 +454,7 @@ pub fn run(args: &IpcBenchArgs) -> Result<IpcReport, IpcBenchError> {
     let mut report = IpcReport {
         machine: Machine::now(),
         cases: Vec::new(),
+        paired: Vec::new(),
     };
     let _wakeup = util::wakeup_hold(args.realtime.is_some(), &mut report.machine);
     let rounds = args.rounds.min(args.samples);
@@ -357,6 +471,20 @@ pub fn run(args: &IpcBenchArgs) -> Result<IpcReport, IpcBenchError> {
                         let i = (k + r as usize) % n_t;
                         let run = run_case(args.transports[i], kind, rate, subs, samples, args.realtime)?;
                         runs[i].push(run);
+                    }
+                }
+                if rounds >= 2 {
+                    let figures: Vec<Vec<[f64; 4]>> = runs
+                        .iter_mut()
+                        .map(|rs| rs.iter_mut().map(round_figures).collect())
+                        .collect();
+                    for i in 1..n_t {
+                        report.paired.push(Paired::of(
+                            (kind, rate, subs),
+                            (args.transports[0], args.transports[i]),
+                            &figures[0],
+                            &figures[i],
+                        ));
                     }
                 }
                 for (&transport, runs) in args.transports.iter().zip(&mut runs) {
@@ -642,7 +770,44 @@ pub fn table(r: &IpcReport) -> String {
         s.push_str(&row(c));
         s.push('\n');
     }
+    if !r.paired.is_empty() {
+        s.push_str(&paired_table(&r.paired));
+    }
     s.push_str(&r.machine.line());
+    s
+}
+
+/// The round-by-round comparison: per metric, rounds at or below, the median ratio and the
+/// sign test's p of "worse".
+fn paired_table(paired: &[Paired]) -> String {
+    let mut s = format!(
+        "\nround by round (cell: rounds at or below / rounds, median ratio, sign-test p of worse):\n\n\
+         | payload | rate | subscribers | transport vs | {} |\n|---|---|---|---|---|---|---|---|\n",
+        PAIRED_METRICS.join(" | ")
+    );
+    for p in paired {
+        let cells: Vec<String> = (0..4)
+            .map(|m| {
+                format!(
+                    "{}/{}, ×{:.3}, p {:.3}",
+                    p.at_or_below[m], p.rounds, p.median_ratio[m], p.p_worse[m]
+                )
+            })
+            .collect();
+        s.push_str(&format!(
+            "| {} | {} | {} | {} vs {} | {} |\n",
+            kind_name(p.kind),
+            match p.rate {
+                Rate::Hz(r) => format!("{r} Hz"),
+                Rate::Max => "max".to_string(),
+            },
+            p.subscribers,
+            transport_name(p.transport),
+            transport_name(p.against),
+            cells.join(" | ")
+        ));
+    }
+    s.push('\n');
     s
 }
 
@@ -958,4 +1123,42 @@ fn connect(path: &Path) -> Result<Fd, IpcBenchError> {
         return Err(std::io::Error::last_os_error().into());
     }
     Ok(fd)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sign_test_tails() {
+        assert_eq!(sign_test_p(0, 10), 1.0);
+        assert!((sign_test_p(10, 10) - 1.0 / 1024.0).abs() < 1e-15);
+        // P(X ≥ 8), n = 10: (45 + 10 + 1) / 1024.
+        assert!((sign_test_p(8, 10) - 56.0 / 1024.0).abs() < 1e-12);
+        assert!((sign_test_p(5, 10) - 638.0 / 1024.0).abs() < 1e-12);
+        assert_eq!(sign_test_p(3, 2), 0.0);
+        assert!(sign_test_p(1000, 1000) > 0.0);
+    }
+
+    #[test]
+    fn paired_counts_rounds_and_medians() {
+        // Transport a is lower in p50 every round, higher in p99 in two of three, tied in CPU.
+        let a = [[1.0, 5.0, 9.0, 2.0], [1.0, 5.0, 9.0, 2.0], [1.0, 3.0, 9.0, 2.0]];
+        let b = [[2.0, 4.0, 9.0, 2.0], [4.0, 4.0, 9.0, 2.0], [2.0, 4.0, 9.0, 2.0]];
+        let p = Paired::of(
+            (Kind::Imu, Rate::Hz(1000.0), 1),
+            (Transport::Iceoryx2, Transport::Socket),
+            &a,
+            &b,
+        );
+        assert_eq!(p.rounds, 3);
+        assert_eq!(p.at_or_below, [3, 1, 3, 3]);
+        assert_eq!(p.median_ratio[0], 0.5);
+        assert_eq!(p.median_ratio[1], 1.25);
+        assert_eq!(p.p_worse[0], 1.0);
+        assert_eq!(p.p_worse[1], 0.5);
+        // Ties count as neither.
+        assert_eq!(p.p_worse[3], 1.0);
+        assert!(paired_table(&[p]).contains("| imu | 1000 Hz | 1 | iceoryx2 vs socket | 3/3, ×0.500"));
+    }
 }

@@ -66,7 +66,7 @@ fn benchmarks_run_and_report_sane_figures() {
         &[
             "ipc",
             "--transports",
-            "futex-floor",
+            "futex-floor,socket",
             "--kinds",
             "imu",
             "--rates",
@@ -79,7 +79,7 @@ fn benchmarks_run_and_report_sane_figures() {
         &env.dir.join("floor.json"),
     );
     let cases = floor["cases"].as_array().unwrap();
-    assert_eq!(cases.len(), 2, "{floor}");
+    assert_eq!(cases.len(), 4, "{floor}");
     for c in cases {
         // Two rounds of 1000 samples (`--quick`: 2000 per case) pooled into one case.
         assert_eq!(c["sent"].as_u64(), Some(2000), "{c}");
@@ -87,6 +87,19 @@ fn benchmarks_run_and_report_sane_figures() {
         let received = c["received"].as_u64().unwrap();
         assert!(expected > 0 && received * 100 >= expected * 99, "{c}");
         percentiles_sane(&c["latency"], "futex-floor");
+    }
+    // Round by round, the floor against the socket, for 1 and 4 subscribers.
+    let paired = floor["paired"].as_array().unwrap();
+    assert_eq!(paired.len(), 2, "{floor}");
+    for p in paired {
+        assert_eq!(p["rounds"].as_u64(), Some(2), "{p}");
+        assert_eq!(p["transport"].as_str(), Some("futex-floor"), "{p}");
+        for m in 0..4 {
+            assert!(p["at_or_below"][m].as_u64().unwrap() <= 2, "{p}");
+            let r = p["median_ratio"][m].as_f64().unwrap();
+            let pw = p["p_worse"][m].as_f64().unwrap();
+            assert!(r > 0.0 && r.is_finite() && (0.0..=1.0).contains(&pw), "{p}");
+        }
     }
     let left: Vec<_> = std::fs::read_dir("/dev/shm")
         .unwrap()
