@@ -35,7 +35,7 @@ use serde::Serialize;
 
 use crate::util::{self, BenchEnv, Machine, Percentiles};
 
-mod floor;
+pub mod floor;
 
 /// How long a bench publisher stays after its last sample unless stopped earlier: longer than
 /// the bench waits for its subscribers.

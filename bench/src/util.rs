@@ -422,10 +422,16 @@ impl Drop for BenchEnv {
             self.stop_all();
         }
         let _ = std::fs::remove_dir_all(&self.dir);
-        // What iceoryx2 leaves of a prefix once every process is gone: its node counter.
-        for d in ["/dev/shm", "/tmp/iceoryx2"] {
-            remove_prefixed(Path::new(d), &self.prefix);
-        }
+        remove_prefix_files(&self.prefix);
+    }
+}
+
+/// Removes what iceoryx2 leaves of a prefix once every process of it is gone (its node
+/// counter, `/dev/shm/<prefix>…global_mgmt`), and anything else of the prefix in `/dev/shm`
+/// and `/tmp/iceoryx2`.
+pub fn remove_prefix_files(prefix: &str) {
+    for d in ["/dev/shm", "/tmp/iceoryx2"] {
+        remove_prefixed(Path::new(d), prefix);
     }
 }
 

@@ -33,6 +33,25 @@ pub fn bench_bin() -> PathBuf {
     workspace_bin("navsync-bench")
 }
 
+/// An example program of the workspace (`<crate>/examples/<name>.rs`), which
+/// `cargo test --workspace` builds into `target/<profile>/examples/`; panics saying so when
+/// it is missing.
+pub fn workspace_example(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    // target/<profile>/deps/<test>-<hash> → target/<profile>/examples/<name>
+    let bin = exe
+        .parent()
+        .and_then(Path::parent)
+        .map(|d| d.join("examples").join(name))
+        .expect("target dir");
+    assert!(
+        bin.exists(),
+        "{} not built: run the tests with `cargo test --workspace` (which builds the examples)",
+        bin.display()
+    );
+    bin
+}
+
 /// A binary of the workspace that cargo built next to the test executable.
 fn workspace_bin(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");

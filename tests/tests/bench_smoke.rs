@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use navsync_tests::{TestEnv, bench_bin, navsync_bin};
+use navsync_tests::{TestEnv, bench_bin, navsync_bin, prefixed_files, workspace_example};
 use serde_json::Value;
 
 fn run_json(env: &TestEnv, args: &[&str], json: &Path) -> Value {
@@ -229,4 +229,42 @@ fn zenoh_benchmark_crosses_two_namespaces() {
         percentiles_sane(&c["latency"], "zenoh");
         assert!(c["bridge_a_cpu_us_per_msg"].as_f64().unwrap() >= 0.0, "{c}");
     }
+}
+
+/// `bench/examples/receive_cost.rs` (built by `cargo test --workspace`): three rows of
+/// positive costs, and nothing of its prefix left in `/dev/shm`.
+#[test]
+fn receive_cost_example_reports_and_cleans_up() {
+    let child = std::process::Command::new(workspace_example("receive_cost"))
+        .arg("2000")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = child.id();
+    let o = child.wait_with_output().unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{}\n{out}\n{}",
+        o.status,
+        String::from_utf8_lossy(&o.stderr)
+    );
+    println!("{out}");
+    let rows: Vec<&str> = out
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| round"))
+        .collect();
+    assert_eq!(rows.len(), 3, "{out}");
+    for r in rows {
+        let cells: Vec<&str> = r.trim_matches('|').split('|').map(str::trim).collect();
+        assert_eq!(cells.len(), 8, "{r}");
+        for c in &cells[1..] {
+            let v: f64 = c.split_whitespace().next().unwrap().parse().unwrap();
+            assert!(v > 0.0 && v.is_finite(), "{r}");
+        }
+    }
+    // The example's own prefix; it removes its node counter too.
+    let left = prefixed_files(&format!("navsync_receive_cost_{pid}_"));
+    assert!(left.is_empty(), "left behind: {left:?}");
 }

@@ -12,7 +12,7 @@ use navsync_shared::client::{Client, ClientError, NavClient};
 use navsync_shared::ipc::IpcNode;
 use navsync_shared::samples::{ImuSample, NavState};
 use navsync_shared::services;
-use navsync_tests::{TestEnv, navsync_bin};
+use navsync_tests::{TestEnv, workspace_example};
 
 #[test]
 fn clients_wait_check_staleness_and_notice_a_stopped_publisher() {
@@ -60,12 +60,7 @@ fn clients_wait_check_staleness_and_notice_a_stopped_publisher() {
     assert!(matches!(e, ClientError::WrongService { .. }), "{e}");
 
     // The example program prints states and exits after --count.
-    let example = navsync_bin().parent().unwrap().join("examples/nav_subscriber");
-    assert!(
-        example.exists(),
-        "{} not built (cargo test --workspace builds the examples)",
-        example.display()
-    );
+    let example = workspace_example("nav_subscriber");
     let o = command_in(&env, &example).args(["--count", "5"]).output().unwrap();
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
