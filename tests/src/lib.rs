@@ -34,36 +34,28 @@ pub fn bench_bin() -> PathBuf {
 }
 
 /// An example program of the workspace (`<crate>/examples/<name>.rs`), which
-/// `cargo test --workspace` builds into `target/<profile>/examples/`; panics saying so when
-/// it is missing.
+/// `cargo test --workspace` builds into `target/<profile>/examples/`.
 pub fn workspace_example(name: &str) -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable path");
-    // target/<profile>/deps/<test>-<hash> → target/<profile>/examples/<name>
-    let bin = exe
-        .parent()
-        .and_then(Path::parent)
-        .map(|d| d.join("examples").join(name))
-        .expect("target dir");
-    assert!(
-        bin.exists(),
-        "{} not built: run the tests with `cargo test --workspace` (which builds the examples)",
-        bin.display()
-    );
-    bin
+    built(&Path::new("examples").join(name), "the examples")
 }
 
 /// A binary of the workspace that cargo built next to the test executable.
 fn workspace_bin(name: &str) -> PathBuf {
+    built(Path::new(name), "the binaries (or set NAVSYNC_BIN for `navsync`)")
+}
+
+/// `rel` under the profile directory cargo builds into (`target/<profile>/`, where the test
+/// executable is `deps/<test>-<hash>`); panics saying how to build it when it is missing.
+fn built(rel: &Path, what: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
-    // target/<profile>/deps/<test>-<hash> → target/<profile>/<name>
     let bin = exe
         .parent()
         .and_then(Path::parent)
-        .map(|d| d.join(name))
+        .map(|d| d.join(rel))
         .expect("target dir");
     assert!(
         bin.exists(),
-        "{} not found: run the tests with `cargo test --workspace` (which builds the binary) or set NAVSYNC_BIN",
+        "{} not found: run the tests with `cargo test --workspace`, which builds {what}",
         bin.display()
     );
     bin
