@@ -2,9 +2,9 @@
 //! `receive`, a `publish`, a `receive` that finds a sample, and `publish` followed by
 //! `Subscriber::wait_with` (the notification already pending, so no sleep). What stays of a
 //! subscriber's CPU per sample in `navsync-bench ipc` beyond these is sleeping and waking
-//! (kernel, scheduler) and caches gone cold: the last column times `wait_with` after 32 MiB
-//! were written since the sample was published, and the same cold read for the futex-floor
-//! ring and a Unix-domain socket's `recv`, for comparison.
+//! (kernel, scheduler) and caches gone cold: the "cold" columns time `wait_with` after 32 MiB
+//! were written since the sample was published, and the same cold read of the futex-floor
+//! ring and of a Unix-domain socket (`recv`), for comparison.
 //!
 //! `cargo run --release -p navsync-bench --example receive_cost [-- ITERATIONS]`
 
@@ -41,20 +41,24 @@ fn evict(junk: &mut [u8], i: u64) {
     std::hint::black_box(&junk);
 }
 
-/// Mean ns of the futex-floor ring's read of a sample published before the caches were
-/// evicted (the ring of `navsync-bench ipc --transports futex-floor`).
-fn ring_cold_ns(ring: &floor::Ring, n: u64, junk: &mut [u8]) -> f64 {
-    let stop = AtomicBool::new(false);
+/// Mean ns of `take(i)` over `n` samples, each sent by `send(i)` before 32 MiB are written
+/// (caches and TLB full of other data, as after a sleep while other processes ran); only
+/// `take` is timed.
+fn cold_ns<E>(
+    n: u64,
+    junk: &mut [u8],
+    mut send: impl FnMut(u64) -> Result<(), E>,
+    mut take: impl FnMut(u64) -> Result<(), E>,
+) -> Result<f64, E> {
     let mut total = 0u128;
     for i in 0..n {
-        ring.publish(i, || sample(i));
+        send(i)?;
         evict(junk, i);
         let t = Instant::now();
-        let got = ring.wait_with(i, &stop, |s: &ImuSample| s.stamp.seq);
+        take(i)?;
         total += t.elapsed().as_nanos();
-        std::hint::black_box(got);
     }
-    total as f64 / n as f64
+    Ok(total as f64 / n as f64)
 }
 
 /// A connected pair of Unix-domain SOCK_SEQPACKET sockets (the socket transport's kind).
@@ -68,41 +72,38 @@ fn socket_pair() -> std::io::Result<[OwnedFd; 2]> {
     Ok(fds.map(|fd| unsafe { OwnedFd::from_raw_fd(fd) }))
 }
 
-/// Mean ns of a blocking `recv` of a sample sent before the caches were evicted.
-fn socket_cold_ns(fds: &[OwnedFd; 2], n: u64, junk: &mut [u8]) -> std::io::Result<f64> {
-    let mut total = 0u128;
-    let mut buf = ImuSample::zeroed();
-    for i in 0..n {
-        let s = sample(i);
-        // SAFETY: sending the bytes of a plain-data sample.
-        let sent = unsafe {
-            libc::send(
-                fds[0].as_raw_fd(),
-                (&s as *const ImuSample).cast(),
-                size_of::<ImuSample>(),
-                0,
-            )
-        };
-        if sent < 0 {
-            return Err(std::io::Error::last_os_error());
-        }
-        evict(junk, i);
-        let t = Instant::now();
-        // SAFETY: receiving at most size_of::<ImuSample>() bytes into an ImuSample.
-        let got = unsafe {
-            libc::recv(
-                fds[1].as_raw_fd(),
-                (&mut buf as *mut ImuSample).cast(),
-                size_of::<ImuSample>(),
-                0,
-            )
-        };
-        total += t.elapsed().as_nanos();
-        if got < 0 {
-            return Err(std::io::Error::last_os_error());
-        }
+/// Sends one sample on a socket.
+fn send_sample(fd: &OwnedFd, s: &ImuSample) -> std::io::Result<()> {
+    // SAFETY: sending the bytes of a plain-data sample.
+    let sent = unsafe {
+        libc::send(
+            fd.as_raw_fd(),
+            (s as *const ImuSample).cast(),
+            size_of::<ImuSample>(),
+            0,
+        )
+    };
+    if sent < 0 {
+        return Err(std::io::Error::last_os_error());
     }
-    Ok(total as f64 / n as f64)
+    Ok(())
+}
+
+/// Receives one sample from a socket (blocking).
+fn recv_sample(fd: &OwnedFd, buf: &mut ImuSample) -> std::io::Result<()> {
+    // SAFETY: receiving at most size_of::<ImuSample>() bytes into an ImuSample.
+    let got = unsafe {
+        libc::recv(
+            fd.as_raw_fd(),
+            (buf as *mut ImuSample).cast(),
+            size_of::<ImuSample>(),
+            0,
+        )
+    };
+    if got < 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -156,23 +157,40 @@ fn measure(n: u64, prefix: &str) -> Result<(), Box<dyn std::error::Error>> {
                 other => Err(format!("published {i}, received {other:?}").into()),
             }
         })?;
-        // Cold: between publishing and receiving, 32 MiB are written (caches and TLB full of
-        // other data, as after a sleep while other processes ran); only the receive is timed.
         let cold_n = (n / 100).max(10);
-        let mut cold_ns = 0u128;
-        for i in 0..cold_n {
-            publisher.publish(&sample(i))?;
-            evict(&mut junk, i);
-            let t = Instant::now();
-            let got = subscriber.wait_with(Duration::MAX, |s| s.stamp.seq)?;
-            cold_ns += t.elapsed().as_nanos();
-            if got != Some(i) {
-                return Err(format!("published {i}, received {got:?}").into());
-            }
-        }
-        let cold = cold_ns as f64 / cold_n as f64;
-        let ring_cold = ring_cold_ns(&ring, cold_n, &mut junk);
-        let socket_cold = socket_cold_ns(&sockets, cold_n, &mut junk)?;
+        let cold = cold_ns(
+            cold_n,
+            &mut junk,
+            |i| {
+                publisher
+                    .publish(&sample(i))
+                    .map_err(Box::<dyn std::error::Error>::from)
+            },
+            |i| match subscriber.wait_with(Duration::MAX, |s| s.stamp.seq)? {
+                Some(seq) if seq == i => Ok(()),
+                other => Err(format!("published {i}, received {other:?}").into()),
+            },
+        )?;
+        let stop = AtomicBool::new(false);
+        let ring_cold = cold_ns(
+            cold_n,
+            &mut junk,
+            |i| {
+                ring.publish(i, || sample(i));
+                Ok::<_, std::io::Error>(())
+            },
+            |i| match ring.wait_with(i, &stop, |s: &ImuSample| s.stamp.seq) {
+                Some((seq, _)) if seq == i => Ok(()),
+                other => Err(std::io::Error::other(format!("ring: wrote {i}, read {other:?}"))),
+            },
+        )?;
+        let mut buf = ImuSample::zeroed();
+        let socket_cold = cold_ns(
+            cold_n,
+            &mut junk,
+            |i| send_sample(&sockets[0], &sample(i)),
+            |_| recv_sample(&sockets[1], &mut buf),
+        )?;
         println!(
             "| {round} | {empty:.0} | {publish:.0} | {receive:.0} ({got} samples) | {round_trip:.0} | {cold:.0} | {ring_cold:.0} | {socket_cold:.0} |"
         );
