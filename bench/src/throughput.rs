@@ -117,11 +117,12 @@ pub fn run_case(args: &ThroughputArgs, imus: usize) -> Result<ThroughputCase, Si
         imus: Some(imus),
         ..Default::default()
     })?;
-    let est = Settings {
-        imu_ids: (0..cfg.imu.count).map(|i| i.to_string()).collect(),
-        imu_model: cfg.imu.preset,
-        gnss_vel_std_mps: cfg.gnss.velocity_sigma_mps.max(0.01),
-        ..Default::default()
+    let est = {
+        let mut s = Settings::default();
+        s.inputs.imus = (0..cfg.imu.count).map(|i| i.to_string()).collect();
+        s.imu.imu_model = cfg.imu.preset;
+        s.gnss.gnss_vel_std_mps = cfg.gnss.velocity_sigma_mps.max(0.01);
+        s
     };
     let start_host = 1_000_000_000_000i64;
     let start_utc = 1_790_000_000 * NS_PER_S;

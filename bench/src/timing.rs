@@ -17,7 +17,6 @@ use navsync_sim::published::PublishedStream;
 use navsync_sim::scenario::{OutageConfig, SimConfig};
 use navsync_sim::world::World;
 
-use navsync_estimator::time::clock_model::OscillatorNoise;
 use navsync_estimator::time::time_sync::{TimeSync, TimeSyncConfig};
 
 /// One benchmark case.
@@ -138,7 +137,8 @@ pub fn run_case(case: &TimingCase) -> Result<TimingResult, SimError> {
     let world = World::new(&cfg, host0, utc0)?;
     let mut ts = TimeSync::new(TimeSyncConfig {
         // The oscillator's stability figures, as a configuration would state them.
-        noise: OscillatorNoise::from_allan(1e-10, case.rw_adev_1s.max(1e-12)),
+        oscillator_white_fm_adev_1s: 1e-10,
+        oscillator_random_walk_fm_adev_1s: case.rw_adev_1s.max(1e-12),
         ..Default::default()
     });
     let mut published: Option<TimeState> = None;

@@ -19,14 +19,15 @@ fn pps_time_mapping_is_within_5_us_after_30_s() {
     cfg.set_pps_jitter_s(1e-6);
     let host0 = 7_000_000_000i64;
     let world = World::new(&cfg, host0, 1_790_000_000_000_000_000).expect("world");
-    let args = Settings {
-        gnss_ids: vec!["0".into()],
-        pps_ids: vec!["0".into()],
-        imu_ids: vec!["0".into()],
-        software_sync: false,
-        imu_model: ImuPreset::Industrial,
-        estimate_delay: true,
-        ..Default::default()
+    let args = {
+        let mut s = Settings::default();
+        s.inputs.gnss = vec!["0".into()];
+        s.inputs.pps = vec!["0".into()];
+        s.inputs.imus = vec!["0".into()];
+        s.time.software_sync = false;
+        s.imu.imu_model = ImuPreset::Industrial;
+        s.nav.estimate_delay = true;
+        s
     };
     let mut p = Pipeline::new(args.pipeline_config());
     let (mut checked, mut worst, mut worst_sigmas) = (0u64, 0.0f64, 0.0f64);

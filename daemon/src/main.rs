@@ -132,4 +132,29 @@ mod tests {
     fn the_command_line_is_consistent() {
         super::Cli::command().debug_assert();
     }
+
+    /// A flag's value is checked as the file's is (the check of the setting's declaration),
+    /// and the error names the flag.
+    #[test]
+    fn bad_estimator_flags_are_errors_that_name_the_flag() {
+        use clap::Parser;
+        for (args, flag) in [
+            (
+                &["replay", "x.mcap", "--estimate", "--gate-scale", "-1"][..],
+                "--gate-scale",
+            ),
+            (&["replay", "x.mcap", "--estimate", "--horizon", "100"], "--horizon"),
+            (&["estimator", "--gnss-vel-std", "nan"], "--gnss-vel-std"),
+            (&["estimator", "--imus", "a,b c"], "--imus"),
+            (&["estimator", "--lever-arm", "1,2"], "--lever-arm"),
+            (&["sim", "--fast", "--estimate", "--align-speed", "0"], "--align-speed"),
+        ] {
+            let e = super::Cli::try_parse_from(std::iter::once("navsync").chain(args.iter().copied()))
+                .err()
+                .unwrap_or_else(|| panic!("{args:?} accepted"));
+            assert!(e.to_string().contains(flag), "{args:?}: {e}");
+        }
+        let ok = super::Cli::try_parse_from(["navsync", "estimator", "--gate-scale", "2", "--lever-arm", "-1,0,0.5"]);
+        assert!(ok.is_ok(), "{:?}", ok.err());
+    }
 }

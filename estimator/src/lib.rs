@@ -18,11 +18,13 @@
 //! - [`input_order`]: the canonical order in which samples of many services enter it.
 //! - [`offline`]: the pipeline over a stream of samples as fast as the CPU allows.
 //! - [`evaluation`]: accuracy against a truth (the simulator's, or another trajectory).
-//! - [`settings`]: every setting with its default.
+//! - [`settings`]: every setting, composed of the groups declared where they act
+//!   ([`declare`]: one declaration per setting).
 //! - [`gnss`]: GNSS signal-in-space models (GPS LNAV subframe decoding, checked against gpsd),
 //!   the first pieces of tightly coupled fusion; not used by the pipeline yet.
 
 pub mod array;
+pub mod declare;
 pub mod evaluation;
 pub mod gnss;
 pub mod input_order;

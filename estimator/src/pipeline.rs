@@ -21,9 +21,12 @@ use crate::nav::measurements::ranges::RangingConfig;
 use crate::array::imu_array::{ArrayConfig, ImuArray};
 use crate::nav::measurements::gnss::{self, GnssAccuracy};
 use crate::nav::navigator::{NavConfig, Navigator};
-use crate::settings::InitialState;
 use crate::time::device_timing::{DeviceTiming, DeviceTimingConfig};
 use crate::time::time_sync::{TimeSync, TimeSyncConfig};
+
+/// Prior of Δ under software sync and its 1-sigma, s: any receiver latency below the fusion
+/// horizon.
+const SOFTWARE_DELAY_PRIOR_S: (f64, f64) = (0.5, 0.5);
 
 /// Mechanization steps of the output catch-up after a correction done per `NavState`
 /// ([`Pipeline::catch_up`]): a 1.5 s horizon at 1 kHz (1500 steps) reaches the output 8
@@ -43,12 +46,6 @@ pub struct PipelineConfig {
     pub reference_imu: String,
     /// The IMUs (one or an array); `array.reference` is set from `reference_imu`.
     pub array: ArrayConfig,
-    /// Prior of Δ under software sync, s, and its 1-sigma.
-    pub software_delay_prior: (f64, f64),
-    /// Prior of Δ under hardware sync, s, and its 1-sigma.
-    pub hardware_delay_prior: (f64, f64),
-    /// A known initial state: the filter starts from it instead of aligning itself.
-    pub initial_state: Option<InitialState>,
     /// Sample times from the IMUs' own clocks where they carry one.
     pub device_timing: DeviceTimingConfig,
 }
@@ -193,7 +190,7 @@ impl Pipeline {
         let Some(stamp) = self.epoch_stamp(fix.utc_ns, fix.stamp.host_ns) else {
             return changed;
         };
-        if self.cfg.initial_state.is_some() && !self.nav.is_aligned() {
+        if self.cfg.nav.initial_state.is_some() && !self.nav.is_aligned() {
             // With a known initial state the filter does not align itself: fixes before its
             // instant are not used.
             return changed;
@@ -218,9 +215,10 @@ impl Pipeline {
             }
         };
         if self.stamping != Some(stamping) {
+            // Under hardware sync Δ is the IMU-to-GNSS offset left after the PPS mapping.
             let (prior, std) = match stamping {
-                FixStamping::Epoch => self.cfg.hardware_delay_prior,
-                FixStamping::Receipt => self.cfg.software_delay_prior,
+                FixStamping::Epoch => (0.0, self.cfg.nav.delay_prior_std_s),
+                FixStamping::Receipt => SOFTWARE_DELAY_PRIOR_S,
             };
             self.nav.reset_delay(prior, std);
             self.stamping = Some(stamping);
@@ -274,7 +272,7 @@ impl Pipeline {
         let epoch = self.ephemerides.range_epoch(raw, stamp, bias_m, &mut self.range_counts);
         if self.nav.is_aligned() {
             self.nav.on_ranges(epoch, raw.stamp.host_ns);
-        } else if self.cfg.initial_state.is_none()
+        } else if self.cfg.nav.initial_state.is_none()
             && let Some(obs) = single_point_observation(&epoch, &self.cfg.nav.measurements.ranges)
         {
             self.nav.on_gnss(obs, raw.stamp.host_ns);
@@ -359,7 +357,7 @@ impl Pipeline {
         }
         self.time.tick(s.stamp.host_ns);
         let (host_ns, g, a) = self.array.output_sample(index, s);
-        if let Some(init) = &self.cfg.initial_state
+        if let Some(init) = &self.cfg.nav.initial_state
             && !self.nav.is_aligned()
             && self.time.utc_ns_at_host(host_ns).is_some_and(|u| u >= init.utc_ns)
             && let Some(h0) = self.time.host_ns_at_utc(init.utc_ns)
@@ -378,7 +376,8 @@ impl Pipeline {
     fn on_handover(&mut self) {
         let configured = self.array.index_of(&self.cfg.reference_imu).unwrap_or(0);
         let moved_b_m = self.array.lever_b_m(self.array.reference()) - self.array.lever_b_m(configured);
-        self.nav.set_lever_arm(self.cfg.nav.lever_arm_b_m - moved_b_m);
+        self.nav
+            .set_lever_arm(nalgebra::Vector3::from(self.cfg.nav.gnss_lever_arm_m) - moved_b_m);
     }
 
     /// Id of the IMU whose samples currently drive the output, as stored in samples (the
@@ -399,8 +398,8 @@ impl Pipeline {
             fixes_used: self.nav.counters().fixes_used,
             fixes_unlabelled: self.counters.fixes_waiting_for_time,
             pps_used: self.time.counters().pps_used,
-            initial_state: self.cfg.initial_state.is_some(),
-            align_min_speed_mps: self.cfg.nav.align.min_speed_mps,
+            initial_state: self.cfg.nav.initial_state.is_some(),
+            align_min_speed_mps: self.cfg.nav.align.align_min_speed_mps,
         }
     }
 

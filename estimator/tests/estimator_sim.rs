@@ -42,15 +42,16 @@ fn run_with(
         });
     }
     let world = World::new(&cfg, 3_000_000_000, 1_790_000_000_000_000_000).expect("world");
-    let args = Settings {
-        gnss_ids: vec!["0".into()],
-        pps_ids: vec!["0".into()],
-        imu_ids: vec!["0".into()],
-        software_sync,
-        imu_model: preset,
-        estimate_delay: delay_state,
-        gnss_vel_std_mps: 0.05,
-        ..Default::default()
+    let args = {
+        let mut s = Settings::default();
+        s.inputs.gnss = vec!["0".into()];
+        s.inputs.pps = vec!["0".into()];
+        s.inputs.imus = vec!["0".into()];
+        s.time.software_sync = software_sync;
+        s.imu.imu_model = preset;
+        s.nav.estimate_delay = delay_state;
+        s.gnss.gnss_vel_std_mps = 0.05;
+        s
     };
     let mut pipeline = Pipeline::new(args.pipeline_config());
     let truth = if software_sync {

@@ -147,7 +147,7 @@ fn bad_imu_samples_are_rejected_counted_and_harmless() {
     let (faulty, n, p) = run(end_s, true);
     let ac = *p.array().counters();
     let pc = *p.counters();
-    let nc = *p.nav().counters();
+    let nc = p.nav().counters();
     let windows = [
         ("turn with bursts, 68–80 s", 68.0, 80.0),
         ("acceleration with bursts, 93–105 s", 93.0, 105.0),

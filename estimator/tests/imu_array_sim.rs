@@ -16,12 +16,11 @@ use navsync_sim::world::World;
 const HOST0: i64 = 3_000_000_000;
 
 fn consumer_args() -> Settings {
-    Settings {
-        imu_ids: (0..4).map(|i| i.to_string()).collect(),
-        imu_model: ImuPreset::Consumer,
-        gnss_vel_std_mps: 0.05,
-        ..Default::default()
-    }
+    let mut s = Settings::default();
+    s.inputs.imus = (0..4).map(|i| i.to_string()).collect();
+    s.imu.imu_model = ImuPreset::Consumer;
+    s.gnss.gnss_vel_std_mps = 0.05;
+    s
 }
 
 /// (time since start in s, per-IMU offset estimates in s, their stds in s).

@@ -35,10 +35,11 @@ fn no_heap_allocation_per_sample_tightly_coupled() {
         .take_while(|p| p.delivered_ns - host0 < 180_000_000_000)
         .map(|p| p.sample)
         .collect();
-    let settings = Settings {
-        coupling: Coupling::Tight,
-        imu_model: ImuPreset::Industrial,
-        ..Settings::default()
+    let settings = {
+        let mut s = Settings::default();
+        s.nav.coupling = Coupling::Tight;
+        s.imu.imu_model = ImuPreset::Industrial;
+        s
     };
     let mut p = Pipeline::new(settings.pipeline_config());
     let feed = |p: &mut Pipeline, s: &AnySample| match s {

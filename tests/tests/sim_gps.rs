@@ -229,11 +229,12 @@ fn an_imu_on_the_receivers_crystal_is_timed_by_the_tightly_coupled_clock() {
     let (start_host, start_utc) = (1_000_000_000_000i64, 1_796_083_200_000_000_000i64);
     let truth = World::new(&cfg, start_host, start_utc).expect("scenario");
     let stream = PublishedStream::new(World::new(&cfg, start_host, start_utc).unwrap());
-    let settings = Settings {
-        coupling: Coupling::Tight,
-        imu_model: cfg.imu.preset,
-        gnss_lever_arm_m: cfg.gnss.antenna_lever_arm_m,
-        ..Settings::default()
+    let settings = {
+        let mut s = Settings::default();
+        s.nav.coupling = Coupling::Tight;
+        s.imu.imu_model = cfg.imu.preset;
+        s.nav.gnss_lever_arm_m = cfg.gnss.antenna_lever_arm_m;
+        s
     };
     let mut pipeline = Pipeline::new(settings.pipeline_config());
     // The device-clock regression alone, on the same samples.

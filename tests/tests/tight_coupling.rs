@@ -301,12 +301,13 @@ fn run_with(coupling: Coupling, sky: Sky, faults: Faults) -> Outcome {
     let start_utc_ns = utc_ns_from_gps_ns(i64::from(WEEK) * SECONDS_PER_WEEK * 1_000_000_000 + (tow0 * 1e9) as i64);
     let truth = world(&cfg, start_utc_ns);
     let stream = PublishedStream::new(world(&cfg, start_utc_ns));
-    let settings = Settings {
-        coupling,
-        software_sync: faults.software_sync,
-        imu_model: ImuPreset::Industrial,
-        gnss_vel_std_mps: 0.1,
-        ..Default::default()
+    let settings = {
+        let mut s = Settings::default();
+        s.nav.coupling = coupling;
+        s.time.software_sync = faults.software_sync;
+        s.imu.imu_model = ImuPreset::Industrial;
+        s.gnss.gnss_vel_std_mps = 0.1;
+        s
     };
     let mut pipeline = Pipeline::new(settings.pipeline_config());
     let mut receiver = Receiver::new(tow0, faults);

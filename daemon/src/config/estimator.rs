@@ -1,15 +1,20 @@
 //! The estimator's settings on the command line and in the file, resolved into one
-//! [`Settings`]: per field a flag given on the command line, else `[estimator]`/`[timing]`
-//! (and each IMU's `mounting`, the first receiver's `lever_arm_m`), else the default of
-//! [`Settings`]. The live `navsync estimator` and every offline tool (`replay --estimate`,
+//! [`Settings`]: per setting a flag given on the command line, else the file (`[estimator]`,
+//! `[timing]`, each IMU's `mounting`, the first receiver's `lever_arm_m`), else the base (the
+//! defaults, or what a recording or the simulator says its devices are). The flags are made
+//! from the settings' declarations ([`Settings::specs`]), so a setting's flag, file key,
+//! default, documentation and check are written once; the check runs on the merged value.
+//! The live `navsync estimator` and every offline tool (`replay --estimate`,
 //! `sim --fast --estimate`, `report`, `analyze`) take the same flags ([`EstimatorFlags`]).
 
-use navsync_estimator::settings::{Coupling, ImuMounting, ReceiverOscillator, Settings};
-use navsync_shared::imu_spec::{ImuNoise, ImuPreset, PerAxis};
+use clap::{Arg, ArgAction, ArgMatches, Command};
+use navsync_estimator::declare::{Group, Spec};
+use navsync_estimator::settings::{ImuMounting, Inputs, Settings};
+use navsync_shared::imu_spec::{ImuNoise, PerAxis};
 
 use super::{ConfigError, Loaded};
 
-/// A device id as used in service names: letters, digits, `-` and `_`.
+/// A device id as used in service names: letters, digits, `-` and `_` (a flag's parser).
 pub fn parse_id(s: &str) -> Result<String, String> {
     if super::valid_id(s) {
         Ok(s.to_string())
@@ -18,103 +23,111 @@ pub fn parse_id(s: &str) -> Result<String, String> {
     }
 }
 
-/// The estimator's flags (each overrides the file; absent flags leave the file's value).
-#[derive(clap::Args, Debug, Clone, Default)]
-pub struct EstimatorFlags {
-    /// Which services it fuses.
-    #[command(flatten)]
-    pub inputs: InputFlags,
-    /// How it models and fuses them.
-    #[command(flatten)]
-    pub model: ModelFlags,
-}
+/// The estimator's flags with its inputs (`--gnss`, `--pps`, `--imus`): every process and tool
+/// that picks its inputs by id.
+pub type EstimatorFlags = SettingFlags<true>;
+/// The estimator's flags without its inputs (the simulator's own IMUs are the inputs).
+pub type ModelFlags = SettingFlags<false>;
 
-/// The estimator's inputs by id.
-#[derive(clap::Args, Debug, Clone, Default)]
-pub struct InputFlags {
-    /// GNSS receiver ids [default: every [gnss.*] of the file, else 0].
-    #[arg(long, value_delimiter = ',', value_parser = parse_id)]
-    pub gnss: Option<Vec<String>>,
-    /// PPS source ids [default: every [pps.*] of the file, else 0].
-    #[arg(long, value_delimiter = ',', value_parser = parse_id)]
-    pub pps: Option<Vec<String>>,
-    /// IMU ids, the reference (which paces the output) first [default: every [imu.*], else 0].
-    #[arg(long, value_delimiter = ',', value_parser = parse_id)]
-    pub imus: Option<Vec<String>>,
-}
-
-/// The estimator's models and switches.
-#[derive(clap::Args, Debug, Clone, Default)]
-pub struct ModelFlags {
-    /// Ignore PPS: stamp fixes by receipt time (software sync, ms-level time)
-    /// [default: [timing].software_sync, else off].
-    #[arg(long)]
-    pub software_sync: bool,
-    /// IMU class for the filter's process noise: consumer, industrial, perfect
-    /// [default: [estimator].imu_model, else industrial].
-    #[arg(long)]
-    pub imu_model: Option<ImuPreset>,
-    /// Do not estimate the GNSS delay Δ (for comparison runs) [default: estimated].
-    #[arg(long)]
-    pub no_delay_state: bool,
-    /// Fuse the IMUs without estimating their time offsets (for comparison runs)
-    /// [default: estimated].
-    #[arg(long)]
-    pub no_imu_offsets: bool,
-    /// No zero-velocity updates while standing still [default: [estimator].zupt, else on].
-    #[arg(long)]
-    pub no_zupt: bool,
-    /// Adapt the IMU's process noise when the GNSS innovations show it too optimistic
-    /// [default: [estimator].adapt_process_noise, else off].
-    #[arg(long = "adapt-noise")]
-    pub adapt_process_noise: bool,
-    /// Fuse IMU samples at their receipt stamps even where they carry a device clock
-    /// [default: [estimator].device_clocks, else the device clocks are used].
-    #[arg(long)]
-    pub no_device_clocks: bool,
-    /// 1-sigma of the receiver's velocity per axis, m/s [default: [estimator].gnss_vel_std_mps,
-    /// else 0.1].
-    #[arg(long = "gnss-vel-std")]
-    pub gnss_vel_std_mps: Option<f64>,
-    /// Factor on the receiver's position σ [default: [estimator].gnss_pos_std_scale, else 1].
-    #[arg(long = "gnss-std-scale")]
-    pub gnss_pos_std_scale: Option<f64>,
-    /// Smallest GNSS position σ, m [default: [estimator].gnss_pos_std_floor_m, else 0.005].
-    #[arg(long = "gnss-std-floor")]
-    pub gnss_pos_std_floor_m: Option<f64>,
-    /// GNSS antenna in the body frame (FRD) from the IMU, m, `x,y,z` [default: the first
-    /// receiver's [gnss.ID].lever_arm_m, else the recording's, else 0].
-    #[arg(long = "lever-arm", value_parser = parse_vector, allow_hyphen_values = true)]
-    pub lever_arm_m: Option<[f64; 3]>,
-    /// Scale of the 99.9 % innovation gate [default: [estimator].gate_scale, else 1].
-    #[arg(long)]
-    pub gate_scale: Option<f64>,
-    /// GNSS speed above which the course gives the initial heading, m/s
-    /// [default: [estimator].align_min_speed_mps, else 3].
-    #[arg(long = "align-speed")]
-    pub align_min_speed_mps: Option<f64>,
-    /// 1-sigma of the prior of Δ under hardware sync (the IMU-to-GNSS time offset left after
-    /// the PPS mapping), s [default: [estimator].delay_prior_std_s, else 0.02; IMU time tags
-    /// from another clock than the PPS's may need 0.2].
-    #[arg(long = "delay-prior-std")]
-    pub delay_prior_std_s: Option<f64>,
-    /// Fusion horizon, s: how far the filter runs behind the present to fuse late
-    /// measurements at their epoch (≥ the largest receiver latency + 0.25 s) [default 1.5].
-    #[arg(long = "horizon")]
-    pub fusion_horizon_s: Option<f64>,
-    /// How GNSS aids the filter: loose (the receiver's fixes) or tight (each satellite's
-    /// pseudorange and Doppler from UBX RXM-RAWX/RXM-SFRBX, the receiver clock in the filter)
-    /// [default: [estimator].coupling, else loose].
-    #[arg(long)]
-    pub coupling: Option<Coupling>,
-    /// The receiver's oscillator for the clock states when tightly coupled: tcxo or crystal
-    /// [default: [estimator].receiver_oscillator, else tcxo].
-    #[arg(long)]
-    pub receiver_oscillator: Option<ReceiverOscillator>,
-    /// The IMU's noise (KF-GINS units; each a number or x,y,z; over [estimator.imu_noise],
-    /// the recording's, else --imu-model's).
-    #[command(flatten)]
+/// The estimator's settings given on the command line (each over the file's value), and the
+/// IMU noise model's refinements field by field.
+#[derive(Debug, Clone, Default)]
+pub struct SettingFlags<const INPUTS: bool> {
+    /// Settings given, by name, with their text as typed (already checked by clap).
+    pub given: Vec<(&'static str, String)>,
+    /// The IMU's noise (KF-GINS units; each a number or x,y,z; over `[estimator.imu_noise]`,
+    /// the recording's, else `--imu-model`'s).
     pub noise: NoiseFlags,
+}
+
+/// The settings that have a flag: every one with `INPUTS`, else all but the inputs.
+fn flagged(inputs: bool) -> impl Iterator<Item = &'static Spec> {
+    Settings::specs()
+        .into_iter()
+        .filter(move |s| s.flag.is_some() && (inputs || !Inputs::SPECS.contains(s)))
+}
+
+/// A flag's help: its doc comment, its default and where the file sets it (a switch says
+/// which way it turns the setting).
+fn help(spec: &Spec) -> String {
+    let doc = spec
+        .doc
+        .split('\n')
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ");
+    let (doc, default) = match spec.switch {
+        Some(true) => (format!("Turns on: {doc}"), " [default: off]".to_string()),
+        Some(false) => (format!("Turns off: {doc}"), " [default: on]".to_string()),
+        None => (
+            doc,
+            format!(
+                " [default: {}]",
+                Settings::default().show(spec.name).unwrap_or_default()
+            ),
+        ),
+    };
+    match spec.section {
+        Some(section) => format!("{doc}{default} [file: [{section}] {}]", spec.name),
+        None => format!("{doc}{default}"),
+    }
+}
+
+/// Checks a flag's text: it parses, and the setting's check holds.
+fn check_flag(name: &'static str, text: &str) -> Result<String, String> {
+    let mut s = Settings::default();
+    s.set_text(name, text)?;
+    s.check().map_err(|e| e.message)?;
+    Ok(text.to_string())
+}
+
+impl<const INPUTS: bool> clap::Args for SettingFlags<INPUTS> {
+    fn augment_args(mut cmd: Command) -> Command {
+        for spec in flagged(INPUTS) {
+            let (name, flag) = (spec.name, spec.flag.unwrap_or_default());
+            let arg = Arg::new(name).long(flag).help(help(spec));
+            cmd = cmd.arg(match spec.switch {
+                Some(_) => arg.action(ArgAction::SetTrue),
+                None => arg
+                    // Once per flag per command: the value's name lives as long as the parser.
+                    .value_name(&*Box::leak(name.to_ascii_uppercase().into_boxed_str()))
+                    .allow_hyphen_values(true)
+                    .value_parser(move |t: &str| check_flag(name, t)),
+            });
+        }
+        NoiseFlags::augment_args(cmd)
+    }
+
+    fn augment_args_for_update(cmd: Command) -> Command {
+        Self::augment_args(cmd)
+    }
+}
+
+impl<const INPUTS: bool> clap::FromArgMatches for SettingFlags<INPUTS> {
+    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
+        let mut given = Vec::new();
+        for spec in flagged(INPUTS) {
+            match spec.switch {
+                Some(on) if m.get_flag(spec.name) => given.push((spec.name, on.to_string())),
+                Some(_) => {}
+                None => {
+                    if let Some(t) = m.get_one::<String>(spec.name) {
+                        given.push((spec.name, t.clone()));
+                    }
+                }
+            }
+        }
+        Ok(Self {
+            given,
+            noise: NoiseFlags::from_arg_matches(m)?,
+        })
+    }
+
+    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
+        *self = Self::from_arg_matches(m)?;
+        Ok(())
+    }
 }
 
 /// The IMU's noise model on the command line, field by field (KF-GINS's units).
@@ -190,33 +203,18 @@ impl NoiseFlags {
     }
 }
 
-/// `x,y,z`: three numbers.
-fn parse_vector(s: &str) -> Result<[f64; 3], String> {
-    match s.parse::<PerAxis>() {
-        Ok(p) if s.contains(',') => Ok(p.0),
-        _ => Err(format!("`{s}`: expected three numbers x,y,z")),
+impl<const INPUTS: bool> SettingFlags<INPUTS> {
+    /// Whether setting `name` was given.
+    pub fn gives(&self, name: &str) -> bool {
+        self.given.iter().any(|(n, _)| *n == name)
     }
-}
 
-impl EstimatorFlags {
-    /// The settings: `defaults`, then the file, then the flags given.
-    pub fn settings_over(&self, cfg: &Loaded, defaults: Settings) -> Result<Settings, ConfigError> {
-        let mut s = defaults;
+    /// The settings: `base`, then the file, then the flags given; checked.
+    pub fn settings_over(&self, cfg: &Loaded, base: Settings) -> Result<Settings, ConfigError> {
+        let mut s = base;
         apply_file(&mut s, cfg)?;
-        let i = &self.inputs;
-        if let Some(ids) = &i.gnss {
-            s.gnss_ids = ids.clone();
-        }
-        if let Some(ids) = &i.pps {
-            s.pps_ids = ids.clone();
-        }
-        if let Some(ids) = &i.imus {
-            s.imu_ids = ids.clone();
-        }
-        self.model.apply(&mut s);
-        if s.imu_ids.is_empty() {
-            return Err(cfg.error_at("estimator.imus", "no IMU: the estimator needs at least one"));
-        }
+        self.apply(&mut s)?;
+        check(&s, cfg)?;
         Ok(s)
     }
 
@@ -224,141 +222,97 @@ impl EstimatorFlags {
     pub fn settings(&self, cfg: &Loaded) -> Result<Settings, ConfigError> {
         self.settings_over(cfg, Settings::default())
     }
-}
 
-impl ModelFlags {
-    /// The flags given, over `s`.
-    pub fn apply(&self, s: &mut Settings) {
-        if self.software_sync {
-            s.software_sync = true;
-        }
-        if let Some(m) = self.imu_model {
-            // A preset on the command line replaces an explicit model from the file or the
-            // recording.
-            s.imu_model = m;
-            s.imu_noise = None;
-        }
-        if self.no_delay_state {
-            s.estimate_delay = false;
-        }
-        if self.no_imu_offsets {
-            s.estimate_imu_offsets = false;
-        }
-        if self.no_zupt {
-            s.zupt = false;
-        }
-        if self.adapt_process_noise {
-            s.adapt_process_noise = true;
-        }
-        if self.no_device_clocks {
-            s.device_clocks = false;
-        }
-        if let Some(v) = self.gnss_vel_std_mps {
-            s.gnss_vel_std_mps = v;
-        }
-        if let Some(v) = self.gnss_pos_std_scale {
-            s.gnss_pos_std_scale = v;
-        }
-        if let Some(v) = self.gnss_pos_std_floor_m {
-            s.gnss_pos_std_floor_m = v;
-        }
-        if let Some(v) = self.lever_arm_m {
-            s.gnss_lever_arm_m = v;
-        }
-        if let Some(v) = self.gate_scale {
-            s.gate_scale = v;
-        }
-        if let Some(v) = self.align_min_speed_mps {
-            s.align_min_speed_mps = v;
-        }
-        if let Some(v) = self.fusion_horizon_s {
-            s.fusion_horizon_s = v;
-        }
-        if let Some(v) = self.delay_prior_std_s {
-            s.hardware_delay_prior_s.1 = v;
-        }
-        if let Some(v) = self.coupling {
-            s.coupling = v;
-        }
-        if let Some(v) = self.receiver_oscillator {
-            s.receiver_oscillator = v;
+    /// The flags given, over `s`. A preset (`--imu-model`) replaces an explicit model from
+    /// the file or the recording; the noise flags refine the model in force.
+    pub fn apply(&self, s: &mut Settings) -> Result<(), ConfigError> {
+        for (name, text) in &self.given {
+            s.set_text(name, text).map_err(|message| ConfigError {
+                file: "command line".into(),
+                line: None,
+                field: Some(format!("--{}", flag_of(name))),
+                message,
+            })?;
+            if *name == "imu_model" {
+                s.imu.imu_noise = None;
+            }
         }
         if self.noise.any() {
-            // Flags refine the model in force: the file's or the recording's, else the preset's
-            // (after --imu-model).
             let mut n = s.noise();
             self.noise.apply(&mut n);
-            s.imu_noise = Some(n);
+            s.imu.imu_noise = Some(n);
         }
+        Ok(())
     }
 }
 
-/// Applies what the file says about the estimator to `s`.
+/// The flag of setting `name`.
+fn flag_of(name: &str) -> &'static str {
+    Settings::specs()
+        .into_iter()
+        .find(|s| s.name == name)
+        .and_then(|s| s.flag)
+        .unwrap_or_default()
+}
+
+/// The merged settings' check, its error located where the failing value came from: the
+/// file's line when the file set it, else the setting's name.
+pub fn check(s: &Settings, cfg: &Loaded) -> Result<(), ConfigError> {
+    let Err(e) = s.check() else { return Ok(()) };
+    let section = Settings::specs()
+        .into_iter()
+        .find(|x| x.name == e.name)
+        .and_then(|x| x.section);
+    let index = e.index.map(|i| format!("[{i}]")).unwrap_or_default();
+    match section {
+        Some(section) if cfg.section(section).is_some_and(|t| t.contains_key(e.name)) => {
+            Err(cfg.error_at(&format!("{section}.{}{index}", e.name), e.message))
+        }
+        _ => Err(ConfigError {
+            file: cfg.file.clone(),
+            line: None,
+            field: Some(format!("{}{index}", e.name)),
+            message: e.message,
+        }),
+    }
+}
+
+/// Applies what the file says about the estimator to `s`: `[estimator]` and `[timing]` by
+/// the settings' declarations, the inputs from the devices' sections where `[estimator]`
+/// names none, each IMU's mounting and the first receiver's lever arm. Unknown keys and
+/// values of the wrong type are errors naming the file, line and field.
 pub fn apply_file(s: &mut Settings, cfg: &Loaded) -> Result<(), ConfigError> {
     let c = &cfg.config;
-    let e = &c.estimator;
-    if let Some(ids) = cfg.estimator_gnss() {
-        s.gnss_ids = ids;
+    for section in ["timing", "estimator"] {
+        for (key, value) in cfg.section(section).into_iter().flatten() {
+            let at = format!("{section}.{key}");
+            match s.set_value(section, key, value.clone()) {
+                Some(Ok(())) => {}
+                Some(Err(e)) => return Err(cfg.error_at(&at, e.message().trim().to_string())),
+                None => {
+                    let known: Vec<_> = Settings::specs()
+                        .into_iter()
+                        .filter(|x| x.section == Some(section))
+                        .map(|x| format!("`{}`", x.name))
+                        .collect();
+                    return Err(cfg.error_at(
+                        &at,
+                        format!("unknown field `{key}`, expected one of {}", known.join(", ")),
+                    ));
+                }
+            }
+        }
     }
-    if let Some(ids) = cfg.estimator_pps() {
-        s.pps_ids = ids;
+    let estimator = cfg.section("estimator");
+    let given = |key: &str| estimator.is_some_and(|t| t.contains_key(key));
+    if !given("gnss") && !c.gnss.is_empty() {
+        s.inputs.gnss = c.gnss.keys().cloned().collect();
     }
-    if let Some(ids) = cfg.estimator_imus() {
-        s.imu_ids = ids;
+    if !given("pps") && !c.pps.is_empty() {
+        s.inputs.pps = c.pps.keys().cloned().collect();
     }
-    if let Some(v) = c.timing.software_sync {
-        s.software_sync = v;
-    }
-    if let Some(m) = e.imu_model {
-        s.imu_model = m;
-    }
-    if let Some(v) = e.estimate_delay {
-        s.estimate_delay = v;
-    }
-    if let Some(v) = e.gnss_vel_std_mps {
-        s.gnss_vel_std_mps = v;
-    }
-    if let Some(v) = e.estimate_imu_offsets {
-        s.estimate_imu_offsets = v;
-    }
-    if let Some(v) = e.zupt {
-        s.zupt = v;
-    }
-    if let Some(v) = e.adapt_process_noise {
-        s.adapt_process_noise = v;
-    }
-    if let Some(v) = e.device_clocks {
-        s.device_clocks = v;
-    }
-    if let Some(v) = e.gnss_pos_std_scale {
-        s.gnss_pos_std_scale = v;
-    }
-    if let Some(v) = e.gnss_pos_std_floor_m {
-        s.gnss_pos_std_floor_m = v;
-    }
-    if let Some(v) = e.gate_scale {
-        s.gate_scale = v;
-    }
-    if let Some(v) = e.align_min_speed_mps {
-        s.align_min_speed_mps = v;
-    }
-    if let Some(n) = e.imu_noise {
-        s.imu_noise = Some(n);
-    }
-    if let Some(i) = e.initial_state {
-        s.initial_state = Some(i);
-    }
-    if let Some(v) = e.delay_prior_std_s {
-        s.hardware_delay_prior_s.1 = v;
-    }
-    if let Some(v) = e.coupling {
-        s.coupling = v;
-    }
-    if let Some(v) = e.receiver_oscillator {
-        s.receiver_oscillator = v;
-    }
-    if let Some(v) = e.fusion_horizon_s {
-        s.fusion_horizon_s = v;
+    if !given("imus") && !c.imu.is_empty() {
+        s.inputs.imus = c.imu.keys().cloned().collect();
     }
     for (id, i) in &c.imu {
         s.imu_mountings.insert(
@@ -369,15 +323,8 @@ pub fn apply_file(s: &mut Settings, cfg: &Loaded) -> Result<(), ConfigError> {
             },
         );
     }
-    if let Some(g) = s.gnss_ids.first().and_then(|id| c.gnss.get(id)) {
-        s.gnss_lever_arm_m = g.lever_arm_m;
-    }
-    let t = &c.timing;
-    if t.oscillator_white_fm_adev_1s.is_some() || t.oscillator_random_walk_fm_adev_1s.is_some() {
-        s.oscillator_adev_1s = Some((
-            t.oscillator_white_fm_adev_1s.unwrap_or(1e-10),
-            t.oscillator_random_walk_fm_adev_1s.unwrap_or(1e-10),
-        ));
+    if let Some(g) = s.inputs.gnss.first().and_then(|id| c.gnss.get(id)) {
+        s.nav.gnss_lever_arm_m = g.lever_arm_m;
     }
     Ok(())
 }
@@ -392,22 +339,23 @@ pub fn recording_metadata(cfg: &Loaded) -> Result<Vec<(String, &'static str, Str
     use navsync_shared::services;
     let mut s = Settings::default();
     apply_file(&mut s, cfg)?;
-    let (c, e) = (&cfg.config, &cfg.config.estimator);
+    let c = &cfg.config;
+    let states = |key: &str| cfg.section("estimator").is_some_and(|t| t.contains_key(key));
     let mut out = Vec::new();
-    if e.imu_model.is_some() || e.imu_noise.is_some() {
+    if states("imu_model") || states("imu_noise") {
         let noise = metadata_value(&s.noise());
-        for id in &s.imu_ids {
+        for id in &s.inputs.imus {
             out.push((services::imu_sample(id), channels::META_IMU_NOISE, noise.clone()));
         }
     }
-    if let (Some(i), Some(id)) = (&s.initial_state, s.imu_ids.first()) {
+    if let (Some(i), Some(id)) = (&s.nav.initial_state, s.inputs.imus.first()) {
         out.push((
             services::imu_sample(id),
             channels::META_INITIAL_STATE,
             metadata_value(i),
         ));
     }
-    for id in &s.gnss_ids {
+    for id in &s.inputs.gnss {
         if let Some(g) = c.gnss.get(id) {
             out.push((
                 services::gnss_fix(id),
@@ -415,8 +363,12 @@ pub fn recording_metadata(cfg: &Loaded) -> Result<Vec<(String, &'static str, Str
                 metadata_value(&g.lever_arm_m),
             ));
         }
-        if let Some(v) = e.gnss_vel_std_mps {
-            out.push((services::gnss_fix(id), channels::META_GNSS_VEL_STD, metadata_value(&v)));
+        if states("gnss_vel_std_mps") {
+            out.push((
+                services::gnss_fix(id),
+                channels::META_GNSS_VEL_STD,
+                metadata_value(&s.gnss.gnss_vel_std_mps),
+            ));
         }
     }
     Ok(out)
@@ -425,6 +377,8 @@ pub fn recording_metadata(cfg: &Loaded) -> Result<Vec<(String, &'static str, Str
 #[cfg(test)]
 mod tests {
     use std::path::Path;
+
+    use navsync_shared::imu_spec::ImuPreset;
 
     use super::*;
 
@@ -465,26 +419,28 @@ mod tests {
         )
         .unwrap();
         let e = EstimatorFlags::default().settings(&cfg).unwrap();
-        assert_eq!(e.imu_model, ImuPreset::Consumer);
-        assert_eq!(e.gnss_vel_std_mps, 0.3);
-        assert!(e.software_sync);
-        assert_eq!(e.gnss_lever_arm_m, [1.0, 2.0, 3.0]);
+        assert_eq!(e.imu.imu_model, ImuPreset::Consumer);
+        assert_eq!(e.gnss.gnss_vel_std_mps, 0.3);
+        assert!(e.time.software_sync);
+        assert_eq!(e.nav.gnss_lever_arm_m, [1.0, 2.0, 3.0]);
         assert_eq!(e.imu_mountings["0"].lever_b_m, [0.5, 0.0, 0.0]);
         let pc = e.pipeline_config();
-        assert_eq!(pc.nav.lever_arm_b_m.x, 1.0);
+        assert_eq!(pc.nav.gnss_lever_arm_m[0], 1.0);
         assert_eq!(pc.array.units[0].lever_b_m.x, 0.5);
         let flags = EstimatorFlags {
-            model: ModelFlags {
-                imu_model: Some(ImuPreset::Industrial),
-                gnss_vel_std_mps: Some(0.05),
-                no_imu_offsets: true,
-                ..Default::default()
-            },
+            given: vec![
+                ("imu_model", "industrial".into()),
+                ("gnss_vel_std_mps", "0.05".into()),
+                ("estimate_imu_offsets", "false".into()),
+            ],
             ..Default::default()
         };
         let e = flags.settings(&cfg).unwrap();
-        assert_eq!((e.imu_model, e.gnss_vel_std_mps), (ImuPreset::Industrial, 0.05));
-        assert!(!e.estimate_imu_offsets);
+        assert_eq!(
+            (e.imu.imu_model, e.gnss.gnss_vel_std_mps),
+            (ImuPreset::Industrial, 0.05)
+        );
+        assert!(!e.array.estimate_imu_offsets);
         // No file: the defaults.
         assert_eq!(
             EstimatorFlags::default().settings(&Loaded::none()).unwrap(),

@@ -51,8 +51,6 @@ use navsync_drivers::gnss::driver::Baud;
 use navsync_drivers::imu::ImuSource;
 use navsync_drivers::imu::axes::AxisMap;
 use navsync_drivers::pps::SourceSpec;
-use navsync_estimator::settings::{Coupling, InitialState, ReceiverOscillator};
-use navsync_shared::imu_spec::{ImuNoise, ImuPreset};
 use navsync_shared::source_map::SourceMap;
 use serde::Deserialize;
 
@@ -191,65 +189,6 @@ pub struct ImuConfig {
     pub mounting: Mounting,
 }
 
-/// `[timing]`.
-#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Timing {
-    /// Ignore PPS: stamp fixes by receipt (ms-level time).
-    pub software_sync: Option<bool>,
-    /// Host oscillator: Allan deviation at 1 s of its white frequency noise (default 1e-10).
-    pub oscillator_white_fm_adev_1s: Option<f64>,
-    /// Host oscillator: Allan deviation at 1 s of its random-walk frequency noise (default 1e-10).
-    pub oscillator_random_walk_fm_adev_1s: Option<f64>,
-}
-
-/// `[estimator]`.
-#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct EstimatorConfig {
-    /// GNSS receiver ids (default: every `[gnss.*]`).
-    pub gnss: Option<Vec<String>>,
-    /// PPS ids (default: every `[pps.*]`).
-    pub pps: Option<Vec<String>>,
-    /// IMU ids, the reference first (default: every `[imu.*]`, in id order).
-    pub imus: Option<Vec<String>>,
-    /// Noise preset of the filter: `consumer`, `industrial` or `perfect`.
-    pub imu_model: Option<ImuPreset>,
-    /// Estimate the GNSS delay Δ (default true).
-    pub estimate_delay: Option<bool>,
-    /// 1-sigma of the receiver's velocity per axis, m/s.
-    pub gnss_vel_std_mps: Option<f64>,
-    /// Estimate the IMUs' time offsets (default true).
-    pub estimate_imu_offsets: Option<bool>,
-    /// Zero-velocity updates while the vehicle stands still (default true).
-    pub zupt: Option<bool>,
-    /// Adapt the IMU's process noise to the GNSS innovations (default false).
-    pub adapt_process_noise: Option<bool>,
-    /// Time IMU samples by their device clocks where they carry one (default true).
-    pub device_clocks: Option<bool>,
-    /// Factor on the receiver's position σ (default 1).
-    pub gnss_pos_std_scale: Option<f64>,
-    /// Smallest GNSS position σ per axis, m (default 0.005).
-    pub gnss_pos_std_floor_m: Option<f64>,
-    /// Scale of the 99.9 % chi-square innovation gate (default 1).
-    pub gate_scale: Option<f64>,
-    /// GNSS speed above which the course gives the heading at alignment, m/s (default 3).
-    pub align_min_speed_mps: Option<f64>,
-    /// The IMU's noise model in KF-GINS's units (overrides `imu_model`'s).
-    pub imu_noise: Option<ImuNoise>,
-    /// A known initial state instead of the alignment.
-    pub initial_state: Option<InitialState>,
-    /// 1-sigma of the prior of Δ under hardware sync, s (default 0.02).
-    pub delay_prior_std_s: Option<f64>,
-    /// Largest fusion horizon, s (default 1.5).
-    pub fusion_horizon_s: Option<f64>,
-    /// How GNSS aids the filter: `loose` (fixes, the default) or `tight` (each satellite's
-    /// pseudorange and Doppler, with the receiver clock in the filter).
-    pub coupling: Option<Coupling>,
-    /// The receiver's oscillator when tightly coupled: `tcxo` (default) or `crystal`.
-    pub receiver_oscillator: Option<ReceiverOscillator>,
-}
-
 /// `[outputs.ntpshm]`.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -299,12 +238,13 @@ pub struct Config {
     /// IMUs by id.
     #[serde(default)]
     pub imu: BTreeMap<String, ImuConfig>,
-    /// Timing.
+    /// Timing (`[timing]`: the estimator's time synchronisation settings, read by their
+    /// declarations: [`estimator::apply_file`]).
     #[serde(default)]
-    pub timing: Timing,
-    /// The estimator.
+    pub timing: toml::Table,
+    /// The estimator (`[estimator]`, read by the settings' declarations: [`estimator::apply_file`]).
     #[serde(default)]
-    pub estimator: EstimatorConfig,
+    pub estimator: toml::Table,
     /// Outputs.
     #[serde(default)]
     pub outputs: Outputs,
@@ -340,10 +280,7 @@ pub struct Loaded {
     map: SourceMap,
 }
 
-/// Whether `s` is a valid device id (letters, digits, `-`, `_`), as used in service names.
-pub fn valid_id(s: &str) -> bool {
-    !s.is_empty() && s.len() <= 16 && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-}
+pub use navsync_estimator::declare::checks::valid_id;
 
 fn valid_level(s: &str) -> bool {
     const LEVELS: [&str; 6] = ["trace", "debug", "info", "warn", "error", "off"];
@@ -508,73 +445,9 @@ impl Loaded {
                 "a finite distance in m",
             )?;
         }
-        let t = &c.timing;
-        positive(
-            "timing.oscillator_white_fm_adev_1s".into(),
-            t.oscillator_white_fm_adev_1s,
-            "an Allan deviation > 0 (e.g. 1e-10)",
-        )?;
-        positive(
-            "timing.oscillator_random_walk_fm_adev_1s".into(),
-            t.oscillator_random_walk_fm_adev_1s,
-            "an Allan deviation > 0 (e.g. 1e-10)",
-        )?;
-        let e = &c.estimator;
-        for (key, ids) in [("gnss", &e.gnss), ("pps", &e.pps), ("imus", &e.imus)] {
-            for (i, id) in ids.iter().flatten().enumerate() {
-                if !valid_id(id) {
-                    return Err(self.error_at(
-                        &format!("estimator.{key}[{i}]"),
-                        format!("`{id}` is not an id: expected 1 to 16 letters, digits, `-` or `_`"),
-                    ));
-                }
-            }
-        }
-        if let Some(imus) = &e.imus {
-            if imus.is_empty() {
-                return Err(self.error_at("estimator.imus", "empty: expected at least one IMU id"));
-            }
-            if imus.len() > 8 {
-                return Err(self.error_at("estimator.imus", "expected at most 8 IMUs"));
-            }
-        }
-        positive(
-            "estimator.gnss_vel_std_mps".into(),
-            e.gnss_vel_std_mps,
-            "a 1-sigma velocity > 0 in m/s",
-        )?;
-        positive(
-            "estimator.gnss_pos_std_scale".into(),
-            e.gnss_pos_std_scale,
-            "a factor > 0",
-        )?;
-        positive("estimator.gate_scale".into(), e.gate_scale, "a factor > 0")?;
-        positive(
-            "estimator.delay_prior_std_s".into(),
-            e.delay_prior_std_s,
-            "a 1-sigma > 0 in s",
-        )?;
-        if let Some(h) = e.fusion_horizon_s
-            && !(h.is_finite() && (0.3..=10.0).contains(&h))
-        {
-            return Err(self.error_at("estimator.fusion_horizon_s", format!("{h}: expected 0.3 to 10 s")));
-        }
-        positive(
-            "estimator.align_min_speed_mps".into(),
-            e.align_min_speed_mps,
-            "a speed > 0 in m/s",
-        )?;
-        if let Some(f) = e.gnss_pos_std_floor_m
-            && !(f.is_finite() && f >= 0.0)
-        {
-            return Err(self.error_at("estimator.gnss_pos_std_floor_m", format!("{f}: expected a σ ≥ 0 in m")));
-        }
-        if let Some(n) = &e.imu_noise
-            && let Err(msg) = n.check()
-        {
-            let field = msg.split(':').next().unwrap_or_default();
-            return Err(self.error_at(&format!("estimator.imu_noise.{field}"), msg));
-        }
+        let mut settings = navsync_estimator::settings::Settings::default();
+        estimator::apply_file(&mut settings, self)?;
+        estimator::check(&settings, self)?;
         if let Some(r) = &c.outputs.record
             && r.path.as_os_str().is_empty()
         {
@@ -583,31 +456,14 @@ impl Loaded {
         Ok(())
     }
 
-    /// The estimator's GNSS ids: `[estimator].gnss`, else every `[gnss.*]` id.
-    pub fn estimator_gnss(&self) -> Option<Vec<String>> {
-        let c = &self.config;
-        c.estimator
-            .gnss
-            .clone()
-            .or_else(|| (!c.gnss.is_empty()).then(|| c.gnss.keys().cloned().collect()))
-    }
-
-    /// The estimator's PPS ids: `[estimator].pps`, else every `[pps.*]` id.
-    pub fn estimator_pps(&self) -> Option<Vec<String>> {
-        let c = &self.config;
-        c.estimator
-            .pps
-            .clone()
-            .or_else(|| (!c.pps.is_empty()).then(|| c.pps.keys().cloned().collect()))
-    }
-
-    /// The estimator's IMU ids: `[estimator].imus`, else every `[imu.*]` id.
-    pub fn estimator_imus(&self) -> Option<Vec<String>> {
-        let c = &self.config;
-        c.estimator
-            .imus
-            .clone()
-            .or_else(|| (!c.imu.is_empty()).then(|| c.imu.keys().cloned().collect()))
+    /// A section of the file read as a table (`estimator`, `timing`); `None` when absent.
+    pub fn section(&self, name: &str) -> Option<&toml::Table> {
+        match name {
+            "estimator" => Some(&self.config.estimator),
+            "timing" => Some(&self.config.timing),
+            _ => None,
+        }
+        .filter(|t| !t.is_empty())
     }
 }
 

@@ -1,6 +1,14 @@
+use navsync_estimator::nav::navigator::Navigator;
+use navsync_estimator::settings::{Coupling, ReceiverOscillator, Settings};
+
 use super::*;
 
 const EXAMPLE: &str = include_str!("../../../systemd/navsync.toml.example");
+
+/// The estimator's settings from `l` alone.
+fn est(l: &Loaded) -> Settings {
+    super::estimator::EstimatorFlags::default().settings(l).unwrap()
+}
 
 fn err(text: &str) -> ConfigError {
     Loaded::parse(text, Path::new("t.toml")).expect_err("should be rejected")
@@ -17,9 +25,10 @@ fn the_example_is_valid_and_complete() {
     assert_eq!(c.imu["0"].axes, Some("x,-y,-z".parse().unwrap()));
     assert_eq!(c.imu["1"].mounting.rotation_deg, [0.0, 0.0, 90.0]);
     assert_eq!(c.imu["1"].mounting.lever_arm_m, [0.35, -0.20, 0.05]);
-    assert_eq!(l.estimator_imus(), Some(vec!["0".to_string(), "1".to_string()]));
-    assert_eq!(c.estimator.coupling, Some(Coupling::Loose));
-    assert_eq!(c.estimator.receiver_oscillator, Some(ReceiverOscillator::Tcxo));
+    let s = est(&l);
+    assert_eq!(s.inputs.imus, vec!["0".to_string(), "1".to_string()]);
+    assert_eq!(s.nav.coupling, Coupling::Loose);
+    assert_eq!(s.nav.receiver_oscillator, ReceiverOscillator::Tcxo);
     assert_eq!(c.outputs.ntpshm, Some(NtpShmOutput { unit: 0 }));
     assert_eq!(c.logging.level.as_deref(), Some("info"));
 }
@@ -28,7 +37,7 @@ fn the_example_is_valid_and_complete() {
 fn empty_file_is_all_defaults() {
     let l = Loaded::parse("", Path::new("e.toml")).unwrap();
     assert_eq!(l.config, Config::default());
-    assert_eq!(l.estimator_imus(), None);
+    assert_eq!(est(&l), Settings::default());
     assert!(l.from_file());
     assert!(!Loaded::none().from_file());
 }
@@ -36,8 +45,8 @@ fn empty_file_is_all_defaults() {
 #[test]
 fn ids_default_to_the_sections() {
     let l = Loaded::parse("[imu.b]\nsource=\"sim\"\n[imu.a]\nsource=\"sim\"\n", Path::new("x")).unwrap();
-    assert_eq!(l.estimator_imus(), Some(vec!["a".to_string(), "b".to_string()]));
-    assert_eq!(l.estimator_gnss(), None);
+    assert_eq!(est(&l).inputs.imus, vec!["a".to_string(), "b".to_string()]);
+    assert_eq!(est(&l).inputs.gnss, Settings::default().inputs.gnss);
 }
 
 #[test]
@@ -63,6 +72,9 @@ fn wrong_type_names_the_field() {
     assert!(e.message.contains("\"auto\""), "{e}");
     let e = err("[gps.0]\nport = \"/dev/x\"\nbaud = -5\n");
     assert_eq!(e.field.as_deref(), Some("gps.0.baud"), "{e}");
+    let e = err("[gps.0]\nport = \"/dev/x\"\nbaud = 12345\n");
+    assert_eq!(e.field.as_deref(), Some("gps.0.baud"), "{e}");
+    assert!(e.message.contains("standard baud rate"), "{e}");
     let e = err("[gps.0]\nbaud = 9600\n");
     assert!(e.message.contains("missing field `port`"), "{e}");
     // `[gnss.ID]` is the name; `[gps.ID]` reads the same.
@@ -149,11 +161,11 @@ fn the_coupling_flows_flag_over_file_over_default() {
     let mut flags = super::estimator::EstimatorFlags::default();
     let s = flags.settings(&Loaded::none()).unwrap();
     assert_eq!(
-        (s.coupling, s.receiver_oscillator),
+        (s.nav.coupling, s.nav.receiver_oscillator),
         (Coupling::Loose, ReceiverOscillator::Tcxo)
     );
     assert!(
-        s.pipeline_config().nav.noise.clock.is_none(),
+        Navigator::new(s.pipeline_config().nav).config().noise.clock.is_none(),
         "loose: the clock states are frozen"
     );
     let file = Loaded::parse(
@@ -163,11 +175,11 @@ fn the_coupling_flows_flag_over_file_over_default() {
     .unwrap();
     let s = flags.settings(&file).unwrap();
     assert_eq!(
-        (s.coupling, s.receiver_oscillator),
+        (s.nav.coupling, s.nav.receiver_oscillator),
         (Coupling::Tight, ReceiverOscillator::Crystal)
     );
-    assert!(s.pipeline_config().nav.noise.clock.is_some());
+    assert!(Navigator::new(s.pipeline_config().nav).config().noise.clock.is_some());
     assert!(s.input_services().iter().any(|x| x.ends_with("/raw")));
-    flags.model.coupling = Some(Coupling::Loose);
-    assert_eq!(flags.settings(&file).unwrap().coupling, Coupling::Loose);
+    flags.given.push(("coupling", "loose".into()));
+    assert_eq!(flags.settings(&file).unwrap().nav.coupling, Coupling::Loose);
 }

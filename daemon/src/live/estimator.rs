@@ -115,38 +115,44 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     // Dead drivers' publishers stop counting once their node is reclaimed: off this loop.
     let _reclaimer = super::reclaimer::Reclaimer::start("estimator-reclaim", RECLAIM_INTERVAL)?;
     let pps: Vec<Subscriber<PpsEdge>> = args
-        .pps_ids
+        .inputs
+        .pps
         .iter()
         .map(|id| node.input(&services::pps_edge(id)))
         .collect::<Result<_, _>>()?;
     let gnss: Vec<Subscriber<GnssFix>> = args
-        .gnss_ids
+        .inputs
+        .gnss
         .iter()
         .map(|id| node.input(&services::gnss_fix(id)))
         .collect::<Result<_, _>>()?;
     // The receivers' reports of their next time pulse (UBX TIM-TP), where they send them.
     let time_pulses: Vec<Subscriber<GnssTimePulse>> = args
-        .gnss_ids
+        .inputs
+        .gnss
         .iter()
         .map(|id| node.input(&services::gnss_time_pulse(id)))
         .collect::<Result<_, _>>()?;
     // Tightly coupled: the receivers' raw measurements (UBX RXM-RAWX) and navigation data
     // (RXM-SFRBX).
-    let tight = args.coupling == Coupling::Tight;
+    let tight = args.nav.coupling == Coupling::Tight;
     let raws: Vec<Subscriber<GnssRaw>> = args
-        .gnss_ids
+        .inputs
+        .gnss
         .iter()
         .filter(|_| tight)
         .map(|id| node.input(&services::gnss_raw(id)))
         .collect::<Result<_, _>>()?;
     let nav_data: Vec<Subscriber<GnssNavData>> = args
-        .gnss_ids
+        .inputs
+        .gnss
         .iter()
         .filter(|_| tight)
         .map(|id| node.input(&services::gnss_nav_data(id)))
         .collect::<Result<_, _>>()?;
     let imus: Vec<Subscriber<ImuSample>> = args
-        .imu_ids
+        .inputs
+        .imus
         .iter()
         .map(|id| node.input(&services::imu_sample(id)))
         .collect::<Result<_, _>>()?;
@@ -194,7 +200,7 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     let c_imu_invalid = health.counter("imu_rejected_invalid")?;
     let c_imu_back = health.counter("imu_rejected_backwards")?;
     let c_imu_sat = health.counter("imu_rejected_saturated")?;
-    let mut order: InputOrder = InputOrder::new(args.imu_ids.first().map(String::as_str));
+    let mut order: InputOrder = InputOrder::new(args.inputs.imus.first().map(String::as_str));
     // Output latency: from taking an IMU sample off its queue to its NavState being published.
     let c_lat_p99 = health.counter("nav_latency_p99_us")?;
     let c_lat_max = health.counter("nav_latency_max_us")?;
@@ -207,9 +213,9 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     let mut live = Liveness::default();
     let mut c_stale = Vec::new();
     for (kind, ids, nominal_ns) in [
-        ("imu", &args.imu_ids, 10_000_000),
-        ("pps", &args.pps_ids, NS_PER_S),
-        ("gnss", &args.gnss_ids, NS_PER_S),
+        ("imu", &args.inputs.imus, 10_000_000),
+        ("pps", &args.inputs.pps, NS_PER_S),
+        ("gnss", &args.inputs.gnss, NS_PER_S),
     ] {
         for id in ids {
             live.add(&format!("{kind}_{id}"), nominal_ns);
@@ -238,10 +244,10 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     let c_stale_events = health.counter("stale_events")?;
     let (n_imu, n_pps) = (imus.len(), pps.len());
     let mut next_publisher_check_ns = monotonic_now_ns();
-    info!(pps = ?args.pps_ids, gnss = ?args.gnss_ids, imus = ?args.imu_ids, "estimator running");
+    info!(pps = ?args.inputs.pps, gnss = ?args.inputs.gnss, imus = ?args.inputs.imus, "estimator running");
     navsync_shared::sd_notify::ready(&format!(
         "estimator: gnss {:?}, pps {:?}, imus {:?}",
-        args.gnss_ids, args.pps_ids, args.imu_ids
+        args.inputs.gnss, args.inputs.pps, args.inputs.imus
     ));
 
     loop {
@@ -415,7 +421,7 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         health.set(c_pps_rx, tc.pps_labelled_by_receiver);
         health.set(c_holdovers, tc.holdovers);
         health.set(c_relocks, tc.relocks);
-        let nc = *est.nav().counters();
+        let nc = est.nav().counters();
         health.set(c_fix_used, nc.fixes_used);
         health.set(c_fix_rej, nc.fixes_rejected);
         health.set(c_fix_old, nc.fixes_too_old);

@@ -127,10 +127,10 @@ pub fn fit_delay(a: &[f64], y: &[f64]) -> (f64, f64) {
 /// Runs the analysis and returns one row per segment.
 pub fn gnss_delay(args: &GnssDelayArgs) -> Result<Vec<SegmentDelay>, AnalyzeError> {
     let mut est = args.est.clone();
-    est.software_sync = true;
+    est.time.software_sync = true;
     let mut reader = SampleReader::open(&args.recording)?;
-    let mut wanted: Vec<String> = est.gnss_ids.iter().map(|id| services::gnss_fix(id)).collect();
-    wanted.extend(est.imu_ids.iter().map(|id| services::imu_sample(id)));
+    let mut wanted: Vec<String> = est.inputs.gnss.iter().map(|id| services::gnss_fix(id)).collect();
+    wanted.extend(est.inputs.imus.iter().map(|id| services::imu_sample(id)));
     // (receipt host ns, vN, vE) of every fix; (host ns, vN, vE, Δ̂, σ) of every nav state.
     let mut fixes: Vec<(i64, f64, f64)> = Vec::new();
     let mut navs: Vec<(i64, f64, f64, f64, f64)> = Vec::new();

@@ -18,9 +18,9 @@ pub fn run(explicit: Option<&Path>) -> Result<()> {
     let est = EstimatorFlags::default().settings(&cfg)?;
     let mut warnings = Vec::new();
     for (kind, ids, known) in [
-        ("gnss", &est.gnss_ids, c.gnss.keys().collect::<Vec<_>>()),
-        ("pps", &est.pps_ids, c.pps.keys().collect()),
-        ("imus", &est.imu_ids, c.imu.keys().collect()),
+        ("gnss", &est.inputs.gnss, c.gnss.keys().collect::<Vec<_>>()),
+        ("pps", &est.inputs.pps, c.pps.keys().collect()),
+        ("imus", &est.inputs.imus, c.imu.keys().collect()),
     ] {
         for id in ids {
             if !known.contains(&id) {
@@ -48,22 +48,22 @@ pub fn run(explicit: Option<&Path>) -> Result<()> {
             i.source, i.mounting.rotation_deg, i.mounting.lever_arm_m
         );
     }
-    let noise = if est.imu_noise.is_some() {
+    let noise = if est.imu.imu_noise.is_some() {
         let n = est.noise();
         format!(
             "IMU noise ARW {:?} °/√h, VRW {:?} m/s/√h ([estimator.imu_noise])",
             n.arw_deg_per_sqrt_h.0, n.vrw_mps_per_sqrt_h.0
         )
     } else {
-        format!("{} IMU noise", est.imu_model.name())
+        format!("{} IMU noise", est.imu.imu_model.name())
     };
     println!(
         "  navsync estimator: gnss {:?}, pps {:?}, imus {:?}, {} sync, {noise}{}",
-        est.gnss_ids,
-        est.pps_ids,
-        est.imu_ids,
-        if est.software_sync { "software" } else { "PPS" },
-        if est.initial_state.is_some() {
+        est.inputs.gnss,
+        est.inputs.pps,
+        est.inputs.imus,
+        if est.time.software_sync { "software" } else { "PPS" },
+        if est.nav.initial_state.is_some() {
             ", initial state given"
         } else {
             ""

@@ -190,14 +190,12 @@ pub fn settings_for_recording(
 ) -> Result<Settings, ConfigError> {
     let ids = est.settings(cfg)?;
     let mut defaults = Settings {
-        gnss_ids: ids.gnss_ids.clone(),
-        pps_ids: ids.pps_ids.clone(),
-        imu_ids: ids.imu_ids.clone(),
+        inputs: ids.inputs.clone(),
         ..Settings::default()
     };
     let meta = |service: Option<String>| service.map(|s| reader.channel_metadata(&s)).unwrap_or_default();
-    let imu = meta(ids.imu_ids.first().map(|id| services::imu_sample(id)));
-    let gnss = meta(ids.gnss_ids.first().map(|id| services::gnss_fix(id)));
+    let imu = meta(ids.inputs.imus.first().map(|id| services::imu_sample(id)));
+    let gnss = meta(ids.inputs.gnss.first().map(|id| services::gnss_fix(id)));
     let value = |list: &[(String, String)], key: &str| list.iter().find(|(k, _)| k == key).map(|(_, v)| v.clone());
     let bad = |key: &str, e: serde_json::Error| ConfigError {
         file: reader.mcap().path().to_path_buf(),
@@ -206,16 +204,16 @@ pub fn settings_for_recording(
         message: e.to_string(),
     };
     if let Some(v) = value(&imu, channels::META_IMU_NOISE) {
-        defaults.imu_noise = Some(serde_json::from_str(&v).map_err(|e| bad(channels::META_IMU_NOISE, e))?);
+        defaults.imu.imu_noise = Some(serde_json::from_str(&v).map_err(|e| bad(channels::META_IMU_NOISE, e))?);
     }
     if let Some(v) = value(&imu, channels::META_INITIAL_STATE) {
-        defaults.initial_state = Some(serde_json::from_str(&v).map_err(|e| bad(channels::META_INITIAL_STATE, e))?);
+        defaults.nav.initial_state = Some(serde_json::from_str(&v).map_err(|e| bad(channels::META_INITIAL_STATE, e))?);
     }
     if let Some(v) = value(&gnss, channels::META_LEVER_ARM) {
-        defaults.gnss_lever_arm_m = serde_json::from_str(&v).map_err(|e| bad(channels::META_LEVER_ARM, e))?;
+        defaults.nav.gnss_lever_arm_m = serde_json::from_str(&v).map_err(|e| bad(channels::META_LEVER_ARM, e))?;
     }
     if let Some(v) = value(&gnss, channels::META_GNSS_VEL_STD) {
-        defaults.gnss_vel_std_mps = serde_json::from_str(&v).map_err(|e| bad(channels::META_GNSS_VEL_STD, e))?;
+        defaults.gnss.gnss_vel_std_mps = serde_json::from_str(&v).map_err(|e| bad(channels::META_GNSS_VEL_STD, e))?;
     }
     est.settings_over(cfg, defaults)
 }

@@ -68,13 +68,14 @@ pub struct Outputs<'a> {
 pub fn settings(cfg: &SimConfig, flags: &ModelFlags, file: &Loaded) -> Result<Settings, ConfigError> {
     let mut s = Settings::default();
     crate::config::estimator::apply_file(&mut s, file)?;
-    s.imu_ids = (0..cfg.imu.count).map(|i| i.to_string()).collect();
-    if flags.imu_model.is_none() {
-        s.imu_model = cfg.imu.preset;
-        s.gnss_vel_std_mps = sim_gnss_vel_std(cfg);
+    s.inputs.imus = (0..cfg.imu.count).map(|i| i.to_string()).collect();
+    if !flags.gives("imu_model") {
+        s.imu.imu_model = cfg.imu.preset;
+        s.gnss.gnss_vel_std_mps = sim_gnss_vel_std(cfg);
     }
-    s.gnss_lever_arm_m = cfg.gnss.antenna_lever_arm_m;
-    flags.apply(&mut s);
+    s.nav.gnss_lever_arm_m = cfg.gnss.antenna_lever_arm_m;
+    flags.apply(&mut s)?;
+    crate::config::estimator::check(&s, file)?;
     Ok(s)
 }
 

@@ -74,6 +74,25 @@ pub enum Baud {
     Auto,
 }
 
+/// The line rates a serial port takes: the standard rates of Linux termios (`B50` …
+/// `B4000000`, termios(3)); GNSS receivers use 4800 to 921600.
+pub const STANDARD_BAUDS: [u32; 30] = [
+    50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19_200, 38_400, 57_600, 115_200, 230_400,
+    460_800, 500_000, 576_000, 921_600, 1_000_000, 1_152_000, 1_500_000, 2_000_000, 2_500_000, 3_000_000, 3_500_000,
+    4_000_000,
+];
+
+impl Baud {
+    /// A fixed rate, when it is one of [`STANDARD_BAUDS`].
+    pub fn standard(rate: u32) -> Option<Self> {
+        STANDARD_BAUDS.contains(&rate).then_some(Self::Fixed(rate))
+    }
+}
+
+/// What a baud rate must be, for messages.
+const BAUD_EXPECTED: &str =
+    "a standard baud rate (4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600, …) or \"auto\"";
+
 impl std::str::FromStr for Baud {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
@@ -82,9 +101,8 @@ impl std::str::FromStr for Baud {
         }
         s.parse::<u32>()
             .ok()
-            .filter(|b| *b > 0)
-            .map(Baud::Fixed)
-            .ok_or_else(|| format!("`{s}` is not a baud rate (a positive integer or `auto`)"))
+            .and_then(Baud::standard)
+            .ok_or_else(|| format!("`{s}` is not {BAUD_EXPECTED}"))
     }
 }
 
@@ -97,20 +115,19 @@ impl std::fmt::Display for Baud {
     }
 }
 
-/// In a configuration file: a positive integer (`9600`) or `"auto"`.
+/// In a configuration file: a standard rate (`9600`) or `"auto"`.
 impl<'de> serde::Deserialize<'de> for Baud {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         struct V;
         impl serde::de::Visitor<'_> for V {
             type Value = Baud;
             fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-                f.write_str("a baud rate (a positive integer such as 9600) or \"auto\"")
+                f.write_str(BAUD_EXPECTED)
             }
             fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Baud, E> {
                 u32::try_from(v)
                     .ok()
-                    .filter(|b| *b > 0)
-                    .map(Baud::Fixed)
+                    .and_then(Baud::standard)
                     .ok_or_else(|| E::invalid_value(serde::de::Unexpected::Signed(v), &self))
             }
             fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Baud, E> {
@@ -662,6 +679,16 @@ fn publish_health(h: &mut HealthReporter, d: &Decoder, log: &mut RateLimitedLog)
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_baud_rate_is_a_standard_one() {
+        assert_eq!("115200".parse::<Baud>(), Ok(Baud::Fixed(115_200)));
+        assert_eq!("auto".parse::<Baud>(), Ok(Baud::Auto));
+        for bad in ["12345", "0", "-9600", "fast", "9600.0"] {
+            let e = bad.parse::<Baud>().expect_err(bad);
+            assert!(e.contains("standard baud rate"), "{bad}: {e}");
+        }
+    }
 
     #[test]
     fn hunt_moves_on_only_after_garbage_for_the_dwell() {

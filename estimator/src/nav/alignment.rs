@@ -11,28 +11,20 @@ use navsync_shared::earth;
 use super::imu_buffer::ImuRecord;
 use super::measurements::gnss::GnssObservation;
 use super::mechanization::Pva;
+use crate::declare::checks::positive;
 
-/// Thresholds of the alignment.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AlignConfig {
-    /// GNSS speed above which the course is taken as the heading, m/s.
-    pub min_speed_mps: f64,
-    /// Largest angular rate still counted as static, rad/s.
-    pub static_gyro_rps: f64,
-    /// Largest deviation of |f| from 1 g still counted as static, m/s².
-    pub static_accel_mps2: f64,
-    /// Largest deviation of f from the static mean still counted as static, m/s².
-    pub static_accel_dev_mps2: f64,
-}
-
-impl Default for AlignConfig {
-    fn default() -> Self {
-        Self {
-            min_speed_mps: 3.0,
-            static_gyro_rps: 0.05,
-            static_accel_mps2: 0.3,
-            static_accel_dev_mps2: 0.15,
-        }
+crate::settings_group! {
+    /// Thresholds of the alignment.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct AlignConfig {
+        /// GNSS speed above which the course is taken as the heading, m/s.
+        pub align_min_speed_mps: f64 = 3.0, file "estimator", flag "align-speed", check positive;
+        /// Largest angular rate still counted as static, rad/s.
+        pub static_gyro_rps: f64 = 0.05;
+        /// Largest deviation of |f| from 1 g still counted as static, m/s².
+        pub static_accel_mps2: f64 = 0.3;
+        /// Largest deviation of f from the static mean still counted as static, m/s².
+        pub static_accel_dev_mps2: f64 = 0.15;
     }
 }
 
@@ -193,7 +185,10 @@ impl Aligner {
             }
             _ => Vector3::zeros(),
         };
-        if !(obs.speed_mps >= self.cfg.min_speed_mps && obs.track_rad.is_finite() && v.x.is_finite() && v.y.is_finite())
+        if !(obs.speed_mps >= self.cfg.align_min_speed_mps
+            && obs.track_rad.is_finite()
+            && v.x.is_finite()
+            && v.y.is_finite())
         {
             return None;
         }

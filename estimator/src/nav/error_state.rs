@@ -87,8 +87,8 @@ pub struct ProcessNoise {
     pub delay_rw: f64,
     /// Estimate scale factors (else their states are frozen at zero).
     pub estimate_scale: bool,
-    /// Estimate the GNSS delay Δ (else frozen).
-    pub estimate_delay: bool,
+    /// The GNSS delay Δ is a live state (else frozen; from [`super::config::NavConfig::estimate_delay`]).
+    pub delay_state: bool,
     /// The receiver's oscillator when its clock bias and drift are estimated (tightly
     /// coupled); `None`: the clock states are frozen (loosely coupled, the default).
     pub clock: Option<OscillatorNoise>,
@@ -118,7 +118,7 @@ impl ProcessNoise {
             delay_rw: 1e-4,
             estimate_scale: n.gyro_scale_init_std_ppm.0.iter().any(|x| *x > 0.0)
                 || n.accel_scale_init_std_ppm.0.iter().any(|x| *x > 0.0),
-            estimate_delay: true,
+            delay_state: true,
             clock: None,
         }
     }
@@ -254,7 +254,7 @@ pub fn process_noise(noise: &ProcessNoise, c_bn: &Matrix3<f64>, dt: f64, imu_sca
             q[(SA + i, SA + i)] = gm(noise.accel_scale_std[i]);
         }
     }
-    if noise.estimate_delay {
+    if noise.delay_state {
         q[(DELAY, DELAY)] = noise.delay_rw * noise.delay_rw * dt;
     }
     if let Some(osc) = noise.clock {

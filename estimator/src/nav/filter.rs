@@ -4,11 +4,11 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use navsync_shared::earth;
 
+use super::config::NavConfig;
 use super::error_state::{self, ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, POS, SA, SG, StateMat, StateVec, VEL};
 use super::eskf::Eskf;
 use super::imu_buffer::ImuRecord;
 use super::mechanization::{ImuIncrement, Pva, propagate};
-use super::navigator::NavConfig;
 
 /// The delayed filter: the navigation state at the delayed time (the fusion horizon behind
 /// the present), its error covariance and the sensor-error and GNSS-delay estimates. The

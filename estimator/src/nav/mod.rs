@@ -3,6 +3,7 @@
 //! - [`mechanization`]: strapdown INS in NED on WGS-84 (increments, coning/sculling).
 //! - [`error_state`], [`eskf`]: the 22-state error model (KF-GINS conventions + GNSS delay Δ)
 //!   and the Kalman filter engine with chi-square gating.
+//! - [`config`]: the filter's settings (a leaf: one declaration per setting).
 //! - [`alignment`]: levelling and GNSS-course heading.
 //! - [`imu_buffer`], [`filter`], [`navigator`]: the fusion horizon (delayed filter + output
 //!   predictor).
@@ -10,6 +11,7 @@
 //!   lever arm and the Δ Jacobians, …), each fused at its own epoch.
 
 pub mod alignment;
+pub mod config;
 pub mod error_state;
 pub mod eskf;
 pub mod filter;

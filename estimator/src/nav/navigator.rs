@@ -17,16 +17,17 @@
 use nalgebra::Vector3;
 use navsync_shared::samples::{ImuSync, MAX_IMUS, NavState, NavStatus};
 
-use super::alignment::{AlignConfig, Aligner};
-use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, ProcessNoise, SA, SG, StateMat, VEL};
+use super::alignment::Aligner;
+pub use super::config::NavConfig;
+use super::config::{Coupling, InitialState};
+use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, SA, SG, StateMat, VEL};
 use super::eskf::Eskf;
 use super::filter::DelayedFilter;
 use super::imu_buffer::{ImuBuffer, ImuRecord};
 use super::measurements::gnss::GnssObservation;
-use super::measurements::{Measurement, MeasurementConfig, MeasurementQueue, MeasurementStates};
+use super::measurements::{Measurement, MeasurementQueue, MeasurementStates};
 use super::mechanization::{ImuIncrement, Pva, propagate};
 use crate::gnss::ranges::RangeEpoch;
-use crate::settings::InitialState;
 
 /// Shortest adaptive fusion horizon, s.
 pub const MIN_HORIZON_S: f64 = 0.25;
@@ -38,66 +39,8 @@ const HORIZON_DECAY_S: f64 = 0.01;
 /// 1-sigma of the motion-onset delay estimate, s.
 const ONSET_DELAY_STD_S: f64 = 0.05;
 
-/// Filter settings.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct NavConfig {
-    /// IMU and state process noise.
-    pub noise: ProcessNoise,
-    /// GNSS antenna position in the body frame (FRD), m.
-    pub lever_arm_b_m: Vector3<f64>,
-    /// Fusion horizon: how far the delayed filter runs behind the present, s; with
-    /// `adaptive_horizon` its largest value. Must exceed the largest GNSS delay (epoch to
-    /// release into the filter: receipt, the input hold, plus Δ in software sync).
-    pub horizon_s: f64,
-    /// Shorten the horizon to what the fixes need (their delay from epoch to release, with
-    /// Δ̂ + 3σ_Δ and a 20 ms margin, the largest of the recent ones), at least
-    /// [`MIN_HORIZON_S`]: the output then carries less dead reckoning after the last fix.
-    pub adaptive_horizon: bool,
-    /// Covariance propagation step, s.
-    pub cov_step_s: f64,
-    /// Prior of the GNSS delay Δ, s, and its 1-sigma.
-    pub delay_prior_s: f64,
-    /// 1-sigma of the delay prior, s.
-    pub delay_prior_std_s: f64,
-    /// Alignment thresholds.
-    pub align: AlignConfig,
-    /// Initial 1-sigma of roll and pitch after levelling, rad.
-    pub init_level_std_rad: f64,
-    /// Initial 1-sigma of the heading from the GNSS course, rad.
-    pub init_yaw_std_rad: f64,
-    /// Initial 1-sigma of the velocity, m/s.
-    pub init_vel_std_mps: f64,
-    /// Scale of the 99.9 % chi-square innovation gate.
-    pub gate_scale: f64,
-    /// No fix for this long: INS-only, s.
-    pub outage_after_s: f64,
-    /// Settings of each kind of measurement ([`super::measurements`]).
-    pub measurements: MeasurementConfig,
-}
-
-impl NavConfig {
-    /// Defaults for a car with the given IMU process noise.
-    pub fn with_noise(noise: ProcessNoise) -> Self {
-        Self {
-            noise,
-            lever_arm_b_m: Vector3::zeros(),
-            horizon_s: 1.5,
-            adaptive_horizon: true,
-            cov_step_s: 0.02,
-            delay_prior_s: 0.0,
-            delay_prior_std_s: 0.02,
-            align: AlignConfig::default(),
-            init_level_std_rad: 0.5f64.to_radians(),
-            init_yaw_std_rad: 5f64.to_radians(),
-            init_vel_std_mps: 0.3,
-            gate_scale: 1.0,
-            outage_after_s: 2.5,
-            measurements: MeasurementConfig::default(),
-        }
-    }
-}
-
-/// Counters of the navigation filter.
+/// Counters of the navigation filter: its own, and the GNSS fixes' (kept by their
+/// measurement kind, [`super::measurements::gnss::GnssState`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct NavCounters {
     /// Fixes fused (position accepted).
@@ -106,10 +49,9 @@ pub struct NavCounters {
     pub fixes_rejected: u64,
     /// Velocity updates that failed the gate.
     pub vel_rejected: u64,
-    /// Fixes whose epoch was already behind the delayed filter (horizon too short).
+    /// Fixes (and raw epochs) whose epoch was already behind the delayed filter (horizon too
+    /// short).
     pub fixes_too_old: u64,
-    /// Fixes without a usable position.
-    pub fixes_unusable: u64,
     /// IMU intervals longer than 1.5 nominal periods (dropped samples bridged).
     pub imu_gaps: u64,
     /// IMU samples going back in time (ignored).
@@ -118,9 +60,7 @@ pub struct NavCounters {
     pub replays: u64,
     /// Resets to GNSS after [`RESET_AFTER_REJECTS`] consecutive rejected fixes.
     pub gnss_resets: u64,
-    /// Of those, full resets: the fix's velocity disagreed with the filter too (the filter had
-    /// lost consistency), so velocity was reset as well and the attitude and sensor-error
-    /// uncertainty reopened. The others moved only the position (the GNSS position jumped).
+    /// Of those, full resets (see [`super::measurements::gnss::GnssState::gnss_resets_full`]).
     pub gnss_resets_full: u64,
 }
 
@@ -182,11 +122,18 @@ pub struct Navigator {
     horizon_ns: i64,
     /// The longest recent delay of a fix from its epoch to its release, ns (fading).
     fix_delay_ns: i64,
+    /// The prior of the GNSS delay Δ in force and its 1-sigma, s (set by
+    /// [`Navigator::reset_delay`] when the time base of the fix stamps changes; the motion
+    /// onset may narrow it at alignment).
+    delay_prior: (f64, f64),
 }
 
 impl Navigator {
     /// A filter that waits for alignment.
-    pub fn new(cfg: NavConfig) -> Self {
+    pub fn new(mut cfg: NavConfig) -> Self {
+        // The states the settings make live: Δ, and the receiver clock when tightly coupled.
+        cfg.noise.delay_state = cfg.estimate_delay;
+        cfg.noise.clock = (cfg.coupling == Coupling::Tight).then(|| cfg.receiver_oscillator.noise());
         Self {
             cfg,
             buf: ImuBuffer::default(),
@@ -204,14 +151,23 @@ impl Navigator {
             last_imu_ns: None,
             last_fix_rx_ns: None,
             last_ranges_rx_ns: None,
-            horizon_ns: (cfg.horizon_s * 1e9) as i64,
+            horizon_ns: (cfg.fusion_horizon_s * 1e9) as i64,
             fix_delay_ns: 0,
+            delay_prior: (0.0, cfg.delay_prior_std_s),
         }
     }
 
     /// Counters so far.
-    pub fn counters(&self) -> &NavCounters {
-        &self.counters
+    pub fn counters(&self) -> NavCounters {
+        let g = &self.states.gnss;
+        NavCounters {
+            fixes_used: g.fixes_used,
+            fixes_rejected: g.fixes_rejected,
+            vel_rejected: g.vel_rejected,
+            gnss_resets: g.gnss_resets,
+            gnss_resets_full: g.gnss_resets_full,
+            ..self.counters
+        }
     }
 
     /// What each kind of measurement keeps (its counters: [`MeasurementStates::each_counter`]).
@@ -237,22 +193,21 @@ impl Navigator {
     /// Estimated GNSS delay Δ and its 1-sigma, s (NaN before alignment or when switched off).
     pub fn gnss_delay(&self) -> (f64, f64) {
         match &self.filt {
-            Some(f) if self.cfg.noise.estimate_delay => (f.delay_s, f.eskf.std(DELAY)),
+            Some(f) if self.cfg.estimate_delay => (f.delay_s, f.eskf.std(DELAY)),
             _ => (f64::NAN, f64::NAN),
         }
     }
 
     /// Forgets the delay estimate (the time base of the fix stamps changed).
     pub fn reset_delay(&mut self, prior_s: f64, prior_std_s: f64) {
-        self.cfg.delay_prior_s = prior_s;
-        self.cfg.delay_prior_std_s = prior_std_s;
+        self.delay_prior = (prior_s, prior_std_s);
         if let Some(f) = &mut self.filt {
             f.delay_s = prior_s;
             for i in 0..N {
                 f.eskf.p[(i, DELAY)] = 0.0;
                 f.eskf.p[(DELAY, i)] = 0.0;
             }
-            f.eskf.p[(DELAY, DELAY)] = if self.cfg.noise.estimate_delay {
+            f.eskf.p[(DELAY, DELAY)] = if self.cfg.estimate_delay {
                 prior_std_s * prior_std_s
             } else {
                 0.0
@@ -297,7 +252,7 @@ impl Navigator {
             self.counters.fixes_too_old += 1;
             return;
         }
-        self.queue.push(m.into(), &mut self.counters);
+        self.states.queue(&mut self.queue, m.into());
     }
 
     /// Queues a receiver epoch's pseudoranges and Doppler for fusion at its epoch (tightly
@@ -326,10 +281,10 @@ impl Navigator {
         }
         // The delay this epoch needed from its epoch (with Δ's doubt) to its release now.
         let (d, sd) = (f.delay_s, f.eskf.std(DELAY));
-        let doubt = if self.cfg.noise.estimate_delay { d + 3.0 * sd } else { d };
+        let doubt = if self.cfg.estimate_delay { d + 3.0 * sd } else { d };
         let needed = now - stamp_host_ns + (doubt.max(0.0) * 1e9) as i64;
         self.fix_delay_ns = needed.max(self.fix_delay_ns - (HORIZON_DECAY_S * 1e9) as i64);
-        let max = (self.cfg.horizon_s * 1e9) as i64;
+        let max = (self.cfg.fusion_horizon_s * 1e9) as i64;
         let min = (MIN_HORIZON_S * 1e9) as i64;
         self.horizon_ns = (self.fix_delay_ns + (HORIZON_MARGIN_S * 1e9) as i64).clamp(min, max);
     }
@@ -337,7 +292,7 @@ impl Navigator {
     /// True when the filter estimates the receiver clock and fuses satellites' measurements
     /// (tightly coupled: [`ProcessNoise::clock`] set).
     pub fn is_tight(&self) -> bool {
-        self.cfg.noise.clock.is_some()
+        self.cfg.coupling == Coupling::Tight
     }
 
     /// The receiver clock at host time `now_ns` from the tightly coupled filter: the delayed
@@ -396,8 +351,8 @@ impl Navigator {
                 p[(SA + i, SA + i)] = cfg.noise.accel_scale_init_std[i].powi(2);
             }
         }
-        if cfg.noise.estimate_delay {
-            p[(DELAY, DELAY)] = cfg.delay_prior_std_s.powi(2);
+        if cfg.estimate_delay {
+            p[(DELAY, DELAY)] = self.delay_prior.1.powi(2);
         }
         while self.buf.front().is_some_and(|r| r.host_ns <= host_ns) {
             self.buf.pop();
@@ -407,7 +362,7 @@ impl Navigator {
             host_ns,
             Eskf::new(p),
             Vector3::from(init.gyro_bias_deg_per_h) * DEG_H,
-            cfg.delay_prior_s,
+            self.delay_prior.0,
         );
         f.bias_a = Vector3::from(init.accel_bias_mgal) * 1e-5;
         self.filt = Some(f);
@@ -420,14 +375,13 @@ impl Navigator {
         // A loose delay prior (software sync) is replaced by the motion-onset estimate: the
         // speed noise of a fix (~0.05 m/s) over a drive-off acceleration of ~1 m/s² puts it
         // within ~50 ms.
-        if self.cfg.noise.estimate_delay
-            && self.cfg.delay_prior_std_s > ONSET_DELAY_STD_S
+        if self.cfg.estimate_delay
+            && self.delay_prior.1 > ONSET_DELAY_STD_S
             && let Some(d) = a
                 .delay_from_onset_s
-                .filter(|d| (-0.2..self.cfg.horizon_s - 0.1).contains(d))
+                .filter(|d| (-0.2..self.cfg.fusion_horizon_s - 0.1).contains(d))
         {
-            self.cfg.delay_prior_s = d;
-            self.cfg.delay_prior_std_s = ONSET_DELAY_STD_S;
+            self.delay_prior = (d, ONSET_DELAY_STD_S);
         }
         let cfg = &self.cfg;
         let mut p = StateMat::zeros();
@@ -454,10 +408,10 @@ impl Navigator {
         p[(ATT, ATT)] = level_std.powi(2);
         p[(ATT + 1, ATT + 1)] = level_std.powi(2);
         p[(ATT + 2, ATT + 2)] = cfg.init_yaw_std_rad.powi(2);
-        if cfg.noise.estimate_delay {
+        if cfg.estimate_delay {
             // The initial position and velocity come from a fix whose epoch is only known to
             // σ_Δ: δr = −v·δΔ and δv = −a·δΔ (see measurements::gnss), so they share that uncertainty.
-            let var_d = cfg.delay_prior_std_s.powi(2);
+            let var_d = self.delay_prior.1.powi(2);
             let v = a.pva.vel_ned_mps;
             let acc = a.acc_ned;
             p[(DELAY, DELAY)] = var_d;
@@ -474,7 +428,7 @@ impl Navigator {
                 }
             }
         }
-        let t_f = obs.stamp_host_ns - (cfg.delay_prior_s * 1e9) as i64;
+        let t_f = obs.stamp_host_ns - (self.delay_prior.0 * 1e9) as i64;
         while self.buf.front().is_some_and(|r| r.host_ns <= t_f) {
             self.buf.pop();
         }
@@ -483,7 +437,7 @@ impl Navigator {
             t_f,
             Eskf::new(p),
             a.gyro_bias,
-            cfg.delay_prior_s,
+            self.delay_prior.0,
         ));
         self.states.gnss.last_fused_ns = t_f;
         self.replay();
@@ -543,7 +497,7 @@ impl Navigator {
     /// Moves the GNSS antenna lever arm (body frame FRD, m, antenna − navigation point): the
     /// IMU that defines the navigation point changed (array reference handover).
     pub fn set_lever_arm(&mut self, lever_arm_b_m: Vector3<f64>) {
-        self.cfg.lever_arm_b_m = lever_arm_b_m;
+        self.cfg.gnss_lever_arm_m = lever_arm_b_m.into();
     }
 
     /// Feeds one interval of the filter stream (the fused virtual IMU, or the single IMU): it
@@ -584,11 +538,8 @@ impl Navigator {
                 continue;
             }
             filt.step(&r, &self.cfg);
-            self.states
-                .on_step(&r, filt, &self.cfg, &mut self.queue, &mut self.counters);
-            corrected |= self
-                .queue
-                .fuse_due(filt, &self.cfg, &mut self.states, &mut self.counters);
+            self.states.on_step(&r, filt, &self.cfg, &mut self.queue);
+            corrected |= self.queue.fuse_due(filt, &self.cfg, &mut self.states);
         }
         if corrected {
             self.counters.replays += 1;
@@ -710,8 +661,8 @@ impl Navigator {
     pub fn fill(&self, s: &mut NavState, now_ns: i64) {
         s.host_ns = now_ns;
         s.status = self.status(now_ns) as u8;
-        s.fixes_used = self.counters.fixes_used as u32;
-        s.fixes_rejected = self.counters.fixes_rejected as u32;
+        s.fixes_used = self.states.gnss.fixes_used as u32;
+        s.fixes_rejected = self.states.gnss.fixes_rejected as u32;
         s.last_fix_host_ns = self.states.gnss.last_fused_ns;
         let (Some((pva, _, _)), Some(filt)) = (&self.out, &self.filt) else {
             for v in [

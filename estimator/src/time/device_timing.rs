@@ -23,40 +23,30 @@ use super::device_clock::{DeviceClock, DeviceClockConfig, DeviceUpdate};
 /// clock of that IMU is restarted.
 pub const RESET_AFTER_OUTLIERS: u32 = 50;
 
-/// Settings of the device timing.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct DeviceTimingConfig {
-    /// Use the device clocks (default true).
-    pub enabled: bool,
-    /// 1-sigma of the least delayed host stamp of a window against the device event, ns
-    /// (default 100 µs; a single receipt scatters by 0.3–0.6 ms through a pseudo-terminal, by
-    /// several ms under load).
-    pub host_stamp_sigma_ns: f64,
-    /// Host stamps per window of the minimum-delay filter (default 40: 0.2 s at 200 Hz; see
-    /// [`DeviceClockConfig::host_stamp_window`]).
-    pub host_stamp_window: u32,
-    /// Largest 1-sigma of the mapping (its offset's uncertainty, a slowly varying error, not
-    /// the scatter) at which it replaces the stamp, ns (default 100 µs: a few seconds at
-    /// 200 Hz; the receipt scatter it replaces is ~600 µs).
-    pub max_sigma_ns: f64,
-    /// Largest |mapped − stamp| accepted, ns (default 50 ms: longer than any transport delay).
-    pub max_residual_ns: i64,
-    /// Largest 1-sigma of the receiver clock bias at which an IMU on the receiver's clock is
-    /// timed by it, ns (default 1 µs: any fused clock is far better; a TCXO in holdover
-    /// reaches it after several minutes without satellites, then the device clock takes over).
-    pub receiver_clock_max_sigma_ns: f64,
-}
-
-impl Default for DeviceTimingConfig {
-    fn default() -> Self {
-        Self {
-            enabled: true,
-            host_stamp_sigma_ns: 100_000.0,
-            host_stamp_window: 40,
-            max_sigma_ns: 100_000.0,
-            max_residual_ns: 50_000_000,
-            receiver_clock_max_sigma_ns: 1_000.0,
-        }
+crate::settings_group! {
+    /// Settings of the device timing.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct DeviceTimingConfig {
+        /// Time IMU samples by their device clocks where they carry one (Xsens SampleTimeFine;
+        /// off: every sample at its receipt stamp).
+        pub device_clocks: bool = true, file "estimator", switch "no-device-clocks" => false;
+        /// 1-sigma of the least delayed host stamp of a window against the device event, ns
+        /// (100 µs; a single receipt scatters by 0.3–0.6 ms through a pseudo-terminal, by
+        /// several ms under load).
+        pub host_stamp_sigma_ns: f64 = 100_000.0;
+        /// Host stamps per window of the minimum-delay filter (40: 0.2 s at 200 Hz; see
+        /// [`DeviceClockConfig::host_stamp_window`]).
+        pub host_stamp_window: u32 = 40;
+        /// Largest 1-sigma of the mapping (its offset's uncertainty, a slowly varying error, not
+        /// the scatter) at which it replaces the stamp, ns (100 µs: a few seconds at 200 Hz;
+        /// the receipt scatter it replaces is ~600 µs).
+        pub max_sigma_ns: f64 = 100_000.0;
+        /// Largest |mapped − stamp| accepted, ns (50 ms: longer than any transport delay).
+        pub max_residual_ns: i64 = 50_000_000;
+        /// Largest 1-sigma of the receiver clock bias at which an IMU on the receiver's clock is
+        /// timed by it, ns (1 µs: any fused clock is far better; a TCXO in holdover reaches it
+        /// after several minutes without satellites, then the device clock takes over).
+        pub receiver_clock_max_sigma_ns: f64 = 1_000.0;
     }
 }
 
@@ -117,7 +107,7 @@ impl DeviceTiming {
     /// converged (stamp source [`StampSource::DeviceCounter`]), else unchanged.
     pub fn retime(&mut self, index: usize, s: &ImuSample) -> ImuSample {
         let mut out = *s;
-        if !self.cfg.enabled || s.stamp.has_device_time == 0 || index >= MAX_IMUS || s.stamp.device_ns < 0 {
+        if !self.cfg.device_clocks || s.stamp.has_device_time == 0 || index >= MAX_IMUS || s.stamp.device_ns < 0 {
             return out;
         }
         let cfg = self.clock_config();
@@ -164,7 +154,7 @@ impl DeviceTiming {
         receiver_bias_ns: Option<(f64, f64)>,
         host_ns_at_utc: impl FnOnce(i64) -> Option<i64>,
     ) -> Option<ImuSample> {
-        if !self.cfg.enabled || s.flags & IMU_FLAG_RECEIVER_CLOCK == 0 || s.stamp.has_device_time == 0 {
+        if !self.cfg.device_clocks || s.flags & IMU_FLAG_RECEIVER_CLOCK == 0 || s.stamp.has_device_time == 0 {
             return None;
         }
         // GPS time within 1980 … 2126 (2⁶² ns): a device time far outside is no receiver's

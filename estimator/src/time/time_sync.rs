@@ -26,6 +26,7 @@ use navsync_shared::time::{NS_PER_S, gps_minus_utc_s};
 
 use super::clock_model::{ClockModel, ClockUpdate, OscillatorNoise};
 use super::latency_stats::LatencyStats;
+use crate::declare::checks::positive;
 
 /// An edge farther than this from a whole mapped second is early/late, ns.
 pub const EDGE_GATE_NS: i64 = 100_000_000;
@@ -38,24 +39,27 @@ const LOCK_UPDATES: u64 = 3;
 /// Offset 1-sigma below which the mapping is declared locked, ns.
 const LOCK_SIGMA_NS: f64 = 100_000.0;
 
-/// Configuration of the time synchronisation.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TimeSyncConfig {
-    /// Oscillator process noise.
-    pub noise: OscillatorNoise,
-    /// Edge stamp noise used when the source does not state its own, ns.
-    pub default_edge_sigma_ns: f64,
-    /// Ignore PPS entirely (software sync).
-    pub software_sync: bool,
+crate::settings_group! {
+    /// Configuration of the time synchronisation.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct TimeSyncConfig {
+        /// Host oscillator: Allan deviation at 1 s of its white frequency noise (a TCXO's by
+        /// default).
+        pub oscillator_white_fm_adev_1s: f64 = 1e-10, file "timing", check positive;
+        /// Host oscillator: Allan deviation at 1 s of its random-walk frequency noise.
+        pub oscillator_random_walk_fm_adev_1s: f64 = 1e-10, file "timing", check positive;
+        /// Edge stamp noise used when the source does not state its own, ns.
+        pub default_edge_sigma_ns: f64 = 30_000.0;
+        /// Ignore PPS: stamp fixes by the receipt of their first byte (software sync, ms-level
+        /// time).
+        pub software_sync: bool = false, file "timing", switch "software-sync" => true;
+    }
 }
 
-impl Default for TimeSyncConfig {
-    fn default() -> Self {
-        Self {
-            noise: OscillatorNoise::default(),
-            default_edge_sigma_ns: 30_000.0,
-            software_sync: false,
-        }
+impl TimeSyncConfig {
+    /// The host oscillator's process noise ([`OscillatorNoise::from_allan`]).
+    pub fn noise(&self) -> OscillatorNoise {
+        OscillatorNoise::from_allan(self.oscillator_white_fm_adev_1s, self.oscillator_random_walk_fm_adev_1s)
     }
 }
 
@@ -141,7 +145,7 @@ impl TimeSync {
     pub fn new(cfg: TimeSyncConfig) -> Self {
         Self {
             cfg,
-            clock: ClockModel::new(cfg.noise),
+            clock: ClockModel::new(cfg.noise()),
             pending: [None; 4],
             last_edge_host_ns: None,
             last_used_host_ns: None,
@@ -329,7 +333,7 @@ impl TimeSync {
         // start over rather than hold a wrong mapping forever.
         if self.consecutive_rejects >= 5 {
             self.counters.resyncs += 1;
-            self.clock = ClockModel::new(self.cfg.noise);
+            self.clock = ClockModel::new(self.cfg.noise());
             self.pending = [None; 4];
             self.consecutive_rejects = 0;
             self.status = TimeStatus::None;

@@ -44,11 +44,10 @@ pub fn scenario() -> SimConfig {
 /// The estimator of `navsync estimator` for [`scenario`]: hardware sync, industrial IMU model,
 /// Δ estimated, the simulated receiver's velocity noise.
 pub fn estimator_args() -> Settings {
-    Settings {
-        imu_model: ImuPreset::Industrial,
-        gnss_vel_std_mps: 0.05,
-        ..Default::default()
-    }
+    let mut s = Settings::default();
+    s.imu.imu_model = ImuPreset::Industrial;
+    s.gnss.gnss_vel_std_mps = 0.05;
+    s
 }
 
 /// What the test sees of a run.
@@ -72,7 +71,7 @@ pub fn drive(
 ) -> Pipeline {
     let world = World::new(cfg, HOST0, UTC0).expect("world");
     let mut p = Pipeline::new(args.pipeline_config());
-    let mut order: InputOrder = InputOrder::new(args.imu_ids.first().map(String::as_str));
+    let mut order: InputOrder = InputOrder::new(args.inputs.imus.first().map(String::as_str));
     let end_ns = HOST0 + (end_s * 1e9) as i64;
     let mut consume = |p: &mut Pipeline, s: Input| match s {
         Input::Imu(x) => {

@@ -24,7 +24,8 @@ use crate::nav::error_state::{ATT, BA, BG, DELAY, N, POS, VEL};
 use crate::nav::eskf::Update;
 use crate::nav::filter::DelayedFilter;
 use crate::nav::mechanization::{Pva, skew};
-use crate::nav::navigator::{NavConfig, NavCounters};
+use crate::declare::checks::{non_negative, positive};
+use crate::nav::config::NavConfig;
 
 /// A fix reduced to what the filter fuses.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -49,31 +50,22 @@ pub struct GnssObservation {
     pub track_rad: f64,
 }
 
-/// How the fixes' accuracy becomes the measurement noise R: the receiver's own σ (NMEA GST,
-/// a KF-GINS file's std columns) where a fix carries it, else an HDOP model; then scaled and
-/// floored, so an RTK-fixed receiver is trusted at cm level and a model of the receiver's
-/// optimism can be stated.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct GnssAccuracy {
-    /// User-equivalent range error for fixes without their own σ, m: σ_horizontal axis =
-    /// HDOP·UERE/√2, σ_down = VDOP·UERE (default 2 m).
-    pub uere_m: f64,
-    /// Velocity 1-sigma per axis, m/s (NMEA reports none; default 0.1).
-    pub vel_std_mps: f64,
-    /// Factor on every position σ (default 1: the receiver's σ as it is).
-    pub pos_std_scale: f64,
-    /// Smallest position σ per axis, m (default 0.005).
-    pub pos_std_floor_m: f64,
-}
-
-impl Default for GnssAccuracy {
-    fn default() -> Self {
-        Self {
-            uere_m: 2.0,
-            vel_std_mps: 0.1,
-            pos_std_scale: 1.0,
-            pos_std_floor_m: 0.005,
-        }
+crate::settings_group! {
+    /// How the fixes' accuracy becomes the measurement noise R: the receiver's own σ (NMEA GST,
+    /// a KF-GINS file's std columns) where a fix carries it, else an HDOP model; then scaled and
+    /// floored, so an RTK-fixed receiver is trusted at cm level and a model of the receiver's
+    /// optimism can be stated.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct GnssAccuracy {
+        /// User-equivalent range error for fixes without their own σ, m: σ_horizontal axis =
+        /// HDOP·UERE/√2, σ_down = VDOP·UERE (default 2 m).
+        pub uere_m: f64 = 2.0;
+        /// 1-sigma of the receiver's velocity per axis where a fix carries none (NMEA), m/s.
+        pub gnss_vel_std_mps: f64 = 0.1, file "estimator", flag "gnss-vel-std", check positive;
+        /// Factor on every position σ (1: the receiver's σ as it is).
+        pub gnss_pos_std_scale: f64 = 1.0, file "estimator", flag "gnss-std-scale", check positive;
+        /// Smallest GNSS position σ per axis, m.
+        pub gnss_pos_std_floor_m: f64 = 0.005, file "estimator", flag "gnss-std-floor", check non_negative;
     }
 }
 
@@ -113,9 +105,9 @@ pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Opt
     let vel_std_mps = if positive(fix.s_acc_mps) {
         fix.s_acc_mps / std::f64::consts::SQRT_2
     } else {
-        acc.vel_std_mps
+        acc.gnss_vel_std_mps
     };
-    pos_std = (pos_std * acc.pos_std_scale).map(|s| s.max(acc.pos_std_floor_m));
+    pos_std = (pos_std * acc.gnss_pos_std_scale).map(|s| s.max(acc.gnss_pos_std_floor_m));
     if fix.altitude_held() {
         // From ≤ 3 satellites the altitude is the receiver's assumption: no vertical information.
         pos_std.z = pos_std.z.max(HELD_ALTITUDE_STD_M);
@@ -194,60 +186,50 @@ pub fn velocity_terms(
 /// uncertainty reopened.
 pub const RESET_AFTER_REJECTS: u32 = 5;
 
-/// How GNSS fixes that fail the gate are treated, and how the filter checks its own model.
-///
-/// **Covariance inflation.** A fix whose position fails the 99.9 % gate by at most
-/// `max_inflation` (NIS ≤ gate × `max_inflation`) after the filter has coasted without a
-/// position for `coast_s`, while it is still recovering from such a fix (within `coast_s` of
-/// it), right after a rejected fix, or while the recent innovations are too large on average
-/// (NIS per component above `inflate_above_nis`), is evidence that the filter's covariance is
-/// too small (process noise below what the IMU really does: vibration, a wrong IMU model, a
-/// long outage), not that the fix is wrong: the whole covariance is scaled by NIS / gate, which
-/// keeps its correlations (fading memory, Sorenson & Sacks 1971; Groves 2013 §17.3.2), and the
-/// fix is fused. A single fix far off after fixes that agreed (multipath) is still rejected,
-/// and so is any fix beyond the bound (a 10 km jump), which [`RESET_AFTER_REJECTS`] in a row
-/// turn into a reset.
-///
-/// **Process-noise adaptation** (innovation-based adaptive estimation, Mehra 1970; Mohamed &
-/// Schwarz 1999; off by default). The NIS per component of every position and velocity update
-/// while fixes flow is averaged over about `adapt_fixes` updates (1 for a consistent filter);
-/// with `adapt_process_noise`, an average above 1.5 multiplies the IMU's process noise by the
-/// average (at most 4× per update, at most `max_q_scale` in all) and one below 0.7 divides it
-/// back towards the configured model, never below it. It rescues a model far too optimistic
-/// (on the simulated drive with every noise term 10× too small: 0.37 m instead of 0.99 m
-/// horizontal RMS), but on a real drive whose innovations come from vibration and timing
-/// rather than from the IMU's noise (drive0708) it raises the noise for nothing and the
-/// dead reckoning through outages gets worse (outage-end mean 4.8 → 10.5 m): hence opt-in.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct GnssFusion {
-    /// Largest covariance scale one fix may apply (default 10⁴: an innovation up to 100× the
-    /// gate's radius); 1 switches the inflation off.
-    pub max_inflation: f64,
-    /// Coasting without a fused position for at least this long makes the next fix eligible
-    /// for inflation, s (default 2).
-    pub coast_s: f64,
-    /// Average NIS per component above which any gated fix is inflated (default 1.5).
-    pub inflate_above_nis: f64,
-    /// Length of the NIS average, updates (default 10).
-    pub adapt_fixes: f64,
-    /// Adapt the IMU's process noise to the innovations (default false).
-    pub adapt_process_noise: bool,
-    /// Largest factor on the IMU's process noise (default 100: 10× its σ).
-    pub max_q_scale: f64,
-}
-
-impl Default for GnssFusion {
-    fn default() -> Self {
-        Self {
-            max_inflation: 1.0e4,
-            coast_s: 2.0,
-            inflate_above_nis: 1.5,
-            adapt_fixes: 10.0,
-            adapt_process_noise: false,
-            max_q_scale: 100.0,
-        }
+crate::settings_group! {
+    /// How GNSS fixes that fail the gate are treated, and how the filter checks its own model.
+    ///
+    /// **Covariance inflation.** A fix whose position fails the 99.9 % gate by at most
+    /// `max_inflation` (NIS ≤ gate × `max_inflation`) after the filter has coasted without a
+    /// position for `coast_s`, while it is still recovering from such a fix (within `coast_s` of
+    /// it), right after a rejected fix, or while the recent innovations are too large on average
+    /// (NIS per component above `inflate_above_nis`), is evidence that the filter's covariance is
+    /// too small (process noise below what the IMU really does: vibration, a wrong IMU model, a
+    /// long outage), not that the fix is wrong: the whole covariance is scaled by NIS / gate, which
+    /// keeps its correlations (fading memory, Sorenson & Sacks 1971; Groves 2013 §17.3.2), and the
+    /// fix is fused. A single fix far off after fixes that agreed (multipath) is still rejected,
+    /// and so is any fix beyond the bound (a 10 km jump), which [`RESET_AFTER_REJECTS`] in a row
+    /// turn into a reset.
+    ///
+    /// **Process-noise adaptation** (innovation-based adaptive estimation, Mehra 1970; Mohamed &
+    /// Schwarz 1999; off by default). The NIS per component of every position and velocity update
+    /// while fixes flow is averaged over about `adapt_fixes` updates (1 for a consistent filter);
+    /// with `adapt_process_noise`, an average above 1.5 multiplies the IMU's process noise by the
+    /// average (at most 4× per update, at most `max_q_scale` in all) and one below 0.7 divides it
+    /// back towards the configured model, never below it. It rescues a model far too optimistic
+    /// (on the simulated drive with every noise term 10× too small: 0.37 m instead of 0.99 m
+    /// horizontal RMS), but on a real drive whose innovations come from vibration and timing
+    /// rather than from the IMU's noise (drive0708) it raises the noise for nothing and the
+    /// dead reckoning through outages gets worse (outage-end mean 4.8 → 10.5 m): hence opt-in.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct GnssFusion {
+        /// Largest covariance scale one fix may apply (default 10⁴: an innovation up to 100× the
+        /// gate's radius); 1 switches the inflation off.
+        pub max_inflation: f64 = 1.0e4;
+        /// Coasting without a fused position for at least this long makes the next fix eligible
+        /// for inflation, s (default 2).
+        pub coast_s: f64 = 2.0;
+        /// Average NIS per component above which any gated fix is inflated (default 1.5).
+        pub inflate_above_nis: f64 = 1.5;
+        /// Length of the NIS average, updates (default 10).
+        pub adapt_fixes: f64 = 10.0;
+        /// Adapt the IMU's process noise when the GNSS innovations show it too optimistic.
+        pub adapt_process_noise: bool = false, file "estimator", switch "adapt-noise" => true;
+        /// Largest factor on the IMU's process noise (default 100: 10× its σ).
+        pub max_q_scale: f64 = 100.0;
     }
 }
+
 
 /// A single update's NIS per component counts at most this much in the average (one outlier
 /// must not move it by itself).
@@ -287,6 +269,18 @@ pub struct GnssState {
     /// Running average of the NIS per component of the updates fused while fixes flow (1
     /// when the filter is consistent).
     pub nis_average: f64,
+    /// Fixes fused (position accepted).
+    pub fixes_used: u64,
+    /// Fixes whose position failed the innovation gate.
+    pub fixes_rejected: u64,
+    /// Velocity updates that failed the gate.
+    pub vel_rejected: u64,
+    /// Resets to GNSS after [`RESET_AFTER_REJECTS`] consecutive rejected fixes.
+    pub gnss_resets: u64,
+    /// Of those, full resets: the fix's velocity disagreed with the filter too (the filter had
+    /// lost consistency), so velocity was reset as well and the attitude and sensor-error
+    /// uncertainty reopened. The others moved only the position (the GNSS position jumped).
+    pub gnss_resets_full: u64,
 }
 
 impl Default for GnssState {
@@ -297,6 +291,11 @@ impl Default for GnssState {
             inflations: 0,
             last_inflated_ns: 0,
             nis_average: 1.0,
+            fixes_used: 0,
+            fixes_rejected: 0,
+            vel_rejected: 0,
+            gnss_resets: 0,
+            gnss_resets_full: 0,
         }
     }
 }
@@ -317,11 +316,10 @@ impl Measurement for GnssObservation {
         eps: f64,
         cfg: &NavConfig,
         state: &mut GnssState,
-        counters: &mut NavCounters,
     ) -> bool {
         let obs = self;
         let t_f = self.epoch_ns(f.delay_s);
-        let (dz, h, r) = position_terms(&f.pva, &cfg.lever_arm_b_m, obs, eps);
+        let (dz, h, r) = position_terms(&f.pva, &Vector3::from(cfg.gnss_lever_arm_m), obs, eps);
         let mut outcome = f.eskf.update(&dz, &h, &r, cfg.gate_scale);
         let fusion = &cfg.measurements.gnss;
         let since = |t: i64| (t_f - t) as f64 * 1e-9;
@@ -346,13 +344,13 @@ impl Measurement for GnssObservation {
         }
         match outcome {
             Update::Accepted { dx, .. } => {
-                f.feedback(&dx, cfg.horizon_s);
-                counters.fixes_used += 1;
+                f.feedback(&dx, cfg.fusion_horizon_s);
+                state.fixes_used += 1;
                 state.consecutive_rejects = 0;
                 state.last_fused_ns = t_f;
             }
             Update::Rejected { .. } => {
-                counters.fixes_rejected += 1;
+                state.fixes_rejected += 1;
                 state.consecutive_rejects += 1;
                 if state.consecutive_rejects < RESET_AFTER_REJECTS {
                     return false;
@@ -360,22 +358,22 @@ impl Measurement for GnssObservation {
                 // Persistently rejected: did the GNSS position jump, or has the filter lost
                 // consistency? The fix's velocity against the filter's tells.
                 let vel_agrees = obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() && {
-                    let (dz, h, r) = velocity_terms(&f.pva, &cfg.lever_arm_b_m, &f.last_w, &f.acc_ned, obs, eps);
+                    let (dz, h, r) = velocity_terms(&f.pva, &Vector3::from(cfg.gnss_lever_arm_m), &f.last_w, &f.acc_ned, obs, eps);
                     f.eskf.gate(&dz, &h, &r, cfg.gate_scale).0
                 };
-                counters.gnss_resets += 1;
+                state.gnss_resets += 1;
                 state.consecutive_rejects = 0;
                 state.last_fused_ns = t_f;
                 if !vel_agrees {
                     reset_to(f, obs, cfg, eps);
-                    counters.gnss_resets_full += 1;
+                    state.gnss_resets_full += 1;
                     return true;
                 }
                 reset_position_to(f, obs, cfg, eps);
             }
         }
         if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
-            let (dz, h, r) = velocity_terms(&f.pva, &cfg.lever_arm_b_m, &f.last_w, &f.acc_ned, obs, eps);
+            let (dz, h, r) = velocity_terms(&f.pva, &Vector3::from(cfg.gnss_lever_arm_m), &f.last_w, &f.acc_ned, obs, eps);
             let outcome = f.eskf.update(&dz, &h, &r, cfg.gate_scale);
             if !coasted {
                 let nis = match outcome {
@@ -384,8 +382,8 @@ impl Measurement for GnssObservation {
                 adapt_process_noise(f, &cfg.measurements.gnss, state, nis, 2);
             }
             match outcome {
-                Update::Accepted { dx, .. } => f.feedback(&dx, cfg.horizon_s),
-                Update::Rejected { .. } => counters.vel_rejected += 1,
+                Update::Accepted { dx, .. } => f.feedback(&dx, cfg.fusion_horizon_s),
+                Update::Rejected { .. } => state.vel_rejected += 1,
             }
         }
         true
@@ -403,7 +401,7 @@ impl Measurement for GnssObservation {
 /// its velocity still agrees with the inertial solution.
 fn reset_position_to(f: &mut DelayedFilter, obs: &GnssObservation, cfg: &NavConfig, eps: f64) {
     let c_bn = f.pva.q_nb.to_rotation_matrix().into_inner();
-    let lever_n = c_bn * cfg.lever_arm_b_m;
+    let lever_n = c_bn * Vector3::from(cfg.gnss_lever_arm_m);
     let (rm, rn) = earth::radii(obs.lat_rad);
     let p_ned = f.pva.vel_ned_mps * eps - lever_n;
     f.pva.lat_rad = obs.lat_rad + p_ned.x / (rm + obs.h_m);
@@ -425,7 +423,7 @@ fn reset_position_to(f: &mut DelayedFilter, obs: &GnssObservation, cfg: &NavConf
 /// decorrelated from the other states.
 fn reset_to(f: &mut DelayedFilter, obs: &GnssObservation, cfg: &NavConfig, eps: f64) {
     let c_bn = f.pva.q_nb.to_rotation_matrix().into_inner();
-    let lever_n = c_bn * cfg.lever_arm_b_m;
+    let lever_n = c_bn * Vector3::from(cfg.gnss_lever_arm_m);
     let (rm, rn) = earth::radii(obs.lat_rad);
     // NMEA carries no vertical velocity: a land vehicle's is ~0, with 2 m/s of doubt.
     let v_d = if obs.vel_ned_mps.z.is_finite() {

@@ -9,9 +9,9 @@
 //! queue, the settings in [`NavConfig`] (`measurements.<kind>`), the state and the health
 //! counters of every kind follow from that line.
 
+use super::config::NavConfig;
 use super::filter::DelayedFilter;
 use super::imu_buffer::ImuRecord;
-use super::navigator::{NavConfig, NavCounters};
 
 /// One kind of measurement.
 pub trait Measurement: Copy + Into<Queued> {
@@ -23,16 +23,9 @@ pub trait Measurement: Copy + Into<Queued> {
     /// Host time (ns) of the instant it measures, given the GNSS delay estimate Δ̂ (s).
     fn epoch_ns(&self, delay_s: f64) -> i64;
 
-    /// Fuses it into the filter, which stands `eps_s` (s, ≥ 0) after [`Self::epoch_ns`].
-    /// Returns true when the state was corrected.
-    fn fuse(
-        &self,
-        f: &mut DelayedFilter,
-        eps_s: f64,
-        cfg: &NavConfig,
-        state: &mut Self::State,
-        counters: &mut NavCounters,
-    ) -> bool;
+    /// Fuses it into the filter, which stands `eps_s` (s, ≥ 0) after [`Self::epoch_ns`],
+    /// counting what became of it in its `state`. Returns true when the state was corrected.
+    fn fuse(&self, f: &mut DelayedFilter, eps_s: f64, cfg: &NavConfig, state: &mut Self::State) -> bool;
 
     /// After each step of the delayed filter over IMU record `rec`: a measurement this kind
     /// makes from the IMU data at the filter's time, if any (default: none).
@@ -76,6 +69,14 @@ macro_rules! measurement_kinds {
         #[derive(Debug, Clone, Default)]
         pub struct MeasurementStates {
             $($(#[$doc])* pub $field: <$t as Measurement>::State,)*
+            /// Measurements of each kind dropped because the queue was full.
+            pub queue_full: QueueFull,
+        }
+
+        /// Measurements of each kind dropped because the queue was full.
+        #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+        pub struct QueueFull {
+            $($(#[$doc])* pub $field: u64,)*
         }
 
         impl Queued {
@@ -85,16 +86,9 @@ macro_rules! measurement_kinds {
                 }
             }
 
-            fn fuse(
-                &self,
-                f: &mut DelayedFilter,
-                eps_s: f64,
-                cfg: &NavConfig,
-                states: &mut MeasurementStates,
-                counters: &mut NavCounters,
-            ) -> bool {
+            fn fuse(&self, f: &mut DelayedFilter, eps_s: f64, cfg: &NavConfig, states: &mut MeasurementStates) -> bool {
                 match self {
-                    $(Self::$variant(m) => m.fuse(f, eps_s, cfg, &mut states.$field, counters),)*
+                    $(Self::$variant(m) => m.fuse(f, eps_s, cfg, &mut states.$field),)*
                 }
             }
         }
@@ -102,22 +96,26 @@ macro_rules! measurement_kinds {
         impl MeasurementStates {
             /// Every kind's [`Measurement::on_step`] after a step of the delayed filter; what
             /// they measure goes into `queue`.
-            pub(crate) fn on_step(
-                &mut self,
-                rec: &ImuRecord,
-                f: &DelayedFilter,
-                cfg: &NavConfig,
-                queue: &mut MeasurementQueue,
-                counters: &mut NavCounters,
-            ) {
+            pub(crate) fn on_step(&mut self, rec: &ImuRecord, f: &DelayedFilter, cfg: &NavConfig, queue: &mut MeasurementQueue) {
                 $(if let Some(m) = <$t as Measurement>::on_step(rec, f, cfg, &mut self.$field) {
-                    queue.push(m.into(), counters);
+                    self.queue(queue, m.into());
                 })*
+            }
+
+            /// Queues `m`; a full queue drops it, counted for its kind.
+            pub(crate) fn queue(&mut self, queue: &mut MeasurementQueue, m: Queued) {
+                let full = match &m {
+                    $(Queued::$variant(_) => &mut self.queue_full.$field,)*
+                };
+                if !queue.push(m) {
+                    *full += 1;
+                }
             }
 
             /// The health counters of every kind, by name.
             pub fn each_counter(&self, out: &mut dyn FnMut(&'static str, u64)) {
                 $(<$t as Measurement>::counters(&self.$field, out);)*
+                $(out(concat!(stringify!($field), "_queue_full"), self.queue_full.$field);)*
             }
         }
     };
@@ -141,23 +139,20 @@ pub struct MeasurementQueue {
 }
 
 impl MeasurementQueue {
-    /// Queues `m`; a full queue drops it (counted as too old).
-    pub fn push(&mut self, m: Queued, counters: &mut NavCounters) {
+    /// Queues `m`; false when the queue is full (`m` is dropped).
+    pub fn push(&mut self, m: Queued) -> bool {
         match self.slots.iter_mut().find(|s| s.is_none()) {
-            Some(slot) => *slot = Some(m),
-            None => counters.fixes_too_old += 1,
+            Some(slot) => {
+                *slot = Some(m);
+                true
+            }
+            None => false,
         }
     }
 
     /// Fuses, in epoch order, every queued measurement whose epoch the filter has reached.
     /// Returns true when the state was corrected.
-    pub fn fuse_due(
-        &mut self,
-        f: &mut DelayedFilter,
-        cfg: &NavConfig,
-        states: &mut MeasurementStates,
-        counters: &mut NavCounters,
-    ) -> bool {
+    pub fn fuse_due(&mut self, f: &mut DelayedFilter, cfg: &NavConfig, states: &mut MeasurementStates) -> bool {
         let mut corrected = false;
         loop {
             // The epoch of a GNSS fix moves with Δ̂, which each fusion may change: look again.
@@ -172,7 +167,7 @@ impl MeasurementQueue {
             let Some(m) = self.slots[i].take() else { break };
             f.propagate_covariance(cfg);
             let eps_s = (f.t_ns - t) as f64 * 1e-9;
-            corrected |= m.fuse(f, eps_s, cfg, states, counters);
+            corrected |= m.fuse(f, eps_s, cfg, states);
         }
         corrected
     }

@@ -27,7 +27,7 @@ use crate::nav::error_state::{ATT, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, VEL};
 use crate::nav::eskf::Update;
 use crate::nav::filter::DelayedFilter;
 use crate::nav::mechanization::skew;
-use crate::nav::navigator::{NavConfig, NavCounters};
+use crate::nav::config::NavConfig;
 
 /// 1σ of the L1 ionospheric delay at zenith when the broadcast model is not known yet, m.
 const UNMODELLED_IONO_ZENITH_M: f64 = 10.0;
@@ -237,7 +237,7 @@ impl RangeEpoch {
     /// anchored (no usable satellite yet).
     fn anchor_clock(&self, f: &mut DelayedFilter, cfg: &NavConfig, eps: f64, st: &mut RangingState) -> bool {
         let rc = &cfg.measurements.ranges;
-        let a = Antenna::of(f, &cfg.lever_arm_b_m, eps);
+        let a = Antenna::of(f, &Vector3::from(cfg.gnss_lever_arm_m), eps);
         let (mut res, mut rates) = ([0.0; MAX_RANGE_SATS], [0.0; MAX_RANGE_SATS]);
         let (mut n, mut m) = (0, 0);
         for s in self.sats() {
@@ -296,7 +296,6 @@ impl Measurement for RangeEpoch {
         eps: f64,
         cfg: &NavConfig,
         st: &mut RangingState,
-        _counters: &mut NavCounters,
     ) -> bool {
         if cfg.noise.clock.is_none() {
             st.epochs_not_tight += 1;
@@ -306,7 +305,7 @@ impl Measurement for RangeEpoch {
             return false;
         }
         let rc = &cfg.measurements.ranges;
-        let lever_b = cfg.lever_arm_b_m;
+        let lever_b = Vector3::from(cfg.gnss_lever_arm_m);
         let mut used = 0u64;
         for s in self.sats() {
             let a = Antenna::of(f, &lever_b, eps);
@@ -333,7 +332,7 @@ impl Measurement for RangeEpoch {
             let var = sd * sd + g.atmosphere_var_m2;
             match f.eskf.update(&dz, &h, &Matrix1::new(var), cfg.gate_scale) {
                 Update::Accepted { dx, .. } => {
-                    f.feedback(&dx, cfg.horizon_s);
+                    f.feedback(&dx, cfg.fusion_horizon_s);
                     st.ranges_used += 1;
                     used += 1;
                 }
@@ -359,7 +358,7 @@ impl Measurement for RangeEpoch {
             let sd = sigma(rc.range_rate_std_mps, s.range_rate_std_mps, g.el_rad, cno, rc);
             match f.eskf.update(&dz, &h, &Matrix1::new(sd * sd), cfg.gate_scale) {
                 Update::Accepted { dx, .. } => {
-                    f.feedback(&dx, cfg.horizon_s);
+                    f.feedback(&dx, cfg.fusion_horizon_s);
                     st.rates_used += 1;
                 }
                 Update::Rejected { .. } => st.rates_rejected += 1,

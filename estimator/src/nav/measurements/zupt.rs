@@ -30,48 +30,35 @@ use crate::nav::error_state::{BG, N, VEL};
 use crate::nav::eskf::Update;
 use crate::nav::filter::DelayedFilter;
 use crate::nav::imu_buffer::ImuRecord;
-use crate::nav::navigator::{NavConfig, NavCounters};
+use crate::nav::config::NavConfig;
 
-/// Settings of the standstill updates.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ZuptConfig {
-    /// Use them (default on).
-    pub enabled: bool,
-    /// Length of a detection window, s (default 0.5).
-    pub window_s: f64,
-    /// Largest specific-force scatter of a still window, m/s² (default 0.25: above a parked
-    /// car's engine vibration, below a moving car's).
-    pub accel_std_mps2: f64,
-    /// Largest mean compensated angular rate of a still window, rad/s (default 1°/s).
-    pub gyro_rps: f64,
-    /// Largest change of the mean specific force from the previous window, m/s² (default
-    /// 0.03: a standing vehicle's mean is constant; an acceleration building up moves it).
-    pub accel_change_mps2: f64,
-    /// Largest filter speed at which a window may count as still, m/s (default 0.15).
-    pub speed_mps: f64,
-    /// Still windows in a row before the first update (default 2: one second).
-    pub still_windows: u32,
-    /// 1-sigma of the zero velocity, m/s (default 0.02).
-    pub vel_std_mps: f64,
-    /// Smallest 1-sigma of the window's mean angular rate, rad/s (default 2e-4, 41°/h).
-    pub rate_std_floor_rps: f64,
-}
-
-impl Default for ZuptConfig {
-    fn default() -> Self {
-        Self {
-            enabled: true,
-            window_s: 0.5,
-            accel_std_mps2: 0.25,
-            gyro_rps: 1f64.to_radians(),
-            accel_change_mps2: 0.03,
-            speed_mps: 0.15,
-            still_windows: 2,
-            vel_std_mps: 0.02,
-            rate_std_floor_rps: 2e-4,
-        }
+crate::settings_group! {
+    /// Settings of the standstill updates.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct ZuptConfig {
+        /// Zero-velocity and zero-angular-rate updates while the vehicle stands still.
+        pub zupt: bool = true, file "estimator", switch "no-zupt" => false;
+        /// Length of a detection window, s (default 0.5).
+        pub window_s: f64 = 0.5;
+        /// Largest specific-force scatter of a still window, m/s² (default 0.25: above a parked
+        /// car's engine vibration, below a moving car's).
+        pub accel_std_mps2: f64 = 0.25;
+        /// Largest mean compensated angular rate of a still window, rad/s (default 1°/s).
+        pub gyro_rps: f64 = 1f64.to_radians();
+        /// Largest change of the mean specific force from the previous window, m/s² (default
+        /// 0.03: a standing vehicle's mean is constant; an acceleration building up moves it).
+        pub accel_change_mps2: f64 = 0.03;
+        /// Largest filter speed at which a window may count as still, m/s (default 0.15).
+        pub speed_mps: f64 = 0.15;
+        /// Still windows in a row before the first update (default 2: one second).
+        pub still_windows: u32 = 2;
+        /// 1-sigma of the zero velocity, m/s (default 0.02).
+        pub vel_std_mps: f64 = 0.02;
+        /// Smallest 1-sigma of the window's mean angular rate, rad/s (default 2e-4, 41°/h).
+        pub rate_std_floor_rps: f64 = 2e-4;
     }
 }
+
 
 /// Sums of the current detection window.
 #[derive(Debug, Clone, Copy, Default)]
@@ -118,7 +105,7 @@ impl Measurement for Zupt {
         self.t_ns
     }
 
-    fn fuse(&self, f: &mut DelayedFilter, _eps_s: f64, cfg: &NavConfig, state: &mut ZuptState, _: &mut NavCounters) -> bool {
+    fn fuse(&self, f: &mut DelayedFilter, _eps_s: f64, cfg: &NavConfig, state: &mut ZuptState) -> bool {
         let z = &cfg.measurements.zupt;
         let c_nb = f.pva.q_nb.inverse().to_rotation_matrix().into_inner();
         let w_ie_b = c_nb * Vector3::from(earth::omega_ie_n(f.pva.lat_rad));
@@ -135,7 +122,7 @@ impl Measurement for Zupt {
         }
         match f.eskf.update(&dz, &h, &r, cfg.gate_scale) {
             Update::Accepted { dx, .. } => {
-                f.feedback(&dx, cfg.horizon_s);
+                f.feedback(&dx, cfg.fusion_horizon_s);
                 state.used += 1;
                 true
             }
@@ -148,7 +135,7 @@ impl Measurement for Zupt {
 
     fn on_step(rec: &ImuRecord, f: &DelayedFilter, cfg: &NavConfig, state: &mut ZuptState) -> Option<Self> {
         let z = &cfg.measurements.zupt;
-        if !z.enabled {
+        if !z.zupt {
             return None;
         }
         let (w, acc) = f.compensate(rec);
