@@ -16,6 +16,8 @@
 //!   fusion into one virtual IMU.
 //! - [`pipeline`]: time sync + array + navigator as one state machine.
 //! - [`input_order`]: the canonical order in which samples of many services enter it.
+//! - [`feed`]: the one input path (order, dispatch, what comes back) of the live process and
+//!   the offline runs.
 //! - [`offline`]: the pipeline over a stream of samples as fast as the CPU allows.
 //! - [`evaluation`]: accuracy against a truth (the simulator's, or another trajectory).
 //! - [`settings`]: every setting, composed of the groups declared where they act
@@ -26,6 +28,7 @@
 pub mod array;
 pub mod declare;
 pub mod evaluation;
+pub mod feed;
 pub mod gnss;
 pub mod input_order;
 pub mod nav;

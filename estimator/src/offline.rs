@@ -1,19 +1,20 @@
 //! Runs the estimator over a stream of recorded or simulated samples as fast as the CPU allows,
 //! and evaluates it against the truth in the stream.
 //!
-//! The samples go through [`InputOrder`] exactly as in the live process, so the estimator
+//! The samples go through the [`Feed`] exactly as in the live process, so the estimator
 //! consumes them in the same order as the live `navsync estimator` would have, whatever order
 //! they come in (delivery order from the simulator, receipt order from a recording): the
 //! navigation states are bit-identical to the live ones for the same samples.
 
+use std::borrow::BorrowMut;
 use std::time::{Duration, Instant};
 
 use navsync_shared::samples::{AnySample, NavState, TimeState};
 use navsync_shared::time::NS_PER_S;
 
 use crate::evaluation::{DelayTruth, Evaluator, Summary};
-use crate::input_order::{Input, InputOrder};
-use crate::output_check::OutputCheck;
+use crate::feed::Feed;
+use crate::input_order::Input;
 use crate::pipeline::Pipeline;
 use crate::settings::Settings;
 
@@ -37,24 +38,21 @@ pub enum Output<'a> {
 
 /// Builds the estimator `settings` describe and runs it over `samples` (each with a tag `T`,
 /// e.g. its recording time) in the canonical input order of its reference IMU: the one entry
-/// point of every offline tool. Outputs as for [`run_ordered`].
+/// point of every offline tool. Outputs as for [`run_feed`].
 pub fn estimate<T, S: Into<Input>, I: IntoIterator<Item = (S, T)>>(
     settings: &Settings,
     samples: I,
     time_states: bool,
     on_output: impl FnMut(Output<'_>, &T),
 ) -> OfflineRun {
-    let cfg = settings.pipeline_config();
-    let reference = cfg.reference_imu.clone();
-    let mut pipeline = Pipeline::new(cfg);
-    run_ordered(
-        &mut pipeline,
-        Some(&reference),
+    run_feed(
+        Feed::new(settings.pipeline_config()),
         samples,
         settings.delay_truth(),
         time_states,
         on_output,
     )
+    .0
 }
 
 /// Feeds `samples` to `pipeline`; every navigation state goes to `on_nav`. The reference
@@ -81,110 +79,85 @@ pub fn run<I: IntoIterator<Item = AnySample>>(
     )
 }
 
-/// Feeds `samples`, each with a tag `T` (e.g. its recording time), to `pipeline` in the
-/// canonical input order released by the IMU `reference_imu` (the pipeline's reference IMU;
-/// `None`: any IMU). Every output goes to `on_output` with the tag of the sample that produced
-/// it (for a time state: of the PPS edge, fix or IMU sample after which it was computed);
-/// time states only with `time_states`.
+/// Feeds `samples` (each with a tag `T`) to `pipeline` in the canonical input order released
+/// by the IMU `reference_imu` (the pipeline's reference IMU; `None`: any IMU). Outputs as for
+/// [`run_feed`].
 pub fn run_ordered<T, S: Into<Input>, I: IntoIterator<Item = (S, T)>>(
     pipeline: &mut Pipeline,
     reference_imu: Option<&str>,
     samples: I,
     delay_truth: DelayTruth,
     time_states: bool,
-    mut on_output: impl FnMut(Output<'_>, &T),
+    on_output: impl FnMut(Output<'_>, &T),
 ) -> OfflineRun {
+    run_feed(
+        Feed::with(pipeline, reference_imu),
+        samples,
+        delay_truth,
+        time_states,
+        on_output,
+    )
+    .0
+}
+
+/// Feeds `samples`, each with a tag `T` (e.g. its recording time), through `feed` (the one
+/// input path, [`Feed`]). Every output goes to `on_output` with the tag of the sample that
+/// produced it (for a time state: of the PPS edge, fix or IMU sample after which it was
+/// computed); time states only with `time_states`, after a PPS edge or fix changed the mapping
+/// and at least once per second of sample time.
+pub fn run_feed<T, P: BorrowMut<Pipeline>, S: Into<Input>, I: IntoIterator<Item = (S, T)>>(
+    mut feed: Feed<T, P>,
+    samples: I,
+    delay_truth: DelayTruth,
+    time_states: bool,
+    mut on_output: impl FnMut(Output<'_>, &T),
+) -> (OfflineRun, Feed<T, P>) {
     let t0 = Instant::now();
     let mut eval = Evaluator::default();
-    let mut check = OutputCheck::default();
-    let mut order: InputOrder<T> = InputOrder::new(reference_imu);
     let (mut imu, mut fixes) = (0u64, 0u64);
-    // Time spent inside the estimator only (not producing or decoding the samples).
+    // Time spent inside the estimator only (not producing or decoding the samples, nor
+    // writing the outputs).
     let mut in_estimator = Duration::ZERO;
     let mut latest_host_ns = i64::MIN;
     let mut last_time_ns = i64::MIN;
-    // Returns the pipeline's reference IMU after an IMU sample (it moves on a handover).
-    let mut consume = |s: Input, tag: T| -> Option<[u8; 8]> {
-        let mut reference = None;
-        let updated = match &s {
+    let mut drain = |feed: &mut Feed<T, P>, all: bool| loop {
+        let t = Instant::now();
+        let Some(step) = feed.next(all) else { break };
+        in_estimator += t.elapsed();
+        match &step.input {
             Input::Imu(x) => {
                 imu += 1;
-                let t = Instant::now();
-                let out = pipeline.on_imu(x);
-                in_estimator += t.elapsed();
                 latest_host_ns = latest_host_ns.max(x.stamp.host_ns);
-                if let Some(n) = out {
-                    eval.add_nav(&n);
-                    check.add(&n);
-                    on_output(Output::Nav(&n), &tag);
-                    let t = Instant::now();
-                    pipeline.catch_up();
-                    in_estimator += t.elapsed();
-                }
-                reference = Some(pipeline.reference_imu_id());
-                false
             }
-            Input::GnssFix(f) => {
-                fixes += 1;
-                let t = Instant::now();
-                let u = pipeline.on_fix(f);
-                in_estimator += t.elapsed();
-                u
-            }
-            Input::PpsEdge(e) => {
-                let t = Instant::now();
-                let u = pipeline.on_pps(e);
-                in_estimator += t.elapsed();
-                u
-            }
-            Input::Truth(t) => {
-                eval.add_truth(t);
-                false
-            }
-            Input::TimePulse(t) => {
-                let t0 = Instant::now();
-                pipeline.on_time_pulse(t);
-                in_estimator += t0.elapsed();
-                false
-            }
-            Input::Raw(r) => {
-                let t = Instant::now();
-                pipeline.on_raw(r);
-                in_estimator += t.elapsed();
-                false
-            }
-            Input::NavData(d) => {
-                let t = Instant::now();
-                pipeline.on_nav_data(d);
-                in_estimator += t.elapsed();
-                false
-            }
-            Input::Other(_) => false,
-        };
+            Input::GnssFix(_) => fixes += 1,
+            Input::Truth(t) => eval.add_truth(t),
+            _ => {}
+        }
+        if let Some(n) = &step.nav {
+            eval.add_nav(n);
+            on_output(Output::Nav(n), &step.tag);
+        }
+        let t = Instant::now();
+        let _ = feed.finish(&step);
+        in_estimator += t.elapsed();
         // Computing a time state does not change the navigation states (it only reads the
         // filter's Δ into the time synchroniser's report).
         if time_states
             && latest_host_ns != i64::MIN
-            && (updated || latest_host_ns.saturating_sub(last_time_ns) >= NS_PER_S)
+            && (step.time_changed || latest_host_ns.saturating_sub(last_time_ns) >= NS_PER_S)
         {
-            let ts = pipeline.time_state(latest_host_ns);
-            on_output(Output::Time(&ts), &tag);
+            let ts = feed.pipeline_mut().time_state(latest_host_ns);
+            on_output(Output::Time(&ts), &step.tag);
             last_time_ns = latest_host_ns;
         }
-        reference
     };
     for (s, tag) in samples {
-        order.push(s, tag);
-        while let Some((s, tag)) = order.pop() {
-            if let Some(r) = consume(s, tag) {
-                order.set_reference(r);
-            }
-        }
+        feed.push(s, tag);
+        drain(&mut feed, false);
     }
-    while let Some((s, tag)) = order.pop_any() {
-        consume(s, tag);
-    }
+    drain(&mut feed, true);
     let wall = t0.elapsed().as_secs_f64();
+    let pipeline = feed.pipeline();
     let rejected = pipeline.nav().counters().fixes_rejected;
     let mut summary = eval.summary((imu, fixes, rejected), wall, in_estimator.as_secs_f64(), delay_truth);
     pipeline.nav().measurement_states().each_counter(&mut |name, v| {
@@ -195,8 +168,8 @@ pub fn run_ordered<T, S: Into<Input>, I: IntoIterator<Item = (S, T)>>(
             summary.measurement_counters.insert(name.to_string(), v);
         });
     }
-    summary.nav_states = check.states;
-    summary.usable_states = check.usable;
-    summary.problem = check.problem(&pipeline.inputs_seen());
-    OfflineRun { summary }
+    summary.nav_states = feed.check().states;
+    summary.usable_states = feed.check().usable;
+    summary.problem = feed.problem();
+    (OfflineRun { summary }, feed)
 }

@@ -16,6 +16,7 @@ use navsync_shared::samples::{
 
 use crate::gnss::ranges::{EphemerisStore, RangeBuildCounts, RangeEpoch};
 use crate::gnss::spp::{self, SppSettings};
+use crate::input_order::Input;
 use crate::nav::measurements::ranges::RangingConfig;
 
 use crate::array::imu_array::{ArrayConfig, ImuArray};
@@ -48,6 +49,16 @@ pub struct PipelineConfig {
     pub array: ArrayConfig,
     /// Sample times from the IMUs' own clocks where they carry one.
     pub device_timing: DeviceTimingConfig,
+}
+
+/// What one input produced ([`Pipeline::on_input`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Outputs {
+    /// The navigation state, for a sample of the reference IMU: publish it, then let the
+    /// pipeline [catch up](Pipeline::catch_up).
+    pub nav: Option<NavState>,
+    /// The time mapping changed (a PPS edge or a fix): a new time state is due.
+    pub time_changed: bool,
 }
 
 /// How fix stamps are currently obtained.
@@ -167,6 +178,23 @@ impl Pipeline {
                 .emit(&mut |v| nav.on_filter_imu(v.host_ns, v.dt_s, v.gyro_rps, v.accel_mps2));
             self.nav.catch_up(CATCH_UP_STEPS);
         }
+    }
+
+    /// Feeds one input of any kind: the one dispatch of every input to the `on_*` of its kind,
+    /// for the live process and the offline runs alike ([`crate::feed`]). The simulator's
+    /// truth and other samples produce nothing.
+    pub fn on_input(&mut self, input: &Input) -> Outputs {
+        let mut out = Outputs::default();
+        match input {
+            Input::Imu(x) => out.nav = self.on_imu(x),
+            Input::PpsEdge(e) => out.time_changed = self.on_pps(e),
+            Input::GnssFix(f) => out.time_changed = self.on_fix(f),
+            Input::TimePulse(t) => self.on_time_pulse(t),
+            Input::Raw(r) => self.on_raw(r),
+            Input::NavData(d) => self.on_nav_data(d),
+            Input::Truth(_) | Input::Other(_) => {}
+        }
+        out
     }
 
     /// Feeds a PPS edge; true when the time mapping changed.

@@ -22,9 +22,7 @@ use navsync_shared::services::{self, ServiceKind};
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
 
-use navsync_estimator::input_order::{Input, InputOrder};
-use navsync_estimator::output_check::OutputCheck;
-use navsync_estimator::pipeline::Pipeline;
+use navsync_estimator::feed::Feed;
 use navsync_estimator::settings::{Coupling, Settings};
 
 use super::liveness::{Change, Liveness, STALE_MARGIN_NS};
@@ -179,13 +177,12 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         ServiceKind::GnssNavData,
     ];
 
-    let mut est = Pipeline::new(args.pipeline_config());
+    let mut feed: Feed = Feed::new(args.pipeline_config());
     let mut nav_pub = node.publisher::<NavState>(services::NAV_STATE)?;
     let c_nav = health.counter("nav_states")?;
     // Never silent: states usable by a subscriber (aligned, with a GNSS time); a warning
     // with the reason every minute while they are missing or far fewer than the states.
     let c_usable = health.counter("nav_usable")?;
-    let mut check = OutputCheck::default();
     let mut next_check_ns = monotonic_now_ns() + OUTPUT_CHECK_INTERVAL_NS;
     let c_fix_used = health.counter("fixes_used")?;
     let c_fix_rej = health.counter("fixes_rejected")?;
@@ -200,14 +197,13 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     let c_imu_invalid = health.counter("imu_rejected_invalid")?;
     let c_imu_back = health.counter("imu_rejected_backwards")?;
     let c_imu_sat = health.counter("imu_rejected_saturated")?;
-    let mut order: InputOrder = InputOrder::new(args.inputs.imus.first().map(String::as_str));
     // Output latency: from taking an IMU sample off its queue to its NavState being published.
     let c_lat_p99 = health.counter("nav_latency_p99_us")?;
     let c_lat_max = health.counter("nav_latency_max_us")?;
     let mut latency = LatencyHistogram::default();
     let mut last_imu_seq: Vec<Option<u64>> = vec![None; imus.len()];
     let mut last_state_ns = 0i64;
-    let mut last_status = est.time().status();
+    let mut last_status = feed.pipeline().time().status();
     // Staleness of every input (roles/liveness.rs): IMUs first, then PPS, then GNSS, as
     // drained below; flagged in Health at once (`stale_<kind>_<id>`: host ns when declared).
     let mut live = Liveness::default();
@@ -224,7 +220,8 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     }
     // Each kind of measurement's counters (`zupt_used`, …), whatever kinds there are.
     let mut c_measurements = Vec::new();
-    est.nav()
+    feed.pipeline()
+        .nav()
         .measurement_states()
         .each_counter(&mut |name, _| c_measurements.push(name));
     let c_measurements = c_measurements
@@ -234,7 +231,7 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     // Tightly coupled: the raw-measurement path's counters (`raw_no_ephemeris`, …).
     let mut c_raw = Vec::new();
     if tight {
-        est.each_raw_counter(&mut |name, _| c_raw.push(name));
+        feed.pipeline().each_raw_counter(&mut |name, _| c_raw.push(name));
     }
     let c_raw = c_raw
         .into_iter()
@@ -283,14 +280,14 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
                 *last = Some(sample.stamp.seq);
                 health.add(c_imu, 1);
                 health.tick(r_imu);
-                order.push(AnySample::Imu(sample), ());
+                feed.push(AnySample::Imu(sample), ());
                 true
             })?;
         }
         for (j, s) in pps.iter().enumerate() {
             s.drain(|edge| {
                 liveness_changed |= resumed(&mut live, n_imu + j, edge.stamp.host_ns, rx_ns);
-                order.push(AnySample::PpsEdge(edge), ());
+                feed.push(AnySample::PpsEdge(edge), ());
                 true
             })?;
         }
@@ -299,72 +296,63 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
                 liveness_changed |= resumed(&mut live, n_imu + n_pps + k, fix.stamp.host_ns, rx_ns);
                 health.add(c_fixes, 1);
                 health.tick(r_fix);
-                order.push(AnySample::GnssFix(fix), ());
+                feed.push(AnySample::GnssFix(fix), ());
                 true
             })?;
         }
         for s in &time_pulses {
             s.drain(|tp| {
-                order.push(AnySample::TimePulse(tp), ());
+                feed.push(AnySample::TimePulse(tp), ());
                 true
             })?;
         }
         for s in &raws {
             s.drain(|raw| {
-                order.push(AnySample::Raw(raw), ());
+                feed.push(AnySample::Raw(raw), ());
                 true
             })?;
         }
         for s in &nav_data {
             s.drain(|d| {
-                order.push(AnySample::NavData(d), ());
+                feed.push(AnySample::NavData(d), ());
                 true
             })?;
         }
         // NavStates say inertial-only at once when every receiver's driver is gone.
         let gnss_gone = !gnss.is_empty() && live.inputs()[n_imu + n_pps..].iter().all(|x| x.is_gone());
         // Without IMUs (or with the reference IMU silent) nothing releases the waiting samples.
-        let release_all = imus.is_empty() || order.stalled(monotonic_now_ns());
-        while let Some((s, ())) = if release_all { order.pop_any() } else { order.pop() } {
-            match s {
-                Input::Imu(sample) => {
-                    let t_in = monotonic_now_ns();
-                    if let Some(mut state) = est.on_imu(&sample) {
-                        if gnss_gone {
-                            state.status = status_without_gnss(state.status);
-                        }
-                        if let Err(e) = nav_pub.publish(&state) {
-                            warn!("publishing nav state: {e}");
-                        }
-                        latency.record(monotonic_now_ns() - t_in);
-                        health.add(c_nav, 1);
-                        check.add(&state);
-                        health.set(c_usable, check.usable);
-                        est.catch_up();
-                    }
-                    let reference = est.reference_imu_id();
-                    if let Some(previous) = order.set_reference(reference) {
-                        warn!(
-                            from = navsync_shared::reflect::str_of(&previous),
-                            to = navsync_shared::reflect::str_of(&reference),
-                            "reference IMU stale: handed over to a live IMU"
-                        );
-                    }
+        let release_all = imus.is_empty() || feed.order().stalled(monotonic_now_ns());
+        loop {
+            let t_in = monotonic_now_ns();
+            let Some(mut step) = feed.next(release_all) else { break };
+            updated |= step.time_changed;
+            if let Some(state) = &mut step.nav {
+                if gnss_gone {
+                    state.status = status_without_gnss(state.status);
                 }
-                Input::PpsEdge(edge) => updated |= est.on_pps(&edge),
-                Input::GnssFix(fix) => updated |= est.on_fix(&fix),
-                Input::TimePulse(tp) => est.on_time_pulse(&tp),
-                Input::Raw(raw) => est.on_raw(&raw),
-                Input::NavData(d) => est.on_nav_data(&d),
-                _ => {}
+                if let Err(e) = nav_pub.publish(state) {
+                    warn!("publishing nav state: {e}");
+                }
+                latency.record(monotonic_now_ns() - t_in);
+                health.add(c_nav, 1);
+            }
+            if let Some(h) = feed.finish(&step) {
+                warn!(
+                    from = navsync_shared::reflect::str_of(&h.from),
+                    to = navsync_shared::reflect::str_of(&h.to),
+                    "reference IMU stale: handed over to a live IMU"
+                );
+            }
+            if step.nav.is_some() {
+                health.set(c_usable, feed.check().usable);
             }
         }
-        health.set(c_late, order.late());
+        health.set(c_late, feed.order().late());
         let now = monotonic_now_ns();
         if now >= next_check_ns {
             next_check_ns = now + OUTPUT_CHECK_INTERVAL_NS;
-            if let Some(why) = check.problem(&est.inputs_seen()) {
-                warn!(states = check.states, usable = check.usable, "{why}");
+            if let Some(why) = feed.problem() {
+                warn!(states = feed.check().states, usable = feed.check().usable, "{why}");
             }
         }
         live.check(now, |_, x, _| {
@@ -400,27 +388,28 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
                 warn!("publishing health: {e}");
             }
         }
-        if est.time().status() != last_status {
+        if feed.pipeline().time().status() != last_status {
             info!(
                 from = last_status.name(),
-                to = est.time().status().name(),
+                to = feed.pipeline().time().status().name(),
                 "time status"
             );
-            last_status = est.time().status();
+            last_status = feed.pipeline().time().status();
         }
         if updated || now - last_state_ns >= NS_PER_S {
-            let state = est.time_state(now);
+            let state = feed.pipeline_mut().time_state(now);
             if let Err(e) = time_pub.publish(&state) {
                 warn!("publishing time state: {e}");
             }
             last_state_ns = now;
         }
-        let tc = *est.time().counters();
+        let tc = *feed.pipeline().time().counters();
         health.set(c_pps, tc.pps_used);
         health.set(c_pps_rej, tc.rejected());
         health.set(c_pps_rx, tc.pps_labelled_by_receiver);
         health.set(c_holdovers, tc.holdovers);
         health.set(c_relocks, tc.relocks);
+        let est = feed.pipeline();
         let nc = est.nav().counters();
         health.set(c_fix_used, nc.fixes_used);
         health.set(c_fix_rej, nc.fixes_rejected);
