@@ -24,7 +24,6 @@ use std::io::BufReader;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use iceoryx2::prelude::ZeroCopySend;
 use navsync_shared::ipc::{IpcError, IpcNode};
 use navsync_shared::pacing;
 use navsync_shared::reflect::Reflect;
@@ -57,8 +56,7 @@ pub enum Kind {
 
 /// A 64 KiB message for the IPC benchmark (where copying through the kernel costs most).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, iceoryx2::prelude::ZeroCopySend)]
-#[type_name("navsync.bench.Blob64k.v1")]
+#[derive(Debug, Clone, Copy)]
 pub struct Blob64k {
     /// Publish time, CLOCK_MONOTONIC ns.
     pub host_ns: i64,
@@ -147,7 +145,7 @@ impl Serialize for Rate {
 }
 
 /// A sample type the benchmark can carry: where its time stamp and sequence number live.
-trait Payload: Reflect + iceoryx2::prelude::ZeroCopySend + std::fmt::Debug + Copy {
+trait Payload: navsync_shared::ipc::IpcSample {
     fn service() -> String;
     fn make(host_ns: i64, seq: u64) -> Self;
     fn stamp(&self) -> (i64, u64);

@@ -389,11 +389,11 @@ macro_rules! enum_setting {
         }
     )*};
 }
-enum_setting!(navsync_shared::imu_spec::ImuPreset);
+enum_setting!(navsync_wire::imu_spec::ImuPreset);
 
 /// The IMU's noise model has no text form: it is given in the file (or field by field with
 /// its own flags).
-impl SettingValue for navsync_shared::imu_spec::ImuNoise {
+impl SettingValue for navsync_wire::imu_spec::ImuNoise {
     fn parse_text(text: &str) -> Result<Self, String> {
         Err(format!(
             "`{text}`: an IMU noise model is given in the configuration file"

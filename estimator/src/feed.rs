@@ -8,7 +8,7 @@
 
 use std::borrow::BorrowMut;
 
-use navsync_shared::samples::NavState;
+use navsync_wire::samples::NavState;
 
 use crate::input_order::{Input, InputOrder};
 use crate::output_check::OutputCheck;

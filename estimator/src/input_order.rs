@@ -63,8 +63,8 @@
 use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 
-use navsync_shared::reflect::fixed_str;
-use navsync_shared::samples::{AnySample, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, PpsEdge, SimTruth};
+use navsync_wire::reflect::fixed_str;
+use navsync_wire::samples::{AnySample, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, PpsEdge, SimTruth};
 
 /// Hold of PPS edges after their stamp, ns.
 pub const PPS_HOLD_NS: i64 = 50_000_000;
@@ -378,8 +378,8 @@ impl<T> InputOrder<T> {
 
 #[cfg(test)]
 mod tests {
-    use navsync_shared::reflect::Reflect;
-    use navsync_shared::samples::{GnssFix, ImuSample, PpsEdge, Stamp, StampSource};
+    use navsync_wire::reflect::Reflect;
+    use navsync_wire::samples::{GnssFix, ImuSample, PpsEdge, Stamp, StampSource};
 
     use super::*;
 
@@ -403,7 +403,7 @@ mod tests {
         match s {
             Input::Imu(x) => format!(
                 "imu{}@{}",
-                navsync_shared::reflect::str_of(&x.imu_id),
+                navsync_wire::reflect::str_of(&x.imu_id),
                 x.stamp.host_ns / MS
             ),
             Input::PpsEdge(e) => format!("pps@{}", e.stamp.host_ns / MS),
@@ -415,8 +415,8 @@ mod tests {
     /// Consumes `batches` (each pushed at once, then drained) and returns the order.
     #[test]
     fn an_input_keeps_the_key_of_its_sample() {
-        use navsync_shared::reflect::Reflect;
-        use navsync_shared::samples::{Health, NavState, Stamp, StampSource};
+        use navsync_wire::reflect::Reflect;
+        use navsync_wire::samples::{Health, NavState, Stamp, StampSource};
         let st = Stamp::host(123_456_789, 42, StampSource::Simulated);
         let mut fix = GnssFix::empty(st);
         fix.stamp.seq = 3;

@@ -9,8 +9,8 @@
 use std::borrow::BorrowMut;
 use std::time::{Duration, Instant};
 
-use navsync_shared::samples::{AnySample, NavState, TimeState};
-use navsync_shared::time::NS_PER_S;
+use navsync_wire::samples::{AnySample, NavState, TimeState};
+use navsync_wire::time::NS_PER_S;
 
 use crate::evaluation::{DelayTruth, Evaluator, Summary};
 use crate::feed::Feed;

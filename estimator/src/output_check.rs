@@ -3,7 +3,7 @@
 //! act on. Used by the offline runs (the summary's `problem`; offline commands exit non-zero)
 //! and by the live estimator (`Health` counter `nav_usable` and a warning).
 
-use navsync_shared::samples::{NavState, NavStatus};
+use navsync_wire::samples::{NavState, NavStatus};
 
 /// Fewer usable states than this share of all states is a problem.
 pub const MIN_USABLE_SHARE: f64 = 0.5;
@@ -102,7 +102,7 @@ impl OutputCheck {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use navsync_shared::reflect::Reflect;
+    use navsync_wire::reflect::Reflect;
 
     fn state(status: NavStatus, utc_ns: i64) -> NavState {
         let mut s = NavState::zeroed();

@@ -8,8 +8,8 @@
 //! PPS) with the receipt time of its first byte, and the navigation filter's Δ state absorbs
 //! the receiver latency. When the stamping switches, Δ is re-initialised to the new mode's prior.
 
-use navsync_shared::reflect::Reflect;
-use navsync_shared::samples::{
+use navsync_wire::reflect::Reflect;
+use navsync_wire::samples::{
     GnssFix, GnssNavData, GnssRaw, GnssTimePulse, IMU_FLAG_RECEIVER_CLOCK, ImuSample, NavState, PpsEdge, TimeState,
     TimeStatus,
 };
@@ -278,14 +278,14 @@ impl Pipeline {
             return;
         }
         self.time.tick(raw.stamp.host_ns);
-        if !(0.0..navsync_shared::time::SECONDS_PER_WEEK as f64).contains(&raw.rcv_tow_s) || raw.week == 0 {
+        if !(0.0..navsync_wire::time::SECONDS_PER_WEEK as f64).contains(&raw.rcv_tow_s) || raw.week == 0 {
             // No receiver time (NaN, out of the week, or the week unknown).
             self.counters.raw_invalid += 1;
             return;
         }
-        let gps_ns = (i64::from(raw.week) * navsync_shared::time::SECONDS_PER_WEEK) * 1_000_000_000
+        let gps_ns = (i64::from(raw.week) * navsync_wire::time::SECONDS_PER_WEEK) * 1_000_000_000
             + (raw.rcv_tow_s * 1e9).round() as i64;
-        let utc_ns = navsync_shared::time::utc_ns_from_gps_ns(gps_ns);
+        let utc_ns = navsync_wire::time::utc_ns_from_gps_ns(gps_ns);
         let Some(stamp) = self.epoch_stamp(utc_ns, raw.stamp.host_ns) else {
             return;
         };
@@ -345,7 +345,7 @@ impl Pipeline {
     /// the delayed filter follows in [`catch_up`](Self::catch_up), after the `NavState`.
     pub fn on_imu(&mut self, s: &ImuSample) -> Option<NavState> {
         self.catch_up();
-        let id = navsync_shared::reflect::str_of(&s.imu_id);
+        let id = navsync_wire::reflect::str_of(&s.imu_id);
         let Some(index) = self.array.index_of(id) else {
             self.counters.imu_other += 1;
             return None;
@@ -515,7 +515,7 @@ fn single_point_observation(e: &RangeEpoch, rc: &RangingConfig) -> Option<gnss::
     }
     let sol = spp::solve(&obs[..n], e.iono.as_ref(), e.tow_s, [0.0; 3], &settings).ok()?;
     let vel = spp::solve_velocity(&rates[..m], sol.ecef_m, &settings).ok();
-    let g = navsync_shared::earth::geodetic_from_ecef(sol.ecef_m[0], sol.ecef_m[1], sol.ecef_m[2])?;
+    let g = navsync_wire::earth::geodetic_from_ecef(sol.ecef_m[0], sol.ecef_m[1], sol.ecef_m[2])?;
     let (lat, lon) = (g.lat_deg.to_radians(), g.lon_deg.to_radians());
     let c_en = spp::ned_from_ecef(lat, lon);
     let ned_std = |cov: &nalgebra::Matrix4<f64>| {

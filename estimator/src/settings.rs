@@ -10,8 +10,8 @@
 use std::collections::BTreeMap;
 
 use nalgebra::{Matrix3, Vector3};
-use navsync_shared::imu_spec::{ImuNoise, ImuPreset};
-use navsync_shared::services;
+use navsync_wire::imu_spec::{ImuNoise, ImuPreset};
+use navsync_wire::services;
 
 use crate::array::imu_array::{ArrayConfig, UnitConfig};
 use crate::array::imu_offset::OffsetConfig;

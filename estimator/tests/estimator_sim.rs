@@ -7,12 +7,12 @@ use navsync_estimator::evaluation::{DelayTruth, Summary};
 use navsync_estimator::offline;
 use navsync_estimator::pipeline::Pipeline;
 use navsync_estimator::settings::Settings;
-use navsync_shared::samples::NavState;
 use navsync_sim::imu_errors::ImuPreset;
 use navsync_sim::published::PublishedStream;
 use navsync_sim::scenario::{OutageConfig, SimConfig};
 use navsync_sim::trajectory::Trajectory;
 use navsync_sim::world::World;
+use navsync_wire::samples::NavState;
 
 struct Run {
     summary: Summary,
@@ -223,8 +223,8 @@ fn reruns_are_bit_identical() {
     assert_eq!(a.len(), b.len());
     assert!(a.len() > 100_000);
     for (x, y) in a.iter().zip(&b) {
-        let json_x = navsync_shared::json::to_json(x).to_string();
-        let json_y = navsync_shared::json::to_json(y).to_string();
+        let json_x = navsync_wire::json::to_json(x).to_string();
+        let json_y = navsync_wire::json::to_json(y).to_string();
         assert_eq!(json_x, json_y, "states differ at host time {}", x.host_ns);
     }
 }

@@ -12,15 +12,15 @@ mod fault_drive;
 
 use fault_drive::{ErrorTrack, Event, UTC0, displace_fix, drive, estimator_args, scenario, t_s};
 use navsync_estimator::nav::navigator::RESET_AFTER_REJECTS;
-use navsync_shared::samples::{AnySample, NavStatus};
-use navsync_shared::time::NS_PER_S;
+use navsync_wire::samples::{AnySample, NavStatus};
+use navsync_wire::time::NS_PER_S;
 use std::sync::OnceLock;
 
 /// The displacement, m north and east (10 km).
 const JUMP_NE_M: [f64; 2] = [8_000.0, 6_000.0];
 
 /// Epoch (s of scenario time) of a fix.
-fn epoch_s(f: &navsync_shared::samples::GnssFix) -> f64 {
+fn epoch_s(f: &navsync_wire::samples::GnssFix) -> f64 {
     (f.utc_ns - UTC0) as f64 / NS_PER_S as f64
 }
 

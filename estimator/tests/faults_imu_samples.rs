@@ -11,8 +11,8 @@
 mod fault_drive;
 
 use fault_drive::{ErrorTrack, drive, estimator_args, scenario, t_s};
-use navsync_shared::imu_spec::ImuPreset;
-use navsync_shared::samples::{AnySample, IMU_FLAG_SATURATED, ImuSample};
+use navsync_wire::imu_spec::ImuPreset;
+use navsync_wire::samples::{AnySample, IMU_FLAG_SATURATED, ImuSample};
 
 /// What was done to a sample.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -9,7 +9,7 @@
 mod fault_drive;
 
 use fault_drive::{ErrorTrack, Event, drive, estimator_args, scenario, t_s};
-use navsync_shared::samples::{AnySample, TimeStatus};
+use navsync_wire::samples::{AnySample, TimeStatus};
 
 /// PPS edges stamped in [GAP_FROM_S, GAP_TO_S) of scenario time are not delivered.
 const GAP_FROM_S: f64 = 80.0;

@@ -7,11 +7,11 @@ use navsync_estimator::evaluation::{DelayTruth, Summary};
 use navsync_estimator::offline;
 use navsync_estimator::pipeline::Pipeline;
 use navsync_estimator::settings::Settings;
-use navsync_shared::samples::{AnySample, ImuSample, ImuSyncReason};
 use navsync_sim::imu_errors::ImuPreset;
 use navsync_sim::published::PublishedStream;
 use navsync_sim::scenario::{SegmentConfig, SegmentKind, SimConfig};
 use navsync_sim::world::World;
+use navsync_wire::samples::{AnySample, ImuSample, ImuSyncReason};
 
 const HOST0: i64 = 3_000_000_000;
 
@@ -129,7 +129,7 @@ fn fused_array_has_the_angle_random_walk_of_four_imus() {
     let mut fused: Vec<VirtualSample> = Vec::new();
     for s in &samples {
         let i = array
-            .index_of(navsync_shared::reflect::str_of(&s.imu_id))
+            .index_of(navsync_wire::reflect::str_of(&s.imu_id))
             .expect("known IMU");
         array.push(i, s, &mut |v| fused.push(*v));
     }
@@ -155,7 +155,7 @@ fn a_stopped_imu_leaves_the_array_and_returns() {
     for s in &samples {
         let t = (s.stamp.host_ns - HOST0) as f64 * 1e-9;
         let i = array
-            .index_of(navsync_shared::reflect::str_of(&s.imu_id))
+            .index_of(navsync_wire::reflect::str_of(&s.imu_id))
             .expect("known IMU");
         // IMU 2 is silent from 10 s to 12 s; IMU 3 reports a 0.2 rad/s gyro fault from 20 s on.
         if i == 2 && (10.0..12.0).contains(&t) {

@@ -10,10 +10,10 @@
 
 use nalgebra::Vector3;
 use navsync_estimator::nav::mechanization::{ImuIncrement, Pva, propagate};
-use navsync_shared::earth;
 use navsync_sim::imu_errors::ImuPreset;
 use navsync_sim::scenario::SimConfig;
 use navsync_sim::world::{SimEvent, World};
+use navsync_wire::earth;
 
 #[test]
 fn noise_free_imu_integrates_to_the_truth_within_one_metre_after_ten_minutes() {

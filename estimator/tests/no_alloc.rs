@@ -7,11 +7,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use navsync_estimator::pipeline::Pipeline;
 use navsync_estimator::settings::Settings;
-use navsync_shared::samples::{AnySample, NavStatus};
 use navsync_sim::imu_errors::ImuPreset;
 use navsync_sim::published::PublishedStream;
 use navsync_sim::scenario::SimConfig;
 use navsync_sim::world::World;
+use navsync_wire::samples::{AnySample, NavStatus};
 
 struct Counting;
 

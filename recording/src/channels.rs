@@ -22,8 +22,6 @@
 
 use core::fmt::Debug;
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::mcap_reader::{Channel, Schema};
 use navsync_shared::json::{from_json, from_json_onto, schema, to_json};
 use navsync_shared::reflect::Reflect;
@@ -147,7 +145,7 @@ pub fn metadata_value<T: serde::Serialize + ?Sized>(v: &T) -> String {
 }
 
 /// A navsync sample type and its place in [`AnySample`].
-pub trait SampleType: Reflect + ZeroCopySend + Debug {
+pub trait SampleType: navsync_shared::ipc::IpcSample {
     /// The kind of service that carries it.
     const KIND: ServiceKind;
     /// Wraps it.

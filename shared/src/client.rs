@@ -46,10 +46,7 @@
 use core::fmt::Debug;
 use core::time::Duration;
 
-use iceoryx2::prelude::ZeroCopySend;
-
-use crate::ipc::{IpcError, IpcNode, Subscriber};
-use crate::reflect::Reflect;
+use crate::ipc::{IpcError, IpcNode, IpcSample, Subscriber};
 use crate::samples::{GnssFix, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState};
 use crate::services::{self, ServiceKind};
 use crate::time::monotonic_now_ns;
@@ -71,7 +68,7 @@ pub enum ClientError {
 }
 
 /// A sample type with a host time stamp (`CLOCK_MONOTONIC` ns), for staleness checks.
-pub trait Stamped: Reflect + ZeroCopySend + Debug {
+pub trait Stamped: IpcSample {
     /// The host time the sample is for, ns.
     fn host_ns(&self) -> i64;
 }

@@ -73,10 +73,27 @@ pub fn termination_requested() -> bool {
     TERMINATED.load(Ordering::Relaxed)
 }
 
-/// What a navsync service can carry: a reflected, zero-copy sample type (every type of
-/// `crate::samples`); for code generic over the sample type without naming iceoryx2.
-pub trait IpcSample: Reflect + ZeroCopySend + Debug {}
-impl<T: Reflect + ZeroCopySend + Debug> IpcSample for T {}
+/// What a navsync service can carry: a reflected sample type (every type of
+/// `crate::samples`: `#[repr(C)]`, plain numbers, no pointers).
+pub trait IpcSample: Reflect + Copy + Debug {}
+impl<T: Reflect + Copy + Debug> IpcSample for T {}
+
+/// A sample as iceoryx2 carries it: the sample itself, under the type name of its field table
+/// ([`Reflect::TYPE_NAME`], the layout version included), which is how iceoryx2 and the
+/// other languages' bindings identify a service's type.
+#[derive(Debug, Clone, Copy)]
+#[repr(transparent)]
+pub struct Wire<T>(pub T);
+
+// SAFETY: every `Reflect` type is a `#[repr(C)]` struct of integers, floats and arrays of them
+// (`sample_struct!`, checked field by field by `Reflect::FIELDS` and the layout test): it holds
+// no pointer and is valid in any process that maps it. `Wire` is `repr(transparent)`, so its
+// layout is the sample's; the type name carries the layout version.
+unsafe impl<T: IpcSample> ZeroCopySend for Wire<T> {
+    unsafe fn type_name() -> &'static str {
+        T::TYPE_NAME
+    }
+}
 
 /// What went wrong in the IPC layer. iceoryx2's own error is kept as text with the
 /// service it concerns.
@@ -358,10 +375,10 @@ impl IpcNode {
             .map_err(|e| err("opening event service", service, e))
     }
 
-    fn pubsub_service<T: Reflect + ZeroCopySend + Debug>(
+    fn pubsub_service<T: IpcSample>(
         &self,
         service: &str,
-    ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, T, ()>, IpcError> {
+    ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, Wire<T>, ()>, IpcError> {
         let qos = match ServiceKind::of(service) {
             Some(kind) if kind.type_name() != T::TYPE_NAME => {
                 return Err(err(
@@ -379,7 +396,7 @@ impl IpcNode {
             .map_err(|_| IpcError::InvalidName(service.to_string()))?;
         self.node
             .service_builder(&name)
-            .publish_subscribe::<T>()
+            .publish_subscribe::<Wire<T>>()
             .enable_safe_overflow(true)
             .history_size(qos.history)
             .subscriber_max_buffer_size(qos.buffer)
@@ -392,7 +409,7 @@ impl IpcNode {
     }
 
     /// A publisher on `service`; the service is created if it does not exist yet.
-    pub fn publisher<T: Reflect + ZeroCopySend + Debug>(&self, service: &str) -> Result<Publisher<T>, IpcError> {
+    pub fn publisher<T: IpcSample>(&self, service: &str) -> Result<Publisher<T>, IpcError> {
         let ps = self.pubsub_service::<T>(service)?;
         let publisher = ps
             .publisher_builder()
@@ -427,7 +444,7 @@ impl IpcNode {
 
     /// A subscriber on `service` that can sleep until its next sample
     /// ([`Subscriber::wait_next`]); the service is created if it does not exist yet.
-    pub fn subscriber<T: Reflect + ZeroCopySend + Debug>(&self, service: &str) -> Result<Subscriber<T>, IpcError> {
+    pub fn subscriber<T: IpcSample>(&self, service: &str) -> Result<Subscriber<T>, IpcError> {
         let mut s = self.input(service)?;
         s.listener = Some(
             self.event_service(service)?
@@ -440,7 +457,7 @@ impl IpcNode {
 
     /// A subscriber on `service` without a wake-up of its own: one of the inputs of a process
     /// that sleeps on its [`Wake`].
-    pub fn input<T: Reflect + ZeroCopySend + Debug>(&self, service: &str) -> Result<Subscriber<T>, IpcError> {
+    pub fn input<T: IpcSample>(&self, service: &str) -> Result<Subscriber<T>, IpcError> {
         let ps = self.pubsub_service::<T>(service)?;
         let subscriber = ps
             .subscriber_builder()
@@ -485,8 +502,8 @@ impl Wake {
 }
 
 /// Publishes samples of one type on one service and wakes its subscribers.
-pub struct Publisher<T: Reflect + ZeroCopySend + Debug> {
-    publisher: iceoryx2::port::publisher::Publisher<Transport, T, ()>,
+pub struct Publisher<T: IpcSample> {
+    publisher: iceoryx2::port::publisher::Publisher<Transport, Wire<T>, ()>,
     notifier: Notifier<Transport>,
     /// On [`services::WAKE`], with this service's kind as the event id.
     wake: Notifier<Transport>,
@@ -496,7 +513,7 @@ pub struct Publisher<T: Reflect + ZeroCopySend + Debug> {
     sent: u64,
 }
 
-impl<T: Reflect + ZeroCopySend + Debug> Publisher<T> {
+impl<T: IpcSample> Publisher<T> {
     /// Writes `value` into a loaned shared-memory slot, sends it and notifies listeners.
     /// Never blocks: a subscriber with a full buffer loses its oldest sample.
     pub fn publish(&mut self, value: &T) -> Result<(), IpcError> {
@@ -511,7 +528,7 @@ impl<T: Reflect + ZeroCopySend + Debug> Publisher<T> {
             .publisher
             .loan_uninit()
             .map_err(|e| err("loaning sample on", &self.service, e))?;
-        slot.write_payload(make())
+        slot.write_payload(Wire(make()))
             .send()
             .map_err(|e| err("sending on", &self.service, e))?;
         self.notifier
@@ -538,22 +555,22 @@ impl<T: Reflect + ZeroCopySend + Debug> Publisher<T> {
 }
 
 /// Receives samples of one type from one service.
-pub struct Subscriber<T: Reflect + ZeroCopySend + Debug> {
-    subscriber: iceoryx2::port::subscriber::Subscriber<Transport, T, ()>,
+pub struct Subscriber<T: IpcSample> {
+    subscriber: iceoryx2::port::subscriber::Subscriber<Transport, Wire<T>, ()>,
     /// The service's event, for [`wait_next`](Self::wait_next); none for an input of a
     /// process that sleeps on its [`Wake`].
     listener: Option<Listener<Transport>>,
     /// [`wait_next`](Subscriber::wait_next) spins instead of sleeping.
     busy: core::cell::Cell<bool>,
     service: String,
-    port_factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, T, ()>,
+    port_factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, Wire<T>, ()>,
 }
 
-impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
+impl<T: IpcSample> Subscriber<T> {
     /// The next buffered sample (copied out of shared memory), if any.
     pub fn receive(&self) -> Result<Option<T>, IpcError> {
         match self.subscriber.receive() {
-            Ok(Some(sample)) => Ok(Some(*sample.payload())),
+            Ok(Some(sample)) => Ok(Some(sample.payload().0)),
             Ok(None) => Ok(None),
             Err(e) => Err(err("receiving from", &self.service, e)),
         }
@@ -562,7 +579,7 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
     /// Hands the next buffered sample, if any, to `f` where it lies in shared memory.
     pub fn receive_with<R>(&self, f: impl FnOnce(&T) -> R) -> Result<Option<R>, IpcError> {
         match self.subscriber.receive() {
-            Ok(Some(sample)) => Ok(Some(f(sample.payload()))),
+            Ok(Some(sample)) => Ok(Some(f(&sample.payload().0))),
             Ok(None) => Ok(None),
             Err(e) => Err(err("receiving from", &self.service, e)),
         }
@@ -576,7 +593,7 @@ impl<T: Reflect + ZeroCopySend + Debug> Subscriber<T> {
             .receive()
             .map_err(|e| err("receiving from", &self.service, e))?
         {
-            f(sample.payload());
+            f(&sample.payload().0);
             n += 1;
         }
         Ok(n)

@@ -20,20 +20,13 @@
 //! Frames: navigation frame NED (north-east-down), body frame FRD (forward-right-down).
 //! Times: integer nanoseconds; `host_ns` is `CLOCK_MONOTONIC`.
 
-pub mod cdr;
+pub use navsync_wire::{cdr, earth, imu_spec, json, reflect, ros2msg, samples, services, time};
+
 pub mod client;
 pub mod cpu_wakeup;
-pub mod earth;
 pub mod health_reporter;
-pub mod imu_spec;
 pub mod ipc;
-pub mod json;
 pub mod latency_histogram;
 pub mod pacing;
-pub mod reflect;
-pub mod ros2msg;
-pub mod samples;
 pub mod sd_notify;
-pub mod services;
 pub mod source_map;
-pub mod time;

@@ -12,7 +12,6 @@
 use std::io::Write;
 use std::time::{Duration, Instant};
 
-use iceoryx2::prelude::ZeroCopySend;
 use navsync_shared::ipc::{IpcError, IpcNode};
 use navsync_shared::json::to_json;
 use navsync_shared::reflect::Reflect;
@@ -257,7 +256,7 @@ fn rate_line(v: &Value) -> String {
     )
 }
 
-fn echo<T: Reflect + ZeroCopySend + core::fmt::Debug>(
+fn echo<T: navsync_shared::ipc::IpcSample>(
     args: &EchoArgs,
     stamp: impl Fn(&T) -> (i64, Option<u64>),
 ) -> Result<(), EchoError> {

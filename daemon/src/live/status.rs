@@ -23,8 +23,9 @@ use std::time::{Duration, Instant};
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern;
+use navsync_shared::ipc::Wire;
 use navsync_shared::ipc::{self, IpcError, IpcNode, Transport};
-use navsync_shared::reflect::{Reflect, str_of};
+use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;
 use navsync_shared::services::ServiceKind;
 use navsync_shared::time::monotonic_now_ns;
@@ -78,18 +79,18 @@ trait Monitor {
     fn latest(&self) -> Option<AnySample>;
 }
 
-struct Typed<T: Reflect + ZeroCopySend + core::fmt::Debug> {
-    factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, T, ()>,
-    sub: iceoryx2::port::subscriber::Subscriber<Transport, T, ()>,
+struct Typed<T: navsync_shared::ipc::IpcSample> {
+    factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, Wire<T>, ()>,
+    sub: iceoryx2::port::subscriber::Subscriber<Transport, Wire<T>, ()>,
     latest: Option<T>,
     wrap: fn(T) -> AnySample,
 }
 
-impl<T: Reflect + ZeroCopySend + core::fmt::Debug> Monitor for Typed<T> {
+impl<T: navsync_shared::ipc::IpcSample> Monitor for Typed<T> {
     fn poll(&mut self) -> usize {
         let mut n = 0;
         while let Ok(Some(s)) = self.sub.receive() {
-            self.latest = Some(*s.payload());
+            self.latest = Some(s.payload().0);
             n += 1;
         }
         n
@@ -106,7 +107,7 @@ impl<T: Reflect + ZeroCopySend + core::fmt::Debug> Monitor for Typed<T> {
     }
 }
 
-fn open_typed<T: Reflect + ZeroCopySend + core::fmt::Debug>(
+fn open_typed<T: navsync_shared::ipc::IpcSample>(
     node: &IpcNode,
     service: &str,
     wrap: fn(T) -> AnySample,
@@ -116,7 +117,7 @@ fn open_typed<T: Reflect + ZeroCopySend + core::fmt::Debug>(
     let factory = node
         .node()
         .service_builder(&name)
-        .publish_subscribe::<T>()
+        .publish_subscribe::<Wire<T>>()
         .open()
         .map_err(|e| format!("{e:?}"))?;
     let sub = factory.subscriber_builder().create().map_err(|e| format!("{e:?}"))?;

@@ -35,8 +35,8 @@
 //! Fixed memory: every ring buffer is allocated at construction; nothing per sample.
 
 use nalgebra::{Matrix3, SVector, Vector3};
-use navsync_shared::reflect::{fixed_str, str_of};
-use navsync_shared::samples::{IMU_FLAG_SATURATED, ImuSample, ImuSync, ImuSyncReason, MAX_IMUS};
+use navsync_wire::reflect::{fixed_str, str_of};
+use navsync_wire::samples::{IMU_FLAG_SATURATED, ImuSample, ImuSync, ImuSyncReason, MAX_IMUS};
 
 use super::fractional_delay::{MAX_ORDER, lagrange_coefficients};
 use super::imu_offset::{OffsetConfig, OffsetFilter, OffsetUpdate};
@@ -444,7 +444,7 @@ impl ImuArray {
 
     /// The per-IMU table for `NavState`/`TimeState`.
     pub fn table(&self) -> ([ImuSync; MAX_IMUS], u8) {
-        let mut t = [<ImuSync as navsync_shared::reflect::Reflect>::zeroed(); MAX_IMUS];
+        let mut t = [<ImuSync as navsync_wire::reflect::Reflect>::zeroed(); MAX_IMUS];
         for (slot, u) in t.iter_mut().zip(&self.units) {
             slot.imu_id = fixed_str(&u.cfg.id);
             let (td, sd) = u.filter.as_ref().map_or((0.0, 0.0), |f| (f.td_s(), f.td_std_s()));

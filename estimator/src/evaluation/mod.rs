@@ -12,9 +12,9 @@ pub mod track;
 
 use std::collections::{BTreeMap, VecDeque};
 
-use navsync_shared::earth;
-use navsync_shared::reflect::str_of;
-use navsync_shared::samples::{ImuSync, MAX_IMUS, NavState, NavStatus, SimTruth};
+use navsync_wire::earth;
+use navsync_wire::reflect::str_of;
+use navsync_wire::samples::{ImuSync, MAX_IMUS, NavState, NavStatus, SimTruth};
 use serde::Serialize;
 
 /// Which delay the filter should find: under software sync the fixes are stamped at receipt,

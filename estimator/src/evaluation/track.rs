@@ -7,8 +7,8 @@
 //! roll/pitch/yaw wrapped to ±180°. When either trajectory lacks the GPS week, both are
 //! compared on seconds of week.
 
-use navsync_shared::earth;
-use navsync_shared::time::NS_PER_S;
+use navsync_wire::earth;
+use navsync_wire::time::NS_PER_S;
 use serde::Serialize;
 
 use super::{lerp_angle_deg, wrap_deg};

@@ -5,7 +5,7 @@
 //! time of transmission. What depends on the receiver's position (the Earth's rotation during
 //! the flight, elevation, ionosphere, troposphere) is left to the filter, which knows it.
 
-use navsync_shared::samples::{GnssNavData, GnssRaw};
+use navsync_wire::samples::{GnssNavData, GnssRaw};
 
 use super::lnav::{self, Ephem1, Ephem2, Ephem3, Subframe};
 use super::orbit::Orbit;

@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Matrix4, Vector4};
 
 use super::lnav::IonoUtc;
 use super::orbit::{GPS_PI, OMEGA_E_RAD_S};
-use navsync_shared::earth::geodetic_from_ecef;
+use navsync_wire::earth::geodetic_from_ecef;
 
 /// Speed of light, m/s (IS-GPS-200 §20.3.4.3).
 pub const C_M_S: f64 = 299_792_458.0;
@@ -348,7 +348,7 @@ mod tests {
 
     #[test]
     fn geometry_and_atmosphere_are_sane() {
-        let rx = navsync_shared::earth::geodetic_to_ecef(0.0, 0.0, 0.0);
+        let rx = navsync_wire::earth::geodetic_to_ecef(0.0, 0.0, 0.0);
         // Straight up.
         let (el, _) = elevation_azimuth(rx, [rx[0] + 2e7, 0.0, 0.0]);
         assert!((el - std::f64::consts::FRAC_PI_2).abs() < 1e-9);

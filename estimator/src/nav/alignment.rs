@@ -6,7 +6,7 @@
 //! θ = atan2(f_x, √(f_y² + f_z²)) and φ = atan2(−f_y, −f_z).
 
 use nalgebra::{UnitQuaternion, Vector3};
-use navsync_shared::earth;
+use navsync_wire::earth;
 
 use super::imu_buffer::ImuRecord;
 use super::measurements::gnss::GnssObservation;

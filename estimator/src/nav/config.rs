@@ -7,7 +7,7 @@
 //! Units: SI unless the name says otherwise; frames: body forward-right-down (FRD),
 //! navigation north-east-down (NED).
 
-use navsync_shared::imu_spec::ImuPreset;
+use navsync_wire::imu_spec::ImuPreset;
 
 use super::alignment::AlignConfig;
 use super::error_state::ProcessNoise;

@@ -23,8 +23,8 @@
 //! tightly coupled ([`ProcessNoise::clock`]); loosely coupled, the receiver solved its clock.
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
-use navsync_shared::earth::{self, OMEGA_IE};
-use navsync_shared::imu_spec::{ImuErrorSpec, ImuNoise, PerAxis};
+use navsync_wire::earth::{self, OMEGA_IE};
+use navsync_wire::imu_spec::{ImuErrorSpec, ImuNoise, PerAxis};
 
 use crate::time::clock_model::OscillatorNoise;
 

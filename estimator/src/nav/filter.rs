@@ -2,7 +2,7 @@
 //! covariance propagation every ~20 ms, closed-loop feedback of the error-state estimates.
 
 use nalgebra::{UnitQuaternion, Vector3};
-use navsync_shared::earth;
+use navsync_wire::earth;
 
 use super::config::NavConfig;
 use super::error_state::{self, ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, POS, SA, SG, StateMat, StateVec, VEL};

@@ -10,7 +10,7 @@
 //! Notation: C_b^n body(FRD)→NED, ω_ie^n earth rate, ω_en^n transport rate, g^n = [0, 0, γ].
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
-use navsync_shared::earth;
+use navsync_wire::earth;
 
 /// One IMU interval as increments in the body frame (FRD).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -15,7 +15,7 @@
 //! Pure and deterministic: the output depends only on the samples and their order.
 
 use nalgebra::Vector3;
-use navsync_shared::samples::{ImuSync, MAX_IMUS, NavState, NavStatus};
+use navsync_wire::samples::{ImuSync, MAX_IMUS, NavState, NavStatus};
 
 use super::alignment::Aligner;
 pub use super::config::NavConfig;
@@ -707,6 +707,6 @@ impl Navigator {
 
     /// An empty per-IMU table.
     pub fn empty_imu_table() -> [ImuSync; MAX_IMUS] {
-        [<ImuSync as navsync_shared::reflect::Reflect>::zeroed(); MAX_IMUS]
+        [<ImuSync as navsync_wire::reflect::Reflect>::zeroed(); MAX_IMUS]
     }
 }

@@ -39,7 +39,7 @@
 //! mapping; otherwise the filter maps to their mean. A constant share of the delay stays in
 //! the mapped times (the estimator's IMU offset estimation takes it up), the scatter does not.
 
-use navsync_shared::samples::{StampSource, TimeState};
+use navsync_wire::samples::{StampSource, TimeState};
 
 use super::clock_model::{ClockModel, ClockUpdate, OscillatorNoise};
 
@@ -311,7 +311,7 @@ impl DeviceClock {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use navsync_shared::samples::TimeStatus;
+    use navsync_wire::samples::TimeStatus;
 
     const U0: i64 = 1_790_000_000_000_000_000;
 

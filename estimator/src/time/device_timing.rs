@@ -14,8 +14,8 @@
 //! ([`DeviceTiming::retime_on_receiver_clock`]): no transport delay is left in it, where the
 //! device-clock regression above keeps the least delay of its windows.
 
-use navsync_shared::samples::{IMU_FLAG_RECEIVER_CLOCK, ImuSample, MAX_IMUS, StampSource};
-use navsync_shared::time::utc_ns_from_gps_ns;
+use navsync_wire::samples::{IMU_FLAG_RECEIVER_CLOCK, ImuSample, MAX_IMUS, StampSource};
+use navsync_wire::time::utc_ns_from_gps_ns;
 
 use super::device_clock::{DeviceClock, DeviceClockConfig, DeviceUpdate};
 
@@ -183,7 +183,7 @@ impl DeviceTiming {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use navsync_shared::reflect::Reflect;
+    use navsync_wire::reflect::Reflect;
 
     /// A 200 Hz IMU whose clock runs 40 ppm slow, received with a one-sided 0.5–3 ms delay.
     fn sample(k: i64, delay_ns: i64) -> (ImuSample, i64) {
@@ -234,8 +234,8 @@ mod tests {
 
     #[test]
     fn a_sample_on_the_receivers_clock_is_its_reading_less_the_bias_in_host_time() {
-        use navsync_shared::samples::IMU_FLAG_RECEIVER_CLOCK;
-        use navsync_shared::time::gps_ns_from_utc_ns;
+        use navsync_wire::samples::IMU_FLAG_RECEIVER_CLOCK;
+        use navsync_wire::time::gps_ns_from_utc_ns;
         let mut t = DeviceTiming::new(DeviceTimingConfig::default());
         // Host time = UTC − 1.7e18 ns + 3 µs (the PPS clock model's mapping).
         let host_at = |utc: i64| Some(utc - 1_700_000_000_000_000_000 + 3_000);

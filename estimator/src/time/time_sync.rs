@@ -21,8 +21,8 @@
 //!
 //! Pure state machine: fed with samples, no clocks or IPC inside.
 
-use navsync_shared::samples::{GnssFix, GnssTimePulse, PpsEdge, TimeState, TimeStatus};
-use navsync_shared::time::{NS_PER_S, gps_minus_utc_s};
+use navsync_wire::samples::{GnssFix, GnssTimePulse, PpsEdge, TimeState, TimeStatus};
+use navsync_wire::time::{NS_PER_S, gps_minus_utc_s};
 
 use super::clock_model::{ClockModel, ClockUpdate, OscillatorNoise};
 use super::latency_stats::LatencyStats;
@@ -522,8 +522,8 @@ impl TimeSync {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use navsync_shared::reflect::Reflect;
-    use navsync_shared::samples::{FixMode, Stamp, StampSource};
+    use navsync_wire::reflect::Reflect;
+    use navsync_wire::samples::{FixMode, Stamp, StampSource};
 
     const U0: i64 = 1_790_000_000 * NS_PER_S;
     const H0: i64 = 5 * NS_PER_S;

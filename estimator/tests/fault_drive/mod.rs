@@ -13,12 +13,12 @@
 use navsync_estimator::input_order::{Input, InputOrder};
 use navsync_estimator::pipeline::Pipeline;
 use navsync_estimator::settings::Settings;
-use navsync_shared::earth;
-use navsync_shared::samples::{AnySample, GnssFix, NavState, NavStatus, SimTruth};
 use navsync_sim::imu_errors::ImuPreset;
 use navsync_sim::published::PublishedStream;
 use navsync_sim::scenario::SimConfig;
 use navsync_sim::world::World;
+use navsync_wire::earth;
+use navsync_wire::samples::{AnySample, GnssFix, NavState, NavStatus, SimTruth};
 
 /// Host time (`CLOCK_MONOTONIC`, ns) of scenario time 0.
 pub const HOST0: i64 = 3_000_000_000;

@@ -16,8 +16,8 @@
 //! H_v = [0, I₃, [(C_b^n (ω×l))×], −C_b^n [l×], 0, …, a].
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
-use navsync_shared::earth;
-use navsync_shared::samples::{FIX_FLAG_INVALID_LLH, FIX_FLAG_OK, GNSS_PROTOCOL_UBX, GnssFix, UBX_MSG_HNR_PVT};
+use navsync_wire::earth;
+use navsync_wire::samples::{FIX_FLAG_INVALID_LLH, FIX_FLAG_OK, GNSS_PROTOCOL_UBX, GnssFix, UBX_MSG_HNR_PVT};
 
 use super::Measurement;
 use crate::nav::error_state::{ATT, BA, BG, DELAY, N, POS, VEL};
@@ -476,7 +476,7 @@ fn reset_to(f: &mut DelayedFilter, obs: &GnssObservation, cfg: &NavConfig, eps: 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use navsync_shared::samples::{FixMode, Stamp, StampSource};
+    use navsync_wire::samples::{FixMode, Stamp, StampSource};
 
     fn fix(sats_used: u16) -> GnssFix {
         let mut f = GnssFix::empty(Stamp::host(0, 0, StampSource::Receipt));

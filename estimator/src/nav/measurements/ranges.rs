@@ -18,7 +18,7 @@
 //! state; innovation dz = computed − measured (KF-GINS sign).
 
 use nalgebra::{Matrix1, Matrix3, SMatrix, Vector1, Vector3};
-use navsync_shared::earth;
+use navsync_wire::earth;
 
 use super::Measurement;
 use crate::gnss::ranges::{MAX_RANGE_SATS, RangeEpoch, SatRange};

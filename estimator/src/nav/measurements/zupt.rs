@@ -23,7 +23,7 @@
 //! `zupt_rejected`).
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
-use navsync_shared::earth;
+use navsync_wire::earth;
 
 use super::Measurement;
 use crate::nav::error_state::{BG, N, VEL};

@@ -127,8 +127,8 @@ pub trait Reflect: Sized + Copy + 'static {
     fn zeroed() -> Self;
 }
 
-/// Declares a `#[repr(C)]`, `ZeroCopySend` sample struct together with its
-/// [`Reflect`] field table. Every field must carry a doc comment (units, frame).
+/// Declares a `#[repr(C)]` sample struct together with its [`Reflect`] field table (from which
+/// the IPC layer takes its type name). Every field must carry a doc comment (units, frame).
 #[macro_export]
 macro_rules! sample_struct {
     (
@@ -139,8 +139,7 @@ macro_rules! sample_struct {
     ) => {
         $(#[doc = $sdoc])*
         #[repr(C)]
-        #[derive(Debug, Clone, Copy, PartialEq, iceoryx2::prelude::ZeroCopySend)]
-        #[type_name($tyname)]
+        #[derive(Debug, Clone, Copy, PartialEq)]
         pub struct $name {
             $( $(#[doc = $doc])+ pub $field: $fty, )*
         }

@@ -1,7 +1,5 @@
 //! The common header of every sensor sample: when it happened, how we know, which one.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 crate::sample_struct! {
     /// When a sample's physical event happened and how that time was obtained.
     pub struct Stamp = "navsync.Stamp.v1" {

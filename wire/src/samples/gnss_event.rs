@@ -1,8 +1,6 @@
 //! A time mark of an external event on a receiver's input pin (u-blox UBX-TIM-TM2: a camera's
 //! exposure pulse on EXTINT), in GNSS time and, where the time mapping is known, host time.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::Stamp;
 
 crate::sample_struct! {

@@ -2,8 +2,6 @@
 //! signal (u-blox UBX-RXM-SFRBX), words unchanged: ephemerides, almanac, ionosphere and UTC
 //! parameters for tightly coupled fusion (GPS LNAV per IS-GPS-200).
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::Stamp;
 
 /// Words one [`GnssNavData`] holds.

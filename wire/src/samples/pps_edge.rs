@@ -1,7 +1,5 @@
 //! A pulse-per-second edge.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::Stamp;
 
 crate::sample_struct! {

@@ -1,7 +1,5 @@
 //! Ground truth from the simulator, for evaluation only.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::MAX_IMUS;
 
 crate::sample_struct! {

@@ -1,7 +1,5 @@
 //! The fused, synchronised navigation state.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::{ImuSync, MAX_IMUS};
 
 crate::sample_struct! {

@@ -1,8 +1,6 @@
 //! The GNSS time of a receiver's next time pulse (u-blox UBX-TIM-TP): labels the PPS edge
 //! directly, with the pulse's quantisation error for the sawtooth correction.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::Stamp;
 
 crate::sample_struct! {

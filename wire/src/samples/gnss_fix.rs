@@ -1,8 +1,6 @@
 //! One GNSS epoch: a receiver's navigation solution for one measurement instant, whatever its
 //! protocol (the GNSS driver's decoder merges the messages that carry the epoch's time tag).
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::Stamp;
 
 crate::sample_struct! {

@@ -1,9 +1,10 @@
 //! The sample types that travel through shared memory.
 //!
 //! Conventions for every type here:
-//! - `#[repr(C)]`, fixed size, no pointers, [`ZeroCopySend`](iceoryx2::prelude::ZeroCopySend);
-//!   the layout version is part of the iceoryx2 type name (`navsync.ImuSample.v1`), so a
-//!   process built against another layout cannot open the service.
+//! - `#[repr(C)]`, fixed size, no pointers (the IPC layer sends them zero-copy:
+//!   `navsync_shared::ipc`); the layout version is part of the type name
+//!   (`navsync.ImuSample.v1`), so a process built against another layout cannot open the
+//!   service.
 //! - Time stamps are integer nanoseconds. `host_ns` is the host's `CLOCK_MONOTONIC`;
 //!   `utc_ns` is UTC since the Unix epoch; `gps_ns` is GPS time since 1980-01-06.
 //! - Navigation frame: local-level NED (north, east, down). Body frame: forward, right, down (FRD).

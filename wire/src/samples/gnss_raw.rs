@@ -1,8 +1,6 @@
 //! A receiver's raw measurements of one epoch (u-blox UBX-RXM-RAWX): pseudorange, carrier
 //! phase and Doppler of every tracked signal, for tightly coupled fusion.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::Stamp;
 
 /// Measurements one [`GnssRaw`] holds.

@@ -1,7 +1,5 @@
 //! One IMU measurement.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::Stamp;
 
 crate::sample_struct! {

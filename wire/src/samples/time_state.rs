@@ -1,7 +1,5 @@
 //! The host-clock ↔ GNSS-time mapping and the other time-synchronisation estimates.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use super::MAX_IMUS;
 
 crate::sample_struct! {

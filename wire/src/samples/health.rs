@@ -1,7 +1,5 @@
 //! Per-process health: alive, rates, error counters.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 crate::sample_struct! {
     /// One named counter.
     pub struct Counter = "navsync.Counter.v1" {
