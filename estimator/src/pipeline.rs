@@ -17,6 +17,7 @@ use navsync_wire::samples::{
 use crate::gnss::ranges::{EphemerisStore, RangeBuildCounts, RangeEpoch};
 use crate::gnss::spp::{self, SppSettings};
 use crate::input_order::Input;
+use crate::nav::measurements::MeasurementConfig;
 use crate::nav::measurements::ranges::RangingConfig;
 
 use crate::array::imu_array::{ArrayConfig, ImuArray};
@@ -41,6 +42,8 @@ pub struct PipelineConfig {
     pub time: TimeSyncConfig,
     /// Navigation filter.
     pub nav: NavConfig,
+    /// Each kind of measurement's settings.
+    pub measurements: MeasurementConfig,
     /// Default GNSS accuracy.
     pub gnss: GnssAccuracy,
     /// Id of the reference IMU: it defines the array's time grid and drives the output.
@@ -120,7 +123,7 @@ impl Pipeline {
     /// A fresh estimator.
     pub fn new(cfg: PipelineConfig) -> Self {
         let time = TimeSync::new(cfg.time);
-        let nav = Navigator::new(cfg.nav);
+        let nav = Navigator::with_measurements(cfg.nav, cfg.measurements);
         let mut array_cfg = cfg.array.clone();
         array_cfg.reference = array_cfg
             .units
@@ -301,7 +304,7 @@ impl Pipeline {
         if self.nav.is_aligned() {
             self.nav.on_ranges(epoch, raw.stamp.host_ns);
         } else if self.cfg.nav.initial_state.is_none()
-            && let Some(obs) = single_point_observation(&epoch, &self.cfg.nav.measurements.ranges)
+            && let Some(obs) = single_point_observation(&epoch, &self.cfg.measurements.ranges)
         {
             self.nav.on_gnss(obs, raw.stamp.host_ns);
         } else {

@@ -19,6 +19,7 @@ use crate::declare::checks::{count_within, ids, positive};
 use crate::declare::{Group, Invalid, Spec};
 use crate::evaluation::DelayTruth;
 use crate::nav::error_state::ProcessNoise;
+use crate::nav::measurements::MeasurementConfig;
 use crate::nav::measurements::gnss::GnssAccuracy;
 use crate::nav::navigator::NavConfig;
 use crate::pipeline::PipelineConfig;
@@ -120,6 +121,8 @@ pub struct Settings {
     pub nav: NavConfig,
     /// How the fixes' accuracy becomes the measurement noise.
     pub gnss: GnssAccuracy,
+    /// Each kind of measurement's settings.
+    pub measurements: MeasurementConfig,
 }
 
 /// Runs `$body` with `$g` bound to each settings group of `$s` in turn (`mut` for a mutable
@@ -139,8 +142,8 @@ macro_rules! each_group {
         { let $g = & $($m)? $s.device_timing; $body }
         { let $g = & $($m)? $s.nav; $body }
         { let $g = & $($m)? $s.nav.align; $body }
-        { let $g = & $($m)? $s.nav.measurements.gnss; $body }
-        { let $g = & $($m)? $s.nav.measurements.zupt; $body }
+        { let $g = & $($m)? $s.measurements.gnss; $body }
+        { let $g = & $($m)? $s.measurements.zupt; $body }
         { let $g = & $($m)? $s.gnss; $body }
     }};
 }
@@ -304,6 +307,7 @@ impl Settings {
                 ..self.nav
             },
             gnss: self.gnss,
+            measurements: self.measurements,
             reference_imu: self.inputs.imus.first().cloned().unwrap_or_else(|| "0".into()),
             array: self.array_config(),
             device_timing: self.device_timing,

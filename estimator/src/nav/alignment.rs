@@ -8,25 +8,10 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use navsync_wire::earth;
 
+use super::config::AlignConfig;
 use super::imu_buffer::ImuRecord;
 use super::measurements::gnss::GnssObservation;
 use super::mechanization::Pva;
-use crate::declare::checks::positive;
-
-crate::settings_group! {
-    /// Thresholds of the alignment.
-    #[derive(Debug, Clone, Copy, PartialEq)]
-    pub struct AlignConfig {
-        /// GNSS speed above which the course is taken as the heading, m/s.
-        pub align_min_speed_mps: f64 = 3.0, file "estimator", flag "align-speed", check positive;
-        /// Largest angular rate still counted as static, rad/s.
-        pub static_gyro_rps: f64 = 0.05;
-        /// Largest deviation of |f| from 1 g still counted as static, m/s².
-        pub static_accel_mps2: f64 = 0.3;
-        /// Largest deviation of f from the static mean still counted as static, m/s².
-        pub static_accel_dev_mps2: f64 = 0.15;
-    }
-}
 
 /// Result of the alignment.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -1,17 +1,16 @@
 //! The navigation filter's settings ([`NavConfig`], one declaration per setting:
 //! [`crate::declare`]) and the types they are made of: how GNSS aids the filter
 //! ([`Coupling`]), the receiver's oscillator ([`ReceiverOscillator`]) and a known initial state
-//! ([`InitialState`]). A leaf: it imports no other part of the filter but the settings of its
-//! parts (alignment, measurements) and its noise model.
+//! ([`InitialState`]), and the alignment's thresholds ([`AlignConfig`]). A leaf of the filter:
+//! it imports only the noise models (the IMU's, the oscillators'); each kind of measurement
+//! declares its own settings ([`super::measurements::MeasurementConfig`]).
 //!
 //! Units: SI unless the name says otherwise; frames: body forward-right-down (FRD),
 //! navigation north-east-down (NED).
 
 use navsync_wire::imu_spec::ImuPreset;
 
-use super::alignment::AlignConfig;
 use super::error_state::ProcessNoise;
-use super::measurements::MeasurementConfig;
 use crate::declare::checks::{finite3, positive, within};
 use crate::time::clock_model::OscillatorNoise;
 
@@ -163,8 +162,21 @@ crate::settings_group! {
         pub initial_state: Option<InitialState> = None, file "estimator";
         /// Alignment thresholds.
         pub align: AlignConfig = AlignConfig::default();
-        /// Settings of each kind of measurement ([`super::measurements`]).
-        pub measurements: MeasurementConfig = MeasurementConfig::default();
+    }
+}
+
+crate::settings_group! {
+    /// Thresholds of the alignment.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct AlignConfig {
+        /// GNSS speed above which the course is taken as the heading, m/s.
+        pub align_min_speed_mps: f64 = 3.0, file "estimator", flag "align-speed", check positive;
+        /// Largest angular rate still counted as static, rad/s.
+        pub static_gyro_rps: f64 = 0.05;
+        /// Largest deviation of |f| from 1 g still counted as static, m/s².
+        pub static_accel_mps2: f64 = 0.3;
+        /// Largest deviation of f from the static mean still counted as static, m/s².
+        pub static_accel_dev_mps2: f64 = 0.15;
     }
 }
 

@@ -25,7 +25,7 @@ use super::eskf::Eskf;
 use super::filter::DelayedFilter;
 use super::imu_buffer::{ImuBuffer, ImuRecord};
 use super::measurements::gnss::GnssObservation;
-use super::measurements::{Measurement, MeasurementQueue, MeasurementStates};
+use super::measurements::{Measurement, MeasurementConfig, MeasurementQueue, MeasurementStates};
 use super::mechanization::{ImuIncrement, Pva, propagate};
 use crate::gnss::ranges::RangeEpoch;
 
@@ -96,6 +96,8 @@ struct CatchUp {
 #[derive(Debug, Clone)]
 pub struct Navigator {
     cfg: NavConfig,
+    /// Each kind of measurement's settings.
+    kinds: MeasurementConfig,
     buf: ImuBuffer,
     aligner: Aligner,
     filt: Option<DelayedFilter>,
@@ -129,13 +131,21 @@ pub struct Navigator {
 }
 
 impl Navigator {
-    /// A filter that waits for alignment.
-    pub fn new(mut cfg: NavConfig) -> Self {
+    /// A filter that waits for alignment, with the default settings of every kind of
+    /// measurement.
+    pub fn new(cfg: NavConfig) -> Self {
+        Self::with_measurements(cfg, MeasurementConfig::default())
+    }
+
+    /// A filter that waits for alignment, with `kinds` the settings of each kind of
+    /// measurement.
+    pub fn with_measurements(mut cfg: NavConfig, kinds: MeasurementConfig) -> Self {
         // The states the settings make live: Δ, and the receiver clock when tightly coupled.
         cfg.noise.delay_state = cfg.estimate_delay;
         cfg.noise.clock = (cfg.coupling == Coupling::Tight).then(|| cfg.receiver_oscillator.noise());
         Self {
             cfg,
+            kinds,
             buf: ImuBuffer::default(),
             aligner: Aligner::new(cfg.align),
             filt: None,
@@ -538,8 +548,8 @@ impl Navigator {
                 continue;
             }
             filt.step(&r, &self.cfg);
-            self.states.on_step(&r, filt, &self.cfg, &mut self.queue);
-            corrected |= self.queue.fuse_due(filt, &self.cfg, &mut self.states);
+            self.states.on_step(&r, filt, &self.cfg, &self.kinds, &mut self.queue);
+            corrected |= self.queue.fuse_due(filt, &self.cfg, &self.kinds, &mut self.states);
         }
         if corrected {
             self.counters.replays += 1;

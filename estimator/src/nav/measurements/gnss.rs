@@ -315,13 +315,13 @@ impl Measurement for GnssObservation {
         f: &mut DelayedFilter,
         eps: f64,
         cfg: &NavConfig,
+        fusion: &GnssFusion,
         state: &mut GnssState,
     ) -> bool {
         let obs = self;
         let t_f = self.epoch_ns(f.delay_s);
         let (dz, h, r) = position_terms(&f.pva, &Vector3::from(cfg.gnss_lever_arm_m), obs, eps);
         let mut outcome = f.eskf.update(&dz, &h, &r, cfg.gate_scale);
-        let fusion = &cfg.measurements.gnss;
         let since = |t: i64| (t_f - t) as f64 * 1e-9;
         let coasted = state.last_fused_ns == 0 || since(state.last_fused_ns) >= fusion.coast_s;
         if !coasted {
@@ -379,7 +379,7 @@ impl Measurement for GnssObservation {
                 let nis = match outcome {
                     Update::Accepted { nis, .. } | Update::Rejected { nis } => nis,
                 };
-                adapt_process_noise(f, &cfg.measurements.gnss, state, nis, 2);
+                adapt_process_noise(f, fusion, state, nis, 2);
             }
             match outcome {
                 Update::Accepted { dx, .. } => f.feedback(&dx, cfg.fusion_horizon_s),

@@ -6,8 +6,8 @@
 //! Adding a kind of measurement: one file with a type implementing [`Measurement`] (its
 //! settings, its state, how it is fused, and, for measurements the IMU data itself produces,
 //! [`Measurement::on_step`]), and one line in the `measurement_kinds!` registry below. The
-//! queue, the settings in [`NavConfig`] (`measurements.<kind>`), the state and the health
-//! counters of every kind follow from that line.
+//! queue, the settings ([`MeasurementConfig`]`::<kind>`), the state and the health counters of
+//! every kind follow from that line.
 
 use super::config::NavConfig;
 use super::filter::DelayedFilter;
@@ -15,7 +15,7 @@ use super::imu_buffer::ImuRecord;
 
 /// One kind of measurement.
 pub trait Measurement: Copy + Into<Queued> {
-    /// Settings of this kind (`NavConfig::measurements.<kind>`).
+    /// Settings of this kind (`MeasurementConfig::<kind>`).
     type Config: Copy + Default + PartialEq + std::fmt::Debug;
     /// What this kind keeps between measurements (detectors, counters).
     type State: Clone + Default + std::fmt::Debug;
@@ -25,11 +25,24 @@ pub trait Measurement: Copy + Into<Queued> {
 
     /// Fuses it into the filter, which stands `eps_s` (s, ≥ 0) after [`Self::epoch_ns`],
     /// counting what became of it in its `state`. Returns true when the state was corrected.
-    fn fuse(&self, f: &mut DelayedFilter, eps_s: f64, cfg: &NavConfig, state: &mut Self::State) -> bool;
+    fn fuse(
+        &self,
+        f: &mut DelayedFilter,
+        eps_s: f64,
+        cfg: &NavConfig,
+        own: &Self::Config,
+        state: &mut Self::State,
+    ) -> bool;
 
     /// After each step of the delayed filter over IMU record `rec`: a measurement this kind
     /// makes from the IMU data at the filter's time, if any (default: none).
-    fn on_step(_rec: &ImuRecord, _f: &DelayedFilter, _cfg: &NavConfig, _state: &mut Self::State) -> Option<Self> {
+    fn on_step(
+        _rec: &ImuRecord,
+        _f: &DelayedFilter,
+        _cfg: &NavConfig,
+        _own: &Self::Config,
+        _state: &mut Self::State,
+    ) -> Option<Self> {
         None
     }
 
@@ -86,9 +99,16 @@ macro_rules! measurement_kinds {
                 }
             }
 
-            fn fuse(&self, f: &mut DelayedFilter, eps_s: f64, cfg: &NavConfig, states: &mut MeasurementStates) -> bool {
+            fn fuse(
+                &self,
+                f: &mut DelayedFilter,
+                eps_s: f64,
+                cfg: &NavConfig,
+                kinds: &MeasurementConfig,
+                states: &mut MeasurementStates,
+            ) -> bool {
                 match self {
-                    $(Self::$variant(m) => m.fuse(f, eps_s, cfg, &mut states.$field),)*
+                    $(Self::$variant(m) => m.fuse(f, eps_s, cfg, &kinds.$field, &mut states.$field),)*
                 }
             }
         }
@@ -96,8 +116,15 @@ macro_rules! measurement_kinds {
         impl MeasurementStates {
             /// Every kind's [`Measurement::on_step`] after a step of the delayed filter; what
             /// they measure goes into `queue`.
-            pub(crate) fn on_step(&mut self, rec: &ImuRecord, f: &DelayedFilter, cfg: &NavConfig, queue: &mut MeasurementQueue) {
-                $(if let Some(m) = <$t as Measurement>::on_step(rec, f, cfg, &mut self.$field) {
+            pub(crate) fn on_step(
+                &mut self,
+                rec: &ImuRecord,
+                f: &DelayedFilter,
+                cfg: &NavConfig,
+                kinds: &MeasurementConfig,
+                queue: &mut MeasurementQueue,
+            ) {
+                $(if let Some(m) = <$t as Measurement>::on_step(rec, f, cfg, &kinds.$field, &mut self.$field) {
                     self.queue(queue, m.into());
                 })*
             }
@@ -152,7 +179,13 @@ impl MeasurementQueue {
 
     /// Fuses, in epoch order, every queued measurement whose epoch the filter has reached.
     /// Returns true when the state was corrected.
-    pub fn fuse_due(&mut self, f: &mut DelayedFilter, cfg: &NavConfig, states: &mut MeasurementStates) -> bool {
+    pub fn fuse_due(
+        &mut self,
+        f: &mut DelayedFilter,
+        cfg: &NavConfig,
+        kinds: &MeasurementConfig,
+        states: &mut MeasurementStates,
+    ) -> bool {
         let mut corrected = false;
         loop {
             // The epoch of a GNSS fix moves with Δ̂, which each fusion may change: look again.
@@ -167,7 +200,7 @@ impl MeasurementQueue {
             let Some(m) = self.slots[i].take() else { break };
             f.propagate_covariance(cfg);
             let eps_s = (f.t_ns - t) as f64 * 1e-9;
-            corrected |= m.fuse(f, eps_s, cfg, states);
+            corrected |= m.fuse(f, eps_s, cfg, kinds, states);
         }
         corrected
     }

@@ -226,8 +226,7 @@ fn median(v: &mut [f64; MAX_RANGE_SATS], n: usize) -> f64 {
 }
 
 impl RangeEpoch {
-    fn usable(&self, a: &Antenna, s: &SatRange, cfg: &NavConfig) -> Option<Sight> {
-        let rc = &cfg.measurements.ranges;
+    fn usable(&self, a: &Antenna, s: &SatRange, rc: &RangingConfig) -> Option<Sight> {
         let g = sight(a, s, self);
         (g.el_rad >= rc.elevation_mask_rad && f64::from(s.cno_dbhz) >= rc.cno_mask_dbhz).then_some(g)
     }
@@ -235,13 +234,19 @@ impl RangeEpoch {
     /// Sets the clock from the median residuals of the satellites in view (≥ 1) the first
     /// time, or re-anchors the bias after a jump. Returns false while the clock has never been
     /// anchored (no usable satellite yet).
-    fn anchor_clock(&self, f: &mut DelayedFilter, cfg: &NavConfig, eps: f64, st: &mut RangingState) -> bool {
-        let rc = &cfg.measurements.ranges;
+    fn anchor_clock(
+        &self,
+        f: &mut DelayedFilter,
+        cfg: &NavConfig,
+        rc: &RangingConfig,
+        eps: f64,
+        st: &mut RangingState,
+    ) -> bool {
         let a = Antenna::of(f, &Vector3::from(cfg.gnss_lever_arm_m), eps);
         let (mut res, mut rates) = ([0.0; MAX_RANGE_SATS], [0.0; MAX_RANGE_SATS]);
         let (mut n, mut m) = (0, 0);
         for s in self.sats() {
-            let Some(g) = self.usable(&a, s, cfg) else { continue };
+            let Some(g) = self.usable(&a, s, rc) else { continue };
             res[n] = s.pseudorange_m - g.range_m - g.atmosphere_m;
             n += 1;
             if s.range_rate_mps.is_finite() {
@@ -295,21 +300,21 @@ impl Measurement for RangeEpoch {
         f: &mut DelayedFilter,
         eps: f64,
         cfg: &NavConfig,
+        rc: &RangingConfig,
         st: &mut RangingState,
     ) -> bool {
         if cfg.noise.clock.is_none() {
             st.epochs_not_tight += 1;
             return false;
         }
-        if !self.anchor_clock(f, cfg, eps, st) {
+        if !self.anchor_clock(f, cfg, rc, eps, st) {
             return false;
         }
-        let rc = &cfg.measurements.ranges;
         let lever_b = Vector3::from(cfg.gnss_lever_arm_m);
         let mut used = 0u64;
         for s in self.sats() {
             let a = Antenna::of(f, &lever_b, eps);
-            let Some(g) = self.usable(&a, s, cfg) else {
+            let Some(g) = self.usable(&a, s, rc) else {
                 if sight(&a, s, self).el_rad < rc.elevation_mask_rad {
                     st.below_mask += 1;
                 } else {

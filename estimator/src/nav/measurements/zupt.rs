@@ -105,8 +105,7 @@ impl Measurement for Zupt {
         self.t_ns
     }
 
-    fn fuse(&self, f: &mut DelayedFilter, _eps_s: f64, cfg: &NavConfig, state: &mut ZuptState) -> bool {
-        let z = &cfg.measurements.zupt;
+    fn fuse(&self, f: &mut DelayedFilter, _eps_s: f64, cfg: &NavConfig, z: &ZuptConfig, state: &mut ZuptState) -> bool {
         let c_nb = f.pva.q_nb.inverse().to_rotation_matrix().into_inner();
         let w_ie_b = c_nb * Vector3::from(earth::omega_ie_n(f.pva.lat_rad));
         let mut dz = SVector::<f64, 6>::zeros();
@@ -133,8 +132,7 @@ impl Measurement for Zupt {
         }
     }
 
-    fn on_step(rec: &ImuRecord, f: &DelayedFilter, cfg: &NavConfig, state: &mut ZuptState) -> Option<Self> {
-        let z = &cfg.measurements.zupt;
+    fn on_step(rec: &ImuRecord, f: &DelayedFilter, _cfg: &NavConfig, z: &ZuptConfig, state: &mut ZuptState) -> Option<Self> {
         if !z.zupt {
             return None;
         }
