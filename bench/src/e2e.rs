@@ -283,12 +283,12 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
     pids.push(("gps".into(), pid));
     if args.imu_path == ImuPath::Xsens {
         for i in 0..imus {
-            let port = navsync_drivers::imu::sim_device::sim_port(&env.dir, i);
+            let port = navsync_drivers::imu::xsens::sim_device::sim_port(&env.dir, i);
             wait_path(&mut env, &port)?;
             let source = format!(
                 "xsens:{}:{}",
                 port.display(),
-                navsync_drivers::imu::sim_device::SIM_BAUD
+                navsync_drivers::imu::xsens::sim_device::SIM_BAUD
             );
             let name = format!("imu-{i}");
             let (pid, _) = env.spawn(

@@ -9,8 +9,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use navsync_drivers::imu::iio_record::{Conversion, Raw, RecordDecoder, Slot, layout, read_raw};
-use navsync_drivers::imu::iio_scan::{Endian, Repr, ScanElement, ScanType};
+use navsync_drivers::imu::iio::record::{Conversion, Raw, RecordDecoder, Slot, layout, read_raw};
+use navsync_drivers::imu::iio::scan::{Endian, Repr, ScanElement, ScanType};
 use navsync_fuzz::split_iio;
 
 /// Integer element `element` of `slot` in `record`, decoded independently of `read_raw`.

@@ -10,8 +10,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use navsync_drivers::imu::iio_record::layout;
-use navsync_drivers::imu::iio_scan::{Endian, Repr, ChannelRole, ScanElement, ScanType};
+use navsync_drivers::imu::iio::record::layout;
+use navsync_drivers::imu::iio::scan::{Endian, Repr, ChannelRole, ScanElement, ScanType};
 use navsync_fuzz::split_iio;
 
 fn canonical(t: &ScanType) -> String {

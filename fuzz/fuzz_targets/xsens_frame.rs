@@ -7,8 +7,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use navsync_drivers::imu::xsens_driver::rotation_vector;
-use navsync_drivers::imu::xsens_frame::{
+use navsync_drivers::imu::xsens::rotation_vector;
+use navsync_drivers::imu::xsens::frame::{
     BID_MASTER, MAX_DATA, MID_MTDATA2, MtData2, RealFormat, XbusFramer, decode_mtdata2, encode_mtdata2,
 };
 

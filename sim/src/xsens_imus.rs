@@ -23,10 +23,10 @@ use std::path::Path;
 use std::str::FromStr;
 
 use navsync_drivers::imu::axes::AxisMap;
-use navsync_drivers::imu::sim_device::{DEFAULT_SIM_DIR, sim_port};
-use navsync_drivers::imu::xsens_frame::{
+use navsync_drivers::imu::xsens::frame::{
     MtData2, RealFormat, SAMPLE_TIME_FINE_HZ, STATUS_CLIP_ACC, STATUS_CLIP_GYR, encode_mtdata2,
 };
+use navsync_drivers::imu::xsens::sim_device::{DEFAULT_SIM_DIR, sim_port};
 use navsync_drivers::pty::Pty;
 use navsync_shared::ipc::{IpcError, IpcNode, Publisher};
 use navsync_shared::samples::{IMU_FLAG_SATURATED, ImuSample};
@@ -199,7 +199,7 @@ impl SimImuSink {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use navsync_drivers::imu::xsens_frame::{XbusFramer, decode_mtdata2};
+    use navsync_drivers::imu::xsens::frame::{XbusFramer, decode_mtdata2};
     use navsync_shared::samples::{Stamp, StampSource};
 
     #[test]

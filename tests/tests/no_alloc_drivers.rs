@@ -19,7 +19,7 @@
 use navsync_drivers::gnss::{Decoder, GnssDecoder, Protocol};
 use navsync_drivers::imu::output::{Extras, SampleOutput};
 use navsync_drivers::imu::sample_checks::{Candidate, CounterReading, Limits, Sequence};
-use navsync_drivers::imu::xsens_frame::{NS_PER_SAMPLE_TIME_FINE_TICK, XbusFramer, decode_mtdata2};
+use navsync_drivers::imu::xsens::frame::{NS_PER_SAMPLE_TIME_FINE_TICK, XbusFramer, decode_mtdata2};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{GnssFix, ImuSample, StampSource};
 use navsync_shared::services;

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
-use navsync_drivers::imu::sim_device::{SIM_BAUD, sim_port};
+use navsync_drivers::imu::xsens::sim_device::{SIM_BAUD, sim_port};
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::reflect::str_of;
 use navsync_shared::samples::*;

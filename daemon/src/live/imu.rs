@@ -59,11 +59,11 @@ impl Options {
             sysfs_root: self
                 .sysfs_root
                 .or_else(|| s.and_then(|s| s.sysfs_root.clone()))
-                .unwrap_or_else(|| navsync_drivers::imu::iio_device::SYSFS_ROOT.into()),
+                .unwrap_or_else(|| navsync_drivers::imu::iio::device::SYSFS_ROOT.into()),
             dev_root: self
                 .dev_root
                 .or_else(|| s.and_then(|s| s.dev_root.clone()))
-                .unwrap_or_else(|| navsync_drivers::imu::iio_device::DEV_ROOT.into()),
+                .unwrap_or_else(|| navsync_drivers::imu::iio::device::DEV_ROOT.into()),
             rate_hz: self.rate.or(s.and_then(|s| s.rate_hz)),
             axes: self.axes.or(s.and_then(|s| s.axes)).unwrap_or(AxisMap::Z_UP_TO_FRD),
             gyro_range_dps: self.gyro_range_dps.or(s.and_then(|s| s.gyro_range_dps)),

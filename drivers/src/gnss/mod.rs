@@ -11,8 +11,8 @@
 //! Protocols: [`nmea`] (NMEA 0183), [`ubx`] (u-blox UBX, with the NMEA sentences and RTCM3
 //! frames of the same port separated out), and `auto` ([`ubx::auto`]: UBX navigation when the
 //! port carries it, else NMEA). Adding one: a module with its framer and decoders (pure
-//! functions on bytes), a type implementing [`GnssDecoder`], a [`Protocol`] variant and its
-//! arm in [`Decoder`].
+//! functions on bytes), a type implementing [`GnssDecoder`] that fills the protocol-neutral
+//! fields of [`GnssFix`], and its line in the `gnss_protocols!` registry below.
 
 pub mod capture;
 pub mod cycle;
@@ -79,40 +79,139 @@ pub enum GnssExtra<'a> {
     Imu(&'a ImuSample),
 }
 
-/// The receiver protocol of a port (`navsync gnss --protocol`, `[gnss.ID] protocol`).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Protocol {
-    /// NMEA 0183 sentences.
-    #[default]
-    Nmea,
-    /// u-blox UBX binary messages (NMEA and RTCM3 on the same port are skipped).
-    Ubx,
-    /// UBX navigation when the port carries UBX NAV messages, else its NMEA sentences,
-    /// decided from the bytes ([`ubx::auto`]).
-    Auto,
+/// The registry of receiver protocols: for each line `Variant = "name" => DecoderType` (with
+/// `[boxed]` for a decoder kept on the heap), the [`Protocol`] variant with its name on the
+/// command line and in the file, and the [`Decoder`] variant with every arm of its
+/// [`GnssDecoder`] implementation. A new protocol is one line here.
+macro_rules! gnss_protocols {
+    (
+        default $default:ident;
+        $( $(#[doc = $doc:literal])+ $variant:ident = $name:literal => $dec:ident $([$boxed:ident])?, )*
+    ) => {
+        /// The receiver protocol of a port (`navsync gnss --protocol`, `[gnss.ID] protocol`).
+        #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+        pub enum Protocol {
+            $( $(#[doc = $doc])+ $variant, )*
+        }
+
+        impl Default for Protocol {
+            fn default() -> Self {
+                Self::$default
+            }
+        }
+
+        impl Protocol {
+            /// Every protocol.
+            pub const ALL: &'static [Protocol] = &[$(Self::$variant),*];
+
+            /// The name on the command line and in the configuration file.
+            pub fn name(self) -> &'static str {
+                match self {
+                    $(Self::$variant => $name,)*
+                }
+            }
+        }
+
+        /// The decoder of one [`Protocol`]. Decoders with a large window (UBX's framer holds one
+        /// maximal frame, 8 kB) are boxed, allocated once with the decoder; the NMEA decoder
+        /// stays inline, so that the NMEA path allocates nothing at all.
+        #[allow(clippy::large_enum_variant)]
+        #[derive(Debug, Clone)]
+        pub enum Decoder {
+            $( $(#[doc = $doc])+ $variant(gnss_protocols!(@store $dec $($boxed)?)), )*
+        }
+
+        impl Decoder {
+            /// A decoder for `protocol` at the start of a stream.
+            pub fn new(protocol: Protocol) -> Self {
+                match protocol {
+                    $(Protocol::$variant => Self::$variant(Default::default()),)*
+                }
+            }
+
+            /// What a growing error counter of any protocol means.
+            pub fn describe_counter(name: &str) -> Option<&'static str> {
+                None$(.or_else(|| <$dec as GnssDecoder>::describe(name)))*
+            }
+        }
+
+        impl GnssDecoder for Decoder {
+            fn push(&mut self, bytes: &[u8], read_host_ns: i64, ns_per_byte: i64, out: &mut impl FnMut(&GnssFix)) {
+                match self {
+                    $(Self::$variant(d) => d.push(bytes, read_host_ns, ns_per_byte, out),)*
+                }
+            }
+
+            fn push_extras(
+                &mut self,
+                bytes: &[u8],
+                read_host_ns: i64,
+                ns_per_byte: i64,
+                out: &mut impl FnMut(&GnssFix),
+                extra: &mut impl FnMut(GnssExtra<'_>),
+            ) {
+                match self {
+                    $(Self::$variant(d) => d.push_extras(bytes, read_host_ns, ns_per_byte, out, extra),)*
+                }
+            }
+
+            fn flush(&mut self, out: &mut impl FnMut(&GnssFix)) {
+                match self {
+                    $(Self::$variant(d) => d.flush(out),)*
+                }
+            }
+
+            fn reset(&mut self) {
+                match self {
+                    $(Self::$variant(d) => d.reset(),)*
+                }
+            }
+
+            fn bytes(&self) -> u64 {
+                match self {
+                    $(Self::$variant(d) => d.bytes(),)*
+                }
+            }
+
+            fn valid_frames(&self) -> u64 {
+                match self {
+                    $(Self::$variant(d) => d.valid_frames(),)*
+                }
+            }
+
+            fn each_counter(&self, f: &mut impl FnMut(&'static str, u64)) {
+                match self {
+                    $(Self::$variant(d) => d.each_counter(f),)*
+                }
+            }
+
+            fn describe(name: &str) -> Option<&'static str> {
+                Self::describe_counter(name)
+            }
+        }
+    };
+    (@store $dec:ident) => { $dec };
+    (@store $dec:ident boxed) => { Box<$dec> };
 }
 
-impl Protocol {
-    /// The name on the command line and in the configuration file.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Nmea => "nmea",
-            Self::Ubx => "ubx",
-            Self::Auto => "auto",
-        }
-    }
+gnss_protocols! {
+    default Nmea;
+    /// NMEA 0183 sentences.
+    Nmea = "nmea" => NmeaDecoder,
+    /// u-blox UBX binary messages (NMEA and RTCM3 on the same port are skipped).
+    Ubx = "ubx" => UbxDecoder [boxed],
+    /// UBX navigation when the port carries UBX NAV messages, else its NMEA sentences,
+    /// decided from the bytes ([`ubx::auto`]).
+    Auto = "auto" => AutoDecoder [boxed],
 }
 
 impl FromStr for Protocol {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "nmea" => Ok(Self::Nmea),
-            "ubx" => Ok(Self::Ubx),
-            "auto" => Ok(Self::Auto),
-            _ => Err(format!("`{s}` is not a GNSS protocol (known: nmea, ubx, auto)")),
-        }
+        Self::ALL.iter().copied().find(|p| p.name() == s).ok_or_else(|| {
+            let known: Vec<_> = Self::ALL.iter().map(|p| p.name()).collect();
+            format!("`{s}` is not a GNSS protocol (known: {})", known.join(", "))
+        })
     }
 }
 
@@ -122,102 +221,11 @@ impl std::fmt::Display for Protocol {
     }
 }
 
-/// The decoder of one [`Protocol`]. The UBX decoders are boxed (their framer holds a window
-/// of one maximal UBX frame, 8 kB: allocated once, with the decoder); the NMEA decoder stays
-/// inline, so that the NMEA path allocates nothing at all.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone)]
-pub enum Decoder {
-    /// NMEA 0183.
-    Nmea(NmeaDecoder),
-    /// u-blox UBX.
-    Ubx(Box<UbxDecoder>),
-    /// UBX with NMEA fallback.
-    Auto(Box<AutoDecoder>),
-}
-
-impl Decoder {
-    /// A decoder for `protocol` at the start of a stream.
-    pub fn new(protocol: Protocol) -> Self {
-        match protocol {
-            Protocol::Nmea => Self::Nmea(NmeaDecoder::new()),
-            Protocol::Ubx => Self::Ubx(Box::default()),
-            Protocol::Auto => Self::Auto(Box::default()),
-        }
-    }
-
-    /// What a growing error counter of any protocol means.
-    pub fn describe_counter(name: &str) -> Option<&'static str> {
-        AutoDecoder::describe(name)
-    }
-}
-
-impl GnssDecoder for Decoder {
-    fn push(&mut self, bytes: &[u8], read_host_ns: i64, ns_per_byte: i64, out: &mut impl FnMut(&GnssFix)) {
-        match self {
-            Self::Nmea(d) => d.push(bytes, read_host_ns, ns_per_byte, out),
-            Self::Ubx(d) => d.push(bytes, read_host_ns, ns_per_byte, out),
-            Self::Auto(d) => d.push(bytes, read_host_ns, ns_per_byte, out),
-        }
-    }
-
-    fn push_extras(
-        &mut self,
-        bytes: &[u8],
-        read_host_ns: i64,
-        ns_per_byte: i64,
-        out: &mut impl FnMut(&GnssFix),
-        extra: &mut impl FnMut(GnssExtra<'_>),
-    ) {
-        match self {
-            Self::Nmea(d) => d.push(bytes, read_host_ns, ns_per_byte, out),
-            Self::Ubx(d) => d.push_extras(bytes, read_host_ns, ns_per_byte, out, extra),
-            Self::Auto(d) => d.push_extras(bytes, read_host_ns, ns_per_byte, out, extra),
-        }
-    }
-
-    fn flush(&mut self, out: &mut impl FnMut(&GnssFix)) {
-        match self {
-            Self::Nmea(d) => d.flush(out),
-            Self::Ubx(d) => d.flush(out),
-            Self::Auto(d) => d.flush(out),
-        }
-    }
-
-    fn reset(&mut self) {
-        match self {
-            Self::Nmea(d) => d.reset(),
-            Self::Ubx(d) => d.reset(),
-            Self::Auto(d) => d.reset(),
-        }
-    }
-
-    fn bytes(&self) -> u64 {
-        match self {
-            Self::Nmea(d) => d.bytes(),
-            Self::Ubx(d) => d.bytes(),
-            Self::Auto(d) => d.bytes(),
-        }
-    }
-
-    fn valid_frames(&self) -> u64 {
-        match self {
-            Self::Nmea(d) => d.valid_frames(),
-            Self::Ubx(d) => d.valid_frames(),
-            Self::Auto(d) => d.valid_frames(),
-        }
-    }
-
-    fn each_counter(&self, f: &mut impl FnMut(&'static str, u64)) {
-        match self {
-            Self::Nmea(d) => d.each_counter(f),
-            Self::Ubx(d) => d.each_counter(f),
-            Self::Auto(d) => d.each_counter(f),
-        }
-    }
-
-    fn describe(name: &str) -> Option<&'static str> {
-        Self::describe_counter(name)
+/// In a configuration file: the protocol's name.
+impl<'de> serde::Deserialize<'de> for Protocol {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
     }
 }
 

@@ -7,14 +7,18 @@
 //!   (ADIS164xx, BMI160/BMI270, ICM-20xxx via inv_mpu6050, …; chips whose driver registers
 //!   the gyroscope and the accelerometer as two devices, such as ICM-42xxx, LSM6DSx or
 //!   BMI088, as `GYRO+ACCEL`): set up through sysfs, records from `/dev/iio:deviceN`, stamped
-//!   with the kernel's per-sample timestamp ([`iio_driver`], [`iio_device`], [`iio_scan`],
-//!   [`iio_record`], [`iio_pair`]).
+//!   with the kernel's per-sample timestamp ([`iio`]: the process shell, `device`, `scan`,
+//!   `record`, `pair`).
 //! - `xsens:PORT[:BAUD]` — an Xsens MTi sending MTData2 over a serial port (default
 //!   115200 Bd), stamped on receipt and carrying the device's SampleTimeFine clock
-//!   ([`xsens_driver`], [`xsens_frame`]).
+//!   ([`xsens`]: the process shell, `frame`).
 //! - `sim[:DIR]` — the simulator's IMU `ID` (`navsync sim --imu-output xsens`), which is an
 //!   Xsens device on the pseudo-terminal `DIR/imu{ID}` (default `/tmp/navsync`)
-//!   ([`sim_device`]).
+//!   ([`xsens::sim_device`]).
+//!
+//! Adding a source: a folder or file here with its pure decoder and its process shell, an
+//! [`ImuSource`] variant with its text form (`kind:…`, the flag's and the file's) and its arms
+//! in [`ImuSource`]'s `FromStr`, [`ImuSource::default_ranges`] and [`run`].
 //!
 //! Every source ends in [`output::SampleOutput`]: checks ([`sample_checks`]: NaN, range,
 //! time going backwards, duplicates, sequence gaps and counter wraps), axis mapping to
@@ -23,16 +27,10 @@
 //! report and reopens the device with exponential backoff.
 
 pub mod axes;
-pub mod iio_device;
-pub mod iio_driver;
-pub mod iio_pair;
-pub mod iio_record;
-pub mod iio_scan;
+pub mod iio;
 pub mod output;
 pub mod sample_checks;
-pub mod sim_device;
-pub mod xsens_driver;
-pub mod xsens_frame;
+pub mod xsens;
 
 use std::path::PathBuf;
 use std::str::FromStr;
@@ -42,18 +40,11 @@ use navsync_shared::ipc::{IpcError, IpcNode};
 use tracing::{info, info_span};
 
 use self::axes::AxisMap;
-use self::iio_device::IioSetup;
+use self::iio::device::IioSetup;
 use self::output::SampleOutput;
 use self::sample_checks::Limits;
 
-/// Default Xsens line rate (the MTi factory setting).
-pub const XSENS_DEFAULT_BAUD: u32 = 115_200;
-/// Default gyroscope range for Xsens devices (MTi 1-, 600-series: ±2000 °/s).
-pub const XSENS_GYRO_RANGE_DPS: f64 = 2000.0;
-/// Default accelerometer range for Xsens devices (MTi 1-series: ±16 g).
-pub const XSENS_ACCEL_RANGE_G: f64 = 16.0;
-/// Default IIO buffer length, records.
-pub const IIO_BUFFER_LENGTH: u32 = 512;
+pub use iio::BUFFER_LENGTH as IIO_BUFFER_LENGTH;
 
 /// Where the samples come from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -79,6 +70,17 @@ pub enum ImuSource {
 }
 
 deserialize_from_str!(ImuSource);
+
+impl ImuSource {
+    /// The source's full-scale ranges when none is configured: (gyroscope °/s,
+    /// accelerometer g). Each source states its own.
+    pub fn default_ranges(&self) -> (f64, f64) {
+        match self {
+            Self::Iio { .. } => iio::DEFAULT_RANGES,
+            Self::Xsens { .. } | Self::Sim { .. } => (xsens::GYRO_RANGE_DPS, xsens::ACCEL_RANGE_G),
+        }
+    }
+}
 
 /// The source as written on the command line (`iio:adis16475`, `xsens:/dev/ttyUSB0:921600`).
 impl std::fmt::Display for ImuSource {
@@ -116,7 +118,7 @@ impl FromStr for ImuSource {
                             .ok_or_else(|| format!("`{b}` in `{s}` is not a baud rate (a positive integer)"))?;
                         (p, baud)
                     }
-                    _ => (rest, XSENS_DEFAULT_BAUD),
+                    _ => (rest, xsens::DEFAULT_BAUD),
                 };
                 Ok(Self::Xsens {
                     port: port.to_string(),
@@ -125,7 +127,7 @@ impl FromStr for ImuSource {
             }
             "sim" => Ok(Self::Sim {
                 dir: PathBuf::from(if rest.is_empty() {
-                    sim_device::DEFAULT_SIM_DIR
+                    xsens::sim_device::DEFAULT_SIM_DIR
                 } else {
                     rest
                 }),
@@ -185,10 +187,7 @@ pub fn run(args: &ImuArgs) -> Result<(), ImuError> {
             "--rate {r}: expected a sampling frequency in Hz, 1 < rate ≤ 100000"
         )));
     }
-    let default_ranges = match args.source {
-        ImuSource::Iio { .. } => (f64::INFINITY, f64::INFINITY),
-        _ => (XSENS_GYRO_RANGE_DPS, XSENS_ACCEL_RANGE_G),
-    };
+    let default_ranges = args.source.default_ranges();
     let limits = Limits {
         gyro_rps: args.gyro_range_dps.unwrap_or(default_ranges.0).to_radians(),
         accel_mps2: args.accel_range_g.unwrap_or(default_ranges.1) * G0,
@@ -199,9 +198,9 @@ pub fn run(args: &ImuArgs) -> Result<(), ImuError> {
     // Serving: the services exist; the device is read (or waited for, with backoff) from here.
     navsync_shared::sd_notify::ready(&format!("imu {}: {:?}", args.id, args.source));
     match &args.source {
-        ImuSource::Iio { devices } => iio_driver::run(
+        ImuSource::Iio { devices } => iio::run(
             &node,
-            &iio_driver::IioArgs {
+            &iio::IioArgs {
                 devices: devices.clone(),
                 sysfs_root: args.sysfs_root.clone(),
                 dev_root: args.dev_root.clone(),
@@ -213,9 +212,9 @@ pub fn run(args: &ImuArgs) -> Result<(), ImuError> {
             },
             &mut out,
         ),
-        ImuSource::Xsens { port, baud } => xsens_driver::run(
+        ImuSource::Xsens { port, baud } => xsens::run(
             &node,
-            &xsens_driver::XsensArgs {
+            &xsens::XsensArgs {
                 port: port.clone(),
                 baud: *baud,
                 axes: args.axes,
@@ -230,11 +229,11 @@ pub fn run(args: &ImuArgs) -> Result<(), ImuError> {
                     args.id
                 ))
             })?;
-            xsens_driver::run(
+            xsens::run(
                 &node,
-                &xsens_driver::XsensArgs {
-                    port: sim_device::sim_port(dir, index).display().to_string(),
-                    baud: sim_device::SIM_BAUD,
+                &xsens::XsensArgs {
+                    port: xsens::sim_device::sim_port(dir, index).display().to_string(),
+                    baud: xsens::sim_device::SIM_BAUD,
                     axes: args.axes,
                     rate_hz: args.rate_hz,
                 },

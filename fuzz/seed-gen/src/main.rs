@@ -17,10 +17,10 @@ use std::fs;
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
-use navsync_drivers::imu::iio_record::layout;
-use navsync_drivers::imu::iio_scan::{Endian, Repr, ScanElement, ScanType};
+use navsync_drivers::imu::iio::record::layout;
+use navsync_drivers::imu::iio::scan::{Endian, Repr, ScanElement, ScanType};
 use navsync_sim::xsens_imus::SimXsensImu;
-use navsync_drivers::imu::xsens_frame::{MtData2, RealFormat, STATUS_CLIP_GYR, encode_mtdata2};
+use navsync_drivers::imu::xsens::frame::{MtData2, RealFormat, STATUS_CLIP_GYR, encode_mtdata2};
 use navsync_sim::nmea::{EpochReport, FixReport, frame, write_burst};
 use navsync_recording::{RecordingOptions, SampleReader, SampleRecorder};
 use navsync_shared::samples::AnySample;

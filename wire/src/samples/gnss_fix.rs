@@ -97,6 +97,14 @@ pub const FIX_FLAG_VALID_DATE: u8 = 1 << 3;
 pub const FIX_FLAG_VALID_TIME: u8 = 1 << 4;
 /// [`GnssFix::fix_flags`]: date and time are fully resolved (UBX `fullyResolved`).
 pub const FIX_FLAG_FULLY_RESOLVED: u8 = 1 << 5;
+/// [`GnssFix::fix_flags`]: the receiver says its solution is not valid (UBX NAV-PVT
+/// `gnssFixOK`, NAV-SOL `GPSfixOK` clear); a protocol without such a flag leaves it clear. Not
+/// fused.
+pub const FIX_FLAG_RECEIVER_INVALID: u8 = 1 << 6;
+/// [`GnssFix::fix_flags`]: not a GNSS solution but the receiver's own blend of GNSS and its
+/// sensors (UBX HNR-PVT), correlated with them from one output to the next. Not fused as a
+/// GNSS measurement.
+pub const FIX_FLAG_NOT_GNSS: u8 = 1 << 7;
 
 /// [`GnssFix::sentences`] bit of a UBX NAV-PVT message.
 pub const UBX_MSG_NAV_PVT: u32 = 1 << 0;

@@ -63,10 +63,11 @@
 //! TIM-TM2 ([`EpochAssembler::time_mark`]) are kept for consumers.
 
 use navsync_shared::samples::{
-    FIX_FLAG_DIFFERENTIAL, FIX_FLAG_FULLY_RESOLVED, FIX_FLAG_INVALID_LLH, FIX_FLAG_OK, FIX_FLAG_VALID_DATE,
-    FIX_FLAG_VALID_TIME, FixMode, GNSS_PROTOCOL_UBX, GnssEvent, GnssFix, GnssTimePulse, Stamp, StampSource,
-    UBX_MSG_HNR_PVT, UBX_MSG_NAV_DOP, UBX_MSG_NAV_EOE, UBX_MSG_NAV_POSLLH, UBX_MSG_NAV_PVT, UBX_MSG_NAV_SAT,
-    UBX_MSG_NAV_SOL, UBX_MSG_NAV_STATUS, UBX_MSG_NAV_TIMEGPS, UBX_MSG_NAV_TIMEUTC, UBX_MSG_NAV_VELNED,
+    FIX_FLAG_DIFFERENTIAL, FIX_FLAG_FULLY_RESOLVED, FIX_FLAG_INVALID_LLH, FIX_FLAG_NOT_GNSS, FIX_FLAG_OK,
+    FIX_FLAG_RECEIVER_INVALID, FIX_FLAG_VALID_DATE, FIX_FLAG_VALID_TIME, FixMode, GNSS_PROTOCOL_UBX, GnssEvent,
+    GnssFix, GnssTimePulse, Stamp, StampSource, UBX_MSG_HNR_PVT, UBX_MSG_NAV_DOP, UBX_MSG_NAV_EOE, UBX_MSG_NAV_POSLLH,
+    UBX_MSG_NAV_PVT, UBX_MSG_NAV_SAT, UBX_MSG_NAV_SOL, UBX_MSG_NAV_STATUS, UBX_MSG_NAV_TIMEGPS, UBX_MSG_NAV_TIMEUTC,
+    UBX_MSG_NAV_VELNED,
 };
 use navsync_shared::time::{
     Civil, GPS_EPOCH_UNIX_S, NS_PER_S, SECONDS_PER_WEEK, gps_ns_from_utc_ns, utc_ns_from_civil, utc_ns_from_gps_ns,
@@ -332,10 +333,8 @@ impl Epoch {
         let f = &mut self.fix;
         f.mode = mode;
         f.quality = quality;
-        f.fix_flags &= !(FIX_FLAG_OK | FIX_FLAG_DIFFERENTIAL);
-        if ok {
-            f.fix_flags |= FIX_FLAG_OK;
-        }
+        f.fix_flags &= !(FIX_FLAG_OK | FIX_FLAG_RECEIVER_INVALID | FIX_FLAG_DIFFERENTIAL);
+        f.fix_flags |= if ok { FIX_FLAG_OK } else { FIX_FLAG_RECEIVER_INVALID };
         if diff {
             f.fix_flags |= FIX_FLAG_DIFFERENTIAL;
         }
@@ -796,6 +795,7 @@ impl EpochAssembler {
     fn hnr(&mut self, m: &HnrPvt, host_ns: i64, out: &mut impl FnMut(&GnssFix)) {
         let mut e = Epoch::start(m.itow_ms, host_ns);
         e.fix.sentences = UBX_MSG_HNR_PVT;
+        e.fix.fix_flags |= FIX_FLAG_NOT_GNSS;
         let ok = m.fix_ok();
         e.set_status(
             mode_of(m.gps_fix),
@@ -862,6 +862,11 @@ impl EpochAssembler {
     /// The fix of a complete epoch (time, position, velocity derived; stamped and counted).
     fn finish(&mut self, e: Epoch) -> GnssFix {
         let mut fix = e.fix;
+        // A solution no message vouched for (gnssFixOK, GPSfixOK) is not one the receiver
+        // calls valid.
+        if fix.fix_flags & FIX_FLAG_OK == 0 {
+            fix.fix_flags |= FIX_FLAG_RECEIVER_INVALID;
+        }
         let leap = e.leap_s.or(self.leap_s);
         let (utc, gps) = match (e.utc_ns, e.gps_ns) {
             (Some(u), Some(g)) => (Some(u), Some(g)),

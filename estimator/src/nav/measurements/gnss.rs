@@ -17,7 +17,7 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use navsync_wire::earth;
-use navsync_wire::samples::{FIX_FLAG_INVALID_LLH, FIX_FLAG_OK, GNSS_PROTOCOL_UBX, GnssFix, UBX_MSG_HNR_PVT};
+use navsync_wire::samples::{FIX_FLAG_INVALID_LLH, FIX_FLAG_NOT_GNSS, FIX_FLAG_RECEIVER_INVALID, GnssFix};
 
 use super::Measurement;
 use crate::nav::error_state::{ATT, BA, BG, DELAY, N, POS, VEL};
@@ -84,9 +84,7 @@ pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Opt
     if !fix.has_position() || !fix.alt_msl_m.is_finite() {
         return None;
     }
-    let flagged_invalid = fix.fix_flags & FIX_FLAG_INVALID_LLH != 0
-        || (fix.protocol == GNSS_PROTOCOL_UBX && fix.fix_flags & FIX_FLAG_OK == 0);
-    if flagged_invalid || fix.sentences & UBX_MSG_HNR_PVT != 0 {
+    if fix.fix_flags & (FIX_FLAG_INVALID_LLH | FIX_FLAG_RECEIVER_INVALID | FIX_FLAG_NOT_GNSS) != 0 {
         return None;
     }
     let hdop = if fix.hdop.is_finite() { fix.hdop } else { 2.0 };
@@ -506,18 +504,15 @@ mod tests {
     fn the_receivers_accuracy_estimates_are_its_noise_and_its_flags_are_honoured() {
         let acc = GnssAccuracy::default();
         let mut f = fix(20);
-        f.protocol = GNSS_PROTOCOL_UBX;
-        f.fix_flags = FIX_FLAG_OK;
         (f.h_acc_m, f.v_acc_m, f.s_acc_mps) = (0.014, 0.010, 0.028);
         let o = observation(&f, 0, &acc).expect("usable");
         assert!((o.pos_std_m.x - 0.014 / std::f64::consts::SQRT_2).abs() < 1e-12 && o.pos_std_m.z == 0.010);
         assert!((o.vel_std_mps - 0.028 / std::f64::consts::SQRT_2).abs() < 1e-12);
-        f.fix_flags = 0;
-        assert!(observation(&f, 0, &acc).is_none(), "gnssFixOK not set");
-        f.fix_flags = FIX_FLAG_OK | FIX_FLAG_INVALID_LLH;
+        f.fix_flags = FIX_FLAG_RECEIVER_INVALID;
+        assert!(observation(&f, 0, &acc).is_none(), "the receiver's own validity (gnssFixOK)");
+        f.fix_flags = FIX_FLAG_INVALID_LLH;
         assert!(observation(&f, 0, &acc).is_none(), "invalidLlh");
-        f.fix_flags = FIX_FLAG_OK;
-        f.sentences = UBX_MSG_HNR_PVT;
+        f.fix_flags = FIX_FLAG_NOT_GNSS;
         assert!(observation(&f, 0, &acc).is_none(), "HNR-PVT is the receiver's blend");
     }
 }

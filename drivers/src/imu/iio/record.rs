@@ -12,7 +12,7 @@
 //! for `temp` (kernel `sysfs-bus-iio`); the timestamp is ns of the clock chosen in
 //! `current_timestamp_clock`.
 
-use super::iio_scan::{ChannelRole, Endian, Repr, ScanElement, ScanType};
+use super::scan::{ChannelRole, Endian, Repr, ScanElement, ScanType};
 
 /// Where one channel is in a record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1,6 +1,6 @@
 //! `navsync imu --source iio:DEVICE[+DEVICE]`: the process shell around IIO buffered devices.
 //!
-//! set up through sysfs ([`iio_device::configure`]) → read whole records from the character
+//! set up through sysfs ([`device::configure`]) → read whole records from the character
 //! devices (poll, non-blocking reads, partial records carried over) → decode
 //! ([`RecordDecoder`](super::iio_record::RecordDecoder), pure) → for a split IMU, join gyroscope and accelerometer records by
 //! stamp ([`Pairer`], pure) → axis map → checks and publish ([`SampleOutput`]).
@@ -23,6 +23,11 @@
 //! A vanished device (read error, end of file, node or sysfs directory gone) is reopened
 //! with exponential backoff (0.1 s → 5 s); the setup is redone each time.
 
+pub mod device;
+pub mod pair;
+pub mod record;
+pub mod scan;
+
 use std::fs::File;
 use std::io::{ErrorKind, Read};
 use std::os::fd::AsRawFd;
@@ -35,12 +40,18 @@ use navsync_shared::samples::StampSource;
 use navsync_shared::time::monotonic_now_ns;
 use tracing::{info, warn};
 
+use self::device::{IioDevice, IioError, IioSetup};
+use self::pair::{Half, Pairer};
+use self::record::IioSample;
 use super::axes::AxisMap;
-use super::iio_device::{self, IioDevice, IioError, IioSetup};
-use super::iio_pair::{Half, Pairer};
-use super::iio_record::IioSample;
 use super::output::{Extras, SampleOutput};
 use super::sample_checks::{Candidate, Sequence};
+
+/// Default IIO buffer length, records.
+pub const BUFFER_LENGTH: u32 = 512;
+/// Full-scale ranges of IIO devices when none is configured: none (their integer outputs cannot
+/// exceed their range and are flagged at full scale instead).
+pub const DEFAULT_RANGES: (f64, f64) = (f64::INFINITY, f64::INFINITY);
 
 /// Records read per `read()` at most.
 const RECORDS_PER_READ: usize = 64;
@@ -109,8 +120,8 @@ fn open_all(args: &IioArgs) -> Result<Vec<Stream>, IioError> {
     let mut streams: Vec<Stream> = Vec::with_capacity(args.devices.len());
     let result = (|| {
         for name in &args.devices {
-            let dir = iio_device::resolve(&args.sysfs_root, name)?;
-            let dev = iio_device::configure(&dir, &args.dev_root, &args.setup)?;
+            let dir = device::resolve(&args.sysfs_root, name)?;
+            let dev = device::configure(&dir, &args.dev_root, &args.setup)?;
             let file = std::fs::OpenOptions::new()
                 .read(true)
                 .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC)
@@ -119,7 +130,7 @@ fn open_all(args: &IioArgs) -> Result<Vec<Stream>, IioError> {
                 Ok(f) => f,
                 Err(source) => {
                     // Set up but not readable: do not leave it capturing into a full buffer.
-                    iio_device::disable(&dev.dir);
+                    device::disable(&dev.dir);
                     return Err(IioError::Io {
                         path: dev.dev_node.clone(),
                         source,
@@ -137,7 +148,7 @@ fn open_all(args: &IioArgs) -> Result<Vec<Stream>, IioError> {
     })();
     if let Err(e) = result {
         for s in &streams {
-            iio_device::disable(&s.dev.dir);
+            device::disable(&s.dev.dir);
         }
         return Err(e);
     }
@@ -234,7 +245,7 @@ pub fn run(node: &IpcNode, args: &IioArgs, out: &mut SampleOutput) {
         configured = streams.iter().map(|s| s.dev.dir.clone()).collect();
         let got_data = capture(node, &mut streams, sampling_hz, args.axes, out, &mut c);
         for s in &streams {
-            iio_device::disable(&s.dev.dir);
+            device::disable(&s.dev.dir);
         }
         if node.termination_requested() {
             break;
@@ -250,7 +261,7 @@ pub fn run(node: &IpcNode, args: &IioArgs, out: &mut SampleOutput) {
         backoff = (backoff * 2).min(Duration::from_secs(5));
     }
     for dir in &configured {
-        iio_device::disable(dir);
+        device::disable(dir);
     }
     out.tick(c.named());
 }

@@ -41,6 +41,9 @@
 //! Sequence numbers come from PacketCounter (wrapping at 2¹⁶): a counter step of n means
 //! n − 1 lost messages. Without PacketCounter, samples are numbered consecutively.
 
+pub mod frame;
+pub mod sim_device;
+
 use std::io::{ErrorKind, Read};
 use std::time::Duration;
 
@@ -50,13 +53,20 @@ use navsync_shared::time::monotonic_now_ns;
 use serialport::{ClearBuffer, SerialPort, TTYPort};
 use tracing::{info, warn};
 
-use super::axes::AxisMap;
-use super::output::{Extras, SampleOutput};
-use super::sample_checks::{Candidate, CounterReading, RESYNC_AFTER, Sequence};
-use super::xsens_frame::{
+use self::frame::{
     MID_MTDATA2, Message, MtData2, NS_PER_SAMPLE_TIME_FINE_TICK, STATUS_CLIP_ACC, STATUS_CLIP_GYR, XbusFramer,
     decode_mtdata2,
 };
+use super::axes::AxisMap;
+use super::output::{Extras, SampleOutput};
+use super::sample_checks::{Candidate, CounterReading, RESYNC_AFTER, Sequence};
+
+/// Default Xsens line rate (the MTi factory setting).
+pub const DEFAULT_BAUD: u32 = 115_200;
+/// Gyroscope range of Xsens devices when none is configured (MTi 1-, 600-series: ±2000 °/s).
+pub const GYRO_RANGE_DPS: f64 = 2000.0;
+/// Accelerometer range of Xsens devices when none is configured (MTi 1-series: ±16 g).
+pub const ACCEL_RANGE_G: f64 = 16.0;
 
 /// Read timeout (the idle wake-up to check for termination and publish health).
 const READ_TIMEOUT: Duration = Duration::from_millis(100);
@@ -371,14 +381,14 @@ mod tests {
     #[test]
     fn bad_samples_in_the_byte_stream_are_rejected_flagged_and_counted() {
         use super::super::sample_checks::{Limits, Rejection, SampleChecks};
-        use super::super::xsens_frame::{RealFormat, encode_mtdata2};
-        use super::super::{XSENS_ACCEL_RANGE_G, XSENS_GYRO_RANGE_DPS};
+        use super::frame::{RealFormat, encode_mtdata2};
+        use super::{ACCEL_RANGE_G, GYRO_RANGE_DPS};
 
         const DT_S: f64 = 0.005;
-        let fs = XSENS_GYRO_RANGE_DPS.to_radians();
+        let fs = GYRO_RANGE_DPS.to_radians();
         let limits = Limits {
             gyro_rps: fs,
-            accel_mps2: XSENS_ACCEL_RANGE_G * navsync_shared::imu_spec::G0,
+            accel_mps2: ACCEL_RANGE_G * navsync_shared::imu_spec::G0,
         };
         let good_w = [0.1, -0.2, 0.3];
         let good_a = [0.5, -0.4, 9.8];

@@ -22,8 +22,8 @@
 use std::io::ErrorKind;
 use std::path::{Path, PathBuf};
 
-use super::iio_record::{Conversion, MissingChannel, RecordDecoder, layout};
-use super::iio_scan::{ChannelRole, ScanElement, ScanType, ScanTypeError};
+use super::record::{Conversion, MissingChannel, RecordDecoder, layout};
+use super::scan::{ChannelRole, ScanElement, ScanType, ScanTypeError};
 
 /// Default sysfs directory of IIO devices.
 pub const SYSFS_ROOT: &str = "/sys/bus/iio/devices";
