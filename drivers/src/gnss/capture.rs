@@ -41,17 +41,19 @@ impl Capture {
     pub fn nmea(&self) -> Option<&NmeaDecoder> {
         match &self.decoder {
             Decoder::Nmea(d) => Some(d),
-            Decoder::Ubx(_) => None,
             Decoder::Auto(d) => Some(d.nmea()),
+            // Another protocol has no NMEA decoder.
+            _ => None,
         }
     }
 
     /// The UBX decoder, when the capture was decoded as `ubx` or `auto`.
     pub fn ubx(&self) -> Option<&UbxDecoder> {
         match &self.decoder {
-            Decoder::Nmea(_) => None,
             Decoder::Ubx(d) => Some(d),
             Decoder::Auto(d) => Some(d.ubx()),
+            // Another protocol has no UBX decoder.
+            _ => None,
         }
     }
 
