@@ -167,7 +167,7 @@ macro_rules! __setting_opt {
 
 /// Declares a settings group: the struct, its `Default`, and its [`Group`] table.
 ///
-/// ```ignore
+/// ```text
 /// settings_group! {
 ///     /// What the group is.
 ///     #[derive(Debug, Clone, Copy, PartialEq)]

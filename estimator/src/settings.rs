@@ -56,10 +56,10 @@ crate::settings_group! {
     /// The IMU's error model: the filter's process noise and the array's noise.
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct ImuModel {
-        /// IMU class for the filter's process noise when `imu_noise` is not given: consumer,
-        /// industrial, perfect (on the command line it replaces a model from the file or the
-        /// recording).
-        pub imu_model: ImuPreset = ImuPreset::Industrial, file "estimator", flag "imu-model";
+        /// IMU class for the filter's process noise when `imu_noise` is not given: generic (an
+        /// IMU of unknown class as it behaves in use), consumer, industrial, perfect (on the
+        /// command line it replaces a model from the file or the recording).
+        pub imu_model: ImuPreset = ImuPreset::Generic, file "estimator", flag "imu-model";
         /// The IMU's noise model in KF-GINS's units (`[estimator.imu_noise]`), overriding
         /// `imu_model`'s; refined field by field by `--arw`, `--vrw`, … .
         pub imu_noise: Option<ImuNoise> = None, file "estimator";

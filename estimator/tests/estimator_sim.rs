@@ -174,7 +174,11 @@ fn with_a_perfect_imu_the_delay_estimate_reaches_the_information_bound() {
     // 1.17–1.27 × the bound from t = 120 s on; a Δ Jacobian off by a factor would show here.
     let s = run_with(ImuPreset::Perfect, 1.1, true, true, None).summary;
     let bound = ideal_delay_bound_s(&SimConfig::default_drive());
+    eprintln!("{}", s.table());
     let mut worst: f64 = 0.0;
+    for p in s.series.iter().filter(|p| (p.t_s as i64) % 20 == 0) {
+        eprintln!("t {:.0} d {:.4} sd {:.4}", p.t_s, p.delay_s, p.delay_std_s);
+    }
     for p in s.series.iter().filter(|p| p.t_s >= 120.0) {
         let b = bound[(p.t_s as usize).min(bound.len() - 1)];
         worst = worst.max(p.delay_std_s / b);

@@ -35,6 +35,12 @@ fn clean() -> &'static Run {
     CLEAN.get_or_init(|| run(f64::INFINITY, f64::INFINITY, end_s()))
 }
 
+/// The drive whose fixes are displaced by [`JUMP_NE_M`] from the start (once per test binary).
+fn shifted_all_along() -> &'static Run {
+    static SHIFTED: OnceLock<Run> = OnceLock::new();
+    SHIFTED.get_or_init(|| run(0.0, f64::INFINITY, end_s()))
+}
+
 struct Run {
     track: ErrorTrack,
     /// (scenario time, fixes used, fixes rejected, gnss resets, status) at every NavState.
@@ -200,11 +206,16 @@ fn a_permanent_10_km_step_is_reset_to_after_the_documented_fixes() {
         "{} m 1 s after the reset",
         err_at(reset_at + 1.0)
     );
-    for (name, a, b, slack_m) in [
-        ("first 20 s after the reset", reset_at + 0.2, reset_at + 20.0, 1.0),
-        ("from 20 s after the reset", reset_at + 20.0, end, 0.3),
+    // From 20 s after the reset on, the reference is the same drive whose fixes described
+    // the shifted world from the start: 10 km away the local vertical is 0.07° from the one
+    // the IMU measures (a 1.2 mg horizontal specific force the filter must carry, with or
+    // without the step); what the step itself may cost is the reset's transient.
+    let shifted = shifted_all_along();
+    for (name, a, b, slack_m, k_run) in [
+        ("first 20 s after the reset", reset_at + 0.2, reset_at + 20.0, 1.0, c),
+        ("from 20 s after the reset", reset_at + 20.0, end, 0.3, shifted),
     ] {
-        let (f, k) = (r.track.stats(a, b), c.track.stats(a, b));
+        let (f, k) = (r.track.stats(a, b), k_run.track.stats(a, b));
         println!("{name}:\n  clean {k}\n  step  {f}");
         assert!(f.n > 150, "{name}: {f}");
         assert!(

@@ -1,6 +1,8 @@
 //! Initial alignment: roll and pitch by levelling the averaged accelerometers while static,
-//! heading from the GNSS course once the vehicle moves faster than a threshold (a car does not
-//! slip sideways), the gyro bias from the static average minus the earth rate.
+//! the gyro bias from the static average minus the earth rate, position and velocity from the
+//! fix; the heading is left to the bank of heading hypotheses
+//! ([`super::heading_bank`]), which starts on this alignment: at once after a levelling, else
+//! once a fix shows motion (its hypotheses then start on the course).
 //!
 //! Levelling (Groves 2013 eq. 5.101): at rest f^b = C_n^b [0, 0, −g], so
 //! θ = atan2(f_x, √(f_y² + f_z²)) and φ = atan2(−f_y, −f_z).
@@ -28,8 +30,9 @@ pub struct Alignment {
     /// when unknown); it couples the initial velocity error to the GNSS delay.
     pub acc_ned: Vector3<f64>,
     /// The fix's stamp minus the instant the accelerometer-integrated speed reached the fix's
-    /// speed, s: a first estimate of the GNSS delay (None without a static start).
-    pub delay_from_onset_s: Option<f64>,
+    /// speed, and its 1-sigma, s: a first estimate of the GNSS delay (None without a static
+    /// start; see [`Aligner::delay_from_onset`]).
+    pub delay_from_onset_s: Option<(f64, f64)>,
 }
 
 /// Accumulates the static period and produces the [`Alignment`].
@@ -45,6 +48,10 @@ pub struct Aligner {
     /// Forward speed integrated from the accelerometers since the vehicle started moving.
     onset: Option<Onset>,
 }
+
+/// Smallest 1-sigma of the motion-onset estimate of the GNSS delay, s (the speed noise of a fix,
+/// ~0.05 m/s, over a drive-off acceleration of ~1 m/s²).
+pub const ONSET_DELAY_FLOOR_S: f64 = 0.05;
 
 /// Points kept of the speed profile after motion onset (10 s at 50 Hz).
 const ONSET_POINTS: usize = 500;
@@ -130,7 +137,9 @@ impl Aligner {
     }
 
     /// Host time (ns) at which the accelerometer-integrated speed first reached `speed_mps`.
-    fn onset_time_of(&self, speed_mps: f64) -> Option<i64> {
+    /// Host time (ns) at which the accelerometer-integrated speed first reached `speed_mps`,
+    /// and the acceleration there (m/s², over ±0.1 s).
+    fn onset_time_of(&self, speed_mps: f64) -> Option<(i64, f64)> {
         let o = self.onset.as_ref()?;
         let pts = &o.points[..o.len];
         let i = pts.iter().position(|p| p.1 >= speed_mps)?;
@@ -138,7 +147,26 @@ impl Aligner {
             return None;
         }
         let ((t0, v0), (t1, v1)) = (pts[i - 1], pts[i]);
-        Some(t0 + ((speed_mps - v0) / (v1 - v0) * (t1 - t0) as f64) as i64)
+        let t = t0 + ((speed_mps - v0) / (v1 - v0) * (t1 - t0) as f64) as i64;
+        let (a, b) = (pts[i.saturating_sub(5)], pts[(i + 5).min(pts.len() - 1)]);
+        let accel = (b.1 - a.1) / ((b.0 - a.0) as f64 * 1e-9).max(1e-3);
+        Some((t, accel))
+    }
+
+    /// The fix's stamp minus the instant the accelerometer-integrated speed reached the fix's
+    /// speed, s: a first estimate of the GNSS delay once the vehicle moves, with its 1-sigma:
+    /// the fix's speed σ over the acceleration there, at least `floor_s` (`None` without a
+    /// static start, before the speed is reached, or without an acceleration).
+    pub fn delay_from_onset(&self, obs: &GnssObservation, floor_s: f64) -> Option<(f64, f64)> {
+        let (t, accel) = self.onset_time_of(obs.speed_mps)?;
+        (accel > 0.0).then(|| {
+            let sigma_v = if obs.vel_std_mps.is_finite() {
+                obs.vel_std_mps
+            } else {
+                0.1
+            };
+            ((obs.stamp_host_ns - t) as f64 * 1e-9, (sigma_v / accel).max(floor_s))
+        })
     }
 
     /// Seconds of static data averaged so far.
@@ -154,7 +182,8 @@ impl Aligner {
         })
     }
 
-    /// Aligns on a fix moving fast enough, or returns `None` (and remembers the fix).
+    /// The alignment on a fix after a levelling or moving at least `align_min_speed_mps`, or
+    /// `None` (the fix is remembered for the acceleration).
     pub fn try_align(&mut self, obs: &GnssObservation) -> Option<Alignment> {
         // A fix with speed and track but no velocity (a receiver or file without one): the
         // horizontal velocity along the track.
@@ -170,18 +199,20 @@ impl Aligner {
             }
             _ => Vector3::zeros(),
         };
-        if !(obs.speed_mps >= self.cfg.align_min_speed_mps
-            && obs.track_rad.is_finite()
-            && v.x.is_finite()
-            && v.y.is_finite())
-        {
+        // Moving: the heading hypotheses start on the course. Standing after a levelling: they
+        // start now (their heading is decided once the motion shows it), so the static
+        // period already estimates the sensor errors.
+        let moving = obs.speed_mps >= self.cfg.align_min_speed_mps && obs.track_rad.is_finite();
+        let standing = self.in_static && self.level().is_some() && obs.speed_mps < self.cfg.align_min_speed_mps;
+        if !((moving || standing) && v.x.is_finite() && v.y.is_finite()) {
             return None;
         }
         let (roll, pitch, levelled) = match self.level() {
             Some((r, p)) => (r, p, true),
             None => (0.0, 0.0, false),
         };
-        let q_nb = UnitQuaternion::from_euler_angles(roll, pitch, obs.track_rad);
+        let course = if moving { obs.track_rad } else { 0.0 };
+        let q_nb = UnitQuaternion::from_euler_angles(roll, pitch, course);
         let gyro_bias = if levelled {
             let w_ie_b = q_nb.inverse() * Vector3::from(earth::omega_ie_n(obs.lat_rad));
             self.sum_w / self.time_s - w_ie_b
@@ -205,9 +236,7 @@ impl Aligner {
             } else {
                 Vector3::zeros()
             },
-            delay_from_onset_s: self
-                .onset_time_of(obs.speed_mps)
-                .map(|t| (obs.stamp_host_ns - t) as f64 * 1e-9),
+            delay_from_onset_s: self.delay_from_onset(obs, ONSET_DELAY_FLOOR_S),
         })
     }
 }

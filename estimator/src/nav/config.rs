@@ -121,7 +121,7 @@ crate::settings_group! {
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct NavConfig {
         /// IMU and state process noise (from the IMU model: `imu_model`, `imu_noise`).
-        pub noise: ProcessNoise = ProcessNoise::from_imu_noise(&ImuPreset::Industrial.noise());
+        pub noise: ProcessNoise = ProcessNoise::from_imu_noise(&ImuPreset::Generic.noise());
         /// GNSS antenna in the body frame (FRD) from the IMU, m, `x,y,z` (in the file: the
         /// first receiver's `[gnss.ID] lever_arm_m`; else the recording's).
         pub gnss_lever_arm_m: [f64; 3] = [0.0; 3], flag "lever-arm", check finite3;
@@ -169,8 +169,9 @@ crate::settings_group! {
     /// Thresholds of the alignment.
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct AlignConfig {
-        /// GNSS speed above which the course is taken as the heading, m/s.
-        pub align_min_speed_mps: f64 = 3.0, file "estimator", flag "align-speed", check positive;
+        /// GNSS speed from which a fix counts as moving, m/s: without a static levelling the
+        /// alignment starts on the first moving fix, its heading hypotheses on the course.
+        pub align_min_speed_mps: f64 = 0.3, file "estimator", flag "align-speed", check positive;
         /// Largest angular rate still counted as static, rad/s.
         pub static_gyro_rps: f64 = 0.05;
         /// Largest deviation of |f| from 1 g still counted as static, m/s².

@@ -97,6 +97,34 @@ impl Eskf {
         (nis.is_finite() && nis <= gate, nis)
     }
 
+    /// Kalman update without a gate, returning the error-state estimate to feed back and the
+    /// log-likelihood of the innovation, −½(νᵀS⁻¹ν + ln det S + M ln 2π) with S = HPHᵀ + R
+    /// (the weight of a hypothesis in a bank of filters: Alspach & Sorenson 1972). `None` when S
+    /// is not positive definite.
+    pub fn update_with_likelihood<const M: usize>(
+        &mut self,
+        dz: &SVector<f64, M>,
+        h: &SMatrix<f64, M, N>,
+        r: &SMatrix<f64, M, M>,
+    ) -> Option<(StateVec, f64)> {
+        let pht = self.p * h.transpose();
+        let s = h * pht + r;
+        let chol = s.cholesky()?;
+        let ln_det: f64 = (0..M).map(|i| 2.0 * chol.l_dirty()[(i, i)].ln()).sum();
+        let s_inv = chol.inverse();
+        let nis = (dz.transpose() * s_inv * dz)[(0, 0)];
+        if !(nis.is_finite() && ln_det.is_finite()) {
+            return None;
+        }
+        let k = pht * s_inv;
+        let dx = k * dz;
+        let i_kh = StateMat::identity() - k * h;
+        let p = i_kh * self.p * i_kh.transpose() + k * r * k.transpose();
+        self.p = (p + p.transpose()) * 0.5;
+        let ll = -0.5 * (nis + ln_det + M as f64 * (2.0 * std::f64::consts::PI).ln());
+        Some((dx, ll))
+    }
+
     /// 1-sigma of state `i`.
     pub fn std(&self, i: usize) -> f64 {
         self.p[(i, i)].max(0.0).sqrt()

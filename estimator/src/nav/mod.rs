@@ -15,6 +15,7 @@ pub mod config;
 pub mod error_state;
 pub mod eskf;
 pub mod filter;
+pub mod heading_bank;
 pub mod imu_buffer;
 pub mod measurements;
 pub mod mechanization;

@@ -17,12 +17,13 @@
 use nalgebra::Vector3;
 use navsync_wire::samples::{ImuSync, MAX_IMUS, NavState, NavStatus};
 
-use super::alignment::Aligner;
+use super::alignment::{Aligner, ONSET_DELAY_FLOOR_S};
 pub use super::config::NavConfig;
 use super::config::{Coupling, InitialState};
 use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, SA, SG, StateMat, VEL};
 use super::eskf::Eskf;
 use super::filter::DelayedFilter;
+use super::heading_bank::{BankStep, HeadingBank, with_heading};
 use super::imu_buffer::{ImuBuffer, ImuRecord};
 use super::measurements::gnss::GnssObservation;
 use super::measurements::{Measurement, MeasurementConfig, MeasurementQueue, MeasurementStates};
@@ -35,9 +36,6 @@ pub const MIN_HORIZON_S: f64 = 0.25;
 const HORIZON_MARGIN_S: f64 = 0.02;
 /// How fast the adaptive horizon's memory of a long delay fades, per fix, s.
 const HORIZON_DECAY_S: f64 = 0.01;
-
-/// 1-sigma of the motion-onset delay estimate, s.
-const ONSET_DELAY_STD_S: f64 = 0.05;
 
 /// Counters of the navigation filter: its own, and the GNSS fixes' (kept by their
 /// measurement kind, [`super::measurements::gnss::GnssState`]).
@@ -62,6 +60,10 @@ pub struct NavCounters {
     pub gnss_resets: u64,
     /// Of those, full resets (see [`super::measurements::gnss::GnssState::gnss_resets_full`]).
     pub gnss_resets_full: u64,
+    /// Heading banks started ([`HeadingBank`]: the alignment of the heading).
+    pub heading_banks: u64,
+    /// Heading banks whose every hypothesis failed (the alignment started again).
+    pub heading_banks_failed: u64,
 }
 
 pub use super::measurements::gnss::RESET_AFTER_REJECTS;
@@ -100,6 +102,8 @@ pub struct Navigator {
     kinds: MeasurementConfig,
     buf: ImuBuffer,
     aligner: Aligner,
+    /// The heading hypotheses while the heading is being decided ([`HeadingBank`]).
+    bank: Option<HeadingBank>,
     filt: Option<DelayedFilter>,
     /// The present-time state, the last increment and the host time it is for.
     out: Option<(Pva, ImuIncrement, i64)>,
@@ -148,6 +152,7 @@ impl Navigator {
             kinds,
             buf: ImuBuffer::default(),
             aligner: Aligner::new(cfg.align),
+            bank: None,
             filt: None,
             out: None,
             out_tail: ImuBuffer::default(),
@@ -238,7 +243,25 @@ impl Navigator {
     pub fn on_gnss(&mut self, obs: GnssObservation, rx_ns: i64) {
         self.last_fix_rx_ns = Some(rx_ns);
         if self.filt.is_none() {
-            self.try_align(&obs);
+            match &mut self.bank {
+                Some(bank) => {
+                    // Started while standing: the motion onset gives the first estimate of Δ.
+                    if self.cfg.estimate_delay
+                        && obs.speed_mps >= self.cfg.align.align_min_speed_mps
+                        && let Some((d, sd)) =
+                            self.aligner
+                                .delay_from_onset(&obs, ONSET_DELAY_FLOOR_S)
+                                .filter(|(d, sd)| {
+                                    *sd < self.delay_prior.1 && (-0.2..self.cfg.fusion_horizon_s - 0.1).contains(d)
+                                })
+                    {
+                        self.delay_prior = (d, sd);
+                        bank.reset_delay(d, sd);
+                    }
+                    bank.queue(obs);
+                }
+                None => self.try_align(&obs),
+            }
             return;
         }
         if self.is_tight() {
@@ -339,6 +362,7 @@ impl Navigator {
         if self.filt.is_some() {
             return;
         }
+        self.bank = None;
         let cfg = &self.cfg;
         let [r, p_, y] = init.rpy_deg.map(f64::to_radians);
         let pva = Pva {
@@ -386,12 +410,11 @@ impl Navigator {
         // speed noise of a fix (~0.05 m/s) over a drive-off acceleration of ~1 m/s² puts it
         // within ~50 ms.
         if self.cfg.estimate_delay
-            && self.delay_prior.1 > ONSET_DELAY_STD_S
-            && let Some(d) = a
+            && let Some((d, sd)) = a
                 .delay_from_onset_s
-                .filter(|d| (-0.2..self.cfg.fusion_horizon_s - 0.1).contains(d))
+                .filter(|(d, sd)| *sd < self.delay_prior.1 && (-0.2..self.cfg.fusion_horizon_s - 0.1).contains(d))
         {
-            self.delay_prior = (d, ONSET_DELAY_STD_S);
+            self.delay_prior = (d, sd);
         }
         let cfg = &self.cfg;
         let mut p = StateMat::zeros();
@@ -442,15 +465,62 @@ impl Navigator {
         while self.buf.front().is_some_and(|r| r.host_ns <= t_f) {
             self.buf.pop();
         }
-        self.filt = Some(DelayedFilter::new(
-            a.pva,
-            t_f,
-            Eskf::new(p),
-            a.gyro_bias,
-            self.delay_prior.0,
-        ));
-        self.states.gnss.last_fused_ns = t_f;
-        self.replay();
+        let base = DelayedFilter::new(a.pva, t_f, Eskf::new(p), a.gyro_bias, self.delay_prior.0);
+        self.bank = Some(HeadingBank::new(&base));
+        self.counters.heading_banks += 1;
+    }
+
+    /// Steps the heading bank over the buffered records older than `until_ns`; once it decides,
+    /// the fine alignment runs ([`Self::fine_align`]).
+    fn step_bank(&mut self, until_ns: i64) {
+        let Some(bank) = &mut self.bank else { return };
+        while let Some(r) = self.buf.front().copied() {
+            if r.host_ns > until_ns {
+                break;
+            }
+            self.buf.pop();
+            match bank.step(&r, &self.cfg) {
+                BankStep::Pending => {}
+                BankStep::Failed => {
+                    self.bank = None;
+                    self.counters.heading_banks_failed += 1;
+                    return;
+                }
+                BankStep::Decided { yaw0, yaw_std } => {
+                    if let Some(mut bank) = self.bank.take() {
+                        self.fine_align(&mut bank, yaw0, yaw_std);
+                    }
+                    return;
+                }
+            }
+        }
+    }
+
+    /// The fine alignment after the bank decided: one filter from the bank's start with the
+    /// decided initial heading `yaw0` ± `yaw_std` (rad) runs over the records and fixes the
+    /// bank went through, with every kind of measurement, and becomes the delayed filter; the
+    /// fixes still waiting are queued for it.
+    fn fine_align(&mut self, bank: &mut HeadingBank, yaw0: f64, yaw_std: f64) {
+        let start = with_heading(bank.base(), yaw0, yaw_std);
+        self.states.gnss.last_fused_ns = start.t_ns;
+        self.filt = Some(start);
+        let (records, fused, pending) = bank.log();
+        let mut next = 0;
+        for r in records {
+            while let (Some(obs), Some(f)) = (fused.get(next), &self.filt)
+                && obs.epoch_ns(f.delay_s) <= r.host_ns
+            {
+                self.enqueue(*obs);
+                next += 1;
+            }
+            let Some(filt) = &mut self.filt else { return };
+            filt.step(r, &self.cfg);
+            self.states.on_step(r, filt, &self.cfg, &self.kinds, &mut self.queue);
+            self.queue.fuse_due(filt, &self.cfg, &self.kinds, &mut self.states);
+        }
+        for obs in fused[next..].iter().copied().chain(pending) {
+            self.enqueue(obs);
+        }
     }
 
     /// Feeds one IMU interval (host time of its end, ns; nominal length, s; average rate and
@@ -531,13 +601,18 @@ impl Navigator {
             self.out_tail.pop();
         }
         let horizon_ns = self.horizon_ns;
+        let mut corrected = false;
+        let mut decided = false;
+        if self.filt.is_none() && self.bank.is_some() {
+            self.step_bank(host_ns - horizon_ns);
+            decided = self.filt.is_some();
+        }
         let Some(filt) = &mut self.filt else {
             while self.buf.front().is_some_and(|r| r.host_ns < host_ns - horizon_ns) {
                 self.buf.pop();
             }
             return;
         };
-        let mut corrected = false;
         while let Some(r) = self.buf.front().copied() {
             if r.host_ns > host_ns - horizon_ns {
                 break;
@@ -551,7 +626,10 @@ impl Navigator {
             self.states.on_step(&r, filt, &self.cfg, &self.kinds, &mut self.queue);
             corrected |= self.queue.fuse_due(filt, &self.cfg, &self.kinds, &mut self.states);
         }
-        if corrected {
+        if decided {
+            // The heading was just decided: the output starts from the new filter at once.
+            self.replay();
+        } else if corrected {
             self.counters.replays += 1;
             self.start_catch_up();
         }
@@ -652,7 +730,7 @@ impl Navigator {
 
     /// Filter status at host time `now_ns`.
     pub fn status(&self, now_ns: i64) -> NavStatus {
-        if self.filt.is_none() {
+        if self.filt.is_none() || self.out.is_none() {
             return NavStatus::Aligning;
         }
         let outage = self

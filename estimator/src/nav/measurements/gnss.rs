@@ -175,6 +175,26 @@ pub fn velocity_terms(
     (dz, h, r)
 }
 
+/// Fuses the fix into one hypothesis of the heading bank ([`crate::nav::heading_bank`]),
+/// ungated: position, then horizontal velocity where the fix has one. Returns the
+/// log-likelihood of the innovations (their sum) and the heading correction they applied
+/// (rad, about the navigation frame's down axis); `None` when an update failed (the
+/// hypothesis is then dropped).
+pub fn fuse_weighed(obs: &GnssObservation, f: &mut DelayedFilter, eps: f64, cfg: &NavConfig) -> Option<(f64, f64)> {
+    let lever = Vector3::from(cfg.gnss_lever_arm_m);
+    let (dz, h, r) = position_terms(&f.pva, &lever, obs, eps);
+    let (dx, mut ll) = f.eskf.update_with_likelihood(&dz, &h, &r)?;
+    f.feedback(&dx, cfg.fusion_horizon_s);
+    let mut dyaw = dx[ATT + 2];
+    if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
+        let (dz, h, r) = velocity_terms(&f.pva, &lever, &f.last_w, &f.acc_ned, obs, eps);
+        let (dx, l) = f.eskf.update_with_likelihood(&dz, &h, &r)?;
+        f.feedback(&dx, cfg.fusion_horizon_s);
+        ll += l;
+        dyaw += dx[ATT + 2];
+    }
+    Some((ll, dyaw))
+}
 
 /// Consecutive rejected fixes after which the filter resets to GNSS (a GNSS jump, or a filter
 /// that has lost consistency, must not keep it in dead reckoning forever; PX4's EKF2 does the
@@ -258,6 +278,11 @@ fn adapt_process_noise(f: &mut DelayedFilter, fusion: &GnssFusion, state: &mut G
 pub struct GnssState {
     /// Fixes rejected in a row (reset after [`RESET_AFTER_REJECTS`]).
     pub consecutive_rejects: u32,
+    /// Sum of the position innovations (filter minus fix, NED, m) of the fixes rejected in a
+    /// row: a position reset moves by their mean.
+    pub rejected_dz_sum_m: Vector3<f64>,
+    /// Sum of the rejected fixes' position variances (NED, m²).
+    pub rejected_var_sum_m2: Vector3<f64>,
     /// Host time of the last fix fused (or reset to), ns.
     pub last_fused_ns: i64,
     /// Fixes fused after scaling the covariance ([`GnssFusion`]).
@@ -285,6 +310,8 @@ impl Default for GnssState {
     fn default() -> Self {
         Self {
             consecutive_rejects: 0,
+            rejected_dz_sum_m: Vector3::zeros(),
+            rejected_var_sum_m2: Vector3::zeros(),
             last_fused_ns: 0,
             inflations: 0,
             last_inflated_ns: 0,
@@ -349,9 +376,17 @@ impl Measurement for GnssObservation {
             }
             Update::Rejected { .. } => {
                 state.fixes_rejected += 1;
+                if state.consecutive_rejects == 0 {
+                    state.rejected_dz_sum_m = Vector3::zeros();
+                    state.rejected_var_sum_m2 = Vector3::zeros();
+                }
                 state.consecutive_rejects += 1;
+                state.rejected_dz_sum_m += dz;
+                state.rejected_var_sum_m2 += obs.pos_std_m.component_mul(&obs.pos_std_m);
                 if state.consecutive_rejects < RESET_AFTER_REJECTS {
-                    return false;
+                    // A position that jumped leaves the Doppler velocity valid: it is fused on
+                    // its own gate, so the dead reckoning until the reset keeps its velocity.
+                    return fuse_velocity(f, obs, eps, cfg, fusion, state, coasted);
                 }
                 // Persistently rejected: did the GNSS position jump, or has the filter lost
                 // consistency? The fix's velocity against the filter's tells.
@@ -360,6 +395,8 @@ impl Measurement for GnssObservation {
                     f.eskf.gate(&dz, &h, &r, cfg.gate_scale).0
                 };
                 state.gnss_resets += 1;
+                let k = f64::from(state.consecutive_rejects);
+                let (mean_dz, mean_var) = (state.rejected_dz_sum_m / k, state.rejected_var_sum_m2 / k);
                 state.consecutive_rejects = 0;
                 state.last_fused_ns = t_f;
                 if !vel_agrees {
@@ -367,23 +404,13 @@ impl Measurement for GnssObservation {
                     state.gnss_resets_full += 1;
                     return true;
                 }
-                reset_position_to(f, obs, cfg, eps);
+                // The fixes rejected in a row agree on one jump (their velocities were fused, so
+                // the filter kept its velocity meanwhile): the position moves by their mean
+                // offset, known to their σ over √K.
+                shift_position(f, &mean_dz, &(mean_var / k));
             }
         }
-        if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
-            let (dz, h, r) = velocity_terms(&f.pva, &Vector3::from(cfg.gnss_lever_arm_m), &f.last_w, &f.acc_ned, obs, eps);
-            let outcome = f.eskf.update(&dz, &h, &r, cfg.gate_scale);
-            if !coasted {
-                let nis = match outcome {
-                    Update::Accepted { nis, .. } | Update::Rejected { nis } => nis,
-                };
-                adapt_process_noise(f, fusion, state, nis, 2);
-            }
-            match outcome {
-                Update::Accepted { dx, .. } => f.feedback(&dx, cfg.fusion_horizon_s),
-                Update::Rejected { .. } => state.vel_rejected += 1,
-            }
-        }
+        fuse_velocity(f, obs, eps, cfg, fusion, state, coasted);
         true
     }
 
@@ -393,18 +420,50 @@ impl Measurement for GnssObservation {
     }
 }
 
-/// Resets the position to a fix (extrapolated by ε to the filter time along the filter's
-/// velocity) and its covariance to the fix's accuracy, decorrelated from the other states;
-/// velocity, attitude and sensor errors are kept: for a GNSS position that jumped while
+/// Fuses the fix's horizontal velocity, gated (when it has one); true when it was fused.
+fn fuse_velocity(
+    f: &mut DelayedFilter,
+    obs: &GnssObservation,
+    eps: f64,
+    cfg: &NavConfig,
+    fusion: &GnssFusion,
+    state: &mut GnssState,
+    coasted: bool,
+) -> bool {
+    if !(obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite()) {
+        return false;
+    }
+    let (dz, h, r) = velocity_terms(&f.pva, &Vector3::from(cfg.gnss_lever_arm_m), &f.last_w, &f.acc_ned, obs, eps);
+    let outcome = f.eskf.update(&dz, &h, &r, cfg.gate_scale);
+    if !coasted {
+        let nis = match outcome {
+            Update::Accepted { nis, .. } | Update::Rejected { nis } => nis,
+        };
+        adapt_process_noise(f, fusion, state, nis, 2);
+    }
+    match outcome {
+        Update::Accepted { dx, .. } => {
+            f.feedback(&dx, cfg.fusion_horizon_s);
+            true
+        }
+        Update::Rejected { .. } => {
+            state.vel_rejected += 1;
+            false
+        }
+    }
+}
+
+/// Moves the position by −`dz_ned_m` (the mean offset of the filter from the fixes rejected
+/// in a row, NED, m) and sets its covariance to `var_ned_m2`, decorrelated from the other
+/// states; velocity, attitude and sensor errors are kept: for a GNSS position that jumped while
 /// its velocity still agrees with the inertial solution.
-fn reset_position_to(f: &mut DelayedFilter, obs: &GnssObservation, cfg: &NavConfig, eps: f64) {
-    let c_bn = f.pva.q_nb.to_rotation_matrix().into_inner();
-    let lever_n = c_bn * Vector3::from(cfg.gnss_lever_arm_m);
-    let (rm, rn) = earth::radii(obs.lat_rad);
-    let p_ned = f.pva.vel_ned_mps * eps - lever_n;
-    f.pva.lat_rad = obs.lat_rad + p_ned.x / (rm + obs.h_m);
-    f.pva.lon_rad = obs.lon_rad + p_ned.y / ((rn + obs.h_m) * obs.lat_rad.cos());
-    f.pva.h_m = obs.h_m - p_ned.z;
+fn shift_position(f: &mut DelayedFilter, dz_ned_m: &Vector3<f64>, var_ned_m2: &Vector3<f64>) {
+    // The innovations were formed at the filter's latitude and height: invert them there.
+    let (rm, rn) = earth::radii(f.pva.lat_rad);
+    let (lat, h) = (f.pva.lat_rad, f.pva.h_m);
+    f.pva.lat_rad -= dz_ned_m.x / (rm + h);
+    f.pva.lon_rad -= dz_ned_m.y / ((rn + h) * lat.cos());
+    f.pva.h_m += dz_ned_m.z;
     for i in POS..POS + 3 {
         for j in 0..N {
             f.eskf.p[(i, j)] = 0.0;
@@ -412,7 +471,7 @@ fn reset_position_to(f: &mut DelayedFilter, obs: &GnssObservation, cfg: &NavConf
         }
     }
     for i in 0..3 {
-        f.eskf.p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
+        f.eskf.p[(POS + i, POS + i)] = var_ned_m2[i];
     }
 }
 

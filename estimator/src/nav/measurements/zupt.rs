@@ -26,7 +26,8 @@ use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use navsync_wire::earth;
 
 use super::Measurement;
-use crate::nav::error_state::{BG, N, VEL};
+use crate::nav::error_state::{ATT, BG, N, VEL};
+use crate::nav::mechanization::skew;
 use crate::nav::eskf::Update;
 use crate::nav::filter::DelayedFilter;
 use crate::nav::imu_buffer::ImuRecord;
@@ -107,13 +108,18 @@ impl Measurement for Zupt {
 
     fn fuse(&self, f: &mut DelayedFilter, _eps_s: f64, cfg: &NavConfig, z: &ZuptConfig, state: &mut ZuptState) -> bool {
         let c_nb = f.pva.q_nb.inverse().to_rotation_matrix().into_inner();
-        let w_ie_b = c_nb * Vector3::from(earth::omega_ie_n(f.pva.lat_rad));
+        let w_ie_n = Vector3::from(earth::omega_ie_n(f.pva.lat_rad));
+        let w_ie_b = c_nb * w_ie_n;
         let mut dz = SVector::<f64, 6>::zeros();
         dz.fixed_rows_mut::<3>(0).copy_from(&f.pva.vel_ned_mps);
         dz.fixed_rows_mut::<3>(3).copy_from(&(self.mean_rate_rps - w_ie_b));
         let mut h = SMatrix::<f64, 6, N>::zeros();
         h.fixed_view_mut::<3, 3>(0, VEL).copy_from(&Matrix3::identity());
         h.fixed_view_mut::<3, 3>(3, BG).copy_from(&Matrix3::identity());
+        // The earth rate the body sees depends on the attitude: with C_b^n = (I + [φ×]) Ĉ_b^n,
+        // ω_ie^b = Ĉ_n^b ω_ie^n + Ĉ_n^b [ω_ie^n×] φ (the gyrocompassing term, Groves 2013
+        // §5.6.2). Leaving it out would let a standstill pin the gyro bias to a wrong heading.
+        h.fixed_view_mut::<3, 3>(3, ATT).copy_from(&(c_nb * skew(&w_ie_n)));
         let mut r = SMatrix::<f64, 6, 6>::zeros();
         for i in 0..3 {
             r[(i, i)] = z.vel_std_mps.powi(2);
