@@ -163,6 +163,9 @@ pub fn run_feed<T, P: BorrowMut<Pipeline>, S: Into<Input>, I: IntoIterator<Item 
     pipeline.nav().measurement_states().each_counter(&mut |name, v| {
         summary.measurement_counters.insert(name.to_string(), v);
     });
+    pipeline.nav().integrity().each(&mut |name, v| {
+        summary.measurement_counters.insert(name.to_string(), v);
+    });
     if pipeline.nav().is_tight() {
         pipeline.each_raw_counter(&mut |name, v| {
             summary.measurement_counters.insert(name.to_string(), v);

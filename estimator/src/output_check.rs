@@ -21,8 +21,12 @@ pub struct InputsSeen {
     pub pps_used: u64,
     /// A known initial state was configured (no self-alignment).
     pub initial_state: bool,
-    /// GNSS speed the alignment waits for, m/s.
+    /// GNSS speed from which a fix counts as moving for the alignment, m/s.
     pub align_min_speed_mps: f64,
+    /// Heading banks started (the alignment's search for the heading).
+    pub heading_banks: u64,
+    /// Resets of the filter by the integrity monitor.
+    pub integrity_resets: u64,
 }
 
 /// Counts of navigation states by usability.
@@ -51,6 +55,21 @@ impl OutputCheck {
     /// Why there are no usable states, or far fewer than states (below
     /// [`MIN_USABLE_SHARE`]); `None` when the output is as expected.
     pub fn problem(&self, seen: &InputsSeen) -> Option<String> {
+        if let Some(p) = self.usability(seen) {
+            return Some(p);
+        }
+        (seen.integrity_resets > 0).then(|| {
+            format!(
+                "the integrity monitor reset the filter {} time(s) (a non-finite, not positive definite or \
+                 implausible state: the integrity_* counters say which): the states before each reset are \
+                 not trustworthy",
+                seen.integrity_resets
+            )
+        })
+    }
+
+    /// Why there are no usable states, or far fewer than states; `None` when they are usable.
+    fn usability(&self, seen: &InputsSeen) -> Option<String> {
         if self.states == 0 {
             return Some(
                 "no navigation state: no sample of the reference IMU reached the estimator (check the IMU ids, \
@@ -74,12 +93,19 @@ impl OutputCheck {
                 "the filter is not aligned: the configured initial state's time was not reached or could not \
                  be mapped to host time (is it within the data? under hardware sync the PPS must lock first)"
                     .to_string()
+            } else if seen.heading_banks == 0 {
+                format!(
+                    "the filter is not aligned: it starts after a static levelling or on the first fix moving \
+                     at {:.1} m/s or more, and neither came ({} fixes seen); give an initial state \
+                     ([estimator.initial_state]) or a lower --align-speed",
+                    seen.align_min_speed_mps, seen.fixes
+                )
             } else {
                 format!(
-                    "the filter is not aligned: alignment takes the heading from the GNSS course once the speed \
-                     exceeds {:.1} m/s ({} fixes seen); a vehicle that stands still or moves slowly needs an \
-                     initial state ([estimator.initial_state]) or a lower --align-speed",
-                    seen.align_min_speed_mps, seen.fixes
+                    "the filter is not aligned: the heading was not observable ({} fixes seen): a vehicle that \
+                     stands still or moves straight at constant speed does not show it; it is decided once the \
+                     motion does (turns, speed changes), or give an initial state ([estimator.initial_state])",
+                    seen.fixes
                 )
             }
         } else if seen.pps_used == 0 && seen.fixes_used == 0 {
@@ -115,7 +141,7 @@ mod tests {
     fn says_why_when_states_are_unusable() {
         let seen = InputsSeen {
             fixes: 10,
-            align_min_speed_mps: 3.0,
+            align_min_speed_mps: 0.3,
             ..Default::default()
         };
         assert!(
@@ -126,12 +152,22 @@ mod tests {
         );
         let mut c = OutputCheck::default();
         (0..10).for_each(|_| c.add(&state(NavStatus::Aligning, i64::MIN)));
-        assert!(c.problem(&seen).unwrap().contains("exceeds 3.0 m/s"));
+        assert!(c.problem(&seen).unwrap().contains("moving at 0.3 m/s"));
+        let searching = InputsSeen {
+            heading_banks: 1,
+            ..seen
+        };
+        assert!(c.problem(&searching).unwrap().contains("heading was not observable"));
         let mut c = OutputCheck::default();
         (0..10).for_each(|_| c.add(&state(NavStatus::Aligned, i64::MIN)));
         assert!(c.problem(&seen).unwrap().contains("--software-sync"));
         (0..10).for_each(|_| c.add(&state(NavStatus::Aligned, 1)));
         assert_eq!(c.usable, 10);
         assert_eq!(c.problem(&seen), None, "half usable is enough");
+        let reset = InputsSeen {
+            integrity_resets: 2,
+            ..seen
+        };
+        assert!(c.problem(&reset).unwrap().contains("reset the filter 2 time(s)"));
     }
 }

@@ -431,6 +431,8 @@ impl Pipeline {
             pps_used: self.time.counters().pps_used,
             initial_state: self.cfg.nav.initial_state.is_some(),
             align_min_speed_mps: self.cfg.nav.align.align_min_speed_mps,
+            heading_banks: self.nav.counters().heading_banks,
+            integrity_resets: self.nav.integrity().resets,
         }
     }
 

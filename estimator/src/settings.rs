@@ -142,6 +142,7 @@ macro_rules! each_group {
         { let $g = & $($m)? $s.device_timing; $body }
         { let $g = & $($m)? $s.nav; $body }
         { let $g = & $($m)? $s.nav.align; $body }
+        { let $g = & $($m)? $s.nav.integrity; $body }
         { let $g = & $($m)? $s.measurements.gnss; $body }
         { let $g = & $($m)? $s.measurements.zupt; $body }
         { let $g = & $($m)? $s.gnss; $body }

@@ -228,6 +228,16 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         .into_iter()
         .map(|name| health.counter(name))
         .collect::<Result<Vec<_>, _>>()?;
+    // The integrity monitor's counters (`integrity_resets`, …).
+    let mut c_integrity = Vec::new();
+    feed.pipeline()
+        .nav()
+        .integrity()
+        .each(&mut |name, _| c_integrity.push(name));
+    let c_integrity = c_integrity
+        .into_iter()
+        .map(|name| health.counter(name))
+        .collect::<Result<Vec<_>, _>>()?;
     // Tightly coupled: the raw-measurement path's counters (`raw_no_ephemeris`, …).
     let mut c_raw = Vec::new();
     if tight {
@@ -423,6 +433,13 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         let mut k = 0;
         est.nav().measurement_states().each_counter(&mut |_, v| {
             if let Some(c) = c_measurements.get(k) {
+                health.set(*c, v);
+            }
+            k += 1;
+        });
+        let mut k = 0;
+        est.nav().integrity().each(&mut |_, v| {
+            if let Some(c) = c_integrity.get(k) {
                 health.set(*c, v);
             }
             k += 1;

@@ -1,7 +1,8 @@
 //! The navigation filter's settings ([`NavConfig`], one declaration per setting:
 //! [`crate::declare`]) and the types they are made of: how GNSS aids the filter
 //! ([`Coupling`]), the receiver's oscillator ([`ReceiverOscillator`]) and a known initial state
-//! ([`InitialState`]), and the alignment's thresholds ([`AlignConfig`]). A leaf of the filter:
+//! ([`InitialState`]), the alignment's thresholds ([`AlignConfig`]) and the integrity monitor's
+//! bounds ([`IntegrityConfig`]). A leaf of the filter:
 //! it imports only the noise models (the IMU's, the oscillators'); each kind of measurement
 //! declares its own settings ([`super::measurements::MeasurementConfig`]).
 //!
@@ -162,6 +163,8 @@ crate::settings_group! {
         pub initial_state: Option<InitialState> = None, file "estimator";
         /// Alignment thresholds.
         pub align: AlignConfig = AlignConfig::default();
+        /// Bounds of the integrity monitor ([`super::integrity`]).
+        pub integrity: IntegrityConfig = IntegrityConfig::default();
     }
 }
 
@@ -178,6 +181,24 @@ crate::settings_group! {
         pub static_accel_mps2: f64 = 0.3;
         /// Largest deviation of f from the static mean still counted as static, m/s².
         pub static_accel_dev_mps2: f64 = 0.15;
+    }
+}
+
+crate::settings_group! {
+    /// Bounds of the integrity monitor.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct IntegrityConfig {
+        /// A bias estimate beyond this many times its turn-on σ (and instability σ) is not one
+        /// the IMU model allows: the filter is reset.
+        pub bias_sigmas: f64 = 6.0, file "estimator", check positive;
+        /// Largest plausible scale-factor estimate (fraction; 0.05 = 5 %).
+        pub max_scale: f64 = 0.05;
+        /// Running NIS per component of the GNSS updates above which the filter is
+        /// inconsistent (the 99.9 % χ² quantile of a 10-update average of 2–3 components is
+        /// about 2.3; 3 leaves margin for the average's correlation).
+        pub max_nis_average: f64 = 3.0, file "estimator", check positive;
+        /// Seconds after a reset during which states are flagged as recovering.
+        pub recovering_s: f64 = 10.0;
     }
 }
 

@@ -17,6 +17,7 @@ pub mod eskf;
 pub mod filter;
 pub mod heading_bank;
 pub mod imu_buffer;
+pub mod integrity;
 pub mod measurements;
 pub mod mechanization;
 pub mod navigator;

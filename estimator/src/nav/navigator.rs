@@ -25,6 +25,9 @@ use super::eskf::Eskf;
 use super::filter::DelayedFilter;
 use super::heading_bank::{BankStep, HeadingBank, with_heading};
 use super::imu_buffer::{ImuBuffer, ImuRecord};
+use super::integrity::{
+    self, Fault, INTEGRITY_HEADING_UNKNOWN, INTEGRITY_INCONSISTENT, INTEGRITY_RECOVERING, IntegrityCounters,
+};
 use super::measurements::gnss::GnssObservation;
 use super::measurements::{Measurement, MeasurementConfig, MeasurementQueue, MeasurementStates};
 use super::mechanization::{ImuIncrement, Pva, propagate};
@@ -128,6 +131,12 @@ pub struct Navigator {
     horizon_ns: i64,
     /// The longest recent delay of a fix from its epoch to its release, ns (fading).
     fix_delay_ns: i64,
+    /// What the integrity monitor found, by kind.
+    integrity: IntegrityCounters,
+    /// The filter is flagged inconsistent (its covariance was inflated).
+    inconsistent: bool,
+    /// Host time until which states are flagged as recovering from a reset, ns.
+    recovering_until_ns: i64,
     /// The prior of the GNSS delay Δ in force and its 1-sigma, s (set by
     /// [`Navigator::reset_delay`] when the time base of the fix stamps changes; the motion
     /// onset may narrow it at alignment).
@@ -169,6 +178,9 @@ impl Navigator {
             horizon_ns: (cfg.fusion_horizon_s * 1e9) as i64,
             fix_delay_ns: 0,
             delay_prior: (0.0, cfg.delay_prior_std_s),
+            integrity: IntegrityCounters::default(),
+            inconsistent: false,
+            recovering_until_ns: i64::MIN,
         }
     }
 
@@ -626,6 +638,9 @@ impl Navigator {
             self.states.on_step(&r, filt, &self.cfg, &self.kinds, &mut self.queue);
             corrected |= self.queue.fuse_due(filt, &self.cfg, &self.kinds, &mut self.states);
         }
+        if !self.monitor() {
+            return;
+        }
         if decided {
             // The heading was just decided: the output starts from the new filter at once.
             self.replay();
@@ -633,6 +648,58 @@ impl Navigator {
             self.counters.replays += 1;
             self.start_catch_up();
         }
+    }
+
+    /// The integrity monitor ([`integrity`]) over the delayed filter: a breakdown or an
+    /// implausible state resets the filter (it aligns again); an inconsistency inflates its
+    /// covariance by the running NIS and flags the states until the innovations agree again.
+    /// Returns false when the filter was reset.
+    fn monitor(&mut self) -> bool {
+        let Some(f) = &mut self.filt else { return true };
+        let nis = self.states.gnss.nis_average;
+        match integrity::check(f, &self.cfg.noise, nis, &self.cfg.integrity) {
+            Some(fault @ (Fault::NonFinite | Fault::NotPositiveDefinite | Fault::Implausible)) => {
+                self.integrity.count(fault);
+                self.integrity.resets += 1;
+                let t = f.t_ns;
+                self.recovering_until_ns = t + (self.cfg.integrity.recovering_s * 1e9) as i64;
+                self.reset();
+                false
+            }
+            Some(Fault::Inconsistent) => {
+                if !self.inconsistent {
+                    self.integrity.count(Fault::Inconsistent);
+                    self.inconsistent = true;
+                    f.eskf.p *= nis;
+                }
+                true
+            }
+            None => {
+                // Hysteresis: flagged until the running NIS is back near its expected 1.
+                if self.inconsistent && nis < 0.5 * self.cfg.integrity.max_nis_average {
+                    self.inconsistent = false;
+                }
+                true
+            }
+        }
+    }
+
+    /// Drops the filter and its output: it aligns again from the next fix (the levelling and
+    /// the IMU buffer are kept; the measurement counters go on).
+    fn reset(&mut self) {
+        self.filt = None;
+        self.bank = None;
+        self.out = None;
+        self.catchup = None;
+        self.queue = MeasurementQueue::default();
+        self.inconsistent = false;
+        self.states.gnss.nis_average = 1.0;
+        self.states.gnss.consecutive_rejects = 0;
+    }
+
+    /// What the integrity monitor found, by kind.
+    pub fn integrity(&self) -> &IntegrityCounters {
+        &self.integrity
     }
 
     /// Feeds one interval of the output stream (the reference IMU at the present): advances the
@@ -749,6 +816,18 @@ impl Navigator {
     pub fn fill(&self, s: &mut NavState, now_ns: i64) {
         s.host_ns = now_ns;
         s.status = self.status(now_ns) as u8;
+        s.integrity = 0;
+        if self.filt.is_none() {
+            s.integrity |= INTEGRITY_HEADING_UNKNOWN;
+        }
+        if self.inconsistent {
+            s.integrity |= INTEGRITY_INCONSISTENT;
+        }
+        if self.filt.as_ref().is_some_and(|f| f.t_ns < self.recovering_until_ns)
+            || (self.filt.is_none() && self.integrity.resets > 0)
+        {
+            s.integrity |= INTEGRITY_RECOVERING;
+        }
         s.fixes_used = self.states.gnss.fixes_used as u32;
         s.fixes_rejected = self.states.gnss.fixes_rejected as u32;
         s.last_fix_host_ns = self.states.gnss.last_fused_ns;
@@ -771,12 +850,29 @@ impl Navigator {
             s.q_nb = [f64::NAN; 4];
             return;
         };
+        let q = pva.q_nb.quaternion();
+        let finite = [pva.lat_rad, pva.lon_rad, pva.h_m, q.w, q.i, q.j, q.k]
+            .iter()
+            .chain(pva.vel_ned_mps.iter())
+            .all(|x| x.is_finite());
+        if !finite {
+            // The output predictor broke down before the monitor saw the filter do so: no
+            // number is claimed (the next check resets the filter).
+            s.status = NavStatus::Aligning as u8;
+            s.integrity |= INTEGRITY_RECOVERING;
+            s.lat_deg = f64::NAN;
+            s.lon_deg = f64::NAN;
+            s.height_m = f64::NAN;
+            s.vel_ned_mps = [f64::NAN; 3];
+            s.rpy_rad = [f64::NAN; 3];
+            s.q_nb = [f64::NAN; 4];
+            return;
+        }
         s.lat_deg = pva.lat_rad.to_degrees();
         s.lon_deg = pva.lon_rad.to_degrees();
         s.height_m = pva.h_m;
         s.vel_ned_mps = pva.vel_ned_mps.into();
         s.rpy_rad = pva.rpy_rad().into();
-        let q = pva.q_nb.quaternion();
         s.q_nb = [q.w, q.i, q.j, q.k];
         s.gyro_body_rps = self.out_w.into();
         s.accel_body_mps2 = self.out_f.into();

@@ -32,7 +32,7 @@ pub use gnss_raw::{GnssRaw, MAX_RAW_MEASUREMENTS, RawMeasurement};
 pub use gnss_time_pulse::GnssTimePulse;
 pub use health::{Counter, Health, MAX_COUNTERS, MAX_RATES, RateEntry};
 pub use imu_sample::{IMU_FLAG_RECEIVER_CLOCK, IMU_FLAG_SATURATED, ImuSample};
-pub use nav_state::{NavState, NavStatus};
+pub use nav_state::{INTEGRITY_HEADING_UNKNOWN, INTEGRITY_INCONSISTENT, INTEGRITY_RECOVERING, NavState, NavStatus};
 pub use pps_edge::PpsEdge;
 pub use sim_truth::SimTruth;
 pub use stamp::{Stamp, StampSource};

@@ -59,10 +59,24 @@ crate::sample_struct! {
         pub imu_count: u8,
         /// A `TimeStatus` as `u8`: how the time stamps of this solution are referenced.
         pub time_status: u8,
+        /// The integrity monitor's flags, `INTEGRITY_*` bits (0: nothing to report; this byte
+        /// was reserved before, so older writers leave it 0).
+        pub integrity: u8,
         /// Reserved, zero.
-        pub reserved: [u8; 5],
+        pub reserved: [u8; 4],
     }
 }
+
+/// [`NavState::integrity`]: the heading is not observed yet; `rpy_rad[2]` is not a heading
+/// (its σ says π).
+pub const INTEGRITY_HEADING_UNKNOWN: u8 = 1 << 0;
+/// [`NavState::integrity`]: the GNSS innovations are larger than the covariance predicts; the
+/// covariance was inflated so that σ covers the error, and the solution is flagged until they
+/// agree again.
+pub const INTEGRITY_INCONSISTENT: u8 = 1 << 1;
+/// [`NavState::integrity`]: the filter was reset by the integrity monitor (a non-finite or
+/// implausible state) within the last seconds and is recovering.
+pub const INTEGRITY_RECOVERING: u8 = 1 << 2;
 
 /// Filter status.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
