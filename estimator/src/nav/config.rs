@@ -191,8 +191,10 @@ crate::settings_group! {
         /// A bias estimate beyond this many times its turn-on σ (and instability σ) is not one
         /// the IMU model allows: the filter is reset.
         pub bias_sigmas: f64 = 6.0, file "estimator", check positive;
-        /// Largest plausible scale-factor estimate (fraction; 0.05 = 5 %).
-        pub max_scale: f64 = 0.05;
+        /// Largest plausible scale-factor estimate (fraction; 0.2 = 20 %: a filter on a
+        /// vibrating mount has been seen carrying ten percent to stand for what its model lacks;
+        /// beyond that the estimate no longer stands for any IMU).
+        pub max_scale: f64 = 0.1;
         /// Running NIS per component of the GNSS updates above which the filter is
         /// inconsistent (the 99.9 % χ² quantile of a 10-update average of 2–3 components is
         /// about 2.3; 3 leaves margin for the average's correlation).

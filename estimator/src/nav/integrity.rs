@@ -14,11 +14,12 @@
 //!   updates above [`IntegrityConfig::max_nis_average`] (a consistent filter keeps it near 1;
 //!   the bound is the 99.9 % χ² quantile of the average over its window).
 //!
-//! The navigator acts on the fault ([`super::navigator::Navigator`]): a breakdown or an
-//! implausible state resets the filter and it aligns again (its outputs say "aligning", not a
-//! number); an inconsistency inflates the covariance so the σ it publishes covers the error, and
-//! the states are flagged ([`INTEGRITY_INCONSISTENT`]) until the innovations agree again. Every
-//! fault is counted by kind.
+//! The navigator acts on the fault ([`super::navigator::Navigator`]): a breakdown resets the
+//! filter and it aligns again (its outputs say "aligning", not a number); implausible sensor
+//! errors are cleared and re-learnt from their turn-on σ (the states flagged as recovering); an
+//! inconsistency inflates the covariance so the σ it publishes covers the error, widens an IMU
+//! model the data contradict, and flags the states ([`INTEGRITY_INCONSISTENT`]) until the
+//! innovations agree again. Every fault is counted by kind.
 
 use super::config::IntegrityConfig;
 use super::error_state::{BA, BG, N, ProcessNoise, SA, SG, StateMat};

@@ -20,7 +20,7 @@ use navsync_wire::samples::{ImuSync, MAX_IMUS, NavState, NavStatus};
 use super::alignment::{Aligner, ONSET_DELAY_FLOOR_S};
 pub use super::config::NavConfig;
 use super::config::{Coupling, InitialState};
-use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, SA, SG, StateMat, VEL};
+use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, ProcessNoise, SA, SG, StateMat, VEL};
 use super::eskf::Eskf;
 use super::filter::DelayedFilter;
 use super::heading_bank::{BankStep, HeadingBank, with_heading};
@@ -39,6 +39,48 @@ pub const MIN_HORIZON_S: f64 = 0.25;
 const HORIZON_MARGIN_S: f64 = 0.02;
 /// How fast the adaptive horizon's memory of a long delay fades, per fix, s.
 const HORIZON_DECAY_S: f64 = 0.01;
+
+/// Clears the sensor-error estimates of `f` (biases, scale factors) and re-opens their
+/// covariance to the model's turn-on σ, decorrelated from the other states.
+fn reset_sensor_errors(f: &mut DelayedFilter, noise: &ProcessNoise) {
+    f.bias_g = Vector3::zeros();
+    f.bias_a = Vector3::zeros();
+    f.scale_g = Vector3::zeros();
+    f.scale_a = Vector3::zeros();
+    for i in BG..BG + 12 {
+        for j in 0..N {
+            f.eskf.p[(i, j)] = 0.0;
+            f.eskf.p[(j, i)] = 0.0;
+        }
+    }
+    for i in 0..3 {
+        f.eskf.p[(BG + i, BG + i)] = noise.gyro_bias_init_std[i].powi(2);
+        f.eskf.p[(BA + i, BA + i)] = noise.accel_bias_init_std[i].powi(2);
+        if noise.estimate_scale {
+            f.eskf.p[(SG + i, SG + i)] = noise.gyro_scale_init_std[i].powi(2);
+            f.eskf.p[(SA + i, SA + i)] = noise.accel_scale_init_std[i].powi(2);
+        }
+    }
+}
+
+/// `noise` with every term at least that of an IMU of unknown class (the generic preset): what
+/// the filter assumes once the data have contradicted the configured model.
+fn widened(noise: &ProcessNoise) -> ProcessNoise {
+    let g = ProcessNoise::from_imu_noise(&navsync_wire::imu_spec::ImuPreset::Generic.noise());
+    let max = |a: Vector3<f64>, b: Vector3<f64>| a.zip_map(&b, f64::max);
+    ProcessNoise {
+        arw: max(noise.arw, g.arw),
+        vrw: max(noise.vrw, g.vrw),
+        gyro_bias_std: max(noise.gyro_bias_std, g.gyro_bias_std),
+        accel_bias_std: max(noise.accel_bias_std, g.accel_bias_std),
+        gyro_scale_std: max(noise.gyro_scale_std, g.gyro_scale_std),
+        accel_scale_std: max(noise.accel_scale_std, g.accel_scale_std),
+        corr_time_s: noise.corr_time_s.min(g.corr_time_s),
+        gyro_bias_init_std: max(noise.gyro_bias_init_std, g.gyro_bias_init_std),
+        accel_bias_init_std: max(noise.accel_bias_init_std, g.accel_bias_init_std),
+        ..*noise
+    }
+}
 
 /// Counters of the navigation filter: its own, and the GNSS fixes' (kept by their
 /// measurement kind, [`super::measurements::gnss::GnssState`]).
@@ -135,6 +177,8 @@ pub struct Navigator {
     integrity: IntegrityCounters,
     /// The filter is flagged inconsistent (its covariance was inflated).
     inconsistent: bool,
+    /// The IMU model was widened after an inconsistency ([`widened`]).
+    widened: bool,
     /// Host time until which states are flagged as recovering from a reset, ns.
     recovering_until_ns: i64,
     /// The prior of the GNSS delay Δ in force and its 1-sigma, s (set by
@@ -180,6 +224,7 @@ impl Navigator {
             delay_prior: (0.0, cfg.delay_prior_std_s),
             integrity: IntegrityCounters::default(),
             inconsistent: false,
+            widened: false,
             recovering_until_ns: i64::MIN,
         }
     }
@@ -658,7 +703,7 @@ impl Navigator {
         let Some(f) = &mut self.filt else { return true };
         let nis = self.states.gnss.nis_average;
         match integrity::check(f, &self.cfg.noise, nis, &self.cfg.integrity) {
-            Some(fault @ (Fault::NonFinite | Fault::NotPositiveDefinite | Fault::Implausible)) => {
+            Some(fault @ (Fault::NonFinite | Fault::NotPositiveDefinite)) => {
                 self.integrity.count(fault);
                 self.integrity.resets += 1;
                 let t = f.t_ns;
@@ -666,16 +711,44 @@ impl Navigator {
                 self.reset();
                 false
             }
+            Some(Fault::Implausible) => {
+                // The navigation states are sound; the sensor errors are re-learnt from their
+                // turn-on σ, decorrelated from the rest.
+                self.integrity.count(Fault::Implausible);
+                self.recovering_until_ns = f.t_ns + (self.cfg.integrity.recovering_s * 1e9) as i64;
+                reset_sensor_errors(f, &self.cfg.noise);
+                self.start_catch_up();
+                true
+            }
             Some(Fault::Inconsistent) => {
                 if !self.inconsistent {
+                    // A new episode, flagged. An IMU model the data contradict is widened to the
+                    // conservative one of an IMU of unknown class (each term at least the
+                    // generic preset's), once; a filter whose model is already that wide has its
+                    // covariance inflated on the rejected fixes ([`GnssFusion`]).
                     self.integrity.count(Fault::Inconsistent);
                     self.inconsistent = true;
-                    f.eskf.p *= nis;
+                    if !self.widened {
+                        self.widened = true;
+                        let wider = widened(&self.cfg.noise);
+                        if wider != self.cfg.noise {
+                            // The model was narrower than any real IMU's: what it made the
+                            // covariance is scaled to the innovations, once, and the sensor
+                            // errors get at least the wider model's turn-on σ.
+                            self.cfg.noise = wider;
+                            f.eskf.p *= nis;
+                            for i in 0..3 {
+                                let (g, a) = (BG + i, BA + i);
+                                f.eskf.p[(g, g)] = f.eskf.p[(g, g)].max(wider.gyro_bias_init_std[i].powi(2));
+                                f.eskf.p[(a, a)] = f.eskf.p[(a, a)].max(wider.accel_bias_init_std[i].powi(2));
+                            }
+                        }
+                    }
                 }
                 true
             }
             None => {
-                // Hysteresis: flagged until the running NIS is back near its expected 1.
+                // Flagged until the running NIS is back below half the bound.
                 if self.inconsistent && nis < 0.5 * self.cfg.integrity.max_nis_average {
                     self.inconsistent = false;
                 }
