@@ -48,11 +48,11 @@ fn run(
         }
         let before = track.errors.len();
         track.on(&e);
-        if let (Some(err), true) = (track.errors.get(before), sigma_h.is_finite()) {
-            if err.t_s >= settle_s {
-                n += 1;
-                inside += u64::from(err.h_m <= 3.0 * sigma_h);
-            }
+        if let (Some(err), true) = (track.errors.get(before), sigma_h.is_finite())
+            && err.t_s >= settle_s
+        {
+            n += 1;
+            inside += u64::from(err.h_m <= 3.0 * sigma_h);
         }
     });
     Outcome {
