@@ -9,12 +9,14 @@
 use std::borrow::BorrowMut;
 use std::time::{Duration, Instant};
 
-use navsync_wire::samples::{AnySample, NavState, TimeState};
+use navsync_wire::samples::{AnySample, NavState, NavStatus, SimTruth, TimeState};
 use navsync_wire::time::NS_PER_S;
 
 use crate::evaluation::{DelayTruth, Evaluator, Summary};
 use crate::feed::Feed;
 use crate::input_order::Input;
+use crate::nav::error_state::{ATT, BA, BG, DELAY, POS, VEL};
+use crate::nav::smoother::Smoothed;
 use crate::pipeline::Pipeline;
 use crate::settings::Settings;
 
@@ -53,6 +55,113 @@ pub fn estimate<T, S: Into<Input>, I: IntoIterator<Item = (S, T)>>(
         on_output,
     )
     .0
+}
+
+/// As [`estimate`], but every navigation state the delayed filter passed through is replaced
+/// by its smoothed one ([`crate::nav::smoother`]: the best estimate of each instant, from the
+/// data before and after it), and the accuracy is that of the smoothed states. The outputs come
+/// after the whole run, in their order. States the filter never reached (before its alignment,
+/// the last horizon of the data) are the real-time ones.
+pub fn estimate_smoothed<T: Clone, S: Into<Input>, I: IntoIterator<Item = (S, T)>>(
+    settings: &Settings,
+    samples: I,
+    time_states: bool,
+    mut on_output: impl FnMut(Output<'_>, &T),
+) -> OfflineRun {
+    let cfg = settings.pipeline_config();
+    let reference = cfg.reference_imu.clone();
+    let mut pipeline = Pipeline::new(cfg);
+    pipeline.enable_smoothing();
+    let mut navs: Vec<(NavState, T)> = Vec::new();
+    // Time states with the number of navigation states before them (their place in the order).
+    let mut times: Vec<(usize, TimeState, T)> = Vec::new();
+    let mut truths: Vec<SimTruth> = Vec::new();
+    let samples = samples.into_iter().map(|(s, t)| {
+        let s: Input = s.into();
+        if let Input::Truth(x) = &s {
+            truths.push(*x);
+        }
+        (s, t)
+    });
+    let (mut run, feed) = run_feed(
+        Feed::with(pipeline, Some(&reference)),
+        samples,
+        settings.delay_truth(),
+        time_states,
+        |o, tag: &T| match o {
+            Output::Nav(n) => navs.push((*n, tag.clone())),
+            Output::Time(t) => times.push((navs.len(), *t, tag.clone())),
+        },
+    );
+    let smoothed = feed.pipeline().nav().smoother().map(|l| l.smooth()).unwrap_or_default();
+    let mut j = 0;
+    for (n, _) in &mut navs {
+        while j < smoothed.len() && smoothed[j].state.t_ns < n.host_ns {
+            j += 1;
+        }
+        if let Some(s) = smoothed.get(j).filter(|s| s.state.t_ns == n.host_ns)
+            && n.status != NavStatus::Aligning as u8
+        {
+            apply_smoothed(n, s);
+        }
+    }
+    // The accuracy of the smoothed states: the evaluator sees them and the truth in time order.
+    let mut eval = Evaluator::default();
+    let mut t = truths.iter().peekable();
+    for (n, _) in &navs {
+        while let Some(x) = t.next_if(|x| x.host_ns < n.host_ns) {
+            eval.add_truth(x);
+        }
+        eval.add_nav(n);
+    }
+    t.for_each(|x| eval.add_truth(x));
+    let f = &run.summary;
+    let mut summary = eval.summary(
+        (f.imu_samples, f.gnss_fixes, f.rejected_fixes),
+        f.wall_s,
+        f.estimator_s,
+        settings.delay_truth(),
+    );
+    summary.measurement_counters = std::mem::take(&mut run.summary.measurement_counters);
+    summary.nav_states = run.summary.nav_states;
+    summary.usable_states = run.summary.usable_states;
+    summary.problem = run.summary.problem.take();
+    let mut ti = times.into_iter().peekable();
+    for (i, (n, tag)) in navs.iter().enumerate() {
+        while let Some((_, ts, tt)) = ti.next_if(|x| x.0 <= i) {
+            on_output(Output::Time(&ts), &tt);
+        }
+        on_output(Output::Nav(n), tag);
+    }
+    for (_, ts, tt) in ti {
+        on_output(Output::Time(&ts), &tt);
+    }
+    OfflineRun { summary }
+}
+
+/// Writes a smoothed state into a navigation state: position, velocity, attitude, their σ, the
+/// sensor errors and Δ.
+fn apply_smoothed(n: &mut NavState, s: &Smoothed) {
+    let p = &s.state.pva;
+    n.lat_deg = p.lat_rad.to_degrees();
+    n.lon_deg = p.lon_rad.to_degrees();
+    n.height_m = p.h_m;
+    n.vel_ned_mps = p.vel_ned_mps.into();
+    n.rpy_rad = p.rpy_rad().into();
+    let q = p.q_nb.quaternion();
+    n.q_nb = [q.w, q.i, q.j, q.k];
+    let std3 = |i: usize| [s.std[i], s.std[i + 1], s.std[i + 2]];
+    n.pos_std_ned_m = std3(POS);
+    n.vel_std_ned_mps = std3(VEL);
+    n.att_std_rad = std3(ATT);
+    n.gyro_bias_rps = s.state.bias_g.into();
+    n.accel_bias_mps2 = s.state.bias_a.into();
+    n.gyro_bias_std_rps = std3(BG);
+    n.accel_bias_std_mps2 = std3(BA);
+    if n.gnss_delay_s.is_finite() {
+        n.gnss_delay_s = s.state.delay_s;
+        n.gnss_delay_std_s = s.std[DELAY];
+    }
 }
 
 /// Feeds `samples` to `pipeline`; every navigation state goes to `on_nav`. The reference

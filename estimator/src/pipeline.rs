@@ -152,6 +152,12 @@ impl Pipeline {
         &self.device_timing
     }
 
+    /// Keeps what the offline smoother needs ([`crate::nav::smoother`]); offline only: its log
+    /// grows with the run.
+    pub fn enable_smoothing(&mut self) {
+        self.nav.enable_smoothing();
+    }
+
     /// The time synchroniser.
     pub fn time(&self) -> &TimeSync {
         &self.time

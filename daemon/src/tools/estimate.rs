@@ -45,6 +45,11 @@ pub struct EstimateOptions {
     /// Write the accuracy summary as JSON to this file (with --estimate).
     #[arg(long, requires = "estimate")]
     pub summary_json: Option<PathBuf>,
+    /// The best estimate of each instant instead of the real-time one: a Rauch–Tung–Striebel
+    /// smoother over the delayed filter, with its smoothed σ (for --out, --format kf-gins and
+    /// the summary). Without it every output is the state published live.
+    #[arg(long, requires = "estimate")]
+    pub smooth: bool,
     /// The estimator's settings.
     #[command(flatten)]
     pub est: EstimatorFlags,
@@ -248,7 +253,8 @@ pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary
     let mut kf_gins_err: Option<KfGinsError> = None;
     let mut write_err: Option<RecordingError> = None;
     let mut inputs = RecordedInputs::new(reader, &settings);
-    let run = offline::estimate(&settings, inputs.by_ref(), out.is_some(), |o, &log_time| {
+    let time_states = out.is_some();
+    let on_output = |o: Output<'_>, &log_time: &u64| {
         if kf_gins_err.is_none()
             && let (Some(w), Output::Nav(n)) = (kf_gins.as_mut(), o)
         {
@@ -275,7 +281,12 @@ pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary
         if let Err(e) = r {
             write_err = Some(e);
         }
-    });
+    };
+    let run = if opts.smooth {
+        offline::estimate_smoothed(&settings, inputs.by_ref(), time_states, on_output)
+    } else {
+        offline::estimate(&settings, inputs.by_ref(), time_states, on_output)
+    };
     let (reader, read_err) = inputs.finish();
     if let Some(e) = read_err.or(write_err) {
         return Err(e.into());

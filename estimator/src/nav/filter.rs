@@ -47,6 +47,10 @@ pub struct DelayedFilter {
     /// Factor on the IMU's process noise, ≥ 1: raised when the GNSS innovations show the
     /// configured model too optimistic ([`super::measurements::gnss::GnssFusion`]).
     pub q_scale: f64,
+    /// Covariance propagations so far.
+    pub propagations: u64,
+    /// The transition Φ of the last propagation (for the offline smoother).
+    pub last_phi: StateMat,
     cov_dt: f64,
     cov_f: Vector3<f64>,
     cov_w: Vector3<f64>,
@@ -72,6 +76,8 @@ impl DelayedFilter {
             acc_ned: Vector3::zeros(),
             last_w: Vector3::zeros(),
             q_scale: 1.0,
+            propagations: 0,
+            last_phi: StateMat::identity(),
             cov_dt: 0.0,
             cov_f: Vector3::zeros(),
             cov_w: Vector3::zeros(),
@@ -121,6 +127,8 @@ impl DelayedFilter {
         let c_bn = self.pva.q_nb.to_rotation_matrix().into_inner();
         let q = error_state::process_noise(&cfg.noise, &c_bn, self.cov_dt, self.q_scale);
         self.eskf.predict(&phi, &q);
+        self.propagations += 1;
+        self.last_phi = phi;
         self.cov_dt = 0.0;
         self.cov_f = Vector3::zeros();
         self.cov_w = Vector3::zeros();

@@ -21,3 +21,4 @@ pub mod integrity;
 pub mod measurements;
 pub mod mechanization;
 pub mod navigator;
+pub mod smoother;

@@ -31,6 +31,7 @@ use super::integrity::{
 use super::measurements::gnss::GnssObservation;
 use super::measurements::{Measurement, MeasurementConfig, MeasurementQueue, MeasurementStates};
 use super::mechanization::{ImuIncrement, Pva, propagate};
+use super::smoother::SmootherLog;
 use crate::gnss::ranges::RangeEpoch;
 
 /// Shortest adaptive fusion horizon, s.
@@ -175,6 +176,8 @@ pub struct Navigator {
     fix_delay_ns: i64,
     /// What the integrity monitor found, by kind.
     integrity: IntegrityCounters,
+    /// The offline smoother's log, when smoothing is on ([`Self::enable_smoothing`]).
+    smoother: Option<SmootherLog>,
     /// The filter is flagged inconsistent (its covariance was inflated).
     inconsistent: bool,
     /// The IMU model was widened after an inconsistency ([`widened`]).
@@ -223,6 +226,7 @@ impl Navigator {
             fix_delay_ns: 0,
             delay_prior: (0.0, cfg.delay_prior_std_s),
             integrity: IntegrityCounters::default(),
+            smoother: None,
             inconsistent: false,
             widened: false,
             recovering_until_ns: i64::MIN,
@@ -456,6 +460,9 @@ impl Navigator {
             self.delay_prior.0,
         );
         f.bias_a = Vector3::from(init.accel_bias_mgal) * 1e-5;
+        if let Some(log) = &mut self.smoother {
+            log.start(&f);
+        }
         self.filt = Some(f);
         self.states.gnss.last_fused_ns = host_ns;
         self.replay();
@@ -560,6 +567,9 @@ impl Navigator {
     fn fine_align(&mut self, bank: &mut HeadingBank, yaw0: f64, yaw_std: f64) {
         let start = with_heading(bank.base(), yaw0, yaw_std);
         self.states.gnss.last_fused_ns = start.t_ns;
+        if let Some(log) = &mut self.smoother {
+            log.start(&start);
+        }
         self.filt = Some(start);
         let (records, fused, pending) = bank.log();
         let mut next = 0;
@@ -570,10 +580,7 @@ impl Navigator {
                 self.enqueue(*obs);
                 next += 1;
             }
-            let Some(filt) = &mut self.filt else { return };
-            filt.step(r, &self.cfg);
-            self.states.on_step(r, filt, &self.cfg, &self.kinds, &mut self.queue);
-            self.queue.fuse_due(filt, &self.cfg, &self.kinds, &mut self.states);
+            self.filter_step(r);
         }
         for obs in fused[next..].iter().copied().chain(pending) {
             self.enqueue(obs);
@@ -670,18 +677,18 @@ impl Navigator {
             }
             return;
         };
+        let mut t = filt.t_ns;
         while let Some(r) = self.buf.front().copied() {
             if r.host_ns > host_ns - horizon_ns {
                 break;
             }
             self.buf.pop();
-            if r.host_ns <= filt.t_ns {
+            if r.host_ns <= t {
                 // Before a known initial state's instant (the filter stream lags the output's).
                 continue;
             }
-            filt.step(&r, &self.cfg);
-            self.states.on_step(&r, filt, &self.cfg, &self.kinds, &mut self.queue);
-            corrected |= self.queue.fuse_due(filt, &self.cfg, &self.kinds, &mut self.states);
+            corrected |= self.filter_step(&r);
+            t = r.host_ns;
         }
         if !self.monitor() {
             return;
@@ -693,6 +700,50 @@ impl Navigator {
             self.counters.replays += 1;
             self.start_catch_up();
         }
+    }
+
+    /// One step of the delayed filter over record `r`: mechanization (and the covariance
+    /// propagation when due), the measurements the IMU data make, and every measurement due.
+    /// With smoothing on, the step and its updates go into the log. True when a measurement
+    /// corrected the state.
+    fn filter_step(&mut self, r: &ImuRecord) -> bool {
+        let Some(filt) = &mut self.filt else { return false };
+        let before = filt.propagations;
+        filt.step(r, &self.cfg);
+        self.states.on_step(r, filt, &self.cfg, &self.kinds, &mut self.queue);
+        let Some(log) = &mut self.smoother else {
+            return self.queue.fuse_due(filt, &self.cfg, &self.kinds, &mut self.states);
+        };
+        if filt.propagations != before {
+            log.on_propagation(&filt.last_phi);
+        }
+        log.on_step(filt);
+        if self.queue.has_due(filt) {
+            // What fuse_due does first anyway: the covariance propagated to now.
+            let flushed = filt.propagations;
+            filt.propagate_covariance(&self.cfg);
+            if filt.propagations != flushed {
+                log.on_propagation(&filt.last_phi);
+            }
+            log.before_updates(filt);
+        }
+        let corrected = self.queue.fuse_due(filt, &self.cfg, &self.kinds, &mut self.states);
+        log.after_updates(filt, filt.propagations != before);
+        corrected
+    }
+
+    /// Keeps what the offline smoother needs from here on ([`SmootherLog`]).
+    pub fn enable_smoothing(&mut self) {
+        let mut log = SmootherLog::new();
+        if let Some(f) = &self.filt {
+            log.start(f);
+        }
+        self.smoother = Some(log);
+    }
+
+    /// The smoother's log, when smoothing is on.
+    pub fn smoother(&self) -> Option<&SmootherLog> {
+        self.smoother.as_ref()
     }
 
     /// The integrity monitor ([`integrity`]) over the delayed filter: a breakdown or an
@@ -717,6 +768,9 @@ impl Navigator {
                 self.integrity.count(Fault::Implausible);
                 self.recovering_until_ns = f.t_ns + (self.cfg.integrity.recovering_s * 1e9) as i64;
                 reset_sensor_errors(f, &self.cfg.noise);
+                if let Some(log) = &mut self.smoother {
+                    log.start(f);
+                }
                 self.start_catch_up();
                 true
             }

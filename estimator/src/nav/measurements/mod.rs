@@ -177,6 +177,11 @@ impl MeasurementQueue {
         }
     }
 
+    /// Whether a queued measurement's epoch has been reached.
+    pub fn has_due(&self, f: &DelayedFilter) -> bool {
+        self.slots.iter().flatten().any(|m| m.epoch_ns(f.delay_s) <= f.t_ns)
+    }
+
     /// Fuses, in epoch order, every queued measurement whose epoch the filter has reached.
     /// Returns true when the state was corrected.
     pub fn fuse_due(
