@@ -87,7 +87,8 @@ impl<T, P: BorrowMut<Pipeline>> Feed<T, P> {
     /// reference moved.
     pub fn finish(&mut self, step: &Step<T>) -> Option<Handover> {
         if let Some(n) = &step.nav {
-            self.check.add(n);
+            let moving = self.pipeline.borrow().nav().motion_seen();
+            self.check.add(n, moving);
             self.pipeline.borrow_mut().catch_up();
         }
         if !matches!(step.input, Input::Imu(_)) {

@@ -24,6 +24,9 @@ use crate::settings::Settings;
 pub struct OfflineRun {
     /// The accuracy summary.
     pub summary: Summary,
+    /// Which Δ the filter had to find (the receiver latency when the fixes were stamped on
+    /// receipt).
+    pub delay_truth: DelayTruth,
 }
 
 /// An output of the estimator.
@@ -120,7 +123,7 @@ pub fn estimate_smoothed<T: Clone, S: Into<Input>, I: IntoIterator<Item = (S, T)
         (f.imu_samples, f.gnss_fixes, f.rejected_fixes),
         f.wall_s,
         f.estimator_s,
-        settings.delay_truth(),
+        run.delay_truth,
     );
     summary.measurement_counters = std::mem::take(&mut run.summary.measurement_counters);
     summary.nav_states = run.summary.nav_states;
@@ -136,7 +139,10 @@ pub fn estimate_smoothed<T: Clone, S: Into<Input>, I: IntoIterator<Item = (S, T)
     for (_, ts, tt) in ti {
         on_output(Output::Time(&ts), &tt);
     }
-    OfflineRun { summary }
+    OfflineRun {
+        summary,
+        delay_truth: run.delay_truth,
+    }
 }
 
 /// Writes a smoothed state into a navigation state: position, velocity, attitude, their σ, the
@@ -268,6 +274,13 @@ pub fn run_feed<T, P: BorrowMut<Pipeline>, S: Into<Input>, I: IntoIterator<Item 
     let wall = t0.elapsed().as_secs_f64();
     let pipeline = feed.pipeline();
     let rejected = pipeline.nav().counters().fixes_rejected;
+    // Fixes stamped on receipt (software sync, asked for or fallen back to without PPS): the
+    // Δ to find is the receiver latency, whatever the caller expected.
+    let delay_truth = if pipeline.fixes_stamped_on_receipt() {
+        DelayTruth::ReceiverLatency
+    } else {
+        delay_truth
+    };
     let mut summary = eval.summary((imu, fixes, rejected), wall, in_estimator.as_secs_f64(), delay_truth);
     pipeline.nav().measurement_states().each_counter(&mut |name, v| {
         summary.measurement_counters.insert(name.to_string(), v);
@@ -283,5 +296,5 @@ pub fn run_feed<T, P: BorrowMut<Pipeline>, S: Into<Input>, I: IntoIterator<Item 
     summary.nav_states = feed.check().states;
     summary.usable_states = feed.check().usable;
     summary.problem = feed.problem();
-    (OfflineRun { summary }, feed)
+    (OfflineRun { summary, delay_truth }, feed)
 }

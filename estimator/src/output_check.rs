@@ -5,7 +5,8 @@
 
 use navsync_wire::samples::{NavState, NavStatus};
 
-/// Fewer usable states than this share of all states is a problem.
+/// Fewer usable states than this share of the states since the platform first moved is a
+/// problem (before that the heading may not be observable: a stationary start waits).
 pub const MIN_USABLE_SHARE: f64 = 0.5;
 
 /// What the pipeline saw, for the diagnosis.
@@ -38,12 +39,17 @@ pub struct OutputCheck {
     pub aligned: u64,
     /// Of those, with a GNSS/UTC time: usable by a subscriber or an export.
     pub usable: u64,
+    /// States not aligned before any fix showed the platform moving (the stationary start).
+    pub waiting_for_motion: u64,
 }
 
 impl OutputCheck {
-    /// Counts one navigation state.
-    pub fn add(&mut self, s: &NavState) {
+    /// Counts one navigation state (`moving`: a fix has shown the platform moving by now).
+    pub fn add(&mut self, s: &NavState, moving: bool) {
         self.states += 1;
+        if s.status == NavStatus::Aligning as u8 && !moving {
+            self.waiting_for_motion += 1;
+        }
         if s.status != NavStatus::Aligning as u8 {
             self.aligned += 1;
             if s.utc_ns != i64::MIN {
@@ -77,14 +83,16 @@ impl OutputCheck {
                     .into(),
             );
         }
-        if self.usable as f64 >= MIN_USABLE_SHARE * self.states as f64 {
+        let expected = self.states - self.waiting_for_motion;
+        if self.usable > 0 && self.usable as f64 >= MIN_USABLE_SHARE * expected as f64 {
             return None;
         }
         let share = format!(
-            "only {} of {} navigation states are usable (aligned, with a GNSS time)",
-            self.usable, self.states
+            "only {} of {} navigation states are usable (aligned, with a GNSS time; {} more before the \
+             platform moved)",
+            self.usable, expected, self.waiting_for_motion
         );
-        let why = if self.aligned * 2 < self.states {
+        let why = if self.aligned * 2 < expected || self.aligned == 0 {
             if seen.fixes == 0 {
                 "the filter is not aligned: no GNSS fix reached the estimator (check the receiver's service \
                  and driver, e.g. --gnss)"
@@ -151,7 +159,7 @@ mod tests {
                 .contains("no navigation state")
         );
         let mut c = OutputCheck::default();
-        (0..10).for_each(|_| c.add(&state(NavStatus::Aligning, i64::MIN)));
+        (0..10).for_each(|_| c.add(&state(NavStatus::Aligning, i64::MIN), false));
         assert!(c.problem(&seen).unwrap().contains("moving at 0.3 m/s"));
         let searching = InputsSeen {
             heading_banks: 1,
@@ -159,9 +167,9 @@ mod tests {
         };
         assert!(c.problem(&searching).unwrap().contains("heading was not observable"));
         let mut c = OutputCheck::default();
-        (0..10).for_each(|_| c.add(&state(NavStatus::Aligned, i64::MIN)));
+        (0..10).for_each(|_| c.add(&state(NavStatus::Aligned, i64::MIN), true));
         assert!(c.problem(&seen).unwrap().contains("--software-sync"));
-        (0..10).for_each(|_| c.add(&state(NavStatus::Aligned, 1)));
+        (0..10).for_each(|_| c.add(&state(NavStatus::Aligned, 1), true));
         assert_eq!(c.usable, 10);
         assert_eq!(c.problem(&seen), None, "half usable is enough");
         let reset = InputsSeen {
@@ -169,5 +177,18 @@ mod tests {
             ..seen
         };
         assert!(c.problem(&reset).unwrap().contains("reset the filter 2 time(s)"));
+        // A long stationary start waits for the motion; what follows it counts.
+        let mut c = OutputCheck::default();
+        (0..80).for_each(|_| c.add(&state(NavStatus::Aligning, i64::MIN), false));
+        (0..5).for_each(|_| c.add(&state(NavStatus::Aligning, i64::MIN), true));
+        (0..15).for_each(|_| c.add(&state(NavStatus::Aligned, 1), true));
+        assert_eq!(c.problem(&seen), None, "{c:?}");
+        // Never moved, never aligned: no usable state is a problem.
+        let mut c = OutputCheck::default();
+        (0..80).for_each(|_| c.add(&state(NavStatus::Aligning, i64::MIN), false));
+        assert!(
+            c.problem(&searching).unwrap().contains("heading was not observable"),
+            "{c:?}"
+        );
     }
 }

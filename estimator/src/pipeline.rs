@@ -396,8 +396,8 @@ impl Pipeline {
         let (host_ns, g, a) = self.array.output_sample(index, s);
         if let Some(init) = &self.cfg.nav.initial_state
             && !self.nav.is_aligned()
-            && self.time.utc_ns_at_host(host_ns).is_some_and(|u| u >= init.utc_ns)
-            && let Some(h0) = self.time.host_ns_at_utc(init.utc_ns)
+            && self.utc_ns_at_host(host_ns).is_some_and(|u| u >= init.utc_ns)
+            && let Some(h0) = self.host_ns_at_utc(init.utc_ns)
         {
             self.nav.initialize(init, h0);
         }
@@ -442,6 +442,29 @@ impl Pipeline {
         }
     }
 
+    /// Whether the fixes are stamped on receipt (software sync): Δ is then the receiver's
+    /// latency rather than a residual offset.
+    pub fn fixes_stamped_on_receipt(&self) -> bool {
+        self.stamping == Some(FixStamping::Receipt)
+    }
+
+    /// The UTC time of host time `host_ns`: on the input's declared time axis, else from the
+    /// clock model (`None` while it is not known).
+    fn utc_ns_at_host(&self, host_ns: i64) -> Option<i64> {
+        match self.cfg.time.time_axis {
+            Some(axis) => Some(axis.utc_ns_at(host_ns)),
+            None => self.time.utc_ns_at_host(host_ns),
+        }
+    }
+
+    /// The host time of UTC time `utc_ns` (the inverse of [`Self::utc_ns_at_host`]).
+    fn host_ns_at_utc(&self, utc_ns: i64) -> Option<i64> {
+        match self.cfg.time.time_axis {
+            Some(axis) => Some(axis.host_ns_at(utc_ns)),
+            None => self.time.host_ns_at_utc(utc_ns),
+        }
+    }
+
     /// The navigation state for host time `now_ns` (the latest IMU sample's).
     pub fn nav_state(&mut self, now_ns: i64) -> NavState {
         let mut s = NavState::zeroed();
@@ -455,10 +478,12 @@ impl Pipeline {
         let (d, d_std) = self.nav.gnss_delay();
         self.time.set_gnss_delay(d, d_std);
         let hardware = matches!(self.time.status(), TimeStatus::Locked | TimeStatus::Holdover);
-        s.utc_ns = match self.time.utc_ns_at_host(now_ns) {
-            Some(u) if hardware && d.is_finite() => u + (d * 1e9).round() as i64,
-            Some(u) => u,
-            None => i64::MIN,
+        s.utc_ns = match (self.cfg.time.time_axis, self.time.utc_ns_at_host(now_ns)) {
+            // An input with an exact time axis keeps it: the sample's own tag.
+            (Some(axis), _) => axis.utc_ns_at(now_ns),
+            (None, Some(u)) if hardware && d.is_finite() => u + (d * 1e9).round() as i64,
+            (None, Some(u)) => u,
+            (None, None) => i64::MIN,
         };
         s.time_status = self.time.status() as u8;
         (s.imu, s.imu_count) = self.array.table();

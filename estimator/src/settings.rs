@@ -27,6 +27,7 @@ use crate::time::device_timing::DeviceTimingConfig;
 use crate::time::time_sync::TimeSyncConfig;
 
 pub use crate::nav::config::{Coupling, InitialState, ReceiverOscillator};
+pub use crate::time::time_sync::TimeAxis;
 
 /// Where one IMU sits in the body frame.
 #[derive(Debug, Clone, Copy, PartialEq)]

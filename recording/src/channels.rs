@@ -11,9 +11,9 @@
 //! * Channel metadata: `offered_qos_profiles` (what rosbag2 writes: reliable, volatile,
 //!   keep last), [`META_LAYOUT`] (the layout version, `navsync.ImuSample.v1`), and what the data
 //!   were made with, so `navsync replay --estimate` runs the estimator with the right models
-//!   unless told otherwise: [`META_IMU_NOISE`] on IMU channels, [`META_INITIAL_STATE`] on the
-//!   reference IMU's, [`META_LEVER_ARM`] and [`META_GNSS_VEL_STD`] on GNSS fix channels. Values
-//!   are JSON.
+//!   unless told otherwise: [`META_IMU_NOISE`] on IMU channels, [`META_INITIAL_STATE`] and
+//!   [`META_TIME_AXIS`] on the reference IMU's, [`META_LEVER_ARM`] and [`META_GNSS_VEL_STD`] on
+//!   GNSS fix channels. Values are JSON.
 //! * Text instead of CDR (`navsync record --encoding json`, and every recording of navsync
 //!   before CDR): message encoding `json` ([`json::to_json`](navsync_shared::json::to_json)),
 //!   schema encoding `jsonschema` named `navsync.ImuSample.v1`. Both are read.
@@ -138,6 +138,9 @@ pub const META_INITIAL_STATE: &str = "navsync.initial_state";
 pub const META_LEVER_ARM: &str = "navsync.lever_arm_m";
 /// GNSS fix channels: the receiver's velocity 1-sigma per axis, m/s, as a number.
 pub const META_GNSS_VEL_STD: &str = "navsync.gnss_vel_std_mps";
+/// The reference IMU's channel: the recording's exact time axis (an import's time tags),
+/// `navsync_estimator::settings::TimeAxis` as JSON: outputs are labelled on it.
+pub const META_TIME_AXIS: &str = "navsync.time_axis";
 
 /// A channel metadata value: `v` as compact JSON (what the `META_*` keys hold).
 pub fn metadata_value<T: serde::Serialize + ?Sized>(v: &T) -> String {

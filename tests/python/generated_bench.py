@@ -14,8 +14,12 @@
    * "software_0" and "software": `import kf-gins --no-pps --gnss-latency 0 | L`: no PPS, each
      fix stamped on receipt 0 or L s after its epoch; `replay --estimate --software-sync` (the
      estimator must find the latency itself and still give every output a GNSS time).
+   * "receipt_tags": the GNSS file rewritten with each tag L s after its epoch (a logging
+     computer's receipt times on the IMU's clock), `import kf-gins --gnss-tags receipt`,
+     `replay --estimate` with no flag: scored against the file's own truth, on its time axis.
 3. Scores each result (and KF-GINS's, with --kf-gins) with score_truth.score; also counts the
-   output rows (one per NavState with a time) against the IMU samples.
+   output rows (one per NavState with a time) against the IMU samples and measures how far
+   the output's time labels are from the input's IMU time tags (off_axis_ms).
 Exits non-zero when a step fails or a result is missing. Needs numpy.
 """
 
@@ -38,12 +42,36 @@ def rows(path):
         return sum(1 for line in f if line.strip())
 
 
-def navsync_run(a, drive, name, import_flags, replay_flags):
+def off_axis_ms(nav, imu_txt):
+    """The largest distance of an output's time label from the nearest IMU time tag, ms."""
+    with open(imu_txt) as f:
+        tags = sorted(float(line.split()[0]) for line in f if line.strip())
+    with open(nav) as f:
+        labels = [float(line.split()[1]) for line in f if line.strip()]
+    worst, j = 0.0, 0
+    for t in labels:
+        while j + 1 < len(tags) and tags[j + 1] <= t:
+            j += 1
+        d = min(abs(t - tags[j]), abs(tags[min(j + 1, len(tags) - 1)] - t))
+        worst = max(worst, d)
+    return worst * 1e3
+
+
+def late_gnss_file(src, dst, late_s):
+    """The GNSS file with every tag `late_s` after its epoch (a logging computer's receipt)."""
+    with open(src) as f, open(dst, "w") as g:
+        for line in f:
+            c = line.split()
+            if c:
+                g.write(" ".join([f"{float(c[0]) + late_s:.6f}"] + c[1:]) + "\n")
+
+
+def navsync_run(a, drive, name, import_flags, replay_flags, gnss=None):
     out = os.path.join(a.work, name)
     os.makedirs(out, exist_ok=True)
     rec = os.path.join(a.work, f"{name}.mcap")
     run([a.navsync, "import", "kf-gins", "--imu", os.path.join(drive, "imu.txt"),
-         "--gnss", os.path.join(drive, "gnss.pos"), "--truth", os.path.join(drive, "truth.nav"),
+         "--gnss", gnss or os.path.join(drive, "gnss.pos"), "--truth", os.path.join(drive, "truth.nav"),
          "--kf-gins-config", os.path.join(drive, "kf-gins.yaml"), "--out", rec, *import_flags],
         os.path.join(a.work, f"{name}-import.log"))
     summary = os.path.join(out, "summary.json")
@@ -58,6 +86,7 @@ def navsync_run(a, drive, name, import_flags, replay_flags):
     with open(summary) as f:
         s = json.load(f)
     r["rows"] = rows(nav)
+    r["off_axis_ms"] = off_axis_ms(nav, os.path.join(drive, "imu.txt"))
     r["imu_samples"] = s.get("imu_samples")
     r["gnss_fixes"] = s.get("gnss_fixes")
     r["rejected_fixes"] = s.get("rejected_fixes")
@@ -96,6 +125,12 @@ def main():
                                   ["--no-pps", "--gnss-latency", str(a.latency)],
                                   ["--software-sync"])
     res["software"]["latency_s"] = a.latency
+    # The GNSS file tagged on receipt (each tag `latency` after its epoch, the IMU and the
+    # truth on the true axis): imported as such, scored against the file's own truth.
+    late = os.path.join(a.work, "gnss-receipt-tags.pos")
+    late_gnss_file(os.path.join(drive, "gnss.pos"), late, a.latency)
+    res["receipt_tags"] = navsync_run(a, drive, "receipt_tags", ["--gnss-tags", "receipt"], [],
+                                      gnss=late)
     if a.kf_gins:
         run([a.kf_gins, os.path.join(drive, "kf-gins.yaml")], os.path.join(a.work, "kf-gins.log"))
         res["kf_gins"] = score_truth.score(
@@ -111,14 +146,15 @@ def main():
     names = {"kf_gins": "KF-GINS",
              "hardware": "navsync (PPS)",
              "software_0": "navsync (software, 0 s)",
-             "software": f"navsync (software, {a.latency:g} s)"}
-    for key in ("kf_gins", "hardware", "software_0", "software"):
+             "software": f"navsync (software, {a.latency:g} s)",
+             "receipt_tags": f"navsync (tags {a.latency:g} s late)"}
+    for key in ("kf_gins", "hardware", "software_0", "software", "receipt_tags"):
         if key not in res:
             continue
         x = res[key]
         print(f"{names[key]:28} {x['horizontal_rms_m']:9.3f} {x['height_rms_m']:12.3f} "
               f"{x['velocity_rms_m_s']:11.3f} {x['yaw_rms_deg']:11.3f} {x.get('rows', ''):>7}")
-    for key, lat in (("software_0", 0.0), ("software", a.latency)):
+    for key, lat in (("software_0", 0.0), ("software", a.latency), ("receipt_tags", a.latency)):
         d = res[key]
         print(f"software sync, receipt latency {lat:g} s: Δ estimated "
               f"{d['gnss_delay_est_s']:.4f} ± {d['gnss_delay_std_s']:.4f} s")

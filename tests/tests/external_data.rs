@@ -11,7 +11,9 @@
 //!   exact kinematics; shares no code with navsync's simulator): with PPS, horizontal and
 //!   height RMS at most KF-GINS's on the same files (measured once with KF-GINS f39bc2e and
 //!   written in tests/python/README.md; KF-GINS is not built here); in software sync with a
-//!   1.1 s receipt latency at most 1.1 × the zero-latency RMS, every output with a time.
+//!   1.1 s receipt latency at most 1.1 × the zero-latency RMS, every output with a time; the
+//!   same file with receipt tags (`import --gnss-tags receipt`) as accurate; every output
+//!   labelled with its IMU sample's own time tag (the input's axis).
 //! * Fixes at 10 Hz stamped at x.x99 s (a real u-blox receiver's epochs): labelled and fused.
 
 use std::path::{Path, PathBuf};
@@ -121,6 +123,21 @@ fn an_independent_drive_as_accurate_as_kf_gins_and_timed_in_software_sync() {
         let (rows, imu) = (f(x, &["rows"]), f(x, &["imu_samples"]));
         assert!(rows >= 0.99 * imu, "{run}: {rows} timed outputs for {imu} IMU samples");
     }
+    // Every output on the input's time axis: labelled with its IMU sample's own tag.
+    for run in ["hardware", "software_0", "software", "receipt_tags"] {
+        let off = f(&r[run], &["off_axis_ms"]);
+        assert!(off < 1e-3, "{run}: an output label {off} ms from every IMU tag");
+    }
+    // A GNSS file tagged on receipt (1.1 s late), imported as such (`--gnss-tags receipt`) and
+    // replayed with no flag: scored on the file's own axis, as good as the epoch-tagged file.
+    let late = &r["receipt_tags"];
+    let (h_late, h0) = (
+        f(late, &["horizontal_rms_m"]),
+        f(&r["software_0"], &["horizontal_rms_m"]),
+    );
+    assert!(h_late <= 1.1 * h0, "receipt tags: {h_late:.3} m vs {h0:.3} m");
+    let (d, ds) = (f(late, &["gnss_delay_est_s"]), f(late, &["gnss_delay_std_s"]));
+    assert!((d - 1.1).abs() <= 3.0 * ds, "receipt tags: Δ {d} ± {ds} s for 1.1 s");
     let ratio = f(&r, &["software_latency_rms_ratio"]);
     assert!(ratio <= 1.1, "RMS with 1.1 s latency / without: {ratio:.3}");
     let delay = f(&r, &["software", "gnss_delay_est_s"]);

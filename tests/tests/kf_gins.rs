@@ -223,6 +223,10 @@ fn kf_gins_files_round_trip_through_import_estimate_and_eval() {
             // The velocities are central differences of the positions (measured above).
             "--gnss-vel-std",
             "0.6",
+            // The simulator's IMU (a MEMS one would need more of the short drive's motion
+            // before its heading is known).
+            "--imu-model",
+            "industrial",
         ],
     );
     println!("replay --estimate over the import:\n{table}");

@@ -214,6 +214,9 @@ pub fn settings_for_recording(
     if let Some(v) = value(&imu, channels::META_INITIAL_STATE) {
         defaults.nav.initial_state = Some(serde_json::from_str(&v).map_err(|e| bad(channels::META_INITIAL_STATE, e))?);
     }
+    if let Some(v) = value(&imu, channels::META_TIME_AXIS) {
+        defaults.time.time_axis = Some(serde_json::from_str(&v).map_err(|e| bad(channels::META_TIME_AXIS, e))?);
+    }
     if let Some(v) = value(&gnss, channels::META_LEVER_ARM) {
         defaults.nav.gnss_lever_arm_m = serde_json::from_str(&v).map_err(|e| bad(channels::META_LEVER_ARM, e))?;
     }

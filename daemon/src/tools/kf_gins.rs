@@ -39,7 +39,14 @@
 //! received `--gnss-latency` (default [`FIX_LATENCY_S`]) after its epoch; one PPS edge at
 //! every whole GPS second (unless `--no-pps`), so the estimator maps host time to GNSS time
 //! exactly (hardware sync); each truth row a `SimTruth`, so `replay --estimate` reports the
-//! accuracy against it. `--kf-gins-config` stores KF-GINS's IMU noise, lever arm and initial
+//! accuracy against it.
+//!
+//! The GNSS file's tags are GNSS epochs by default (`--gnss-tags epoch`, KF-GINS's and NMEA's
+//! meaning). `--gnss-tags receipt` says they are receipt times on the IMU's clock (a logging
+//! computer's): each fix is stamped at its tag, no PPS edge is written, and the estimator finds
+//! the delay (software sync). Either way the recording declares its exact time axis
+//! (`navsync.time_axis`): the estimator labels each state with its IMU sample's own tag, so an
+//! export lies on the input's time axis. `--kf-gins-config` stores KF-GINS's IMU noise, lever arm and initial
 //! state as channel metadata, and keeps only its start/end time.
 //!
 //! A file without velocities gives fixes with speed and track from central differences of
@@ -53,7 +60,7 @@ use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::iter::Peekable;
 use std::path::{Path, PathBuf};
 
-use navsync_estimator::settings::InitialState;
+use navsync_estimator::settings::{InitialState, TimeAxis};
 use navsync_recording::{RecordingError, SampleRecorder, channels};
 
 use super::kf_gins_config::KfGinsConfig;
@@ -392,16 +399,33 @@ pub struct ImportArgs {
     /// epochs by time (instead of central differences of the positions).
     #[arg(long)]
     pub gnss_vel: Option<PathBuf>,
-    /// How long after its epoch each fix is received (its stamp), s.
-    #[arg(long, default_value_t = FIX_LATENCY_S)]
-    pub gnss_latency: f64,
-    /// No PPS edges: the recording has only receipt-stamped fixes, for the estimator's
-    /// software sync (it must find the latency itself).
+    /// What the GNSS file's time tags are: `epoch` (the GNSS epoch of each fix, in the IMU's
+    /// time scale, as KF-GINS and NMEA write them) or `receipt` (when a logging computer received
+    /// each fix, on the IMU's clock: the delay is unknown and the estimator finds it).
+    #[arg(long, value_enum, default_value_t = GnssTags::Epoch)]
+    pub gnss_tags: GnssTags,
+    /// Epoch tags: how long after its epoch each fix is received (its stamp), s
+    /// (default 0.05).
+    #[arg(long)]
+    pub gnss_latency: Option<f64>,
+    /// Epoch tags: no PPS edges, the recording has only fixes received `--gnss-latency` after
+    /// their epoch, for the estimator's software sync (it must find the latency itself).
     #[arg(long)]
     pub no_pps: bool,
     /// The output recording (MCAP).
     #[arg(short, long)]
     pub out: PathBuf,
+}
+
+/// What the time tags of a GNSS file are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum GnssTags {
+    /// The GNSS epoch of each fix, on the IMU file's time scale (KF-GINS's and NMEA's meaning):
+    /// the import adds PPS edges on whole seconds (hardware sync).
+    Epoch,
+    /// When each fix was received, on the IMU's clock (a logging computer's stamps): no PPS,
+    /// the estimator finds the delay itself (software sync).
+    Receipt,
 }
 
 /// Column order of a 13-column GNSS file.
@@ -730,7 +754,19 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         Some(p) => read_velocities(p)?,
         None => (BTreeMap::new(), None),
     };
-    let fixes = read_fixes(&args.gnss, tl, args.gnss_layout, args.gnss_latency, &velocities, span)?;
+    let (latency, no_pps) = match (args.gnss_tags, args.gnss_latency) {
+        (GnssTags::Epoch, l) => (l.unwrap_or(FIX_LATENCY_S), args.no_pps),
+        (GnssTags::Receipt, None) => (0.0, true),
+        (GnssTags::Receipt, Some(_)) => {
+            return Err(KfGinsError::Format {
+                path: args.gnss.display().to_string(),
+                line: 0,
+                problem: "--gnss-latency describes epoch tags; with --gnss-tags receipt the tags are the receipt times"
+                    .into(),
+            });
+        }
+    };
+    let fixes = read_fixes(&args.gnss, tl, args.gnss_layout, latency, &velocities, span)?;
     let vel_std = vel_file_std.or(median_vel_std(&args.gnss)?);
     let imu_service = services::imu_sample(&args.imu_id);
     let id = fixed_str::<8>(&args.imu_id);
@@ -738,7 +774,7 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
     // PPS edges at every whole GPS second of the IMU span (delivered 1 ms after the edge).
     let first_edge = (first_imu - dt).ceil() as i64;
     let last_edge = last_imu.floor() as i64;
-    let edges = if args.no_pps { 0 } else { last_edge - first_edge + 1 };
+    let edges = if no_pps { 0 } else { last_edge - first_edge + 1 };
     let pps = (first_edge..first_edge + edges.max(0)).enumerate().map(move |(i, s)| {
         let host = tl.host_ns(s as f64);
         let mut e = PpsEdge::zeroed();
@@ -768,7 +804,13 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         // Truth rows: week, seconds of week, …
         let rows = Rows::open(p, &[11])?
             .filter(move |r| r.as_ref().map_or(true, |(_, row)| row[1] >= span.0 && row[1] <= span.1));
-        streams.push((Box::new(truth_items(rows, tl, args.gnss_latency)) as Box<dyn Iterator<Item = _>>).peekable());
+        // Receipt tags: the true delay is not known to the import.
+        let true_latency = if args.gnss_tags == GnssTags::Receipt {
+            f64::NAN
+        } else {
+            latency
+        };
+        streams.push((Box::new(truth_items(rows, tl, true_latency)) as Box<dyn Iterator<Item = _>>).peekable());
     }
     let mut rec = SampleRecorder::create(&args.out)?;
     let mut stats = ImportStats {
@@ -783,6 +825,12 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         Ok(())
     };
     let fix_channel = services::gnss_fix("0");
+    // The files' time axis: the host clock of every sample is GPS time shifted; outputs keep it.
+    let axis = TimeAxis {
+        host_ns: HOST_BASE_NS,
+        gps_ns: tl.gps_ns(tl.sow0),
+    };
+    meta(&imu_service, channels::META_TIME_AXIS, channels::metadata_value(&axis))?;
     if let Some(v) = vel_std {
         meta(&fix_channel, channels::META_GNSS_VEL_STD, format!("{v}"))?;
     }

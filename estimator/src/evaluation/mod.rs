@@ -273,10 +273,14 @@ impl Evaluator {
             att_rms_deg: have.then(|| self.sum_att2.map(|s| (s / n).sqrt())),
             gnss_delay_est_s: self.last_delay.0.is_finite().then_some(self.last_delay.0),
             gnss_delay_std_s: self.last_delay.1.is_finite().then_some(self.last_delay.1),
-            gnss_delay_true_s: self.true_latency_s.map(|l| match delay_truth {
-                DelayTruth::ReceiverLatency => l,
-                DelayTruth::Zero => 0.0,
-            }),
+            // A truth that does not know the latency (an import of receipt tags) gives none.
+            gnss_delay_true_s: self
+                .true_latency_s
+                .filter(|l| l.is_finite())
+                .map(|l| match delay_truth {
+                    DelayTruth::ReceiverLatency => l,
+                    DelayTruth::Zero => 0.0,
+                }),
             rejected_fixes: counts.2,
             wall_s,
             estimator_s,

@@ -168,6 +168,8 @@ pub struct Navigator {
     counters: NavCounters,
     last_imu_ns: Option<i64>,
     last_fix_rx_ns: Option<i64>,
+    /// A fix has shown the platform moving (speed ≥ the alignment's minimum and 3 σ).
+    motion_seen: bool,
     /// Receipt of the last raw epoch (tightly coupled), host ns.
     last_ranges_rx_ns: Option<i64>,
     /// The fusion horizon in force, ns.
@@ -221,6 +223,7 @@ impl Navigator {
             counters: NavCounters::default(),
             last_imu_ns: None,
             last_fix_rx_ns: None,
+            motion_seen: false,
             last_ranges_rx_ns: None,
             horizon_ns: (cfg.fusion_horizon_s * 1e9) as i64,
             fix_delay_ns: 0,
@@ -259,6 +262,13 @@ impl Navigator {
     /// The fusion horizon in force, s (adaptive: see [`NavConfig::adaptive_horizon`]).
     pub fn horizon_s(&self) -> f64 {
         self.horizon_ns as f64 * 1e-9
+    }
+
+    /// True once a fix has shown the platform moving (speed ≥ the alignment's minimum and 3 σ
+    /// of the speed): before
+    /// that, a heading may not be observable at all.
+    pub fn motion_seen(&self) -> bool {
+        self.motion_seen
     }
 
     /// True once aligned.
@@ -303,6 +313,9 @@ impl Navigator {
     /// satellites' own measurements ([`Self::on_ranges`]) carry the same information.
     pub fn on_gnss(&mut self, obs: GnssObservation, rx_ns: i64) {
         self.last_fix_rx_ns = Some(rx_ns);
+        // Moving: faster than the alignment's minimum and than the speed's own noise (a speed
+        // from differences of noisy positions is not zero when standing).
+        self.motion_seen |= obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(3.0 * obs.vel_std_mps);
         if self.filt.is_none() {
             match &mut self.bank {
                 Some(bank) => {

@@ -53,6 +53,33 @@ crate::settings_group! {
         /// Ignore PPS: stamp fixes by the receipt of their first byte (software sync, ms-level
         /// time).
         pub software_sync: bool = false, file "timing", switch "software-sync" => true;
+        /// The input's own exact time axis (an imported file's time tags): every output is
+        /// labelled on it instead of through the clock model; declared by the recording.
+        pub time_axis: Option<TimeAxis> = None;
+    }
+}
+
+/// An exact time axis an input declares: the host clock of its samples is GPS time shifted by
+/// a constant (`gps = host_ns − host_ns₀ + gps_ns₀`), as an import of files whose time tags are
+/// GPS seconds writes it. Outputs keep that axis: the state of an IMU sample is labelled with
+/// the sample's own tag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct TimeAxis {
+    /// A host time, ns of the recording's `CLOCK_MONOTONIC`.
+    pub host_ns: i64,
+    /// The GPS time at `host_ns`, ns since the GPS epoch (1980-01-06).
+    pub gps_ns: i64,
+}
+
+impl TimeAxis {
+    /// The UTC time on this axis at host time `host_ns`, ns since the Unix epoch.
+    pub fn utc_ns_at(&self, host_ns: i64) -> i64 {
+        navsync_wire::time::utc_ns_from_gps_ns(self.gps_ns + (host_ns - self.host_ns))
+    }
+
+    /// The host time at UTC time `utc_ns` on this axis.
+    pub fn host_ns_at(&self, utc_ns: i64) -> i64 {
+        navsync_wire::time::gps_ns_from_utc_ns(utc_ns) - self.gps_ns + self.host_ns
     }
 }
 
