@@ -5,7 +5,7 @@
 //!   the host (or the navsync installation) the samples come from.
 //! * Payload: the sample as CDR with the `navsync_msgs` definitions, exactly as in the
 //!   recordings ([`navsync_shared::cdr`]).
-//! * Attachment: the sample type's layout version (`navsync.NavState.v1`), a NUL, and the
+//! * Attachment: the sample type's layout version (`navsync.NavState.v2`), a NUL, and the
 //!   exporter's per-key sequence number as a little-endian `u64` (a gap is a loss). A
 //!   subscriber whose layout differs refuses the sample and says so.
 

@@ -87,11 +87,18 @@ impl OutputCheck {
         if self.usable > 0 && self.usable as f64 >= MIN_USABLE_SHARE * expected as f64 {
             return None;
         }
-        let share = format!(
-            "only {} of {} navigation states are usable (aligned, with a GNSS time; {} more before the \
-             platform moved)",
-            self.usable, expected, self.waiting_for_motion
-        );
+        let share = if expected == 0 {
+            format!(
+                "no navigation state is usable: no fix showed the platform moving ({} states)",
+                self.waiting_for_motion
+            )
+        } else {
+            format!(
+                "only {} of {} navigation states are usable (aligned, with a GNSS time; {} more before the \
+                 platform moved)",
+                self.usable, expected, self.waiting_for_motion
+            )
+        };
         let why = if self.aligned * 2 < expected || self.aligned == 0 {
             if seen.fixes == 0 {
                 "the filter is not aligned: no GNSS fix reached the estimator (check the receiver's service \

@@ -274,7 +274,11 @@ fn encode_cdr(sample: &AnySample, out: &mut Vec<u8>) {
 
 /// Schema names of older JSON layouts that navsync still reads, with their kind: each newer
 /// layout only added fields.
-pub const OLDER_LAYOUTS: &[(&str, ServiceKind)] = &[("navsync.GnssFix.v1", ServiceKind::GnssFix)];
+pub const OLDER_LAYOUTS: &[(&str, ServiceKind)] = &[
+    ("navsync.GnssFix.v1", ServiceKind::GnssFix),
+    // v2 names the formerly reserved byte `integrity` (0 = no flag, as every v1 state was).
+    ("navsync.NavState.v1", ServiceKind::NavState),
+];
 
 /// How a channel's messages decode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -311,6 +315,9 @@ pub fn decode(ty: ChannelType, data: &[u8]) -> Result<AnySample, String> {
                             .map(AnySample::GnssFix)
                             .map_err(|e| e.to_string())
                     }
+                    ServiceKind::NavState => from_json_onto(&v, NavState::zeroed())
+                        .map(AnySample::Nav)
+                        .map_err(|e| e.to_string()),
                     _ => Err(format!("no older layout of {} is readable", ty.kind.type_name())),
                 };
             }

@@ -131,7 +131,7 @@ fn round_trip_with_summary(bytes: &[u8], encoding: Encoding, compression: ChunkC
     assert_eq!(summary.chunk_indexes.len() as u32, stats.chunk_count);
     let (topic, schema, profile) = match encoding {
         Encoding::Cdr => ("/navsync/imu/0/sample", "navsync_msgs/msg/NavState", "ros2"),
-        Encoding::Json => ("navsync/imu/0/sample", "navsync.NavState.v1", ""),
+        Encoding::Json => ("navsync/imu/0/sample", "navsync.NavState.v2", ""),
     };
     assert_eq!(summary.channels[0].topic, topic);
     assert_eq!(summary.schemas[1].name, schema);

@@ -4,7 +4,7 @@
 """navsync's shared-memory sample layouts as ctypes structures.
 
 Every class is the exact `#[repr(C)]` layout of the Rust type and has `type_name()`, the
-iceoryx2 type name including the layout version (e.g. ``navsync.NavState.v1``). The
+iceoryx2 type name including the layout version (e.g. ``navsync.NavState.v2``). The
 ``iceoryx2`` package's ``publish_subscribe(NavState)`` uses it, so Python subscribers open the
 services the navsync processes publish. Units and frames: the comment after each field.
 Times are integer nanoseconds (``host_ns``: CLOCK_MONOTONIC); frames NED and FRD; an unknown
@@ -427,8 +427,10 @@ class NavState(ctypes.Structure):
         ("imu_count", ctypes.c_uint8),
         # A `TimeStatus` as `u8`: how the time stamps of this solution are referenced.
         ("time_status", ctypes.c_uint8),
+        # The integrity monitor's flags, `INTEGRITY_*` bits (0: nothing to report; this byte was reserved before, so older writers leave it 0).
+        ("integrity", ctypes.c_uint8),
         # Reserved, zero.
-        ("reserved", (ctypes.c_char * 5)),
+        ("reserved", (ctypes.c_char * 4)),
     ]
 
     #: Size in bytes of the Rust type.
@@ -436,12 +438,12 @@ class NavState(ctypes.Structure):
     #: Alignment in bytes of the Rust type.
     RUST_ALIGN = 8
     #: Byte offset of every field in the Rust type.
-    RUST_OFFSETS = {"host_ns": 0, "utc_ns": 8, "seq": 16, "last_fix_host_ns": 24, "lat_deg": 32, "lon_deg": 40, "height_m": 48, "vel_ned_mps": 56, "rpy_rad": 80, "q_nb": 104, "gyro_body_rps": 136, "accel_body_mps2": 160, "pos_std_ned_m": 184, "vel_std_ned_mps": 208, "att_std_rad": 232, "gyro_bias_rps": 256, "accel_bias_mps2": 280, "gyro_bias_std_rps": 304, "accel_bias_std_mps2": 328, "gnss_delay_s": 352, "gnss_delay_std_s": 360, "imu": 368, "fixes_used": 624, "fixes_rejected": 628, "status": 632, "imu_count": 633, "time_status": 634, "reserved": 635}
+    RUST_OFFSETS = {"host_ns": 0, "utc_ns": 8, "seq": 16, "last_fix_host_ns": 24, "lat_deg": 32, "lon_deg": 40, "height_m": 48, "vel_ned_mps": 56, "rpy_rad": 80, "q_nb": 104, "gyro_body_rps": 136, "accel_body_mps2": 160, "pos_std_ned_m": 184, "vel_std_ned_mps": 208, "att_std_rad": 232, "gyro_bias_rps": 256, "accel_bias_mps2": 280, "gyro_bias_std_rps": 304, "accel_bias_std_mps2": 328, "gnss_delay_s": 352, "gnss_delay_std_s": 360, "imu": 368, "fixes_used": 624, "fixes_rejected": 628, "status": 632, "imu_count": 633, "time_status": 634, "integrity": 635, "reserved": 636}
 
     @staticmethod
     def type_name():
         """The iceoryx2 type name (with the layout version)."""
-        return "navsync.NavState.v1"
+        return "navsync.NavState.v2"
 
 
 class Health(ctypes.Structure):

@@ -187,3 +187,87 @@ fn fixes_at_10_hz_stamped_at_x_x99_are_labelled_and_fused() {
         );
     }
 }
+
+/// A parked vehicle (issue 34, item 5): positions only (speeds from their differences), a
+/// consumer-grade IMU, GNSS σ 2 m. The heading is not observable: nothing aligned is published,
+/// no row is exported, and the command fails saying why, instead of a heading with a small σ.
+#[test]
+fn a_parked_vehicle_publishes_no_heading_and_says_why() {
+    let env = TestEnv::new("parked");
+    let (py, target) = python_with(&env.dir, &["numpy"])
+        .unwrap_or_else(|why| panic!("cannot install numpy (needs python3, pip and PyPI or a wheel): {why}"));
+    let data = env.dir.join("drive");
+    let mut cmd = Command::new(&py);
+    cmd.arg(repo_root().join("tests/python/independent_drive.py"))
+        .arg(&data);
+    cmd.args([
+        "--static",
+        "180",
+        "--duration",
+        "180",
+        "--lat0",
+        "-23.6",
+        "--lon0",
+        "-46.6",
+        "--heading0",
+        "73.6",
+        "--gnss-sigma",
+        "2",
+        "2",
+        "4",
+        "--preset",
+        "industrial",
+        "--gyro-bias",
+        "1",
+        "--gyro-bias-instab",
+        "0.3",
+        "--accel-bias",
+        "300",
+        "--arw",
+        "0.15",
+        "--vrw",
+        "0.05",
+    ]);
+    if let Some(t) = &target {
+        cmd.env("PYTHONPATH", t);
+    }
+    let o = cmd.output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rec = env.dir.join("p.mcap");
+    let (imu, gnss) = (data.join("imu.txt"), data.join("gnss.pos"));
+    let o = env
+        .command(&["import", "kf-gins", "--imu"])
+        .arg(&imu)
+        .arg("--gnss")
+        .arg(&gnss)
+        .arg("--out")
+        .arg(&rec)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = env.dir.join("nav.txt");
+    let summary = env.dir.join("s.json");
+    let o = env
+        .command(&["replay"])
+        .arg(&rec)
+        .args(["--estimate", "--format", "kf-gins", "--out"])
+        .arg(&out)
+        .arg("--summary-json")
+        .arg(&summary)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "a parked vehicle's replay succeeded:\n{err}");
+    assert!(
+        err.contains("no fix showed the platform moving") && err.contains("heading was not observable"),
+        "{err}"
+    );
+    let s: Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(s["usable_states"], 0, "{s}");
+    let rows = std::fs::read_to_string(&out).unwrap_or_default();
+    assert!(
+        rows.lines().all(|l| l.trim().is_empty() || l.starts_with('#')),
+        "rows exported while parked:\n{}",
+        &rows[..rows.len().min(400)]
+    );
+}

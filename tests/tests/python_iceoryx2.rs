@@ -59,7 +59,7 @@ fn a_python_iceoryx2_subscriber_reads_the_live_navigation_state() {
         assert!(w[1]["host_ns"].as_i64() > w[0]["host_ns"].as_i64());
     }
     let first = &rows[0];
-    assert_eq!(first["type_name"], "navsync.NavState.v1");
+    assert_eq!(first["type_name"], "navsync.NavState.v2");
     // The Python process saw the states the estimator is publishing now.
     assert!(first["seq"].as_u64().unwrap() > nav.seq, "{first} vs seq {}", nav.seq);
     assert!((first["lat_deg"].as_f64().unwrap() - 48.137154).abs() < 0.01, "{first}");

@@ -573,6 +573,14 @@ fn imu_items(
     })
 }
 
+/// A GNSS file row's position STD north, east, down, m.
+fn row_std(row: &[f64], layout: GnssLayout) -> [f64; 3] {
+    match (row.len(), layout) {
+        (13, GnssLayout::KfGins) => [row[7], row[8], row[9]],
+        _ => [row[4], row[5], row[6]],
+    }
+}
+
 /// The fixes of a GNSS file (small: read whole), with velocities by central differences when
 /// the file has none.
 fn read_fixes(
@@ -612,12 +620,12 @@ fn read_fixes(
         f.lon_deg = row[2];
         f.alt_msl_m = row[3];
         f.geoid_sep_m = 0.0;
-        let (std, vel) = match (row.len(), layout) {
-            (13, GnssLayout::KfGins) => ([row[7], row[8], row[9]], Some([row[4], row[5], row[6]])),
-            (13, GnssLayout::Matlab) => ([row[4], row[5], row[6]], Some([row[7], row[8], row[9]])),
-            _ => ([row[4], row[5], row[6]], None),
+        let vel = match (row.len(), layout) {
+            (13, GnssLayout::KfGins) => Some([row[4], row[5], row[6]]),
+            (13, GnssLayout::Matlab) => Some([row[7], row[8], row[9]]),
+            _ => None,
         };
-        [f.std_lat_m, f.std_lon_m, f.std_alt_m] = std;
+        [f.std_lat_m, f.std_lon_m, f.std_alt_m] = row_std(row, layout);
         let vel = vel.or_else(|| velocities.get(&ms_of(t)).copied());
         // Without a velocity from the receiver: speed and track from central differences
         // (the alignment's heading), but no velocity: they carry the positions' noise,
@@ -636,7 +644,17 @@ fn read_fixes(
                 row
             };
             let dt = b[0] - a[0];
-            (dt > 0.0).then(|| ned(a, b).map(|d| d / dt))
+            let diff = (dt > 0.0).then(|| ned(a, b).map(|d| d / dt));
+            if diff.is_some() {
+                // Its noise: per axis √2·σ/dt for two positions of σ (the larger horizontal
+                // σ of the two), as a 3D speed accuracy (×√2, UBX sAcc's meaning).
+                let horizontal = |r: &[f64]| {
+                    let s = row_std(r, layout);
+                    s[0].max(s[1])
+                };
+                f.s_acc_mps = 2.0 * horizontal(a).max(horizontal(b)) / dt;
+            }
+            diff
         });
         if let Some(v) = vel {
             f.speed_mps = v[0].hypot(v[1]);

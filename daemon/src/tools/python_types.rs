@@ -6,7 +6,7 @@
 //! regenerates it and compares, and has Python report every size, alignment and offset to
 //! compare with the Rust ones.
 //!
-//! Each class carries `type_name()` (e.g. `navsync.NavState.v1`, the iceoryx2 type name): the
+//! Each class carries `type_name()` (e.g. `navsync.NavState.v2`, the iceoryx2 type name): the
 //! official `iceoryx2` Python package's `publish_subscribe(T)` takes the payload's type name
 //! from `T.type_name()` when it exists, its size from `ctypes.sizeof(T)` and its alignment from
 //! `ctypes.alignment(T)`, which is what the Rust side registers (`#[type_name(..)]`,
@@ -100,7 +100,7 @@ pub fn generate() -> String {
 """navsync's shared-memory sample layouts as ctypes structures.
 
 Every class is the exact `#[repr(C)]` layout of the Rust type and has `type_name()`, the
-iceoryx2 type name including the layout version (e.g. ``navsync.NavState.v1``). The
+iceoryx2 type name including the layout version (e.g. ``navsync.NavState.v2``). The
 ``iceoryx2`` package's ``publish_subscribe(NavState)`` uses it, so Python subscribers open the
 services the navsync processes publish. Units and frames: the comment after each field.
 Times are integer nanoseconds (``host_ns``: CLOCK_MONOTONIC); frames NED and FRD; an unknown

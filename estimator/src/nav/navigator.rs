@@ -264,7 +264,7 @@ impl Navigator {
         self.horizon_ns as f64 * 1e-9
     }
 
-    /// True once a fix has shown the platform moving (speed ≥ the alignment's minimum and 3 σ
+    /// True once a fix has shown the platform moving (speed ≥ the alignment's minimum and 5.3 σ
     /// of the speed): before
     /// that, a heading may not be observable at all.
     pub fn motion_seen(&self) -> bool {
@@ -314,8 +314,11 @@ impl Navigator {
     pub fn on_gnss(&mut self, obs: GnssObservation, rx_ns: i64) {
         self.last_fix_rx_ns = Some(rx_ns);
         // Moving: faster than the alignment's minimum and than the speed's own noise (a speed
-        // from differences of noisy positions is not zero when standing).
-        self.motion_seen |= obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(3.0 * obs.vel_std_mps);
+        // from differences of noisy positions is not zero when standing). The horizontal speed
+        // of a standing receiver with σ per axis is Rayleigh: above kσ with probability
+        // exp(−k²/2), 1e-6 per fix at k = 5.3.
+        const MOTION_SIGMAS: f64 = 5.3;
+        self.motion_seen |= obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(MOTION_SIGMAS * obs.vel_std_mps);
         if self.filt.is_none() {
             match &mut self.bank {
                 Some(bank) => {

@@ -4,7 +4,7 @@ use super::{ImuSync, MAX_IMUS};
 
 crate::sample_struct! {
     /// The estimator's navigation solution at one IMU epoch.
-    pub struct NavState = "navsync.NavState.v1" {
+    pub struct NavState = "navsync.NavState.v2" {
         /// Host time (`CLOCK_MONOTONIC` ns) of the IMU epoch this state is for.
         pub host_ns: i64,
         /// UTC of that epoch, ns since 1970 (`i64::MIN` while time is not known).
