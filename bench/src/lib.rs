@@ -26,5 +26,7 @@ pub mod ipc;
 pub mod netns;
 pub mod throughput;
 pub mod timing;
+#[cfg(test)]
+mod timing_cases;
 pub mod util;
 pub mod zenoh;
