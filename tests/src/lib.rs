@@ -6,7 +6,10 @@
 //! checks that no shared memory was left behind.
 //!
 //! The `navsync` binary is the one cargo built next to the test executable
-//! (`target/<profile>/navsync`; `cargo test --workspace` builds it), or `$NAVSYNC_BIN`.
+//! (`target/<profile>/navsync`), or `$NAVSYNC_BIN`. `cargo test --workspace` builds it, and
+//! `navsync-bench`, because the daemon and the bench crates have integration tests of their own
+//! (`daemon/tests/`, `bench/tests/`: cargo builds a package's executables for its integration
+//! tests); keep one in each.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;

@@ -1,11 +1,10 @@
 //! The estimator on the simulator, on real satellites and on data navsync did not generate:
 //! the GPS models against the simulator and gpsd, tightly against loosely coupled (offline and
-//! live), the offline tools (`import`, `replay --estimate`, `analyze`). One test binary; its
-//! tests run concurrently.
+//! live), the offline tools (`import`, `replay --estimate`). One test binary; its tests run
+//! concurrently.
 
 mod gps_sky;
 
-mod analyze_gnss_delay;
 mod external_data;
 mod kf_gins;
 mod lnav_gpsd;

@@ -8,7 +8,7 @@ fn offline_fits_and_online_estimate_find_the_receiver_latency() {
     let dir = std::env::temp_dir().join(format!("navsync-analyze-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let rec = dir.join("drive.mcap");
-    let bin = &navsync_tests::navsync_bin();
+    let bin = env!("CARGO_BIN_EXE_navsync");
     let out = Command::new(bin)
         .args(["sim", "--fast", "--record"])
         .arg(&rec)

@@ -73,7 +73,7 @@ fn pps_time_mapping_is_within_5_us_after_30_s() {
 /// labels stay right with d0 = 0.9 s ± 20 ms; d0 measured within 5 µs of the simulated latency.
 #[test]
 fn timing_benchmark_meets_the_issue_bounds() {
-    use crate::timing::{TimingCase, run_case};
+    use navsync_bench::timing::{TimingCase, run_case};
     for case in TimingCase::standard() {
         let r = run_case(&case).expect("case runs");
         println!("{}: {r:?}", case.name);
