@@ -209,8 +209,7 @@ fn publisher<'a>(
 }
 
 fn is_tty() -> bool {
-    // SAFETY: isatty only inspects the descriptor.
-    unsafe { libc::isatty(2) == 1 }
+    std::io::IsTerminal::is_terminal(&std::io::stderr())
 }
 
 fn progress(tty: bool, done: f64, rel_ns: u64, published: u64, speed: Speed, laps: u64) {
