@@ -887,8 +887,7 @@ pub fn helper_sub(a: &SubArgs) -> Result<(), IpcBenchError> {
 
 fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
     // The event wake-ups are what is measured; the pacing sleep must not add timer slack.
-    // SAFETY: prctl with an integer argument.
-    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
+    navsync_shared::pacing::minimal_timer_slack();
     let period_ns = match a.rate {
         Rate::Hz(r) => Some(1e9 / r),
         Rate::Max => None,
