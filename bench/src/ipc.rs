@@ -229,7 +229,7 @@ impl Payload for NavState {
 /// The payload's bytes, as the socket sends them.
 fn bytes_of<T: Payload>(v: &T) -> &[u8] {
     // SAFETY: every navsync sample is #[repr(C)] of integers and floats without padding
-    // (shared/tests/layout.rs), so all its bytes are initialised.
+    // (shared/src/samples/layout_contract.rs), so all its bytes are initialised.
     unsafe { std::slice::from_raw_parts((v as *const T).cast::<u8>(), size_of::<T>()) }
 }
 

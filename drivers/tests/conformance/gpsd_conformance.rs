@@ -250,8 +250,9 @@ fn compare(gpsd: &Value, fix: &GnssFix) -> (Vec<Diff>, bool) {
     (diffs, derived)
 }
 
-/// Diagnostics (`cargo test --test gpsd_conformance -- --nocapture` with): `NMEA_ALL=1`
-/// prints every unexplained mismatch, `NMEA_COUNTERS=1` the decoder's counters per capture,
+/// Diagnostics (`cargo test -p navsync-drivers --test conformance gpsd_conformance --
+/// --nocapture` with): `NMEA_ALL=1` prints every unexplained mismatch, `NMEA_COUNTERS=1` the
+/// decoder's counters per capture,
 /// `NMEA_DUMP=NAME.log` the decoder's epochs, its counters and gpsd's epochs for one capture.
 fn dump(fixes: &[GnssFix], counters: &NmeaCounters, chk: &str) {
     for f in fixes {

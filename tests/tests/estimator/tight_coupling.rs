@@ -13,7 +13,7 @@
 //!
 //! Scenarios: the full sky; an urban canyon of 120 s with the three, then two highest
 //! satellites; a full blockage of 60 s followed by one satellite (the clock in holdover).
-//! `cargo test --release -p navsync-tests --test tight_coupling -- --nocapture` prints the
+//! `cargo test --release -p navsync-tests --test estimator tight_coupling:: -- --nocapture` prints the
 //! figures of the README's table.
 
 use crate::gps_sky;

@@ -2,7 +2,7 @@
 //! IMUs at 200 Hz through the Xsens path, GNSS and PPS at 1 Hz; sim, gps, pps, 4 × imu,
 //! estimator) for `$NAVSYNC_SOAK_SECS` seconds after it is aligned (default 120, what CI runs;
 //! `NAVSYNC_SOAK_SECS=3600` is the one-hour run, on demand:
-//! `NAVSYNC_SOAK_SECS=3600 cargo test --release -p navsync-tests --test soak -- --nocapture`).
+//! `NAVSYNC_SOAK_SECS=3600 cargo test --release -p navsync-tests --test timing soak:: -- --nocapture`).
 //!
 //! * Memory flat: every child's RSS (`/proc/<pid>/status`) every 5 s; after the warm-up (the
 //!   first quarter, at least 30 s) the median of the last quarter may exceed the median of the
