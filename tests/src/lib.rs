@@ -412,7 +412,7 @@ const OWN_PROCESS_ENV: &str = "NAVSYNC_TEST_OWN_PROCESS";
 /// passes when that child passed. `true` in the child (go on with the test's body), `false` in
 /// the parent once the child passed (return); the child's output is printed as the test's.
 ///
-/// ```ignore
+/// ```text
 /// #[test]
 /// fn sigterm_is_latched() {
 ///     if !navsync_tests::in_own_process!() {
