@@ -95,8 +95,7 @@ pub enum HostError {
 fn sleeper(cpu: usize, t0: i64, period_ns: i64, n: u64) -> Result<Vec<i64>, HostError> {
     util::pin_this_thread(&[cpu]).map_err(|e| HostError::Sleeper(format!("CPU {cpu}: {e}")))?;
     // Timer slack 1 ns (default 50 µs): the lateness is then the wake-up path's alone.
-    // SAFETY: prctl on the calling thread with an integer argument.
-    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong) };
+    navsync_shared::pacing::minimal_timer_slack();
     let mut late = Vec::with_capacity(n as usize);
     for i in 1..=n as i64 {
         let target = t0 + i * period_ns;

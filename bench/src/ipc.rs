@@ -227,7 +227,7 @@ impl Payload for NavState {
 /// The payload's bytes, as the socket sends them.
 fn bytes_of<T: Payload>(v: &T) -> &[u8] {
     // SAFETY: every navsync sample is #[repr(C)] of integers and floats without padding
-    // (shared/tests/layout.rs), so all its bytes are initialised.
+    // (shared/src/samples/layout_contract.rs), so all its bytes are initialised.
     unsafe { std::slice::from_raw_parts((v as *const T).cast::<u8>(), size_of::<T>()) }
 }
 
@@ -885,8 +885,7 @@ pub fn helper_sub(a: &SubArgs) -> Result<(), IpcBenchError> {
 
 fn publish<T: Payload>(a: &PubArgs) -> Result<(), IpcBenchError> {
     // The event wake-ups are what is measured; the pacing sleep must not add timer slack.
-    // SAFETY: prctl with an integer argument.
-    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
+    navsync_shared::pacing::minimal_timer_slack();
     let period_ns = match a.rate {
         Rate::Hz(r) => Some(1e9 / r),
         Rate::Max => None,

@@ -3,7 +3,7 @@
 //! The benchmarks behind the README's performance and timing tables, as a crate of their own
 //! so the production `navsync` binary does not carry them. Each is one subcommand of the
 //! `navsync-bench` binary with one options struct, prints a table and writes JSON with
-//! `--json FILE`; `--quick` is the smoke-test size CI runs (`tests/tests/bench_smoke.rs`).
+//! `--json FILE`; `--quick` is the smoke-test size CI runs (`tests/tests/timing/bench_smoke.rs`).
 //!
 //! - [`ipc`]: publisher → subscriber latency between processes, iceoryx2 against a Unix socket.
 //! - [`e2e`]: IMU driver → estimator → subscriber latency of the live pipeline, CPU and memory.

@@ -1,5 +1,5 @@
 //! Two "hosts" on one machine: network namespaces joined by a veth pair, created and removed
-//! by the caller (root needed). Used by `navsync-bench zenoh` and tests/tests/zenoh_bridge.rs.
+//! by the caller (root needed). Used by `navsync-bench zenoh` and tests/tests/timing/zenoh_bridge.rs.
 
 use std::path::Path;
 use std::process::Command;

@@ -4,6 +4,8 @@
 //! ([`remote`]). Samples keep their time stamps as the source host made them (host-monotonic
 //! of that host, and GNSS/UTC): a remote subscriber uses the UTC fields.
 
+#![forbid(unsafe_code)]
+
 pub mod bridge;
 pub mod remote;
 pub mod wire;

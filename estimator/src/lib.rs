@@ -25,6 +25,8 @@
 //! - [`gnss`]: GNSS signal-in-space models (GPS LNAV subframe decoding, checked against gpsd),
 //!   the first pieces of tightly coupled fusion; not used by the pipeline yet.
 
+#![forbid(unsafe_code)]
+
 pub mod array;
 pub mod declare;
 pub mod evaluation;

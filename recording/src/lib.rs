@@ -32,6 +32,8 @@
 //! the operating system, so a crash or `kill -9` loses at most the last second. A clean stop
 //! writes the summary (schemas, channels, statistics, chunk indexes) and the footer.
 
+#![forbid(unsafe_code)]
+
 pub mod channels;
 mod error;
 pub mod glob;

@@ -8,7 +8,7 @@
 //! §20.3.5.2 and Table 20-XIV: parity, §20.3.3.5.2.5: the Klobuchar model), the YUMA almanac
 //! format as the US Coast Guard's NAVCEN publishes it, and the u-blox 8 / M8 protocol
 //! description (UBX-13003221: UBX-RXM-RAWX, UBX-RXM-SFRBX, "GPS L1C/A" data words);
-//! independently of the estimator's decoders and orbit model, which `tests/tests/sim_gps.rs`
+//! independently of the estimator's decoders and orbit model, which `tests/tests/estimator/sim_gps.rs`
 //! checks against.
 //!
 //! The physics of one measurement (true GPS time t of the epoch, receiver antenna r, v in ECEF):

@@ -257,8 +257,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
     let _span = info_span!("sim").entered();
     let cfg = load_config(args)?;
     // Wake-ups within µs of the requested time (the default timer slack is 50 µs).
-    // SAFETY: prctl with an integer argument.
-    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
+    navsync_shared::pacing::minimal_timer_slack();
 
     let node = IpcNode::new("sim")?;
     let mut imus = SimImuSink::open(&node, &cfg, args.imu_output, args.imu_pty_dir.as_deref())?;

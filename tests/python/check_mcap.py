@@ -1,5 +1,5 @@
 """Reads an MCAP file with the `mcap` package from PyPI (no navsync code): used by
-tests/tests/record_replay_python.rs.
+tests/tests/recording/record_replay_python.rs.
 
 Checks, with the library's CRC validation on (zstd and lz4 chunks decompressed by the
 package):

@@ -2,7 +2,7 @@
 every message of every channel, with no navsync code: navsync's own types (`navsync_msgs/...`)
 with the `ros2msg` definitions stored in the file, the standard ROS 2 types (`sensor_msgs`,
 `nav_msgs`, ...) with rosbags' built-in ROS 2 Humble type store. Used by
-tests/tests/record_replay_python.rs.
+tests/tests/recording/record_replay_python.rs.
 
 Prints a JSON report on stdout: per-topic message counts and types, and the first and last
 decoded message of each topic (floats as JSON numbers, NaN as null, arrays as lists).

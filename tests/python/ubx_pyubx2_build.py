@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Writes UBX frames built by pyubx2 for the message types the gpsd corpus lacks (NAV-VELNED,
 TIM-TM2, RXM-RAWX), so that navsync's decoders of them are cross-checked against pyubx2 like
-the others (tests/tests/ubx_pyubx2.rs). Usage: ubx_pyubx2_build.py OUT.ubx
+the others (tests/tests/drivers/ubx_pyubx2.rs). Usage: ubx_pyubx2_build.py OUT.ubx
 
 The values are drawn from a seeded generator over each field's whole range (the extremes
 included), pyubx2 serialises them from the interface description, and the file goes through

@@ -1,5 +1,5 @@
 """Decodes u-blox captures with pyubx2 (PyPI) and prints its view of every UBX frame, one JSON
-object per line, for the cross-check in tests/tests/ubx_pyubx2.rs.
+object per line, for the cross-check in tests/tests/drivers/ubx_pyubx2.rs.
 
     python3 ubx_pyubx2_dump.py CAPTURE...
 

@@ -1,7 +1,7 @@
 """Writes a ROS 2 bag (MCAP storage) with `rosbags` (PyPI): every navsync message of IN.mcap,
 deserialised and serialised again by rosbags' own CDR code with the `navsync_msgs`
 definitions found in IN's schemas; the standard ROS 2 messages are left out. Used by
-tests/tests/record_replay_python.rs to show that navsync reads bags other tools wrote.
+tests/tests/recording/record_replay_python.rs to show that navsync reads bags other tools wrote.
 
 usage: write_rosbag.py IN.mcap OUT_DIR   (OUT_DIR must not exist; rosbags creates it with
 metadata.yaml and OUT_DIR/OUT_DIR.mcap). Prints the number of messages written.

@@ -6,7 +6,10 @@
 //! checks that no shared memory was left behind.
 //!
 //! The `navsync` binary is the one cargo built next to the test executable
-//! (`target/<profile>/navsync`; `cargo test --workspace` builds it), or `$NAVSYNC_BIN`.
+//! (`target/<profile>/navsync`), or `$NAVSYNC_BIN`. `cargo test --workspace` builds it, and
+//! `navsync-bench`, because the daemon and the bench crates have integration tests of their own
+//! (`daemon/tests/`, `bench/tests/`: cargo builds a package's executables for its integration
+//! tests); keep one in each.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -387,14 +390,89 @@ pub fn leftovers(prefix: &str) -> Vec<PathBuf> {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Tests that share a test binary (one per area, `tests/tests/<area>/main.rs`).
+
+/// Serialises the tests that take it.
+static ALONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Taken first by a test that must have the machine to itself while it runs (it asserts
+/// latency, jitter or deadlines, or uses machine-wide state such as `/dev/cpu_dma_latency`):
+/// every test of `tests/tests/timing/` takes it, so they run one at a time, and cargo runs one
+/// test binary at a time. A test binary whose tests do not all take it gives no such guarantee.
+pub fn alone() -> std::sync::MutexGuard<'static, ()> {
+    ALONE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Set in the child process [`in_own_process!`] starts: the name of the one test it runs.
+const OWN_PROCESS_ENV: &str = "NAVSYNC_TEST_OWN_PROCESS";
+
+/// Runs the calling `#[test]` in a process of its own, for tests whose subject is the whole
+/// process (a signal raised in it, its alarm thread, a global allocator counting all its
+/// allocations): the test binary starts itself again with only this test (`--exact`), and
+/// passes when that child passed. `true` in the child (go on with the test's body), `false` in
+/// the parent once the child passed (return); the child's output is printed as the test's.
+///
+/// ```text
+/// #[test]
+/// fn sigterm_is_latched() {
+///     if !navsync_tests::in_own_process!() {
+///         return;
+///     }
+///     // … the test itself, alone in its process …
+/// }
+/// ```
+#[macro_export]
+macro_rules! in_own_process {
+    () => {{
+        fn here() {}
+        $crate::run_in_own_process(::std::any::type_name_of_val(&here))
+    }};
+}
+
+/// The work of [`in_own_process!`]; `here` is the type name of a function item declared in the
+/// test (`<crate>::<module>::<test>::here`).
+#[doc(hidden)]
+pub fn run_in_own_process(here: &str) -> bool {
+    // libtest names a test by its path without the crate: `<module>::<test>`.
+    let path = here
+        .strip_suffix("::here")
+        .expect("in_own_process! inside a test function");
+    let test = path.split_once("::").map_or(path, |(_, rest)| rest);
+    if std::env::var_os(OWN_PROCESS_ENV).is_some_and(|v| v == test) {
+        return true;
+    }
+    let exe = std::env::current_exe().expect("test executable path");
+    let out = Command::new(&exe)
+        .args([test, "--exact", "--test-threads=1", "--nocapture"])
+        .env(OWN_PROCESS_ENV, test)
+        .stdin(Stdio::null())
+        .output()
+        .unwrap_or_else(|e| panic!("starting {} for {test}: {e}", exe.display()));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    print!("{stdout}");
+    eprint!("{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{test} failed in its own process ({})",
+        out.status
+    );
+    assert!(
+        stdout.contains("test result: ok. 1 passed"),
+        "{test} did not run in its own process"
+    );
+    false
+}
+
+// ---------------------------------------------------------------------------------------------
 // Live pipelines, fault injection and soak measurements.
 
 /// Heap allocations counted by [`CountingAllocator`] since the process started.
 static ALLOCATIONS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 /// A global allocator that forwards to the system's and counts every allocation and
-/// reallocation, for the no-allocation tests (each such test binary installs it with
-/// `#[global_allocator] static GLOBAL: CountingAllocator = CountingAllocator;`).
+/// reallocation of the process, for the no-allocation tests (`tests/tests/process/` installs it
+/// with `#[global_allocator] static GLOBAL: CountingAllocator = CountingAllocator;` and runs
+/// each test [`in_own_process!`], so that what is counted is that test's).
 pub struct CountingAllocator;
 
 // SAFETY: forwards to the system allocator; only counts.

@@ -306,8 +306,7 @@ fn subscribe_all(node: &IpcNode, subs: &mut Vec<AnySubscriber>, refused: &mut Ha
 }
 
 fn is_tty() -> bool {
-    // SAFETY: isatty only inspects the descriptor.
-    unsafe { libc::isatty(2) == 1 }
+    std::io::IsTerminal::is_terminal(&std::io::stderr())
 }
 
 fn progress(tty: bool, elapsed_ns: i64, bytes: u64, subs: &[AnySubscriber], counts: &[u64]) {

@@ -109,8 +109,7 @@ pub struct ReplayStats {
 pub fn run(args: &ReplayArgs) -> Result<ReplayStats, ReplayError> {
     let _span = info_span!("replay").entered();
     // Wake-ups within µs of the requested time (the default timer slack is 50 µs).
-    // SAFETY: prctl with an integer argument.
-    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
+    navsync_shared::pacing::minimal_timer_slack();
     let globs: Vec<ServiceGlob> = args.services.iter().map(|s| ServiceGlob::new(s)).collect();
     let node = IpcNode::new("replay")?;
     let mut pubs: Vec<Option<AnyPublisher>> = Vec::new();
@@ -209,8 +208,7 @@ fn publisher<'a>(
 }
 
 fn is_tty() -> bool {
-    // SAFETY: isatty only inspects the descriptor.
-    unsafe { libc::isatty(2) == 1 }
+    std::io::IsTerminal::is_terminal(&std::io::stderr())
 }
 
 fn progress(tty: bool, done: f64, rel_ns: u64, published: u64, speed: Speed, laps: u64) {

@@ -16,7 +16,7 @@
 //! (`_IOWR('p', 0xa4, struct pps_fdata *)`), so the size encoded in the number is
 //! `sizeof(void *)`, not the size of the structure; [`PPS_FETCH`] etc. reproduce that quirk.
 //! The layouts and numbers are checked against the system header by
-//! `drivers/tests/pps_kernel_abi.rs`, which compiles a small C program with `cc`.
+//! `drivers/tests/conformance/pps_kernel_abi.rs`, which compiles a small C program with `cc`.
 
 use std::fs::{File, OpenOptions};
 use std::os::fd::AsRawFd;

@@ -8,7 +8,7 @@
 //! D30* is 1 (§20.3.5.2); the decoder undoes that per word and accepts a subframe only when
 //! all ten words pass the parity check. Scaling to physical
 //! units (powers of two, semicircles) is the user's: these are the raw fields, which is what
-//! gpsd prints with `"scaled":false` and what `tests/tests/lnav_gpsd.rs` compares against.
+//! gpsd prints with `"scaled":false` and what `tests/tests/estimator/lnav_gpsd.rs` compares against.
 
 /// Why a subframe was not decoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]

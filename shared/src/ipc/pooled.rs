@@ -6,7 +6,7 @@
 //! `SingleThreaded` policy is an `Rc`, so every publish allocated once. [`Pooled`] has `Rc`'s
 //! semantics (not `Send`, shared ownership within a thread) but returns a freed block to a
 //! per-thread free list of its layout and takes the next one from there: after the first
-//! loans, publishing allocates nothing (`tests/tests/no_alloc_drivers.rs`).
+//! loans, publishing allocates nothing (`tests/tests/process/no_alloc_drivers.rs`).
 
 use core::alloc::Layout;
 use core::cell::{Cell, RefCell};

@@ -18,6 +18,8 @@ mod gnss_raw;
 mod gnss_time_pulse;
 mod health;
 mod imu_sample;
+#[cfg(test)]
+mod layout_contract;
 mod nav_state;
 mod pps_edge;
 mod sim_truth;

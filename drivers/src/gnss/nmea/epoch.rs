@@ -29,7 +29,7 @@
 //!
 //! Decoding follows gpsd's `driver_nmea0183.c` where NMEA leaves room for interpretation, so
 //! that the decoder can be checked against gpsd's regression captures
-//! (`drivers/tests/gpsd_conformance.rs`): a position is taken only from a sentence that
+//! (`drivers/tests/conformance/gpsd_conformance.rs`): a position is taken only from a sentence that
 //! flags it valid; DOPs ≥ 99 are "unknown" sentinels; two-digit RMC years 80–99 are 19xx,
 //! 00–79 are 20xx; when two sentences of one epoch carry the same quantity, the later one
 //! wins. ZDA and GST carry a time of their own that need not be the epoch's (several

@@ -31,7 +31,7 @@
 //!   receiver's, NAV-TIMEGPS `leapSValid`, else the table of `navsync_shared::time`).
 //!   `gps_ns` from week and time of week, else from `utc_ns` and the leap seconds.
 //! - **mode** (gpsd's TPV mode, checked against gpsd's output in
-//!   `drivers/tests/gpsd_ubx_conformance.rs`) from `fixType`/`gpsFix`: 0 no fix → 1;
+//!   `drivers/tests/conformance/gpsd_ubx_conformance.rs`) from `fixType`/`gpsFix`: 0 no fix → 1;
 //!   1 dead reckoning only → 2 (gpsd: "consider this too as 2D"); 2 → 2; 3 and 4 (GNSS +
 //!   dead reckoning) → 3; 5 time only → 3 (a timing receiver's fixed, surveyed position, as
 //!   gpsd reports it). NAV-STATUS with `gpsFixOk` clear says no fix (gpsd too); NAV-PVT's and

@@ -8,7 +8,7 @@
 //! References: u-blox 8 / M8 Receiver Description incl. Protocol Specification
 //! (UBX-13003221); u-blox F9 HPG Interface Description (UBX-22008968); RTCM 10403.x for
 //! RTCM3 framing. Checked against gpsd's output on real captures by
-//! `drivers/tests/gpsd_ubx_conformance.rs`.
+//! `drivers/tests/conformance/gpsd_ubx_conformance.rs`.
 
 pub mod auto;
 pub mod configure;

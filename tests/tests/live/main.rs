@@ -1,0 +1,18 @@
+//! Live sets of processes and the ways in for other programs: `navsync demo`, `status`, `echo`,
+//! the Rust client API, Python over iceoryx2 and `ctypes`, `gpsd-server`, the health table, the
+//! futex wake-ups, a PPS source going silent, the systemd units and the shared memory's
+//! permissions. One test binary; its tests run concurrently, each in its own `TestEnv`.
+
+mod clients_common;
+
+mod client_api;
+mod demo;
+mod faults_pps_silence_live;
+mod gpsd_server;
+mod health_table;
+mod ipc_wake;
+mod python_iceoryx2;
+mod python_types;
+mod shm_permissions;
+mod status_echo;
+mod systemd_units;
