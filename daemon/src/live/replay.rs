@@ -113,6 +113,7 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayStats, ReplayError> {
     unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
     let globs: Vec<ServiceGlob> = args.services.iter().map(|s| ServiceGlob::new(s)).collect();
     let node = IpcNode::new("replay")?;
+    navsync_shared::sd_notify::ready(&format!("replaying {}", args.input.display()));
     let mut pubs: Vec<Option<AnyPublisher>> = Vec::new();
     let mut stats = ReplayStats::default();
     let tty = args.progress && is_tty();

@@ -685,6 +685,7 @@ pub fn run(args: &StatusArgs) -> Result<(), StatusError> {
     let interval = args.watch.unwrap_or(args.window);
     let mut reports = 0u64;
     let mut last_discovery = Instant::now();
+    navsync_shared::sd_notify::ready("status");
     loop {
         let until = st.interval_start + interval;
         while Instant::now() < until {
