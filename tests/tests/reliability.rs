@@ -268,7 +268,11 @@ fn record_stops_on_sigterm_and_sigcont_and_closes_its_recording() {
         |run| {
             let mut r = SampleReader::open(&file(run)).unwrap_or_else(|e| panic!("run {run}: {e}"));
             while r.next_sample().unwrap_or_else(|e| panic!("run {run}: {e}")).is_some() {}
-            assert_eq!(r.scan_end(), Some(&ScanEnd::Clean), "run {run}: the recording was not closed");
+            assert_eq!(
+                r.scan_end(),
+                Some(&ScanEnd::Clean),
+                "run {run}: the recording was not closed"
+            );
             assert!(r.summary().is_some(), "run {run}: no summary");
         },
     );
@@ -313,7 +317,12 @@ fn estimator_stops_on_sigterm_and_sigcont() {
 #[test]
 fn pps_stops_on_sigterm_and_sigcont() {
     let env = TestEnv::new("stoppps");
-    stops_always_stop(&env, "pps", |_| strings(&["pps", "--source", "sim", "--id", "0"]), |_| {});
+    stops_always_stop(
+        &env,
+        "pps",
+        |_| strings(&["pps", "--source", "sim", "--id", "0"]),
+        |_| {},
+    );
     env.finish();
 }
 
@@ -349,7 +358,12 @@ fn imu_stops_on_sigterm_and_sigcont() {
         &link,
     );
     let source = format!("sim:{dir_s}");
-    stops_always_stop(&env, "imu", |_| strings(&["imu", "--source", &source, "--id", "0"]), |_| {});
+    stops_always_stop(
+        &env,
+        "imu",
+        |_| strings(&["imu", "--source", &source, "--id", "0"]),
+        |_| {},
+    );
     env.finish();
 }
 
@@ -448,4 +462,259 @@ fn remove_ntp_shm(unit: u32) {
             libc::shmctl(id, libc::IPC_RMID, std::ptr::null_mut());
         }
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// gpsd-server: every port bounded.
+
+/// The port `gpsd-server --listen 127.0.0.1:0` chose (from its stderr).
+fn gpsd_port(env: &mut TestEnv, name: &str) -> u16 {
+    let t0 = Instant::now();
+    loop {
+        if let Some(l) = env.log(name).lines().find(|l| l.contains("listening on ")) {
+            return l
+                .rsplit(':')
+                .next()
+                .and_then(|p| p.trim().parse().ok())
+                .expect("a port");
+        }
+        env.assert_running();
+        assert!(t0.elapsed() < Duration::from_secs(20), "gpsd-server did not start");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Publishes an aligned `NavState` at 20 Hz from the test process (the estimator's output as
+/// gpsd-server sees it) until `stop` is set.
+fn publish_nav_states(
+    prefix: String,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<()> {
+    use navsync_shared::reflect::Reflect;
+    use navsync_shared::samples::{NavState, NavStatus};
+    std::thread::spawn(move || {
+        let node = navsync_shared::ipc::IpcNode::with_prefix("navpub", &prefix).expect("node");
+        let mut p = node
+            .publisher::<NavState>(navsync_shared::services::NAV_STATE)
+            .expect("publisher");
+        let mut n = NavState::zeroed();
+        n.status = NavStatus::Aligned as u8;
+        n.lat_deg = 48.137;
+        n.lon_deg = 11.576;
+        n.height_m = 560.0;
+        n.pos_std_ned_m = [0.5, 0.5, 1.0];
+        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+            n.host_ns = navsync_shared::time::monotonic_now_ns();
+            n.utc_ns = navsync_shared::time::realtime_now_ns();
+            p.publish(&n).expect("publishing");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    })
+}
+
+/// `gpspipe -w` against the server for `run`, in a thread: the instants TPVs arrived at.
+fn gpspipe_tpvs(port: u16, run: Duration) -> Option<std::thread::JoinHandle<Vec<Duration>>> {
+    let mut child = match Command::new("gpspipe")
+        .args(["-w", &format!("127.0.0.1:{port}")])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+    {
+        Ok(c) => c,
+        Err(e) => {
+            println!(
+                "SKIPPED the gpspipe part: gpspipe is not installed ({e}); .ci/run installs Debian's gpsd-clients"
+            );
+            return None;
+        }
+    };
+    Some(std::thread::spawn(move || {
+        let t0 = Instant::now();
+        let out = child.stdout.take().expect("stdout");
+        let killer = {
+            let pid = child.id();
+            std::thread::spawn(move || {
+                std::thread::sleep(run);
+                // SAFETY: signalling our own child by pid.
+                unsafe { libc::kill(pid as libc::pid_t, libc::SIGTERM) };
+            })
+        };
+        let mut at = Vec::new();
+        for line in BufReader::new(out).lines().map_while(Result::ok) {
+            if let Ok(v) = serde_json::from_str::<Value>(&line)
+                && v["class"] == "TPV"
+                && v["mode"] == 3
+            {
+                at.push(t0.elapsed());
+            }
+        }
+        let _ = child.wait();
+        let _ = killer.join();
+        at
+    }))
+}
+
+/// Sends `?POLL;` at about 32 KB/s and never reads, reconnecting when dropped, for `run`;
+/// returns how often the server dropped it (its requests are answered at the request rate
+/// bound, so its unread replies pass the output bound only after a minute or more).
+fn poll_flood(port: u16, run: Duration) -> std::thread::JoinHandle<u32> {
+    std::thread::spawn(move || {
+        let t0 = Instant::now();
+        let chunk = b"?POLL;".repeat(53); // 318 bytes every 10 ms
+        let mut drops = 0u32;
+        while t0.elapsed() < run {
+            let Ok(mut s) = TcpStream::connect(("127.0.0.1", port)) else {
+                std::thread::sleep(Duration::from_millis(50));
+                continue;
+            };
+            s.set_nonblocking(true).expect("nonblocking");
+            while t0.elapsed() < run {
+                match s.write(&chunk) {
+                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+                    Err(_) | Ok(0) => {
+                        drops += 1;
+                        break;
+                    }
+                    Ok(_) => {}
+                }
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        }
+        drops
+    })
+}
+
+/// Before: replies to requests bypassed the pending-output bound; one local client sending
+/// `?POLL;` at ~32 KB/s without reading took the server from 13 MB to 278 MB in 60 s and was
+/// never dropped.
+#[test]
+fn a_request_flood_keeps_gpsd_server_under_32_mb_while_gpspipe_keeps_its_tpvs() {
+    const RUN: Duration = Duration::from_secs(60);
+    let mut env = TestEnv::new("gpsdflood");
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let publisher = publish_nav_states(env.prefix.clone(), stop.clone());
+    let pid = env.spawn("gpsd", &["gpsd-server", "--listen", "127.0.0.1:0"]);
+    let port = gpsd_port(&mut env, "gpsd");
+    let watcher = gpspipe_tpvs(port, RUN);
+    let flood = poll_flood(port, RUN);
+    let t0 = Instant::now();
+    let mut max_kib = 0;
+    while t0.elapsed() < RUN {
+        max_kib = max_kib.max(rss_kib(pid).expect("gpsd-server is running"));
+        std::thread::sleep(Duration::from_millis(250));
+    }
+    let drops = flood.join().expect("flood thread");
+    println!(
+        "gpsd-server under a request flood: max RSS {} KiB over {RUN:?}, the flooder dropped {drops} times",
+        max_kib
+    );
+    assert!(max_kib < 32 * 1024, "gpsd-server grew to {max_kib} KiB");
+    if let Some(w) = watcher {
+        let at = w.join().expect("gpspipe thread");
+        let gap = at
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .chain(at.first().copied())
+            .max()
+            .unwrap_or(RUN);
+        println!("gpspipe: {} TPVs, longest gap {gap:?}", at.len());
+        assert!(at.len() >= 50, "gpspipe got {} TPVs in {RUN:?}", at.len());
+        assert!(gap < Duration::from_secs(5), "gpspipe waited {gap:?} for a TPV");
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    publisher.join().expect("publisher");
+    env.finish();
+}
+
+/// A raw client of the server.
+struct GpsdConn {
+    reader: BufReader<TcpStream>,
+    writer: TcpStream,
+}
+
+impl GpsdConn {
+    fn open(port: u16) -> Self {
+        let s = TcpStream::connect(("127.0.0.1", port)).expect("connecting");
+        s.set_read_timeout(Some(Duration::from_secs(10))).expect("timeout");
+        Self {
+            writer: s.try_clone().expect("clone"),
+            reader: BufReader::new(s),
+        }
+    }
+    fn send(&mut self, s: &str) {
+        self.writer.write_all(s.as_bytes()).expect("sending");
+    }
+    /// The next object; None at the end of the connection.
+    fn next(&mut self) -> Option<Value> {
+        let mut line = String::new();
+        match self.reader.read_line(&mut line) {
+            Ok(0) | Err(_) => None,
+            Ok(_) => Some(serde_json::from_str(&line).unwrap_or_else(|e| panic!("{e}: {line}"))),
+        }
+    }
+}
+
+/// Before: 31 idle clients held every slot forever (gpsd drops idle non-watchers after 3
+/// minutes); an unbalanced `{` swallowed every later request; `?POLL` after the estimator
+/// died answered its last state as a fix.
+#[test]
+fn idle_clients_are_closed_a_bad_brace_costs_one_request_and_a_dead_estimator_is_no_fix() {
+    let mut env = TestEnv::new("gpsdidle");
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let publisher = publish_nav_states(env.prefix.clone(), stop.clone());
+    env.spawn(
+        "gpsd",
+        &[
+            "gpsd-server",
+            "--listen",
+            "127.0.0.1:0",
+            "--max-clients",
+            "3",
+            "--idle-timeout",
+            "1",
+        ],
+    );
+    let port = gpsd_port(&mut env, "gpsd");
+
+    // Three silent clients take every slot; a fourth is turned away.
+    let mut idle: Vec<GpsdConn> = (0..3).map(|_| GpsdConn::open(port)).collect();
+    for c in &mut idle {
+        assert_eq!(c.next().expect("VERSION")["class"], "VERSION");
+    }
+    let mut fourth = GpsdConn::open(port);
+    let refused = fourth.next().expect("an answer");
+    assert_eq!(refused["class"], "ERROR", "{refused}");
+    // After the idle timeout they are closed, and a client gets in again.
+    let t0 = Instant::now();
+    for c in &mut idle {
+        assert!(c.next().is_none(), "an idle client was not closed");
+    }
+    println!("idle clients closed after {:?}", t0.elapsed());
+    assert!(t0.elapsed() < Duration::from_secs(5));
+
+    let mut c = GpsdConn::open(port);
+    assert_eq!(c.next().expect("VERSION")["class"], "VERSION");
+    // An unbalanced brace: an ERROR for that line, the next request answered.
+    c.send("?WATCH={\"enable\":true\n?POLL;\n");
+    let e = c.next().expect("an answer");
+    assert_eq!(e["class"], "ERROR", "{e}");
+    let poll = c.next().expect("the POLL after it");
+    assert_eq!(poll["class"], "POLL", "{poll}");
+    assert_eq!(
+        (poll["active"].as_u64(), poll["tpv"][0]["mode"].as_u64()),
+        (Some(1), Some(3)),
+        "{poll}"
+    );
+
+    // The estimator stops publishing: within a second, no fix.
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    publisher.join().expect("publisher");
+    std::thread::sleep(Duration::from_millis(800));
+    c.send("?POLL;\n");
+    let poll = c.next().expect("the POLL");
+    assert_eq!(poll["active"], 0, "{poll}");
+    assert_eq!(poll["tpv"][0]["mode"], 1, "{poll}");
+    assert!(poll["tpv"][0].get("lat").is_none(), "{poll}");
+    drop((c, fourth, idle));
+    env.finish();
 }
