@@ -203,8 +203,14 @@ mod tests {
     #[test]
     fn the_base_follows_systemd_then_xdg_then_the_user() {
         let p = |s: &str| Some(PathBuf::from(s));
-        assert_eq!(base_from(p("/run/navsync:/run/other"), p("/run/user/7"), 7), PathBuf::from("/run/navsync"));
-        assert_eq!(base_from(None, p("/run/user/7"), 7), PathBuf::from("/run/user/7/navsync"));
+        assert_eq!(
+            base_from(p("/run/navsync:/run/other"), p("/run/user/7"), 7),
+            PathBuf::from("/run/navsync")
+        );
+        assert_eq!(
+            base_from(None, p("/run/user/7"), 7),
+            PathBuf::from("/run/user/7/navsync")
+        );
         assert_eq!(base_from(None, p("relative"), 7), PathBuf::from("/tmp/navsync-7"));
         assert_eq!(base_from(p(""), None, 0), PathBuf::from("/run/navsync"));
         assert_eq!(base_from(None, None, 1000), PathBuf::from("/tmp/navsync-1000"));
@@ -228,7 +234,10 @@ mod tests {
         assert!(matches!(e, RuntimeDirError::Io { .. }), "{e}");
         std::fs::create_dir(made.join("c")).unwrap();
         let e = check(&made.join("c"), HINT).unwrap_err();
-        assert!(matches!(e, RuntimeDirError::WritableByOthers { ref path, .. } if *path == made), "{e}");
+        assert!(
+            matches!(e, RuntimeDirError::WritableByOthers { ref path, .. } if *path == made),
+            "{e}"
+        );
 
         let link = scratch.join("link");
         std::os::unix::fs::symlink(&made, &link).unwrap();

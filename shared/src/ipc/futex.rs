@@ -200,9 +200,8 @@ pub fn termination_wakes_sleepers() -> bool {
                 previous.store(old.sa_sigaction, Ordering::SeqCst);
                 takes_info.store(old.sa_flags & libc::SA_SIGINFO != 0, Ordering::SeqCst);
                 let mut new = old;
-                new.sa_sigaction = on_termination
-                    as extern "C" fn(libc::c_int, *mut libc::siginfo_t, *mut libc::c_void)
-                    as usize;
+                new.sa_sigaction =
+                    on_termination as extern "C" fn(libc::c_int, *mut libc::siginfo_t, *mut libc::c_void) as usize;
                 new.sa_flags = (old.sa_flags | libc::SA_SIGINFO) & !libc::SA_RESETHAND;
                 if libc::sigaction(sig, &new, core::ptr::null_mut()) != 0 {
                     return false;
