@@ -718,3 +718,182 @@ fn idle_clients_are_closed_a_bad_brace_costs_one_request_and_a_dead_estimator_is
     drop((c, fourth, idle));
     env.finish();
 }
+
+// ---------------------------------------------------------------------------------------------
+// Files safe by construction.
+
+/// A recording of `seconds` of the simulated drive (`sim --fast --record`; about 20 s per
+/// chunk).
+fn simulated_recording(env: &TestEnv, name: &str, seconds: u32) -> PathBuf {
+    let rec = env.dir.join(name);
+    let o = env
+        .command(&[
+            "sim",
+            "--fast",
+            "--duration",
+            &seconds.to_string(),
+            "--imus",
+            "1",
+            "--record",
+            &rec.display().to_string(),
+        ])
+        .output()
+        .expect("navsync sim --fast");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    rec
+}
+
+/// Runs `navsync ARGS` to its end; (success, stderr).
+fn run_navsync(env: &TestEnv, args: &[&str]) -> (bool, String) {
+    let o = env.command(args).output().expect("running navsync");
+    (o.status.success(), String::from_utf8_lossy(&o.stderr).into_owned())
+}
+
+/// The samples of a recording, and how its scan ended.
+fn count_samples(path: &Path) -> (usize, Option<ScanEnd>) {
+    let mut r = SampleReader::open(path).unwrap_or_else(|e| panic!("{e}"));
+    let mut n = 0;
+    while r.next_sample().unwrap_or_else(|e| panic!("{e}")).is_some() {
+        n += 1;
+    }
+    (n, r.scan_end().cloned())
+}
+
+/// Temporary files (`.NAME.PID.N.tmp`) left in `dir`.
+fn temporaries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .expect("listing")
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect()
+}
+
+/// Before: `convert b.mcap ./b.mcap` exited 0 leaving 6 414 of 60 236 samples (the check
+/// compared path strings); `replay X --estimate --out X` replaced a 3.4 MB input with 141 KB;
+/// `report X -o X` overwrote it with HTML; `record` silently truncated an existing file.
+#[test]
+fn no_command_destroys_its_own_input_or_an_existing_recording() {
+    let env = TestEnv::new("samefile");
+    let rec = simulated_recording(&env, "b.mcap", 20);
+    let original = std::fs::read(&rec).expect("the recording");
+    let (samples, _) = count_samples(&rec);
+    let dir = env.dir.display().to_string();
+    let link = env.dir.join("hard.mcap");
+    std::fs::hard_link(&rec, &link).expect("hard link");
+    let sym = env.dir.join("sym.mcap");
+    std::os::unix::fs::symlink(&rec, &sym).expect("symlink");
+    let (rec_s, link_s, sym_s) = (
+        rec.display().to_string(),
+        link.display().to_string(),
+        sym.display().to_string(),
+    );
+    let dotted = format!("{dir}/./b.mcap");
+    let untouched = |what: &str| {
+        assert_eq!(
+            std::fs::read(&rec).expect("the recording"),
+            original,
+            "{what} changed the input"
+        );
+        assert!(temporaries(&env.dir).is_empty(), "{what}: {:?}", temporaries(&env.dir));
+    };
+    for out in [&dotted, &link_s, &sym_s] {
+        for force in [false, true] {
+            let mut args = vec!["convert", &rec_s, out.as_str()];
+            if force {
+                args.push("--force");
+            }
+            let (ok, err) = run_navsync(&env, &args);
+            assert!(
+                !ok && err.contains("same file"),
+                "convert to {out} (force {force}): {err}"
+            );
+            untouched("convert");
+
+            let mut args = vec!["replay", &rec_s, "--estimate", "--out", out.as_str()];
+            if force {
+                args.push("--force");
+            }
+            let (ok, err) = run_navsync(&env, &args);
+            assert!(!ok && err.contains("same file"), "replay --out {out}: {err}");
+            untouched("replay --estimate --out");
+
+            let mut args = vec!["report", &rec_s, "-o", out.as_str()];
+            if force {
+                args.push("--force");
+            }
+            let (ok, err) = run_navsync(&env, &args);
+            assert!(!ok && err.contains("same file"), "report -o {out}: {err}");
+            untouched("report -o");
+        }
+    }
+    // Another existing recording is replaced only with --force.
+    let other = env.dir.join("other.mcap");
+    std::fs::copy(&rec, &other).expect("copy");
+    let other_s = other.display().to_string();
+    let (ok, err) = run_navsync(&env, &["convert", &rec_s, &other_s, "--encoding", "json"]);
+    assert!(!ok && err.contains("--force"), "{err}");
+    assert_eq!(std::fs::read(&other).expect("other"), original);
+    let (ok, err) = run_navsync(&env, &["report", &rec_s, "-o", &other_s]);
+    assert!(!ok && err.contains("--force"), "{err}");
+    let (ok, err) = run_navsync(&env, &["convert", &rec_s, &other_s, "--encoding", "json", "--force"]);
+    assert!(ok, "{err}");
+    assert_eq!(count_samples(&other), (samples, Some(ScanEnd::Clean)));
+    untouched("convert --force to another file");
+    // record refuses an existing file, and replaces it only with --force.
+    let (ok, err) = run_navsync(&env, &["record", &other_s, "--duration", "0.2"]);
+    assert!(!ok && err.contains("--force"), "{err}");
+    assert_eq!(count_samples(&other).0, samples, "record truncated an existing file");
+    let (ok, err) = run_navsync(&env, &["record", &other_s, "--duration", "0.2", "--force"]);
+    assert!(ok, "{err}");
+    assert_eq!(count_samples(&other).1, Some(ScanEnd::Clean));
+    untouched("record");
+    env.finish();
+}
+
+/// Before: one corrupt chunk made the whole recording unreadable, and `convert` left a
+/// 1.7 MB partial output.
+#[test]
+fn a_corrupt_chunk_is_skipped_and_reported_and_the_rest_is_used() {
+    let env = TestEnv::new("badchunk");
+    let rec = simulated_recording(&env, "drive.mcap", 70);
+    let (samples, _) = count_samples(&rec);
+    let chunks = {
+        let r = SampleReader::open(&rec).expect("reader");
+        r.summary().expect("a summary").chunk_indexes.clone()
+    };
+    assert!(chunks.len() >= 3, "{} chunks", chunks.len());
+    let victim = &chunks[1];
+    let mut bytes = std::fs::read(&rec).expect("bytes");
+    let at = (victim.chunk_start_offset + victim.chunk_length / 2) as usize;
+    bytes[at] ^= 0xA5;
+    let bad = env.dir.join("bad.mcap");
+    std::fs::write(&bad, &bytes).expect("writing the damaged copy");
+    let out = env.dir.join("converted.mcap");
+    let (bad_s, out_s) = (bad.display().to_string(), out.display().to_string());
+    let (ok, err) = run_navsync(&env, &["convert", &bad_s, &out_s]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains(&format!("corrupt chunk at byte offset {}", victim.chunk_start_offset)),
+        "{err}"
+    );
+    println!("{}", err.trim());
+    let (kept, end) = count_samples(&out);
+    assert_eq!(end, Some(ScanEnd::Clean));
+    assert!(kept < samples && kept > samples / 3, "{kept} of {samples}");
+    println!("{kept} of {samples} samples converted around the corrupt chunk");
+    // The other offline readers use the rest too.
+    let (ok, err) = run_navsync(&env, &["replay", &bad_s, "--estimate"]);
+    assert!(err.contains("corrupt chunk"), "{ok} {err}");
+    // A file that cannot be read at all leaves no output behind.
+    let mut broken = bytes.clone();
+    broken.truncate(12);
+    broken.extend_from_slice(&[0xFF; 64]);
+    std::fs::write(&bad, &broken).expect("writing");
+    let out2 = env.dir.join("never.mcap");
+    let (ok, err) = run_navsync(&env, &["convert", &bad_s, &out2.display().to_string()]);
+    assert!(!ok, "{err}");
+    assert!(!out2.exists(), "a failed convert left {}", out2.display());
+    assert!(temporaries(&env.dir).is_empty(), "{:?}", temporaries(&env.dir));
+    env.finish();
+}

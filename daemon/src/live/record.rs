@@ -18,7 +18,8 @@
 //! The open chunk is closed and handed to the operating system at least every
 //! [`CHUNK_INTERVAL`], so `kill -9` loses at most that much; SIGINT/SIGTERM or the end of
 //! `--duration` close the file with its summary and footer. Progress (elapsed time, file size,
-//! messages per service) goes to stderr.
+//! messages per service) goes to stderr. An existing file at OUT is refused (it used to be
+//! truncated silently) unless `--force`.
 
 use std::collections::HashSet;
 use std::io::Write;
@@ -57,6 +58,9 @@ pub struct Options {
     /// Encoding and standard messages.
     #[command(flatten)]
     pub format: crate::config::recording::RecordingFlags,
+    /// Replace an existing file at OUT (without it, an existing file is refused).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Runs `navsync record`: flags, else `[outputs.record]`.
@@ -79,6 +83,7 @@ pub fn main(opts: Options, cfg: &crate::config::Loaded) -> anyhow::Result<()> {
         progress: true,
         metadata,
         options: opts.format.options(&cfg.config.recording),
+        force: opts.force,
     })
     .with_context(|| format!("recording {}", out.display()))?;
     Ok(())
@@ -100,6 +105,8 @@ pub struct RecordArgs {
     pub metadata: Vec<(String, &'static str, String)>,
     /// Encoding, compression, standard messages.
     pub options: navsync_recording::RecordingOptions,
+    /// Replace an existing file at `out` (else it is refused).
+    pub force: bool,
 }
 
 /// Errors of `navsync record`.
@@ -160,7 +167,9 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
     let r_msgs = health.rate("messages")?;
 
     // The file appears once the initial subscriptions exist: from then on nothing is missed.
-    let mut rec = SampleRecorder::create_with(&args.out, args.options.clone())?;
+    // It is created exclusively (an existing file is refused unless --force): a recording
+    // grows at its own name, readable while it is written.
+    let mut rec = SampleRecorder::create_live(&args.out, args.force, args.options.clone())?;
     for (service, key, value) in &args.metadata {
         rec.set_channel_metadata(service, key, value)?;
     }

@@ -173,6 +173,9 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayStats, ReplayError> {
                 args.input.display()
             );
         }
+        for c in reader.skipped_chunks() {
+            warn!("{}: {c}; replayed the rest", args.input.display());
+        }
         if args.progress {
             progress(tty, 1.0, 0, stats.published, args.speed, stats.laps);
         }
