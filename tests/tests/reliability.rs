@@ -897,3 +897,56 @@ fn a_corrupt_chunk_is_skipped_and_reported_and_the_rest_is_used() {
     assert!(temporaries(&env.dir).is_empty(), "{:?}", temporaries(&env.dir));
     env.finish();
 }
+
+// ---------------------------------------------------------------------------------------------
+// Serial input.
+
+/// Before: the baud hunt's log always said `from=9600`, whichever rate it was leaving.
+#[test]
+fn the_baud_hunt_logs_the_rate_it_leaves() {
+    let mut env = TestEnv::new("baudlog");
+    // Bytes with no frame of any protocol in them (no '$', no 0xB5 0x62, no 0xD3).
+    let garbage: Vec<u8> = (0..4096u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .map(|b| if matches!(b, b'$' | 0xB5 | 0xD3) { b'x' } else { b })
+        .collect();
+    let capture = env.dir.join("garbage.bin");
+    std::fs::write(&capture, garbage).expect("capture");
+    let link = env.dir.join("gnss0");
+    let (cap_s, link_s) = (capture.display().to_string(), link.display().to_string());
+    helper(
+        &mut env,
+        "feed",
+        &["feed", &cap_s, "--pty", "--link", &link_s, "--loop", "--baud", "9600"],
+        &link,
+    );
+    let log_path = env.dir.join("gnss-info.log");
+    let mut gnss = env
+        .command(&["gnss", "--port", &link_s, "--baud", "auto", "--id", "0"])
+        .env("RUST_LOG", "info")
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&log_path).expect("log"))
+        .spawn()
+        .expect("navsync gnss");
+    let t0 = Instant::now();
+    let switches = || {
+        std::fs::read_to_string(&log_path)
+            .unwrap_or_default()
+            .lines()
+            .filter(|l| l.contains("hunting on"))
+            .map(str::to_string)
+            .collect::<Vec<_>>()
+    };
+    while switches().len() < 2 && t0.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // SAFETY: signalling our own child by pid.
+    unsafe { libc::kill(gnss.id() as libc::pid_t, libc::SIGTERM) };
+    assert!(gnss.wait().expect("gnss").success());
+    let s = switches();
+    println!("{}", s.join("\n"));
+    assert!(s.len() >= 2, "{s:?}");
+    assert!(s[0].contains("from=9600") && s[0].contains("to=4800"), "{}", s[0]);
+    assert!(s[1].contains("from=4800") && s[1].contains("to=38400"), "{}", s[1]);
+    env.finish();
+}
