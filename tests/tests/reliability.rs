@@ -950,3 +950,80 @@ fn the_baud_hunt_logs_the_rate_it_leaves() {
     assert!(s[1].contains("from=4800") && s[1].contains("to=38400"), "{}", s[1]);
     env.finish();
 }
+
+// ---------------------------------------------------------------------------------------------
+// The configuration reader.
+
+/// Runs `navsync ARGS` with a deadline; (exited in time, success, stderr, the largest RSS
+/// seen in KiB). A process still running at the deadline is killed.
+fn run_bounded(env: &TestEnv, args: &[&str], deadline: Duration) -> (bool, bool, String, u64) {
+    let err_path = env.dir.join("bounded.err");
+    // No backtrace: resolving one in a debug build takes ~400 MB, which is not the reader's.
+    let mut child = env
+        .command(args)
+        .env("RUST_BACKTRACE", "0")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&err_path).expect("stderr file"))
+        .spawn()
+        .expect("navsync");
+    let t0 = Instant::now();
+    let mut max_kib = 0;
+    let status = loop {
+        if let Ok(Some(st)) = child.try_wait() {
+            break Some(st);
+        }
+        max_kib = max_kib.max(rss_kib(child.id()).unwrap_or(0));
+        if t0.elapsed() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let err = std::fs::read_to_string(&err_path).unwrap_or_default();
+    (status.is_some(), status.is_some_and(|s| s.success()), err, max_kib)
+}
+
+/// Before: a configuration from /dev/zero or /dev/urandom grew to 8.1 / 4.5 GB in 20 s, a
+/// FIFO blocked forever, a 10 MB value was echoed whole to stderr.
+#[test]
+fn the_configuration_reader_refuses_devices_fifos_and_huge_files_and_cuts_what_it_echoes() {
+    let env = TestEnv::new("configbound");
+    let fifo = env.dir.join("fifo.toml");
+    let c = std::ffi::CString::new(fifo.display().to_string()).expect("path");
+    // SAFETY: mkfifo with a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let fifo_s = fifo.display().to_string();
+    for (file, want) in [
+        ("/dev/zero", "not a regular file"),
+        ("/dev/urandom", "not a regular file"),
+        (fifo_s.as_str(), "not a regular file"),
+    ] {
+        let (in_time, ok, err, kib) = run_bounded(&env, &["--config", file, "check-config"], Duration::from_secs(5));
+        assert!(in_time, "--config {file}: still running after 5 s ({kib} KiB)");
+        assert!(!ok && err.contains(want), "--config {file}: {err}");
+        assert!(kib < 64 * 1024, "--config {file}: {kib} KiB");
+    }
+    let huge = env.dir.join("huge.toml");
+    std::fs::write(&huge, format!("[logging]\nlevel = \"{}\"\n", "x".repeat(10 << 20))).expect("writing");
+    let (in_time, ok, err, _) = run_bounded(
+        &env,
+        &["--config", &huge.display().to_string(), "check-config"],
+        Duration::from_secs(10),
+    );
+    assert!(in_time && !ok, "{err}");
+    assert!(err.contains("more than"), "{}", tail(&err, 500));
+    assert!(err.len() < 4096, "{} bytes of stderr", err.len());
+    let value = env.dir.join("value.toml");
+    std::fs::write(&value, format!("[imu.0]\nsource = \"{}\"\n", "y".repeat(500_000))).expect("writing");
+    let (in_time, ok, err, _) = run_bounded(
+        &env,
+        &["--config", &value.display().to_string(), "check-config"],
+        Duration::from_secs(10),
+    );
+    assert!(in_time && !ok, "{err}");
+    assert!(err.len() < 4096, "{} bytes of stderr: {}", err.len(), tail(&err, 300));
+    println!("{}", err.trim());
+    env.finish();
+}
