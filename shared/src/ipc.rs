@@ -121,8 +121,8 @@ pub enum IpcError {
     /// A name was not acceptable to iceoryx2.
     #[error("invalid name `{0}`")]
     InvalidName(String),
-    /// iceoryx2's root directory is not safe to use ([`root_dir`]).
-    #[error("iceoryx2's root directory: {0}")]
+    /// iceoryx2's root directory is not safe to use ([`root_dir`]); the error names it.
+    #[error(transparent)]
     RuntimeDir(#[from] crate::runtime_dir::RuntimeDirError),
 }
 

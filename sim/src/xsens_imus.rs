@@ -133,7 +133,7 @@ pub enum SimImuSinkError {
         source: std::io::Error,
     },
     /// The directory of the links is not safe to use.
-    #[error("the IMU pseudo-terminals' directory: {0}")]
+    #[error("the IMU pseudo-terminals' directory")]
     Dir(#[from] navsync_shared::runtime_dir::RuntimeDirError),
 }
 

@@ -13,7 +13,7 @@
 //! iceoryx2 0.10's signal record, which keeps only the last signal, lost the SIGTERM to the
 //! SIGCONT and the processes spun at 100 % CPU.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{BufRead, BufReader, Write};
 use std::net::TcpStream;
 use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 
 use navsync_recording::SampleReader;
 use navsync_recording::mcap_reader::ScanEnd;
-use navsync_tests::{TestEnv, corpus_dir, navsync_bin, process_state, rss_kib};
+use navsync_tests::{TestEnv, corpus_dir, process_state, rss_kib};
 use serde_json::Value;
 
 /// The longest a stop may take, from the first signal to the process's exit.
@@ -1025,5 +1025,216 @@ fn the_configuration_reader_refuses_devices_fifos_and_huge_files_and_cuts_what_i
     assert!(in_time && !ok, "{err}");
     assert!(err.len() < 4096, "{} bytes of stderr: {}", err.len(), tail(&err, 300));
     println!("{}", err.trim());
+    env.finish();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Status, the NTP SHM segment, runtime directories.
+
+/// `navsync status --json` once; its processes by name: (state, why).
+fn status_processes(env: &TestEnv) -> Vec<(String, String, String)> {
+    let o = env
+        .command(&["status", "--json", "--window", "0.5"])
+        .output()
+        .expect("navsync status");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: Value = serde_json::from_slice(&o.stdout).expect("status JSON");
+    v["processes"]
+        .as_array()
+        .expect("processes")
+        .iter()
+        .map(|p| {
+            (
+                p["name"].as_str().unwrap_or("").to_string(),
+                p["state"].as_str().unwrap_or("").to_string(),
+                p["why"].as_str().unwrap_or("").to_string(),
+            )
+        })
+        .collect()
+}
+
+fn state_of(list: &[(String, String, String)], name_start: &str) -> Option<(String, String)> {
+    list.iter()
+        .find(|(n, _, _)| n.starts_with(name_start))
+        .map(|(_, s, w)| (s.clone(), w.clone()))
+}
+
+/// Before: `status` showed a SIGSTOPped process as alive, and a killed one simply vanished.
+#[test]
+fn status_marks_a_stopped_process_stalled_and_a_killed_one_gone() {
+    let mut env = TestEnv::new("statusgone");
+    env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
+    env.spawn("echo", &["echo", "navsync/nav/state"]);
+    let t0 = Instant::now();
+    loop {
+        let p = status_processes(&env);
+        if state_of(&p, "pps-0").is_some() && state_of(&p, "echo-").is_some() {
+            assert_eq!(state_of(&p, "pps-0").map(|s| s.0).as_deref(), Some("alive"), "{p:?}");
+            break;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(20), "not listed: {p:?}");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    env.signal("pps", libc::SIGSTOP);
+    env.signal("echo", libc::SIGSTOP);
+    std::thread::sleep(Duration::from_millis(3500));
+    let p = status_processes(&env);
+    println!("stopped: {p:?}");
+    assert_eq!(state_of(&p, "pps-0").map(|s| s.0).as_deref(), Some("stalled"), "{p:?}");
+    assert_eq!(state_of(&p, "echo-").map(|s| s.0).as_deref(), Some("stalled"), "{p:?}");
+    env.signal("pps", libc::SIGCONT);
+    env.signal("echo", libc::SIGCONT);
+    env.kill9("echo");
+    let p = status_processes(&env);
+    println!("killed: {p:?}");
+    let (state, why) = state_of(&p, "echo-").expect("the killed echo is listed");
+    assert_eq!(state, "gone", "{why}");
+    assert_eq!(state_of(&p, "pps-0").map(|s| s.0).as_deref(), Some("alive"), "{p:?}");
+    env.finish();
+}
+
+/// Creates NTP SHM unit `unit`'s segment of `size` bytes, owned by `uid`, mode `mode`.
+fn make_ntp_shm(unit: u32, size: usize, uid: u32, mode: u16) {
+    let key = 0x4e54_5030i32.wrapping_add(unit as i32);
+    // SAFETY: System V shm calls on this test's own key; `ds` is a plain struct.
+    unsafe {
+        let id = libc::shmget(key, size, libc::IPC_CREAT | libc::IPC_EXCL | i32::from(mode));
+        assert!(id >= 0, "shmget: {}", std::io::Error::last_os_error());
+        let mut ds: libc::shmid_ds = std::mem::zeroed();
+        assert_eq!(libc::shmctl(id, libc::IPC_STAT, &mut ds), 0);
+        ds.shm_perm.uid = uid;
+        ds.shm_perm.mode = mode;
+        assert_eq!(
+            libc::shmctl(id, libc::IPC_SET, &mut ds),
+            0,
+            "{}",
+            std::io::Error::last_os_error()
+        );
+    }
+}
+
+/// Before: a pre-existing segment of the wrong size failed with "shmget: Invalid argument"
+/// and no hint; one owned by another user with mode 0666 was attached silently.
+#[test]
+fn ntpshm_refuses_a_segment_of_the_wrong_size_or_another_owner_and_says_what_to_do() {
+    let env = TestEnv::new("shmcheck");
+    let unit = 50_000 + std::process::id() % 10_000;
+    let unit_s = unit.to_string();
+    remove_ntp_shm(unit);
+    make_ntp_shm(unit, 16, 0, 0o600);
+    let (in_time, ok, err, _) = run_bounded(&env, &["ntpshm", "--unit", &unit_s], Duration::from_secs(10));
+    remove_ntp_shm(unit);
+    assert!(in_time && !ok, "{err}");
+    assert!(err.contains("16 bytes") && err.contains("ipcrm -M"), "{err}");
+    println!("{}", err.trim());
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } == 0 {
+        make_ntp_shm(unit, 96, 65_534, 0o666);
+        let (in_time, ok, err, _) = run_bounded(&env, &["ntpshm", "--unit", &unit_s], Duration::from_secs(10));
+        remove_ntp_shm(unit);
+        assert!(in_time && !ok, "a segment of uid 65534 was used: {err}");
+        assert!(err.contains("uid 65534"), "{err}");
+        println!("{}", err.trim());
+    } else {
+        println!("SKIPPED the foreign-owner part: it needs root to give a segment away");
+    }
+    env.finish();
+}
+
+/// Before: a pre-created iceoryx2 root (or runtime folder) owned by another user with mode
+/// 0777 was used silently: its owner could read the service descriptions or put their own in.
+#[test]
+fn a_pre_created_world_writable_runtime_directory_is_refused_with_a_message_naming_it() {
+    let env = TestEnv::new("rootdir");
+    // SAFETY: geteuid has no preconditions.
+    let root_user = unsafe { libc::geteuid() } == 0;
+    let xdg = env.dir.join("xdg");
+    let planted = xdg.join("navsync");
+    std::fs::create_dir_all(planted.join("iceoryx2")).expect("dirs");
+    for d in [&xdg, &planted, &planted.join("iceoryx2")] {
+        std::fs::set_permissions(d, std::os::unix::fs::PermissionsExt::from_mode(0o777)).expect("chmod");
+    }
+    std::fs::set_permissions(&xdg, std::os::unix::fs::PermissionsExt::from_mode(0o700)).expect("chmod");
+    if root_user {
+        let c = std::ffi::CString::new(planted.join("iceoryx2").display().to_string()).expect("path");
+        // SAFETY: chown with a valid path, to nobody.
+        assert_eq!(unsafe { libc::chown(c.as_ptr(), 65_534, 65_534) }, 0);
+    }
+    // (success, stderr); a process still running after 10 s (it used the directory and waits
+    // for samples) is killed and counts as a failure to refuse.
+    let run = |extra_env: &[(&str, &Path)], args: &[&str]| {
+        let err_path = env.dir.join("run.err");
+        let mut c = env.command(args);
+        c.env_remove("NAVSYNC_IPC_ROOT").env_remove("RUNTIME_DIRECTORY");
+        for (k, v) in extra_env {
+            c.env(k, v);
+        }
+        let mut child = c
+            .env("RUST_BACKTRACE", "0")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&err_path).expect("stderr file"))
+            .spawn()
+            .expect("navsync");
+        let t0 = Instant::now();
+        let ok = loop {
+            if let Ok(Some(st)) = child.try_wait() {
+                break st.success();
+            }
+            if t0.elapsed() > Duration::from_secs(10) {
+                let _ = child.kill();
+                let _ = child.wait();
+                break false;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        (ok, std::fs::read_to_string(&err_path).unwrap_or_default())
+    };
+    // iceoryx2's root under $XDG_RUNTIME_DIR/navsync/iceoryx2, planted 0777 (and another
+    // user's when we can): refused, naming it.
+    let root = planted.join("iceoryx2");
+    let (ok, err) = run(
+        &[("XDG_RUNTIME_DIR", &xdg)],
+        &["echo", "navsync/nav/state", "--count", "1"],
+    );
+    assert!(!ok, "a planted root was used: {err}");
+    assert!(err.contains(&root.display().to_string()), "{err}");
+    println!("{}", err.trim());
+    // The same as $NAVSYNC_IPC_ROOT.
+    let (ok, err) = run(
+        &[("NAVSYNC_IPC_ROOT", &root)],
+        &["echo", "navsync/nav/state", "--count", "1"],
+    );
+    assert!(!ok && err.contains(&root.display().to_string()), "{err}");
+    // The simulator's IMU links in a planted folder.
+    let (ok, err) = run(
+        &[],
+        &[
+            "sim",
+            "--imus",
+            "1",
+            "--imu-output",
+            "xsens",
+            "--imu-pty-dir",
+            &planted.display().to_string(),
+            "--duration",
+            "1",
+        ],
+    );
+    assert!(!ok && err.contains(&planted.display().to_string()), "{err}");
+    // A fresh one is made owner-only and used.
+    let fresh = env.dir.join("fresh");
+    std::fs::create_dir(&fresh).expect("dir");
+    std::fs::set_permissions(&fresh, std::os::unix::fs::PermissionsExt::from_mode(0o700)).expect("chmod");
+    let (ok, err) = run(&[("XDG_RUNTIME_DIR", &fresh)], &["status", "--window", "0.1"]);
+    assert!(ok, "{err}");
+    let made = fresh.join("navsync/iceoryx2");
+    let mode = std::os::unix::fs::PermissionsExt::mode(&std::fs::metadata(&made).expect("made").permissions());
+    assert_eq!(mode & 0o027, 0, "{mode:o}");
+    for f in navsync_tests::prefixed_files(&env.prefix) {
+        if f.starts_with(&fresh) {
+            let _ = std::fs::remove_file(f);
+        }
+    }
     env.finish();
 }

@@ -175,7 +175,7 @@ pub enum ImuError {
     #[error(transparent)]
     Health(#[from] navsync_shared::health_reporter::HealthError),
     /// The simulated devices' directory is not safe to use.
-    #[error("the simulated IMUs' directory: {0}")]
+    #[error("the simulated IMUs' directory")]
     SimDir(#[from] navsync_shared::runtime_dir::RuntimeDirError),
 }
 
