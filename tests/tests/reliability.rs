@@ -1238,3 +1238,29 @@ fn a_pre_created_world_writable_runtime_directory_is_refused_with_a_message_nami
     }
     env.finish();
 }
+
+/// Before: no unit bounded its memory (gpsd-server, which any local user can connect to,
+/// grew to 278 MB). `systemd/check-units` checks the same.
+#[test]
+fn every_unit_bounds_its_memory() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../systemd");
+    let mut units = 0;
+    for e in std::fs::read_dir(&dir).expect("systemd/").flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if !name.ends_with(".service") {
+            continue;
+        }
+        units += 1;
+        let text = std::fs::read_to_string(e.path()).expect("unit");
+        let max = text
+            .lines()
+            .find_map(|l| l.strip_prefix("MemoryMax="))
+            .unwrap_or_else(|| panic!("{name} sets no MemoryMax="));
+        let mib: u64 = max
+            .strip_suffix('M')
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{name}: MemoryMax={max}, expected a size in M"));
+        assert!((32..=1024).contains(&mib), "{name}: MemoryMax={max}");
+    }
+    assert!(units >= 8, "{units} units");
+}
