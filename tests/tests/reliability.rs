@@ -77,19 +77,19 @@ impl ReadySocket {
 #[derive(Debug, Clone, Copy)]
 enum StopSequence {
     /// SIGTERM, SIGCONT: `systemctl stop` (KillSignal=SIGTERM, then SIGCONT) and `timeout`.
-    TermCont,
+    Systemctl,
     /// SIGSTOP first, then SIGTERM, SIGCONT: systemd stopping a stopped service.
-    StoppedTermCont,
+    WhileStopped,
     /// SIGINT, SIGCONT: Ctrl-C of a job that was continued.
-    IntCont,
+    CtrlC,
 }
 
 impl StopSequence {
     fn of_run(i: usize) -> Self {
         match i % 3 {
-            0 => Self::TermCont,
-            1 => Self::StoppedTermCont,
-            _ => Self::IntCont,
+            0 => Self::Systemctl,
+            1 => Self::WhileStopped,
+            _ => Self::CtrlC,
         }
     }
 
@@ -102,8 +102,8 @@ impl StopSequence {
             unsafe { libc::kill(pid as libc::pid_t, s) };
         };
         let signals: &[libc::c_int] = match self {
-            Self::TermCont => &[libc::SIGTERM, libc::SIGCONT],
-            Self::StoppedTermCont => {
+            Self::Systemctl => &[libc::SIGTERM, libc::SIGCONT],
+            Self::WhileStopped => {
                 kill(libc::SIGSTOP);
                 let t0 = Instant::now();
                 while process_state(pid) != Some('T') && t0.elapsed() < Duration::from_secs(2) {
@@ -111,7 +111,7 @@ impl StopSequence {
                 }
                 &[libc::SIGTERM, libc::SIGCONT]
             }
-            Self::IntCont => &[libc::SIGINT, libc::SIGCONT],
+            Self::CtrlC => &[libc::SIGINT, libc::SIGCONT],
         };
         let t0 = Instant::now();
         for &s in signals {
