@@ -221,7 +221,8 @@ pub struct NtpShmOutput {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RecordOutput {
-    /// Output file (MCAP).
+    /// Output file (MCAP); `{start}` becomes the UTC start time, so a restarted service writes
+    /// a new file (an existing file is never overwritten).
     pub path: PathBuf,
     /// Services or patterns (default `navsync/**`).
     #[serde(default)]

@@ -675,11 +675,17 @@ fn poll_reply(latest: &Latest, now_ns: i64) -> Value {
     })
 }
 
+/// A command name as echoed in an `ERROR`: at most 32 characters (a name can be as long as
+/// the request line).
+fn shown(name: &str) -> &str {
+    name.get(..32).unwrap_or(name)
+}
+
 /// Answers the commands of one client.
 fn handle(c: &mut Client, cmds: impl IntoIterator<Item = Command>, latest: &Latest, now_ns: i64) {
     for cmd in cmds {
         match (cmd.name.as_str(), &cmd.arg) {
-            (_, Some(Value::Null)) => c.queue(&error(&format!("Invalid {} argument", cmd.name)).to_string()),
+            (_, Some(Value::Null)) => c.queue(&error(&format!("Invalid {} argument", shown(&cmd.name))).to_string()),
             ("VERSION", _) => c.queue(&version().to_string()),
             ("DEVICES", _) => {
                 c.queue(&json!({"class": "DEVICES", "devices": [device(&latest.activated())]}).to_string())
@@ -697,7 +703,7 @@ fn handle(c: &mut Client, cmds: impl IntoIterator<Item = Command>, latest: &Late
                 c.queue(&watch_json(c.watch).to_string());
             }
             ("POLL", _) => c.queue(&poll_reply(latest, now_ns).to_string()),
-            (other, _) => c.queue(&error(&format!("Unrecognized request '{other}'")).to_string()),
+            (other, _) => c.queue(&error(&format!("Unrecognized request '{}'", shown(other))).to_string()),
         }
     }
 }

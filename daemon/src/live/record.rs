@@ -46,7 +46,8 @@ pub const DEFAULT_SERVICES: &str = "navsync/**";
 /// `navsync record`: navsync services into an MCAP file until Ctrl-C/SIGTERM or --duration.
 #[derive(Debug, Clone, clap::Args)]
 pub struct Options {
-    /// Output file (MCAP) [default: [outputs.record].path].
+    /// Output file (MCAP) [default: [outputs.record].path]; `{start}` in it becomes the UTC
+    /// start time (`20261204T170525Z`), so every run gets a file of its own.
     pub out: Option<PathBuf>,
     /// Services to record: names or patterns (`*` within a segment, `**` across)
     /// [default: [outputs.record].services, else navsync/**].
@@ -70,6 +71,7 @@ pub fn main(opts: Options, cfg: &crate::config::Loaded) -> anyhow::Result<()> {
     let Some(out) = opts.out.or_else(|| r.map(|r| r.path.clone())) else {
         anyhow::bail!("no output file, and no [outputs.record] in {}", cfg.shown());
     };
+    let out = with_start_time(&out, realtime_now_ns());
     let services = if opts.services.is_empty() {
         r.map(|r| r.services.clone()).unwrap_or_default()
     } else {
@@ -270,6 +272,22 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
     Ok(stats)
 }
 
+/// `path` with every `{start}` replaced by the UTC time `utc_ns` as `YYYYMMDDTHHMMSSZ` (a
+/// service restarted after a crash then writes a new file instead of meeting its last one).
+pub fn with_start_time(path: &std::path::Path, utc_ns: i64) -> PathBuf {
+    let text = path.to_string_lossy();
+    if !text.contains("{start}") {
+        return path.to_path_buf();
+    }
+    let stamp: String = navsync_shared::time::format_rfc3339_ms(utc_ns)
+        .chars()
+        .take(19)
+        .filter(|c| !matches!(c, '-' | ':'))
+        .chain(['Z'])
+        .collect();
+    PathBuf::from(text.replace("{start}", &stamp))
+}
+
 fn ns(d: Duration) -> i64 {
     d.as_nanos() as i64
 }
@@ -337,4 +355,18 @@ fn progress(tty: bool, elapsed_ns: i64, bytes: u64, subs: &[AnySubscriber], coun
         let _ = writeln!(err, "{line}");
     }
     let _ = err.flush();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn start_in_the_path_becomes_the_utc_start_time() {
+        let t = 1_796_403_925_562_000_000; // 2026-12-04T17:05:25.562Z
+        let p = with_start_time(std::path::Path::new("/var/lib/navsync/navsync-{start}.mcap"), t);
+        assert_eq!(p, PathBuf::from("/var/lib/navsync/navsync-20261204T170525Z.mcap"));
+        let plain = std::path::Path::new("/tmp/x.mcap");
+        assert_eq!(with_start_time(plain, t), plain);
+    }
 }

@@ -14,7 +14,8 @@
 //!   [`UBX_COVER_NS`] of them; it stops navigating when none of the last [`UBX_WINDOW`] had
 //!   one (the receiver was reconfigured). A few stray or forged UBX frames never cover
 //!   enough epochs to take over (three used to suppress the real NMEA fixes for ~13 s); an
-//!   NMEA epoch that began before UBX took over is still reported.
+//!   NMEA epoch that began before UBX took over is still reported, unless a UBX epoch of the
+//!   same time of day was emitted already (the same receiver epoch: reported once).
 //!
 //! The fixes emitted are numbered anew (`stamp.seq` 0, 1, 2, … whichever protocol each came
 //! from), so a gap in the sequence is a lost sample as everywhere else.
@@ -97,11 +98,26 @@ struct UbxVote {
     navigates: bool,
     /// Since when, host ns (an NMEA epoch that began before is still reported).
     since_ns: i64,
+    /// Times of day (ns) of the last UBX epochs emitted, newest first.
+    ubx_tods: [Option<i64>; 4],
 }
 
 impl UbxVote {
     fn ubx_solution(&mut self, host_ns: i64) {
         self.last_ubx_ns = Some(host_ns);
+    }
+
+    /// A UBX epoch was emitted.
+    fn ubx_epoch(&mut self, tod_ns: i64) {
+        if tod_ns >= 0 {
+            self.ubx_tods.rotate_right(1);
+            self.ubx_tods[0] = Some(tod_ns);
+        }
+    }
+
+    /// True if a UBX epoch of this time of day was emitted lately.
+    fn reported_by_ubx(&self, tod_ns: i64) -> bool {
+        tod_ns >= 0 && self.ubx_tods.iter().flatten().any(|&t| (t - tod_ns).abs() < 1_000_000)
     }
 
     /// An NMEA epoch began at `host_ns`: its vote; true if it is to be dropped.
@@ -122,7 +138,8 @@ impl UbxVote {
 impl AutoDecoder {
     /// An NMEA epoch: emitted unless UBX navigates.
     fn nmea_fix(vote: &mut UbxVote, suppressed: &mut u64, fix: &GnssFix, out: &mut impl FnMut(&GnssFix)) {
-        if vote.nmea_epoch(fix.stamp.host_ns) {
+        let navigates = vote.nmea_epoch(fix.stamp.host_ns);
+        if navigates || vote.reported_by_ubx(fix.tod_ns) {
             *suppressed += 1;
         } else {
             out(fix);
@@ -152,7 +169,10 @@ impl GnssDecoder for AutoDecoder {
         } = self;
         let out = &mut |fix: &GnssFix| Self::renumbered(emitted, fix, out);
         ubx.push_events(bytes, read_host_ns, ns_per_byte, &mut |ev| match ev {
-            Event::Fix(fix) => out(fix),
+            Event::Fix(fix) => {
+                vote.ubx_epoch(fix.tod_ns);
+                out(fix)
+            }
             Event::Extra(x) => extra(x),
             Event::NavSolution { host_ns } => vote.ubx_solution(host_ns),
             Event::Nmea { text, host_ns } => {
@@ -174,7 +194,10 @@ impl GnssDecoder for AutoDecoder {
             emitted,
         } = self;
         let out = &mut |fix: &GnssFix| Self::renumbered(emitted, fix, out);
-        ubx.flush(out);
+        ubx.flush(&mut |fix: &GnssFix| {
+            vote.ubx_epoch(fix.tod_ns);
+            out(fix)
+        });
         nmea.flush(&mut |fix| Self::nmea_fix(vote, suppressed, fix, out));
     }
 
