@@ -214,6 +214,7 @@ pub fn run(args: &FeedArgs) -> Result<FeedStats, FeedError> {
         let _ = out.flush();
     }
     info!(kind = ?kind, chunks = chunks.len(), lap_s, "feeding");
+    navsync_shared::sd_notify::ready(&format!("feeding {}", pty.path().display()));
 
     let mut stats = FeedStats::default();
     if args.wait_reader {

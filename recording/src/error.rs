@@ -46,6 +46,22 @@ pub enum RecordingError {
         /// What was wrong.
         problem: String,
     },
+    /// The output is one of the inputs (same device and inode, whatever the paths say).
+    #[error(
+        "{output} is the same file as the input {input}: refused (writing it would destroy the input; choose another output)"
+    )]
+    SameFile {
+        /// The output asked for.
+        output: PathBuf,
+        /// The input it is.
+        input: PathBuf,
+    },
+    /// The output is an existing recording.
+    #[error("{path} exists: refused, it would be overwritten (--force replaces it)")]
+    Exists {
+        /// The file.
+        path: PathBuf,
+    },
     /// A service name that navsync does not know, or a sample of the wrong type for a channel.
     #[error("{path}: {problem}")]
     Usage {

@@ -8,6 +8,8 @@
 //! 3. [`mcap_writer`], [`mcap_reader`]: the container, through the `mcap` crate.
 //! 4. [`ros_std`]: the standard ROS 2 messages written next to navsync's own (`--ros-std`).
 //! 5. [`ports`], [`glob`]: what the record and replay processes need besides (pacing: `navsync_shared::pacing`).
+//! 6. [`output`]: how every command writes a file (a temporary file renamed into place, inputs
+//!    compared by device and inode, an existing recording replaced only with `--force`).
 //!
 //! # Time stamps of the messages
 //!
@@ -39,6 +41,7 @@ mod error;
 pub mod glob;
 pub mod mcap_reader;
 pub mod mcap_writer;
+pub mod output;
 pub mod ports;
 pub mod ros_std;
 pub mod sample_file;

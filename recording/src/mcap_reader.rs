@@ -13,9 +13,12 @@
 //!
 //! A file whose writer died (no Data End, summary or footer; perhaps a partial last chunk)
 //! is not an error: the scan yields every complete chunk and then reports
-//! [`ScanEnd::Truncated`]. A damaged record inside the file (a chunk whose CRC does not match,
-//! a field that overruns its record) is an error naming the byte offset reached. Nothing in a
-//! file makes the reader panic.
+//! [`ScanEnd::Truncated`]. A damaged chunk (its CRC does not match, it does not decompress, a
+//! record in it overruns it) is skipped whole, none of its messages given out, and reported
+//! with its byte offset and the time range of the messages it held
+//! ([`McapReader::skipped_chunks`]); the rest of the file is read. Any other damaged record
+//! (outside a chunk, where its length cannot be trusted to find the next one) is an error
+//! naming the byte offset reached. Nothing in a file makes the reader panic.
 
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
@@ -164,6 +167,41 @@ pub enum ScanEnd {
     },
 }
 
+/// A chunk the reader skipped because it was damaged.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SkippedChunk {
+    /// File offset of the Chunk record.
+    pub offset: u64,
+    /// Length of the Chunk record, prefix included.
+    pub length: u64,
+    /// Log time range (ns) of the messages it held: the summary's chunk index when the file
+    /// has one, else the chunk's own header (which may be damaged too).
+    pub message_start_time: u64,
+    /// See `message_start_time`.
+    pub message_end_time: u64,
+    /// What was wrong.
+    pub problem: String,
+}
+
+impl std::fmt::Display for SkippedChunk {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let t = |ns: u64| match i64::try_from(ns) {
+            // log_time is UTC-like in navsync's recordings; anything before 2000 is shown raw.
+            Ok(v) if v > 946_684_800_000_000_000 => navsync_shared::time::format_rfc3339_ms(v),
+            _ => format!("{ns} ns"),
+        };
+        write!(
+            f,
+            "skipped a corrupt chunk at byte offset {} ({} bytes; messages logged {} to {}): {}",
+            self.offset,
+            self.length,
+            t(self.message_start_time),
+            t(self.message_end_time),
+            self.problem
+        )
+    }
+}
+
 /// A streaming MCAP reader.
 pub struct McapReader<R: Read + Seek> {
     src: R,
@@ -183,6 +221,12 @@ pub struct McapReader<R: Read + Seek> {
     /// Its records not handed out yet: (opcode, body range in `chunk`), in order.
     pending: std::collections::VecDeque<(u8, core::ops::Range<usize>)>,
     end: Option<ScanEnd>,
+    /// File offset of the next record the linear reader hands out.
+    next_record_offset: u64,
+    /// The chunk `pending` comes from, to skip it whole if one of its records is damaged.
+    pending_chunk: Option<SkippedChunk>,
+    /// The damaged chunks skipped so far.
+    skipped: Vec<SkippedChunk>,
 }
 
 impl McapReader<BufReader<File>> {
@@ -260,6 +304,9 @@ impl<R: Read + Seek> McapReader<R> {
             chunk: Vec::new(),
             pending: std::collections::VecDeque::new(),
             end: None,
+            next_record_offset: MAGIC.len() as u64,
+            pending_chunk: None,
+            skipped: Vec::new(),
         };
         r.summary = r.read_summary()?;
         if let Some(s) = &r.summary {
@@ -321,6 +368,27 @@ impl<R: Read + Seek> McapReader<R> {
     /// How the scan ended, once [`next_message`](Self::next_message) returned `None`.
     pub fn scan_end(&self) -> Option<&ScanEnd> {
         self.end.as_ref()
+    }
+
+    /// The damaged chunks skipped so far, in file order.
+    pub fn skipped_chunks(&self) -> &[SkippedChunk] {
+        &self.skipped
+    }
+
+    /// Skips the chunk `info` (its records not given out), reporting it.
+    fn skip_chunk(&mut self, mut info: SkippedChunk, problem: String) {
+        self.pending.clear();
+        self.pending_chunk = None;
+        if let Some(ci) = self
+            .summary
+            .as_ref()
+            .and_then(|s| s.chunk_indexes.iter().find(|c| c.chunk_start_offset == info.offset))
+        {
+            info.message_start_time = ci.message_start_time;
+            info.message_end_time = ci.message_end_time;
+        }
+        info.problem = problem;
+        self.skipped.push(info);
     }
 
     /// A channel seen so far (or in the summary).
@@ -454,11 +522,24 @@ impl<R: Read + Seek> McapReader<R> {
                 let chunk = core::mem::take(&mut self.chunk);
                 let step = self.record(opcode, &chunk[range]);
                 self.chunk = chunk;
-                match step? {
-                    Some(step) => return Ok(Some(step)),
-                    None => continue,
+                match step {
+                    Ok(Some(step)) => return Ok(Some(step)),
+                    Ok(None) => continue,
+                    Err(e) => match self.pending_chunk.take() {
+                        // A record of a chunk: the chunk goes, the file goes on.
+                        Some(info) => {
+                            let problem = match &e {
+                                RecordingError::Corrupt { record, problem, .. } => format!("{record}: {problem}"),
+                                other => other.to_string(),
+                            };
+                            self.skip_chunk(info, problem);
+                            continue;
+                        }
+                        None => return Err(e),
+                    },
                 }
             }
+            self.pending_chunk = None;
             if self.end.is_some() {
                 return Ok(None);
             }
@@ -488,9 +569,26 @@ impl<R: Read + Seek> McapReader<R> {
                     self.fed += n as u64;
                 }
                 LinearReadEvent::Record { data, opcode } => {
+                    let offset = self.next_record_offset;
+                    let length = 9 + data.len() as u64;
+                    self.next_record_offset += length;
                     if opcode == mcap::records::op::CHUNK {
-                        let r = unpack_chunk(data, &mut self.chunk, &mut self.pending);
-                        r.map_err(|e| self.corrupt("Chunk", e))?;
+                        let time = |i: usize| {
+                            data.get(i..i + 8)
+                                .and_then(|b| b.try_into().ok())
+                                .map_or(0, u64::from_le_bytes)
+                        };
+                        let info = SkippedChunk {
+                            offset,
+                            length,
+                            message_start_time: time(0),
+                            message_end_time: time(8),
+                            problem: String::new(),
+                        };
+                        match unpack_chunk(data, &mut self.chunk, &mut self.pending) {
+                            Ok(()) => self.pending_chunk = Some(info),
+                            Err(problem) => self.skip_chunk(info, problem),
+                        }
                         continue;
                     }
                     let body = data.to_vec();

@@ -11,6 +11,7 @@ use super::channels::{self, Encoding, LIBRARY, META_LAYOUT, META_QOS, PROFILE, Q
 use super::error::RecordingError;
 use super::mcap_reader::{McapReader, ScanEnd, SummarySection};
 use super::mcap_writer::{ChannelId, ChunkCompression, DEFAULT_CHUNK_SIZE, McapWriter, SchemaId};
+use super::output::{OutputFile, Overwrite};
 use super::ros_std::{RosFrames, RosStd, StdType};
 use navsync_shared::samples::AnySample;
 use navsync_shared::services::ServiceKind;
@@ -58,15 +59,52 @@ pub struct SampleRecorder<W: Write + Seek = BufWriter<File>> {
     ros_std: Option<StdChannels>,
 }
 
-impl SampleRecorder<BufWriter<File>> {
-    /// Creates (or truncates) `path` and writes the file header, with the default options.
-    pub fn create(path: &Path) -> Result<Self, RecordingError> {
-        Self::create_with(path, RecordingOptions::default())
+impl SampleRecorder<BufWriter<OutputFile>> {
+    /// A recording made by a command (an offline tool): written to a temporary file beside
+    /// `target` and renamed over it by [`close`](Self::close), so that `target` is never opened
+    /// for writing; refused if `target` is one of `rules.inputs` or an existing recording
+    /// without `rules.force` ([`crate::output`]). Dropped without `close`, nothing changes.
+    pub fn create(target: &Path, rules: &Overwrite<'_>, options: RecordingOptions) -> Result<Self, RecordingError> {
+        let f = OutputFile::create(target, rules)?;
+        Self::new(BufWriter::with_capacity(256 * 1024, f), target, options)
     }
 
-    /// Creates (or truncates) `path` and writes the file header.
-    pub fn create_with(path: &Path, options: RecordingOptions) -> Result<Self, RecordingError> {
-        let f = File::create(path).map_err(|e| RecordingError::io(path, "creating", e))?;
+    /// Closes the recording properly (summary, footer), syncs it and renames it into place.
+    pub fn close(self) -> Result<(), RecordingError> {
+        let path = self.path.clone();
+        let w = self.finish()?;
+        let f = w
+            .into_inner()
+            .map_err(|e| RecordingError::io(&path, "flushing", e.into_error()))?;
+        f.commit()
+    }
+}
+
+impl SampleRecorder<BufWriter<File>> {
+    /// A live recording (`navsync record`): written at `path` itself, so it can be read while
+    /// it grows and a `kill -9` loses at most the open chunk. Created exclusively: an existing
+    /// file is refused, unless `force`, which removes it first (a reader that has it open
+    /// keeps its data).
+    pub fn create_live(path: &Path, force: bool, options: RecordingOptions) -> Result<Self, RecordingError> {
+        if force && let Ok(m) = std::fs::symlink_metadata(path) {
+            if !m.is_file() {
+                return Err(RecordingError::Usage {
+                    path: path.to_path_buf(),
+                    problem: "exists and is not a regular file: refused as an output".into(),
+                });
+            }
+            std::fs::remove_file(path).map_err(|e| RecordingError::io(path, "removing the old file", e))?;
+        }
+        let f = File::options()
+            .write(true)
+            .create_new(true)
+            .open(path)
+            .map_err(|e| match e.kind() {
+                std::io::ErrorKind::AlreadyExists => RecordingError::Exists {
+                    path: path.to_path_buf(),
+                },
+                _ => RecordingError::io(path, "creating", e),
+            })?;
         Self::new(BufWriter::with_capacity(256 * 1024, f), path, options)
     }
 
@@ -319,6 +357,12 @@ impl<R: Read + Seek> SampleReader<R> {
                     .map(|c| c.metadata.clone())
             })
             .unwrap_or_default()
+    }
+
+    /// Damaged chunks skipped so far (their messages are not given out; the rest of the file
+    /// is read): where, which time range, why.
+    pub fn skipped_chunks(&self) -> &[super::mcap_reader::SkippedChunk] {
+        self.mcap.skipped_chunks()
     }
 
     /// Channels skipped so far: (topic, reason).

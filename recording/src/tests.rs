@@ -250,8 +250,19 @@ fn a_truncated_file_yields_every_complete_chunk() {
     assert_eq!(prev, all.len());
 }
 
+/// Reads every sample of `bytes`; the samples and the chunks skipped.
+fn read_skipping(bytes: &[u8]) -> (Vec<Read>, Vec<super::mcap_reader::SkippedChunk>, ScanEnd) {
+    let mcap = McapReader::new(Cursor::new(bytes), Path::new("mem.mcap")).unwrap();
+    let mut r = SampleReader::from_mcap(mcap);
+    let mut out = Vec::new();
+    while let Some(s) = r.next_sample().unwrap() {
+        out.push((s.service.to_string(), s.sample, s.log_time, s.publish_time));
+    }
+    (out, r.skipped_chunks().to_vec(), r.scan_end().cloned().unwrap())
+}
+
 #[test]
-fn a_damaged_chunk_is_an_error_naming_the_file() {
+fn a_damaged_chunk_is_skipped_with_its_time_range_and_the_rest_is_read() {
     for compression in [ChunkCompression::None, ChunkCompression::Zstd] {
         let mut bytes = recording_with(
             20,
@@ -260,32 +271,36 @@ fn a_damaged_chunk_is_an_error_naming_the_file() {
                 ..options(1000)
             },
         );
-        let mcap = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap")).unwrap();
-        let second = mcap.summary().unwrap().chunk_indexes[1].clone();
+        let all = keys(&read_all(&bytes).unwrap().0);
+        let chunks = mcap_chunks(&bytes);
+        assert!(chunks.len() >= 3, "{compression:?}: {} chunks", chunks.len());
+        let second = chunks[1].clone();
+        let in_second = chunk_message_count(&bytes, &second);
         // Flip a byte inside the second chunk's records.
         let at = (second.chunk_start_offset + second.chunk_length - 10) as usize;
         bytes[at] ^= 0x55;
-        let err = read_all(&bytes).unwrap_err();
-        match &err {
-            RecordingError::Corrupt { offset, problem, .. } => {
-                assert!(*offset > second.chunk_start_offset, "{err}");
-                assert!(!problem.is_empty());
-            }
-            e => panic!("{e}"),
-        }
-        assert!(err.to_string().starts_with("mem.mcap: corrupt"), "{err}");
-        // No message of the damaged chunk was given out: chunks are checked before use.
-        let mcap = McapReader::new(Cursor::new(&bytes[..]), Path::new("mem.mcap")).unwrap();
-        let mut r = SampleReader::from_mcap(mcap);
-        let mut n = 0;
-        while let Ok(Some(_)) = r.next_sample() {
-            n += 1;
-        }
+        let (got, skipped, end) = read_skipping(&bytes);
+        assert_eq!(end, ScanEnd::Clean, "{compression:?}");
+        assert_eq!(skipped.len(), 1, "{compression:?}: {skipped:?}");
+        let s = &skipped[0];
+        assert_eq!((s.offset, s.length), (second.chunk_start_offset, second.chunk_length));
         assert_eq!(
-            n,
-            chunk_message_count(&bytes, &mcap_chunks(&bytes)[0]),
-            "{compression:?}"
+            (s.message_start_time, s.message_end_time),
+            (second.message_start_time, second.message_end_time),
+            "the time range from the summary's chunk index"
         );
+        assert!(!s.problem.is_empty());
+        let shown = s.to_string();
+        assert!(
+            shown.contains(&format!("byte offset {}", second.chunk_start_offset)),
+            "{shown}"
+        );
+        assert!(shown.contains("2023-11-14T22:13:20"), "{shown}");
+        // Every message of the other chunks, in order; none of the damaged one.
+        assert_eq!(got.len(), all.len() - in_second, "{compression:?}");
+        let first = chunk_message_count(&bytes, &chunks[0]);
+        assert_eq!(keys(&got)[..first], all[..first]);
+        assert_eq!(keys(&got)[first..], all[first + in_second..]);
     }
     // A summary that does not match its CRC is an error at the footer.
     let mut bytes = recording(5, 1000);
@@ -428,7 +443,7 @@ fn a_string_longer_than_its_record_is_an_error_not_an_allocation() {
 }
 
 #[test]
-fn a_record_longer_than_its_chunk_is_an_error_not_a_panic() {
+fn a_record_longer_than_its_chunk_skips_the_chunk_not_a_panic() {
     // Found by the fuzzer (mcap_reader): an uncompressed chunk without a CRC whose first
     // record claims more bytes than the chunk holds made mcap 0.26's chunk reader overflow.
     let mut bytes = recording_with(
@@ -438,11 +453,15 @@ fn a_record_longer_than_its_chunk_is_an_error_not_a_panic() {
             ..options(1000)
         },
     );
-    let first = mcap_chunks(&bytes)[0].chunk_start_offset as usize;
+    let chunks = mcap_chunks(&bytes);
+    let first = chunks[0].chunk_start_offset as usize;
     let content = first + 9;
     bytes[content + 24..content + 28].fill(0); // no CRC
     let records = content + 8 * 3 + 4 + 4 + 8; // empty compression string
     bytes[records + 1..records + 9].copy_from_slice(&0xFFFF_FFFFu64.to_le_bytes());
-    let err = read_all(&bytes).unwrap_err();
-    assert!(err.to_string().contains("overruns the chunk"), "{err}");
+    let (got, skipped, _) = read_skipping(&bytes);
+    assert_eq!(skipped.len(), 1, "{skipped:?}");
+    assert!(skipped[0].problem.contains("overruns the chunk"), "{:?}", skipped[0]);
+    let total: usize = chunks.iter().map(|c| chunk_message_count(&bytes, c)).sum();
+    assert_eq!(got.len(), total - chunk_message_count(&bytes, &chunks[0]));
 }

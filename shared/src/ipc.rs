@@ -61,16 +61,25 @@ pub const WAIT_SLICE: Duration = Duration::from_millis(50);
 /// How many polls a busy wait makes between looks at the clock and the termination latch.
 const BUSY_CHECK_EVERY: u32 = 256;
 
-/// Process-wide latch of a termination request: iceoryx2 reports (and clears) the signal
-/// once, to whichever check sees it first.
-static TERMINATED: AtomicBool = AtomicBool::new(false);
+/// Process-wide latch of a termination request, sticky: set by navsync's own SIGINT/SIGTERM
+/// handler ([`futex::termination_wakes_sleepers`], installed in front of iceoryx2's when a node
+/// is created) and never cleared. iceoryx2 0.10 keeps only the last signal it caught, SIGCONT
+/// included, so a SIGCONT right after the SIGTERM (what `systemctl stop` and `timeout` send)
+/// overwrote the request there: the waits had seen it and returned at once, the loops asked
+/// iceoryx2, heard "no" and spun at 100 % CPU, never exiting.
+pub(crate) static TERMINATED: AtomicBool = AtomicBool::new(false);
 
-/// True once SIGINT or SIGTERM was received (latched; an atomic load, no system call).
+/// True once SIGINT or SIGTERM was received (latched, whatever signal came after; an atomic
+/// load, no system call, once a node installed navsync's handler).
 pub fn termination_requested() -> bool {
-    if SignalHandler::termination_requested() {
-        TERMINATED.store(true, Ordering::Relaxed);
+    if TERMINATED.load(Ordering::SeqCst) {
+        return true;
     }
-    TERMINATED.load(Ordering::Relaxed)
+    // Before navsync's handler is installed (or if it could not be), iceoryx2's record.
+    if !futex::handler_installed() && SignalHandler::termination_requested() {
+        TERMINATED.store(true, Ordering::SeqCst);
+    }
+    TERMINATED.load(Ordering::SeqCst)
 }
 
 /// What a navsync service can carry: a reflected sample type (every type of
@@ -112,6 +121,9 @@ pub enum IpcError {
     /// A name was not acceptable to iceoryx2.
     #[error("invalid name `{0}`")]
     InvalidName(String),
+    /// iceoryx2's root directory is not safe to use ([`root_dir`]); the error names it.
+    #[error(transparent)]
+    RuntimeDir(#[from] crate::runtime_dir::RuntimeDirError),
 }
 
 fn err(what: &'static str, service: &str, e: impl Debug) -> IpcError {
@@ -132,22 +144,46 @@ pub fn config() -> Result<Config, IpcError> {
     config_with_prefix(&prefix())
 }
 
-/// Environment variable naming a dedicated iceoryx2 root directory (default `/tmp/iceoryx2/`);
-/// the systemd units use `/run/navsync/iceoryx2/` (README "## Running as a service").
+/// Environment variable naming a dedicated iceoryx2 root directory; the systemd units use
+/// `/run/navsync/iceoryx2/` (README "## Running as a service"). See [`root_dir`].
 pub const ROOT_ENV: &str = "NAVSYNC_IPC_ROOT";
 
-/// iceoryx2 configuration with an explicit resource prefix.
+/// iceoryx2's root directory (its service and node files; the shared memory itself is in
+/// `/dev/shm`): `$NAVSYNC_IPC_ROOT`, else `iceoryx2` in systemd's `$RUNTIME_DIRECTORY`, else
+/// `navsync/iceoryx2` in `$XDG_RUNTIME_DIR`, else iceoryx2's own default `/tmp/iceoryx2`
+/// (where programs on stock iceoryx2 settings, such as the Python package, meet navsync).
+/// Whichever it is, it is created owner-only or checked before use
+/// ([`crate::runtime_dir::ensure`]): one that another user owns or may write into is refused.
+pub fn root_dir() -> std::path::PathBuf {
+    use std::path::PathBuf;
+    let var = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty()).map(PathBuf::from);
+    if let Some(root) = var(ROOT_ENV) {
+        return root;
+    }
+    if let Some(d) = var("RUNTIME_DIRECTORY") {
+        return crate::runtime_dir::base_from(Some(d), None, 0).join("iceoryx2");
+    }
+    if let Some(x) = var("XDG_RUNTIME_DIR").filter(|x| x.is_absolute()) {
+        return x.join("navsync").join("iceoryx2");
+    }
+    PathBuf::from("/tmp/iceoryx2")
+}
+
+/// Where [`root_dir`] comes from, for its errors.
+const ROOT_HINT: &str = "set $NAVSYNC_IPC_ROOT, $XDG_RUNTIME_DIR or $RUNTIME_DIRECTORY to a directory of your own";
+
+/// iceoryx2 configuration with an explicit resource prefix, in the checked [`root_dir`].
 pub fn config_with_prefix(prefix: &str) -> Result<Config, IpcError> {
     let mut config = Config::default();
     config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|_| IpcError::InvalidName(prefix.to_string()))?;
-    if let Ok(root) = std::env::var(ROOT_ENV)
-        && !root.is_empty()
-    {
-        let root = if root.ends_with('/') { root } else { format!("{root}/") };
-        config
-            .global
-            .set_root_path(&Path::new(root.as_bytes()).map_err(|_| IpcError::InvalidName(root.clone()))?);
+    let root = crate::runtime_dir::ensure(&root_dir(), ROOT_HINT)?;
+    let mut root = root.display().to_string();
+    if !root.ends_with('/') {
+        root.push('/');
     }
+    config
+        .global
+        .set_root_path(&Path::new(root.as_bytes()).map_err(|_| IpcError::InvalidName(root.clone()))?);
     Ok(config)
 }
 
@@ -193,6 +229,11 @@ impl IpcNode {
     /// Like [`new`](Self::new) with an explicit resource prefix instead of `$NAVSYNC_IPC_PREFIX`
     /// (tests that talk to several isolated navsync instances from one process).
     pub fn with_prefix(process: &str, prefix: &str) -> Result<Self, IpcError> {
+        // iceoryx2's SIGINT/SIGTERM handler (installed on its first look) and navsync's in
+        // front of it, before the node exists: a termination request from here on is latched,
+        // neither fatal (a process killed by the signal would leave its node's files to the
+        // dead-node reclaim) nor undone by a later signal.
+        futex::termination_wakes_sleepers();
         let config = config_with_prefix(prefix)?;
         let name = NodeName::new(process).map_err(|_| IpcError::InvalidName(process.to_string()))?;
         let node = NodeBuilder::new()
@@ -206,9 +247,6 @@ impl IpcNode {
             name: process.to_string(),
             stock: core::cell::OnceCell::new(),
         };
-        // iceoryx2 installs its SIGINT/SIGTERM handler on the first look; do it now, so a
-        // termination request that arrives before the first wait is latched, not fatal.
-        node.termination_requested();
         // Reclaim what processes that died without cleaning up (kill -9) left behind.
         node.reclaim_dead_nodes();
         restrict_global_segment(prefix);

@@ -28,5 +28,6 @@ pub mod health_reporter;
 pub mod ipc;
 pub mod latency_histogram;
 pub mod pacing;
+pub mod runtime_dir;
 pub mod sd_notify;
 pub mod source_map;

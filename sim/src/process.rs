@@ -71,7 +71,7 @@ pub struct SimArgs {
     #[arg(long, default_value = "direct")]
     pub imu_output: SimImuOutput,
     /// Directory of the IMU pseudo-terminal links (`imu0`, `imu1`, …) with `--imu-output xsens`
-    /// (default `/tmp/navsync`).
+    /// (default navsync's runtime directory: `$XDG_RUNTIME_DIR/navsync`, `/run/navsync` for root, else `/tmp/navsync-<uid>`).
     #[arg(long)]
     pub imu_pty_dir: Option<PathBuf>,
     /// Stop after this many seconds of scenario.
@@ -309,6 +309,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
     );
 
     let mut next = world.next_event();
+    navsync_shared::sd_notify::ready("simulation running");
     loop {
         if node.termination_requested() {
             break;

@@ -26,7 +26,7 @@ use navsync_drivers::imu::axes::AxisMap;
 use navsync_drivers::imu::xsens::frame::{
     MtData2, RealFormat, SAMPLE_TIME_FINE_HZ, STATUS_CLIP_ACC, STATUS_CLIP_GYR, encode_mtdata2,
 };
-use navsync_drivers::imu::xsens::sim_device::{DEFAULT_SIM_DIR, sim_port};
+use navsync_drivers::imu::xsens::sim_device::{default_sim_dir, sim_port};
 use navsync_drivers::pty::Pty;
 use navsync_shared::ipc::{IpcError, IpcNode, Publisher};
 use navsync_shared::samples::{IMU_FLAG_SATURATED, ImuSample};
@@ -132,11 +132,15 @@ pub enum SimImuSinkError {
         /// The error.
         source: std::io::Error,
     },
+    /// The directory of the links is not safe to use.
+    #[error("the IMU pseudo-terminals' directory")]
+    Dir(#[from] navsync_shared::runtime_dir::RuntimeDirError),
 }
 
 impl SimImuSink {
     /// The outputs of `cfg`'s IMUs; for [`SimImuOutput::Xsens`] one pseudo-terminal per IMU
-    /// with its link `dir/imu{i}` (default [`DEFAULT_SIM_DIR`]), announced on stdout.
+    /// with its link `dir/imu{i}` (default [`default_sim_dir`], created owner-only or checked),
+    /// announced on stdout.
     pub fn open(
         node: &IpcNode,
         cfg: &SimConfig,
@@ -150,7 +154,12 @@ impl SimImuSink {
                     .collect::<Result<_, _>>()?,
             )),
             SimImuOutput::Xsens => {
-                let dir = dir.unwrap_or(Path::new(DEFAULT_SIM_DIR));
+                let dir = match dir {
+                    Some(d) => d.to_path_buf(),
+                    None => default_sim_dir(),
+                };
+                navsync_shared::runtime_dir::ensure(&dir, navsync_shared::runtime_dir::HINT)?;
+                let dir = dir.as_path();
                 let mut out = Vec::with_capacity(cfg.imu.count);
                 for i in 0..cfg.imu.count {
                     let unit = cfg.imu_unit(i);

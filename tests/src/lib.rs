@@ -360,7 +360,7 @@ fn remove_persistent_segment(prefix: &str) {
 
 fn list_prefixed(prefix: &str) -> Vec<PathBuf> {
     let mut out = Vec::new();
-    let mut visit = vec![PathBuf::from("/dev/shm"), PathBuf::from("/tmp/iceoryx2")];
+    let mut visit = vec![PathBuf::from("/dev/shm"), navsync_shared::ipc::root_dir()];
     while let Some(d) = visit.pop() {
         let Ok(rd) = std::fs::read_dir(&d) else { continue };
         for e in rd.flatten() {
@@ -375,7 +375,8 @@ fn list_prefixed(prefix: &str) -> Vec<PathBuf> {
     out
 }
 
-/// Every shared-memory and iceoryx2 file of this prefix (in `/dev/shm` and `/tmp/iceoryx2`),
+/// Every shared-memory and iceoryx2 file of this prefix (in `/dev/shm` and iceoryx2's root,
+/// [`navsync_shared::ipc::root_dir`]),
 /// the persistent node counter included.
 pub fn prefixed_files(prefix: &str) -> Vec<PathBuf> {
     list_prefixed(prefix)

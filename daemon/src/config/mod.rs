@@ -57,6 +57,25 @@ use serde::Deserialize;
 /// The default configuration file.
 pub const DEFAULT_PATH: &str = "/etc/navsync/navsync.toml";
 
+/// The largest configuration file read (the annotated example is ~10 KiB): a bigger one is
+/// refused instead of read into memory (`--config /dev/zero` grew to 8 GB).
+pub const MAX_FILE_BYTES: u64 = 1 << 20;
+
+/// The most characters of a field path or message an error shows (a 10 MB value was echoed
+/// whole to stderr); the rest is summarised by its length.
+pub const MAX_SHOWN_CHARS: usize = 200;
+
+/// `s`, cut to [`MAX_SHOWN_CHARS`] characters with a note of how many more there were.
+pub fn cut(s: &str) -> std::borrow::Cow<'_, str> {
+    match s.char_indices().nth(MAX_SHOWN_CHARS) {
+        None => std::borrow::Cow::Borrowed(s),
+        Some((at, _)) => {
+            let more = s[at..].chars().count();
+            std::borrow::Cow::Owned(format!("{}… ({more} more characters)", &s[..at]))
+        }
+    }
+}
+
 /// A configuration error, located in its file.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ConfigError {
@@ -78,9 +97,9 @@ impl fmt::Display for ConfigError {
         }
         write!(f, ": ")?;
         if let Some(field) = &self.field {
-            write!(f, "{field}: ")?;
+            write!(f, "{}: ", cut(field))?;
         }
-        write!(f, "{}", self.message)
+        write!(f, "{}", cut(&self.message))
     }
 }
 
@@ -202,7 +221,8 @@ pub struct NtpShmOutput {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RecordOutput {
-    /// Output file (MCAP).
+    /// Output file (MCAP); `{start}` becomes the UTC start time, so a restarted service writes
+    /// a new file (an existing file is never overwritten).
     pub path: PathBuf,
     /// Services or patterns (default `navsync/**`).
     #[serde(default)]
@@ -270,6 +290,39 @@ pub fn load(explicit: Option<&Path>) -> Result<Loaded, ConfigError> {
     Ok(loaded)
 }
 
+/// The text of a regular file of at most [`MAX_FILE_BYTES`]. Opened without blocking (a FIFO
+/// with no writer would wait forever) and checked on the open descriptor, so what is read is
+/// what was checked.
+fn read_bounded(file: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    use std::os::unix::fs::OpenOptionsExt;
+    let invalid = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, m);
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(file)?;
+    let meta = f.metadata()?;
+    if !meta.is_file() {
+        return Err(invalid(
+            "not a regular file (a FIFO, a device or a directory): refused".to_string(),
+        ));
+    }
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(invalid(format!(
+            "{} bytes, more than the {MAX_FILE_BYTES} a configuration file may have: refused",
+            meta.len()
+        )));
+    }
+    let mut bytes = Vec::new();
+    f.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > MAX_FILE_BYTES {
+        return Err(invalid(format!(
+            "more than the {MAX_FILE_BYTES} bytes a configuration file may have: refused"
+        )));
+    }
+    String::from_utf8(bytes).map_err(|e| invalid(format!("not UTF-8 text (at byte {})", e.utf8_error().valid_up_to())))
+}
+
 /// A loaded configuration with where it came from, to locate errors found later.
 #[derive(Debug, Clone, Default)]
 pub struct Loaded {
@@ -321,14 +374,16 @@ impl Loaded {
         Ok(loaded)
     }
 
-    /// Reads, parses and checks `file`.
+    /// Reads, parses and checks `file`: a regular file of at most [`MAX_FILE_BYTES`] (a
+    /// FIFO, a device or a directory is refused without waiting on it or reading it).
     pub fn load(file: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(file).map_err(|e| ConfigError {
+        let fail = |message: String| ConfigError {
             file: file.to_path_buf(),
             line: None,
             field: None,
-            message: format!("cannot read the configuration file: {e}"),
-        })?;
+            message,
+        };
+        let text = read_bounded(file).map_err(|e| fail(format!("cannot read the configuration file: {e}")))?;
         Self::parse(&text, file)
     }
 

@@ -183,3 +183,39 @@ fn the_coupling_flows_flag_over_file_over_default() {
     flags.given.push(("coupling", "loose".into()));
     assert_eq!(flags.settings(&file).unwrap().nav.coupling, Coupling::Loose);
 }
+
+#[test]
+fn only_a_regular_file_of_bounded_size_is_read() {
+    // A device and a directory: refused without reading (/dev/zero never ends).
+    for p in ["/dev/zero", "/dev/urandom", "/"] {
+        let e = Loaded::load(Path::new(p)).unwrap_err();
+        assert!(e.message.contains("not a regular file"), "{p}: {e}");
+    }
+    let dir = std::env::temp_dir().join(format!("navsync-config-bounds-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // A FIFO with no writer: refused at once, not waited on.
+    let fifo = dir.join("fifo.toml");
+    let c = std::ffi::CString::new(fifo.display().to_string()).unwrap();
+    // SAFETY: mkfifo with a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let t0 = std::time::Instant::now();
+    let e = Loaded::load(&fifo).unwrap_err();
+    assert!(e.message.contains("not a regular file"), "{e}");
+    assert!(t0.elapsed() < std::time::Duration::from_secs(1));
+    // Larger than the bound.
+    let big = dir.join("big.toml");
+    std::fs::write(&big, vec![b'#'; MAX_FILE_BYTES as usize + 1]).unwrap();
+    let e = Loaded::load(&big).unwrap_err();
+    assert!(e.message.contains("more than"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_huge_value_is_cut_in_the_error() {
+    let value = "x".repeat(10 << 20);
+    let e = err(&format!("[imu.0]\nsource = \"{value}\"\n"));
+    let shown = e.to_string();
+    assert!(shown.len() < 1000, "{} bytes shown", shown.len());
+    assert!(shown.contains("more characters"), "{shown}");
+    assert!(shown.starts_with("t.toml:2:"), "{shown}");
+}

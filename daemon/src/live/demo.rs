@@ -68,6 +68,9 @@ pub enum DemoError {
     /// I/O.
     #[error(transparent)]
     Io(#[from] std::io::Error),
+    /// The runtime directory is not safe to use.
+    #[error(transparent)]
+    RuntimeDir(#[from] navsync_shared::runtime_dir::RuntimeDirError),
 }
 
 struct Proc {
@@ -77,8 +80,13 @@ struct Proc {
 
 fn spawn(name: &'static str, args: &[String]) -> Result<Proc, DemoError> {
     let exe = std::env::current_exe()?;
+    // The children are the demo's, not the service manager's: they neither report readiness
+    // nor feed a watchdog of their own.
     let child = Command::new(exe)
         .args(args)
+        .env_remove("NOTIFY_SOCKET")
+        .env_remove("WATCHDOG_USEC")
+        .env_remove("WATCHDOG_PID")
         .spawn()
         .map_err(|e| DemoError::Child(format!("starting `navsync {}`: {e}", args.join(" "))))?;
     info!(name, pid = child.id(), "started");
@@ -302,8 +310,10 @@ impl Monitor {
 /// Runs the demo.
 pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
     let node = IpcNode::new(&format!("demo-{}", std::process::id()))?;
-    let dir = std::env::temp_dir().join(format!("navsync-demo-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)?;
+    // The pseudo-terminal links, in a directory of this process's own under navsync's runtime
+    // directory (created exclusively, owner-only: a predictable path in /tmp could be another
+    // user's).
+    let dir = navsync_shared::runtime_dir::private(&format!("demo-{}", std::process::id()))?;
     let link = dir.join("gnss0");
     let mut monitor = Monitor::new(&node, args.imus)?;
 
@@ -398,6 +408,7 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
             ]
             .map(String::from),
         )?);
+        navsync_shared::sd_notify::ready("demo running");
         monitor_loop(&node, &mut monitor, &mut procs, args.duration_s)
     })();
     let exits = stop_all(&mut procs);

@@ -269,6 +269,7 @@ fn echo<T: navsync_shared::ipc::IpcSample>(
     let node = IpcNode::new(&format!("echo-{}", std::process::id()))?;
     let sub = node.subscriber::<T>(&args.service)?;
     sub.set_busy_poll(args.busy_poll);
+    navsync_shared::sd_notify::ready(&format!("echo {}", args.service));
     let mut out = std::io::stdout().lock();
     let mut printed = 0u64;
     let mut last = Instant::now();

@@ -25,11 +25,21 @@
 //! fresh (under [`FRESH_NAV_NS`] old), otherwise the receiver's own fix ([`tpv_of_fix`]), so a
 //! receiver alone serves gpsd clients too; `ATT` and `IMU` come with the fused state only.
 //!
+//! `?POLL` answers the fused state while it is fresh (under [`FRESH_NAV_NS`] old), else the
+//! receiver's fix while that is fresh (under [`FRESH_FIX_NS`]), else no fix: a `TPV` of mode 1
+//! and `active:0` (a dead estimator's last state is not a fix).
+//!
 //! One thread, one `poll(2)` loop over the listening socket, the clients and the fix
-//! subscriber's wake-up descriptor (no async
-//! runtime): sockets are non-blocking; each client has a bounded output queue, and a client
-//! that lets it fill (a slow reader) is dropped instead of blocking the others; at most
-//! `--max-clients` clients at once (one more gets an `ERROR` and is closed). Listens on
+//! subscriber's wake-up descriptor (no async runtime). Every client is bounded, whatever it
+//! sends or fails to read ([`ClientLimits`]): its pending output, replies to requests and
+//! watch reports alike (a client that lets it pass [`MAX_PENDING_BYTES`] is dropped instead of
+//! blocking the others or growing the server); its requests, by a token bucket
+//! ([`REQUESTS_PER_S`], burst [`REQUEST_BURST`]: beyond it the server stops reading from that
+//! socket until the bucket refills, so TCP pushes back on the client); a request line, at
+//! [`MAX_REQUEST_BYTES`] (an `ERROR`, then closed; a line end always ends a request, so an
+//! unbalanced `{` costs that request only); its silence, at `--idle-timeout` for a client that
+//! does not watch (gpsd drops those after 3 minutes too). At most `--max-clients` clients at
+//! once (one more gets an `ERROR` and is closed). Sockets are non-blocking. Listens on
 //! localhost unless told otherwise. Counters in `navsync/health/gpsd-server`.
 
 use std::collections::VecDeque;
@@ -56,8 +66,17 @@ pub const MAX_PENDING_BYTES: usize = 256 * 1024;
 /// The kernel's send buffer of a client socket (bounded: autotuning could hold megabytes for a
 /// client that does not read).
 const SEND_BUFFER_BYTES: libc::c_int = 64 * 1024;
-/// A request line longer than this (gpsd allows 80 characters) closes the client.
-const MAX_REQUEST_BYTES: usize = 4096;
+/// A request line longer than this (gpsd's own limit is 1536 characters) gets an `ERROR` and
+/// closes the client.
+pub const MAX_REQUEST_BYTES: usize = 4096;
+/// Requests a client may make per second on average (a token bucket; gpsd clients send a
+/// handful per connection, a polling client one per report).
+pub const REQUESTS_PER_S: f64 = 20.0;
+/// Requests a client may make at once (the bucket's depth).
+pub const REQUEST_BURST: f64 = 40.0;
+/// With `--report period` and in `?POLL`, the receiver's fix is reported while it is at most
+/// this old (host `CLOCK_MONOTONIC`, ns): a 1 Hz receiver with one epoch missing.
+pub const FRESH_FIX_NS: i64 = 2_500_000_000;
 
 /// `navsync gpsd-server`: the fused state for gpsd clients (gpsd JSON protocol: VERSION,
 /// DEVICES, WATCH, POLL, TPV, SKY, ATT, IMU).
@@ -79,6 +98,17 @@ pub struct GpsdArgs {
     /// report times (`navsync/gnss/{id}/fix`).
     #[arg(long, default_value = "0")]
     pub gnss_id: String,
+    /// Seconds after which a client that does not watch and has sent nothing is closed
+    /// (gpsd: 180), so idle connections cannot hold every `--max-clients` slot.
+    #[arg(long = "idle-timeout", default_value_t = 180.0, value_parser = idle_timeout)]
+    pub idle_timeout_s: f64,
+}
+
+fn idle_timeout(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(t) if t > 0.0 && t <= 86_400.0 => Ok(t),
+        _ => Err(format!("`{s}`: expected seconds in (0, 86400]")),
+    }
 }
 
 /// When `navsync gpsd-server` reports.
@@ -134,6 +164,35 @@ struct Watch {
     json: bool,
 }
 
+/// The bounds every client is held to ([`MAX_PENDING_BYTES`], [`REQUESTS_PER_S`],
+/// [`REQUEST_BURST`], [`MAX_REQUEST_BYTES`], `--idle-timeout`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClientLimits {
+    /// Pending output beyond this drops the client.
+    pub max_pending_bytes: usize,
+    /// Requests per second on average.
+    pub requests_per_s: f64,
+    /// Requests at once.
+    pub request_burst: f64,
+    /// The longest request line.
+    pub max_request_bytes: usize,
+    /// A client that does not watch is closed after this long without a request, ns.
+    pub idle_timeout_ns: i64,
+}
+
+impl ClientLimits {
+    /// The defaults with `--idle-timeout`.
+    pub fn with_idle_timeout_s(idle_timeout_s: f64) -> Self {
+        Self {
+            max_pending_bytes: MAX_PENDING_BYTES,
+            requests_per_s: REQUESTS_PER_S,
+            request_burst: REQUEST_BURST,
+            max_request_bytes: MAX_REQUEST_BYTES,
+            idle_timeout_ns: (idle_timeout_s * 1e9) as i64,
+        }
+    }
+}
+
 struct Client {
     stream: TcpStream,
     peer: SocketAddr,
@@ -141,11 +200,24 @@ struct Client {
     out: VecDeque<u8>,
     watch: Watch,
     closing: bool,
+    /// Requests received but not answered yet: the bucket was empty (at most one read's worth).
+    backlog: VecDeque<Command>,
+    /// The request bucket's tokens, and when it was last filled (host monotonic ns).
+    tokens: f64,
+    refilled_ns: i64,
+    /// When the client last sent a request (or connected), host monotonic ns.
+    last_request_ns: i64,
+    /// Its requests are waiting for tokens.
+    throttled: bool,
 }
 
 impl Client {
     /// A freshly accepted connection: non-blocking, no Nagle delay, a bounded send buffer.
     fn accepted(stream: TcpStream, peer: SocketAddr) -> Self {
+        Self::accepted_at(stream, peer, monotonic_now_ns(), REQUEST_BURST)
+    }
+
+    fn accepted_at(stream: TcpStream, peer: SocketAddr, now_ns: i64, tokens: f64) -> Self {
         let _ = stream.set_nonblocking(true);
         let _ = stream.set_nodelay(true);
         set_send_buffer(&stream, SEND_BUFFER_BYTES);
@@ -156,7 +228,29 @@ impl Client {
             out: VecDeque::new(),
             watch: Watch::default(),
             closing: false,
+            backlog: VecDeque::new(),
+            tokens,
+            refilled_ns: now_ns,
+            last_request_ns: now_ns,
+            throttled: false,
         }
+    }
+
+    /// Refills the request bucket for the time since the last refill.
+    fn refill(&mut self, now_ns: i64, limits: &ClientLimits) {
+        let dt_s = (now_ns - self.refilled_ns).max(0) as f64 * 1e-9;
+        self.tokens = (self.tokens + dt_s * limits.requests_per_s).min(limits.request_burst);
+        self.refilled_ns = now_ns;
+    }
+
+    /// Whether the server reads from this client now: not while requests wait for tokens.
+    fn wants_input(&self) -> bool {
+        self.backlog.is_empty() && !self.closing
+    }
+
+    /// Idle: not watching and silent for longer than the limit.
+    fn idle(&self, now_ns: i64, limits: &ClientLimits) -> bool {
+        !self.watch.enable && now_ns - self.last_request_ns > limits.idle_timeout_ns
     }
 
     fn queue(&mut self, line: &str) {
@@ -233,7 +327,9 @@ pub struct Command {
 
 /// Splits request text (`?WATCH={...};?POLL;`) into commands; returns the commands and how many
 /// bytes were consumed (a command still being received stays in the buffer). Malformed JSON
-/// arguments yield a command with a `Value::Null` argument, which is answered with an error.
+/// arguments yield a command with a `Value::Null` argument, which is answered with an error; a
+/// line end always ends a command (gpsd's requests are lines), so an argument whose braces do
+/// not balance is malformed at its line's end instead of swallowing every later request.
 pub fn parse_commands(buf: &[u8]) -> (Vec<Command>, usize) {
     let mut out = Vec::new();
     let mut i = 0;
@@ -266,7 +362,7 @@ pub fn parse_commands(buf: &[u8]) -> (Vec<Command>, usize) {
                                     break;
                                 }
                             }
-                            b'\n' if depth == 0 => {
+                            b'\n' => {
                                 end = Some(k);
                                 break;
                             }
@@ -553,11 +649,43 @@ fn fix_report(latest: &Latest, now_ns: i64) -> Option<Vec<String>> {
     Some(lines)
 }
 
+/// The `POLL` object at `now_ns` (host monotonic): the fused state while fresh, else the
+/// receiver's fix while fresh, else no fix (a `TPV` of mode 1, `active:0`).
+fn poll_reply(latest: &Latest, now_ns: i64) -> Value {
+    let fresh_nav = latest
+        .nav
+        .filter(|n| (now_ns - n.host_ns).abs() < FRESH_NAV_NS && n.status != NavStatus::Aligning as u8);
+    let fresh_fix = latest.fix.filter(|f| (now_ns - f.stamp.host_ns).abs() < FRESH_FIX_NS);
+    let (tpv, active) = match (&fresh_nav, &fresh_fix) {
+        (Some(n), fix) => (tpv(n, fix.as_ref().or(latest.fix.as_ref()), latest.time.as_ref()), 1),
+        (None, Some(f)) => (tpv_of_fix(f, latest.time.as_ref()), 1),
+        (None, None) => (json!({"class": "TPV", "device": DEVICE, "mode": 1}), 0),
+    };
+    let skies: Vec<Value> = fresh_fix.iter().map(sky).collect();
+    let time = fresh_nav
+        .and_then(|n| iso_time(n.utc_ns))
+        .unwrap_or_else(|| json!(format_rfc3339_ms(navsync_shared::time::realtime_now_ns())));
+    json!({
+        "class": "POLL",
+        "time": time,
+        "active": active,
+        "tpv": [tpv],
+        "gst": [],
+        "sky": skies,
+    })
+}
+
+/// A command name as echoed in an `ERROR`: at most 32 characters (a name can be as long as
+/// the request line).
+fn shown(name: &str) -> &str {
+    name.get(..32).unwrap_or(name)
+}
+
 /// Answers the commands of one client.
-fn handle(c: &mut Client, cmds: Vec<Command>, latest: &Latest) {
+fn handle(c: &mut Client, cmds: impl IntoIterator<Item = Command>, latest: &Latest, now_ns: i64) {
     for cmd in cmds {
         match (cmd.name.as_str(), &cmd.arg) {
-            (_, Some(Value::Null)) => c.queue(&error(&format!("Invalid {} argument", cmd.name)).to_string()),
+            (_, Some(Value::Null)) => c.queue(&error(&format!("Invalid {} argument", shown(&cmd.name))).to_string()),
             ("VERSION", _) => c.queue(&version().to_string()),
             ("DEVICES", _) => {
                 c.queue(&json!({"class": "DEVICES", "devices": [device(&latest.activated())]}).to_string())
@@ -574,31 +702,8 @@ fn handle(c: &mut Client, cmds: Vec<Command>, latest: &Latest) {
                 }
                 c.queue(&watch_json(c.watch).to_string());
             }
-            ("POLL", _) => {
-                // The fused state; without one, the receiver's fix.
-                let tpvs: Vec<Value> = match (&latest.nav, &latest.fix) {
-                    (Some(n), fix) => vec![tpv(n, fix.as_ref(), latest.time.as_ref())],
-                    (None, Some(f)) => vec![tpv_of_fix(f, latest.time.as_ref())],
-                    (None, None) => Vec::new(),
-                };
-                let skies: Vec<Value> = latest.fix.iter().map(sky).collect();
-                let time = latest
-                    .nav
-                    .and_then(|n| iso_time(n.utc_ns))
-                    .unwrap_or_else(|| json!(format_rfc3339_ms(navsync_shared::time::realtime_now_ns())));
-                c.queue(
-                    &json!({
-                        "class": "POLL",
-                        "time": time,
-                        "active": usize::from(!tpvs.is_empty()),
-                        "tpv": tpvs,
-                        "gst": [],
-                        "sky": skies,
-                    })
-                    .to_string(),
-                );
-            }
-            (other, _) => c.queue(&error(&format!("Unrecognized request '{other}'")).to_string()),
+            ("POLL", _) => c.queue(&poll_reply(latest, now_ns).to_string()),
+            (other, _) => c.queue(&error(&format!("Unrecognized request '{}'", shown(other))).to_string()),
         }
     }
 }
@@ -623,6 +728,9 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
     let c_active = health.counter("clients_active")?;
     let c_reports = health.counter("reports_sent")?;
     let c_bad = health.counter("bad_requests")?;
+    let c_idle = health.counter("clients_dropped_idle")?;
+    let c_throttled = health.counter("clients_throttled")?;
+    let limits = ClientLimits::with_idle_timeout_s(args.idle_timeout_s);
     let r_tpv = health.rate("tpv_out")?;
 
     let listener = TcpListener::bind(args.listen).map_err(io(&format!("listening on {}", args.listen)))?;
@@ -631,6 +739,7 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
     // The bound address on stderr (with --listen …:0 the port the system chose).
     eprintln!("navsync gpsd-server: listening on {local}");
     info!(%local, max_clients = args.max_clients, "gpsd server");
+    navsync_shared::sd_notify::ready(&format!("gpsd-server on {local}"));
 
     let period_ns = (1e9 / args.rate_hz.clamp(0.01, 1000.0)) as i64;
     // Period reports go out within 10 ms of their state; fix reports are woken by the fix
@@ -659,7 +768,8 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
             revents: 0,
         });
         for c in &clients {
-            let mut events = libc::POLLIN;
+            // A client whose requests wait for tokens is not read (TCP pushes back on it).
+            let mut events = if c.wants_input() { libc::POLLIN } else { 0 };
             if !c.out.is_empty() {
                 events |= libc::POLLOUT;
             }
@@ -669,8 +779,14 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
                 revents: 0,
             });
         }
+        // A client held back by its bucket is looked at again within 50 ms.
+        let timeout_ms = if clients.iter().any(|c| !c.backlog.is_empty()) {
+            poll_ms.min(50)
+        } else {
+            poll_ms
+        };
         // SAFETY: fds is a valid array of pollfd for the call's duration.
-        let n = unsafe { libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, poll_ms) };
+        let n = unsafe { libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, timeout_ms) };
         if n < 0 {
             let e = std::io::Error::last_os_error();
             if e.kind() != ErrorKind::Interrupted {
@@ -709,36 +825,36 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
             }
         }
         // Requests and writable sockets.
+        let now = monotonic_now_ns();
         for (c, pfd) in clients.iter_mut().zip(fds.iter().skip(2)) {
-            if pfd.revents & (libc::POLLIN | libc::POLLHUP | libc::POLLERR) != 0 {
-                loop {
-                    match c.stream.read(&mut rx) {
-                        Ok(0) => {
-                            c.closing = true;
-                            break;
-                        }
-                        Ok(k) => c.inbuf.extend_from_slice(&rx[..k]),
-                        Err(e) if e.kind() == ErrorKind::WouldBlock => break,
-                        Err(e) if e.kind() == ErrorKind::Interrupted => {}
-                        Err(_) => {
-                            c.closing = true;
-                            break;
-                        }
-                    }
-                    if c.inbuf.len() > MAX_REQUEST_BYTES {
+            if pfd.revents & (libc::POLLIN | libc::POLLHUP | libc::POLLERR) != 0 && c.wants_input() {
+                match read_requests(c, &mut rx, &limits, now) {
+                    Ok(bad) => health.add(c_bad, bad),
+                    Err(RequestError::LineTooLong) => {
                         health.add(c_bad, 1);
+                        c.queue(&error("request line too long").to_string());
+                        let _ = c.flush();
                         c.closing = true;
-                        break;
                     }
                 }
-                let (cmds, used) = parse_commands(&c.inbuf);
-                c.inbuf.drain(..used);
-                if cmds.iter().any(|k| k.arg == Some(Value::Null)) {
-                    health.add(c_bad, 1);
-                }
-                handle(c, cmds, &latest);
+            }
+            if pfd.revents & (libc::POLLHUP | libc::POLLERR) != 0 && !c.wants_input() {
+                // Gone while its requests waited: nobody to answer.
+                c.closing = true;
+            }
+            if !c.backlog.is_empty() && answer_backlog(c, &latest, &limits, now) {
+                health.add(c_throttled, 1);
             }
             if !c.out.is_empty() && !c.flush() {
+                c.closing = true;
+            } else if c.out.len() > limits.max_pending_bytes {
+                // Replies to requests count against the same bound as watch reports.
+                warn!(peer = %c.peer, pending = c.out.len(), "dropping a client that does not read its replies");
+                health.add(c_slow, 1);
+                c.closing = true;
+            } else if c.idle(now, &limits) {
+                info!(peer = %c.peer, "closing an idle client");
+                health.add(c_idle, 1);
                 c.closing = true;
             }
         }
@@ -795,9 +911,69 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
         });
         health.set(c_active, clients.len() as u64);
         health.maybe_publish(monotonic_now_ns())?;
+        navsync_shared::sd_notify::watchdog();
     }
+    navsync_shared::sd_notify::stopping();
     health.publish_final()?;
     Ok(())
+}
+
+/// A request that closes its client.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RequestError {
+    /// A line longer than [`ClientLimits::max_request_bytes`].
+    LineTooLong,
+}
+
+/// Reads what the client sent (at most one line's bound at a time, so the buffer stays
+/// bounded whatever it sends) into its backlog of requests; the number of malformed ones.
+fn read_requests(c: &mut Client, rx: &mut [u8], limits: &ClientLimits, now_ns: i64) -> Result<u64, RequestError> {
+    loop {
+        let room = limits
+            .max_request_bytes
+            .saturating_sub(c.inbuf.len())
+            .clamp(1, rx.len());
+        match c.stream.read(&mut rx[..room]) {
+            Ok(0) => {
+                c.closing = true;
+                break;
+            }
+            Ok(k) => c.inbuf.extend_from_slice(&rx[..k]),
+            Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+            Err(e) if e.kind() == ErrorKind::Interrupted => continue,
+            Err(_) => {
+                c.closing = true;
+                break;
+            }
+        }
+        let (cmds, used) = parse_commands(&c.inbuf);
+        c.inbuf.drain(..used);
+        if !cmds.is_empty() {
+            c.last_request_ns = now_ns;
+        }
+        c.backlog.extend(cmds);
+        if c.inbuf.len() >= limits.max_request_bytes {
+            return Err(RequestError::LineTooLong);
+        }
+        if !c.backlog.is_empty() {
+            // Answer these first; the rest waits in the socket.
+            break;
+        }
+    }
+    Ok(c.backlog.iter().filter(|k| k.arg == Some(Value::Null)).count() as u64)
+}
+
+/// Answers as many waiting requests as the client's bucket allows; true when the client has
+/// just started to wait for tokens (counted once per episode).
+fn answer_backlog(c: &mut Client, latest: &Latest, limits: &ClientLimits, now_ns: i64) -> bool {
+    c.refill(now_ns, limits);
+    let n = (c.tokens.floor().max(0.0) as usize).min(c.backlog.len());
+    c.tokens -= n as f64;
+    let cmds: Vec<Command> = c.backlog.drain(..n).collect();
+    handle(c, cmds, latest, now_ns);
+    let started = !c.backlog.is_empty() && !c.throttled;
+    c.throttled = !c.backlog.is_empty();
+    started
 }
 
 #[cfg(test)]
@@ -907,6 +1083,138 @@ mod tests {
         let (c, used) = parse_commands(b"garbage\n?version;");
         assert_eq!(c[0].name, "VERSION");
         assert_eq!(used, 17);
+    }
+
+    #[test]
+    fn an_unbalanced_brace_costs_its_own_line_only() {
+        // Before: the brace search ran past the line end and swallowed every later request.
+        let text = b"?WATCH={\"enable\":true\n?VERSION;\n?POLL;\n";
+        let (c, used) = parse_commands(text);
+        let names: Vec<&str> = c.iter().map(|k| k.name.as_str()).collect();
+        assert_eq!(names, ["WATCH", "VERSION", "POLL"]);
+        assert_eq!(c[0].arg, Some(Value::Null), "malformed, answered with an ERROR");
+        assert_eq!(used, text.len());
+        let (c, _) = parse_commands(b"?WATCH=}}{\n?DEVICES;");
+        assert_eq!(c.len(), 2);
+        assert_eq!(c[1].name, "DEVICES");
+    }
+
+    /// A client flooding `?POLL;` without ever reading, served as the run loop does.
+    #[test]
+    fn a_client_that_floods_requests_and_never_reads_stays_bounded_and_is_dropped() {
+        let (mut c, mut peer) = connected_pair();
+        peer.set_nonblocking(true).unwrap();
+        let limits = ClientLimits::with_idle_timeout_s(180.0);
+        let mut n = NavState::zeroed();
+        n.status = NavStatus::Aligned as u8;
+        n.lat_deg = 48.0;
+        n.lon_deg = 11.0;
+        let mut latest = Latest {
+            nav: Some(n),
+            fix: None,
+            time: None,
+        };
+        let mut rx = [0u8; 2048];
+        let flood = b"?POLL;".repeat(100);
+        let (mut now, mut answered, mut max_backlog) = (0i64, 0usize, 0usize);
+        let dropped = loop {
+            let _ = peer.write(&flood);
+            latest.nav.as_mut().unwrap().host_ns = now;
+            if c.wants_input() {
+                assert_eq!(read_requests(&mut c, &mut rx, &limits, now), Ok(0));
+            }
+            max_backlog = max_backlog.max(c.backlog.len());
+            let before = c.backlog.len();
+            answer_backlog(&mut c, &latest, &limits, now);
+            answered += before - c.backlog.len();
+            assert!(c.flush(), "the peer is there");
+            if c.out.len() > limits.max_pending_bytes {
+                break true;
+            }
+            now += 10_000_000;
+            if now > 3_600 * 1_000_000_000 {
+                break false;
+            }
+        };
+        assert!(dropped, "never passed the output bound");
+        let seconds = now as f64 * 1e-9;
+        // The bucket held it to its rate: at most the burst plus the rate over the time.
+        assert!(
+            answered as f64 <= REQUEST_BURST + REQUESTS_PER_S * seconds + 1.0,
+            "{answered} answers in {seconds} s"
+        );
+        // One read's worth of requests at most waits (2048 bytes of 6-byte requests).
+        assert!(max_backlog <= 2048 / 6 + 1, "{max_backlog}");
+        assert!(c.inbuf.len() < limits.max_request_bytes);
+        println!("dropped after {seconds:.0} s of flooding, {answered} requests answered");
+    }
+
+    #[test]
+    fn a_request_line_longer_than_the_bound_is_refused() {
+        let (mut c, mut peer) = connected_pair();
+        let limits = ClientLimits::with_idle_timeout_s(180.0);
+        peer.write_all(&[b'x'; MAX_REQUEST_BYTES + 10]).unwrap();
+        let mut rx = [0u8; 2048];
+        let mut r = Ok(0);
+        for _ in 0..100 {
+            r = read_requests(&mut c, &mut rx, &limits, 0);
+            if r.is_err() {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        assert_eq!(r, Err(RequestError::LineTooLong));
+        assert!(c.inbuf.len() <= MAX_REQUEST_BYTES);
+    }
+
+    #[test]
+    fn an_idle_client_that_does_not_watch_times_out() {
+        let (mut c, _peer) = connected_pair();
+        let limits = ClientLimits::with_idle_timeout_s(180.0);
+        let t0 = c.last_request_ns;
+        assert!(!c.idle(t0 + 179_000_000_000, &limits));
+        assert!(c.idle(t0 + 181_000_000_000, &limits));
+        c.watch.enable = true;
+        assert!(!c.idle(t0 + 3_600_000_000_000, &limits), "a watcher is never idle");
+    }
+
+    #[test]
+    fn poll_reports_no_fix_once_the_state_and_the_fix_are_stale() {
+        let mut n = NavState::zeroed();
+        n.status = NavStatus::Aligned as u8;
+        n.lat_deg = 48.0;
+        n.lon_deg = 11.0;
+        n.utc_ns = 1_700_000_000_000_000_000;
+        n.host_ns = 100_000_000_000;
+        let mut f = GnssFix::empty(navsync_shared::samples::Stamp::host(
+            n.host_ns,
+            0,
+            navsync_shared::samples::StampSource::Receipt,
+        ));
+        f.mode = 3;
+        f.lat_deg = 48.0;
+        f.lon_deg = 11.0;
+        let latest = Latest {
+            nav: Some(n),
+            fix: Some(f),
+            time: None,
+        };
+        let fresh = poll_reply(&latest, n.host_ns + 100_000_000);
+        assert_eq!(
+            (fresh["active"].as_u64(), fresh["tpv"][0]["mode"].as_u64()),
+            (Some(1), Some(3))
+        );
+        assert_eq!(fresh["tpv"][0]["status"], 6, "{fresh}");
+        // The estimator stopped; the receiver goes on: its fix.
+        let fix_only = poll_reply(&latest, n.host_ns + FRESH_NAV_NS + 1);
+        assert_eq!(fix_only["active"], 1);
+        assert!(fix_only["tpv"][0].get("status").is_none(), "{fix_only}");
+        // Both stale (the estimator died 23 s ago, as in the report): no fix at all.
+        let dead = poll_reply(&latest, n.host_ns + 23_000_000_000);
+        assert_eq!(dead["active"], 0, "{dead}");
+        assert_eq!(dead["tpv"][0]["mode"], 1, "{dead}");
+        assert!(dead["tpv"][0].get("lat").is_none() && dead["tpv"][0].get("ept").is_none());
+        assert_eq!(dead["sky"].as_array().map(Vec::len), Some(0));
     }
 
     #[test]

@@ -160,12 +160,69 @@ pub enum NtpShmError {
         /// Cause.
         source: std::io::Error,
     },
+    /// A segment of the unit exists and is not one navsync may write.
+    #[error(
+        "NTP SHM unit {unit} (key {key:#x}): the existing segment {problem}: refused; remove it with `ipcrm -M {key:#x}` once nothing uses it (chronyd, ntpd, gpsd), or use another --unit"
+    )]
+    Segment {
+        /// Unit.
+        unit: u32,
+        /// Key.
+        key: i32,
+        /// What is wrong with it.
+        problem: String,
+    },
     /// IPC failure.
     #[error(transparent)]
     Ipc(#[from] IpcError),
     /// A health counter could not be registered.
     #[error(transparent)]
     Health(#[from] navsync_shared::health_reporter::HealthError),
+}
+
+/// What an existing segment is (`shmctl(IPC_STAT)`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SegmentInfo {
+    /// Bytes.
+    pub size: usize,
+    /// Owner.
+    pub uid: u32,
+    /// Permission bits.
+    pub mode: u32,
+}
+
+/// The permission bits navsync gives unit `unit`'s segment: units 0 and 1 root-only (0600) as
+/// in ntpd and gpsd, the others 0666 (the convention for unprivileged time sources).
+pub fn unit_mode(unit: u32) -> u32 {
+    if unit < 2 { 0o600 } else { 0o666 }
+}
+
+/// Whether an existing segment of `unit` may be used by a process of user `me`: large enough
+/// for the NTP SHM layout, owned by `me` or root, and no more open than the unit's mode (a
+/// root-only unit that others may write would let them set the time).
+pub fn check_segment(unit: u32, seg: &SegmentInfo, me: u32) -> Result<(), String> {
+    let need = size_of::<ShmTime>();
+    if seg.size < need {
+        return Err(format!(
+            "has {} bytes, fewer than the {need} of an NTP SHM segment (another program's?)",
+            seg.size
+        ));
+    }
+    if seg.uid != me && seg.uid != 0 {
+        return Err(format!(
+            "belongs to uid {}, not to this user (uid {me}) or root: its owner could set the time chrony/ntpd takes",
+            seg.uid
+        ));
+    }
+    let extra = seg.mode & 0o777 & !unit_mode(unit);
+    if extra != 0 {
+        return Err(format!(
+            "has mode {:04o}, more open than unit {unit}'s {:04o}: others could write it",
+            seg.mode & 0o777,
+            unit_mode(unit)
+        ));
+    }
+    Ok(())
 }
 
 /// An attached SHM segment.
@@ -179,20 +236,41 @@ impl ShmSegment {
         NTP_SHM_BASE_KEY.wrapping_add(unit as i32)
     }
 
-    /// Creates (or opens) and attaches the segment of `unit`. Units 0 and 1 are root-only
-    /// (0600) as in ntpd and gpsd, others 0666.
+    /// Creates and attaches the segment of `unit` ([`unit_mode`]); an existing one is first
+    /// checked ([`check_segment`]: size, owner, mode) and refused with what to do.
     pub fn open(unit: u32) -> Result<Self, NtpShmError> {
         let key = Self::key(unit);
-        let perm = if unit < 2 { 0o600 } else { 0o666 };
+        let perm = unit_mode(unit) as libc::c_int;
         let fail = |what, source| NtpShmError::Shm {
             unit,
             key,
             what,
             source,
         };
-        // SAFETY: System V shared memory calls with checked results.
+        // SAFETY: System V shared memory calls with checked results; `ds` is a plain struct.
         unsafe {
-            let id = libc::shmget(key, size_of::<ShmTime>(), libc::IPC_CREAT | perm);
+            let mut id = libc::shmget(key, size_of::<ShmTime>(), libc::IPC_CREAT | libc::IPC_EXCL | perm);
+            if id < 0 && std::io::Error::last_os_error().raw_os_error() == Some(libc::EEXIST) {
+                // There already: look at it before using it.
+                id = libc::shmget(key, 0, 0);
+                if id < 0 {
+                    return Err(fail("shmget", std::io::Error::last_os_error()));
+                }
+                let mut ds: libc::shmid_ds = core::mem::zeroed();
+                if libc::shmctl(id, libc::IPC_STAT, &mut ds) != 0 {
+                    return Err(fail("shmctl(IPC_STAT)", std::io::Error::last_os_error()));
+                }
+                let seg = SegmentInfo {
+                    size: ds.shm_segsz,
+                    uid: ds.shm_perm.uid,
+                    mode: u32::from(ds.shm_perm.mode),
+                };
+                check_segment(unit, &seg, libc::geteuid()).map_err(|problem| NtpShmError::Segment {
+                    unit,
+                    key,
+                    problem,
+                })?;
+            }
             if id < 0 {
                 return Err(fail("shmget", std::io::Error::last_os_error()));
             }
@@ -333,6 +411,75 @@ pub fn run(unit: u32) -> Result<(), NtpShmError> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn an_existing_segment_must_fit_belong_to_us_and_be_no_more_open_than_its_unit() {
+        let size = size_of::<ShmTime>();
+        let ok = |unit, seg: SegmentInfo| check_segment(unit, &seg, 1000);
+        assert_eq!(
+            ok(
+                0,
+                SegmentInfo {
+                    size,
+                    uid: 1000,
+                    mode: 0o600
+                }
+            ),
+            Ok(())
+        );
+        assert_eq!(
+            ok(
+                2,
+                SegmentInfo {
+                    size,
+                    uid: 0,
+                    mode: 0o666
+                }
+            ),
+            Ok(())
+        );
+        assert_eq!(
+            ok(
+                3,
+                SegmentInfo {
+                    size: size + 16,
+                    uid: 1000,
+                    mode: 0o644
+                }
+            ),
+            Ok(())
+        );
+        let e = ok(
+            4,
+            SegmentInfo {
+                size: 16,
+                uid: 1000,
+                mode: 0o666,
+            },
+        )
+        .unwrap_err();
+        assert!(e.contains("16 bytes"), "{e}");
+        let e = ok(
+            4,
+            SegmentInfo {
+                size,
+                uid: 65534,
+                mode: 0o666,
+            },
+        )
+        .unwrap_err();
+        assert!(e.contains("uid 65534"), "{e}");
+        let e = ok(
+            0,
+            SegmentInfo {
+                size,
+                uid: 1000,
+                mode: 0o666,
+            },
+        )
+        .unwrap_err();
+        assert!(e.contains("0666"), "{e}");
+    }
+
     use super::*;
 
     fn locked(ref_host_ns: i64, ref_utc_ns: i64) -> TimeState {

@@ -18,7 +18,8 @@
 //! The open chunk is closed and handed to the operating system at least every
 //! [`CHUNK_INTERVAL`], so `kill -9` loses at most that much; SIGINT/SIGTERM or the end of
 //! `--duration` close the file with its summary and footer. Progress (elapsed time, file size,
-//! messages per service) goes to stderr.
+//! messages per service) goes to stderr. An existing file at OUT is refused (it used to be
+//! truncated silently) unless `--force`.
 
 use std::collections::HashSet;
 use std::io::Write;
@@ -45,7 +46,8 @@ pub const DEFAULT_SERVICES: &str = "navsync/**";
 /// `navsync record`: navsync services into an MCAP file until Ctrl-C/SIGTERM or --duration.
 #[derive(Debug, Clone, clap::Args)]
 pub struct Options {
-    /// Output file (MCAP) [default: [outputs.record].path].
+    /// Output file (MCAP) [default: [outputs.record].path]; `{start}` in it becomes the UTC
+    /// start time (`20261204T170525Z`), so every run gets a file of its own.
     pub out: Option<PathBuf>,
     /// Services to record: names or patterns (`*` within a segment, `**` across)
     /// [default: [outputs.record].services, else navsync/**].
@@ -57,6 +59,9 @@ pub struct Options {
     /// Encoding and standard messages.
     #[command(flatten)]
     pub format: crate::config::recording::RecordingFlags,
+    /// Replace an existing file at OUT (without it, an existing file is refused).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Runs `navsync record`: flags, else `[outputs.record]`.
@@ -66,6 +71,7 @@ pub fn main(opts: Options, cfg: &crate::config::Loaded) -> anyhow::Result<()> {
     let Some(out) = opts.out.or_else(|| r.map(|r| r.path.clone())) else {
         anyhow::bail!("no output file, and no [outputs.record] in {}", cfg.shown());
     };
+    let out = with_start_time(&out, realtime_now_ns());
     let services = if opts.services.is_empty() {
         r.map(|r| r.services.clone()).unwrap_or_default()
     } else {
@@ -79,6 +85,7 @@ pub fn main(opts: Options, cfg: &crate::config::Loaded) -> anyhow::Result<()> {
         progress: true,
         metadata,
         options: opts.format.options(&cfg.config.recording),
+        force: opts.force,
     })
     .with_context(|| format!("recording {}", out.display()))?;
     Ok(())
@@ -100,6 +107,8 @@ pub struct RecordArgs {
     pub metadata: Vec<(String, &'static str, String)>,
     /// Encoding, compression, standard messages.
     pub options: navsync_recording::RecordingOptions,
+    /// Replace an existing file at `out` (else it is refused).
+    pub force: bool,
 }
 
 /// Errors of `navsync record`.
@@ -160,7 +169,9 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
     let r_msgs = health.rate("messages")?;
 
     // The file appears once the initial subscriptions exist: from then on nothing is missed.
-    let mut rec = SampleRecorder::create_with(&args.out, args.options.clone())?;
+    // It is created exclusively (an existing file is refused unless --force): a recording
+    // grows at its own name, readable while it is written.
+    let mut rec = SampleRecorder::create_live(&args.out, args.force, args.options.clone())?;
     for (service, key, value) in &args.metadata {
         rec.set_channel_metadata(service, key, value)?;
     }
@@ -261,6 +272,22 @@ pub fn run(args: &RecordArgs) -> Result<RecordStats, RecordError> {
     Ok(stats)
 }
 
+/// `path` with every `{start}` replaced by the UTC time `utc_ns` as `YYYYMMDDTHHMMSSZ` (a
+/// service restarted after a crash then writes a new file instead of meeting its last one).
+pub fn with_start_time(path: &std::path::Path, utc_ns: i64) -> PathBuf {
+    let text = path.to_string_lossy();
+    if !text.contains("{start}") {
+        return path.to_path_buf();
+    }
+    let stamp: String = navsync_shared::time::format_rfc3339_ms(utc_ns)
+        .chars()
+        .take(19)
+        .filter(|c| !matches!(c, '-' | ':'))
+        .chain(['Z'])
+        .collect();
+    PathBuf::from(text.replace("{start}", &stamp))
+}
+
 fn ns(d: Duration) -> i64 {
     d.as_nanos() as i64
 }
@@ -327,4 +354,18 @@ fn progress(tty: bool, elapsed_ns: i64, bytes: u64, subs: &[AnySubscriber], coun
         let _ = writeln!(err, "{line}");
     }
     let _ = err.flush();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn start_in_the_path_becomes_the_utc_start_time() {
+        let t = 1_796_403_925_562_000_000; // 2026-12-04T17:05:25.562Z
+        let p = with_start_time(std::path::Path::new("/var/lib/navsync/navsync-{start}.mcap"), t);
+        assert_eq!(p, PathBuf::from("/var/lib/navsync/navsync-20261204T170525Z.mcap"));
+        let plain = std::path::Path::new("/tmp/x.mcap");
+        assert_eq!(with_start_time(plain, t), plain);
+    }
 }

@@ -112,6 +112,7 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayStats, ReplayError> {
     navsync_shared::pacing::minimal_timer_slack();
     let globs: Vec<ServiceGlob> = args.services.iter().map(|s| ServiceGlob::new(s)).collect();
     let node = IpcNode::new("replay")?;
+    navsync_shared::sd_notify::ready(&format!("replaying {}", args.input.display()));
     let mut pubs: Vec<Option<AnyPublisher>> = Vec::new();
     let mut stats = ReplayStats::default();
     let tty = args.progress && is_tty();
@@ -170,6 +171,9 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayStats, ReplayError> {
                 "{}: the recording stops at byte {offset} ({record}): it was not closed properly; replayed what precedes",
                 args.input.display()
             );
+        }
+        for c in reader.skipped_chunks() {
+            warn!("{}: {c}; replayed the rest", args.input.display());
         }
         if args.progress {
             progress(tty, 1.0, 0, stats.published, args.speed, stats.laps);

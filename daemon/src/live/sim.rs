@@ -33,6 +33,9 @@ pub struct Options {
     /// With --record: encoding and standard messages.
     #[command(flatten)]
     pub format: crate::config::recording::RecordingFlags,
+    /// Replace an existing recording at --record or --summary-json (never the scenario).
+    #[arg(long, requires = "fast")]
+    pub force: bool,
     /// The estimator's models (with --estimate; every simulated IMU is fused, the first as
     /// the reference; unless --imu-model is given the filter is told the simulated IMU class
     /// and receiver velocity noise).
@@ -52,6 +55,7 @@ pub fn run(opts: Options, cfg: &Loaded) -> Result<()> {
             summary_json: opts.summary_json.as_deref(),
             record: opts.record.as_deref(),
             record_options: opts.format.options(&cfg.config.recording),
+            force: opts.force,
         };
         return sim_fast::run(&opts.world, &opts.est, cfg, outputs).context("offline simulation");
     }

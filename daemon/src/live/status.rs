@@ -12,6 +12,13 @@
 //! per-IMU offsets; a u-blox receiver's latest TIM-TP gives the qErr of its next pulse, its
 //! latest TIM-TM2 the last time mark.
 //!
+//! A process's state is iceoryx2's, refined ([`refine_state`]): `alive`; `stalled` when it is
+//! stopped (SIGSTOP: `/proc/PID/stat` says `T`) or its `Health` heartbeat is older than
+//! [`HEARTBEAT_STALE_S`] (a listed node is not a working process); `gone` when it died
+//! without cleaning up (`kill -9`: listed before this process's own node reclaims it) or
+//! vanished between two refreshes of `--watch`, so a killed process is reported, not silently
+//! missing.
+//!
 //! `--json` prints one JSON document (one line per refresh with `--watch`); `--watch S`
 //! refreshes every S seconds until Ctrl-C (`--count N` refreshes, then exits).
 
@@ -157,6 +164,39 @@ struct Watched {
     nodes: Vec<String>,
 }
 
+/// A process whose latest `Health` is older than this (three of its 1 s reports missed) has
+/// stopped reporting: `stalled`.
+pub const HEARTBEAT_STALE_S: f64 = 3.0;
+
+/// The state shown for a process: iceoryx2's node state (`alive`, `dead`, …), refined by its
+/// `/proc` state letter and the age of its latest `Health` (None: it has none); and why, for a
+/// stalled one.
+pub fn refine_state(
+    node_state: &'static str,
+    proc_state: Option<char>,
+    heartbeat_age_s: Option<f64>,
+) -> (&'static str, Option<String>) {
+    match node_state {
+        "alive" => {}
+        "dead" => return ("gone", Some("died without cleaning up (killed?)".into())),
+        other => return (other, None),
+    }
+    if matches!(proc_state, Some('T' | 't')) {
+        return ("stalled", Some("stopped (SIGSTOP or a debugger)".into()));
+    }
+    match heartbeat_age_s {
+        Some(age) if age > HEARTBEAT_STALE_S => ("stalled", Some(format!("no heartbeat for {age:.1} s"))),
+        _ => ("alive", None),
+    }
+}
+
+/// The state letter of process `pid` in `/proc` (`R`, `S`, `T` when stopped, …).
+fn proc_state(pid: i32) -> Option<char> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    s.rsplit_once(')')
+        .and_then(|(_, rest)| rest.trim_start().chars().next())
+}
+
 /// A discovered process (iceoryx2 node).
 #[derive(Debug, Clone)]
 struct Process {
@@ -170,17 +210,26 @@ struct Status {
     node: IpcNode,
     services: BTreeMap<String, Watched>,
     processes: Vec<Process>,
+    /// Processes that died or vanished: reported as `gone`.
+    gone: Vec<Process>,
     foreign_services: Vec<String>,
     interval_start: Instant,
 }
 
 impl Status {
     fn new() -> Result<Self, StatusError> {
+        // The dead nodes first: creating our node reclaims them, and they would vanish.
+        let gone = list_processes(&ipc::config()?, None)?
+            .into_iter()
+            .filter(|p| p.state == "dead")
+            .map(|p| Process { state: "gone", ..p })
+            .collect();
         let node = IpcNode::new(&format!("status-{}", std::process::id()))?;
         Ok(Self {
             node,
             services: BTreeMap::new(),
             processes: Vec::new(),
+            gone,
             foreign_services: Vec::new(),
             interval_start: Instant::now(),
         })
@@ -190,30 +239,17 @@ impl Status {
     fn discover(&mut self) -> Result<(), StatusError> {
         let config = ipc::config()?;
         let own = *self.node.node().id();
-        let mut processes = Vec::new();
-        Node::<Transport>::list(&config, |state| {
-            let (view, st) = match &state {
-                NodeState::Alive(v) => (Some(v.details().clone()), "alive"),
-                NodeState::Dead(v) => (Some(v.details().clone()), "dead"),
-                NodeState::Inaccessible(_) => (None, "inaccessible"),
-                NodeState::Undefined(_) => (None, "undefined"),
-            };
-            if *state.node_id() == own {
-                return CallbackProgression::Continue;
+        let processes = list_processes(&config, Some(own))?;
+        // What was there at the last discovery and is not now has gone.
+        for p in &self.processes {
+            let same = |q: &Process| q.name == p.name && q.pid == p.pid;
+            if p.state != "gone" && !processes.iter().any(same) && !self.gone.iter().any(same) {
+                self.gone.push(Process {
+                    state: "gone",
+                    ..p.clone()
+                });
             }
-            let details = view.flatten();
-            processes.push(Process {
-                name: details
-                    .as_ref()
-                    .map_or(String::new(), |d| d.name().as_str().to_string()),
-                pid: details.as_ref().map(|d| d.process_id().value()),
-                executable: details.as_ref().map_or(String::new(), |d| d.executable().to_string()),
-                state: st,
-            });
-            CallbackProgression::Continue
-        })
-        .map_err(|e| StatusError::Discovery(format!("listing nodes: {e:?}")))?;
-        processes.sort_by(|a, b| (&a.name, a.pid).cmp(&(&b.name, b.pid)));
+        }
         self.processes = processes;
 
         let mut found: BTreeMap<String, Vec<String>> = BTreeMap::new();
@@ -327,15 +363,22 @@ impl Status {
         let processes: Vec<Value> = self
             .processes
             .iter()
+            .chain(&self.gone)
             .map(|p| {
                 let h = health
                     .iter()
                     .find(|h| h["process"] == p.name.as_str() && h["pid"].as_i64() == p.pid.map(i64::from));
+                let (state, why) = refine_state(
+                    p.state,
+                    p.pid.and_then(proc_state),
+                    h.and_then(|h| h["report_age_s"].as_f64()),
+                );
                 json!({
                     "name": p.name,
                     "pid": p.pid,
                     "executable": p.executable,
-                    "state": p.state,
+                    "state": state,
+                    "why": why,
                     "uptime_s": h.and_then(|h| h["uptime_s"].as_f64()),
                 })
             })
@@ -488,6 +531,38 @@ fn seconds(v: &Value) -> String {
     }
 }
 
+/// The nodes under this prefix (but `own`), by name and pid, with iceoryx2's state.
+fn list_processes(
+    config: &Config,
+    own: Option<iceoryx2::identifiers::UniqueNodeId>,
+) -> Result<Vec<Process>, StatusError> {
+    let mut processes = Vec::new();
+    Node::<Transport>::list(config, |state| {
+        let (view, st) = match &state {
+            NodeState::Alive(v) => (Some(v.details().clone()), "alive"),
+            NodeState::Dead(v) => (Some(v.details().clone()), "dead"),
+            NodeState::Inaccessible(_) => (None, "inaccessible"),
+            NodeState::Undefined(_) => (None, "undefined"),
+        };
+        if Some(*state.node_id()) == own {
+            return CallbackProgression::Continue;
+        }
+        let details = view.flatten();
+        processes.push(Process {
+            name: details
+                .as_ref()
+                .map_or(String::new(), |d| d.name().as_str().to_string()),
+            pid: details.as_ref().map(|d| d.process_id().value()),
+            executable: details.as_ref().map_or(String::new(), |d| d.executable().to_string()),
+            state: st,
+        });
+        CallbackProgression::Continue
+    })
+    .map_err(|e| StatusError::Discovery(format!("listing nodes: {e:?}")))?;
+    processes.sort_by(|a, b| (&a.name, a.pid).cmp(&(&b.name, b.pid)));
+    Ok(processes)
+}
+
 /// The report as text.
 pub fn render_text(r: &Value) -> String {
     let mut s = String::new();
@@ -505,11 +580,12 @@ pub fn render_text(r: &Value) -> String {
     for p in procs {
         let _ = writeln!(
             s,
-            "{:<24} {:>8} {:<13} {:>10}",
+            "{:<24} {:>8} {:<13} {:>10}{}",
             p["name"].as_str().unwrap_or(""),
             p["pid"].as_i64().map_or("-".into(), |x| x.to_string()),
             p["state"].as_str().unwrap_or(""),
-            seconds(&p["uptime_s"])
+            seconds(&p["uptime_s"]),
+            p["why"].as_str().map_or(String::new(), |w| format!("  {w}"))
         );
     }
     let _ = writeln!(
@@ -685,6 +761,7 @@ pub fn run(args: &StatusArgs) -> Result<(), StatusError> {
     let interval = args.watch.unwrap_or(args.window);
     let mut reports = 0u64;
     let mut last_discovery = Instant::now();
+    navsync_shared::sd_notify::ready("status");
     loop {
         let until = st.interval_start + interval;
         while Instant::now() < until {
@@ -715,5 +792,25 @@ pub fn run(args: &StatusArgs) -> Result<(), StatusError> {
         if args.watch.is_none() || args.count.is_some_and(|c| reports >= c) {
             return Ok(());
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_stopped_or_silent_process_is_stalled_and_a_dead_one_gone() {
+        assert_eq!(refine_state("alive", Some('S'), Some(0.4)), ("alive", None));
+        assert_eq!(refine_state("alive", Some('R'), None), ("alive", None));
+        let (s, why) = refine_state("alive", Some('T'), Some(0.4));
+        assert_eq!(s, "stalled");
+        assert!(why.unwrap().contains("stopped"));
+        let (s, why) = refine_state("alive", Some('S'), Some(HEARTBEAT_STALE_S + 1.0));
+        assert_eq!(s, "stalled");
+        assert!(why.unwrap().contains("no heartbeat for 4.0 s"));
+        assert_eq!(refine_state("dead", None, None).0, "gone");
+        assert_eq!(refine_state("gone", None, None), ("gone", None));
+        assert_eq!(refine_state("inaccessible", None, None), ("inaccessible", None));
     }
 }

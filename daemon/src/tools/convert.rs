@@ -1,11 +1,18 @@
 //! `navsync convert IN.mcap OUT.mcap [--encoding cdr|json] [--ros-std]`: rewrites a recording
 //! in another encoding (e.g. a JSON recording of an earlier navsync as a ROS 2 bag), with the
 //! same samples, times and channel metadata.
+//!
+//! The output is written beside its target and renamed into place when complete
+//! (`navsync_recording::output`): the input is never opened for writing, whatever path names
+//! it (`./b.mcap`, a link); an existing recording is replaced only with `--force`; a failed
+//! conversion leaves nothing. A corrupt chunk of the input is skipped and reported with its
+//! time range; the rest is converted.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use navsync_recording::channels::{META_LAYOUT, META_QOS};
+use navsync_recording::output::Overwrite;
 use navsync_recording::ros_std::META_ORIGIN;
 use navsync_recording::{SampleReader, SampleRecorder};
 
@@ -19,6 +26,9 @@ pub struct Options {
     pub input: PathBuf,
     /// The recording to write.
     pub output: PathBuf,
+    /// Replace an existing recording at OUTPUT (never the input itself).
+    #[arg(long)]
+    pub force: bool,
     /// Encoding and standard messages of the output.
     #[command(flatten)]
     pub format: RecordingFlags,
@@ -26,11 +36,13 @@ pub struct Options {
 
 /// Runs `navsync convert`; prints what it wrote.
 pub fn run(opts: &Options, cfg: &Loaded) -> Result<()> {
-    if opts.input == opts.output {
-        bail!("{}: input and output are the same file", opts.input.display());
-    }
+    let inputs = [opts.input.as_path()];
+    let mut writer = SampleRecorder::create(
+        &opts.output,
+        &Overwrite::new(&inputs, opts.force),
+        opts.format.options(&cfg.config.recording),
+    )?;
     let mut reader = SampleReader::open(&opts.input)?;
-    let mut writer = SampleRecorder::create_with(&opts.output, opts.format.options(&cfg.config.recording))?;
     let mut seen = std::collections::HashSet::new();
     let mut n = 0u64;
     while let Some(s) = reader.next_sample()? {
@@ -50,15 +62,19 @@ pub fn run(opts: &Options, cfg: &Loaded) -> Result<()> {
     let truncated = reader
         .scan_end()
         .is_some_and(|e| *e != navsync_recording::mcap_reader::ScanEnd::Clean);
+    for c in reader.skipped_chunks() {
+        eprintln!("convert: {}: {c}; converted the rest", opts.input.display());
+    }
     for (topic, why) in reader.skipped_channels() {
         if !why.contains("(--ros-std)") {
             eprintln!("convert: skipped channel {topic}: {why}");
         }
     }
-    writer.close()?;
     if n == 0 {
+        // The writer is dropped unclosed: no output appears.
         bail!("{}: no navsync samples to convert", opts.input.display());
     }
+    writer.close()?;
     let size = std::fs::metadata(&opts.output)
         .with_context(|| opts.output.display().to_string())?
         .len();

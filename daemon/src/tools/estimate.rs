@@ -6,6 +6,7 @@
 //! [`navsync_estimator::input_order`], so the `NavState`s are bit-identical to the live
 //! process's for the same samples, and bit-identical from run to run.
 
+use navsync_recording::output::{Overwrite, check_target, write_file};
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
@@ -50,6 +51,9 @@ pub struct EstimateOptions {
     /// the summary). Without it every output is the state published live.
     #[arg(long, requires = "estimate")]
     pub smooth: bool,
+    /// Replace an existing recording at --out or --summary-json (never the input itself).
+    #[arg(long, requires = "estimate")]
+    pub force: bool,
     /// The estimator's settings.
     #[command(flatten)]
     pub est: EstimatorFlags,
@@ -234,23 +238,40 @@ pub fn warn_if_truncated(reader: &SampleReader, path: &Path) {
             path.display()
         );
     }
+    warn_skipped_chunks(reader, path);
+}
+
+/// Warns about every damaged chunk the reader skipped (where, which time range, why).
+pub fn warn_skipped_chunks(reader: &SampleReader, path: &Path) {
+    for c in reader.skipped_chunks() {
+        warn!("{}: {c}; the rest of the recording was read", path.display());
+    }
 }
 
 /// Runs the estimator over a recording as fast as the CPU allows; prints the summary table
 /// (to stdout) and returns it.
 pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary, EstimateError> {
     let _span = info_span!("replay-estimate").entered();
+    // Every output goes to a temporary file renamed into place at the end
+    // (navsync_recording::output): the input is never opened for writing, whatever path
+    // names it, and an existing recording is replaced only with --force.
+    let inputs = [input];
+    let rules = Overwrite::new(&inputs, opts.force);
+    if let Some(p) = &opts.summary_json {
+        check_target(p, &rules)?;
+    }
     let reader = SampleReader::open(input)?;
     let settings = settings_for_recording(&opts.est, cfg, &reader)?;
     let mut out = match &opts.out {
-        Some(p) if opts.format == Format::Mcap => Some(SampleRecorder::create_with(
+        Some(p) if opts.format == Format::Mcap => Some(SampleRecorder::create(
             p,
+            &rules,
             opts.recording.options(&cfg.config.recording),
         )?),
         _ => None,
     };
     let mut kf_gins = match &opts.out {
-        Some(p) if opts.format == Format::KfGins => Some(ResultWriter::create(p)?),
+        Some(p) if opts.format == Format::KfGins => Some(ResultWriter::create(p, &rules)?),
         _ => None,
     };
     let mut kf_gins_err: Option<KfGinsError> = None;
@@ -309,10 +330,7 @@ pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary
     println!("{}", run.summary.table());
     if let Some(p) = &opts.summary_json {
         let text = serde_json::to_string_pretty(&run.summary).unwrap_or_default();
-        std::fs::write(p, text).map_err(|source| EstimateError::Io {
-            path: p.display().to_string(),
-            source,
-        })?;
+        write_file(p, &rules, text.as_bytes())?;
     }
     if let Some(p) = run.summary.problem {
         return Err(EstimateError::Unusable(p));

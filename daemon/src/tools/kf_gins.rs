@@ -54,6 +54,7 @@
 //! positions' noise, correlated from fix to fix, so the filter makes position-only updates,
 //! as KF-GINS does.
 
+use navsync_recording::output::{OutputFile, Overwrite};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Write};
@@ -239,19 +240,22 @@ pub fn week_sow(utc_ns: i64) -> (i64, f64) {
 /// `KF_GINS_IMU_ERR.txt` and `KF_GINS_STD.txt` in a directory (as KF-GINS's `outputpath`), or
 /// only the navigation result into a file. States while aligning or without UTC are left out.
 pub struct ResultWriter {
-    nav: BufWriter<File>,
-    imu_err: Option<BufWriter<File>>,
-    std: Option<BufWriter<File>>,
+    nav: BufWriter<OutputFile>,
+    imu_err: Option<BufWriter<OutputFile>>,
+    std: Option<BufWriter<OutputFile>>,
     path: PathBuf,
     rows: u64,
 }
 
 impl ResultWriter {
-    /// Creates the file(s): `out` is a directory (existing, or given with a trailing `/`) or a file.
-    pub fn create(out: &Path) -> Result<Self, KfGinsError> {
+    /// Creates the file(s): `out` is a directory (existing, or given with a trailing `/`) or a
+    /// file. Each is written beside its name and renamed into place by
+    /// [`finish`](Self::finish) (`navsync_recording::output`: never over an input, nor over
+    /// a recording without `rules.force`).
+    pub fn create(out: &Path, rules: &Overwrite<'_>) -> Result<Self, KfGinsError> {
         let is_dir = out.is_dir() || out.as_os_str().to_string_lossy().ends_with('/');
-        let create = |p: &Path| -> Result<BufWriter<File>, KfGinsError> {
-            Ok(BufWriter::new(File::create(p).map_err(io_err(p))?))
+        let create = |p: &Path| -> Result<BufWriter<OutputFile>, KfGinsError> {
+            Ok(BufWriter::new(OutputFile::create(p, rules)?))
         };
         if is_dir {
             std::fs::create_dir_all(out).map_err(io_err(out))?;
@@ -320,12 +324,12 @@ impl ResultWriter {
         Ok(())
     }
 
-    /// Flushes everything; returns the rows written.
-    pub fn finish(mut self) -> Result<u64, KfGinsError> {
+    /// Flushes everything and renames the files into place; returns the rows written.
+    pub fn finish(self) -> Result<u64, KfGinsError> {
         let p = self.path.clone();
-        self.nav.flush().map_err(io_err(&p))?;
-        for w in [self.imu_err.as_mut(), self.std.as_mut()].into_iter().flatten() {
-            w.flush().map_err(io_err(&p))?;
+        for w in [Some(self.nav), self.imu_err, self.std].into_iter().flatten() {
+            let f = w.into_inner().map_err(|e| io_err(&p)(e.into_error()))?;
+            f.commit()?;
         }
         Ok(self.rows)
     }
@@ -415,6 +419,9 @@ pub struct ImportArgs {
     /// The output recording (MCAP).
     #[arg(short, long)]
     pub out: PathBuf,
+    /// Replace an existing recording at --out (never one of the inputs).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// What the time tags of a GNSS file are.
@@ -830,7 +837,20 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         };
         streams.push((Box::new(truth_items(rows, tl, true_latency)) as Box<dyn Iterator<Item = _>>).peekable());
     }
-    let mut rec = SampleRecorder::create(&args.out)?;
+    let inputs: Vec<&Path> = [Some(args.imu.as_path()), Some(args.gnss.as_path())]
+        .into_iter()
+        .chain([
+            args.truth.as_deref(),
+            args.kf_gins_config.as_deref(),
+            args.gnss_vel.as_deref(),
+        ])
+        .flatten()
+        .collect();
+    let mut rec = SampleRecorder::create(
+        &args.out,
+        &Overwrite::new(&inputs, args.force),
+        navsync_recording::RecordingOptions::default(),
+    )?;
     let mut stats = ImportStats {
         week,
         imu_rate_hz: 1.0 / dt,

@@ -11,6 +11,7 @@
 //! When the recording has no `NavState`s (a simulator or sensor recording), the estimator runs
 //! over it first, exactly as `navsync replay --estimate` with the same flags.
 
+use navsync_recording::output::{Overwrite, check_target, write_file};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -41,6 +42,9 @@ pub struct Options {
     /// Run the estimator over the recording even when it has navigation states.
     #[arg(long)]
     pub estimate: bool,
+    /// Replace an existing recording at --out (never the input itself).
+    #[arg(long)]
+    pub force: bool,
     /// The estimator's settings (when it runs).
     #[command(flatten)]
     pub est: EstimatorFlags,
@@ -55,6 +59,7 @@ pub fn main(opts: Options, cfg: &Loaded) -> anyhow::Result<()> {
         input: opts.input.clone(),
         out: out.clone(),
         estimate: opts.estimate,
+        force: opts.force,
         est: super::estimate::settings_for_recording(&opts.est, cfg, &reader)?,
     };
     drop(reader);
@@ -72,6 +77,8 @@ pub struct ReportArgs {
     pub out: PathBuf,
     /// Run the estimator even when the recording has navigation states.
     pub estimate: bool,
+    /// Replace an existing recording at `out` (never the input).
+    pub force: bool,
     /// Estimator settings when it runs.
     pub est: Settings,
 }
@@ -147,6 +154,7 @@ fn read(args: &ReportArgs) -> Result<Data, ReportError> {
             _ => {}
         }
     }
+    super::estimate::warn_skipped_chunks(&reader, &args.input);
     if !has_nav {
         // Run the estimator over the recording, as `replay --estimate` does.
         d.nav.clear();
@@ -968,12 +976,18 @@ svg.plot {{ display: block; margin: 8px 0; border: 1px solid #ddd; }}
 
 /// Runs `navsync report`; returns the number of plots written.
 pub fn run(args: &ReportArgs) -> Result<usize, ReportError> {
+    // The page goes to a temporary file renamed over `out` (navsync_recording::output): never
+    // over the recording it is made of, nor over another recording without --force. Checked
+    // first, so a refusal costs no reading.
+    let inputs = [args.input.as_path()];
+    let rules = Overwrite::new(&inputs, args.force);
+    check_target(&args.out, &rules)?;
     let d = read(args)?;
     if d.counts.is_empty() {
         return Err(ReportError::Empty(format!("{}: no samples", args.input.display())));
     }
     let page = render(args, &d);
-    std::fs::write(&args.out, &page).map_err(|e| ReportError::Io(args.out.display().to_string(), e))?;
+    write_file(&args.out, &rules, page.as_bytes())?;
     if let Some(problem) = d.problem {
         return Err(ReportError::Unusable {
             path: args.out.display().to_string(),

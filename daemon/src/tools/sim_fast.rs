@@ -8,6 +8,7 @@
 //! `log_time` = the simulated UTC of its delivery instant and `publish_time` = its delivery
 //! host time (`World::utc_ns_at_host`), so `navsync replay` paces it as the drivers would have.
 
+use navsync_recording::output::{Overwrite, check_target, write_file};
 use std::path::Path;
 
 use navsync_recording::{RecordingError, SampleRecorder, channels};
@@ -59,6 +60,8 @@ pub struct Outputs<'a> {
     pub record: Option<&'a Path>,
     /// How the recording is written.
     pub record_options: navsync_recording::RecordingOptions,
+    /// Replace an existing recording (`--force`).
+    pub force: bool,
 }
 
 /// The estimator's settings for the simulated world: every simulated IMU (ids "0", "1", …;
@@ -86,7 +89,10 @@ fn sim_gnss_vel_std(cfg: &SimConfig) -> f64 {
 
 /// Stores in the recording what the simulated devices are (each IMU's noise model, the
 /// antenna lever arm, the receiver's velocity σ), so `replay --estimate` uses the right models.
-fn describe_devices(mut rec: SampleRecorder, cfg: &SimConfig) -> Result<SampleRecorder, RecordingError> {
+fn describe_devices<W: std::io::Write + std::io::Seek>(
+    mut rec: SampleRecorder<W>,
+    cfg: &SimConfig,
+) -> Result<SampleRecorder<W>, RecordingError> {
     for i in 0..cfg.imu.count {
         let noise = cfg.imu_unit(i).preset.noise();
         rec.set_channel_metadata(
@@ -125,9 +131,16 @@ pub fn run(sim: &SimArgs, flags: &ModelFlags, file: &Loaded, outputs: Outputs<'_
     // The world's clock, for the UTC of each delivery instant (a pure function of the world).
     let clock = world.clone();
     let end_host = sim.duration_s.map(|d| start_host + (d * 1e9) as i64);
+    // Written beside their names and renamed into place at the end (never over the scenario
+    // file, nor over a recording without --force).
+    let inputs: Vec<&Path> = sim.scenario.as_deref().into_iter().collect();
+    let rules = Overwrite::new(&inputs, outputs.force);
+    if let Some(p) = outputs.summary_json {
+        check_target(p, &rules)?;
+    }
     let mut recorder = match outputs.record {
         Some(p) => Some(describe_devices(
-            SampleRecorder::create_with(p, outputs.record_options.clone())?,
+            SampleRecorder::create(p, &rules, outputs.record_options.clone())?,
             &cfg,
         )?),
         None => None,
@@ -152,10 +165,7 @@ pub fn run(sim: &SimArgs, flags: &ModelFlags, file: &Loaded, outputs: Outputs<'_
         println!("{}", run.summary.table());
         if let Some(p) = outputs.summary_json {
             let text = serde_json::to_string_pretty(&run.summary).unwrap_or_default();
-            std::fs::write(p, text).map_err(|source| SimEstimateError::Io {
-                path: p.display().to_string(),
-                source,
-            })?;
+            write_file(p, &rules, text.as_bytes())?;
         }
         if let Some(p) = run.summary.problem {
             unusable = Some(p);

@@ -504,7 +504,8 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
     while !node.termination_requested() {
         // Serving: the services exist and the device is being read (or waited for, with backoff).
         navsync_shared::sd_notify::ready(&format!("gnss {}: reading {}", args.id, args.port));
-        let baud = match args.baud {
+        // The line rate now (the hunt changes it while the port stays open).
+        let mut baud = match args.baud {
             Baud::Fixed(b) => b,
             Baud::Auto => hunt.baud(),
         };
@@ -623,6 +624,7 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
                         }
                         dec.reset();
                         health.set(pc.baud, u64::from(b));
+                        baud = b;
                         ns_per_byte = 10_000_000_000 / i64::from(b);
                     }
                 }

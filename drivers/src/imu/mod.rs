@@ -13,7 +13,7 @@
 //!   115200 Bd), stamped on receipt and carrying the device's SampleTimeFine clock
 //!   ([`xsens`]: the process shell, `frame`).
 //! - `sim[:DIR]` — the simulator's IMU `ID` (`navsync sim --imu-output xsens`), which is an
-//!   Xsens device on the pseudo-terminal `DIR/imu{ID}` (default `/tmp/navsync`)
+//!   Xsens device on the pseudo-terminal `DIR/imu{ID}` (default navsync's runtime directory)
 //!   ([`xsens::sim_device`]).
 //!
 //! Adding a source: a folder or file here with its pure decoder and its process shell, an
@@ -126,11 +126,11 @@ impl FromStr for ImuSource {
                 })
             }
             "sim" => Ok(Self::Sim {
-                dir: PathBuf::from(if rest.is_empty() {
-                    xsens::sim_device::DEFAULT_SIM_DIR
+                dir: if rest.is_empty() {
+                    xsens::sim_device::default_sim_dir()
                 } else {
-                    rest
-                }),
+                    PathBuf::from(rest)
+                },
             }),
             _ => Err(expected()),
         }
@@ -174,6 +174,9 @@ pub enum ImuError {
     /// A health counter could not be registered.
     #[error(transparent)]
     Health(#[from] navsync_shared::health_reporter::HealthError),
+    /// The simulated devices' directory is not safe to use.
+    #[error("the simulated IMUs' directory")]
+    SimDir(#[from] navsync_shared::runtime_dir::RuntimeDirError),
 }
 
 /// Runs the driver until SIGINT/SIGTERM.
@@ -223,6 +226,8 @@ pub fn run(args: &ImuArgs) -> Result<(), ImuError> {
             &mut out,
         ),
         ImuSource::Sim { dir } => {
+            // A link in a directory another user controls could lead anywhere.
+            navsync_shared::runtime_dir::check(dir, navsync_shared::runtime_dir::HINT)?;
             let index: usize = args.id.parse().map_err(|_| {
                 ImuError::Config(format!(
                     "--source sim needs a numeric --id (the simulator's IMU index), not `{}`",
@@ -282,7 +287,7 @@ mod tests {
         assert_eq!(
             "sim".parse::<ImuSource>(),
             Ok(ImuSource::Sim {
-                dir: "/tmp/navsync".into()
+                dir: navsync_shared::runtime_dir::base()
             })
         );
         assert_eq!("sim:/x".parse::<ImuSource>(), Ok(ImuSource::Sim { dir: "/x".into() }));

@@ -115,11 +115,13 @@ static SLEEPERS: [SleeperSlot; SLEEPER_SLOTS] = [const {
     }
 }; SLEEPER_SLOTS];
 
-/// Set by [`on_termination`] before it wakes the sleepers.
-static TERMINATING: AtomicBool = AtomicBool::new(false);
-/// The SIGINT and SIGTERM handlers [`on_termination`] replaced (iceoryx2's), called first.
+/// The SIGINT and SIGTERM actions [`on_termination`] replaced (iceoryx2's), called after it
+/// latched the request: `sa_sigaction` as a number (0: none to call) and whether it takes
+/// `SA_SIGINFO`'s three arguments.
 static PREVIOUS_SIGINT: AtomicUsize = AtomicUsize::new(0);
 static PREVIOUS_SIGTERM: AtomicUsize = AtomicUsize::new(0);
+static PREVIOUS_SIGINT_INFO: AtomicBool = AtomicBool::new(false);
+static PREVIOUS_SIGTERM_INFO: AtomicBool = AtomicBool::new(false);
 /// True once [`on_termination`] is installed for both signals.
 static INSTALLED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
 
@@ -138,22 +140,30 @@ unsafe fn bump_and_wake(w: *mut AtomicU32) {
     }
 }
 
-/// SIGINT/SIGTERM: the handler that was there (iceoryx2's, which records the signal for
-/// `termination_requested`), then every registered sleeper woken. Async-signal-safe: atomics
-/// and `futex(2)`.
-extern "C" fn on_termination(sig: libc::c_int) {
-    let previous = if sig == libc::SIGINT {
-        &PREVIOUS_SIGINT
+/// SIGINT/SIGTERM: navsync's own record of the request, sticky (`super::TERMINATED`: nothing
+/// clears it, unlike iceoryx2's "last signal", which a SIGCONT right after the SIGTERM, as
+/// systemd and `timeout` send, overwrites), then the handler that was there (iceoryx2's), then
+/// every registered sleeper woken. Async-signal-safe: atomics and `futex(2)`.
+extern "C" fn on_termination(sig: libc::c_int, info: *mut libc::siginfo_t, ctx: *mut libc::c_void) {
+    super::TERMINATED.store(true, Ordering::SeqCst);
+    let (previous, takes_info) = if sig == libc::SIGINT {
+        (&PREVIOUS_SIGINT, &PREVIOUS_SIGINT_INFO)
     } else {
-        &PREVIOUS_SIGTERM
+        (&PREVIOUS_SIGTERM, &PREVIOUS_SIGTERM_INFO)
     };
     let h = previous.load(Ordering::SeqCst);
-    if h != libc::SIG_DFL && h != libc::SIG_IGN {
-        // SAFETY: `h` is the plain (non-SA_SIGINFO) handler sigaction reported as installed.
-        let f: extern "C" fn(libc::c_int) = unsafe { core::mem::transmute(h) };
-        f(sig);
+    if h != 0 && h != libc::SIG_DFL && h != libc::SIG_IGN {
+        if takes_info.load(Ordering::SeqCst) {
+            // SAFETY: `h` is the SA_SIGINFO handler sigaction reported as installed.
+            let f: extern "C" fn(libc::c_int, *mut libc::siginfo_t, *mut libc::c_void) =
+                unsafe { core::mem::transmute(h) };
+            f(sig, info, ctx);
+        } else {
+            // SAFETY: `h` is the plain handler sigaction reported as installed.
+            let f: extern "C" fn(libc::c_int) = unsafe { core::mem::transmute(h) };
+            f(sig);
+        }
     }
-    TERMINATING.store(true, Ordering::SeqCst);
     for slot in &SLEEPERS {
         slot.busy.fetch_add(1, Ordering::SeqCst);
         let w = slot.word.load(Ordering::SeqCst);
@@ -166,30 +176,33 @@ extern "C" fn on_termination(sig: libc::c_int) {
     }
 }
 
-/// Installs [`on_termination`] in front of the SIGINT/SIGTERM handlers once; false if they
-/// are not iceoryx2's (left alone: waits then keep kernel timeouts, untimed ones sliced at
-/// `WAIT_SLICE`).
+/// Installs [`on_termination`] in front of the SIGINT/SIGTERM handlers once (after
+/// iceoryx2's, which it chains to); false if that failed (waits then keep kernel timeouts,
+/// untimed ones sliced at `WAIT_SLICE`, and the request is read from iceoryx2's record).
+/// `IpcNode` does it when it is created.
 pub fn termination_wakes_sleepers() -> bool {
     *INSTALLED.get_or_init(|| {
-        // iceoryx2 installs its handlers on first use; make sure they are there to chain to,
-        // and latch a request that came before.
-        if super::termination_requested() {
-            TERMINATING.store(true, Ordering::SeqCst);
+        // iceoryx2 installs its handlers on first use (and would replace ours then); make sure
+        // they are there to chain to, and latch a request that came before.
+        if iceoryx2_bb_posix::signal::SignalHandler::termination_requested() {
+            super::TERMINATED.store(true, Ordering::SeqCst);
         }
-        for (sig, previous) in [(libc::SIGINT, &PREVIOUS_SIGINT), (libc::SIGTERM, &PREVIOUS_SIGTERM)] {
+        for (sig, previous, takes_info) in [
+            (libc::SIGINT, &PREVIOUS_SIGINT, &PREVIOUS_SIGINT_INFO),
+            (libc::SIGTERM, &PREVIOUS_SIGTERM, &PREVIOUS_SIGTERM_INFO),
+        ] {
             // SAFETY: sigaction with valid structs; the handler is async-signal-safe.
             unsafe {
                 let mut old: libc::sigaction = core::mem::zeroed();
-                if libc::sigaction(sig, core::ptr::null(), &mut old) != 0
-                    || old.sa_sigaction == libc::SIG_DFL
-                    || old.sa_sigaction == libc::SIG_IGN
-                    || old.sa_flags & libc::SA_SIGINFO != 0
-                {
+                if libc::sigaction(sig, core::ptr::null(), &mut old) != 0 {
                     return false;
                 }
                 previous.store(old.sa_sigaction, Ordering::SeqCst);
+                takes_info.store(old.sa_flags & libc::SA_SIGINFO != 0, Ordering::SeqCst);
                 let mut new = old;
-                new.sa_sigaction = on_termination as extern "C" fn(libc::c_int) as usize;
+                new.sa_sigaction =
+                    on_termination as extern "C" fn(libc::c_int, *mut libc::siginfo_t, *mut libc::c_void) as usize;
+                new.sa_flags = (old.sa_flags | libc::SA_SIGINFO) & !libc::SA_RESETHAND;
                 if libc::sigaction(sig, &new, core::ptr::null_mut()) != 0 {
                     return false;
                 }
@@ -201,6 +214,12 @@ pub fn termination_wakes_sleepers() -> bool {
         unsafe { libc::pthread_atfork(None, None, Some(after_fork_in_child)) };
         true
     })
+}
+
+/// True once [`termination_wakes_sleepers`] installed navsync's handler (the latch is then
+/// exact: nothing but that handler needs to be asked).
+pub(crate) fn handler_installed() -> bool {
+    INSTALLED.get().copied().unwrap_or(false)
 }
 
 /// The alarm thread: not started (0), running (1), could not be started (2), being started
@@ -449,7 +468,7 @@ impl<E: EventState, S: DynamicStorage<State<E, FutexMgmt>>> FutexWaiter<E, S> {
         let seen = self.seen.load(Ordering::Relaxed);
         let before = self.word().fetch_or(SLEEPING, Ordering::SeqCst);
         // A termination before this sleeper was registered woke nobody: do not sleep.
-        if before & !SLEEPING == seen && !(timeout.is_none() && TERMINATING.load(Ordering::SeqCst)) {
+        if before & !SLEEPING == seen && !(timeout.is_none() && super::TERMINATED.load(Ordering::SeqCst)) {
             let ts = timeout.map(|t| libc::timespec {
                 tv_sec: t.as_secs().min(i32::MAX as u64) as libc::time_t,
                 tv_nsec: t.subsec_nanos() as libc::c_long,

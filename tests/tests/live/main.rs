@@ -13,6 +13,7 @@ mod health_table;
 mod ipc_wake;
 mod python_iceoryx2;
 mod python_types;
+mod reliability;
 mod shm_permissions;
 mod status_echo;
 mod systemd_units;

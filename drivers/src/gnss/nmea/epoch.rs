@@ -88,6 +88,9 @@ pub struct EpochCounters {
     pub lenient: u64,
     /// Fields that were present but malformed (time, number, date); ignored.
     pub bad_fields: u64,
+    /// Well-formed values outside what NMEA 0183 allows (negative speed, track ≥ 360°, GGA
+    /// quality above 8); the field, or for a quality the fix, dropped.
+    pub out_of_range: u64,
     /// Epochs emitted.
     pub epochs: u64,
     /// Epochs emitted on the learned last sentence of the cycle (subset of `epochs`).
@@ -108,7 +111,7 @@ pub struct EpochCounters {
 
 impl EpochCounters {
     /// The counters with short names for a `Health` report (names ≤ 24 bytes).
-    pub fn named(&self) -> [(&'static str, u64); 14] {
+    pub fn named(&self) -> [(&'static str, u64); 15] {
         [
             ("nmea_sentences_in", self.sentences),
             ("nmea_bad_checksum", self.bad_checksum),
@@ -117,6 +120,7 @@ impl EpochCounters {
             ("nmea_unsupported", self.unsupported),
             ("nmea_lenient", self.lenient),
             ("nmea_bad_fields", self.bad_fields),
+            ("nmea_out_of_range", self.out_of_range),
             ("nmea_epochs", self.epochs),
             ("nmea_ender_emits", self.ender_emits),
             ("nmea_flush_emits", self.flush_emits),
@@ -505,6 +509,7 @@ impl EpochAssembler {
                 Some((u, lenient)) => {
                     self.counters.lenient += u64::from(lenient);
                     self.counters.bad_fields += u64::from(u.bad_fields);
+                    self.counters.out_of_range += u64::from(u.out_of_range);
                     Some(u)
                 }
                 None => {
@@ -746,6 +751,50 @@ mod tests {
             second,
             nanos: ms * 1_000_000,
         })
+    }
+
+    /// Checksum-valid values outside NMEA 0183's ranges (seen from a misbehaving receiver:
+    /// speed -11.5 m/s, track 999.4°, GGA quality 9) were published as they came.
+    #[test]
+    fn values_outside_the_standard_are_counted_and_dropped() {
+        let mut asm = EpochAssembler::new();
+        let sentences = [
+            nmea("GPGGA,123519,4807.0381,N,01131.0004,E,1,08,0.9,545.437,M,46.9,M,,"),
+            nmea("GPRMC,123519,A,4807.0381,N,01131.0004,E,-22.35,999.4,230394,,,A"),
+            nmea("GPGGA,123520,4807.0381,N,01131.0004,E,9,08,0.9,545.437,M,46.9,M,,"),
+            nmea("GPRMC,123520,A,4807.0381,N,01131.0004,E,010.0,360.0,230394,,,A"),
+            nmea("GPVTG,-5.0,T,,M,-3.0,N,,K,A"),
+            gga("123521"),
+            rmc("123521", "230394"),
+        ];
+        let mut fixes: Vec<GnssFix> = run(&mut asm, &sentences).into_iter().map(|(_, f)| f).collect();
+        fixes.extend(flush(&mut asm));
+        assert_eq!(asm.counters().out_of_range, 6, "{:?}", asm.counters());
+        let by_time = |hhmmss: u32| {
+            fixes
+                .iter()
+                .find(|f| f.utc_ns.rem_euclid(86_400_000_000_000) / 1_000_000_000 == i64::from(hhmmss))
+                .copied()
+        };
+        // 12:35:19: the position stands, speed and track are dropped.
+        let f = by_time(12 * 3600 + 35 * 60 + 19).expect("the 12:35:19 fix");
+        assert!(f.mode >= 2 && f.lat_deg.is_finite());
+        assert!(f.speed_mps.is_nan() && f.track_deg.is_nan(), "{f:?}");
+        // 12:35:20: quality 9 is no fix; the 360° track is dropped, the speed kept.
+        let f = by_time(12 * 3600 + 35 * 60 + 20).expect("the 12:35:20 epoch");
+        assert!(f.track_deg.is_nan(), "{f:?}");
+        assert_eq!(
+            (f.mode, f.quality),
+            (1, u8::MAX),
+            "quality 9 is no fix, not published: {f:?}"
+        );
+        // 12:35:21: all in range, all used.
+        let f = by_time(12 * 3600 + 35 * 60 + 21).expect("the 12:35:21 fix");
+        assert_eq!(f.quality, 1);
+        assert!(
+            (f.track_deg - 90.0).abs() < 1e-9 && (f.speed_mps - 10.0 * 0.514444).abs() < 1e-3,
+            "{f:?}"
+        );
     }
 
     #[test]

@@ -87,6 +87,7 @@ impl GnssDecoder for NmeaDecoder {
             "nmea_no_checksum" => "NMEA sentences without a checksum dropped",
             "nmea_unparsable" => "unparsable NMEA sentences dropped",
             "nmea_bad_fields" => "malformed NMEA fields ignored",
+            "nmea_out_of_range" => "NMEA values outside the standard's range dropped",
             "nmea_zero_sat_fixes" => "fixes claimed from 0 satellites published as no fix",
             _ => return None,
         })

@@ -288,6 +288,9 @@ fn parse_lat_lon(data: &str, first: usize) -> Option<(f64, f64)> {
 
 /// A coordinate pair from the `nmea` crate, which does not range-check: `None` unless
 /// |lat| ≤ 90° and |lon| ≤ 180°.
+/// The highest GGA quality NMEA 0183 defines (8: simulator).
+const MAX_GGA_QUALITY: u32 = 8;
+
 fn plausible(lat_lon: Option<(f64, f64)>) -> Option<(f64, f64)> {
     lat_lon.filter(|(lat, lon)| lat.abs() <= 90.0 && lon.abs() <= 180.0)
 }
@@ -340,6 +343,9 @@ pub(super) struct Update {
     pub(super) gsa_prn_count: usize,
     /// Fields present but invalid.
     pub(super) bad_fields: u32,
+    /// Well-formed values outside what NMEA 0183 allows (a negative speed, a track of 360° or
+    /// more, a GGA quality above 8); the field, or for a quality the fix, is dropped.
+    pub(super) out_of_range: u32,
 }
 
 impl Update {
@@ -365,7 +371,22 @@ impl Update {
             gsa_prns: [0; 24],
             gsa_prn_count: 0,
             bad_fields: 0,
+            out_of_range: 0,
         }
+    }
+
+    /// A speed over ground, m/s: NMEA 0183 has no negative speed; one is counted and dropped.
+    fn speed(&mut self, v: Option<f64>) -> Option<f64> {
+        let bad = v.is_some_and(|v| v < 0.0);
+        self.out_of_range += u32::from(bad);
+        v.filter(|_| !bad)
+    }
+
+    /// A track, ° true: NMEA 0183's is in [0, 360); another is counted and dropped.
+    fn track(&mut self, v: Option<f64>) -> Option<f64> {
+        let bad = v.is_some_and(|v| !(0.0..360.0).contains(&v));
+        self.out_of_range += u32::from(bad);
+        v.filter(|_| !bad)
     }
 
     /// A time-of-day field: empty is "absent", malformed counts as a bad field.
@@ -401,10 +422,17 @@ fn quality_digit(t: FixType) -> u8 {
 /// GGA. A position is used when quality is not 0 (an empty quality is "unknown", as gpsd);
 /// mode: no fix for quality 0 or no position, else 3D with an altitude and ≥ 4 satellites,
 /// else 2D. (gpsd also calls < 3 satellites "no fix"; multi-constellation receivers send one
-/// GGA per system whose count covers that system only, so that rule is not applied.)
+/// GGA per system whose count covers that system only, so that rule is not applied.) A
+/// quality NMEA 0183 does not define (above 8) is counted and the fix dropped: nothing says
+/// what the position is worth.
 fn decode_gga(d: &str, parsed: Option<&nmea::sentences::GgaData>) -> Update {
     let mut u = Update::new(Kind::Gga);
     u.tod_ns = u.tod(field(d, 1));
+    if int(field(d, 6)).is_some_and(|q| q > MAX_GGA_QUALITY) {
+        u.out_of_range += 1;
+        u.mode = Some(ModeHint::Mode(FixMode::NoFix as u8));
+        return u;
+    }
     let (quality, lat_lon, sats) = match parsed {
         Some(p) => (
             p.fix_type.map(quality_digit),
@@ -486,8 +514,10 @@ fn decode_rmc(d: &str, parsed: Option<&nmea::sentences::RmcData>) -> Update {
         }
         _ => u.mode = Some(ModeHint::Mode(FixMode::NoFix as u8)),
     }
-    u.speed_mps = u.opt_num(field(d, 7), num).map(|kn| kn * KNOTS_TO_MPS);
-    u.track_deg = u.opt_num(field(d, 8), num);
+    let speed = u.opt_num(field(d, 7), num).map(|kn| kn * KNOTS_TO_MPS);
+    u.speed_mps = u.speed(speed);
+    let track = u.opt_num(field(d, 8), num);
+    u.track_deg = u.track(track);
     u
 }
 
@@ -530,12 +560,14 @@ fn decode_vtg(d: &str) -> Update {
     if matches!(field(d, 9), "E" | "N") {
         return u;
     }
-    u.track_deg = u.opt_num(field(d, 1), num);
+    let track = u.opt_num(field(d, 1), num);
+    u.track_deg = u.track(track);
     let knots = u.opt_num(field(d, 5), num);
-    u.speed_mps = match knots {
+    let speed = match knots {
         Some(kn) => Some(kn * KNOTS_TO_MPS),
         None => u.opt_num(field(d, 7), num).map(|kmh| kmh * KMH_TO_MPS),
     };
+    u.speed_mps = u.speed(speed);
     u
 }
 

@@ -6,12 +6,16 @@
 //! the bytes alone:
 //!
 //! - UBX epochs are always emitted (they exist only when UBX NAV messages arrive);
-//! - an NMEA epoch is emitted when the port carried no UBX navigation as it began (its
-//!   first sentence arrived before the first UBX navigation solution message, NAV-PVT,
-//!   NAV-SOL, NAV-POSLLH or HNR-PVT), or once [`NMEA_TAKEOVER_EPOCHS`] NMEA epochs in a row
-//!   have been completed without such a message (the receiver was reconfigured). Otherwise
-//!   it is counted (`auto_nmea_suppressed`) and dropped, so each epoch is reported once,
-//!   from UBX, the richer protocol.
+//! - NMEA epochs are emitted until UBX navigates, and dropped while it does (counted,
+//!   `auto_nmea_suppressed`), so each epoch is reported once, from UBX, the richer protocol.
+//!   UBX navigates once it is a stable majority: of the last [`UBX_WINDOW`] NMEA epochs, at
+//!   least [`UBX_MAJORITY`] had a UBX navigation solution message (NAV-PVT, NAV-SOL,
+//!   NAV-POSLLH or HNR-PVT, within the bounds of [`super::plausible`]) within
+//!   [`UBX_COVER_NS`] of them; it stops navigating when none of the last [`UBX_WINDOW`] had
+//!   one (the receiver was reconfigured). A few stray or forged UBX frames never cover
+//!   enough epochs to take over (three used to suppress the real NMEA fixes for ~13 s); an
+//!   NMEA epoch that began before UBX took over is still reported, unless a UBX epoch of the
+//!   same time of day was emitted already (the same receiver epoch: reported once).
 //!
 //! The fixes emitted are numbered anew (`stamp.seq` 0, 1, 2, … whichever protocol each came
 //! from), so a gap in the sequence is a lost sample as everywhere else.
@@ -22,22 +26,22 @@ use super::{Event, UbxDecoder};
 use crate::gnss::nmea::NmeaDecoder;
 use crate::gnss::{GnssDecoder, GnssExtra};
 
-/// NMEA epochs in a row without a UBX navigation solution message after which NMEA takes over
-/// again (more than a receiver sending NMEA at up to 10 × its UBX rate produces between two
-/// UBX solutions).
-pub const NMEA_TAKEOVER_EPOCHS: u32 = 10;
+/// The NMEA epochs over which UBX's share is judged.
+pub const UBX_WINDOW: u32 = 8;
+/// Of the last [`UBX_WINDOW`] NMEA epochs, how many must have a UBX navigation solution near
+/// them for UBX to take over.
+pub const UBX_MAJORITY: u32 = 6;
+/// A UBX navigation solution this close (host time) to an NMEA epoch covers it: the same
+/// receiver epoch, or one of a receiver sending NMEA at up to 10 × its UBX rate.
+pub const UBX_COVER_NS: i64 = 1_500_000_000;
 
 /// UBX with NMEA fallback as one [`GnssDecoder`] (see the module doc).
 #[derive(Debug, Clone, Default)]
 pub struct AutoDecoder {
     ubx: UbxDecoder,
     nmea: NmeaDecoder,
-    /// A UBX navigation solution has been seen and NMEA has not taken over since.
-    ubx_navigates: bool,
-    /// Receipt time of the UBX navigation solution that made UBX navigate, host ns.
-    ubx_since_ns: i64,
-    /// NMEA epochs completed since the last UBX navigation solution.
-    nmea_since_ubx: u32,
+    /// UBX's navigation state (see the module doc).
+    vote: UbxVote,
     /// NMEA epochs dropped because UBX navigates.
     suppressed: u64,
     /// Fixes emitted: their sequence numbers, one count for both protocols (the two decoders
@@ -62,10 +66,10 @@ impl AutoDecoder {
         &self.nmea
     }
 
-    /// True while UBX epochs are the ones emitted (a UBX navigation solution was seen and
-    /// NMEA has not taken over since).
+    /// True while UBX epochs are the ones emitted (UBX is a stable majority; see the module
+    /// doc).
     pub fn ubx_navigates(&self) -> bool {
-        self.ubx_navigates
+        self.vote.navigates
     }
 
     /// NMEA epochs dropped because UBX navigates.
@@ -80,23 +84,62 @@ impl AutoDecoder {
         *emitted += 1;
         out(&f);
     }
+}
 
-    /// An NMEA epoch: emitted unless UBX navigated when it began.
-    fn nmea_fix(
-        ubx_navigates: &mut bool,
-        ubx_since_ns: i64,
-        nmea_since_ubx: &mut u32,
-        suppressed: &mut u64,
-        fix: &GnssFix,
-        out: &mut impl FnMut(&GnssFix),
-    ) {
-        if *ubx_navigates {
-            *nmea_since_ubx = nmea_since_ubx.saturating_add(1);
-            if *nmea_since_ubx >= NMEA_TAKEOVER_EPOCHS {
-                *ubx_navigates = false;
-            }
+/// Whether UBX navigates: which of the last NMEA epochs had a UBX navigation solution near
+/// them.
+#[derive(Debug, Clone, Copy, Default)]
+struct UbxVote {
+    /// Receipt time of the last UBX navigation solution, host ns.
+    last_ubx_ns: Option<i64>,
+    /// One bit per recent NMEA epoch, newest in bit 0: covered by a UBX solution.
+    covered: u8,
+    /// UBX is the majority (NMEA epochs are dropped).
+    navigates: bool,
+    /// Since when, host ns (an NMEA epoch that began before is still reported).
+    since_ns: i64,
+    /// Times of day (ns) of the last UBX epochs emitted, newest first.
+    ubx_tods: [Option<i64>; 4],
+}
+
+impl UbxVote {
+    fn ubx_solution(&mut self, host_ns: i64) {
+        self.last_ubx_ns = Some(host_ns);
+    }
+
+    /// A UBX epoch was emitted.
+    fn ubx_epoch(&mut self, tod_ns: i64) {
+        if tod_ns >= 0 {
+            self.ubx_tods.rotate_right(1);
+            self.ubx_tods[0] = Some(tod_ns);
         }
-        if *ubx_navigates && fix.stamp.host_ns >= ubx_since_ns {
+    }
+
+    /// True if a UBX epoch of this time of day was emitted lately.
+    fn reported_by_ubx(&self, tod_ns: i64) -> bool {
+        tod_ns >= 0 && self.ubx_tods.iter().flatten().any(|&t| (t - tod_ns).abs() < 1_000_000)
+    }
+
+    /// An NMEA epoch began at `host_ns`: its vote; true if it is to be dropped.
+    fn nmea_epoch(&mut self, host_ns: i64) -> bool {
+        let covered = self.last_ubx_ns.is_some_and(|t| (host_ns - t).abs() <= UBX_COVER_NS);
+        self.covered = (self.covered << 1) | u8::from(covered);
+        let window = self.covered & ((1u16 << UBX_WINDOW) - 1) as u8;
+        if !self.navigates && window.count_ones() >= UBX_MAJORITY {
+            self.navigates = true;
+            self.since_ns = host_ns;
+        } else if self.navigates && window == 0 {
+            self.navigates = false;
+        }
+        self.navigates && host_ns >= self.since_ns
+    }
+}
+
+impl AutoDecoder {
+    /// An NMEA epoch: emitted unless UBX navigates.
+    fn nmea_fix(vote: &mut UbxVote, suppressed: &mut u64, fix: &GnssFix, out: &mut impl FnMut(&GnssFix)) {
+        let navigates = vote.nmea_epoch(fix.stamp.host_ns);
+        if navigates || vote.reported_by_ubx(fix.tod_ns) {
             *suppressed += 1;
         } else {
             out(fix);
@@ -120,29 +163,22 @@ impl GnssDecoder for AutoDecoder {
         let Self {
             ubx,
             nmea,
-            ubx_navigates,
-            ubx_since_ns,
-            nmea_since_ubx,
+            vote,
             suppressed,
             emitted,
         } = self;
         let out = &mut |fix: &GnssFix| Self::renumbered(emitted, fix, out);
         ubx.push_events(bytes, read_host_ns, ns_per_byte, &mut |ev| match ev {
-            Event::Fix(fix) => out(fix),
-            Event::Extra(x) => extra(x),
-            Event::NavSolution { host_ns } => {
-                if !*ubx_navigates {
-                    *ubx_navigates = true;
-                    *ubx_since_ns = host_ns;
-                }
-                *nmea_since_ubx = 0;
+            Event::Fix(fix) => {
+                vote.ubx_epoch(fix.tod_ns);
+                out(fix)
             }
+            Event::Extra(x) => extra(x),
+            Event::NavSolution { host_ns } => vote.ubx_solution(host_ns),
             Event::Nmea { text, host_ns } => {
                 // The sentence, then its terminator, at the time of its `$` (rate 0: no
                 // back-dating within these pushes).
-                let since = *ubx_since_ns;
-                let mut emit =
-                    |fix: &GnssFix| Self::nmea_fix(ubx_navigates, since, nmea_since_ubx, suppressed, fix, out);
+                let mut emit = |fix: &GnssFix| Self::nmea_fix(vote, suppressed, fix, out);
                 nmea.push(text, host_ns, 0, &mut emit);
                 nmea.push(b"\r\n", host_ns, 0, &mut emit);
             }
@@ -153,16 +189,16 @@ impl GnssDecoder for AutoDecoder {
         let Self {
             ubx,
             nmea,
-            ubx_navigates,
-            ubx_since_ns,
-            nmea_since_ubx,
+            vote,
             suppressed,
             emitted,
         } = self;
         let out = &mut |fix: &GnssFix| Self::renumbered(emitted, fix, out);
-        ubx.flush(out);
-        let since = *ubx_since_ns;
-        nmea.flush(&mut |fix| Self::nmea_fix(ubx_navigates, since, nmea_since_ubx, suppressed, fix, out));
+        ubx.flush(&mut |fix: &GnssFix| {
+            vote.ubx_epoch(fix.tod_ns);
+            out(fix)
+        });
+        nmea.flush(&mut |fix| Self::nmea_fix(vote, suppressed, fix, out));
     }
 
     fn reset(&mut self) {
@@ -225,51 +261,80 @@ mod tests {
         assert_eq!(d.nmea().counters().epochs.epochs, 2);
     }
 
+    const S: i64 = 1_000_000_000;
+
+    /// NMEA epoch `t` (a GGA at `t` s past 12:00:00) and, with `ubx`, its NAV-PVT 100 ms
+    /// later, each in a read of its own; the fixes.
+    fn second(d: &mut AutoDecoder, t: i64, ubx: bool, fixes: &mut Vec<GnssFix>) {
+        d.push(&gga(&format!("12{:02}{:02}", t / 60, t % 60)), t * S, 0, &mut |f| {
+            fixes.push(*f)
+        });
+        if ubx {
+            let frame = ubx_frame(1, 7, &pvt(1000 * t as u32, 3, 1));
+            d.push(&frame, t * S + S / 10, 0, &mut |f| fixes.push(*f));
+        }
+    }
+
     #[test]
-    fn ubx_navigation_wins_over_nmea_and_nmea_takes_over_when_it_stops() {
+    fn ubx_takes_over_once_it_is_a_stable_majority_and_gives_way_when_it_stops() {
         let mut d = AutoDecoder::new();
         let mut fixes = Vec::new();
-        // Each frame in a read of its own, 1 ms apart.
-        let frames: Vec<Vec<u8>> = vec![
-            gga("120000"),
-            ubx_frame(1, 7, &pvt(1000, 3, 1)),
-            gga("120001"),
-            ubx_frame(1, 7, &pvt(2000, 3, 1)),
-            gga("120002"),
-        ];
-        for (i, f) in frames.iter().enumerate() {
-            d.push(f, i as i64 * 1_000_000, 0, &mut |f| fixes.push(*f));
+        let mut navigated_at = None;
+        for t in 0..20 {
+            second(&mut d, t, true, &mut fixes);
+            if navigated_at.is_none() && d.ubx_navigates() {
+                navigated_at = Some(t);
+            }
         }
-        d.flush(&mut |f| fixes.push(*f));
-        let protocols: Vec<u8> = fixes.iter().map(|f| f.protocol).collect();
-        // The NMEA epoch of 12:00:00 began before the first NAV-PVT: reported (when the next
-        // GGA completes it); the later ones are not.
-        assert_eq!(
-            protocols,
-            vec![GNSS_PROTOCOL_NMEA, GNSS_PROTOCOL_UBX, GNSS_PROTOCOL_UBX]
+        // The first NMEA epochs are reported (UBX is not yet a stable majority), then UBX
+        // alone: every epoch once from then on.
+        let at = navigated_at.expect("UBX never took over") as usize;
+        // The UBX_MAJORITY-th covered NMEA epoch (epoch 5, or 6 when the NMEA decoder has not
+        // learned its cycle's last sentence yet) makes UBX navigate.
+        assert!(
+            (UBX_MAJORITY as usize - 1..=UBX_MAJORITY as usize).contains(&at),
+            "took over at {at} s"
         );
-        assert_eq!(d.nmea_suppressed(), 2);
-        let seqs: Vec<u64> = fixes.iter().map(|f| f.stamp.seq).collect();
-        assert_eq!(
-            seqs,
-            [0, 1, 2],
-            "one numbering for both protocols, no gap for suppressed epochs"
-        );
-        // UBX stops: after NMEA_TAKEOVER_EPOCHS NMEA epochs NMEA is reported again.
-        let mut s = Vec::new();
-        for i in 0..15 {
-            s.extend(gga(&format!("1201{i:02}")));
+        let nmea_before = fixes.iter().filter(|f| f.protocol == GNSS_PROTOCOL_NMEA).count();
+        assert!(nmea_before < UBX_MAJORITY as usize + 1, "{nmea_before} NMEA fixes");
+        let after: Vec<u8> = fixes
+            .iter()
+            .filter(|f| f.stamp.host_ns > (at as i64 + 1) * S)
+            .map(|f| f.protocol)
+            .collect();
+        assert!(after.iter().all(|&p| p == GNSS_PROTOCOL_UBX), "{after:?}");
+        assert!(after.len() >= 10);
+        // UBX stops: NMEA is reported again once none of the last UBX_WINDOW epochs had UBX.
+        let mut more = Vec::new();
+        for t in 20..40 {
+            second(&mut d, t, false, &mut more);
         }
-        let mut fixes = Vec::new();
-        d.push(&s, 10_000_000, 0, &mut |f| fixes.push(*f));
-        d.flush(&mut |f| fixes.push(*f));
-        // The 2 NMEA epochs after the last NAV-PVT count towards the takeover: 7 more are
-        // dropped, the 10th in a row is reported.
-        let dropped = NMEA_TAKEOVER_EPOCHS as usize - 1 - 2;
-        assert_eq!(fixes.len(), 15 - dropped);
-        assert!(fixes.iter().enumerate().all(|(i, f)| f.stamp.seq == 3 + i as u64));
-        assert_eq!(d.nmea_suppressed(), 2 + dropped as u64);
+        d.flush(&mut |f| more.push(*f));
         assert!(!d.ubx_navigates());
+        assert!(more.iter().all(|f| f.protocol == GNSS_PROTOCOL_NMEA));
+        let first_back = (more[0].stamp.host_ns / S) as u32;
+        assert!(first_back <= 20 + UBX_WINDOW + 1, "NMEA back at {first_back} s");
+        let seqs: Vec<u64> = fixes.iter().chain(&more).map(|f| f.stamp.seq).collect();
+        assert!(
+            seqs.windows(2).all(|w| w[1] == w[0] + 1),
+            "one numbering for both protocols, no gap for suppressed epochs: {seqs:?}"
+        );
+    }
+
+    /// Three stray NAV-PVT frames on an NMEA port used to suppress the real NMEA fixes for
+    /// ~13 s (each one made UBX "navigate" for the next 10 NMEA epochs).
+    #[test]
+    fn a_few_stray_ubx_frames_do_not_suppress_nmea() {
+        let mut d = AutoDecoder::new();
+        let mut fixes = Vec::new();
+        for t in 0..20 {
+            second(&mut d, t, matches!(t, 3 | 7 | 11), &mut fixes);
+            assert!(!d.ubx_navigates(), "UBX took over at {t} s");
+        }
+        d.flush(&mut |f| fixes.push(*f));
+        let nmea = fixes.iter().filter(|f| f.protocol == GNSS_PROTOCOL_NMEA).count();
+        assert_eq!(nmea, 20, "every NMEA epoch reported");
+        assert_eq!(d.nmea_suppressed(), 0);
     }
 
     #[test]

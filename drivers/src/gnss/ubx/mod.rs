@@ -19,6 +19,7 @@ pub mod framer;
 pub mod messages;
 pub mod mon;
 pub mod nav;
+pub mod plausible;
 pub mod rxm;
 pub mod samples;
 pub mod tim;
@@ -42,16 +43,20 @@ pub struct MessageCounters {
     pub acks: u64,
     /// ACK-NAK messages (the receiver rejected a configuration message).
     pub naks: u64,
+    /// Values outside what the message's interface description allows ([`plausible`]): the
+    /// field, or the whole message, dropped.
+    pub out_of_range: u64,
 }
 
 impl MessageCounters {
     /// The counters with short names for a `Health` report (names ≤ 23 bytes).
-    pub fn named(&self) -> [(&'static str, u64); 4] {
+    pub fn named(&self) -> [(&'static str, u64); 5] {
         [
             ("ubx_decode_errors", self.decode_errors),
             ("ubx_unknown_msgs", self.unknown),
             ("ubx_acks", self.acks),
             ("ubx_naks", self.naks),
+            ("ubx_out_of_range", self.out_of_range),
         ]
     }
 }
@@ -163,7 +168,12 @@ impl UbxDecoder {
                 payload,
                 host_ns,
             } => match messages::decode(class, id, payload) {
-                Ok(msg) => {
+                Ok(mut msg) => {
+                    let checked = plausible::check(&mut msg);
+                    messages.out_of_range += checked.out_of_range();
+                    if checked.dropped {
+                        return;
+                    }
                     match &msg {
                         Message::Other { .. } => messages.unknown += 1,
                         Message::AckAck(_) => messages.acks += 1,
@@ -222,6 +232,7 @@ impl UbxDecoder {
             "ubx_nmea_bad_checksum" => "NMEA sentences with a bad or missing checksum dropped (UBX port)",
             "ubx_rtcm3_bad_crc" => "RTCM3 frames with a bad CRC dropped",
             "ubx_decode_errors" => "UBX messages of a wrong length or version dropped",
+            "ubx_out_of_range" => "UBX values outside the interface description dropped",
             "ubx_naks" => "UBX configuration messages rejected by the receiver (ACK-NAK)",
             "ubx_late_messages" => "UBX NAV messages that arrived after their epoch was emitted",
             "ubx_sats_dropped" => "satellites beyond the capacity of a NAV-SAT/NAV-SVINFO view dropped",
@@ -400,6 +411,6 @@ pub(crate) mod tests {
             n += 1;
             assert!(name.len() <= MAX_NAME_LEN, "{name}");
         });
-        assert_eq!(n, 24);
+        assert_eq!(n, 25);
     }
 }

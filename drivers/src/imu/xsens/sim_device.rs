@@ -7,8 +7,13 @@ use std::path::{Path, PathBuf};
 /// Line rate the simulated devices nominally use (a pseudo-terminal has none; the driver
 /// uses it to back-date messages that arrive together).
 pub const SIM_BAUD: u32 = 921_600;
-/// Directory of the simulated devices' links when none is given.
-pub const DEFAULT_SIM_DIR: &str = "/tmp/navsync";
+/// Directory of the simulated devices' links when none is given: navsync's runtime
+/// directory ([`navsync_shared::runtime_dir::base`]: `$RUNTIME_DIRECTORY`,
+/// `$XDG_RUNTIME_DIR/navsync`, `/run/navsync` for root, else `/tmp/navsync-<uid>`), checked
+/// before use by both sides.
+pub fn default_sim_dir() -> PathBuf {
+    navsync_shared::runtime_dir::base()
+}
 
 /// The link to simulated IMU `index`'s pseudo-terminal in `dir`: `dir/imu{index}`.
 pub fn sim_port(dir: &Path, index: usize) -> PathBuf {
