@@ -20,6 +20,7 @@ use navsync_shared::samples::GnssFix;
 
 use super::{Event, UbxDecoder};
 use crate::gnss::nmea::NmeaDecoder;
+use crate::gnss::order::{Admit, TimeOrder};
 use crate::gnss::{GnssDecoder, GnssExtra};
 
 /// NMEA epochs in a row without a UBX navigation solution message after which NMEA takes over
@@ -44,6 +45,10 @@ pub struct AutoDecoder {
     /// number their own epochs, and suppressed NMEA epochs would leave gaps that subscribers
     /// take for losses).
     emitted: u64,
+    /// The order of the merged output: an epoch of one protocol whose time is not after the
+    /// last one published (of either) is held back ([`TimeOrder`]), counted in `held_back`.
+    order: TimeOrder,
+    held_back: u64,
 }
 
 impl AutoDecoder {
@@ -73,8 +78,16 @@ impl AutoDecoder {
         self.suppressed
     }
 
-    /// Emits `fix` with the next sequence number.
-    fn renumbered(emitted: &mut u64, fix: &GnssFix, out: &mut impl FnMut(&GnssFix)) {
+    /// Emits `fix` with the next sequence number, if its time is after the last one emitted.
+    fn renumbered(
+        (emitted, order, held_back): (&mut u64, &mut TimeOrder, &mut u64),
+        fix: &GnssFix,
+        out: &mut impl FnMut(&GnssFix),
+    ) {
+        if order.admit(fix.utc_ns) == Admit::HeldBack {
+            *held_back += 1;
+            return;
+        }
         let mut f = *fix;
         f.stamp.seq = *emitted;
         *emitted += 1;
@@ -125,8 +138,10 @@ impl GnssDecoder for AutoDecoder {
             nmea_since_ubx,
             suppressed,
             emitted,
+            order,
+            held_back,
         } = self;
-        let out = &mut |fix: &GnssFix| Self::renumbered(emitted, fix, out);
+        let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back), fix, out);
         ubx.push_events(bytes, read_host_ns, ns_per_byte, &mut |ev| match ev {
             Event::Fix(fix) => out(fix),
             Event::Extra(x) => extra(x),
@@ -158,8 +173,10 @@ impl GnssDecoder for AutoDecoder {
             nmea_since_ubx,
             suppressed,
             emitted,
+            order,
+            held_back,
         } = self;
-        let out = &mut |fix: &GnssFix| Self::renumbered(emitted, fix, out);
+        let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back), fix, out);
         ubx.flush(out);
         let since = *ubx_since_ns;
         nmea.flush(&mut |fix| Self::nmea_fix(ubx_navigates, since, nmea_since_ubx, suppressed, fix, out));
@@ -182,17 +199,23 @@ impl GnssDecoder for AutoDecoder {
         self.ubx.each_counter(f);
         self.nmea.each_counter(f);
         f("auto_nmea_suppressed", self.suppressed);
+        f("auto_not_after_last", self.held_back);
     }
 
     fn describe(name: &str) -> Option<&'static str> {
-        UbxDecoder::describe_ubx(name).or_else(|| NmeaDecoder::describe(name))
+        UbxDecoder::describe_ubx(name)
+            .or_else(|| NmeaDecoder::describe(name))
+            .or_else(|| {
+                (name == "auto_not_after_last")
+                    .then_some("epochs held back: their time was not after the last one published (UBX or NMEA)")
+            })
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::framer::ubx_frame;
-    use super::super::nav::tests::pvt;
+    use super::super::nav::tests::pvt_at as pvt;
     use super::*;
     use navsync_shared::health_reporter::MAX_NAME_LEN;
     use navsync_shared::samples::{GNSS_PROTOCOL_NMEA, GNSS_PROTOCOL_UBX, MAX_COUNTERS};

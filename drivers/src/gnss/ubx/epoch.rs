@@ -64,10 +64,10 @@
 
 use navsync_shared::samples::{
     FIX_FLAG_DIFFERENTIAL, FIX_FLAG_FULLY_RESOLVED, FIX_FLAG_INVALID_LLH, FIX_FLAG_NOT_GNSS, FIX_FLAG_OK,
-    FIX_FLAG_RECEIVER_INVALID, FIX_FLAG_VALID_DATE, FIX_FLAG_VALID_TIME, FixMode, GNSS_PROTOCOL_UBX, GnssEvent,
-    GnssFix, GnssTimePulse, Stamp, StampSource, UBX_MSG_HNR_PVT, UBX_MSG_NAV_DOP, UBX_MSG_NAV_EOE, UBX_MSG_NAV_POSLLH,
-    UBX_MSG_NAV_PVT, UBX_MSG_NAV_SAT, UBX_MSG_NAV_SOL, UBX_MSG_NAV_STATUS, UBX_MSG_NAV_TIMEGPS, UBX_MSG_NAV_TIMEUTC,
-    UBX_MSG_NAV_VELNED,
+    FIX_FLAG_RECEIVER_INVALID, FIX_FLAG_VALID_DATE, FIX_FLAG_VALID_TIME, FIX_GEOID_MODEL, FixMode, GNSS_PROTOCOL_UBX,
+    GnssEvent, GnssFix, GnssTimePulse, Stamp, StampSource, UBX_MSG_HNR_PVT, UBX_MSG_NAV_DOP, UBX_MSG_NAV_EOE,
+    UBX_MSG_NAV_POSLLH, UBX_MSG_NAV_PVT, UBX_MSG_NAV_SAT, UBX_MSG_NAV_SOL, UBX_MSG_NAV_STATUS, UBX_MSG_NAV_TIMEGPS,
+    UBX_MSG_NAV_TIMEUTC, UBX_MSG_NAV_VELNED,
 };
 use navsync_shared::time::{
     Civil, GPS_EPOCH_UNIX_S, NS_PER_S, SECONDS_PER_WEEK, gps_ns_from_utc_ns, utc_ns_from_civil, utc_ns_from_gps_ns,
@@ -79,6 +79,8 @@ use super::messages::{MAX_SATS, Message};
 use super::nav::{NavPvt, NavSat, NavSol, NavStatus, NavSvinfo, NavTimegps, SatInfo};
 use super::tim::{TimTm2, TimTp};
 use crate::gnss::cycle::CycleEnder;
+use crate::gnss::geoid::GeoidCache;
+use crate::gnss::order::{Admit, TimeOrder};
 
 /// Nanoseconds per day.
 const NS_PER_DAY: i64 = 86_400 * NS_PER_S;
@@ -107,6 +109,11 @@ pub struct EpochCounters {
     pub hnr_fixes: u64,
     /// Epochs emitted without a time (no valid date, week or time of week).
     pub no_time: u64,
+    /// Epochs held back because their time was not after the last one published on their
+    /// output (the same epoch again, time going back; [`TimeOrder`]).
+    pub not_after_last: u64,
+    /// Times the receiver's time went back for good and the order restarted.
+    pub time_resets: u64,
     /// NAV-SAT/NAV-SVINFO satellites that did not fit (more than [`MAX_SATS`]).
     pub sats_dropped: u64,
     /// TIM-TP messages.
@@ -117,7 +124,7 @@ pub struct EpochCounters {
 
 impl EpochCounters {
     /// The counters with short names for a `Health` report (names ≤ 23 bytes).
-    pub fn named(&self) -> [(&'static str, u64); 11] {
+    pub fn named(&self) -> [(&'static str, u64); 13] {
         [
             ("ubx_nav_messages", self.nav_messages),
             ("ubx_epochs", self.epochs),
@@ -127,6 +134,8 @@ impl EpochCounters {
             ("ubx_late_messages", self.late_messages),
             ("ubx_hnr_fixes", self.hnr_fixes),
             ("ubx_no_time", self.no_time),
+            ("ubx_not_after_last", self.not_after_last),
+            ("ubx_time_resets", self.time_resets),
             ("ubx_sats_dropped", self.sats_dropped),
             ("ubx_time_pulses", self.time_pulses),
             ("ubx_time_marks", self.time_marks),
@@ -290,6 +299,53 @@ struct Epoch {
     sats: Option<SatView>,
     /// The last NAV message merged other than NAV-EOE (its name), for learning the cycle.
     last_msg: Option<&'static str>,
+    /// The precedence rank of the message that supplied each quantity ([`Sources`]).
+    src: Sources,
+}
+
+/// Which message supplies each quantity of an epoch: the precedence rank of the message that
+/// set it (0: none yet). A message sets a quantity only if its rank is at least the current
+/// one, so the finest and most complete message wins whatever the order of arrival
+/// (`docs/guide/receivers.md`, "One message per quantity"; u-blox 8 / M8 Receiver
+/// Description UBX-13003221, "UBX-NAV-PVT": "This message combines position, velocity and
+/// time solution, including accuracy figures", at 1 mm, 1 mm/s; NAV-VELNED and NAV-SOL carry
+/// cm/s, NAV-SOL cm ECEF):
+///
+/// | quantity | NAV-PVT | NAV-POSLLH | NAV-VELNED | NAV-SOL | NAV-DOP | others |
+/// |---|---|---|---|---|---|---|
+/// | position, heights | 3 | 2 | | 1 (ECEF, cm) | | |
+/// | hAcc, vAcc | 3 | 2 | | | | |
+/// | velocity, speed, track | 3 (mm/s) | | 2 (cm/s) | 1 (ECEF cm/s) | | |
+/// | sAcc | 3 (mm/s) | | 2 (cm/s) | 1 (cm/s) | | |
+/// | headAcc | 3 | | 2 | | | |
+/// | pDOP | 2 | | | 1 | 3 | |
+/// | satellites used | 2 (`numSV`) | | | 1 (`numSV`) | | NAV-SAT/SVINFO flags when neither |
+/// | satellites | | | | | | NAV-SAT 2 over NAV-SVINFO 1 |
+/// | UTC | 2 | | | | | NAV-TIMEUTC 1 |
+/// | GPS week/time | | | | 1 | | NAV-TIMEGPS 2 |
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Sources {
+    pos: u8,
+    acc: u8,
+    vel: u8,
+    s_acc: u8,
+    head_acc: u8,
+    pdop: u8,
+    num_sv: u8,
+    sats: u8,
+    utc: u8,
+    gps: u8,
+}
+
+/// Takes a quantity for a message of precedence `rank`: whether it may set it (its rank is
+/// at least that of the message that set it so far); records the rank.
+fn claim(slot: &mut u8, rank: u8) -> bool {
+    if rank >= *slot {
+        *slot = rank;
+        true
+    } else {
+        false
+    }
 }
 
 impl Epoch {
@@ -312,6 +368,7 @@ impl Epoch {
             num_sv: None,
             sats: None,
             last_msg: None,
+            src: Sources::default(),
         }
     }
 
@@ -372,7 +429,7 @@ impl Epoch {
         if m.invalid_llh() {
             f.fix_flags |= FIX_FLAG_INVALID_LLH;
         }
-        if m.valid_date_time() {
+        if m.valid_date_time() && claim(&mut self.src.utc, 2) {
             self.utc_ns = utc_of(m.year, m.month, m.day, m.hour, m.min, m.sec, m.nano_ns);
             if m.fully_resolved() {
                 self.leap_s = self.utc_ns.and_then(|u| leap_of(m.itow_ms, u)).or(self.leap_s);
@@ -385,22 +442,45 @@ impl Epoch {
             ok,
             m.diff_soln(),
         );
-        if !m.invalid_llh() {
+        if !m.invalid_llh() && claim(&mut self.src.pos, 3) {
             self.set_geodetic(m.lat_deg, m.lon_deg, m.height_m, m.h_msl_m);
         }
+        if claim(&mut self.src.acc, 3) {
+            self.fix.h_acc_m = m.h_acc_m;
+            self.fix.v_acc_m = m.v_acc_m;
+        }
+        self.set_ned_velocity(
+            3,
+            [m.vel_n_mps, m.vel_e_mps, m.vel_d_mps],
+            m.g_speed_mps,
+            m.head_mot_deg,
+        );
+        if claim(&mut self.src.s_acc, 3) {
+            self.fix.s_acc_mps = m.s_acc_mps;
+        }
+        if claim(&mut self.src.head_acc, 3) {
+            self.fix.head_acc_deg = m.head_acc_deg;
+        }
+        if claim(&mut self.src.pdop, 2) {
+            self.fix.pdop = dop(m.p_dop);
+        }
+        if claim(&mut self.src.num_sv, 2) {
+            self.num_sv = Some(u16::from(m.num_sv));
+        }
+    }
+
+    /// A NED velocity with ground speed and heading of motion (NAV-PVT rank 3, NAV-VELNED 2).
+    fn set_ned_velocity(&mut self, rank: u8, [n, e, d]: [f64; 3], speed_mps: f64, heading_deg: f64) {
+        if !claim(&mut self.src.vel, rank) {
+            return;
+        }
         let f = &mut self.fix;
-        f.h_acc_m = m.h_acc_m;
-        f.v_acc_m = m.v_acc_m;
-        f.vel_n_mps = m.vel_n_mps;
-        f.vel_e_mps = m.vel_e_mps;
-        f.vel_d_mps = m.vel_d_mps;
-        f.speed_mps = m.g_speed_mps;
-        f.track_deg = m.head_mot_deg.rem_euclid(360.0);
-        f.s_acc_mps = m.s_acc_mps;
-        f.head_acc_deg = m.head_acc_deg;
-        f.pdop = dop(m.p_dop);
+        f.vel_n_mps = n;
+        f.vel_e_mps = e;
+        f.vel_d_mps = d;
+        f.speed_mps = speed_mps;
+        f.track_deg = heading_deg.rem_euclid(360.0);
         self.ned_vel = true;
-        self.num_sv = Some(u16::from(m.num_sv));
     }
 
     fn sol(&mut self, m: &NavSol) {
@@ -417,19 +497,31 @@ impl Epoch {
                 self.fix.fix_flags |= flag;
             }
         }
-        if m.time_valid() {
+        if m.time_valid() && claim(&mut self.src.gps, 1) {
             self.gps_ns = gps_of(i64::from(m.week), tow_ns(m.itow_ms, m.ftow_ns));
         }
-        self.ecef_m = Some([m.ecef_x_m, m.ecef_y_m, m.ecef_z_m]);
-        self.ecef_vel_mps = Some([m.ecef_vx_mps, m.ecef_vy_mps, m.ecef_vz_mps]);
-        self.fix.s_acc_mps = m.s_acc_mps;
-        self.fix.pdop = dop(m.p_dop);
-        self.num_sv = Some(u16::from(m.num_sv));
+        // The ECEF position and velocity are used at the end only where no message of higher
+        // precedence gave a geodetic position or a NED velocity.
+        if claim(&mut self.src.pos, 1) {
+            self.ecef_m = Some([m.ecef_x_m, m.ecef_y_m, m.ecef_z_m]);
+        }
+        if claim(&mut self.src.vel, 1) {
+            self.ecef_vel_mps = Some([m.ecef_vx_mps, m.ecef_vy_mps, m.ecef_vz_mps]);
+        }
+        if claim(&mut self.src.s_acc, 1) {
+            self.fix.s_acc_mps = m.s_acc_mps;
+        }
+        if claim(&mut self.src.pdop, 1) {
+            self.fix.pdop = dop(m.p_dop);
+        }
+        if claim(&mut self.src.num_sv, 1) {
+            self.num_sv = Some(u16::from(m.num_sv));
+        }
     }
 
     fn timegps(&mut self, m: &NavTimegps) {
         self.fix.sentences |= UBX_MSG_NAV_TIMEGPS;
-        if m.time_valid() {
+        if m.time_valid() && claim(&mut self.src.gps, 2) {
             self.gps_ns = gps_of(i64::from(m.week), tow_ns(m.itow_ms, m.ftow_ns));
             self.fix.fix_flags |= FIX_FLAG_VALID_DATE | FIX_FLAG_VALID_TIME;
         }
@@ -460,32 +552,36 @@ impl Epoch {
             Message::NavStatus(m) => self.status(m),
             Message::NavPosllh(m) => {
                 self.fix.sentences |= UBX_MSG_NAV_POSLLH;
-                self.set_geodetic(m.lat_deg, m.lon_deg, m.height_m, m.h_msl_m);
-                self.fix.h_acc_m = m.h_acc_m;
-                self.fix.v_acc_m = m.v_acc_m;
+                if claim(&mut self.src.pos, 2) {
+                    self.set_geodetic(m.lat_deg, m.lon_deg, m.height_m, m.h_msl_m);
+                }
+                if claim(&mut self.src.acc, 2) {
+                    self.fix.h_acc_m = m.h_acc_m;
+                    self.fix.v_acc_m = m.v_acc_m;
+                }
             }
             Message::NavVelned(m) => {
-                let f = &mut self.fix;
-                f.sentences |= UBX_MSG_NAV_VELNED;
-                f.vel_n_mps = m.vel_n_mps;
-                f.vel_e_mps = m.vel_e_mps;
-                f.vel_d_mps = m.vel_d_mps;
-                f.speed_mps = m.g_speed_mps;
-                f.track_deg = m.heading_deg.rem_euclid(360.0);
-                f.s_acc_mps = m.s_acc_mps;
-                f.head_acc_deg = m.c_acc_deg;
-                self.ned_vel = true;
+                self.fix.sentences |= UBX_MSG_NAV_VELNED;
+                self.set_ned_velocity(2, [m.vel_n_mps, m.vel_e_mps, m.vel_d_mps], m.g_speed_mps, m.heading_deg);
+                if claim(&mut self.src.s_acc, 2) {
+                    self.fix.s_acc_mps = m.s_acc_mps;
+                }
+                if claim(&mut self.src.head_acc, 2) {
+                    self.fix.head_acc_deg = m.c_acc_deg;
+                }
             }
             Message::NavDop(m) => {
                 let f = &mut self.fix;
                 f.sentences |= UBX_MSG_NAV_DOP;
                 f.hdop = dop(m.h_dop);
                 f.vdop = dop(m.v_dop);
-                f.pdop = dop(m.p_dop);
+                if claim(&mut self.src.pdop, 3) {
+                    self.fix.pdop = dop(m.p_dop);
+                }
             }
             Message::NavTimeutc(m) => {
                 self.fix.sentences |= UBX_MSG_NAV_TIMEUTC;
-                if m.utc_valid() {
+                if m.utc_valid() && claim(&mut self.src.utc, 1) {
                     self.utc_ns = utc_of(m.year, m.month, m.day, m.hour, m.min, m.sec, m.nano_ns);
                     self.leap_s = self.utc_ns.and_then(|u| leap_of(m.itow_ms, u)).or(self.leap_s);
                     self.fix.fix_flags |= FIX_FLAG_VALID_DATE | FIX_FLAG_VALID_TIME | FIX_FLAG_FULLY_RESOLVED;
@@ -493,11 +589,15 @@ impl Epoch {
             }
             Message::NavSat(m) => {
                 self.fix.sentences |= UBX_MSG_NAV_SAT;
-                self.sats = Some(SatView::of_sat(m));
+                if claim(&mut self.src.sats, 2) {
+                    self.sats = Some(SatView::of_sat(m));
+                }
             }
             Message::NavSvinfo(m) => {
                 self.fix.sentences |= UBX_MSG_NAV_SAT;
-                self.sats = Some(SatView::of_svinfo(m));
+                if claim(&mut self.src.sats, 1) {
+                    self.sats = Some(SatView::of_svinfo(m));
+                }
             }
             Message::NavEoe(_) => self.fix.sentences |= UBX_MSG_NAV_EOE,
             _ => {}
@@ -536,8 +636,25 @@ const YEARS: core::ops::RangeInclusive<u16> = 1980..=2200;
 /// GPS weeks accepted (to 2171).
 const WEEKS: core::ops::RangeInclusive<i64> = 0..=9999;
 
-/// UTC ns of a UBX date and time with its (possibly negative) nanoseconds; `None` for an
-/// impossible date.
+/// The navigation epoch of a precise time: the time rounded to the nearest millisecond.
+///
+/// u-blox 8 / M8 Receiver Description (UBX-13003221), "Clocks and Time", "Navigation
+/// Epochs": "Each navigation solution is triggered by the tick of the 1-kHz clock nearest to
+/// the desired navigation solution time"; "iTOW Timestamps": iTOW, in ms, "indicates the GPS
+/// time at which the navigation epoch occurred". The sub-millisecond rest of a precise time
+/// (NAV-PVT/NAV-TIMEUTC/HNR-PVT `nano` beyond the whole ms, NAV-SOL/NAV-TIMEGPS `fTOW`) is
+/// the receiver clock's offset from that tick as the solution measured it, not another
+/// instant: an epoch whose UTC fields say 02:40:14 with `nano` −192 µs ("UTC
+/// Representation": the fields are rounded and `nano` corrects them, so it is negative when
+/// they were rounded up) is the epoch 02:40:14.000, as gpsd reports it. Every output path
+/// (the fix's `utc_ns`/`gps_ns`, hence JSON, gpsd-server, recordings, the estimator) carries
+/// the rounded time.
+pub fn epoch_ns(precise_ns: i64) -> i64 {
+    precise_ns.saturating_add(NS_PER_MS / 2).div_euclid(NS_PER_MS) * NS_PER_MS
+}
+
+/// UTC ns of a UBX date and time with its (possibly negative) nanoseconds, as the navigation
+/// epoch ([`epoch_ns`]); `None` for an impossible date.
 #[allow(clippy::too_many_arguments)]
 fn utc_of(year: u16, month: u8, day: u8, hour: u8, min: u8, sec: u8, nano_ns: i32) -> Option<i64> {
     let ok = YEARS.contains(&year)
@@ -557,6 +674,7 @@ fn utc_of(year: u16, month: u8, day: u8, hour: u8, min: u8, sec: u8, nano_ns: i3
             nanos: 0,
         }) + i64::from(nano_ns)
     })
+    .map(epoch_ns)
 }
 
 /// GPS ns of a week, time of week (ms) and fraction (ns); `None` for a week outside
@@ -565,9 +683,9 @@ fn gps_of(week: i64, tow_ns: i64) -> Option<i64> {
     WEEKS.contains(&week).then(|| week * NS_PER_WEEK + tow_ns)
 }
 
-/// Time of week of `iTOW` (ms) + `fTOW` (ns), ns.
+/// Time of week of `iTOW` (ms) + `fTOW` (ns) as the navigation epoch ([`epoch_ns`]), ns.
 fn tow_ns(itow_ms: u32, ftow_ns: i32) -> i64 {
-    i64::from(itow_ms) * NS_PER_MS + i64::from(ftow_ns)
+    epoch_ns(i64::from(itow_ms) * NS_PER_MS + i64::from(ftow_ns))
 }
 
 /// GPS − UTC (s) from a NAV message's `iTOW` (GPS time of week, ms) and the UTC of the same
@@ -613,10 +731,16 @@ enum Close {
 #[derive(Debug, Clone)]
 pub struct EpochAssembler {
     cur: Epoch,
-    /// The last epoch emitted at NAV-EOE or on flush, kept in case late messages for it arrive.
-    prev: Option<Epoch>,
-    /// `iTOW` of the last epoch emitted, ms.
+    /// `iTOW` of the last epoch closed (ms), the last data message merged into it and its
+    /// UTC time: a NAV message of that `iTOW` arriving later is late.
     last_itow_ms: Option<u32>,
+    last_closed_msg: Option<&'static str>,
+    last_closed_utc_ns: i64,
+    /// The order of the NAV epochs and of the HNR-PVT fixes published ([`TimeOrder`]).
+    nav_order: TimeOrder,
+    hnr_order: TimeOrder,
+    /// The geoid model for receivers without an MSL height (NAV-SOL).
+    geoid: GeoidCache,
     /// Receiver's GPS − UTC, s (see [`EpochAssembler::leap_seconds`]), carried across epochs.
     leap_s: Option<i64>,
     sats: SatView,
@@ -627,7 +751,9 @@ pub struct EpochAssembler {
     /// The last message and `iTOW` of an epoch emitted on flush: a vote once the next epoch
     /// begins.
     flushed: Option<(&'static str, u32)>,
+    /// Sequence numbers of the NAV epochs and of the HNR-PVT fixes (two outputs).
     seq: u64,
+    hnr_seq: u64,
     counters: EpochCounters,
 }
 
@@ -642,8 +768,12 @@ impl EpochAssembler {
     pub fn new() -> Self {
         Self {
             cur: Epoch::closed(),
-            prev: None,
             last_itow_ms: None,
+            last_closed_msg: None,
+            last_closed_utc_ns: i64::MIN,
+            nav_order: TimeOrder::default(),
+            hnr_order: TimeOrder::default(),
+            geoid: GeoidCache::default(),
             leap_s: None,
             sats: SatView::EMPTY,
             time_pulse: None,
@@ -651,6 +781,7 @@ impl EpochAssembler {
             cycle: CycleEnder::default(),
             flushed: None,
             seq: 0,
+            hnr_seq: 0,
             counters: EpochCounters::default(),
         }
     }
@@ -705,33 +836,22 @@ impl EpochAssembler {
         self.counters.nav_messages += 1;
         if self.cur.open && self.cur.itow_ms != itow_ms {
             if self.last_itow_ms == Some(itow_ms) {
-                // For the epoch before the one being assembled: too late to merge (and if
-                // that epoch was emitted at a learned last message, that was wrong).
-                self.counters.late_messages += 1;
-                self.cycle.forget();
-                return;
+                // For the epoch before the one being assembled.
+                return self.late(msg);
             }
             self.emit(Close::NextEpoch, out);
         }
         if !self.cur.open {
-            match self.prev.take() {
-                Some(prev) if prev.itow_ms == itow_ms => {
-                    // The epoch emitted at NAV-EOE, the learned last message or on flush was
-                    // not complete after all.
-                    self.counters.late_messages += 1;
-                    self.cycle.forget();
-                    self.flushed = None;
-                    self.cur = prev;
-                }
-                _ => {
-                    if let Some((name, flushed_itow)) = self.flushed.take()
-                        && flushed_itow != itow_ms
-                    {
-                        self.cycle.vote(name);
-                    }
-                    self.cur = Epoch::start(itow_ms, host_ns);
-                }
+            if self.last_itow_ms == Some(itow_ms) {
+                // For the epoch just emitted (at NAV-EOE, the learned last message, on flush).
+                return self.late(msg);
             }
+            if let Some((name, flushed_itow)) = self.flushed.take()
+                && flushed_itow != itow_ms
+            {
+                self.cycle.vote(name);
+            }
+            self.cur = Epoch::start(itow_ms, host_ns);
         }
         self.cur.merge(msg);
         if self.cur.leap_s.is_some() {
@@ -740,10 +860,45 @@ impl EpochAssembler {
         if matches!(msg, Message::NavEoe(_)) {
             self.emit(Close::Eoe, out);
         } else {
-            self.cur.last_msg = Some(msg.name());
-            if self.cycle.is_ender(msg.name()) {
+            let name = msg.name();
+            if let Some(before) = self.cur.last_msg
+                && before != name
+            {
+                // `before` is not the last message of every epoch: never the cycle's ender.
+                self.cycle.followed(before);
+            }
+            self.cur.last_msg = Some(name);
+            if self.cycle.is_ender(name) {
                 self.emit(Close::Ender, out);
             }
+        }
+    }
+
+    /// A NAV message for an epoch already closed: it is not published again (every epoch is
+    /// published once). Counted; the message it followed is no cycle ender; a satellite view
+    /// still replaces that epoch's in [`EpochAssembler::satellites`].
+    fn late(&mut self, msg: &Message) {
+        self.counters.late_messages += 1;
+        if matches!(msg, Message::NavEoe(_)) {
+            return;
+        }
+        if let Some(before) = self.last_closed_msg
+            && before != msg.name()
+        {
+            self.cycle.followed(before);
+        }
+        self.last_closed_msg = Some(msg.name());
+        let view = match msg {
+            Message::NavSat(m) => Some(SatView::of_sat(m)),
+            Message::NavSvinfo(m) if self.sats.itow_ms != m.itow_ms || self.sats.from_svinfo => {
+                Some(SatView::of_svinfo(m))
+            }
+            _ => None,
+        };
+        if let Some(mut v) = view {
+            v.utc_ns = self.last_closed_utc_ns;
+            self.counters.sats_dropped += v.dropped as u64;
+            self.sats = v;
         }
     }
 
@@ -822,17 +977,19 @@ impl EpochAssembler {
         f.s_acc_mps = m.s_acc_mps;
         f.head_acc_deg = m.head_acc_deg;
         e.ned_vel = true;
-        self.counters.hnr_fixes += 1;
-        let fix = self.finish(e);
-        out(&fix);
+        if let Some(fix) = self.finish(e, true) {
+            self.counters.hnr_fixes += 1;
+            out(&fix);
+        }
     }
 
     /// Completes the open epoch and hands it to `out` (epochs with nothing but NAV-EOE are
     /// dropped).
     fn emit(&mut self, how: Close, out: &mut impl FnMut(&GnssFix)) {
         let e = core::mem::replace(&mut self.cur, Epoch::closed());
-        self.prev = (how != Close::NextEpoch).then_some(e);
         self.last_itow_ms = Some(e.itow_ms);
+        self.last_closed_msg = e.last_msg;
+        self.last_closed_utc_ns = i64::MIN;
         // An epoch that ended without NAV-EOE teaches the cycle: at once when the next epoch's
         // first message closed it, when the next epoch begins if the line went idle.
         self.flushed = None;
@@ -844,13 +1001,16 @@ impl EpochAssembler {
         if !e.has_data() {
             return;
         }
+        let Some(fix) = self.finish(e, false) else {
+            return;
+        };
         match how {
             Close::Eoe => self.counters.eoe_emits += 1,
             Close::Ender => self.counters.ender_emits += 1,
             Close::Flush => self.counters.flush_emits += 1,
             Close::NextEpoch => {}
         }
-        let fix = self.finish(e);
+        self.last_closed_utc_ns = fix.utc_ns;
         if let Some(mut sats) = e.sats {
             sats.utc_ns = fix.utc_ns;
             self.counters.sats_dropped += sats.dropped as u64;
@@ -859,8 +1019,10 @@ impl EpochAssembler {
         out(&fix);
     }
 
-    /// The fix of a complete epoch (time, position, velocity derived; stamped and counted).
-    fn finish(&mut self, e: Epoch) -> GnssFix {
+    /// The fix of a complete epoch (time, position, velocity derived; stamped and counted), of
+    /// the HNR-PVT output when `hnr`; `None` when its time is not after the last one published
+    /// on that output ([`TimeOrder`]: held back, counted).
+    fn finish(&mut self, e: Epoch, hnr: bool) -> Option<GnssFix> {
         let mut fix = e.fix;
         // A solution no message vouched for (gnssFixOK, GPSfixOK) is not one the receiver
         // calls valid.
@@ -891,8 +1053,15 @@ impl EpochAssembler {
         {
             fix.lat_deg = g.lat_deg;
             fix.lon_deg = g.lon_deg;
-            // No MSL altitude from ECEF: the height with an unknown separation (module doc).
-            fix.alt_msl_m = g.height_m;
+            // No MSL altitude from the receiver: the geoid model's, said so (module doc).
+            match self.geoid.separation_m(g.lat_deg, g.lon_deg) {
+                Some(n) => {
+                    fix.alt_msl_m = g.height_m - n;
+                    fix.geoid_sep_m = n;
+                    fix.sentences |= FIX_GEOID_MODEL;
+                }
+                None => fix.alt_msl_m = g.height_m,
+            }
         }
         if let (true, false, true, Some([vx, vy, vz])) = (has_fix, e.ned_vel, fix.lat_deg.is_finite(), e.ecef_vel_mps) {
             let [n, east, d] = ned_from_ecef_velocity(fix.lat_deg, fix.lon_deg, vx, vy, vz);
@@ -933,10 +1102,20 @@ impl EpochAssembler {
             (None, Some(s)) => u16::try_from(s.used()).unwrap_or(u16::MAX),
             (None, None) => u16::MAX,
         };
-        fix.stamp = Stamp::host(fix.stamp.host_ns, self.seq, StampSource::Receipt);
-        self.seq += 1;
+        let order = if hnr { &mut self.hnr_order } else { &mut self.nav_order };
+        match order.admit(fix.utc_ns) {
+            Admit::Publish => {}
+            Admit::Reset => self.counters.time_resets += 1,
+            Admit::HeldBack => {
+                self.counters.not_after_last += 1;
+                return None;
+            }
+        }
+        let seq = if hnr { &mut self.hnr_seq } else { &mut self.seq };
+        fix.stamp = Stamp::host(fix.stamp.host_ns, *seq, StampSource::Receipt);
+        *seq += 1;
         self.counters.epochs += 1;
-        fix
+        Some(fix)
     }
 }
 
@@ -962,13 +1141,13 @@ fn nav_itow(msg: &Message) -> Option<u32> {
 mod tests {
     use super::super::esf::decode_hnr_pvt;
     use super::super::messages::decode;
-    use super::super::nav::tests::{P, pvt};
+    use super::super::nav::tests::{P, pvt, pvt_at};
     use super::*;
     use navsync_shared::time::format_rfc3339_ms;
 
     /// A NAV-PVT message (see `nav::tests::pvt`) with a valid position.
     fn pvt_msg(itow_ms: u32, fix_type: u8, flags: u8) -> Message {
-        let mut p = pvt(itow_ms, fix_type, flags);
+        let mut p = pvt_at(itow_ms, fix_type, flags);
         p[78] = 0;
         decode(1, 7, &p).unwrap()
     }
@@ -1082,10 +1261,10 @@ mod tests {
         );
         assert_eq!(
             format_rfc3339_ms(f.utc_ns),
-            "2021-06-10T18:18:56.999Z",
-            "date and time with nano −123456 ns"
+            "2021-06-10T18:18:57.000Z",
+            "18:18:57 with nano −123456 ns is the epoch 18:18:57.000"
         );
-        assert_eq!(f.utc_ns % NS_PER_S, NS_PER_S - 123_456);
+        assert_eq!(f.utc_ns % NS_PER_S, 0, "rounded to the navigation epoch's millisecond");
         assert_eq!(f.gps_ns, gps_ns_from_utc_ns(f.utc_ns));
         assert_eq!(f.tod_ns, f.utc_ns.rem_euclid(NS_PER_DAY));
         assert_eq!((f.lat_deg, f.lon_deg), (50.135_084_5, 14.429_946_9));
@@ -1134,15 +1313,20 @@ mod tests {
         assert_eq!(out.len(), 1);
         let (at, f) = out[0];
         assert_eq!(at, 3, "emitted when the next epoch's first message arrives");
-        let gps = 1977 * NS_PER_WEEK + 494_575_000 * NS_PER_MS - 112_313;
+        // iTOW + fTOW (−112 µs) is the navigation epoch iTOW.
+        let gps = 1977 * NS_PER_WEEK + 494_575_000 * NS_PER_MS;
         assert_eq!(f.gps_ns, gps);
         assert_eq!(f.utc_ns, gps + (GPS_EPOCH_UNIX_S - 18) * NS_PER_S);
-        assert_eq!(format_rfc3339_ms(f.utc_ns), "2017-12-01T17:22:36.999Z");
+        assert_eq!(format_rfc3339_ms(f.utc_ns), "2017-12-01T17:22:37.000Z");
         assert!(
             (f.lat_deg - 45.2185).abs() < 1e-7 && (f.lon_deg - 5.8072).abs() < 1e-7,
             "{f:?}"
         );
-        assert!(f.geoid_sep_m.is_nan(), "no MSL from ECEF");
+        // No MSL height from the receiver: EGM96's separation, said so.
+        assert_ne!(f.sentences & FIX_GEOID_MODEL, 0);
+        let n = crate::gnss::geoid::egm96_separation_m(f.lat_deg, f.lon_deg).unwrap();
+        assert!((f.geoid_sep_m - n).abs() < 0.05, "{} {n}", f.geoid_sep_m);
+        assert!((f.alt_msl_m - (278.88 - n)).abs() < 0.06, "{}", f.alt_msl_m);
         assert!(
             (f.height_m() - 278.88).abs() < 0.01,
             "the ellipsoidal height: {}",
@@ -1185,17 +1369,33 @@ mod tests {
         assert_eq!(emitted, [(0, 1), (0, 1), (1, 0), (1, 0), (1, 0), (1, 0)]);
         assert_eq!(asm.cycle_ender(), Some("NAV-DOP"));
         assert_eq!(asm.counters().ender_emits, 4);
-        // The receiver adds NAV-SAT after NAV-DOP: that epoch is reopened, emitted again
-        // complete, and the learned message forgotten.
+        // The receiver adds NAV-SAT after NAV-DOP: the epoch was published at NAV-DOP and is
+        // not published again; NAV-SAT still gives the satellites of that epoch, and NAV-DOP
+        // is never trusted again.
         let mut out = Vec::new();
         for m in [pvt_msg(7000, 3, 1), dop(7000), sat(7000)] {
             asm.push(&m, 0, &mut |f| out.push(*f));
         }
         asm.flush(&mut |f| out.push(*f));
-        assert_eq!(out.len(), 2, "emitted at NAV-DOP, then again complete");
-        assert_eq!(out[0].utc_ns, out[1].utc_ns);
-        assert!(out[1].sentences & UBX_MSG_NAV_SAT != 0);
+        assert_eq!(out.len(), 1, "published once, at NAV-DOP");
+        assert_eq!(asm.counters().late_messages, 1);
+        assert_eq!(
+            (asm.satellites().itow_ms, asm.satellites().utc_ns),
+            (7000, out[0].utc_ns)
+        );
         assert_eq!(asm.cycle_ender(), None);
+        for k in 8..=12u32 {
+            for m in [pvt_msg(k * 1000, 3, 1), dop(k * 1000)] {
+                asm.push(&m, 0, &mut |f| out.push(*f));
+            }
+            asm.flush(&mut |f| out.push(*f));
+        }
+        assert_eq!(
+            asm.cycle_ender(),
+            None,
+            "NAV-DOP was followed once: never the ender again"
+        );
+        assert_eq!(out.len(), 6);
         // Without NAV-EOE but with the next epoch arriving at once (no idle line), it is
         // learned from the epoch boundaries.
         let mut asm = EpochAssembler::new();
@@ -1208,20 +1408,12 @@ mod tests {
     }
 
     #[test]
-    fn late_messages_reopen_an_epoch_or_are_dropped() {
+    fn late_messages_are_counted_and_never_publish_an_epoch_twice() {
         let mut asm = EpochAssembler::new();
         let mut out = run(&mut asm, &[pvt_msg(1000, 3, 1), eoe(1000), dop(1000)]);
         out.extend(flush(&mut asm).into_iter().map(|f| (9, f)));
-        assert_eq!(out.len(), 2);
-        let (first, again) = (out[0].1, out[1].1);
-        assert!(
-            first.hdop.is_nan() && again.hdop == 1.3,
-            "reassembled with the late NAV-DOP"
-        );
-        assert_eq!(
-            (again.utc_ns, again.stamp.host_ns, again.stamp.seq),
-            (first.utc_ns, first.stamp.host_ns, 1)
-        );
+        assert_eq!(out.len(), 1, "published once, at NAV-EOE");
+        assert!(out[0].1.hdop.is_nan());
         assert_eq!(asm.counters().late_messages, 1);
         // A message for the previous epoch while the next one is assembled: dropped.
         let mut asm = EpochAssembler::new();
@@ -1311,8 +1503,8 @@ mod tests {
         let (at, nav) = out[1];
         assert_eq!(
             (at, nav.stamp.seq, nav.sentences & UBX_MSG_HNR_PVT),
-            (2, 1, 0),
-            "the NAV epoch is intact"
+            (2, 0, 0),
+            "the NAV epoch is intact, numbered on its own output"
         );
         assert_eq!(asm.counters().hnr_fixes, 1);
     }
