@@ -701,7 +701,7 @@ fn velocity(f: &mut GnssFix) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use navsync_shared::samples::{SENTENCE_GGA, SENTENCE_GLL, SENTENCE_GSA, SENTENCE_RMC, SENTENCE_ZDA};
+    use navsync_shared::samples::{SENTENCE_GGA, SENTENCE_GSA, SENTENCE_RMC, SENTENCE_ZDA};
     use navsync_shared::time::{Civil, format_rfc3339_ms, utc_ns_from_civil};
 
     /// `$<body>*hh` with the right checksum.

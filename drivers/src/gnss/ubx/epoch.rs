@@ -1659,4 +1659,266 @@ mod tests {
         asm.push(&decode(0x0D, 1, &tp).unwrap(), 0, &mut |_| {});
         assert_eq!(asm.time_pulse().map(|t| t.pulse_utc_ns), Some(i64::MIN));
     }
+    // ---- Issue 35: each defect as a test on bytes written from the interface description
+    // (u-blox 8 / M8 Receiver Description, UBX-13003221: UBX-NAV-PVT, UBX-NAV-VELNED,
+    // UBX-NAV-SOL, UBX-NAV-SAT, UBX-HNR-PVT payload layouts).
+
+    /// A NAV-PVT payload (3D fix, gnssFixOK, valid date and time) at `hh:mm:ss` + `nano` ns on
+    /// 2021-06-10, with velocity north `vel_n_mm_s`, ground speed and sAcc in mm/s.
+    fn pvt_time(itow_ms: u32, (hh, mm, ss): (u8, u8, u8), nano: i32, vel_n_mm_s: i32, s_acc_mm_s: u32) -> Message {
+        let mut p = pvt(itow_ms, 3, 0x01);
+        p[8] = hh;
+        p[9] = mm;
+        p[10] = ss;
+        p[16..20].copy_from_slice(&nano.to_le_bytes());
+        p[48..52].copy_from_slice(&vel_n_mm_s.to_le_bytes());
+        p[52..56].copy_from_slice(&0i32.to_le_bytes());
+        p[60..64].copy_from_slice(&vel_n_mm_s.unsigned_abs().to_le_bytes());
+        p[68..72].copy_from_slice(&s_acc_mm_s.to_le_bytes());
+        p[78] = 0;
+        decode(1, 7, &p).unwrap()
+    }
+
+    #[test]
+    fn issue35_negative_nano_is_the_epoch_of_the_rounded_second() {
+        // UTC fields 02:40:14 with nano −192 µs and −78 µs (the fields are rounded, nano
+        // corrects them): the navigation epochs 02:40:14.000 and 02:40:15.000, not …13.999.
+        let mut asm = EpochAssembler::new();
+        let out = run(
+            &mut asm,
+            &[
+                pvt_time(1_000, (2, 40, 14), -192_000, 0, 100),
+                eoe(1_000),
+                pvt_time(2_000, (2, 40, 15), -78_000, 0, 100),
+                eoe(2_000),
+                pvt_time(3_000, (2, 40, 15), 999_600_000, 0, 100),
+                eoe(3_000),
+            ],
+        );
+        let times: Vec<String> = out.iter().map(|(_, f)| format_rfc3339_ms(f.utc_ns)).collect();
+        assert_eq!(
+            times,
+            [
+                "2021-06-10T02:40:14.000Z",
+                "2021-06-10T02:40:15.000Z",
+                "2021-06-10T02:40:16.000Z"
+            ]
+        );
+        for (_, f) in &out {
+            assert_eq!(f.utc_ns % NS_PER_MS, 0, "on the millisecond in the sample itself");
+            assert_eq!(f.gps_ns % NS_PER_MS, 0);
+        }
+        // The same in the JSON of `navsync decode`.
+        let j = crate::gnss::capture::epoch_json(&out[0].1);
+        assert_eq!(j["time"], "2021-06-10T02:40:14.000Z");
+        // And for HNR-PVT and NAV-TIMEUTC, whose nano is the same field.
+        assert_eq!(epoch_ns(14 * NS_PER_S - 192_000), 14 * NS_PER_S);
+        assert_eq!(epoch_ns(14 * NS_PER_S + 499_999), 14 * NS_PER_S);
+        assert_eq!(epoch_ns(14 * NS_PER_S + 500_000), 14 * NS_PER_S + NS_PER_MS);
+        assert_eq!(epoch_ns(-1), 0);
+    }
+
+    #[test]
+    fn issue35_nav_sol_only_gives_msl_from_the_geoid_model_and_keeps_the_ellipsoidal_height() {
+        // A receiver sending NAV-SOL (ECEF, no MSL height) and NAV-TIMEGPS only.
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[
+                sol(494_575_000, 3, 0xDF),
+                timegps(494_575_000, 0, 1977, 18, 0x07),
+                sol(494_576_000, 3, 0xDF),
+            ],
+        );
+        let f = flush(&mut asm)[0];
+        let g = geodetic_from_ecef(4_477_487.13, 455_375.03, 4_504_684.08).unwrap();
+        let n = crate::gnss::geoid::egm96_separation_m(g.lat_deg, g.lon_deg).unwrap();
+        assert!(n.abs() > 10.0, "the separation matters here: {n}");
+        assert!(
+            (f.height_m() - g.height_m).abs() < 1e-6,
+            "ellipsoidal height is the receiver's"
+        );
+        assert!(
+            (f.alt_msl_m - (g.height_m - n)).abs() < 0.05,
+            "MSL = h − N, not h: {} vs {}",
+            f.alt_msl_m,
+            g.height_m
+        );
+        assert_ne!(f.sentences & FIX_GEOID_MODEL, 0, "the source is stated");
+        let j = crate::gnss::capture::epoch_json(&f);
+        assert_eq!(j["alt_msl_source"], "egm96");
+        assert!((j["alt_hae"].as_f64().unwrap() - g.height_m).abs() < 1e-6);
+        // With NAV-PVT (hMSL from the receiver): the receiver's, no model.
+        let mut asm = EpochAssembler::new();
+        run(&mut asm, &[pvt_msg(1000, 3, 1), sol(1000, 3, 0xDF), eoe(1000)]);
+        let asm_out = asm.counters().epochs;
+        assert_eq!(asm_out, 1);
+    }
+
+    /// A NAV-VELNED payload: velocity north `vel_n_cm_s`, ground speed, sAcc in cm/s.
+    fn velned(itow_ms: u32, vel_n_cm_s: i32, s_acc_cm_s: u32) -> Message {
+        let p = P::default()
+            .u4(itow_ms)
+            .i4(vel_n_cm_s)
+            .i4(0)
+            .i4(7)
+            .u4(vel_n_cm_s.unsigned_abs())
+            .u4(vel_n_cm_s.unsigned_abs())
+            .i4(0)
+            .u4(s_acc_cm_s)
+            .u4(900_000)
+            .0;
+        decode(1, 0x12, &p).unwrap()
+    }
+
+    #[test]
+    fn issue35_the_finer_message_wins_whatever_the_order() {
+        // NAV-PVT says 1.234 m/s north, sAcc 0.081 m/s (mm/s); NAV-VELNED of the same epoch
+        // 1.23 m/s, sAcc 0.09 m/s (cm/s): NAV-PVT's stand, before or after NAV-VELNED.
+        for order in [0, 1] {
+            let (a, b) = (pvt_time(1_000, (2, 40, 14), 0, 1_234, 81), velned(1_000, 123, 9));
+            let msgs = if order == 0 {
+                [a, b, eoe(1_000)]
+            } else {
+                [b, a, eoe(1_000)]
+            };
+            let mut asm = EpochAssembler::new();
+            let f = run(&mut asm, &msgs)[0].1;
+            assert_eq!(
+                (f.vel_n_mps, f.speed_mps, f.s_acc_mps),
+                (1.234, 1.234, 0.081),
+                "order {order}"
+            );
+            assert_eq!(f.vel_d_mps, -0.03, "NAV-PVT's velD");
+            assert_ne!(f.sentences & UBX_MSG_NAV_VELNED, 0, "both merged");
+        }
+        // NAV-VELNED alone still gives the velocity.
+        let mut asm = EpochAssembler::new();
+        let f = run(&mut asm, &[sol(1_000, 3, 0xDF), velned(1_000, 123, 9), eoe(1_000)])[0].1;
+        assert_eq!((f.vel_n_mps, f.s_acc_mps), (1.23, 0.09), "VELNED over NAV-SOL's ECEF");
+        // NAV-SOL's pDOP and sAcc do not overwrite NAV-PVT's, in either order.
+        let mut asm = EpochAssembler::new();
+        let f = run(
+            &mut asm,
+            &[pvt_time(1_000, (2, 40, 14), 0, 0, 81), sol(1_000, 3, 0xDF), eoe(1_000)],
+        )[0]
+        .1;
+        assert_eq!((f.s_acc_mps, f.pdop, f.sats_used), (0.081, 1.56, 12));
+    }
+
+    #[test]
+    fn issue35_alternating_epoch_content_is_published_once() {
+        // Epochs of NAV-PVT alone and NAV-PVT + NAV-SAT every fifth second, each burst
+        // followed by an idle line (flush) or not; the capture starting with either kind.
+        for start_with_sat in [false, true] {
+            for idle in [false, true] {
+                let mut asm = EpochAssembler::new();
+                let mut out = Vec::new();
+                let mut with_sat = Vec::new();
+                for k in 1..=30u32 {
+                    let itow = k * 1000;
+                    let sat_epoch = (k + u32::from(!start_with_sat) * 3) % 5 == 1;
+                    let mut msgs = vec![pvt_msg(itow, 3, 1)];
+                    if sat_epoch {
+                        msgs.push(sat(itow));
+                        with_sat.push(itow);
+                    }
+                    for m in &msgs {
+                        asm.push(m, i64::from(itow), &mut |f| out.push(*f));
+                    }
+                    if idle {
+                        asm.flush(&mut |f| out.push(*f));
+                    }
+                }
+                asm.flush(&mut |f| out.push(*f));
+                let times: Vec<i64> = out.iter().map(|f| f.utc_ns).collect();
+                assert_eq!(times.len(), 30, "sat first {start_with_sat} idle {idle}: {times:?}");
+                assert!(times.windows(2).all(|w| w[0] < w[1]), "strictly increasing");
+                let seqs: Vec<u64> = out.iter().map(|f| f.stamp.seq).collect();
+                assert_eq!(seqs, (0..30).collect::<Vec<_>>());
+                assert!(asm.counters().late_messages <= 1, "at most the first NAV-SAT");
+            }
+        }
+    }
+
+    #[test]
+    fn issue35_hnr_pvt_is_an_output_of_its_own() {
+        // HNR-PVT at 10 Hz (the .4, .0, .5 of the issue) between NAV epochs at 1 Hz, through
+        // the whole decoder: the fixes carry NAV epochs only, the HNR output its own
+        // strictly increasing times and sequence numbers.
+        use crate::gnss::ubx::UbxDecoder;
+        use crate::gnss::ubx::framer::ubx_frame;
+        use crate::gnss::{GnssDecoder, GnssExtra};
+        let mut bytes = Vec::new();
+        let itow0 = (3 * 86_400 + 23 * 3600 + 46 * 60 + 23) * 1000;
+        for s in 5..10u8 {
+            let nav_itow = itow0 + u32::from(s) * 1000;
+            for tenth in 0..10u32 {
+                // nano 40 µs before each tenth: rounded to it.
+                let p = hnr_payload(nav_itow + tenth * 100, s, (tenth * 100_000_000) as i32 - 40_000);
+                bytes.extend(ubx_frame(0x28, 0, &p));
+            }
+            let mut pvt_p = pvt(nav_itow, 3, 1);
+            pvt_p[4..6].copy_from_slice(&2021u16.to_le_bytes());
+            (pvt_p[6], pvt_p[7], pvt_p[8], pvt_p[9], pvt_p[10]) = (6, 16, 23, 46, s);
+            pvt_p[16..20].copy_from_slice(&0i32.to_le_bytes());
+            pvt_p[78] = 0;
+            bytes.extend(ubx_frame(1, 7, &pvt_p));
+            bytes.extend(ubx_frame(1, 0x61, &nav_itow.to_le_bytes()));
+        }
+        let mut d = UbxDecoder::new();
+        let (mut nav, mut hnr) = (Vec::new(), Vec::new());
+        d.push_extras(&bytes, 0, 1, &mut |f| nav.push(*f), &mut |x| {
+            if let GnssExtra::Hnr(h) = x {
+                hnr.push(*h);
+            }
+        });
+        assert_eq!((nav.len(), hnr.len()), (5, 50));
+        assert!(
+            nav.iter()
+                .all(|f| f.sentences & UBX_MSG_HNR_PVT == 0 && f.sats_used == 12)
+        );
+        assert!(hnr.iter().all(|f| f.fix_flags & FIX_FLAG_NOT_GNSS != 0));
+        for out in [&nav, &hnr] {
+            assert!(out.windows(2).all(|w| w[0].utc_ns < w[1].utc_ns));
+            assert!(out.iter().enumerate().all(|(i, f)| f.stamp.seq == i as u64));
+        }
+        assert_eq!(format_rfc3339_ms(hnr[1].utc_ns), "2021-06-16T23:46:05.100Z", "rounded");
+    }
+
+    /// An HNR-PVT payload at 2021-06-16 23:46:`sec` + `nano` ns, a dead-reckoning fix.
+    fn hnr_payload(itow_ms: u32, sec: u8, nano: i32) -> Vec<u8> {
+        let mut p = P::default()
+            .u4(itow_ms)
+            .u2(2021)
+            .u1(6)
+            .u1(16)
+            .u1(23)
+            .u1(46)
+            .u1(sec)
+            .u1(0x37)
+            .i4(nano)
+            .0;
+        p.extend(
+            P::default()
+                .u1(1)
+                .u1(0x1D)
+                .zeros(2)
+                .i4(-1_213_140_876)
+                .i4(440_688_578)
+                .i4(1_111_800)
+                .i4(1_133_150)
+                .i4(1_000)
+                .i4(1_001)
+                .i4(9_000_000)
+                .i4(0)
+                .u4(3_024)
+                .u4(6_053)
+                .u4(290)
+                .u4(3_334_190)
+                .zeros(4)
+                .0,
+        );
+        p
+    }
 }
