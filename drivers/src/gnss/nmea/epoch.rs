@@ -163,6 +163,8 @@ struct Epoch {
     open: bool,
     /// Some decoded sentence has been merged.
     has_data: bool,
+    /// The own time of the last ZDA/GST merged (which need not be the epoch's).
+    aux_tod_ns: Option<i64>,
     fix: GnssFix,
     /// Time tag, ns since midnight.
     tod_ns: Option<i64>,
@@ -187,6 +189,7 @@ impl Epoch {
         Self {
             open: false,
             has_data: false,
+            aux_tod_ns: None,
             fix: GnssFix::empty(Stamp::host(0, 0, StampSource::Receipt)),
             tod_ns: None,
             tod_from_zda: false,
@@ -309,6 +312,9 @@ impl Epoch {
     /// Merges a decoded sentence (later values replace earlier ones, as in gpsd).
     fn merge(&mut self, u: &Update, last_dim: u8) {
         self.has_data = true;
+        if u.aux_tod_ns.is_some() {
+            self.aux_tod_ns = u.aux_tod_ns;
+        }
         let f = &mut self.fix;
         f.sentences |= u.kind.bit();
         match (u.tod_ns, u.aux_tod_ns) {
@@ -408,6 +414,8 @@ pub struct EpochAssembler {
     last_dim: u8,
     /// Time tag of the last emitted epoch.
     last_emitted_tod: Option<i64>,
+    /// Own time of the last ZDA/GST merged into the last emitted epoch.
+    last_emitted_aux: Option<i64>,
     /// Mode of the last emitted epoch.
     last_mode: u8,
     /// The learned last data sentence of the cycle.
@@ -436,6 +444,7 @@ impl EpochAssembler {
             date: None,
             last_dim: 0,
             last_emitted_tod: None,
+            last_emitted_aux: None,
             last_mode: FixMode::Unknown as u8,
             cycle: CycleEnder::default(),
             flushed: None,
@@ -507,9 +516,13 @@ impl EpochAssembler {
             self.date = Some(DateAnchor { days, tod_ns: tod });
         }
         if !self.cur.open {
-            if u.tod_ns.is_none() && u.aux_tod_ns.is_some() && u.aux_tod_ns == self.last_emitted_tod {
+            if u.tod_ns.is_none()
+                && u.aux_tod_ns.is_some()
+                && (u.aux_tod_ns == self.last_emitted_tod || u.aux_tod_ns == self.last_emitted_aux)
+            {
                 // A ZDA or GST for the epoch just emitted (sent after the cycle's usual last
-                // sentence): its date is taken, but it does not start an epoch of its own.
+                // sentence), or the same ZDA/GST again as the one merged into it: its date is
+                // taken, but it does not start an epoch of its own.
                 self.counters.after_epoch += 1;
                 return;
             }
@@ -524,7 +537,8 @@ impl EpochAssembler {
             self.cycle.followed(before);
         }
         self.cur.last_data_key = Some(key);
-        if self.cycle.is_ender(key) {
+        // Not before the epoch has its time tag (a sentence reordered ahead of the tagged ones).
+        if self.cycle.is_ender(key) && self.cur.tod_ns.is_some() {
             if has_fix(self.cur.fix.mode) == has_fix(self.last_mode) {
                 self.emit(Close::Ender, out);
             } else {
@@ -640,6 +654,7 @@ impl EpochAssembler {
         }
         velocity(&mut fix);
         self.last_emitted_tod = e.tod_ns;
+        self.last_emitted_aux = e.aux_tod_ns;
         self.last_mode = fix.mode;
         self.last_dim = match fix.mode {
             m if m == FixMode::Fix2d as u8 || m == FixMode::Fix3d as u8 => m,

@@ -380,6 +380,11 @@ impl Epoch {
         e
     }
 
+    /// A UTC or GPS time is known.
+    fn has_time(&self) -> bool {
+        self.utc_ns.is_some() || self.gps_ns.is_some()
+    }
+
     /// Data besides NAV-EOE.
     fn has_data(&self) -> bool {
         self.fix.sentences & !UBX_MSG_NAV_EOE != 0
@@ -858,7 +863,13 @@ impl EpochAssembler {
             self.leap_s = self.cur.leap_s;
         }
         if matches!(msg, Message::NavEoe(_)) {
-            self.emit(Close::Eoe, out);
+            // NAV-EOE ends the epoch ("output after all enabled NAV class messages", u-blox
+            // M8 UBX-13003221 "UBX-NAV-EOE"); one before the message carrying the epoch's
+            // time (out of order) leaves it open until the next epoch begins or the line
+            // goes idle, so that the epoch is published with its time.
+            if self.cur.has_time() {
+                self.emit(Close::Eoe, out);
+            }
         } else {
             let name = msg.name();
             if let Some(before) = self.cur.last_msg
@@ -868,7 +879,9 @@ impl EpochAssembler {
                 self.cycle.followed(before);
             }
             self.cur.last_msg = Some(name);
-            if self.cycle.is_ender(name) {
+            // Not before the epoch has its time: a message reordered ahead of the one that
+            // carries it would otherwise publish an epoch without its time.
+            if self.cycle.is_ender(name) && self.cur.has_time() {
                 self.emit(Close::Ender, out);
             }
         }
@@ -1581,9 +1594,12 @@ mod tests {
     fn satellites_of_the_last_epoch() {
         let mut asm = EpochAssembler::new();
         assert_eq!(asm.satellites().len, 0);
-        // NAV-SAT alone: sats_used from its flags, no time.
-        let out = run(&mut asm, &[sat(1000), eoe(1000)]);
-        assert_eq!((out[0].1.sats_used, out[0].1.mode), (1, 0));
+        // NAV-SAT alone: sats_used from its flags, no time: NAV-EOE does not publish an epoch
+        // without its time (the message carrying it may come out of order); the next epoch
+        // or an idle line does.
+        assert!(run(&mut asm, &[sat(1000), eoe(1000)]).is_empty());
+        let out = flush(&mut asm);
+        assert_eq!((out[0].sats_used, out[0].mode), (1, 0));
         let v = asm.satellites();
         assert_eq!(
             (v.itow_ms, v.len, v.used(), v.from_svinfo, v.utc_ns),
