@@ -155,3 +155,34 @@ fn hnr_pvt_and_gnss_epochs_on_services_of_their_own_and_geoid_heights() {
     assert!(with_position > 50, "{with_position} fixes with a position");
     env.finish();
 }
+
+#[test]
+fn navsync_decode_finds_the_protocol_and_says_what_it_saw() {
+    let env = TestEnv::new("decodeauto");
+    let path = shared_material("corpora/gpsd-ubx").join("ublox-neo-m8n.log");
+    let file = path.display().to_string();
+    // No --protocol: auto, as for a u-blox capture a user decodes.
+    let out = env.command(&["decode", &file]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let offline = decode_capture(&std::fs::read(&path).unwrap(), Protocol::Auto);
+    assert_eq!(lines.len(), offline.fixes.len());
+    assert!(lines.len() > 10);
+    for (l, f) in lines.iter().zip(&offline.fixes) {
+        assert_eq!(f.utc_ns % 1_000_000, 0, "NAV-PVT epochs on their millisecond");
+        assert_eq!(l["time"], navsync_shared::time::format_rfc3339_ms(f.utc_ns).as_str());
+        assert_eq!(l["alt_msl_source"], "receiver");
+    }
+    // Forced to NMEA, it fails and says what the bytes are.
+    let out = env.command(&["decode", "--protocol", "nmea", &file]).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("UBX frames") && err.contains("--protocol auto"),
+        "the failure names what was seen: {err}"
+    );
+    env.finish();
+}
