@@ -1,32 +1,36 @@
 //! Groups decoded UBX messages into navigation epochs: one [`GnssFix`] per epoch.
 //!
-//! All NAV messages of one navigation epoch carry the same `iTOW` (GPS time of week, ms). The
-//! [`EpochAssembler`] merges them in arrival order (a later message overrides what an earlier
-//! one said about the same quantity, as gpsd does) and emits the epoch when it is complete:
+//! All NAV messages of one navigation epoch carry the same `iTOW` (GPS time of week, ms;
+//! u-blox 8 / M8 Receiver Description UBX-13003221, "iTOW Timestamps"). The
+//! [`EpochAssembler`] merges them, each quantity from the message of the highest precedence
+//! whatever the order of arrival (the table at `Sources`; `docs/guide/receivers.md`), and
+//! publishes the epoch **once**, when it is complete and has its time:
 //!
 //! - at **NAV-EOE** of its `iTOW` (protocol 18+ receivers send it after the epoch's last NAV
 //!   message);
 //! - else at the receiver's **last NAV message of the cycle**, once learned: whenever an
 //!   epoch ends without NAV-EOE (a NAV message of another `iTOW` arrives, or the line went
 //!   idle and the next epoch begins), its last NAV message is a candidate, trusted after
-//!   [`ENDER_VOTES`](crate::gnss::cycle::ENDER_VOTES) consecutive epochs agree, and forgotten when a NAV message for the epoch
-//!   arrives after it (that epoch is then reopened and emitted again, as below);
+//!   [`ENDER_VOTES`](crate::gnss::cycle::ENDER_VOTES) consecutive epochs agree; a message
+//!   ever seen followed by another NAV message of its epoch is never trusted
+//!   ([`CycleEnder::followed`]);
 //! - else when a NAV message with **another `iTOW`** arrives (the first of the next epoch);
 //! - else on [`EpochAssembler::flush`] (the live driver calls it when the line goes idle).
 //!
-//! A NAV message for the epoch just emitted at NAV-EOE, at the learned last message or on
-//! flush reopens it: it is
-//! completed and emitted once more (same time and stamp, next sequence number; consumers keep
-//! the later of two fixes with the same time); one for the epoch before the one being
-//! assembled is too late and dropped (both counted, `late_messages`). The stamp of an epoch
-//! is the receipt time of its first message's first byte; `seq` counts emitted fixes.
+//! A NAV message for an epoch already published is late: counted (`late_messages`), never
+//! published again (a late NAV-SAT still becomes the satellites of its epoch), and the message
+//! it followed is no longer trusted as the cycle's last. Each output (the NAV epochs, the
+//! HNR-PVT fixes) passes a [`TimeOrder`]: its times strictly increase (`not_after_last`,
+//! `time_resets`). The stamp of an epoch is the receipt time of its first message's first
+//! byte; `seq` counts the fixes of its output.
 //!
 //! Older receivers (u-blox 4 to 7) describe an epoch with NAV-SOL (ECEF position and
 //! velocity, GPS week and time), NAV-TIMEGPS, NAV-POSLLH, NAV-VELNED, NAV-DOP, NAV-STATUS and
 //! NAV-TIMEUTC; newer ones with NAV-PVT. Mapping to [`GnssFix`]:
 //!
-//! - **time**: `utc_ns` from a valid UTC date and time (NAV-PVT `validDate` and `validTime`,
-//!   NAV-TIMEUTC `validUTC`) plus `nano`; else from GPS week and `iTOW` + `fTOW` (NAV-SOL
+//! - **time**: the navigation epoch ([`epoch_ns`]: the precise time rounded to the
+//!   millisecond). `utc_ns` from a valid UTC date and time (NAV-PVT `validDate` and
+//!   `validTime`, NAV-TIMEUTC `validUTC`) plus `nano`; else from GPS week and `iTOW` + `fTOW` (NAV-SOL
 //!   `WKNSET`/`TOWSET`, NAV-TIMEGPS `towValid`/`weekValid`) minus the leap seconds (the
 //!   receiver's, NAV-TIMEGPS `leapSValid`, else the table of `navsync_shared::time`).
 //!   `gps_ns` from week and time of week, else from `utc_ns` and the leap seconds.
@@ -42,9 +46,10 @@
 //!   included).
 //! - **position**: from NAV-PVT/NAV-POSLLH (1e-7°; `height` and `hMSL` → `alt_msl_m` and
 //!   `geoid_sep_m` = height − hMSL); else from NAV-SOL's ECEF position ([`super::ecef`]).
-//!   NAV-SOL gives no MSL altitude: `alt_msl_m` is then the ellipsoidal height and
-//!   `geoid_sep_m` NaN, so that [`GnssFix::height_m`] (which takes an unknown separation as
-//!   0) is the receiver's height; consumers that need MSL see that the separation is unknown.
+//!   NAV-SOL gives no MSL altitude: `geoid_sep_m` is then EGM96's separation N at the
+//!   position ([`crate::gnss::geoid`]) and `alt_msl_m` the ellipsoidal height less N, with
+//!   the `sentences` bit `FIX_GEOID_MODEL` saying so; [`GnssFix::height_m`] is the receiver's
+//!   ellipsoidal height either way.
 //!   Nothing (position, height, velocity) is reported for an epoch without a fix (mode < 2),
 //!   no position or height for one flagged `invalidLlh`, no position outside ±90°/±180°.
 //!   DOPs of 99.99 (u-blox's "unknown") are NaN.
@@ -56,7 +61,9 @@
 //!
 //! HNR-PVT (the fused high-rate solution of ADR/UDR receivers) arrives between the NAV
 //! epochs at its own rate: each one is a complete fix of its own, emitted at once (bit
-//! `UBX_MSG_HNR_PVT`), without disturbing the NAV epoch being assembled.
+//! `UBX_MSG_HNR_PVT`, `FIX_FLAG_NOT_GNSS`) with sequence numbers and time order of its own,
+//! without disturbing the NAV epoch being assembled; the decoder hands it out as
+//! `GnssExtra::Hnr` for `navsync/gnss/{id}/hnr`, never with the NAV epochs.
 //!
 //! The satellites of the last epoch that carried NAV-SAT/NAV-SVINFO
 //! ([`EpochAssembler::satellites`]), the last TIM-TP ([`EpochAssembler::time_pulse`]) and
