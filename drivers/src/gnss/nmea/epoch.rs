@@ -472,10 +472,9 @@ impl EpochAssembler {
     /// epoch when this sentence starts a new one, this one if it is the cycle ender).
     ///
     /// Emitted fixes have `stamp = Stamp::host(first_byte_host_ns, seq, Receipt)` with `seq`
-    /// counting emissions from 0. When data for an epoch arrive after it was emitted on a
-    /// wrongly learned cycle ender, that epoch is emitted once more, complete: same
-    /// `utc_ns` and `stamp.host_ns`, next `seq` (consumers keep the later of two fixes with
-    /// the same time).
+    /// counting emissions from 0. Every epoch is emitted once: a time-tagged sentence for an
+    /// epoch already emitted on a wrongly learned cycle ender is counted late and dropped, and
+    /// an epoch whose time is not after the last one emitted is held back.
     pub fn push(&mut self, text: &[u8], host_ns: i64, out: &mut impl FnMut(&GnssFix)) {
         self.counters.sentences += 1;
         let s = match check(text) {

@@ -109,8 +109,8 @@ pub struct EpochCounters {
     pub flush_emits: u64,
     /// NAV epochs emitted at the learned last NAV message of the cycle (subset of `epochs`).
     pub ender_emits: u64,
-    /// NAV messages for an epoch already emitted: merged and the epoch emitted again when it
-    /// was closed by NAV-EOE or flush, dropped when a later epoch had already begun.
+    /// NAV messages for an epoch already published (or closed): dropped, never published
+    /// again (a late NAV-SAT/NAV-SVINFO still becomes that epoch's satellites).
     pub late_messages: u64,
     /// Fixes emitted from HNR-PVT (subset of `epochs`).
     pub hnr_fixes: u64,
