@@ -129,8 +129,19 @@ fn decode_binary(bytes: &[u8], protocol: Protocol) -> Capture {
     let mut fixes = Vec::new();
     let mut hnr = Vec::new();
     let (mut offset, comment_lines) = gpsd_header(bytes);
+    // A delay cookie declared in the header is a write boundary, not data, in a binary
+    // capture too (gpsfake splits the whole log at it).
+    let cookie = bytes
+        .get(..offset)
+        .unwrap_or(&[])
+        .split_inclusive(|&b| b == b'\n')
+        .find_map(delay_cookie);
     let rest = bytes.get(offset..).unwrap_or(&[]);
-    for chunk in rest.chunks(REPLAY_READ_BYTES) {
+    let pieces: Vec<&[u8]> = match cookie {
+        Some(c) => rest.split(|&b| b == c).collect(),
+        None => vec![rest],
+    };
+    for chunk in pieces.iter().flat_map(|p| p.chunks(REPLAY_READ_BYTES)) {
         offset += chunk.len();
         let read_ns = i64::try_from(offset)
             .unwrap_or(i64::MAX)
@@ -347,11 +358,13 @@ mod tests {
     #[test]
     fn delay_cookie_splits_reads_and_is_not_data() {
         let cap = b"# Delay-Cookie: | 0.01\n$GPGGA,|12351|9,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\n";
-        let c = decode_capture(cap, Protocol::Nmea);
-        let fixes = &c.fixes;
-        assert_eq!(c.nmea().unwrap().counters().epochs.bad_checksum, 0);
-        assert_eq!(fixes.len(), 1);
-        assert_eq!(fixes[0].alt_msl_m, 545.4);
+        for protocol in [Protocol::Nmea, Protocol::Auto] {
+            let c = decode_capture(cap, protocol);
+            let fixes = &c.fixes;
+            assert_eq!(c.nmea().unwrap().counters().epochs.bad_checksum, 0, "{protocol}");
+            assert_eq!(fixes.len(), 1);
+            assert_eq!(fixes[0].alt_msl_m, 545.4, "{protocol}: the cookie is not data");
+        }
         assert_eq!(delay_cookie(b"# Date: 2013-11-03\n"), None);
     }
 
