@@ -51,7 +51,9 @@ impl TimeOrder {
                 self.restart(t_ns);
                 Admit::Reset
             }
-            Some(last) if t_ns <= last => {
+            // The last epoch again: never published twice, whatever came in between.
+            Some(last) if t_ns == last => Admit::HeldBack,
+            Some(last) if t_ns < last => {
                 let consistent = self.held_last_ns.is_none_or(|h| t_ns > h);
                 self.held = if consistent { self.held.saturating_add(1) } else { 1 };
                 self.held_last_ns = Some(t_ns);
@@ -103,5 +105,13 @@ mod tests {
         for _ in 0..10 {
             assert_eq!(o.admit(6), Admit::HeldBack);
         }
+        // A consistent line that climbs back to the last time does not publish it again.
+        let mut o = TimeOrder::default();
+        assert_eq!(o.admit(100), Admit::Publish);
+        for t in [97, 98, 99] {
+            assert_eq!(o.admit(t), Admit::HeldBack);
+        }
+        assert_eq!(o.admit(100), Admit::HeldBack, "the same epoch as the last published");
+        assert_eq!(o.admit(101), Admit::Publish);
     }
 }

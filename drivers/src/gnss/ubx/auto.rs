@@ -49,6 +49,8 @@ pub struct AutoDecoder {
     /// last one published (of either) is held back ([`TimeOrder`]), counted in `held_back`.
     order: TimeOrder,
     held_back: u64,
+    /// Resets of the merged output's time line ([`Admit::Reset`]).
+    resets: u64,
 }
 
 impl AutoDecoder {
@@ -80,13 +82,17 @@ impl AutoDecoder {
 
     /// Emits `fix` with the next sequence number, if its time is after the last one emitted.
     fn renumbered(
-        (emitted, order, held_back): (&mut u64, &mut TimeOrder, &mut u64),
+        (emitted, order, held_back, resets): (&mut u64, &mut TimeOrder, &mut u64, &mut u64),
         fix: &GnssFix,
         out: &mut impl FnMut(&GnssFix),
     ) {
-        if order.admit(fix.utc_ns) == Admit::HeldBack {
-            *held_back += 1;
-            return;
+        match order.admit(fix.utc_ns) {
+            Admit::HeldBack => {
+                *held_back += 1;
+                return;
+            }
+            Admit::Reset => *resets += 1,
+            Admit::Publish => {}
         }
         let mut f = *fix;
         f.stamp.seq = *emitted;
@@ -140,8 +146,9 @@ impl GnssDecoder for AutoDecoder {
             emitted,
             order,
             held_back,
+            resets,
         } = self;
-        let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back), fix, out);
+        let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back, resets), fix, out);
         ubx.push_events(bytes, read_host_ns, ns_per_byte, &mut |ev| match ev {
             Event::Fix(fix) => out(fix),
             Event::Extra(x) => extra(x),
@@ -175,8 +182,9 @@ impl GnssDecoder for AutoDecoder {
             emitted,
             order,
             held_back,
+            resets,
         } = self;
-        let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back), fix, out);
+        let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back, resets), fix, out);
         ubx.flush(out);
         let since = *ubx_since_ns;
         nmea.flush(&mut |fix| Self::nmea_fix(ubx_navigates, since, nmea_since_ubx, suppressed, fix, out));
@@ -200,14 +208,20 @@ impl GnssDecoder for AutoDecoder {
         self.nmea.each_counter(f);
         f("auto_nmea_suppressed", self.suppressed);
         f("auto_not_after_last", self.held_back);
+        f("auto_time_resets", self.resets);
     }
 
     fn describe(name: &str) -> Option<&'static str> {
         UbxDecoder::describe_ubx(name)
             .or_else(|| NmeaDecoder::describe(name))
             .or_else(|| {
-                (name == "auto_not_after_last")
-                    .then_some("epochs held back: their time was not after the last one published (UBX or NMEA)")
+                Some(match name {
+                    "auto_not_after_last" => {
+                        "epochs held back: their time was not after the last one published (UBX or NMEA)"
+                    }
+                    "auto_time_resets" => "the receiver's time went back for good; the epoch order restarted",
+                    _ => return None,
+                })
             })
     }
 }
