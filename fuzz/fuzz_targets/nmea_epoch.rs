@@ -6,7 +6,8 @@
 //! Checks: no panic; framing does not depend on how the stream is cut into reads; every
 //! emitted fix is plausible (mode 0..=3, |lat| ≤ 90°, |lon| ≤ 180°, no infinite value, time
 //! of day within a day plus a leap second, UTC consistent with the time of day, sequence
-//! numbers counting up from 0).
+//! numbers counting up from 0; every epoch published once, times strictly increasing except
+//! across a counted reset of the receiver's time line: `navsync_fuzz::check_epoch_order`).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -14,7 +15,7 @@ use navsync_drivers::gnss::Protocol;
 use navsync_drivers::gnss::capture::decode_capture;
 use navsync_drivers::gnss::nmea::epoch::EpochAssembler;
 use navsync_drivers::gnss::nmea::framer::{LineFramer, MAX_SENTENCE_LEN};
-use navsync_fuzz::check_fix_plausible;
+use navsync_fuzz::{check_epoch_order, check_fix_plausible, time_resets};
 use navsync_shared::samples::GnssFix;
 
 const NS_PER_DAY: i64 = 86_400_000_000_000;
@@ -72,6 +73,7 @@ fuzz_target!(|data: &[u8]| {
     let decoded = decode_capture(data, Protocol::Nmea);
     let (fixes, counters) = (decoded.fixes.clone(), decoded.nmea().expect("NMEA").counters());
     check_fixes(&fixes);
+    check_epoch_order(&fixes, time_resets(&decoded.decoder));
     assert_eq!(counters.epochs.epochs, fixes.len() as u64);
 
     // Framing is independent of read boundaries.
@@ -86,4 +88,5 @@ fuzz_target!(|data: &[u8]| {
     }
     assembler.flush(&mut |f| fixes.push(*f));
     check_fixes(&fixes);
+    check_epoch_order(&fixes, assembler.counters().time_resets);
 });

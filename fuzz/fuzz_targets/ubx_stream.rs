@@ -6,7 +6,9 @@
 //! into reads (the same frames, counters and fixes, stamps included, for one read and for
 //! odd-sized reads); every byte is counted; no frame is longer than the framer's limit;
 //! every emitted fix is plausible (mode 0..=3, |lat| ≤ 90°, |lon| ≤ 180°, no infinite value,
-//! sequence numbers counting up from 0).
+//! sequence numbers counting up from 0); on each output (the GNSS epochs and the HNR-PVT
+//! fixes, `navsync_fuzz::check_epoch_order`) every epoch is published once and times
+//! strictly increase except across a counted reset of the receiver's time line.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -14,7 +16,7 @@ use navsync_drivers::gnss::capture::decode_capture;
 use navsync_drivers::gnss::ubx::framer::{Frame, MAX_UBX_PAYLOAD, UbxFramer};
 use navsync_drivers::gnss::ubx::messages;
 use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra, Protocol};
-use navsync_fuzz::check_fix_plausible;
+use navsync_fuzz::{check_epoch_order, check_fix_plausible, time_resets};
 use navsync_shared::samples::GnssFix;
 
 /// Nanoseconds per byte of the emulated line (115200 baud, 10 bits a byte).
@@ -45,6 +47,7 @@ fn frame(data: &[u8], chunk: usize) -> (Vec<String>, String) {
 fn decode(data: &[u8], chunk: usize, protocol: Protocol) -> (Vec<String>, usize) {
     let mut d = Decoder::new(protocol);
     let mut fixes: Vec<GnssFix> = Vec::new();
+    let mut hnr: Vec<GnssFix> = Vec::new();
     let mut extras = 0usize;
     let mut offset = 0i64;
     for c in data.chunks(chunk.max(1)) {
@@ -56,8 +59,12 @@ fn decode(data: &[u8], chunk: usize, protocol: Protocol) -> (Vec<String>, usize)
             &mut |f| fixes.push(*f),
             &mut |x| {
                 extras += 1;
-                if let GnssExtra::Imu(s) = x {
-                    assert!(s.gyro_rps.iter().chain(&s.accel_mps2).all(|v| !v.is_infinite()));
+                match x {
+                    GnssExtra::Imu(s) => {
+                        assert!(s.gyro_rps.iter().chain(&s.accel_mps2).all(|v| !v.is_infinite()));
+                    }
+                    GnssExtra::Hnr(f) => hnr.push(*f),
+                    _ => {}
                 }
             },
         );
@@ -67,6 +74,13 @@ fn decode(data: &[u8], chunk: usize, protocol: Protocol) -> (Vec<String>, usize)
         check_fix_plausible(f);
         assert_eq!(f.stamp.seq, i as u64, "sequence numbers count emissions");
     }
+    for (i, f) in hnr.iter().enumerate() {
+        check_fix_plausible(f);
+        assert_eq!(f.stamp.seq, i as u64, "HNR sequence numbers of their own");
+    }
+    let resets = time_resets(&d);
+    check_epoch_order(&fixes, resets);
+    check_epoch_order(&hnr, resets);
     assert_eq!(d.bytes(), data.len() as u64);
     (fixes.iter().map(|f| format!("{f:?}")).collect(), extras)
 }

@@ -88,3 +88,29 @@ pub fn check_fix_plausible(f: &navsync_shared::samples::GnssFix) {
         assert!(!v.is_infinite(), "{name} is {v}");
     }
 }
+
+/// The epoch properties of one output of a receiver (the fixes of `navsync/gnss/{id}/fix`, or
+/// the HNR-PVT fixes of `…/hnr`), as `drivers/tests/conformance/epoch_properties.rs` states them: each
+/// timed epoch is after the one before (so none is published twice) except where the decoder
+/// counted a reset of the receiver's time line (`resets`: the `*_time_resets` counters). On
+/// arbitrary input the time line may jump back and forth: across a reset a time may recur,
+/// never within the stretch between two resets, and never twice in a row.
+pub fn check_epoch_order(fixes: &[navsync_shared::samples::GnssFix], resets: u64) {
+    let times: Vec<i64> = fixes.iter().map(|f| f.utc_ns).filter(|&t| t != i64::MIN).collect();
+    for w in times.windows(2) {
+        assert_ne!(w[0], w[1], "epoch {} published twice in a row", w[0]);
+    }
+    let back = times.windows(2).filter(|w| w[1] < w[0]).count() as u64;
+    assert!(back <= resets, "{back} steps back in time, {resets} resets counted");
+}
+
+/// The sum of a decoder's `*_time_resets` counters.
+pub fn time_resets(d: &impl navsync_drivers::gnss::GnssDecoder) -> u64 {
+    let mut n = 0;
+    d.each_counter(&mut |name, v| {
+        if name.ends_with("time_resets") {
+            n += v;
+        }
+    });
+    n
+}

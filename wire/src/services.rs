@@ -3,6 +3,7 @@
 //! | service | type | publisher |
 //! |---|---|---|
 //! | `navsync/gnss/{id}/fix` | [`GnssFix`] | `navsync gnss` |
+//! | `navsync/gnss/{id}/hnr` | [`GnssFix`] | `navsync gnss` (UBX HNR-PVT: the receiver's high-rate fused solution) |
 //! | `navsync/gnss/{id}/timepulse` | [`GnssTimePulse`] | `navsync gnss` (UBX TIM-TP) |
 //! | `navsync/gnss/{id}/event` | [`GnssEvent`] | `navsync gnss` (UBX TIM-TM2) |
 //! | `navsync/gnss/{id}/raw` | [`GnssRaw`] | `navsync gnss` (UBX RXM-RAWX) |
@@ -33,6 +34,12 @@ pub const DEFAULT_PREFIX: &str = "navsync_";
 /// `navsync/gnss/{id}/fix`
 pub fn gnss_fix(id: &str) -> String {
     format!("navsync/gnss/{id}/fix")
+}
+/// `navsync/gnss/{id}/hnr`: the receiver's high-rate blend of GNSS and its own sensors (UBX
+/// HNR-PVT), a stream of its own beside the GNSS epochs on [`gnss_fix`] (its fixes carry
+/// `FIX_FLAG_NOT_GNSS`).
+pub fn gnss_hnr(id: &str) -> String {
+    format!("navsync/gnss/{id}/hnr")
 }
 /// `navsync/gnss/{id}/timepulse`
 pub fn gnss_time_pulse(id: &str) -> String {
@@ -141,7 +148,7 @@ impl ServiceKind {
     pub fn of(service: &str) -> Option<Self> {
         let parts: Vec<&str> = service.split('/').collect();
         match parts.as_slice() {
-            ["navsync", "gnss", id, "fix"] if !id.is_empty() => Some(Self::GnssFix),
+            ["navsync", "gnss", id, "fix" | "hnr"] if !id.is_empty() => Some(Self::GnssFix),
             ["navsync", "gnss", id, "timepulse"] if !id.is_empty() => Some(Self::GnssTimePulse),
             ["navsync", "gnss", id, "event"] if !id.is_empty() => Some(Self::GnssEvent),
             ["navsync", "gnss", id, "raw"] if !id.is_empty() => Some(Self::GnssRaw),
@@ -255,6 +262,7 @@ mod tests {
     #[test]
     fn kinds_from_names() {
         assert_eq!(ServiceKind::of(&gnss_fix("0")), Some(ServiceKind::GnssFix));
+        assert_eq!(ServiceKind::of(&gnss_hnr("0")), Some(ServiceKind::GnssFix));
         assert_eq!(ServiceKind::of(&imu_sample("3")), Some(ServiceKind::ImuSample));
         assert_eq!(ServiceKind::of(&health("gps-0")), Some(ServiceKind::Health));
         assert_eq!(ServiceKind::of(NAV_STATE), Some(ServiceKind::NavState));

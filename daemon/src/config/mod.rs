@@ -130,7 +130,7 @@ pub struct GnssConfig {
     /// Line rate or `"auto"` (default 9600).
     #[serde(default)]
     pub baud: Option<Baud>,
-    /// The receiver's protocol: `nmea`, `ubx` or `auto` (default `nmea`).
+    /// The receiver's protocol: `auto`, `nmea` or `ubx` (default `auto`: the bytes say which).
     #[serde(default)]
     pub protocol: Option<Protocol>,
     /// Antenna position in the body frame (forward-right-down), m (the filter's GNSS lever arm).

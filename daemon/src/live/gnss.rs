@@ -17,8 +17,8 @@ pub struct Options {
     /// Line rate, or `auto` to hunt the common rates [default: [gnss.ID].baud, else 9600].
     #[arg(long)]
     pub baud: Option<Baud>,
-    /// The receiver's protocol: nmea, ubx (u-blox binary) or auto (UBX navigation when the
-    /// port carries it, else NMEA) [default: [gnss.ID].protocol, else nmea].
+    /// The receiver's protocol: auto (UBX navigation when the port carries it, else NMEA: the
+    /// bytes say which), nmea, or ubx (u-blox binary) [default: [gnss.ID].protocol, else auto].
     #[arg(long)]
     pub protocol: Option<Protocol>,
     /// Publish the receiver's own IMU readings (UBX ESF-MEAS) as this IMU id, one more IMU of
@@ -80,7 +80,7 @@ mod tests {
         let g = opts(None, None, "0").resolve(&cfg).unwrap();
         assert_eq!(
             (g.port.as_str(), g.baud, g.protocol),
-            ("/dev/a", Baud::Fixed(4800), Protocol::Nmea)
+            ("/dev/a", Baud::Fixed(4800), Protocol::Auto)
         );
         let g = opts(Some("/dev/b"), Some(Baud::Auto), "0").resolve(&cfg).unwrap();
         assert_eq!((g.port.as_str(), g.baud), ("/dev/b", Baud::Auto));

@@ -10,15 +10,16 @@ use std::io::{Read, Write};
 
 use anyhow::{Context, Result};
 use navsync_drivers::gnss::Protocol;
-use navsync_drivers::gnss::capture::{decode_capture, epoch_json};
+use navsync_drivers::gnss::capture::{Seen, decode_capture, epoch_json};
 
 /// `navsync decode`: a capture file (gpsd log: `#` comments skipped) or `-` for stdin.
 #[derive(clap::Args, Debug)]
 pub struct Options {
     /// Capture file, or `-` for stdin.
     pub file: String,
-    /// The receiver's protocol: nmea, ubx (u-blox binary, NMEA on the same port skipped) or auto (UBX when the capture has UBX navigation, else NMEA).
-    #[arg(long, default_value = "nmea")]
+    /// The receiver's protocol: auto (UBX navigation when the capture has it, else its NMEA:
+    /// the bytes say which), nmea, or ubx (u-blox binary, NMEA on the same port skipped).
+    #[arg(long, default_value = "auto")]
     pub protocol: Protocol,
     /// Print the GPS LNAV subframes of the capture's UBX-RXM-SFRBX (ephemerides, almanac,
     /// ionosphere/UTC; IS-GPS-200 unscaled fields) instead of the epochs.
@@ -337,13 +338,22 @@ pub fn run(opts: Options) -> Result<()> {
         .filter(|(_, v)| *v > 0)
         .map(|(n, v)| format!("{n} {v}"))
         .collect();
-    eprintln!("{} epochs; {}", cap.fixes.len(), counters.join(", "));
+    let hnr = if cap.hnr.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " (and {} HNR-PVT fixes, navsync/gnss/ID/hnr, not printed)",
+            cap.hnr.len()
+        )
+    };
+    eprintln!("{} epochs{hnr}; {}", cap.fixes.len(), counters.join(", "));
     anyhow::ensure!(
         !cap.fixes.is_empty() || bytes.is_empty(),
-        "{}: no epoch decoded from {} bytes as {} (wrong protocol, or not receiver output?)",
+        "{}: no epoch decoded from {} bytes as {}: {}",
         opts.file,
         bytes.len(),
-        opts.protocol
+        opts.protocol,
+        Seen::of(&bytes).explain(opts.protocol)
     );
     Ok(())
 }

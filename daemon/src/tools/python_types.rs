@@ -179,7 +179,7 @@ def service_type(service):
     """The ctypes class carried by a navsync service name, or None for other names."""
     p = service.split("/")
     if len(p) == 4 and p[0] == "navsync" and p[2]:
-        return {("gnss", "fix"): GnssFix, ("pps", "edge"): PpsEdge, ("imu", "sample"): ImuSample,
+        return {("gnss", "fix"): GnssFix, ("gnss", "hnr"): GnssFix, ("pps", "edge"): PpsEdge, ("imu", "sample"): ImuSample,
                 ("gnss", "timepulse"): GnssTimePulse, ("gnss", "event"): GnssEvent, ("gnss", "raw"): GnssRaw,
                 ("gnss", "nav-data"): GnssNavData}.get((p[1], p[3]))
     if len(p) == 3 and p[0] == "navsync":

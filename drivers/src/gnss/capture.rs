@@ -9,13 +9,13 @@
 //! ones are (gpsfake skips the header, then frames the rest), since a `#` after a newline
 //! byte inside a binary message is data.
 
-use navsync_shared::samples::{FixMode, GnssFix};
+use navsync_shared::samples::{FIX_GEOID_MODEL, FixMode, GnssFix};
 use navsync_shared::time::format_rfc3339_ms;
 use serde_json::{Map, Value};
 
 use super::nmea::NmeaDecoder;
 use super::ubx::UbxDecoder;
-use super::{Decoder, GnssDecoder, Protocol};
+use super::{Decoder, GnssDecoder, GnssExtra, Protocol};
 
 /// Bytes per replayed read of a binary capture (a serial driver's typical read).
 pub const REPLAY_READ_BYTES: usize = 64;
@@ -27,8 +27,11 @@ pub const REPLAY_NS_PER_BYTE: i64 = 1_000_000_000 * 10 / 9600;
 /// A decoded capture.
 #[derive(Debug, Clone)]
 pub struct Capture {
-    /// The fixes, one per epoch, in order.
+    /// The fixes, one per epoch, in order (what `navsync/gnss/{id}/fix` would carry).
     pub fixes: Vec<GnssFix>,
+    /// The receiver's high-rate fused fixes (UBX HNR-PVT), in order: what
+    /// `navsync/gnss/{id}/hnr` would carry.
+    pub hnr: Vec<GnssFix>,
     /// The decoder after the whole capture (its counters: framing, checks, epochs).
     pub decoder: Decoder,
     /// `#` comment lines skipped.
@@ -102,6 +105,7 @@ pub fn decode_capture(bytes: &[u8], protocol: Protocol) -> Capture {
     decoder.flush(&mut |fix| fixes.push(*fix));
     Capture {
         fixes,
+        hnr: Vec::new(),
         decoder,
         comment_lines,
     }
@@ -123,20 +127,123 @@ pub fn gpsd_header(bytes: &[u8]) -> (usize, u64) {
 fn decode_binary(bytes: &[u8], protocol: Protocol) -> Capture {
     let mut decoder = Decoder::new(protocol);
     let mut fixes = Vec::new();
+    let mut hnr = Vec::new();
     let (mut offset, comment_lines) = gpsd_header(bytes);
+    // A delay cookie declared in the header is a write boundary, not data, in a binary
+    // capture too (gpsfake splits the whole log at it).
+    let cookie = bytes
+        .get(..offset)
+        .unwrap_or(&[])
+        .split_inclusive(|&b| b == b'\n')
+        .find_map(delay_cookie);
     let rest = bytes.get(offset..).unwrap_or(&[]);
-    for chunk in rest.chunks(REPLAY_READ_BYTES) {
+    let pieces: Vec<&[u8]> = match cookie {
+        Some(c) => rest.split(|&b| b == c).collect(),
+        None => vec![rest],
+    };
+    for chunk in pieces.iter().flat_map(|p| p.chunks(REPLAY_READ_BYTES)) {
         offset += chunk.len();
         let read_ns = i64::try_from(offset)
             .unwrap_or(i64::MAX)
             .saturating_mul(REPLAY_NS_PER_BYTE);
-        decoder.push(chunk, read_ns, REPLAY_NS_PER_BYTE, &mut |fix| fixes.push(*fix));
+        decoder.push_extras(
+            chunk,
+            read_ns,
+            REPLAY_NS_PER_BYTE,
+            &mut |fix| fixes.push(*fix),
+            &mut |x| {
+                if let GnssExtra::Hnr(h) = x {
+                    hnr.push(*h);
+                }
+            },
+        );
     }
     decoder.flush(&mut |fix| fixes.push(*fix));
     Capture {
         fixes,
+        hnr,
         decoder,
         comment_lines,
+    }
+}
+
+/// What the bytes of a capture are, whatever protocol it was decoded as: for the message of
+/// `navsync decode` when nothing decoded.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Seen {
+    /// UBX frames whose checksum passed.
+    pub ubx_frames: u64,
+    /// Of those, navigation solutions (NAV-PVT, NAV-SOL, NAV-POSLLH, HNR-PVT).
+    pub ubx_solutions: u64,
+    /// NMEA sentences whose checksum passed.
+    pub nmea_sentences: u64,
+    /// RTCM3 frames whose CRC passed.
+    pub rtcm3_frames: u64,
+    /// Bytes in none of these.
+    pub noise_bytes: u64,
+}
+
+impl Seen {
+    /// The bytes after gpsd's leading header, framed as a u-blox port (UBX, NMEA, RTCM3).
+    pub fn of(bytes: &[u8]) -> Self {
+        use super::ubx::framer::{Frame, UbxFramer};
+        use super::ubx::messages::{Message, decode};
+        let (header, _) = gpsd_header(bytes);
+        let mut framer = UbxFramer::new();
+        let mut solutions = 0;
+        framer.push(bytes.get(header..).unwrap_or(&[]), 0, 0, &mut |f| {
+            if let Frame::Ubx { class, id, payload, .. } = f
+                && matches!(
+                    decode(class, id, payload),
+                    Ok(Message::NavPvt(_) | Message::NavSol(_) | Message::NavPosllh(_) | Message::HnrPvt(_))
+                )
+            {
+                solutions += 1;
+            }
+        });
+        let c = framer.counters();
+        Self {
+            ubx_frames: c.ubx_frames,
+            ubx_solutions: solutions,
+            nmea_sentences: c.nmea_sentences,
+            rtcm3_frames: c.rtcm3_frames,
+            noise_bytes: c.noise_bytes,
+        }
+    }
+
+    /// The protocol the bytes say they are: `ubx` (shown as `auto`, which also takes the NMEA
+    /// of the port) when they carry UBX navigation, `nmea` when they carry NMEA sentences;
+    /// `None` when neither.
+    pub fn protocol(&self) -> Option<Protocol> {
+        if self.ubx_solutions > 0 {
+            Some(Protocol::Auto)
+        } else if self.nmea_sentences > 0 {
+            Some(Protocol::Nmea)
+        } else {
+            None
+        }
+    }
+
+    /// Why `protocol` decoded no epoch from these bytes, and what to do.
+    pub fn explain(&self, protocol: Protocol) -> String {
+        let what = format!(
+            "seen {} UBX frames ({} navigation solutions), {} NMEA sentences, {} RTCM3 frames, {} bytes of neither",
+            self.ubx_frames, self.ubx_solutions, self.nmea_sentences, self.rtcm3_frames, self.noise_bytes
+        );
+        let hint = match (self.protocol(), protocol) {
+            (Some(Protocol::Auto), Protocol::Nmea) => {
+                "the capture is u-blox UBX: use --protocol auto (the default) or ubx".to_owned()
+            }
+            (Some(Protocol::Nmea), Protocol::Ubx) => {
+                "the capture is NMEA without UBX navigation: use --protocol auto (the default) or nmea".to_owned()
+            }
+            (Some(_), _) => "the messages carry no epoch with data (no fix, no time)".to_owned(),
+            (None, _) if self.ubx_frames > 0 => {
+                "its UBX frames carry no navigation solution (NAV-PVT, NAV-SOL, NAV-POSLLH, HNR-PVT)".to_owned()
+            }
+            (None, _) => "no receiver protocol recognised: not receiver output, or a wrong line rate".to_owned(),
+        };
+        format!("{what}; {hint}")
     }
 }
 
@@ -160,10 +267,12 @@ fn num(v: f64) -> Value {
     serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number)
 }
 
-/// One epoch as a JSON object: `time` (RFC 3339 UTC with milliseconds, as gpsd prints it),
-/// `lat`/`lon` (degrees), `alt_msl` (m), `speed_mps`, `track_deg` (degrees true), `mode`
-/// (0 unknown, 1 no fix, 2 2D, 3 3D), `sats_used`, `hdop`; `null` where the epoch had no
-/// such field.
+/// One epoch as a JSON object: `time` (RFC 3339 UTC with milliseconds, as gpsd prints it;
+/// the decoders put UBX epochs on their millisecond already), `lat`/`lon` (degrees), `alt_msl`
+/// (m above mean sea level) with `alt_msl_source` (`receiver`, or `egm96` where the receiver
+/// reported only an ellipsoidal height), `alt_hae` (m above the WGS-84 ellipsoid, the
+/// receiver's), `speed_mps`, `track_deg` (degrees true), `mode` (0 unknown, 1 no fix, 2 2D,
+/// 3 3D), `sats_used`, `hdop`; `null` where the epoch had no such field.
 pub fn epoch_json(fix: &GnssFix) -> Value {
     let mut m = Map::new();
     let time = if fix.utc_ns == i64::MIN {
@@ -175,6 +284,24 @@ pub fn epoch_json(fix: &GnssFix) -> Value {
     m.insert("lat".into(), num(fix.lat_deg));
     m.insert("lon".into(), num(fix.lon_deg));
     m.insert("alt_msl".into(), num(fix.alt_msl_m));
+    // The ellipsoidal height is the receiver's; where the receiver sent no height above sea
+    // level, `alt_msl` is navsync's geoid model's, and `alt_msl_source` says so.
+    m.insert(
+        "alt_hae".into(),
+        num(if fix.alt_msl_m.is_finite() {
+            fix.height_m()
+        } else {
+            f64::NAN
+        }),
+    );
+    if fix.alt_msl_m.is_finite() {
+        let source = if fix.sentences & FIX_GEOID_MODEL != 0 {
+            "egm96"
+        } else {
+            "receiver"
+        };
+        m.insert("alt_msl_source".into(), Value::from(source));
+    }
     m.insert("speed_mps".into(), num(fix.speed_mps));
     m.insert("track_deg".into(), num(fix.track_deg));
     let mode = if fix.mode <= FixMode::Fix3d as u8 {
@@ -231,11 +358,13 @@ mod tests {
     #[test]
     fn delay_cookie_splits_reads_and_is_not_data() {
         let cap = b"# Delay-Cookie: | 0.01\n$GPGGA,|12351|9,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\n";
-        let c = decode_capture(cap, Protocol::Nmea);
-        let fixes = &c.fixes;
-        assert_eq!(c.nmea().unwrap().counters().epochs.bad_checksum, 0);
-        assert_eq!(fixes.len(), 1);
-        assert_eq!(fixes[0].alt_msl_m, 545.4);
+        for protocol in [Protocol::Nmea, Protocol::Auto] {
+            let c = decode_capture(cap, protocol);
+            let fixes = &c.fixes;
+            assert_eq!(c.nmea().unwrap().counters().epochs.bad_checksum, 0, "{protocol}");
+            assert_eq!(fixes.len(), 1);
+            assert_eq!(fixes[0].alt_msl_m, 545.4, "{protocol}: the cookie is not data");
+        }
         assert_eq!(delay_cookie(b"# Date: 2013-11-03\n"), None);
     }
 
@@ -275,5 +404,31 @@ mod tests {
         assert_eq!(j["mode"], 2);
         assert!((j["speed_mps"].as_f64().unwrap_or(0.0) - 0.5 * 1852.0 / 3600.0).abs() < 1e-12);
         assert_eq!(j["track_deg"], 54.7);
+    }
+    #[test]
+    fn a_ubx_capture_decoded_as_nmea_says_what_it_is() {
+        use crate::gnss::ubx::framer::ubx_frame;
+        use crate::gnss::ubx::nav::tests::pvt_at;
+        let mut cap = b"# u-blox\n".to_vec();
+        for k in 1..=3u32 {
+            cap.extend(ubx_frame(1, 7, &pvt_at(k * 1000, 3, 1)));
+        }
+        assert!(decode_capture(&cap, Protocol::Nmea).fixes.is_empty());
+        let seen = Seen::of(&cap);
+        assert_eq!((seen.ubx_frames, seen.ubx_solutions, seen.nmea_sentences), (3, 3, 0));
+        assert_eq!(seen.protocol(), Some(Protocol::Auto));
+        let why = seen.explain(Protocol::Nmea);
+        assert!(
+            why.contains("3 UBX frames (3 navigation solutions)") && why.contains("--protocol auto"),
+            "{why}"
+        );
+        // The default protocol decodes it.
+        assert_eq!(decode_capture(&cap, Protocol::default()).fixes.len(), 3);
+        // Noise says so.
+        let why = Seen::of(b"\x01\x02\x03").explain(Protocol::Auto);
+        assert!(why.contains("no receiver protocol recognised"), "{why}");
+        let nmea = b"$GPRMC,225446.33,A,4916.45,N,12311.12,W,000.5,054.7,191194,020.3,E*46\r\n";
+        assert_eq!(Seen::of(nmea).protocol(), Some(Protocol::Nmea));
+        assert!(Seen::of(nmea).explain(Protocol::Ubx).contains("--protocol auto"));
     }
 }

@@ -238,7 +238,7 @@ fn configure_receiver(port: &mut TTYPort, node: &IpcNode) -> Result<ubx_configur
 }
 
 /// Publishers of what a receiver reports besides fixes (time pulses, time marks, raw
-/// measurements, subframes, its IMU), each created on its first sample, so a receiver that
+/// measurements, subframes, its IMU, its high-rate fused solution), each created on its first sample, so a receiver that
 /// sends none of them creates no service for them.
 struct ExtraPublishers<'n> {
     node: &'n IpcNode,
@@ -249,6 +249,8 @@ struct ExtraPublishers<'n> {
     raw: Option<Publisher<GnssRaw>>,
     nav_data: Option<Publisher<GnssNavData>>,
     imu: Option<Publisher<ImuSample>>,
+    /// The receiver's high-rate fused solution (HNR-PVT), `navsync/gnss/{id}/hnr`.
+    hnr: Option<Publisher<GnssFix>>,
     /// The estimator's host → GNSS time mapping (`navsync/time/state`), subscribed on the
     /// first time mark, and its latest state: a time mark's GNSS time is mapped back to the
     /// host clock with it ([`GnssEvent::rising_host_ns`]).
@@ -277,6 +279,7 @@ impl ExtraPublishers<'_> {
             GnssExtra::Event(s) => publish_lazily(node, &mut self.event, || services::gnss_event(id), s),
             GnssExtra::Raw(s) => publish_lazily(node, &mut self.raw, || services::gnss_raw(id), s),
             GnssExtra::NavData(s) => publish_lazily(node, &mut self.nav_data, || services::gnss_nav_data(id), s),
+            GnssExtra::Hnr(s) => publish_lazily(node, &mut self.hnr, || services::gnss_hnr(id), s),
             GnssExtra::Imu(s) => match &self.imu_id {
                 Some(imu_id) => {
                     let mut s = *s;
@@ -485,6 +488,7 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
         raw: None,
         nav_data: None,
         imu: None,
+        hnr: None,
         time: None,
         time_state: None,
         events_unmapped: 0,

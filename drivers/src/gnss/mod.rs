@@ -17,7 +17,9 @@
 pub mod capture;
 pub mod cycle;
 pub mod driver;
+pub mod geoid;
 pub mod nmea;
+pub mod order;
 pub mod ubx;
 
 use std::str::FromStr;
@@ -77,6 +79,10 @@ pub enum GnssExtra<'a> {
     /// A reading of the receiver's own IMU (UBX ESF-MEAS), for `navsync/imu/{id}/sample`
     /// (`imu_id` still empty: the driver names it).
     Imu(&'a ImuSample),
+    /// The receiver's high-rate blend of GNSS and its sensors (UBX HNR-PVT, `FIX_FLAG_NOT_GNSS`),
+    /// for `navsync/gnss/{id}/hnr`: a stream of its own, with its own sequence numbers and
+    /// times, never mixed into the GNSS epochs of `navsync/gnss/{id}/fix`.
+    Hnr(&'a GnssFix),
 }
 
 /// The registry of receiver protocols: for each line `Variant = "name" => DecoderType` (with
@@ -195,7 +201,7 @@ macro_rules! gnss_protocols {
 }
 
 gnss_protocols! {
-    default Nmea;
+    default Auto;
     /// NMEA 0183 sentences.
     Nmea = "nmea" => NmeaDecoder,
     /// u-blox UBX binary messages (NMEA and RTCM3 on the same port are skipped).
@@ -241,6 +247,10 @@ mod tests {
             assert_eq!(serde_json::from_str::<Protocol>(&json).ok(), Some(p));
         }
         assert!("sirf".parse::<Protocol>().is_err());
-        assert_eq!(Protocol::default(), Protocol::Nmea);
+        assert_eq!(
+            Protocol::default(),
+            Protocol::Auto,
+            "the bytes say which protocol they are"
+        );
     }
 }

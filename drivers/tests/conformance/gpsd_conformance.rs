@@ -120,6 +120,16 @@ const EXCEPTIONS: &[Exception] = &[
                  GSA mode 3); the decoder does not decode $PMGNST",
     },
     Exception {
+        name: "one-epoch-two-tag-resolutions",
+        captures: &["eXplorist210.log"],
+        times: &["2006-05-20T20:06:20.300Z"],
+        fields: &["time"],
+        applies: |_, fix| fix.is_none(),
+        reason: "this receiver stamps GLL to the millisecond (200620.303) and then GGA/RMC of the same \
+                 epoch to the centisecond (200620.30): gpsd reports two TPVs, the second 3 ms before the \
+                 first; the decoder keeps them one epoch (20.303) so that its times never step back",
+    },
+    Exception {
         name: "gpsd-perc-average-position",
         captures: &["ericsson-gru04-02-70sec.log"],
         times: &["2026-02-12T21:37:13.000Z", "2026-02-12T21:38:13.000Z"],

@@ -174,6 +174,10 @@ fn corpus_captures_through_feed_and_gps_match_the_offline_decoder() {
                 &link.display().to_string(),
                 "--baud",
                 "115200",
+                // The NMEA decoder's counters are compared with the offline NMEA decode
+                // (the default, auto, counts the same bytes in its u-blox framer).
+                "--protocol",
+                "nmea",
                 "--id",
                 &r.id,
             ],

@@ -9,4 +9,5 @@ mod gnss_event_host_time;
 mod gnss_robustness;
 mod imu_iio;
 mod imu_xsens;
+mod receivers;
 mod ubx_pyubx2;

@@ -129,6 +129,12 @@ pub const UBX_MSG_NAV_EOE: u32 = 1 << 9;
 /// [`GnssFix::sentences`] bit of a UBX HNR-PVT message (high-rate dead-reckoning output).
 pub const UBX_MSG_HNR_PVT: u32 = 1 << 10;
 
+/// [`GnssFix::sentences`] bit, any protocol: the geoid separation (`geoid_sep_m`), and so
+/// `alt_msl_m`, is navsync's geoid model (EGM96, `navsync_drivers::gnss::geoid`) at the fix's
+/// position, not the receiver's: it reported only an ellipsoidal height (u-blox NAV-SOL). The
+/// ellipsoidal height ([`GnssFix::height_m`]) is the receiver's either way.
+pub const FIX_GEOID_MODEL: u32 = 1 << 31;
+
 /// [`GnssFix::sentences`] bit of a GGA sentence.
 pub const SENTENCE_GGA: u32 = 1 << 0;
 /// [`GnssFix::sentences`] bit of an RMC sentence.

@@ -11,10 +11,12 @@
 //!   consecutive cycle boundaries agree. An epoch emitted on [`EpochAssembler::flush`] (the
 //!   line went idle: the live driver's case when the receiver pauses between bursts) votes
 //!   too, when the next epoch's first time tag differs from its own. Sentences without fix data (GSV, TXT, proprietary)
-//!   never count, so trailing satellite views do not delay the fix. The learned ender is
-//!   forgotten (and relearned) when data for the emitted epoch arrive after it — that epoch
-//!   is then reassembled with them and emitted again, same stamp, next sequence number — and
-//!   when the receiver gains or loses its fix (receivers change their cycle then);
+//!   never count, so trailing satellite views do not delay the fix. A sentence once seen
+//!   followed by another data sentence of its epoch is never trusted
+//!   ([`CycleEnder::followed`]). The learned ender is forgotten when a time-tagged sentence
+//!   for the emitted epoch arrives after it — that sentence is counted late and dropped: every
+//!   epoch is published exactly once — and when the receiver gains or loses its fix
+//!   (receivers change their cycle then);
 //! - otherwise when a fix sentence with a **new time tag** arrives, or a fix sentence
 //!   repeats within the epoch with the same or no time (a new cycle: e.g. a receiver without
 //!   fix sending `$GPGGA,,,,,,0,…` every second);
@@ -57,6 +59,7 @@ use navsync_shared::time::{NS_PER_S, gps_ns_from_utc_ns};
 
 use super::sentence::{Kind, ModeHint, Reject, Update, check, decode};
 use crate::gnss::cycle::CycleEnder;
+use crate::gnss::order::{Admit, TimeOrder};
 
 /// Nanoseconds per day.
 const NS_PER_DAY: i64 = 86_400 * NS_PER_S;
@@ -98,9 +101,14 @@ pub struct EpochCounters {
     /// Epochs emitted by [`EpochAssembler::flush`] (subset of `epochs`).
     pub flush_emits: u64,
     /// Time-tagged sentences for an epoch already emitted on the learned ender (the ender
-    /// was wrong; it is forgotten and relearned). That epoch is reassembled with the late
-    /// data and emitted again (same stamp, next sequence number).
+    /// was wrong; it is forgotten and never trusted again). Dropped: the epoch is not
+    /// published twice.
     pub late_sentences: u64,
+    /// Epochs held back because their time was not after the last one published (the same
+    /// time tag again, time going back; `crate::gnss::order::TimeOrder`).
+    pub not_after_last: u64,
+    /// Times the receiver's time went back for good and the epoch order restarted.
+    pub time_resets: u64,
     /// Epochs closed because a time-tagged sentence repeated with the same (or no) time.
     pub repeats: u64,
     /// ZDA/GST sentences for an epoch already emitted (date used, sigmas dropped).
@@ -111,7 +119,7 @@ pub struct EpochCounters {
 
 impl EpochCounters {
     /// The counters with short names for a `Health` report (names ≤ 24 bytes).
-    pub fn named(&self) -> [(&'static str, u64); 15] {
+    pub fn named(&self) -> [(&'static str, u64); 17] {
         [
             ("nmea_sentences_in", self.sentences),
             ("nmea_bad_checksum", self.bad_checksum),
@@ -128,6 +136,8 @@ impl EpochCounters {
             ("nmea_repeats", self.repeats),
             ("nmea_after_epoch", self.after_epoch),
             ("nmea_zero_sat_fixes", self.zero_satellite_fixes),
+            ("nmea_not_after_last", self.not_after_last),
+            ("nmea_time_resets", self.time_resets),
         ]
     }
 }
@@ -157,6 +167,8 @@ struct Epoch {
     open: bool,
     /// Some decoded sentence has been merged.
     has_data: bool,
+    /// The own time of the last ZDA/GST merged (which need not be the epoch's).
+    aux_tod_ns: Option<i64>,
     fix: GnssFix,
     /// Time tag, ns since midnight.
     tod_ns: Option<i64>,
@@ -181,6 +193,7 @@ impl Epoch {
         Self {
             open: false,
             has_data: false,
+            aux_tod_ns: None,
             fix: GnssFix::empty(Stamp::host(0, 0, StampSource::Receipt)),
             tod_ns: None,
             tod_from_zda: false,
@@ -303,11 +316,18 @@ impl Epoch {
     /// Merges a decoded sentence (later values replace earlier ones, as in gpsd).
     fn merge(&mut self, u: &Update, last_dim: u8) {
         self.has_data = true;
+        if u.aux_tod_ns.is_some() {
+            self.aux_tod_ns = u.aux_tod_ns;
+        }
         let f = &mut self.fix;
         f.sentences |= u.kind.bit();
         match (u.tod_ns, u.aux_tod_ns) {
             (Some(t), _) => {
-                self.tod_ns = Some(t);
+                // A coarser tag just before the epoch's finer one is the same epoch
+                // ([`same_epoch_coarser_tag`]): the epoch keeps the tag it has.
+                if !self.tod_ns.is_some_and(|c| same_epoch_coarser_tag(c, t)) {
+                    self.tod_ns = Some(t);
+                }
                 self.tod_from_zda = false;
             }
             (None, Some(z)) if u.kind == Kind::Zda && self.tod_ns.is_none() => {
@@ -345,49 +365,6 @@ impl Epoch {
         if let Some(hint) = u.mode {
             self.apply_mode(hint, last_dim);
         }
-    }
-
-    /// Merges an epoch assembled later for the same time (data that arrived after this epoch
-    /// had been emitted on a wrongly learned cycle ender).
-    fn absorb(&mut self, later: &Epoch) {
-        if !later.has_data {
-            return;
-        }
-        self.has_data = true;
-        let (f, g) = (&mut self.fix, &later.fix);
-        f.sentences |= g.sentences;
-        if g.lat_deg.is_finite() && g.lon_deg.is_finite() {
-            f.lat_deg = g.lat_deg;
-            f.lon_deg = g.lon_deg;
-        }
-        for (dst, src) in [
-            (&mut f.alt_msl_m, g.alt_msl_m),
-            (&mut f.geoid_sep_m, g.geoid_sep_m),
-            (&mut f.speed_mps, g.speed_mps),
-            (&mut f.track_deg, g.track_deg),
-            (&mut f.hdop, g.hdop),
-            (&mut f.vdop, g.vdop),
-            (&mut f.pdop, g.pdop),
-            (&mut f.std_lat_m, g.std_lat_m),
-            (&mut f.std_lon_m, g.std_lon_m),
-            (&mut f.std_alt_m, g.std_alt_m),
-        ] {
-            if src.is_finite() {
-                *dst = src;
-            }
-        }
-        if g.quality != u8::MAX {
-            f.quality = g.quality;
-        }
-        if later.mode_determined || (!self.mode_determined && g.mode != FixMode::Unknown as u8) {
-            f.mode = g.mode;
-            self.mode_determined |= later.mode_determined;
-        }
-        self.sats_reported = self.sats_reported.max(later.sats_reported);
-        for &entry in &later.prns[..later.n_prns] {
-            self.add_prn(entry);
-        }
-        self.last_data_key = later.last_data_key.or(self.last_data_key);
     }
 }
 
@@ -441,6 +418,8 @@ pub struct EpochAssembler {
     last_dim: u8,
     /// Time tag of the last emitted epoch.
     last_emitted_tod: Option<i64>,
+    /// Own time of the last ZDA/GST merged into the last emitted epoch.
+    last_emitted_aux: Option<i64>,
     /// Mode of the last emitted epoch.
     last_mode: u8,
     /// The learned last data sentence of the cycle.
@@ -448,6 +427,8 @@ pub struct EpochAssembler {
     /// The last data sentence and time tag of an epoch emitted on flush: a vote for the cycle
     /// ender once the next epoch's time tag is seen to differ.
     flushed: Option<(Key, i64)>,
+    /// The order of the epochs published.
+    order: TimeOrder,
     seq: u64,
     counters: EpochCounters,
 }
@@ -467,9 +448,11 @@ impl EpochAssembler {
             date: None,
             last_dim: 0,
             last_emitted_tod: None,
+            last_emitted_aux: None,
             last_mode: FixMode::Unknown as u8,
             cycle: CycleEnder::default(),
             flushed: None,
+            order: TimeOrder::default(),
             seq: 0,
             counters: EpochCounters::default(),
         }
@@ -493,10 +476,9 @@ impl EpochAssembler {
     /// epoch when this sentence starts a new one, this one if it is the cycle ender).
     ///
     /// Emitted fixes have `stamp = Stamp::host(first_byte_host_ns, seq, Receipt)` with `seq`
-    /// counting emissions from 0. When data for an epoch arrive after it was emitted on a
-    /// wrongly learned cycle ender, that epoch is emitted once more, complete: same
-    /// `utc_ns` and `stamp.host_ns`, next `seq` (consumers keep the later of two fixes with
-    /// the same time).
+    /// counting emissions from 0. Every epoch is emitted once: a time-tagged sentence for an
+    /// epoch already emitted on a wrongly learned cycle ender is counted late and dropped, and
+    /// an epoch whose time is not after the last one emitted is held back.
     pub fn push(&mut self, text: &[u8], host_ns: i64, out: &mut impl FnMut(&GnssFix)) {
         self.counters.sentences += 1;
         let s = match check(text) {
@@ -531,14 +513,20 @@ impl EpochAssembler {
             }
             return;
         };
-        self.route(&u, s.address, out);
+        if self.route(&u, s.address, out) {
+            return;
+        }
         if let (Some(days), Some(tod)) = (u.date_days, u.tod_ns.or(u.aux_tod_ns)) {
             self.date = Some(DateAnchor { days, tod_ns: tod });
         }
         if !self.cur.open {
-            if u.tod_ns.is_none() && u.aux_tod_ns.is_some() && u.aux_tod_ns == self.last_emitted_tod {
+            if u.tod_ns.is_none()
+                && u.aux_tod_ns.is_some()
+                && (u.aux_tod_ns == self.last_emitted_tod || u.aux_tod_ns == self.last_emitted_aux)
+            {
                 // A ZDA or GST for the epoch just emitted (sent after the cycle's usual last
-                // sentence): its date is taken, but it does not start an epoch of its own.
+                // sentence), or the same ZDA/GST again as the one merged into it: its date is
+                // taken, but it does not start an epoch of its own.
                 self.counters.after_epoch += 1;
                 return;
             }
@@ -546,8 +534,15 @@ impl EpochAssembler {
         }
         self.cur.merge(&u, self.last_dim);
         let key = self.cur.note(s.address);
+        if let Some(before) = self.cur.last_data_key
+            && before != key
+        {
+            // `before` is not the last data sentence of every epoch: never the cycle's ender.
+            self.cycle.followed(before);
+        }
         self.cur.last_data_key = Some(key);
-        if self.cycle.is_ender(key) {
+        // Not before the epoch has its time tag (a sentence reordered ahead of the tagged ones).
+        if self.cycle.is_ender(key) && self.cur.tod_ns.is_some() {
             if has_fix(self.cur.fix.mode) == has_fix(self.last_mode) {
                 self.emit(Close::Ender, out);
             } else {
@@ -566,20 +561,23 @@ impl EpochAssembler {
         }
     }
 
-    /// Decides, before a decoded sentence is merged, whether it closes the open epoch.
-    fn route(&mut self, u: &Update, address: &[u8], out: &mut impl FnMut(&GnssFix)) {
+    /// Decides, before a decoded sentence is merged, whether it closes the open epoch; true
+    /// when it is late (for the epoch already emitted on the learned ender) and is dropped.
+    fn route(&mut self, u: &Update, address: &[u8], out: &mut impl FnMut(&GnssFix)) -> bool {
         if u.kind.is_fix() {
-            self.route_fix(u.tod_ns, address, out);
+            return self.route_fix(u.tod_ns, address, out);
         } else if let (Kind::Zda, Some(z)) = (u.kind, u.aux_tod_ns) {
             // A ZDA with another time closes an epoch that only a ZDA has tagged.
             if self.cur.open && self.cur.tod_from_zda && self.cur.tod_ns != Some(z) {
                 self.emit(Close::NextEpoch, out);
             }
         }
+        false
     }
 
-    /// Routing of a fix sentence (GGA, RMC, GNS, GLL) with time tag `t` (if any).
-    fn route_fix(&mut self, t: Option<i64>, address: &[u8], out: &mut impl FnMut(&GnssFix)) {
+    /// Routing of a fix sentence (GGA, RMC, GNS, GLL) with time tag `t` (if any); true when
+    /// it is late.
+    fn route_fix(&mut self, t: Option<i64>, address: &[u8], out: &mut impl FnMut(&GnssFix)) -> bool {
         if let (Some((key, flushed_tod)), Some(t)) = (self.flushed, t) {
             self.flushed = None;
             if flushed_tod != t {
@@ -588,7 +586,7 @@ impl EpochAssembler {
         }
         if self.cur.open {
             match (self.cur.tod_ns, t) {
-                (Some(c), Some(t)) if c != t => {
+                (Some(c), Some(t)) if c != t && !same_epoch_coarser_tag(c, t) => {
                     if let (false, Some(k)) = (self.cur.tod_from_zda, self.cur.last_data_key) {
                         self.cycle.vote(k);
                     }
@@ -605,22 +603,21 @@ impl EpochAssembler {
         }
         let untagged = !self.cur.open || self.cur.tod_ns.is_none();
         if t.is_some() && untagged && self.prev.as_ref().and_then(|p| p.tod_ns) == t {
-            self.reopen();
+            self.late();
+            return true;
         }
+        false
     }
 
-    /// Data for the epoch last emitted on the learned ender: that sentence was not the
-    /// cycle's last after all. Forget it, and continue assembling that epoch (with whatever
-    /// arrived in between) so that it is emitted again, complete, with the same stamp.
-    fn reopen(&mut self) {
+    /// A fix sentence for the epoch last emitted on the learned ender: that sentence was not
+    /// the cycle's last after all. It is never trusted again; the late sentence is dropped
+    /// (the epoch was published and is not published twice).
+    fn late(&mut self) {
         self.counters.late_sentences += 1;
-        self.forget_ender();
-        if let Some(mut prev) = self.prev.take() {
-            if self.cur.open {
-                prev.absorb(&self.cur);
-            }
-            self.cur = prev;
+        if let Some(k) = self.prev.as_ref().and_then(|p| p.last_data_key) {
+            self.cycle.followed(k);
         }
+        self.forget_ender();
     }
 
     fn forget_ender(&mut self) {
@@ -661,12 +658,21 @@ impl EpochAssembler {
         }
         velocity(&mut fix);
         self.last_emitted_tod = e.tod_ns;
+        self.last_emitted_aux = e.aux_tod_ns;
         self.last_mode = fix.mode;
         self.last_dim = match fix.mode {
             m if m == FixMode::Fix2d as u8 || m == FixMode::Fix3d as u8 => m,
             m if m == FixMode::NoFix as u8 => 0,
             _ => self.last_dim,
         };
+        match self.order.admit(fix.utc_ns) {
+            Admit::Publish => {}
+            Admit::Reset => self.counters.time_resets += 1,
+            Admit::HeldBack => {
+                self.counters.not_after_last += 1;
+                return;
+            }
+        }
         fix.stamp = Stamp::host(fix.stamp.host_ns, self.seq, StampSource::Receipt);
         self.seq += 1;
         self.counters.epochs += 1;
@@ -677,6 +683,20 @@ impl EpochAssembler {
         }
         out(&fix);
     }
+}
+
+/// Time tags within this much of each other may be one epoch's, reported at two
+/// resolutions: NMEA's usual time field has centiseconds, some receivers stamp one sentence
+/// to the millisecond (eXplorist 210: GLL `200620.303`, then GGA and RMC `200620.30`).
+const TAG_RESOLUTION_NS: i64 = 10_000_000;
+
+/// Whether a fix sentence tagged `t` belongs to the open epoch tagged `c` although the tags
+/// differ: `t` is before `c` by less than [`TAG_RESOLUTION_NS`], i.e. the same instant at a
+/// coarser resolution. An epoch of its own there would step time back by a few ms after `c`
+/// was published. (A coarser tag just *after* a finer one, `200621.297` then `200621.30`,
+/// still opens an epoch, as gpsd reports it: time goes forward.)
+fn same_epoch_coarser_tag(c: i64, t: i64) -> bool {
+    t < c && c - t < TAG_RESOLUTION_NS
 }
 
 /// A 2D or 3D fix.
@@ -700,7 +720,7 @@ fn velocity(f: &mut GnssFix) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use navsync_shared::samples::{SENTENCE_GGA, SENTENCE_GLL, SENTENCE_GSA, SENTENCE_RMC, SENTENCE_ZDA};
+    use navsync_shared::samples::{SENTENCE_GGA, SENTENCE_GSA, SENTENCE_RMC, SENTENCE_ZDA};
     use navsync_shared::time::{Civil, format_rfc3339_ms, utc_ns_from_civil};
 
     /// `$<body>*hh` with the right checksum.
@@ -920,7 +940,7 @@ mod tests {
     }
 
     #[test]
-    fn late_data_reopens_the_epoch() {
+    fn late_data_never_publish_an_epoch_twice() {
         let mut asm = EpochAssembler::new();
         let mut sentences = Vec::new();
         for s in 10..14 {
@@ -939,13 +959,21 @@ mod tests {
         assert_eq!(last_early.sentences, SENTENCE_RMC | SENTENCE_GGA);
         assert_eq!(asm.counters().late_sentences, 1);
         assert_eq!(asm.cycle_ender(), None, "forgotten");
-        assert_eq!(rest.len(), 1);
-        let again = rest[0];
-        assert_eq!(again.utc_ns, last_early.utc_ns);
-        assert_eq!(again.stamp.host_ns, last_early.stamp.host_ns, "same first byte");
-        assert_eq!(again.stamp.seq, last_early.stamp.seq + 1);
-        assert_eq!(again.sentences, SENTENCE_RMC | SENTENCE_GGA | SENTENCE_GLL);
-        assert!((again.lat_deg - (48.0 + 7.0382 / 60.0)).abs() < 1e-12, "GLL came last");
+        assert!(rest.is_empty(), "the epoch of 12:00:14 was published once: {rest:?}");
+        // GGA was followed once: the next epochs close when the next one begins.
+        let mut more = Vec::new();
+        for s in 15..19 {
+            let t = format!("1200{s}");
+            more.extend([
+                rmc(&t, "150326"),
+                gga(&t),
+                nmea(&format!("GPGLL,4807.0382,N,01131.0005,E,{t},A,A")),
+            ]);
+        }
+        let out = run(&mut asm, &more);
+        assert_eq!(asm.cycle_ender(), Some(("GLL", 1)), "GLL, never followed, is learned");
+        let times: Vec<i64> = out.iter().map(|o| o.1.utc_ns).collect();
+        assert!(times.windows(2).all(|w| w[0] < w[1]), "{times:?}");
     }
 
     #[test]

@@ -89,6 +89,9 @@ impl GnssDecoder for NmeaDecoder {
             "nmea_bad_fields" => "malformed NMEA fields ignored",
             "nmea_out_of_range" => "NMEA values outside the standard's range dropped",
             "nmea_zero_sat_fixes" => "fixes claimed from 0 satellites published as no fix",
+            "nmea_late_sentences" => "NMEA fix sentences for an epoch already published dropped (not published twice)",
+            "nmea_not_after_last" => "NMEA epochs held back: their time was not after the last one published",
+            "nmea_time_resets" => "the receiver's time went back for good; the epoch order restarted",
             _ => return None,
         })
     }

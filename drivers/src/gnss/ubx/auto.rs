@@ -24,6 +24,7 @@ use navsync_shared::samples::GnssFix;
 
 use super::{Event, UbxDecoder};
 use crate::gnss::nmea::NmeaDecoder;
+use crate::gnss::order::{Admit, TimeOrder};
 use crate::gnss::{GnssDecoder, GnssExtra};
 
 /// The NMEA epochs over which UBX's share is judged.
@@ -48,6 +49,12 @@ pub struct AutoDecoder {
     /// number their own epochs, and suppressed NMEA epochs would leave gaps that subscribers
     /// take for losses).
     emitted: u64,
+    /// The order of the merged output: an epoch of one protocol whose time is not after the
+    /// last one published (of either) is held back ([`TimeOrder`]), counted in `held_back`.
+    order: TimeOrder,
+    held_back: u64,
+    /// Resets of the merged output's time line ([`Admit::Reset`]).
+    resets: u64,
 }
 
 impl AutoDecoder {
@@ -77,8 +84,20 @@ impl AutoDecoder {
         self.suppressed
     }
 
-    /// Emits `fix` with the next sequence number.
-    fn renumbered(emitted: &mut u64, fix: &GnssFix, out: &mut impl FnMut(&GnssFix)) {
+    /// Emits `fix` with the next sequence number, if its time is after the last one emitted.
+    fn renumbered(
+        (emitted, order, held_back, resets): (&mut u64, &mut TimeOrder, &mut u64, &mut u64),
+        fix: &GnssFix,
+        out: &mut impl FnMut(&GnssFix),
+    ) {
+        match order.admit(fix.utc_ns) {
+            Admit::HeldBack => {
+                *held_back += 1;
+                return;
+            }
+            Admit::Reset => *resets += 1,
+            Admit::Publish => {}
+        }
         let mut f = *fix;
         f.stamp.seq = *emitted;
         *emitted += 1;
@@ -166,8 +185,11 @@ impl GnssDecoder for AutoDecoder {
             vote,
             suppressed,
             emitted,
+            order,
+            held_back,
+            resets,
         } = self;
-        let out = &mut |fix: &GnssFix| Self::renumbered(emitted, fix, out);
+        let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back, resets), fix, out);
         ubx.push_events(bytes, read_host_ns, ns_per_byte, &mut |ev| match ev {
             Event::Fix(fix) => {
                 vote.ubx_epoch(fix.tod_ns);
@@ -192,8 +214,11 @@ impl GnssDecoder for AutoDecoder {
             vote,
             suppressed,
             emitted,
+            order,
+            held_back,
+            resets,
         } = self;
-        let out = &mut |fix: &GnssFix| Self::renumbered(emitted, fix, out);
+        let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back, resets), fix, out);
         ubx.flush(&mut |fix: &GnssFix| {
             vote.ubx_epoch(fix.tod_ns);
             out(fix)
@@ -218,17 +243,29 @@ impl GnssDecoder for AutoDecoder {
         self.ubx.each_counter(f);
         self.nmea.each_counter(f);
         f("auto_nmea_suppressed", self.suppressed);
+        f("auto_not_after_last", self.held_back);
+        f("auto_time_resets", self.resets);
     }
 
     fn describe(name: &str) -> Option<&'static str> {
-        UbxDecoder::describe_ubx(name).or_else(|| NmeaDecoder::describe(name))
+        UbxDecoder::describe_ubx(name)
+            .or_else(|| NmeaDecoder::describe(name))
+            .or_else(|| {
+                Some(match name {
+                    "auto_not_after_last" => {
+                        "epochs held back: their time was not after the last one published (UBX or NMEA)"
+                    }
+                    "auto_time_resets" => "the receiver's time went back for good; the epoch order restarted",
+                    _ => return None,
+                })
+            })
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::framer::ubx_frame;
-    use super::super::nav::tests::pvt;
+    use super::super::nav::tests::pvt_at as pvt;
     use super::*;
     use navsync_shared::health_reporter::MAX_NAME_LEN;
     use navsync_shared::samples::{GNSS_PROTOCOL_NMEA, GNSS_PROTOCOL_UBX, MAX_COUNTERS};

@@ -1,32 +1,36 @@
 //! Groups decoded UBX messages into navigation epochs: one [`GnssFix`] per epoch.
 //!
-//! All NAV messages of one navigation epoch carry the same `iTOW` (GPS time of week, ms). The
-//! [`EpochAssembler`] merges them in arrival order (a later message overrides what an earlier
-//! one said about the same quantity, as gpsd does) and emits the epoch when it is complete:
+//! All NAV messages of one navigation epoch carry the same `iTOW` (GPS time of week, ms;
+//! u-blox 8 / M8 Receiver Description UBX-13003221, "iTOW Timestamps"). The
+//! [`EpochAssembler`] merges them, each quantity from the message of the highest precedence
+//! whatever the order of arrival (the table at `Sources`; `docs/guide/receivers.md`), and
+//! publishes the epoch **once**, when it is complete and has its time:
 //!
 //! - at **NAV-EOE** of its `iTOW` (protocol 18+ receivers send it after the epoch's last NAV
 //!   message);
 //! - else at the receiver's **last NAV message of the cycle**, once learned: whenever an
 //!   epoch ends without NAV-EOE (a NAV message of another `iTOW` arrives, or the line went
 //!   idle and the next epoch begins), its last NAV message is a candidate, trusted after
-//!   [`ENDER_VOTES`](crate::gnss::cycle::ENDER_VOTES) consecutive epochs agree, and forgotten when a NAV message for the epoch
-//!   arrives after it (that epoch is then reopened and emitted again, as below);
+//!   [`ENDER_VOTES`](crate::gnss::cycle::ENDER_VOTES) consecutive epochs agree; a message
+//!   ever seen followed by another NAV message of its epoch is never trusted
+//!   ([`CycleEnder::followed`]);
 //! - else when a NAV message with **another `iTOW`** arrives (the first of the next epoch);
 //! - else on [`EpochAssembler::flush`] (the live driver calls it when the line goes idle).
 //!
-//! A NAV message for the epoch just emitted at NAV-EOE, at the learned last message or on
-//! flush reopens it: it is
-//! completed and emitted once more (same time and stamp, next sequence number; consumers keep
-//! the later of two fixes with the same time); one for the epoch before the one being
-//! assembled is too late and dropped (both counted, `late_messages`). The stamp of an epoch
-//! is the receipt time of its first message's first byte; `seq` counts emitted fixes.
+//! A NAV message for an epoch already published is late: counted (`late_messages`), never
+//! published again (a late NAV-SAT still becomes the satellites of its epoch), and the message
+//! it followed is no longer trusted as the cycle's last. Each output (the NAV epochs, the
+//! HNR-PVT fixes) passes a [`TimeOrder`]: its times strictly increase (`not_after_last`,
+//! `time_resets`). The stamp of an epoch is the receipt time of its first message's first
+//! byte; `seq` counts the fixes of its output.
 //!
 //! Older receivers (u-blox 4 to 7) describe an epoch with NAV-SOL (ECEF position and
 //! velocity, GPS week and time), NAV-TIMEGPS, NAV-POSLLH, NAV-VELNED, NAV-DOP, NAV-STATUS and
 //! NAV-TIMEUTC; newer ones with NAV-PVT. Mapping to [`GnssFix`]:
 //!
-//! - **time**: `utc_ns` from a valid UTC date and time (NAV-PVT `validDate` and `validTime`,
-//!   NAV-TIMEUTC `validUTC`) plus `nano`; else from GPS week and `iTOW` + `fTOW` (NAV-SOL
+//! - **time**: the navigation epoch ([`epoch_ns`]: the precise time rounded to the
+//!   millisecond). `utc_ns` from a valid UTC date and time (NAV-PVT `validDate` and
+//!   `validTime`, NAV-TIMEUTC `validUTC`) plus `nano`; else from GPS week and `iTOW` + `fTOW` (NAV-SOL
 //!   `WKNSET`/`TOWSET`, NAV-TIMEGPS `towValid`/`weekValid`) minus the leap seconds (the
 //!   receiver's, NAV-TIMEGPS `leapSValid`, else the table of `navsync_shared::time`).
 //!   `gps_ns` from week and time of week, else from `utc_ns` and the leap seconds.
@@ -42,9 +46,10 @@
 //!   included).
 //! - **position**: from NAV-PVT/NAV-POSLLH (1e-7°; `height` and `hMSL` → `alt_msl_m` and
 //!   `geoid_sep_m` = height − hMSL); else from NAV-SOL's ECEF position ([`super::ecef`]).
-//!   NAV-SOL gives no MSL altitude: `alt_msl_m` is then the ellipsoidal height and
-//!   `geoid_sep_m` NaN, so that [`GnssFix::height_m`] (which takes an unknown separation as
-//!   0) is the receiver's height; consumers that need MSL see that the separation is unknown.
+//!   NAV-SOL gives no MSL altitude: `geoid_sep_m` is then EGM96's separation N at the
+//!   position ([`crate::gnss::geoid`]) and `alt_msl_m` the ellipsoidal height less N, with
+//!   the `sentences` bit `FIX_GEOID_MODEL` saying so; [`GnssFix::height_m`] is the receiver's
+//!   ellipsoidal height either way.
 //!   Nothing (position, height, velocity) is reported for an epoch without a fix (mode < 2),
 //!   no position or height for one flagged `invalidLlh`, no position outside ±90°/±180°.
 //!   DOPs of 99.99 (u-blox's "unknown") are NaN.
@@ -56,7 +61,9 @@
 //!
 //! HNR-PVT (the fused high-rate solution of ADR/UDR receivers) arrives between the NAV
 //! epochs at its own rate: each one is a complete fix of its own, emitted at once (bit
-//! `UBX_MSG_HNR_PVT`), without disturbing the NAV epoch being assembled.
+//! `UBX_MSG_HNR_PVT`, `FIX_FLAG_NOT_GNSS`) with sequence numbers and time order of its own,
+//! without disturbing the NAV epoch being assembled; the decoder hands it out as
+//! `GnssExtra::Hnr` for `navsync/gnss/{id}/hnr`, never with the NAV epochs.
 //!
 //! The satellites of the last epoch that carried NAV-SAT/NAV-SVINFO
 //! ([`EpochAssembler::satellites`]), the last TIM-TP ([`EpochAssembler::time_pulse`]) and
@@ -64,10 +71,10 @@
 
 use navsync_shared::samples::{
     FIX_FLAG_DIFFERENTIAL, FIX_FLAG_FULLY_RESOLVED, FIX_FLAG_INVALID_LLH, FIX_FLAG_NOT_GNSS, FIX_FLAG_OK,
-    FIX_FLAG_RECEIVER_INVALID, FIX_FLAG_VALID_DATE, FIX_FLAG_VALID_TIME, FixMode, GNSS_PROTOCOL_UBX, GnssEvent,
-    GnssFix, GnssTimePulse, Stamp, StampSource, UBX_MSG_HNR_PVT, UBX_MSG_NAV_DOP, UBX_MSG_NAV_EOE, UBX_MSG_NAV_POSLLH,
-    UBX_MSG_NAV_PVT, UBX_MSG_NAV_SAT, UBX_MSG_NAV_SOL, UBX_MSG_NAV_STATUS, UBX_MSG_NAV_TIMEGPS, UBX_MSG_NAV_TIMEUTC,
-    UBX_MSG_NAV_VELNED,
+    FIX_FLAG_RECEIVER_INVALID, FIX_FLAG_VALID_DATE, FIX_FLAG_VALID_TIME, FIX_GEOID_MODEL, FixMode, GNSS_PROTOCOL_UBX,
+    GnssEvent, GnssFix, GnssTimePulse, Stamp, StampSource, UBX_MSG_HNR_PVT, UBX_MSG_NAV_DOP, UBX_MSG_NAV_EOE,
+    UBX_MSG_NAV_POSLLH, UBX_MSG_NAV_PVT, UBX_MSG_NAV_SAT, UBX_MSG_NAV_SOL, UBX_MSG_NAV_STATUS, UBX_MSG_NAV_TIMEGPS,
+    UBX_MSG_NAV_TIMEUTC, UBX_MSG_NAV_VELNED,
 };
 use navsync_shared::time::{
     Civil, GPS_EPOCH_UNIX_S, NS_PER_S, SECONDS_PER_WEEK, gps_ns_from_utc_ns, utc_ns_from_civil, utc_ns_from_gps_ns,
@@ -79,6 +86,8 @@ use super::messages::{MAX_SATS, Message};
 use super::nav::{NavPvt, NavSat, NavSol, NavStatus, NavSvinfo, NavTimegps, SatInfo};
 use super::tim::{TimTm2, TimTp};
 use crate::gnss::cycle::CycleEnder;
+use crate::gnss::geoid::GeoidCache;
+use crate::gnss::order::{Admit, TimeOrder};
 
 /// Nanoseconds per day.
 const NS_PER_DAY: i64 = 86_400 * NS_PER_S;
@@ -100,13 +109,18 @@ pub struct EpochCounters {
     pub flush_emits: u64,
     /// NAV epochs emitted at the learned last NAV message of the cycle (subset of `epochs`).
     pub ender_emits: u64,
-    /// NAV messages for an epoch already emitted: merged and the epoch emitted again when it
-    /// was closed by NAV-EOE or flush, dropped when a later epoch had already begun.
+    /// NAV messages for an epoch already published (or closed): dropped, never published
+    /// again (a late NAV-SAT/NAV-SVINFO still becomes that epoch's satellites).
     pub late_messages: u64,
     /// Fixes emitted from HNR-PVT (subset of `epochs`).
     pub hnr_fixes: u64,
     /// Epochs emitted without a time (no valid date, week or time of week).
     pub no_time: u64,
+    /// Epochs held back because their time was not after the last one published on their
+    /// output (the same epoch again, time going back; [`TimeOrder`]).
+    pub not_after_last: u64,
+    /// Times the receiver's time went back for good and the order restarted.
+    pub time_resets: u64,
     /// NAV-SAT/NAV-SVINFO satellites that did not fit (more than [`MAX_SATS`]).
     pub sats_dropped: u64,
     /// TIM-TP messages.
@@ -117,7 +131,7 @@ pub struct EpochCounters {
 
 impl EpochCounters {
     /// The counters with short names for a `Health` report (names ≤ 23 bytes).
-    pub fn named(&self) -> [(&'static str, u64); 11] {
+    pub fn named(&self) -> [(&'static str, u64); 13] {
         [
             ("ubx_nav_messages", self.nav_messages),
             ("ubx_epochs", self.epochs),
@@ -127,6 +141,8 @@ impl EpochCounters {
             ("ubx_late_messages", self.late_messages),
             ("ubx_hnr_fixes", self.hnr_fixes),
             ("ubx_no_time", self.no_time),
+            ("ubx_not_after_last", self.not_after_last),
+            ("ubx_time_resets", self.time_resets),
             ("ubx_sats_dropped", self.sats_dropped),
             ("ubx_time_pulses", self.time_pulses),
             ("ubx_time_marks", self.time_marks),
@@ -290,6 +306,53 @@ struct Epoch {
     sats: Option<SatView>,
     /// The last NAV message merged other than NAV-EOE (its name), for learning the cycle.
     last_msg: Option<&'static str>,
+    /// The precedence rank of the message that supplied each quantity ([`Sources`]).
+    src: Sources,
+}
+
+/// Which message supplies each quantity of an epoch: the precedence rank of the message that
+/// set it (0: none yet). A message sets a quantity only if its rank is at least the current
+/// one, so the finest and most complete message wins whatever the order of arrival
+/// (`docs/guide/receivers.md`, "One message per quantity"; u-blox 8 / M8 Receiver
+/// Description UBX-13003221, "UBX-NAV-PVT": "This message combines position, velocity and
+/// time solution, including accuracy figures", at 1 mm, 1 mm/s; NAV-VELNED and NAV-SOL carry
+/// cm/s, NAV-SOL cm ECEF):
+///
+/// | quantity | NAV-PVT | NAV-POSLLH | NAV-VELNED | NAV-SOL | NAV-DOP | others |
+/// |---|---|---|---|---|---|---|
+/// | position, heights | 3 | 2 | | 1 (ECEF, cm) | | |
+/// | hAcc, vAcc | 3 | 2 | | | | |
+/// | velocity, speed, track | 3 (mm/s) | | 2 (cm/s) | 1 (ECEF cm/s) | | |
+/// | sAcc | 3 (mm/s) | | 2 (cm/s) | 1 (cm/s) | | |
+/// | headAcc | 3 | | 2 | | | |
+/// | pDOP | 2 | | | 1 | 3 | |
+/// | satellites used | 2 (`numSV`) | | | 1 (`numSV`) | | NAV-SAT/SVINFO flags when neither |
+/// | satellites | | | | | | NAV-SAT 2 over NAV-SVINFO 1 |
+/// | UTC | 2 | | | | | NAV-TIMEUTC 1 |
+/// | GPS week/time | | | | 1 | | NAV-TIMEGPS 2 |
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Sources {
+    pos: u8,
+    acc: u8,
+    vel: u8,
+    s_acc: u8,
+    head_acc: u8,
+    pdop: u8,
+    num_sv: u8,
+    sats: u8,
+    utc: u8,
+    gps: u8,
+}
+
+/// Takes a quantity for a message of precedence `rank`: whether it may set it (its rank is
+/// at least that of the message that set it so far); records the rank.
+fn claim(slot: &mut u8, rank: u8) -> bool {
+    if rank >= *slot {
+        *slot = rank;
+        true
+    } else {
+        false
+    }
 }
 
 impl Epoch {
@@ -312,6 +375,7 @@ impl Epoch {
             num_sv: None,
             sats: None,
             last_msg: None,
+            src: Sources::default(),
         }
     }
 
@@ -321,6 +385,11 @@ impl Epoch {
         e.itow_ms = itow_ms;
         e.fix.stamp.host_ns = host_ns;
         e
+    }
+
+    /// A UTC or GPS time is known.
+    fn has_time(&self) -> bool {
+        self.utc_ns.is_some() || self.gps_ns.is_some()
     }
 
     /// Data besides NAV-EOE.
@@ -372,7 +441,7 @@ impl Epoch {
         if m.invalid_llh() {
             f.fix_flags |= FIX_FLAG_INVALID_LLH;
         }
-        if m.valid_date_time() {
+        if m.valid_date_time() && claim(&mut self.src.utc, 2) {
             self.utc_ns = utc_of(m.year, m.month, m.day, m.hour, m.min, m.sec, m.nano_ns);
             if m.fully_resolved() {
                 self.leap_s = self.utc_ns.and_then(|u| leap_of(m.itow_ms, u)).or(self.leap_s);
@@ -385,22 +454,45 @@ impl Epoch {
             ok,
             m.diff_soln(),
         );
-        if !m.invalid_llh() {
+        if !m.invalid_llh() && claim(&mut self.src.pos, 3) {
             self.set_geodetic(m.lat_deg, m.lon_deg, m.height_m, m.h_msl_m);
         }
+        if claim(&mut self.src.acc, 3) {
+            self.fix.h_acc_m = m.h_acc_m;
+            self.fix.v_acc_m = m.v_acc_m;
+        }
+        self.set_ned_velocity(
+            3,
+            [m.vel_n_mps, m.vel_e_mps, m.vel_d_mps],
+            m.g_speed_mps,
+            m.head_mot_deg,
+        );
+        if claim(&mut self.src.s_acc, 3) {
+            self.fix.s_acc_mps = m.s_acc_mps;
+        }
+        if claim(&mut self.src.head_acc, 3) {
+            self.fix.head_acc_deg = m.head_acc_deg;
+        }
+        if claim(&mut self.src.pdop, 2) {
+            self.fix.pdop = dop(m.p_dop);
+        }
+        if claim(&mut self.src.num_sv, 2) {
+            self.num_sv = Some(u16::from(m.num_sv));
+        }
+    }
+
+    /// A NED velocity with ground speed and heading of motion (NAV-PVT rank 3, NAV-VELNED 2).
+    fn set_ned_velocity(&mut self, rank: u8, [n, e, d]: [f64; 3], speed_mps: f64, heading_deg: f64) {
+        if !claim(&mut self.src.vel, rank) {
+            return;
+        }
         let f = &mut self.fix;
-        f.h_acc_m = m.h_acc_m;
-        f.v_acc_m = m.v_acc_m;
-        f.vel_n_mps = m.vel_n_mps;
-        f.vel_e_mps = m.vel_e_mps;
-        f.vel_d_mps = m.vel_d_mps;
-        f.speed_mps = m.g_speed_mps;
-        f.track_deg = m.head_mot_deg.rem_euclid(360.0);
-        f.s_acc_mps = m.s_acc_mps;
-        f.head_acc_deg = m.head_acc_deg;
-        f.pdop = dop(m.p_dop);
+        f.vel_n_mps = n;
+        f.vel_e_mps = e;
+        f.vel_d_mps = d;
+        f.speed_mps = speed_mps;
+        f.track_deg = heading_deg.rem_euclid(360.0);
         self.ned_vel = true;
-        self.num_sv = Some(u16::from(m.num_sv));
     }
 
     fn sol(&mut self, m: &NavSol) {
@@ -417,19 +509,31 @@ impl Epoch {
                 self.fix.fix_flags |= flag;
             }
         }
-        if m.time_valid() {
+        if m.time_valid() && claim(&mut self.src.gps, 1) {
             self.gps_ns = gps_of(i64::from(m.week), tow_ns(m.itow_ms, m.ftow_ns));
         }
-        self.ecef_m = Some([m.ecef_x_m, m.ecef_y_m, m.ecef_z_m]);
-        self.ecef_vel_mps = Some([m.ecef_vx_mps, m.ecef_vy_mps, m.ecef_vz_mps]);
-        self.fix.s_acc_mps = m.s_acc_mps;
-        self.fix.pdop = dop(m.p_dop);
-        self.num_sv = Some(u16::from(m.num_sv));
+        // The ECEF position and velocity are used at the end only where no message of higher
+        // precedence gave a geodetic position or a NED velocity.
+        if claim(&mut self.src.pos, 1) {
+            self.ecef_m = Some([m.ecef_x_m, m.ecef_y_m, m.ecef_z_m]);
+        }
+        if claim(&mut self.src.vel, 1) {
+            self.ecef_vel_mps = Some([m.ecef_vx_mps, m.ecef_vy_mps, m.ecef_vz_mps]);
+        }
+        if claim(&mut self.src.s_acc, 1) {
+            self.fix.s_acc_mps = m.s_acc_mps;
+        }
+        if claim(&mut self.src.pdop, 1) {
+            self.fix.pdop = dop(m.p_dop);
+        }
+        if claim(&mut self.src.num_sv, 1) {
+            self.num_sv = Some(u16::from(m.num_sv));
+        }
     }
 
     fn timegps(&mut self, m: &NavTimegps) {
         self.fix.sentences |= UBX_MSG_NAV_TIMEGPS;
-        if m.time_valid() {
+        if m.time_valid() && claim(&mut self.src.gps, 2) {
             self.gps_ns = gps_of(i64::from(m.week), tow_ns(m.itow_ms, m.ftow_ns));
             self.fix.fix_flags |= FIX_FLAG_VALID_DATE | FIX_FLAG_VALID_TIME;
         }
@@ -460,32 +564,36 @@ impl Epoch {
             Message::NavStatus(m) => self.status(m),
             Message::NavPosllh(m) => {
                 self.fix.sentences |= UBX_MSG_NAV_POSLLH;
-                self.set_geodetic(m.lat_deg, m.lon_deg, m.height_m, m.h_msl_m);
-                self.fix.h_acc_m = m.h_acc_m;
-                self.fix.v_acc_m = m.v_acc_m;
+                if claim(&mut self.src.pos, 2) {
+                    self.set_geodetic(m.lat_deg, m.lon_deg, m.height_m, m.h_msl_m);
+                }
+                if claim(&mut self.src.acc, 2) {
+                    self.fix.h_acc_m = m.h_acc_m;
+                    self.fix.v_acc_m = m.v_acc_m;
+                }
             }
             Message::NavVelned(m) => {
-                let f = &mut self.fix;
-                f.sentences |= UBX_MSG_NAV_VELNED;
-                f.vel_n_mps = m.vel_n_mps;
-                f.vel_e_mps = m.vel_e_mps;
-                f.vel_d_mps = m.vel_d_mps;
-                f.speed_mps = m.g_speed_mps;
-                f.track_deg = m.heading_deg.rem_euclid(360.0);
-                f.s_acc_mps = m.s_acc_mps;
-                f.head_acc_deg = m.c_acc_deg;
-                self.ned_vel = true;
+                self.fix.sentences |= UBX_MSG_NAV_VELNED;
+                self.set_ned_velocity(2, [m.vel_n_mps, m.vel_e_mps, m.vel_d_mps], m.g_speed_mps, m.heading_deg);
+                if claim(&mut self.src.s_acc, 2) {
+                    self.fix.s_acc_mps = m.s_acc_mps;
+                }
+                if claim(&mut self.src.head_acc, 2) {
+                    self.fix.head_acc_deg = m.c_acc_deg;
+                }
             }
             Message::NavDop(m) => {
                 let f = &mut self.fix;
                 f.sentences |= UBX_MSG_NAV_DOP;
                 f.hdop = dop(m.h_dop);
                 f.vdop = dop(m.v_dop);
-                f.pdop = dop(m.p_dop);
+                if claim(&mut self.src.pdop, 3) {
+                    self.fix.pdop = dop(m.p_dop);
+                }
             }
             Message::NavTimeutc(m) => {
                 self.fix.sentences |= UBX_MSG_NAV_TIMEUTC;
-                if m.utc_valid() {
+                if m.utc_valid() && claim(&mut self.src.utc, 1) {
                     self.utc_ns = utc_of(m.year, m.month, m.day, m.hour, m.min, m.sec, m.nano_ns);
                     self.leap_s = self.utc_ns.and_then(|u| leap_of(m.itow_ms, u)).or(self.leap_s);
                     self.fix.fix_flags |= FIX_FLAG_VALID_DATE | FIX_FLAG_VALID_TIME | FIX_FLAG_FULLY_RESOLVED;
@@ -493,11 +601,15 @@ impl Epoch {
             }
             Message::NavSat(m) => {
                 self.fix.sentences |= UBX_MSG_NAV_SAT;
-                self.sats = Some(SatView::of_sat(m));
+                if claim(&mut self.src.sats, 2) {
+                    self.sats = Some(SatView::of_sat(m));
+                }
             }
             Message::NavSvinfo(m) => {
                 self.fix.sentences |= UBX_MSG_NAV_SAT;
-                self.sats = Some(SatView::of_svinfo(m));
+                if claim(&mut self.src.sats, 1) {
+                    self.sats = Some(SatView::of_svinfo(m));
+                }
             }
             Message::NavEoe(_) => self.fix.sentences |= UBX_MSG_NAV_EOE,
             _ => {}
@@ -536,8 +648,25 @@ const YEARS: core::ops::RangeInclusive<u16> = 1980..=2200;
 /// GPS weeks accepted (to 2171).
 const WEEKS: core::ops::RangeInclusive<i64> = 0..=9999;
 
-/// UTC ns of a UBX date and time with its (possibly negative) nanoseconds; `None` for an
-/// impossible date.
+/// The navigation epoch of a precise time: the time rounded to the nearest millisecond.
+///
+/// u-blox 8 / M8 Receiver Description (UBX-13003221), "Clocks and Time", "Navigation
+/// Epochs": "Each navigation solution is triggered by the tick of the 1-kHz clock nearest to
+/// the desired navigation solution time"; "iTOW Timestamps": iTOW, in ms, "indicates the GPS
+/// time at which the navigation epoch occurred". The sub-millisecond rest of a precise time
+/// (NAV-PVT/NAV-TIMEUTC/HNR-PVT `nano` beyond the whole ms, NAV-SOL/NAV-TIMEGPS `fTOW`) is
+/// the receiver clock's offset from that tick as the solution measured it, not another
+/// instant: an epoch whose UTC fields say 02:40:14 with `nano` −192 µs ("UTC
+/// Representation": the fields are rounded and `nano` corrects them, so it is negative when
+/// they were rounded up) is the epoch 02:40:14.000, as gpsd reports it. Every output path
+/// (the fix's `utc_ns`/`gps_ns`, hence JSON, gpsd-server, recordings, the estimator) carries
+/// the rounded time.
+pub fn epoch_ns(precise_ns: i64) -> i64 {
+    precise_ns.saturating_add(NS_PER_MS / 2).div_euclid(NS_PER_MS) * NS_PER_MS
+}
+
+/// UTC ns of a UBX date and time with its (possibly negative) nanoseconds, as the navigation
+/// epoch ([`epoch_ns`]); `None` for an impossible date.
 #[allow(clippy::too_many_arguments)]
 fn utc_of(year: u16, month: u8, day: u8, hour: u8, min: u8, sec: u8, nano_ns: i32) -> Option<i64> {
     let ok = YEARS.contains(&year)
@@ -557,6 +686,7 @@ fn utc_of(year: u16, month: u8, day: u8, hour: u8, min: u8, sec: u8, nano_ns: i3
             nanos: 0,
         }) + i64::from(nano_ns)
     })
+    .map(epoch_ns)
 }
 
 /// GPS ns of a week, time of week (ms) and fraction (ns); `None` for a week outside
@@ -565,9 +695,9 @@ fn gps_of(week: i64, tow_ns: i64) -> Option<i64> {
     WEEKS.contains(&week).then(|| week * NS_PER_WEEK + tow_ns)
 }
 
-/// Time of week of `iTOW` (ms) + `fTOW` (ns), ns.
+/// Time of week of `iTOW` (ms) + `fTOW` (ns) as the navigation epoch ([`epoch_ns`]), ns.
 fn tow_ns(itow_ms: u32, ftow_ns: i32) -> i64 {
-    i64::from(itow_ms) * NS_PER_MS + i64::from(ftow_ns)
+    epoch_ns(i64::from(itow_ms) * NS_PER_MS + i64::from(ftow_ns))
 }
 
 /// GPS − UTC (s) from a NAV message's `iTOW` (GPS time of week, ms) and the UTC of the same
@@ -613,10 +743,16 @@ enum Close {
 #[derive(Debug, Clone)]
 pub struct EpochAssembler {
     cur: Epoch,
-    /// The last epoch emitted at NAV-EOE or on flush, kept in case late messages for it arrive.
-    prev: Option<Epoch>,
-    /// `iTOW` of the last epoch emitted, ms.
+    /// `iTOW` of the last epoch closed (ms), the last data message merged into it and its
+    /// UTC time: a NAV message of that `iTOW` arriving later is late.
     last_itow_ms: Option<u32>,
+    last_closed_msg: Option<&'static str>,
+    last_closed_utc_ns: i64,
+    /// The order of the NAV epochs and of the HNR-PVT fixes published ([`TimeOrder`]).
+    nav_order: TimeOrder,
+    hnr_order: TimeOrder,
+    /// The geoid model for receivers without an MSL height (NAV-SOL).
+    geoid: GeoidCache,
     /// Receiver's GPS − UTC, s (see [`EpochAssembler::leap_seconds`]), carried across epochs.
     leap_s: Option<i64>,
     sats: SatView,
@@ -627,7 +763,9 @@ pub struct EpochAssembler {
     /// The last message and `iTOW` of an epoch emitted on flush: a vote once the next epoch
     /// begins.
     flushed: Option<(&'static str, u32)>,
+    /// Sequence numbers of the NAV epochs and of the HNR-PVT fixes (two outputs).
     seq: u64,
+    hnr_seq: u64,
     counters: EpochCounters,
 }
 
@@ -642,8 +780,12 @@ impl EpochAssembler {
     pub fn new() -> Self {
         Self {
             cur: Epoch::closed(),
-            prev: None,
             last_itow_ms: None,
+            last_closed_msg: None,
+            last_closed_utc_ns: i64::MIN,
+            nav_order: TimeOrder::default(),
+            hnr_order: TimeOrder::default(),
+            geoid: GeoidCache::default(),
             leap_s: None,
             sats: SatView::EMPTY,
             time_pulse: None,
@@ -651,6 +793,7 @@ impl EpochAssembler {
             cycle: CycleEnder::default(),
             flushed: None,
             seq: 0,
+            hnr_seq: 0,
             counters: EpochCounters::default(),
         }
     }
@@ -705,45 +848,77 @@ impl EpochAssembler {
         self.counters.nav_messages += 1;
         if self.cur.open && self.cur.itow_ms != itow_ms {
             if self.last_itow_ms == Some(itow_ms) {
-                // For the epoch before the one being assembled: too late to merge (and if
-                // that epoch was emitted at a learned last message, that was wrong).
-                self.counters.late_messages += 1;
-                self.cycle.forget();
-                return;
+                // For the epoch before the one being assembled.
+                return self.late(msg);
             }
             self.emit(Close::NextEpoch, out);
         }
         if !self.cur.open {
-            match self.prev.take() {
-                Some(prev) if prev.itow_ms == itow_ms => {
-                    // The epoch emitted at NAV-EOE, the learned last message or on flush was
-                    // not complete after all.
-                    self.counters.late_messages += 1;
-                    self.cycle.forget();
-                    self.flushed = None;
-                    self.cur = prev;
-                }
-                _ => {
-                    if let Some((name, flushed_itow)) = self.flushed.take()
-                        && flushed_itow != itow_ms
-                    {
-                        self.cycle.vote(name);
-                    }
-                    self.cur = Epoch::start(itow_ms, host_ns);
-                }
+            if self.last_itow_ms == Some(itow_ms) {
+                // For the epoch just emitted (at NAV-EOE, the learned last message, on flush).
+                return self.late(msg);
             }
+            if let Some((name, flushed_itow)) = self.flushed.take()
+                && flushed_itow != itow_ms
+            {
+                self.cycle.vote(name);
+            }
+            self.cur = Epoch::start(itow_ms, host_ns);
         }
         self.cur.merge(msg);
         if self.cur.leap_s.is_some() {
             self.leap_s = self.cur.leap_s;
         }
         if matches!(msg, Message::NavEoe(_)) {
-            self.emit(Close::Eoe, out);
+            // NAV-EOE ends the epoch ("output after all enabled NAV class messages", u-blox
+            // M8 UBX-13003221 "UBX-NAV-EOE"); one before the message carrying the epoch's
+            // time (out of order) leaves it open until the next epoch begins or the line
+            // goes idle, so that the epoch is published with its time.
+            if self.cur.has_time() {
+                self.emit(Close::Eoe, out);
+            }
         } else {
-            self.cur.last_msg = Some(msg.name());
-            if self.cycle.is_ender(msg.name()) {
+            let name = msg.name();
+            if let Some(before) = self.cur.last_msg
+                && before != name
+            {
+                // `before` is not the last message of every epoch: never the cycle's ender.
+                self.cycle.followed(before);
+            }
+            self.cur.last_msg = Some(name);
+            // Not before the epoch has its time: a message reordered ahead of the one that
+            // carries it would otherwise publish an epoch without its time.
+            if self.cycle.is_ender(name) && self.cur.has_time() {
                 self.emit(Close::Ender, out);
             }
+        }
+    }
+
+    /// A NAV message for an epoch already closed: it is not published again (every epoch is
+    /// published once). Counted; the message it followed is no cycle ender; a satellite view
+    /// still replaces that epoch's in [`EpochAssembler::satellites`].
+    fn late(&mut self, msg: &Message) {
+        self.counters.late_messages += 1;
+        if matches!(msg, Message::NavEoe(_)) {
+            return;
+        }
+        if let Some(before) = self.last_closed_msg
+            && before != msg.name()
+        {
+            self.cycle.followed(before);
+        }
+        self.last_closed_msg = Some(msg.name());
+        let view = match msg {
+            Message::NavSat(m) => Some(SatView::of_sat(m)),
+            Message::NavSvinfo(m) if self.sats.itow_ms != m.itow_ms || self.sats.from_svinfo => {
+                Some(SatView::of_svinfo(m))
+            }
+            _ => None,
+        };
+        if let Some(mut v) = view {
+            v.utc_ns = self.last_closed_utc_ns;
+            self.counters.sats_dropped += v.dropped as u64;
+            self.sats = v;
         }
     }
 
@@ -822,17 +997,19 @@ impl EpochAssembler {
         f.s_acc_mps = m.s_acc_mps;
         f.head_acc_deg = m.head_acc_deg;
         e.ned_vel = true;
-        self.counters.hnr_fixes += 1;
-        let fix = self.finish(e);
-        out(&fix);
+        if let Some(fix) = self.finish(e, true) {
+            self.counters.hnr_fixes += 1;
+            out(&fix);
+        }
     }
 
     /// Completes the open epoch and hands it to `out` (epochs with nothing but NAV-EOE are
     /// dropped).
     fn emit(&mut self, how: Close, out: &mut impl FnMut(&GnssFix)) {
         let e = core::mem::replace(&mut self.cur, Epoch::closed());
-        self.prev = (how != Close::NextEpoch).then_some(e);
         self.last_itow_ms = Some(e.itow_ms);
+        self.last_closed_msg = e.last_msg;
+        self.last_closed_utc_ns = i64::MIN;
         // An epoch that ended without NAV-EOE teaches the cycle: at once when the next epoch's
         // first message closed it, when the next epoch begins if the line went idle.
         self.flushed = None;
@@ -844,13 +1021,16 @@ impl EpochAssembler {
         if !e.has_data() {
             return;
         }
+        let Some(fix) = self.finish(e, false) else {
+            return;
+        };
         match how {
             Close::Eoe => self.counters.eoe_emits += 1,
             Close::Ender => self.counters.ender_emits += 1,
             Close::Flush => self.counters.flush_emits += 1,
             Close::NextEpoch => {}
         }
-        let fix = self.finish(e);
+        self.last_closed_utc_ns = fix.utc_ns;
         if let Some(mut sats) = e.sats {
             sats.utc_ns = fix.utc_ns;
             self.counters.sats_dropped += sats.dropped as u64;
@@ -859,8 +1039,10 @@ impl EpochAssembler {
         out(&fix);
     }
 
-    /// The fix of a complete epoch (time, position, velocity derived; stamped and counted).
-    fn finish(&mut self, e: Epoch) -> GnssFix {
+    /// The fix of a complete epoch (time, position, velocity derived; stamped and counted), of
+    /// the HNR-PVT output when `hnr`; `None` when its time is not after the last one published
+    /// on that output ([`TimeOrder`]: held back, counted).
+    fn finish(&mut self, e: Epoch, hnr: bool) -> Option<GnssFix> {
         let mut fix = e.fix;
         // A solution no message vouched for (gnssFixOK, GPSfixOK) is not one the receiver
         // calls valid.
@@ -891,8 +1073,15 @@ impl EpochAssembler {
         {
             fix.lat_deg = g.lat_deg;
             fix.lon_deg = g.lon_deg;
-            // No MSL altitude from ECEF: the height with an unknown separation (module doc).
-            fix.alt_msl_m = g.height_m;
+            // No MSL altitude from the receiver: the geoid model's, said so (module doc).
+            match self.geoid.separation_m(g.lat_deg, g.lon_deg) {
+                Some(n) => {
+                    fix.alt_msl_m = g.height_m - n;
+                    fix.geoid_sep_m = n;
+                    fix.sentences |= FIX_GEOID_MODEL;
+                }
+                None => fix.alt_msl_m = g.height_m,
+            }
         }
         if let (true, false, true, Some([vx, vy, vz])) = (has_fix, e.ned_vel, fix.lat_deg.is_finite(), e.ecef_vel_mps) {
             let [n, east, d] = ned_from_ecef_velocity(fix.lat_deg, fix.lon_deg, vx, vy, vz);
@@ -933,10 +1122,20 @@ impl EpochAssembler {
             (None, Some(s)) => u16::try_from(s.used()).unwrap_or(u16::MAX),
             (None, None) => u16::MAX,
         };
-        fix.stamp = Stamp::host(fix.stamp.host_ns, self.seq, StampSource::Receipt);
-        self.seq += 1;
+        let order = if hnr { &mut self.hnr_order } else { &mut self.nav_order };
+        match order.admit(fix.utc_ns) {
+            Admit::Publish => {}
+            Admit::Reset => self.counters.time_resets += 1,
+            Admit::HeldBack => {
+                self.counters.not_after_last += 1;
+                return None;
+            }
+        }
+        let seq = if hnr { &mut self.hnr_seq } else { &mut self.seq };
+        fix.stamp = Stamp::host(fix.stamp.host_ns, *seq, StampSource::Receipt);
+        *seq += 1;
         self.counters.epochs += 1;
-        fix
+        Some(fix)
     }
 }
 
@@ -962,13 +1161,13 @@ fn nav_itow(msg: &Message) -> Option<u32> {
 mod tests {
     use super::super::esf::decode_hnr_pvt;
     use super::super::messages::decode;
-    use super::super::nav::tests::{P, pvt};
+    use super::super::nav::tests::{P, pvt, pvt_at};
     use super::*;
     use navsync_shared::time::format_rfc3339_ms;
 
     /// A NAV-PVT message (see `nav::tests::pvt`) with a valid position.
     fn pvt_msg(itow_ms: u32, fix_type: u8, flags: u8) -> Message {
-        let mut p = pvt(itow_ms, fix_type, flags);
+        let mut p = pvt_at(itow_ms, fix_type, flags);
         p[78] = 0;
         decode(1, 7, &p).unwrap()
     }
@@ -1082,10 +1281,10 @@ mod tests {
         );
         assert_eq!(
             format_rfc3339_ms(f.utc_ns),
-            "2021-06-10T18:18:56.999Z",
-            "date and time with nano −123456 ns"
+            "2021-06-10T18:18:57.000Z",
+            "18:18:57 with nano −123456 ns is the epoch 18:18:57.000"
         );
-        assert_eq!(f.utc_ns % NS_PER_S, NS_PER_S - 123_456);
+        assert_eq!(f.utc_ns % NS_PER_S, 0, "rounded to the navigation epoch's millisecond");
         assert_eq!(f.gps_ns, gps_ns_from_utc_ns(f.utc_ns));
         assert_eq!(f.tod_ns, f.utc_ns.rem_euclid(NS_PER_DAY));
         assert_eq!((f.lat_deg, f.lon_deg), (50.135_084_5, 14.429_946_9));
@@ -1134,15 +1333,20 @@ mod tests {
         assert_eq!(out.len(), 1);
         let (at, f) = out[0];
         assert_eq!(at, 3, "emitted when the next epoch's first message arrives");
-        let gps = 1977 * NS_PER_WEEK + 494_575_000 * NS_PER_MS - 112_313;
+        // iTOW + fTOW (−112 µs) is the navigation epoch iTOW.
+        let gps = 1977 * NS_PER_WEEK + 494_575_000 * NS_PER_MS;
         assert_eq!(f.gps_ns, gps);
         assert_eq!(f.utc_ns, gps + (GPS_EPOCH_UNIX_S - 18) * NS_PER_S);
-        assert_eq!(format_rfc3339_ms(f.utc_ns), "2017-12-01T17:22:36.999Z");
+        assert_eq!(format_rfc3339_ms(f.utc_ns), "2017-12-01T17:22:37.000Z");
         assert!(
             (f.lat_deg - 45.2185).abs() < 1e-7 && (f.lon_deg - 5.8072).abs() < 1e-7,
             "{f:?}"
         );
-        assert!(f.geoid_sep_m.is_nan(), "no MSL from ECEF");
+        // No MSL height from the receiver: EGM96's separation, said so.
+        assert_ne!(f.sentences & FIX_GEOID_MODEL, 0);
+        let n = crate::gnss::geoid::egm96_separation_m(f.lat_deg, f.lon_deg).unwrap();
+        assert!((f.geoid_sep_m - n).abs() < 0.05, "{} {n}", f.geoid_sep_m);
+        assert!((f.alt_msl_m - (278.88 - n)).abs() < 0.06, "{}", f.alt_msl_m);
         assert!(
             (f.height_m() - 278.88).abs() < 0.01,
             "the ellipsoidal height: {}",
@@ -1185,17 +1389,33 @@ mod tests {
         assert_eq!(emitted, [(0, 1), (0, 1), (1, 0), (1, 0), (1, 0), (1, 0)]);
         assert_eq!(asm.cycle_ender(), Some("NAV-DOP"));
         assert_eq!(asm.counters().ender_emits, 4);
-        // The receiver adds NAV-SAT after NAV-DOP: that epoch is reopened, emitted again
-        // complete, and the learned message forgotten.
+        // The receiver adds NAV-SAT after NAV-DOP: the epoch was published at NAV-DOP and is
+        // not published again; NAV-SAT still gives the satellites of that epoch, and NAV-DOP
+        // is never trusted again.
         let mut out = Vec::new();
         for m in [pvt_msg(7000, 3, 1), dop(7000), sat(7000)] {
             asm.push(&m, 0, &mut |f| out.push(*f));
         }
         asm.flush(&mut |f| out.push(*f));
-        assert_eq!(out.len(), 2, "emitted at NAV-DOP, then again complete");
-        assert_eq!(out[0].utc_ns, out[1].utc_ns);
-        assert!(out[1].sentences & UBX_MSG_NAV_SAT != 0);
+        assert_eq!(out.len(), 1, "published once, at NAV-DOP");
+        assert_eq!(asm.counters().late_messages, 1);
+        assert_eq!(
+            (asm.satellites().itow_ms, asm.satellites().utc_ns),
+            (7000, out[0].utc_ns)
+        );
         assert_eq!(asm.cycle_ender(), None);
+        for k in 8..=12u32 {
+            for m in [pvt_msg(k * 1000, 3, 1), dop(k * 1000)] {
+                asm.push(&m, 0, &mut |f| out.push(*f));
+            }
+            asm.flush(&mut |f| out.push(*f));
+        }
+        assert_eq!(
+            asm.cycle_ender(),
+            None,
+            "NAV-DOP was followed once: never the ender again"
+        );
+        assert_eq!(out.len(), 6);
         // Without NAV-EOE but with the next epoch arriving at once (no idle line), it is
         // learned from the epoch boundaries.
         let mut asm = EpochAssembler::new();
@@ -1208,20 +1428,12 @@ mod tests {
     }
 
     #[test]
-    fn late_messages_reopen_an_epoch_or_are_dropped() {
+    fn late_messages_are_counted_and_never_publish_an_epoch_twice() {
         let mut asm = EpochAssembler::new();
         let mut out = run(&mut asm, &[pvt_msg(1000, 3, 1), eoe(1000), dop(1000)]);
         out.extend(flush(&mut asm).into_iter().map(|f| (9, f)));
-        assert_eq!(out.len(), 2);
-        let (first, again) = (out[0].1, out[1].1);
-        assert!(
-            first.hdop.is_nan() && again.hdop == 1.3,
-            "reassembled with the late NAV-DOP"
-        );
-        assert_eq!(
-            (again.utc_ns, again.stamp.host_ns, again.stamp.seq),
-            (first.utc_ns, first.stamp.host_ns, 1)
-        );
+        assert_eq!(out.len(), 1, "published once, at NAV-EOE");
+        assert!(out[0].1.hdop.is_nan());
         assert_eq!(asm.counters().late_messages, 1);
         // A message for the previous epoch while the next one is assembled: dropped.
         let mut asm = EpochAssembler::new();
@@ -1311,8 +1523,8 @@ mod tests {
         let (at, nav) = out[1];
         assert_eq!(
             (at, nav.stamp.seq, nav.sentences & UBX_MSG_HNR_PVT),
-            (2, 1, 0),
-            "the NAV epoch is intact"
+            (2, 0, 0),
+            "the NAV epoch is intact, numbered on its own output"
         );
         assert_eq!(asm.counters().hnr_fixes, 1);
     }
@@ -1389,9 +1601,12 @@ mod tests {
     fn satellites_of_the_last_epoch() {
         let mut asm = EpochAssembler::new();
         assert_eq!(asm.satellites().len, 0);
-        // NAV-SAT alone: sats_used from its flags, no time.
-        let out = run(&mut asm, &[sat(1000), eoe(1000)]);
-        assert_eq!((out[0].1.sats_used, out[0].1.mode), (1, 0));
+        // NAV-SAT alone: sats_used from its flags, no time: NAV-EOE does not publish an epoch
+        // without its time (the message carrying it may come out of order); the next epoch
+        // or an idle line does.
+        assert!(run(&mut asm, &[sat(1000), eoe(1000)]).is_empty());
+        let out = flush(&mut asm);
+        assert_eq!((out[0].sats_used, out[0].mode), (1, 0));
         let v = asm.satellites();
         assert_eq!(
             (v.itow_ms, v.len, v.used(), v.from_svinfo, v.utc_ns),
@@ -1466,5 +1681,267 @@ mod tests {
         let tp = P::default().u4(u32::MAX).u4(u32::MAX).i4(0).u2(u16::MAX).u1(1).u1(0).0;
         asm.push(&decode(0x0D, 1, &tp).unwrap(), 0, &mut |_| {});
         assert_eq!(asm.time_pulse().map(|t| t.pulse_utc_ns), Some(i64::MIN));
+    }
+    // ---- Issue 35: each defect as a test on bytes written from the interface description
+    // (u-blox 8 / M8 Receiver Description, UBX-13003221: UBX-NAV-PVT, UBX-NAV-VELNED,
+    // UBX-NAV-SOL, UBX-NAV-SAT, UBX-HNR-PVT payload layouts).
+
+    /// A NAV-PVT payload (3D fix, gnssFixOK, valid date and time) at `hh:mm:ss` + `nano` ns on
+    /// 2021-06-10, with velocity north `vel_n_mm_s`, ground speed and sAcc in mm/s.
+    fn pvt_time(itow_ms: u32, (hh, mm, ss): (u8, u8, u8), nano: i32, vel_n_mm_s: i32, s_acc_mm_s: u32) -> Message {
+        let mut p = pvt(itow_ms, 3, 0x01);
+        p[8] = hh;
+        p[9] = mm;
+        p[10] = ss;
+        p[16..20].copy_from_slice(&nano.to_le_bytes());
+        p[48..52].copy_from_slice(&vel_n_mm_s.to_le_bytes());
+        p[52..56].copy_from_slice(&0i32.to_le_bytes());
+        p[60..64].copy_from_slice(&vel_n_mm_s.unsigned_abs().to_le_bytes());
+        p[68..72].copy_from_slice(&s_acc_mm_s.to_le_bytes());
+        p[78] = 0;
+        decode(1, 7, &p).unwrap()
+    }
+
+    #[test]
+    fn issue35_negative_nano_is_the_epoch_of_the_rounded_second() {
+        // UTC fields 02:40:14 with nano −192 µs and −78 µs (the fields are rounded, nano
+        // corrects them): the navigation epochs 02:40:14.000 and 02:40:15.000, not …13.999.
+        let mut asm = EpochAssembler::new();
+        let out = run(
+            &mut asm,
+            &[
+                pvt_time(1_000, (2, 40, 14), -192_000, 0, 100),
+                eoe(1_000),
+                pvt_time(2_000, (2, 40, 15), -78_000, 0, 100),
+                eoe(2_000),
+                pvt_time(3_000, (2, 40, 15), 999_600_000, 0, 100),
+                eoe(3_000),
+            ],
+        );
+        let times: Vec<String> = out.iter().map(|(_, f)| format_rfc3339_ms(f.utc_ns)).collect();
+        assert_eq!(
+            times,
+            [
+                "2021-06-10T02:40:14.000Z",
+                "2021-06-10T02:40:15.000Z",
+                "2021-06-10T02:40:16.000Z"
+            ]
+        );
+        for (_, f) in &out {
+            assert_eq!(f.utc_ns % NS_PER_MS, 0, "on the millisecond in the sample itself");
+            assert_eq!(f.gps_ns % NS_PER_MS, 0);
+        }
+        // The same in the JSON of `navsync decode`.
+        let j = crate::gnss::capture::epoch_json(&out[0].1);
+        assert_eq!(j["time"], "2021-06-10T02:40:14.000Z");
+        // And for HNR-PVT and NAV-TIMEUTC, whose nano is the same field.
+        assert_eq!(epoch_ns(14 * NS_PER_S - 192_000), 14 * NS_PER_S);
+        assert_eq!(epoch_ns(14 * NS_PER_S + 499_999), 14 * NS_PER_S);
+        assert_eq!(epoch_ns(14 * NS_PER_S + 500_000), 14 * NS_PER_S + NS_PER_MS);
+        assert_eq!(epoch_ns(-1), 0);
+    }
+
+    #[test]
+    fn issue35_nav_sol_only_gives_msl_from_the_geoid_model_and_keeps_the_ellipsoidal_height() {
+        // A receiver sending NAV-SOL (ECEF, no MSL height) and NAV-TIMEGPS only.
+        let mut asm = EpochAssembler::new();
+        run(
+            &mut asm,
+            &[
+                sol(494_575_000, 3, 0xDF),
+                timegps(494_575_000, 0, 1977, 18, 0x07),
+                sol(494_576_000, 3, 0xDF),
+            ],
+        );
+        let f = flush(&mut asm)[0];
+        let g = geodetic_from_ecef(4_477_487.13, 455_375.03, 4_504_684.08).unwrap();
+        let n = crate::gnss::geoid::egm96_separation_m(g.lat_deg, g.lon_deg).unwrap();
+        assert!(n.abs() > 10.0, "the separation matters here: {n}");
+        assert!(
+            (f.height_m() - g.height_m).abs() < 1e-6,
+            "ellipsoidal height is the receiver's"
+        );
+        assert!(
+            (f.alt_msl_m - (g.height_m - n)).abs() < 0.05,
+            "MSL = h − N, not h: {} vs {}",
+            f.alt_msl_m,
+            g.height_m
+        );
+        assert_ne!(f.sentences & FIX_GEOID_MODEL, 0, "the source is stated");
+        let j = crate::gnss::capture::epoch_json(&f);
+        assert_eq!(j["alt_msl_source"], "egm96");
+        assert!((j["alt_hae"].as_f64().unwrap() - g.height_m).abs() < 1e-6);
+        // With NAV-PVT (hMSL from the receiver): the receiver's, no model.
+        let mut asm = EpochAssembler::new();
+        run(&mut asm, &[pvt_msg(1000, 3, 1), sol(1000, 3, 0xDF), eoe(1000)]);
+        let asm_out = asm.counters().epochs;
+        assert_eq!(asm_out, 1);
+    }
+
+    /// A NAV-VELNED payload: velocity north `vel_n_cm_s`, ground speed, sAcc in cm/s.
+    fn velned(itow_ms: u32, vel_n_cm_s: i32, s_acc_cm_s: u32) -> Message {
+        let p = P::default()
+            .u4(itow_ms)
+            .i4(vel_n_cm_s)
+            .i4(0)
+            .i4(7)
+            .u4(vel_n_cm_s.unsigned_abs())
+            .u4(vel_n_cm_s.unsigned_abs())
+            .i4(0)
+            .u4(s_acc_cm_s)
+            .u4(900_000)
+            .0;
+        decode(1, 0x12, &p).unwrap()
+    }
+
+    #[test]
+    fn issue35_the_finer_message_wins_whatever_the_order() {
+        // NAV-PVT says 1.234 m/s north, sAcc 0.081 m/s (mm/s); NAV-VELNED of the same epoch
+        // 1.23 m/s, sAcc 0.09 m/s (cm/s): NAV-PVT's stand, before or after NAV-VELNED.
+        for order in [0, 1] {
+            let (a, b) = (pvt_time(1_000, (2, 40, 14), 0, 1_234, 81), velned(1_000, 123, 9));
+            let msgs = if order == 0 {
+                [a, b, eoe(1_000)]
+            } else {
+                [b, a, eoe(1_000)]
+            };
+            let mut asm = EpochAssembler::new();
+            let f = run(&mut asm, &msgs)[0].1;
+            assert_eq!(
+                (f.vel_n_mps, f.speed_mps, f.s_acc_mps),
+                (1.234, 1.234, 0.081),
+                "order {order}"
+            );
+            assert_eq!(f.vel_d_mps, -0.03, "NAV-PVT's velD");
+            assert_ne!(f.sentences & UBX_MSG_NAV_VELNED, 0, "both merged");
+        }
+        // NAV-VELNED alone still gives the velocity.
+        let mut asm = EpochAssembler::new();
+        let f = run(&mut asm, &[sol(1_000, 3, 0xDF), velned(1_000, 123, 9), eoe(1_000)])[0].1;
+        assert_eq!((f.vel_n_mps, f.s_acc_mps), (1.23, 0.09), "VELNED over NAV-SOL's ECEF");
+        // NAV-SOL's pDOP and sAcc do not overwrite NAV-PVT's, in either order.
+        let mut asm = EpochAssembler::new();
+        let f = run(
+            &mut asm,
+            &[pvt_time(1_000, (2, 40, 14), 0, 0, 81), sol(1_000, 3, 0xDF), eoe(1_000)],
+        )[0]
+        .1;
+        assert_eq!((f.s_acc_mps, f.pdop, f.sats_used), (0.081, 1.56, 12));
+    }
+
+    #[test]
+    fn issue35_alternating_epoch_content_is_published_once() {
+        // Epochs of NAV-PVT alone and NAV-PVT + NAV-SAT every fifth second, each burst
+        // followed by an idle line (flush) or not; the capture starting with either kind.
+        for start_with_sat in [false, true] {
+            for idle in [false, true] {
+                let mut asm = EpochAssembler::new();
+                let mut out = Vec::new();
+                let mut with_sat = Vec::new();
+                for k in 1..=30u32 {
+                    let itow = k * 1000;
+                    let sat_epoch = (k + u32::from(!start_with_sat) * 3) % 5 == 1;
+                    let mut msgs = vec![pvt_msg(itow, 3, 1)];
+                    if sat_epoch {
+                        msgs.push(sat(itow));
+                        with_sat.push(itow);
+                    }
+                    for m in &msgs {
+                        asm.push(m, i64::from(itow), &mut |f| out.push(*f));
+                    }
+                    if idle {
+                        asm.flush(&mut |f| out.push(*f));
+                    }
+                }
+                asm.flush(&mut |f| out.push(*f));
+                let times: Vec<i64> = out.iter().map(|f| f.utc_ns).collect();
+                assert_eq!(times.len(), 30, "sat first {start_with_sat} idle {idle}: {times:?}");
+                assert!(times.windows(2).all(|w| w[0] < w[1]), "strictly increasing");
+                let seqs: Vec<u64> = out.iter().map(|f| f.stamp.seq).collect();
+                assert_eq!(seqs, (0..30).collect::<Vec<_>>());
+                assert!(asm.counters().late_messages <= 1, "at most the first NAV-SAT");
+            }
+        }
+    }
+
+    #[test]
+    fn issue35_hnr_pvt_is_an_output_of_its_own() {
+        // HNR-PVT at 10 Hz (the .4, .0, .5 of the issue) between NAV epochs at 1 Hz, through
+        // the whole decoder: the fixes carry NAV epochs only, the HNR output its own
+        // strictly increasing times and sequence numbers.
+        use crate::gnss::ubx::UbxDecoder;
+        use crate::gnss::ubx::framer::ubx_frame;
+        use crate::gnss::{GnssDecoder, GnssExtra};
+        let mut bytes = Vec::new();
+        let itow0 = (3 * 86_400 + 23 * 3600 + 46 * 60 + 23) * 1000;
+        for s in 5..10u8 {
+            let nav_itow = itow0 + u32::from(s) * 1000;
+            for tenth in 0..10u32 {
+                // nano 40 µs before each tenth: rounded to it.
+                let p = hnr_payload(nav_itow + tenth * 100, s, (tenth * 100_000_000) as i32 - 40_000);
+                bytes.extend(ubx_frame(0x28, 0, &p));
+            }
+            let mut pvt_p = pvt(nav_itow, 3, 1);
+            pvt_p[4..6].copy_from_slice(&2021u16.to_le_bytes());
+            (pvt_p[6], pvt_p[7], pvt_p[8], pvt_p[9], pvt_p[10]) = (6, 16, 23, 46, s);
+            pvt_p[16..20].copy_from_slice(&0i32.to_le_bytes());
+            pvt_p[78] = 0;
+            bytes.extend(ubx_frame(1, 7, &pvt_p));
+            bytes.extend(ubx_frame(1, 0x61, &nav_itow.to_le_bytes()));
+        }
+        let mut d = UbxDecoder::new();
+        let (mut nav, mut hnr) = (Vec::new(), Vec::new());
+        d.push_extras(&bytes, 0, 1, &mut |f| nav.push(*f), &mut |x| {
+            if let GnssExtra::Hnr(h) = x {
+                hnr.push(*h);
+            }
+        });
+        assert_eq!((nav.len(), hnr.len()), (5, 50));
+        assert!(
+            nav.iter()
+                .all(|f| f.sentences & UBX_MSG_HNR_PVT == 0 && f.sats_used == 12)
+        );
+        assert!(hnr.iter().all(|f| f.fix_flags & FIX_FLAG_NOT_GNSS != 0));
+        for out in [&nav, &hnr] {
+            assert!(out.windows(2).all(|w| w[0].utc_ns < w[1].utc_ns));
+            assert!(out.iter().enumerate().all(|(i, f)| f.stamp.seq == i as u64));
+        }
+        assert_eq!(format_rfc3339_ms(hnr[1].utc_ns), "2021-06-16T23:46:05.100Z", "rounded");
+    }
+
+    /// An HNR-PVT payload at 2021-06-16 23:46:`sec` + `nano` ns, a dead-reckoning fix.
+    fn hnr_payload(itow_ms: u32, sec: u8, nano: i32) -> Vec<u8> {
+        let mut p = P::default()
+            .u4(itow_ms)
+            .u2(2021)
+            .u1(6)
+            .u1(16)
+            .u1(23)
+            .u1(46)
+            .u1(sec)
+            .u1(0x37)
+            .i4(nano)
+            .0;
+        p.extend(
+            P::default()
+                .u1(1)
+                .u1(0x1D)
+                .zeros(2)
+                .i4(-1_213_140_876)
+                .i4(440_688_578)
+                .i4(1_111_800)
+                .i4(1_133_150)
+                .i4(1_000)
+                .i4(1_001)
+                .i4(9_000_000)
+                .i4(0)
+                .u4(3_024)
+                .u4(6_053)
+                .u4(290)
+                .u4(3_334_190)
+                .zeros(4)
+                .0,
+        );
+        p
     }
 }

@@ -24,7 +24,7 @@ pub mod rxm;
 pub mod samples;
 pub mod tim;
 
-use navsync_shared::samples::GnssFix;
+use navsync_shared::samples::{GnssFix, UBX_MSG_HNR_PVT};
 
 use super::{GnssDecoder, GnssExtra};
 use epoch::{EpochAssembler, EpochCounters, SatView, TimeMark, TimePulse};
@@ -75,7 +75,7 @@ pub struct UbxCounters {
 /// One thing the decoder found in the byte stream, in stream order ([`UbxDecoder::push_events`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Event<'a> {
-    /// A completed epoch (or HNR-PVT fix).
+    /// A completed NAV epoch (HNR-PVT fixes are [`GnssExtra::Hnr`]).
     Fix(&'a GnssFix),
     /// An NMEA sentence with a valid checksum (`$` … `*hh`, without CR/LF) and the host time
     /// of its `$`, ns.
@@ -184,7 +184,14 @@ impl UbxDecoder {
                         }
                         _ => {}
                     }
-                    assembler.push(&msg, host_ns, &mut |fix| on(Event::Fix(fix)));
+                    // HNR-PVT fixes are an output of their own (`GnssExtra::Hnr`).
+                    assembler.push(&msg, host_ns, &mut |fix| {
+                        if fix.sentences & UBX_MSG_HNR_PVT != 0 {
+                            on(Event::Extra(GnssExtra::Hnr(fix)))
+                        } else {
+                            on(Event::Fix(fix))
+                        }
+                    });
                     let mut next = |i: usize| {
                         extra_seq[i] += 1;
                         extra_seq[i] - 1
@@ -234,7 +241,11 @@ impl UbxDecoder {
             "ubx_decode_errors" => "UBX messages of a wrong length or version dropped",
             "ubx_out_of_range" => "UBX values outside the interface description dropped",
             "ubx_naks" => "UBX configuration messages rejected by the receiver (ACK-NAK)",
-            "ubx_late_messages" => "UBX NAV messages that arrived after their epoch was emitted",
+            "ubx_late_messages" => {
+                "UBX NAV messages that arrived after their epoch was published (not published again)"
+            }
+            "ubx_not_after_last" => "UBX epochs held back: their time was not after the last one published",
+            "ubx_time_resets" => "the receiver's time went back for good; the epoch order restarted",
             "ubx_sats_dropped" => "satellites beyond the capacity of a NAV-SAT/NAV-SVINFO view dropped",
             _ => return None,
         })
@@ -302,7 +313,7 @@ impl GnssDecoder for UbxDecoder {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::framer::ubx_frame;
-    use super::nav::tests::pvt;
+    use super::nav::tests::pvt_at as pvt;
     use super::*;
     use navsync_shared::health_reporter::MAX_NAME_LEN;
 
@@ -390,12 +401,28 @@ pub(crate) mod tests {
             if round % 7 == 0 {
                 bytes.extend(ubx_frame(1, 7, &pvt(round, 3, 1)));
             }
-            d.push(&bytes, i64::from(round), 1, &mut |f| {
-                fixes += 1;
+            let check = |f: &GnssFix| {
                 assert!(f.mode <= 3);
                 assert!(f.lat_deg.is_nan() || f.lat_deg.abs() <= 90.0);
                 assert!(f.utc_ns == i64::MIN || f.gps_ns != i64::MIN);
-            });
+            };
+            let mut hnr = 0;
+            d.push_extras(
+                &bytes,
+                i64::from(round),
+                1,
+                &mut |f| {
+                    fixes += 1;
+                    check(f);
+                },
+                &mut |x| {
+                    if let GnssExtra::Hnr(f) = x {
+                        hnr += 1;
+                        check(f);
+                    }
+                },
+            );
+            fixes += hnr;
         }
         d.flush(&mut |_| fixes += 1);
         assert!(fixes > 1000);
@@ -411,6 +438,6 @@ pub(crate) mod tests {
             n += 1;
             assert!(name.len() <= MAX_NAME_LEN, "{name}");
         });
-        assert_eq!(n, 25);
+        assert_eq!(n, 27);
     }
 }

@@ -839,6 +839,21 @@ pub(crate) mod tests {
             .0
     }
 
+    /// [`pvt`] with its UTC time of day moved by `iTOW` seconds for the small `iTOW`s (below
+    /// 100 s) of synthetic epoch sequences (18:18:57 + iTOW/1000 s, the nano field kept), so
+    /// that successive epochs of a test have successive times; as [`pvt`] otherwise.
+    pub(crate) fn pvt_at(itow_ms: u32, fix_type: u8, flags: u8) -> Vec<u8> {
+        let mut p = pvt(itow_ms, fix_type, flags);
+        if itow_ms >= 100_000 {
+            return p;
+        }
+        let tod = (18 * 3600 + 18 * 60 + 57 + itow_ms / 1000) % 86_400;
+        p[8] = (tod / 3600) as u8;
+        p[9] = (tod / 60 % 60) as u8;
+        p[10] = (tod % 60) as u8;
+        p
+    }
+
     #[test]
     fn nav_pvt_fields_and_units() {
         let m = decode_nav_pvt(&pvt(237_537_000, 3, 0x83)).unwrap();
