@@ -31,7 +31,6 @@
 //! time). UBX captures are decoded with `auto` (the default protocol), NMEA captures with
 //! `nmea` and with `auto`.
 
-
 use std::collections::BTreeSet;
 use std::path::Path;
 
