@@ -176,7 +176,7 @@ mod tests {
         old.extend_from_slice(&5u64.to_le_bytes());
         let e = decode(&key, &payload, Some(&old)).unwrap_err();
         assert!(
-            e.to_string().contains("navsync.NavState.v0") && e.to_string().contains("v1"),
+            e.to_string().contains("navsync.NavState.v0") && e.to_string().contains("v2"),
             "{e}"
         );
         assert!(matches!(decode(&key, &payload, None), Err(Refused::Attachment(_))));

@@ -43,8 +43,13 @@ pub struct AutoDecoder {
     nmea: NmeaDecoder,
     /// UBX's navigation state (see the module doc).
     vote: UbxVote,
-    /// NMEA epochs dropped because UBX navigates.
+    /// NMEA epochs dropped because UBX navigates or reported the same epoch.
     suppressed: u64,
+    /// An NMEA epoch held while UBX solutions are about but UBX does not navigate yet: the
+    /// same receiver epoch's UBX messages may follow its sentences, and the richer report is
+    /// the one published (once). Published when the next epoch of either protocol comes
+    /// first, or at a flush.
+    pending: Option<GnssFix>,
     /// Fixes emitted: their sequence numbers, one count for both protocols (the two decoders
     /// number their own epochs, and suppressed NMEA epochs would leave gaps that subscribers
     /// take for losses).
@@ -134,6 +139,11 @@ impl UbxVote {
         }
     }
 
+    /// True if a UBX navigation solution arrived within [`UBX_COVER_NS`] of `host_ns`.
+    fn ubx_about(&self, host_ns: i64) -> bool {
+        self.last_ubx_ns.is_some_and(|t| (host_ns - t).abs() <= UBX_COVER_NS)
+    }
+
     /// True if a UBX epoch of this time of day was emitted lately.
     fn reported_by_ubx(&self, tod_ns: i64) -> bool {
         tod_ns >= 0 && self.ubx_tods.iter().flatten().any(|&t| (t - tod_ns).abs() < 1_000_000)
@@ -141,7 +151,7 @@ impl UbxVote {
 
     /// An NMEA epoch began at `host_ns`: its vote; true if it is to be dropped.
     fn nmea_epoch(&mut self, host_ns: i64) -> bool {
-        let covered = self.last_ubx_ns.is_some_and(|t| (host_ns - t).abs() <= UBX_COVER_NS);
+        let covered = self.ubx_about(host_ns);
         self.covered = (self.covered << 1) | u8::from(covered);
         let window = self.covered & ((1u16 << UBX_WINDOW) - 1) as u8;
         if !self.navigates && window.count_ones() >= UBX_MAJORITY {
@@ -155,14 +165,50 @@ impl UbxVote {
 }
 
 impl AutoDecoder {
-    /// An NMEA epoch: emitted unless UBX navigates.
-    fn nmea_fix(vote: &mut UbxVote, suppressed: &mut u64, fix: &GnssFix, out: &mut impl FnMut(&GnssFix)) {
+    /// An NMEA epoch: dropped while UBX navigates or when UBX reported its epoch already; held
+    /// in `pending` while UBX solutions are about (its UBX report may follow); else emitted.
+    fn nmea_fix(
+        vote: &mut UbxVote,
+        suppressed: &mut u64,
+        pending: &mut Option<GnssFix>,
+        fix: &GnssFix,
+        out: &mut impl FnMut(&GnssFix),
+    ) {
         let navigates = vote.nmea_epoch(fix.stamp.host_ns);
         if navigates || vote.reported_by_ubx(fix.tod_ns) {
             *suppressed += 1;
+            return;
+        }
+        if let Some(p) = pending.take() {
+            out(&p);
+        }
+        if vote.ubx_about(fix.stamp.host_ns) {
+            *pending = Some(*fix);
         } else {
             out(fix);
         }
+    }
+
+    /// A UBX epoch: a held NMEA epoch of the same time of day is dropped (the same receiver
+    /// epoch, reported by UBX), an older one published first.
+    fn ubx_fix(
+        vote: &mut UbxVote,
+        suppressed: &mut u64,
+        pending: &mut Option<GnssFix>,
+        fix: &GnssFix,
+        out: &mut impl FnMut(&GnssFix),
+    ) {
+        vote.ubx_epoch(fix.tod_ns);
+        if let Some(p) = pending.take() {
+            if vote.reported_by_ubx(p.tod_ns) {
+                *suppressed += 1;
+            } else if p.utc_ns < fix.utc_ns {
+                out(&p);
+            } else {
+                *pending = Some(p);
+            }
+        }
+        out(fix);
     }
 }
 
@@ -184,6 +230,7 @@ impl GnssDecoder for AutoDecoder {
             nmea,
             vote,
             suppressed,
+            pending,
             emitted,
             order,
             held_back,
@@ -191,16 +238,13 @@ impl GnssDecoder for AutoDecoder {
         } = self;
         let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back, resets), fix, out);
         ubx.push_events(bytes, read_host_ns, ns_per_byte, &mut |ev| match ev {
-            Event::Fix(fix) => {
-                vote.ubx_epoch(fix.tod_ns);
-                out(fix)
-            }
+            Event::Fix(fix) => Self::ubx_fix(vote, suppressed, pending, fix, out),
             Event::Extra(x) => extra(x),
             Event::NavSolution { host_ns } => vote.ubx_solution(host_ns),
             Event::Nmea { text, host_ns } => {
                 // The sentence, then its terminator, at the time of its `$` (rate 0: no
                 // back-dating within these pushes).
-                let mut emit = |fix: &GnssFix| Self::nmea_fix(vote, suppressed, fix, out);
+                let mut emit = |fix: &GnssFix| Self::nmea_fix(vote, suppressed, pending, fix, out);
                 nmea.push(text, host_ns, 0, &mut emit);
                 nmea.push(b"\r\n", host_ns, 0, &mut emit);
             }
@@ -213,22 +257,24 @@ impl GnssDecoder for AutoDecoder {
             nmea,
             vote,
             suppressed,
+            pending,
             emitted,
             order,
             held_back,
             resets,
         } = self;
         let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back, resets), fix, out);
-        ubx.flush(&mut |fix: &GnssFix| {
-            vote.ubx_epoch(fix.tod_ns);
-            out(fix)
-        });
-        nmea.flush(&mut |fix| Self::nmea_fix(vote, suppressed, fix, out));
+        ubx.flush(&mut |fix: &GnssFix| Self::ubx_fix(vote, suppressed, pending, fix, out));
+        nmea.flush(&mut |fix| Self::nmea_fix(vote, suppressed, pending, fix, out));
+        if let Some(p) = pending.take() {
+            out(&p);
+        }
     }
 
     fn reset(&mut self) {
         self.ubx.reset();
         self.nmea.reset();
+        self.pending = None;
     }
 
     fn bytes(&self) -> u64 {
