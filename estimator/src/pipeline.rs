@@ -478,12 +478,18 @@ impl Pipeline {
         let (d, d_std) = self.nav.gnss_delay();
         self.time.set_gnss_delay(d, d_std);
         let hardware = matches!(self.time.status(), TimeStatus::Locked | TimeStatus::Holdover);
-        s.utc_ns = match (self.cfg.time.time_axis, self.time.utc_ns_at_host(now_ns)) {
-            // An input with an exact time axis keeps it: the sample's own tag.
-            (Some(axis), _) => axis.utc_ns_at(now_ns),
-            (None, Some(u)) if hardware && d.is_finite() => u + (d * 1e9).round() as i64,
-            (None, Some(u)) => u,
-            (None, None) => i64::MIN,
+        // The sample's time: on the input's exact time axis when it declares one, else from the
+        // clock model. With the fixes' epochs known in GNSS time (PPS, or an import's epoch
+        // tags) a Δ is the IMU stamps' own offset from GNSS time, and the label is corrected by
+        // it; with fixes stamped on receipt Δ is the receiver's latency and the label stays.
+        let at_host = match self.cfg.time.time_axis {
+            Some(axis) => Some(axis.utc_ns_at(now_ns)),
+            None => self.time.utc_ns_at_host(now_ns),
+        };
+        s.utc_ns = match at_host {
+            Some(u) if hardware && d.is_finite() => u + (d * 1e9).round() as i64,
+            Some(u) => u,
+            None => i64::MIN,
         };
         s.time_status = self.time.status() as u8;
         (s.imu, s.imu_count) = self.array.table();

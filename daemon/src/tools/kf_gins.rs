@@ -651,17 +651,7 @@ fn read_fixes(
                 row
             };
             let dt = b[0] - a[0];
-            let diff = (dt > 0.0).then(|| ned(a, b).map(|d| d / dt));
-            if diff.is_some() {
-                // Its noise: per axis √2·σ/dt for two positions of σ (the larger horizontal
-                // σ of the two), as a 3D speed accuracy (×√2, UBX sAcc's meaning).
-                let horizontal = |r: &[f64]| {
-                    let s = row_std(r, layout);
-                    s[0].max(s[1])
-                };
-                f.s_acc_mps = 2.0 * horizontal(a).max(horizontal(b)) / dt;
-            }
-            diff
+            (dt > 0.0).then(|| ned(a, b).map(|d| d / dt))
         });
         if let Some(v) = vel {
             f.speed_mps = v[0].hypot(v[1]);

@@ -15,8 +15,10 @@
 //!   the bound is the 99.9 % χ² quantile of the average over its window).
 //!
 //! The navigator acts on the fault ([`super::navigator::Navigator`]): a breakdown resets the
-//! filter and it aligns again (its outputs say "aligning", not a number); implausible sensor
-//! errors are cleared and re-learnt from their turn-on σ (the states flagged as recovering); an
+//! filter and it aligns again (its outputs say "aligning", not a number); sensor errors beyond
+//! the configured model but within an IMU of unknown class widen the model (once: the
+//! estimates kept, their σ reopened), beyond that they are cleared and re-learnt from their
+//! turn-on σ (the states flagged as recovering either way); an
 //! inconsistency inflates the covariance so the σ it publishes covers the error, widens an IMU
 //! model the data contradict, and flags the states ([`INTEGRITY_INCONSISTENT`]) until the
 //! innovations agree again. Every fault is counted by kind.
@@ -109,7 +111,7 @@ fn positive_definite(p: &StateMat) -> bool {
 }
 
 /// Whether the sensor-error estimates are within what the model allows.
-fn plausible(f: &DelayedFilter, noise: &ProcessNoise, cfg: &IntegrityConfig) -> bool {
+pub fn plausible(f: &DelayedFilter, noise: &ProcessNoise, cfg: &IntegrityConfig) -> bool {
     let k = cfg.bias_sigmas;
     let bound = |init: f64, instab: f64, floor: f64| k * init.hypot(instab).max(floor);
     (0..3).all(|i| {

@@ -170,6 +170,8 @@ pub struct Navigator {
     last_fix_rx_ns: Option<i64>,
     /// A fix has shown the platform moving (speed ≥ the alignment's minimum and 3 σ).
     motion_seen: bool,
+    /// Epoch of the previous fix, host ns (for the noise of a speed from positions).
+    prev_fix_ns: Option<i64>,
     /// Receipt of the last raw epoch (tightly coupled), host ns.
     last_ranges_rx_ns: Option<i64>,
     /// The fusion horizon in force, ns.
@@ -224,6 +226,7 @@ impl Navigator {
             last_imu_ns: None,
             last_fix_rx_ns: None,
             motion_seen: false,
+            prev_fix_ns: None,
             last_ranges_rx_ns: None,
             horizon_ns: (cfg.fusion_horizon_s * 1e9) as i64,
             fix_delay_ns: 0,
@@ -313,12 +316,25 @@ impl Navigator {
     /// satellites' own measurements ([`Self::on_ranges`]) carry the same information.
     pub fn on_gnss(&mut self, obs: GnssObservation, rx_ns: i64) {
         self.last_fix_rx_ns = Some(rx_ns);
-        // Moving: faster than the alignment's minimum and than the speed's own noise (a speed
-        // from differences of noisy positions is not zero when standing). The horizontal speed
-        // of a standing receiver with σ per axis is Rayleigh: above kσ with probability
-        // exp(−k²/2), 1e-6 per fix at k = 5.3.
+        // Moving: faster than the alignment's minimum and than the speed's own noise. Without
+        // a measured velocity the speed is a difference of positions (σ_h each, dt apart):
+        // √2·σ_h/dt per axis, whatever velocity σ the settings assume. The horizontal speed of
+        // a standing receiver with σ per axis is Rayleigh: above kσ with probability exp(−k²/2),
+        // 1e-6 per fix at k = 5.3.
         const MOTION_SIGMAS: f64 = 5.3;
-        self.motion_seen |= obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(MOTION_SIGMAS * obs.vel_std_mps);
+        let measured = obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite();
+        let prev = self.prev_fix_ns.replace(obs.stamp_host_ns);
+        let speed_std = match prev {
+            _ if measured => obs.vel_std_mps,
+            Some(prev) if obs.stamp_host_ns > prev => {
+                let dt_s = (obs.stamp_host_ns - prev) as f64 * 1e-9;
+                let sigma_h = obs.pos_std_m.x.max(obs.pos_std_m.y);
+                obs.vel_std_mps.max(std::f64::consts::SQRT_2 * sigma_h / dt_s)
+            }
+            // The first fix without a measured velocity: its noise is not known yet.
+            _ => f64::INFINITY,
+        };
+        self.motion_seen |= obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(MOTION_SIGMAS * speed_std);
         if self.filt.is_none() {
             match &mut self.bank {
                 Some(bank) => {
@@ -779,11 +795,25 @@ impl Navigator {
                 false
             }
             Some(Fault::Implausible) => {
-                // The navigation states are sound; the sensor errors are re-learnt from their
-                // turn-on σ, decorrelated from the rest.
                 self.integrity.count(Fault::Implausible);
                 self.recovering_until_ns = f.t_ns + (self.cfg.integrity.recovering_s * 1e9) as i64;
-                reset_sensor_errors(f, &self.cfg.noise);
+                let wider = widened(&self.cfg.noise);
+                if !self.widened && wider != self.cfg.noise && integrity::plausible(f, &wider, &self.cfg.integrity) {
+                    // Sensor errors an IMU of unknown class may have: the configured model
+                    // was too narrow for this IMU. It is widened (once, as on an inconsistency),
+                    // the estimates are kept and their σ reopened to the wider turn-on σ.
+                    self.widened = true;
+                    self.cfg.noise = wider;
+                    for i in 0..3 {
+                        let (g, a) = (BG + i, BA + i);
+                        f.eskf.p[(g, g)] = f.eskf.p[(g, g)].max(wider.gyro_bias_init_std[i].powi(2));
+                        f.eskf.p[(a, a)] = f.eskf.p[(a, a)].max(wider.accel_bias_init_std[i].powi(2));
+                    }
+                } else {
+                    // Beyond any IMU's: the navigation states are sound; the sensor errors are
+                    // re-learnt from their turn-on σ, decorrelated from the rest.
+                    reset_sensor_errors(f, &self.cfg.noise);
+                }
                 if let Some(log) = &mut self.smoother {
                     log.start(f);
                 }

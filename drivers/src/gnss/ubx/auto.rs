@@ -15,7 +15,10 @@
 //!   one (the receiver was reconfigured). A few stray or forged UBX frames never cover
 //!   enough epochs to take over (three used to suppress the real NMEA fixes for ~13 s); an
 //!   NMEA epoch that began before UBX took over is still reported, unless a UBX epoch of the
-//!   same time of day was emitted already (the same receiver epoch: reported once).
+//!   same time of day was emitted already (the same receiver epoch: reported once). While UBX
+//!   solutions are about but UBX does not navigate yet, an NMEA epoch is held until the next
+//!   epoch of either protocol: a UBX epoch of the same time replaces it (the receiver sent
+//!   its sentences first), else it is published then.
 //!
 //! The fixes emitted are numbered anew (`stamp.seq` 0, 1, 2, … whichever protocol each came
 //! from), so a gap in the sequence is a lost sample as everywhere else.
