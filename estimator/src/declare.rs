@@ -148,6 +148,9 @@ pub trait Group {
     ) -> Option<Result<(), D::Error>>;
     /// The first setting whose value fails its check.
     fn check(&self) -> Result<(), Invalid>;
+    /// Every setting read from the file, as (section, name, value): what [`Self::set_value`]
+    /// reads back.
+    fn file_values(&self) -> Vec<(&'static str, &'static str, serde_json::Value)>;
     /// Setting `name`'s value as text; `None` when the group has no such setting in the file
     /// or on the command line.
     fn show(&self, name: &str) -> Option<String>;
@@ -253,6 +256,20 @@ macro_rules! settings_group {
                     }
                 )?)*
                 None
+            }
+
+            #[allow(clippy::vec_init_then_push)]
+            fn file_values(&self) -> Vec<(&'static str, &'static str, serde_json::Value)> {
+                #[allow(unused_mut)]
+                let mut out = Vec::new();
+                $($(
+                    out.push((
+                        $section,
+                        stringify!($field),
+                        serde_json::to_value(&self.$field).unwrap_or(serde_json::Value::Null),
+                    ));
+                )?)*
+                out
             }
 
             fn check(&self) -> Result<(), $crate::declare::Invalid> {

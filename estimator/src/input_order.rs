@@ -105,6 +105,7 @@ pub fn order_key(s: &AnySample) -> OrderKey {
         // epoch's PPS edge first).
         AnySample::Raw(r) => (r.stamp.host_ns.saturating_add(FIX_HOLD_NS), 1, [1; 8], r.stamp.seq),
         AnySample::NavData(d) => (d.stamp.host_ns, 7, [2; 8], d.stamp.seq),
+        AnySample::Settings(x) => (x.host_ns, 6, [1; 8], x.seq),
     };
     OrderKey { at_ns, rank, id, seq }
 }

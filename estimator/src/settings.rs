@@ -30,7 +30,7 @@ pub use crate::nav::config::{Coupling, InitialState, ReceiverOscillator};
 pub use crate::time::time_sync::TimeAxis;
 
 /// Where one IMU sits in the body frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ImuMounting {
     /// Rotation IMU axes → body (FRD): x_body = C_b^s · x_imu.
     pub c_b_s: [[f64; 3]; 3],
@@ -197,6 +197,55 @@ impl Settings {
         None
     }
 
+    /// The settings in force as JSON, for a recording of the live run: every setting of the
+    /// file's sections (`{"file": {section: {name: value}}}`), the antenna lever arm and the
+    /// IMUs' mountings. [`Self::apply_in_force`] reads it back.
+    pub fn in_force_json(&self) -> String {
+        let mut file = serde_json::Map::new();
+        each_group!(self, g => {
+            for (section, name, value) in g.file_values() {
+                let sec = file
+                    .entry(section.to_string())
+                    .or_insert_with(|| serde_json::Value::Object(serde_json::Map::new()));
+                if let serde_json::Value::Object(m) = sec {
+                    m.insert(name.to_string(), value);
+                }
+            }
+        });
+        serde_json::json!({
+            "file": file,
+            "gnss_lever_arm_m": self.nav.gnss_lever_arm_m,
+            "imu_mountings": self.imu_mountings,
+        })
+        .to_string()
+    }
+
+    /// Sets what [`Self::in_force_json`] wrote; an error names the setting that does not read
+    /// (a recording of another version).
+    pub fn apply_in_force(&mut self, json: &str) -> Result<(), String> {
+        let v: serde_json::Value = serde_json::from_str(json).map_err(|e| format!("not JSON: {e}"))?;
+        if let Some(file) = v["file"].as_object() {
+            for (section, values) in file {
+                for (name, value) in values.as_object().into_iter().flatten() {
+                    match self.set_value(section, name, value.clone()) {
+                        Some(Ok(())) => {}
+                        Some(Err(e)) => return Err(format!("{section}.{name}: {e}")),
+                        None => return Err(format!("{section}.{name}: no such setting")),
+                    }
+                }
+            }
+        }
+        if !v["gnss_lever_arm_m"].is_null() {
+            self.nav.gnss_lever_arm_m =
+                serde_json::from_value(v["gnss_lever_arm_m"].clone()).map_err(|e| format!("gnss_lever_arm_m: {e}"))?;
+        }
+        if !v["imu_mountings"].is_null() {
+            self.imu_mountings =
+                serde_json::from_value(v["imu_mountings"].clone()).map_err(|e| format!("imu_mountings: {e}"))?;
+        }
+        Ok(())
+    }
+
     /// The first setting whose value fails its check.
     pub fn check(&self) -> Result<(), Invalid> {
         each_group!(self, g => {
@@ -314,5 +363,42 @@ impl Settings {
             array: self.array_config(),
             device_timing: self.device_timing,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_settings_in_force_read_back_exactly() {
+        let mut s = Settings::default();
+        s.set_text("imu_model", "consumer").unwrap();
+        s.set_text("gnss_vel_std_mps", "0.05").unwrap();
+        s.set_text("imus", "0,1,2,3").unwrap();
+        s.nav.gnss_lever_arm_m = [0.1, -0.2, 0.3];
+        s.imu.imu_noise = Some(ImuPreset::Industrial.noise());
+        s.imu_mountings.insert(
+            "1".into(),
+            ImuMounting {
+                c_b_s: [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]],
+                lever_b_m: [0.01, 0.02, 0.03],
+            },
+        );
+        let json = s.in_force_json();
+        println!("{} bytes: {json}", json.len());
+        // Room to grow in the sample that carries it.
+        assert!(
+            json.len() <= navsync_wire::samples::SETTINGS_JSON_BYTES / 2,
+            "{} bytes",
+            json.len()
+        );
+        let mut back = Settings::default();
+        back.apply_in_force(&json).unwrap();
+        assert_eq!(back, s);
+        let e = back
+            .apply_in_force(r#"{"file": {"estimator": {"no_such": 1}}}"#)
+            .unwrap_err();
+        assert!(e.contains("estimator.no_such"), "{e}");
     }
 }

@@ -26,8 +26,8 @@ use super::mcap_reader::{Channel, Schema};
 use navsync_shared::json::{from_json, from_json_onto, schema, to_json};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{
-    AnySample, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState, PpsEdge, SimTruth,
-    TimeState,
+    AnySample, EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState,
+    PpsEdge, SimTruth, TimeState,
 };
 use navsync_shared::services::ServiceKind;
 use navsync_shared::{cdr, ros2msg};
@@ -184,6 +184,7 @@ sample_type!(GnssTimePulse, GnssTimePulse, TimePulse);
 sample_type!(GnssEvent, GnssEvent, Event);
 sample_type!(GnssRaw, GnssRaw, Raw);
 sample_type!(GnssNavData, GnssNavData, NavData);
+sample_type!(EstimatorSettings, EstimatorSettings, Settings);
 
 /// Evaluates `$body` with the type alias `$T` set to the sample type of `$kind`.
 #[macro_export]
@@ -234,6 +235,10 @@ macro_rules! with_sample_type {
                 type $T = navsync_shared::samples::GnssNavData;
                 $body
             }
+            navsync_shared::services::ServiceKind::EstimatorSettings => {
+                type $T = navsync_shared::samples::EstimatorSettings;
+                $body
+            }
         }
     };
 }
@@ -252,6 +257,7 @@ pub fn sample_json(sample: &AnySample) -> serde_json::Value {
         AnySample::Event(x) => to_json(x),
         AnySample::Raw(x) => to_json(x),
         AnySample::NavData(x) => to_json(x),
+        AnySample::Settings(x) => to_json(x),
     }
 }
 
@@ -269,6 +275,7 @@ fn encode_cdr(sample: &AnySample, out: &mut Vec<u8>) {
         AnySample::Event(x) => cdr::encode(x, out),
         AnySample::Raw(x) => cdr::encode(x, out),
         AnySample::NavData(x) => cdr::encode(x, out),
+        AnySample::Settings(x) => cdr::encode(x, out),
     }
 }
 

@@ -30,6 +30,8 @@ pub enum AnySubscriber {
     Raw(Subscriber<navsync_shared::samples::GnssRaw>),
     /// `navsync/gnss/{id}/nav-data`
     NavData(Subscriber<navsync_shared::samples::GnssNavData>),
+    /// `navsync/estimator/settings`
+    Settings(Subscriber<navsync_shared::samples::EstimatorSettings>),
 }
 
 macro_rules! each_subscriber {
@@ -46,6 +48,7 @@ macro_rules! each_subscriber {
             AnySubscriber::Event($s) => $body,
             AnySubscriber::Raw($s) => $body,
             AnySubscriber::NavData($s) => $body,
+            AnySubscriber::Settings($s) => $body,
         }
     };
 }
@@ -70,6 +73,7 @@ impl AnySubscriber {
             ServiceKind::GnssEvent => Self::Event(node.input(service)?),
             ServiceKind::GnssRaw => Self::Raw(node.input(service)?),
             ServiceKind::GnssNavData => Self::NavData(node.input(service)?),
+            ServiceKind::EstimatorSettings => Self::Settings(node.input(service)?),
         })
     }
 
@@ -108,6 +112,8 @@ pub enum AnyPublisher {
     Raw(Publisher<navsync_shared::samples::GnssRaw>),
     /// `navsync/gnss/{id}/nav-data`
     NavData(Publisher<navsync_shared::samples::GnssNavData>),
+    /// `navsync/estimator/settings`
+    Settings(Publisher<navsync_shared::samples::EstimatorSettings>),
 }
 
 impl AnyPublisher {
@@ -125,6 +131,7 @@ impl AnyPublisher {
             ServiceKind::GnssEvent => Self::Event(node.publisher(service)?),
             ServiceKind::GnssRaw => Self::Raw(node.publisher(service)?),
             ServiceKind::GnssNavData => Self::NavData(node.publisher(service)?),
+            ServiceKind::EstimatorSettings => Self::Settings(node.publisher(service)?),
         })
     }
 
@@ -142,6 +149,7 @@ impl AnyPublisher {
             Self::Event(p) => pub_as(p, sample),
             Self::Raw(p) => pub_as(p, sample),
             Self::NavData(p) => pub_as(p, sample),
+            Self::Settings(p) => pub_as(p, sample),
         }
     }
 }

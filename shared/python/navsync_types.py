@@ -721,6 +721,31 @@ class GnssNavData(ctypes.Structure):
         return "navsync.GnssNavData.v1"
 
 
+class EstimatorSettings(ctypes.Structure):
+    """The estimator's settings in force as JSON (navsync/estimator/settings)."""
+
+    _fields_ = [
+        # Host time of this report, ns (`CLOCK_MONOTONIC`).
+        ("host_ns", ctypes.c_int64),
+        # Report sequence number.
+        ("seq", ctypes.c_uint64),
+        # The settings as JSON (`Settings::in_force_json` of the estimator crate), NUL-padded UTF-8.
+        ("json", (ctypes.c_char * 4096)),
+    ]
+
+    #: Size in bytes of the Rust type.
+    RUST_SIZE = 4112
+    #: Alignment in bytes of the Rust type.
+    RUST_ALIGN = 8
+    #: Byte offset of every field in the Rust type.
+    RUST_OFFSETS = {"host_ns": 0, "seq": 8, "json": 16}
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name (with the layout version)."""
+        return "navsync.EstimatorSettings.v1"
+
+
 #: Publish-subscribe QoS per sample type: history, subscriber buffer.
 QOS = {
     "GnssFix": {"history": 1, "buffer": 64},
@@ -734,6 +759,7 @@ QOS = {
     "GnssEvent": {"history": 1, "buffer": 64},
     "GnssRaw": {"history": 1, "buffer": 64},
     "GnssNavData": {"history": 0, "buffer": 256},
+    "EstimatorSettings": {"history": 1, "buffer": 4},
 }
 
 
@@ -748,7 +774,7 @@ def service_type(service):
         if p[1] == "health":
             return Health if p[2] else None
         return {("time", "state"): TimeState, ("nav", "state"): NavState, ("sim", "truth"): SimTruth,
-                ("sim", "pps"): PpsEdge}.get((p[1], p[2]))
+                ("sim", "pps"): PpsEdge, ("estimator", "settings"): EstimatorSettings}.get((p[1], p[2]))
     return None
 
 

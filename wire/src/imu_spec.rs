@@ -51,7 +51,7 @@ pub fn micro_g(x: f64) -> f64 {
 }
 
 /// Which IMU error model to simulate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ImuPreset {
     /// An IMU of unknown class as it behaves in use ([`ImuErrorSpec::generic`]): the

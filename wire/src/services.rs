@@ -13,6 +13,7 @@
 //! | `navsync/time/state` | [`TimeState`] | `navsync estimator` |
 //! | `navsync/nav/state` | [`NavState`] | `navsync estimator` |
 //! | `navsync/health/{process}` | [`Health`] | every process |
+//! | `navsync/estimator/settings` | [`EstimatorSettings`] | `navsync estimator` (its settings in force, about once per second) |
 //! | `navsync/sim/truth` | [`SimTruth`] | `navsync sim` |
 //! | `navsync/sim/pps` | [`PpsEdge`] | `navsync sim` (raw edges for `navsync pps --source sim`) |
 //!
@@ -21,8 +22,8 @@
 
 use crate::reflect::Reflect;
 use crate::samples::{
-    AnySample, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState, PpsEdge, SimTruth,
-    TimeState,
+    AnySample, EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState,
+    PpsEdge, SimTruth, TimeState,
 };
 
 /// Environment variable with the iceoryx2 resource prefix (default [`DEFAULT_PREFIX`]).
@@ -73,6 +74,8 @@ pub fn health(process: &str) -> String {
 pub const TIME_STATE: &str = "navsync/time/state";
 /// The navigation solution.
 pub const NAV_STATE: &str = "navsync/nav/state";
+/// The estimator's settings in force.
+pub const ESTIMATOR_SETTINGS: &str = "navsync/estimator/settings";
 /// Simulator ground truth.
 pub const SIM_TRUTH: &str = "navsync/sim/truth";
 /// Raw simulated PPS edges (simulator-private; `navsync pps --source sim` validates them and
@@ -104,6 +107,8 @@ pub enum ServiceKind {
     GnssRaw,
     /// [`GnssNavData`]
     GnssNavData,
+    /// [`EstimatorSettings`]
+    EstimatorSettings,
 }
 
 impl ServiceKind {
@@ -121,11 +126,12 @@ impl ServiceKind {
             AnySample::Event(_) => Self::GnssEvent,
             AnySample::Raw(_) => Self::GnssRaw,
             AnySample::NavData(_) => Self::GnssNavData,
+            AnySample::Settings(_) => Self::EstimatorSettings,
         }
     }
 
     /// All kinds.
-    pub const ALL: [ServiceKind; 11] = [
+    pub const ALL: [ServiceKind; 12] = [
         Self::GnssFix,
         Self::PpsEdge,
         Self::ImuSample,
@@ -137,6 +143,7 @@ impl ServiceKind {
         Self::GnssEvent,
         Self::GnssRaw,
         Self::GnssNavData,
+        Self::EstimatorSettings,
     ];
 
     /// The kind's position in [`ALL`](Self::ALL): its event id on [`WAKE`].
@@ -158,6 +165,7 @@ impl ServiceKind {
             ["navsync", "time", "state"] => Some(Self::TimeState),
             ["navsync", "nav", "state"] => Some(Self::NavState),
             ["navsync", "health", p] if !p.is_empty() => Some(Self::Health),
+            ["navsync", "estimator", "settings"] => Some(Self::EstimatorSettings),
             ["navsync", "sim", "truth"] => Some(Self::SimTruth),
             ["navsync", "sim", "pps"] => Some(Self::PpsEdge),
             _ => None,
@@ -178,6 +186,7 @@ impl ServiceKind {
             Self::GnssEvent => GnssEvent::TYPE_NAME,
             Self::GnssRaw => GnssRaw::TYPE_NAME,
             Self::GnssNavData => GnssNavData::TYPE_NAME,
+            Self::EstimatorSettings => EstimatorSettings::TYPE_NAME,
         }
     }
 
@@ -206,6 +215,8 @@ impl ServiceKind {
                 buffer: 256,
             },
             Self::TimeState | Self::Health => Qos { history: 1, buffer: 16 },
+            // About once per second; a recorder started later gets the last one.
+            Self::EstimatorSettings => Qos { history: 1, buffer: 4 },
         }
     }
 }

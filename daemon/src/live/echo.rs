@@ -109,6 +109,7 @@ pub fn run(args: &EchoArgs) -> Result<(), EchoError> {
         ServiceKind::GnssEvent => echo::<GnssEvent>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
         ServiceKind::GnssRaw => echo::<GnssRaw>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
         ServiceKind::GnssNavData => echo::<GnssNavData>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
+        ServiceKind::EstimatorSettings => echo::<EstimatorSettings>(args, |s| (s.host_ns, Some(s.seq))),
     }
 }
 

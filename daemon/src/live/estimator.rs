@@ -16,7 +16,8 @@ use navsync_shared::health_reporter::HealthReporter;
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::latency_histogram::LatencyHistogram;
 use navsync_shared::samples::{
-    AnySample, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, NavState, NavStatus, PpsEdge, TimeState,
+    AnySample, EstimatorSettings, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, NavState, NavStatus,
+    PpsEdge, TimeState,
 };
 use navsync_shared::services::{self, ServiceKind};
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
@@ -155,6 +156,25 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         .map(|id| node.input(&services::imu_sample(id)))
         .collect::<Result<_, _>>()?;
     let mut time_pub = node.publisher::<TimeState>(services::TIME_STATE)?;
+    // The settings in force, with every health report: a recording of this run replays with
+    // them (`replay --estimate`).
+    let mut settings_pub = node.publisher::<EstimatorSettings>(services::ESTIMATOR_SETTINGS)?;
+    let mut settings_sample = EstimatorSettings::new(0, 0, &args.in_force_json());
+    if settings_sample.is_none() {
+        warn!(
+            "the settings in force exceed {} bytes of JSON: not published, a recording of this run will not hold them",
+            navsync_shared::samples::SETTINGS_JSON_BYTES
+        );
+    }
+    let mut publish_settings = |now_ns: i64| -> Result<(), IpcError> {
+        if let Some(s) = &mut settings_sample {
+            s.host_ns = now_ns;
+            settings_pub.publish(s)?;
+            s.seq += 1;
+        }
+        Ok(())
+    };
+    publish_settings(monotonic_now_ns())?;
     let mut health = HealthReporter::new(&node, "estimator")?;
     let c_pps = health.counter("pps_used")?;
     let c_pps_rej = health.counter("pps_rejected")?;
@@ -455,6 +475,7 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         health.set(c_lat_max, (latency.max_ns() as u64).div_ceil(1000));
         if health.maybe_publish(now)? {
             latency.clear();
+            publish_settings(now)?;
         }
     }
     navsync_shared::sd_notify::stopping();

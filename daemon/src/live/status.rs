@@ -149,6 +149,7 @@ fn open_monitor(node: &IpcNode, service: &str, kind: ServiceKind) -> Result<Box<
         ServiceKind::GnssEvent => open_typed::<GnssEvent>(node, service, AnySample::Event),
         ServiceKind::GnssRaw => open_typed::<GnssRaw>(node, service, AnySample::Raw),
         ServiceKind::GnssNavData => open_typed::<GnssNavData>(node, service, AnySample::NavData),
+        ServiceKind::EstimatorSettings => open_typed::<EstimatorSettings>(node, service, AnySample::Settings),
     }
 }
 

@@ -189,19 +189,64 @@ impl Iterator for RecordedInputs {
     }
 }
 
-/// The estimator's settings for a recording: what the recording says it was made with
-/// (channel metadata: the IMU's noise model, the antenna lever arm, the receiver's velocity σ,
-/// a known initial state), then the configuration file, then the flags.
+/// The settings a live estimator published into a recording (its first
+/// `navsync/estimator/settings` sample), as JSON; `None` when it holds none.
+fn recorded_settings(path: &Path) -> Result<Option<String>, RecordingError> {
+    let mut r = SampleReader::open(path)?;
+    let has_channel = r.summary().map(|s| {
+        s.channels
+            .iter()
+            .any(|c| channels::service_of(&c.topic) == services::ESTIMATOR_SETTINGS)
+    });
+    if has_channel == Some(false) {
+        return Ok(None);
+    }
+    // The estimator publishes them when it starts and with every health report (about 1 Hz),
+    // and a recorder started later gets the last one at once: they come early in the file.
+    let mut left = if has_channel == Some(true) { u64::MAX } else { 1_000_000 };
+    while let Some(s) = r.next_sample()? {
+        if let AnySample::Settings(x) = s.sample {
+            return Ok(x.text().map(str::to_string));
+        }
+        left -= 1;
+        if left == 0 {
+            break;
+        }
+    }
+    Ok(None)
+}
+
+/// The estimator's settings for a recording: those of the live estimator that made it (its
+/// published settings in force), else its defaults; over them what the recording says it was
+/// made with (channel metadata: the IMU's noise model, the antenna lever arm, the receiver's
+/// velocity σ, a known initial state), then the configuration file, then the flags.
 pub fn settings_for_recording(
     est: &EstimatorFlags,
     cfg: &Loaded,
     reader: &SampleReader,
 ) -> Result<Settings, ConfigError> {
-    let ids = est.settings(cfg)?;
-    let mut defaults = Settings {
-        inputs: ids.inputs.clone(),
-        ..Settings::default()
-    };
+    let path = reader.mcap().path().to_path_buf();
+    let mut defaults = Settings::default();
+    let live = recorded_settings(&path).map_err(|e| ConfigError {
+        file: path.clone(),
+        line: None,
+        field: Some(services::ESTIMATOR_SETTINGS.into()),
+        message: e.to_string(),
+    })?;
+    if let Some(json) = &live {
+        defaults.apply_in_force(json).map_err(|message| ConfigError {
+            file: path.clone(),
+            line: None,
+            field: Some(format!(
+                "{} (the live estimator's settings)",
+                services::ESTIMATOR_SETTINGS
+            )),
+            message,
+        })?;
+    }
+    // The inputs: the flags', else the file's, else the live run's, else the defaults.
+    let ids = est.settings_over(cfg, defaults.clone())?;
+    defaults.inputs = ids.inputs.clone();
     let meta = |service: Option<String>| service.map(|s| reader.channel_metadata(&s)).unwrap_or_default();
     let imu = meta(ids.inputs.imus.first().map(|id| services::imu_sample(id)));
     let gnss = meta(ids.inputs.gnss.first().map(|id| services::gnss_fix(id)));

@@ -61,6 +61,7 @@ fn types() -> Vec<Ty> {
         ty::<RawMeasurement>("One signal's raw measurements (pseudorange, carrier phase, Doppler)."),
         ty::<GnssRaw>("The raw measurements of one receiver epoch (navsync/gnss/{id}/raw)."),
         ty::<GnssNavData>("One broadcast navigation data subframe (navsync/gnss/{id}/nav-data)."),
+        ty::<EstimatorSettings>("The estimator's settings in force as JSON (navsync/estimator/settings)."),
     ]
 }
 
@@ -186,7 +187,7 @@ def service_type(service):
         if p[1] == "health":
             return Health if p[2] else None
         return {("time", "state"): TimeState, ("nav", "state"): NavState, ("sim", "truth"): SimTruth,
-                ("sim", "pps"): PpsEdge}.get((p[1], p[2]))
+                ("sim", "pps"): PpsEdge, ("estimator", "settings"): EstimatorSettings}.get((p[1], p[2]))
     return None
 
 

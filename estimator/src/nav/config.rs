@@ -16,7 +16,7 @@ use crate::declare::checks::{finite3, positive, within};
 use crate::time::clock_model::OscillatorNoise;
 
 /// How GNSS aids the filter.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Coupling {
     /// The receiver's position and velocity fixes (the default).
@@ -40,7 +40,7 @@ impl std::str::FromStr for Coupling {
 }
 
 /// The receiver's oscillator: the process noise of its clock states when tightly coupled.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ReceiverOscillator {
     /// A TCXO ([`OscillatorNoise::tcxo`]; the default: what GNSS receivers carry).

@@ -119,6 +119,7 @@ fn generated_python_types_are_current_and_match_the_rust_layouts() {
         rust::<RawMeasurement>(),
         rust::<GnssRaw>(),
         rust::<GnssNavData>(),
+        rust::<EstimatorSettings>(),
     ];
     assert_eq!(report.as_object().unwrap().len(), rust_layouts.len(), "{report}");
     let mut fields = 0;

@@ -1,6 +1,7 @@
 //! `navsync record` beside a live run, and `navsync replay --estimate` over that recording:
 //! the replayed navigation states equal the live estimator's bit for bit (matched by IMU host
-//! time), and two replays write byte-identical files. A recorder killed with SIGKILL leaves a
+//! time) with the live estimator's own settings (not the defaults: they come from the
+//! recording, no flag is given to the replay), and two replays write byte-identical files. A recorder killed with SIGKILL leaves a
 //! readable file that lacks at most the last second.
 
 use std::collections::HashMap;
@@ -113,10 +114,28 @@ fn live_run_and_replay(name: &str, protocol: &str) {
             "navsync/time/state",
             "navsync/sim/truth",
             "navsync/health/*",
+            "navsync/estimator/settings",
         ],
     );
     env.wait_for_path(&rec, Duration::from_secs(20));
-    env.spawn("estimator", &["estimator", "--gnss", "0", "--pps", "0", "--imus", "0"]);
+    // Settings other than the defaults (as `navsync demo` runs it): the recording holds them
+    // and the replay, given no flag, uses them.
+    env.spawn(
+        "estimator",
+        &[
+            "estimator",
+            "--gnss",
+            "0",
+            "--pps",
+            "0",
+            "--imus",
+            "0",
+            "--imu-model",
+            "consumer",
+            "--gnss-vel-std",
+            "0.05",
+        ],
+    );
     assert!(
         est_health.wait_next(Duration::from_secs(20)).unwrap().is_some(),
         "the estimator did not start; log:\n{}",

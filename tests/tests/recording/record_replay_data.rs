@@ -121,8 +121,8 @@ fn replaying_the_checked_in_recording_drives_a_live_estimator() {
     let mut recorder = start(&env, "record", &args);
     env.wait_for_path(&rec, Duration::from_secs(20));
     // The live estimator gets the models the recording says it was made with, as
-    // `replay --estimate` takes them from its channel metadata: the receiver's velocity σ
-    // (the IMU is the industrial preset, the estimator's default; no lever arm).
+    // `replay --estimate` takes them from its channel metadata: the receiver's velocity σ and
+    // the IMU's model (the industrial preset; no lever arm).
     let reader = SampleReader::open(&data_file()).unwrap();
     let meta = |service: &str, key: &str| {
         reader
@@ -152,6 +152,8 @@ fn replaying_the_checked_in_recording_drives_a_live_estimator() {
             "0",
             "--gnss-vel-std",
             &vel_std,
+            "--imu-model",
+            "industrial",
         ],
     );
     assert!(

@@ -256,8 +256,9 @@ fn rosbags_and_mcap_read_every_recording_and_navsync_reads_theirs() {
         let y = b.next_sample().unwrap().expect("as many samples");
         assert_eq!((sx, xv), (y.service.to_string(), sample_json(&y.sample)));
     }
-    // The receiver velocity sigma travels in navsync's channel metadata, which rosbags does not
-    // write: both runs get it as a flag.
+    // The receiver velocity sigma and the IMU model travel in navsync's channel metadata, which
+    // rosbags does not write: both runs get them as flags (the recording's IMU is the
+    // industrial preset).
     let vel_std = SampleReader::open(&data)
         .unwrap()
         .channel_metadata("navsync/gnss/0/fix")
@@ -274,6 +275,8 @@ fn rosbags_and_mcap_read_every_recording_and_navsync_reads_theirs() {
                 "--estimate",
                 "--gnss-vel-std",
                 &vel_std,
+                "--imu-model",
+                "industrial",
                 "--summary-json",
                 &out.display().to_string(),
             ])

@@ -1,7 +1,8 @@
 //! Any navsync sample, tagged with its type: what a recording holds and a replay publishes.
 
 use super::{
-    GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState, PpsEdge, SimTruth, TimeState,
+    EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState, PpsEdge,
+    SimTruth, TimeState,
 };
 
 /// A sample of any navsync type. Variants differ in size (a `Health` report is ~2.4 kB); the
@@ -31,6 +32,8 @@ pub enum AnySample {
     Raw(GnssRaw),
     /// `navsync/gnss/{id}/nav-data`
     NavData(GnssNavData),
+    /// `navsync/estimator/settings`
+    Settings(EstimatorSettings),
 }
 
 impl AnySample {
@@ -48,6 +51,7 @@ impl AnySample {
             Self::Event(e) => e.stamp.host_ns,
             Self::Raw(r) => r.stamp.host_ns,
             Self::NavData(d) => d.stamp.host_ns,
+            Self::Settings(s) => s.host_ns,
         }
     }
 }

@@ -48,6 +48,7 @@ fn all() -> Vec<String> {
         signature::<GnssEvent>(),
         signature::<GnssRaw>(),
         signature::<GnssNavData>(),
+        signature::<EstimatorSettings>(),
     ]
 }
 
@@ -70,6 +71,7 @@ fn field_tables_describe_the_real_layout() {
     check::<RawMeasurement>();
     check::<GnssRaw>();
     check::<GnssNavData>();
+    check::<EstimatorSettings>();
 }
 
 #[test]

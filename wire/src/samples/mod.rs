@@ -11,6 +11,7 @@
 //! - A float that is not known is NaN (written as JSON `null`).
 
 mod any_sample;
+mod estimator_settings;
 mod gnss_event;
 mod gnss_fix;
 mod gnss_nav_data;
@@ -27,6 +28,7 @@ mod stamp;
 mod time_state;
 
 pub use any_sample::AnySample;
+pub use estimator_settings::{EstimatorSettings, SETTINGS_JSON_BYTES};
 pub use gnss_event::GnssEvent;
 pub use gnss_fix::*;
 pub use gnss_nav_data::{GnssNavData, MAX_NAV_WORDS};
