@@ -173,6 +173,9 @@ class Drive:
         self.static = float(args.static)
         self.duration = float(args.duration)
         self.k_roll = args.roll_gain * D2R  # rad per m/s^2
+        # Every speed change scaled: 1 a car (up to 20 m/s), 0.08 a pedestrian, 0.04 a slow
+        # robot; the stops and turns stay where they are.
+        self.speed_scale = float(getattr(args, "speed_scale", 1.0))
         self.init = {"speed": 0.0, "heading": args.heading0 * D2R,
                      "grade": args.grade0 * D2R, "bank": args.bank0 * D2R}
         self.events = {q: [] for q in self.init}
@@ -184,7 +187,7 @@ class Drive:
                     continue
                 if rep > 0 and q in ("grade", "bank") and ts < 10:
                     continue  # the parking-slope changes only once
-                scale = 1.0 if q == "speed" else D2R
+                scale = self.speed_scale if q == "speed" else D2R
                 self.events[q].append((off + ts, float(T), d * scale))
             rep += 1
 
@@ -533,6 +536,8 @@ def parse_args(argv):
     ap.add_argument("--no-gnss-noise", action="store_true")
     ap.add_argument("--duration", type=float, default=660.0, help="s, total incl. static start")
     ap.add_argument("--static", type=float, default=60.0, help="s standing start (whole s)")
+    ap.add_argument("--speed-scale", type=float, default=1.0,
+                    help="scales every speed change: 1 a car (to 20 m/s), 0.08 a pedestrian, 0.04 a robot")
     ap.add_argument("--lever-arm", type=float, nargs=3, default=[0.3, -0.2, -1.0],
                     metavar=("F", "R", "D"), help="IMU -> antenna, body FRD, m")
     ap.add_argument("--week", type=int, default=2300)

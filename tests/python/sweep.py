@@ -1,0 +1,216 @@
+#!/usr/bin/env python3
+"""The randomized sweep (issue 34): many independent drives, navsync with its defaults on each.
+
+  sweep.py [--navsync BIN] [--runs N] [--seed S] [--duration S] [--work DIR] [--json OUT]
+           [--kf-gins BIN]
+
+Each run draws (from --seed and its index) a drive of `independent_drive.py` (exact
+kinematics, shares no code with navsync): a profile (car, pedestrian, slow robot: the speed
+changes scaled 1, 0.08, 0.04; the stops and turns kept), a start heading (any), a place (both
+hemispheres, both sides of Greenwich, up to 75 deg latitude), an IMU grade (industrial,
+consumer), a GNSS sigma (1 cm to 3 m, log-uniform) and rate (1, 2, 4, 5, 10 Hz), a lever arm
+(up to 1 m per axis), and the time synchronisation: PPS (fixes at their epoch) or software sync
+with a receipt latency of 0 to 1.5 s. navsync gets what a user would give: the files, the lever
+arm and, in software sync, `--software-sync`; no IMU model, no initial state.
+
+Per run: the exit status and the summary's problem (a run that exits 0 must have usable
+output; one that fails must say why), NaN in any output row, and per output epoch whether the
+error is within 2 sigma of the output's own sigma, for north and east position and yaw (against
+truth.nav at the output's time), and for the final GNSS delay. Pooled over the runs: the share
+of epochs within 2 sigma (a consistent filter: ~95 %).
+
+With --kf-gins: KF-GINS on the same files with its exact noise set and initial state, and
+navsync given the same (`import --kf-gins-config`); the ratio of horizontal RMS per drive.
+Exits non-zero when a step of the sweep itself fails. Needs numpy.
+"""
+
+import argparse
+import json
+import math
+import os
+import random
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import score_truth  # noqa: E402
+
+REPO = os.path.dirname(os.path.dirname(HERE))
+PROFILES = {"car": 1.0, "pedestrian": 0.08, "robot": 0.04}
+
+
+def draw(rng, i, duration):
+    profile = rng.choice(sorted(PROFILES))
+    software = rng.random() < 0.5
+    return {
+        "index": i,
+        "profile": profile,
+        "preset": rng.choice(["industrial", "consumer"]),
+        "heading0": round(rng.uniform(0.0, 360.0), 3),
+        "lat0": round(rng.uniform(-75.0, 75.0), 6),
+        "lon0": round(rng.uniform(-180.0, 180.0), 6),
+        "gnss_sigma": round(10 ** rng.uniform(-2.0, math.log10(3.0)), 4),
+        "gnss_rate": rng.choice([1, 2, 4, 5, 10]),
+        "lever_arm": [round(rng.uniform(-1.0, 1.0), 3) for _ in range(3)],
+        "latency_s": round(rng.uniform(0.0, 1.5), 3) if software else None,
+        "seed": rng.randrange(1, 1 << 30),
+        "duration": duration,
+    }
+
+
+def run(cmd, log):
+    with open(log, "w") as f:
+        return subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT).returncode
+
+
+def wrap180(x):
+    return (x + 180.0) % 360.0 - 180.0
+
+
+def coverage(nav_path, std_path, truth_path):
+    """Per output epoch: (|e_N| <= 2 sN, |e_E| <= 2 sE, |e_yaw| <= 2 s_yaw), and any NaN."""
+    try:
+        nav = np.loadtxt(nav_path, ndmin=2)
+        std = np.loadtxt(std_path, ndmin=2)
+    except (OSError, ValueError):
+        return None, False
+    if nav.size == 0:
+        return np.zeros((0, 3), dtype=bool), False
+    nan = bool(np.isnan(nav).any() or np.isnan(std).any())
+    truth = score_truth.load_nav(truth_path)
+    t = nav[:, 1]
+    keep = (t >= truth[0, 1]) & (t <= truth[-1, 1])
+    nav = nav[keep]
+    t = nav[:, 1]
+    by_t = {round(r[0], 4): r for r in std}
+    s = np.array([by_t.get(round(x, 4), [np.nan] * 10) for x in t])
+    lat = np.interp(t, truth[:, 1], truth[:, 2])
+    lon = np.interp(t, truth[:, 1], truth[:, 3])
+    yaw_t = np.interp(t, truth[:, 1], np.unwrap(np.radians(truth[:, 10])))
+    s2 = np.sin(np.radians(lat)) ** 2
+    rn = score_truth.A / np.sqrt(1.0 - score_truth.E2 * s2)
+    rm = score_truth.A * (1.0 - score_truth.E2) / (1.0 - score_truth.E2 * s2) ** 1.5
+    h = np.interp(t, truth[:, 1], truth[:, 4])
+    e_n = np.radians(nav[:, 2] - lat) * (rm + h)
+    e_e = np.radians(wrap180(nav[:, 3] - lon)) * (rn + h) * np.cos(np.radians(lat))
+    e_yaw = wrap180(nav[:, 10] - np.degrees(yaw_t))
+    ok = np.stack([np.abs(e_n) <= 2 * s[:, 1], np.abs(e_e) <= 2 * s[:, 2], np.abs(e_yaw) <= 2 * s[:, 9]], -1)
+    return ok, nan
+
+
+def one(a, d, work):
+    os.makedirs(work, exist_ok=True)
+    drive = os.path.join(work, "drive")
+    gen = [sys.executable, os.path.join(HERE, "independent_drive.py"), drive, "--preset", d["preset"],
+           "--seed", str(d["seed"]), "--duration", str(d["duration"]), "--static", "30",
+           "--speed-scale", str(PROFILES[d["profile"]]), "--heading0", str(d["heading0"]),
+           "--lat0", str(d["lat0"]), "--lon0", str(d["lon0"]), "--gnss-rate", str(d["gnss_rate"]),
+           "--gnss-sigma", str(d["gnss_sigma"]), str(d["gnss_sigma"]), str(2 * d["gnss_sigma"]),
+           "--lever-arm", *map(str, d["lever_arm"])]
+    if run(gen, os.path.join(work, "generate.log")) != 0:
+        raise SystemExit(f"run {d['index']}: the generator failed (see {work}/generate.log)")
+    rec = os.path.join(work, "rec.mcap")
+    imp = [a.navsync, "import", "kf-gins", "--imu", os.path.join(drive, "imu.txt"),
+           "--gnss", os.path.join(drive, "gnss.pos"), "--truth", os.path.join(drive, "truth.nav"),
+           "--out", rec, "--force"]
+    if d["latency_s"] is not None:
+        imp += ["--no-pps", "--gnss-latency", str(d["latency_s"])]
+    if a.kf_gins:
+        imp += ["--kf-gins-config", os.path.join(drive, "kf-gins.yaml")]
+    if run(imp, os.path.join(work, "import.log")) != 0:
+        raise SystemExit(f"run {d['index']}: the import failed (see {work}/import.log)")
+    out = os.path.join(work, "out")
+    summary = os.path.join(work, "summary.json")
+    rep = [a.navsync, "replay", rec, "--estimate", "--lever-arm", ",".join(map(str, d["lever_arm"])),
+           "--format", "kf-gins", "--out", out + "/", "--summary-json", summary, "--force"]
+    if d["latency_s"] is not None:
+        rep.append("--software-sync")
+    rc = run(rep, os.path.join(work, "replay.log"))
+    s = {}
+    if os.path.exists(summary):
+        with open(summary) as f:
+            s = json.load(f)
+    usable = s.get("usable_states") or 0
+    ok, nan = coverage(os.path.join(out, "KF_GINS_Navresult.nav"), os.path.join(out, "KF_GINS_STD.txt"),
+                       os.path.join(drive, "truth.nav"))
+    r = dict(d, exit=rc, problem=s.get("problem"), usable_states=usable, nan=nan,
+             silent=(rc == 0 and (usable == 0 or s.get("problem") is not None)) or (rc != 0 and not s.get("problem")))
+    if ok is not None and len(ok):
+        r["epochs"] = int(len(ok))
+        r["within_2sigma"] = [int(x) for x in ok.sum(0)]
+    est, sd, true = s.get("gnss_delay_est_s"), s.get("gnss_delay_std_s"), s.get("gnss_delay_true_s")
+    if None not in (est, sd, true):
+        r["delay"] = [est, sd, true]
+        r["delay_within_2sigma"] = abs(est - true) <= 2 * sd
+    if rc == 0 and usable:
+        sc = score_truth.score(score_truth.load_nav(os.path.join(out, "KF_GINS_Navresult.nav")),
+                               score_truth.load_nav(os.path.join(drive, "truth.nav")))
+        r["horizontal_rms_m"] = sc["horizontal_rms_m"]
+    if a.kf_gins:
+        run([a.kf_gins, os.path.join(drive, "kf-gins.yaml")], os.path.join(work, "kf-gins.log"))
+        kf = os.path.join(drive, "kf-gins-out", "KF_GINS_Navresult.nav")
+        if os.path.exists(kf):
+            r["kf_gins_horizontal_rms_m"] = score_truth.score(
+                score_truth.load_nav(kf), score_truth.load_nav(os.path.join(drive, "truth.nav")))["horizontal_rms_m"]
+    return r
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--navsync", default=os.path.join(REPO, "target", "release", "navsync"))
+    ap.add_argument("--runs", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--duration", type=float, default=150.0)
+    ap.add_argument("--work", help="working directory (default: a temporary one)")
+    ap.add_argument("--kf-gins", help="KF-GINS binary: compare on the same files")
+    ap.add_argument("--json", help="write the results here")
+    a = ap.parse_args()
+    a.work = a.work or tempfile.mkdtemp(prefix="navsync-sweep-")
+    rng = random.Random(a.seed)
+    runs = []
+    for i in range(a.runs):
+        d = draw(rng, i, a.duration)
+        r = one(a, d, os.path.join(a.work, f"run{i:03d}"))
+        runs.append(r)
+        cov = r.get("within_2sigma")
+        print(f"{i:3d} {r['profile']:10s} {r['preset']:10s} sigma {r['gnss_sigma']:6.3f} m {r['gnss_rate']:2d} Hz "
+              f"lat {r['lat0']:7.2f} {'latency %.2f s' % r['latency_s'] if r['latency_s'] is not None else 'PPS':14s} "
+              f"exit {r['exit']} usable {r['usable_states']:6d} nan {r['nan']} silent {r['silent']} "
+              f"2sigma {[round(c / max(r.get('epochs', 1), 1), 3) for c in cov] if cov else '-'} "
+              f"delay {'ok' if r.get('delay_within_2sigma') else r.get('delay')}", flush=True)
+    epochs = sum(r.get("epochs", 0) for r in runs)
+    within = [sum(r.get("within_2sigma", [0, 0, 0])[k] for r in runs) for k in range(3)]
+    delays = [r["delay_within_2sigma"] for r in runs if "delay_within_2sigma" in r]
+    res = {
+        "runs": len(runs),
+        "nan_runs": sum(r["nan"] for r in runs),
+        "silent_failures": sum(r["silent"] for r in runs),
+        "failed_runs": sum(r["exit"] != 0 for r in runs),
+        "epochs": epochs,
+        "coverage_2sigma": {"north": within[0] / max(epochs, 1), "east": within[1] / max(epochs, 1),
+                            "yaw": within[2] / max(epochs, 1),
+                            "delay": sum(delays) / max(len(delays), 1)},
+        "work": a.work,
+        "detail": runs,
+    }
+    pairs = [(r["horizontal_rms_m"], r["kf_gins_horizontal_rms_m"]) for r in runs
+             if "horizontal_rms_m" in r and "kf_gins_horizontal_rms_m" in r]
+    if pairs:
+        res["navsync_within_1p1_kf_gins"] = sum(n <= 1.1 * k for n, k in pairs) / len(pairs)
+    c = res["coverage_2sigma"]
+    print(f"{len(runs)} runs: {res['nan_runs']} with NaN, {res['silent_failures']} silent failures, "
+          f"{res['failed_runs']} failed (saying why); within 2 sigma: north {c['north']:.3f}, east {c['east']:.3f}, "
+          f"yaw {c['yaw']:.3f} over {epochs} epochs, delay {c['delay']:.3f} of {len(delays)} runs"
+          + (f"; navsync <= 1.1 x KF-GINS on {res['navsync_within_1p1_kf_gins']:.2f} of {len(pairs)} drives"
+             if pairs else ""))
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(res, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
