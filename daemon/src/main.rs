@@ -3,6 +3,7 @@
 //! code live in its module (`live/` process shells, `tools/` offline tools).
 
 use std::path::PathBuf;
+use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -18,6 +19,10 @@ struct Cli {
     /// Configuration file (default /etc/navsync/navsync.toml when it exists); flags override it.
     #[arg(long, global = true, value_name = "FILE")]
     config: Option<PathBuf>,
+    /// Debug logging (unless RUST_LOG says otherwise), and an error's backtrace when one was
+    /// captured (RUST_BACKTRACE=1). Without it, an error is one message and no backtrace.
+    #[arg(short, long, global = true)]
+    verbose: bool,
     #[command(subcommand)]
     cmd: Cmd,
 }
@@ -81,13 +86,34 @@ enum Cmd {
     Install(install::Options),
 }
 
-fn main() -> Result<()> {
+fn main() -> ExitCode {
     let cli = Cli::parse();
+    let verbose = cli.verbose || logging::debug_requested();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // The message and its causes on one line; a backtrace only when asked for: a
+            // configuration or flag error is the user's to fix, not a crash to debug.
+            eprintln!("Error: {e:#}");
+            if verbose && e.backtrace().status() == std::backtrace::BacktraceStatus::Captured {
+                eprintln!("\nBacktrace:\n{}", e.backtrace());
+            }
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
     if matches!(cli.cmd, Cmd::CheckConfig) {
         return check_config::run(cli.config.as_deref());
     }
     let cfg = config::load(cli.config.as_deref())?;
-    logging::init(cfg.config.logging.level.as_deref());
+    let level = if cli.verbose {
+        Some("debug")
+    } else {
+        cfg.config.logging.level.as_deref()
+    };
+    logging::init(level);
     match cli.cmd {
         Cmd::Gnss(o) => gnss::run(o, &cfg),
         Cmd::Imu(o) => imu::run(o, &cfg),
