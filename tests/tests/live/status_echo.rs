@@ -252,6 +252,61 @@ fn publish_until_exit<T: navsync_shared::ipc::IpcSample>(
     child.wait_with_output().unwrap()
 }
 
+/// `status`: a 1 Hz service is 1 Hz over a window that holds 2 or 3 of its samples (the
+/// intervals between them are counted, not the samples); a process with two iceoryx2 nodes
+/// (a `TimeState` publisher has one more for the Python clients' wake-up) is one row; with
+/// nothing running it says so and fails, without a backtrace even with RUST_BACKTRACE=1.
+#[test]
+fn status_rates_count_intervals_a_process_is_one_row_and_nothing_running_fails() {
+    use navsync_shared::samples::TimeState;
+    use navsync_shared::time::monotonic_now_ns;
+    use std::process::Stdio;
+
+    let env = TestEnv::new("statusrate");
+    let o = env
+        .command(&["status", "--window", "0.5"])
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "nothing running, yet: {err}");
+    assert!(err.contains("nothing is running under the iceoryx2 prefix"), "{err}");
+    assert!(!err.contains("acktrace"), "{err}");
+
+    let node = env.node("timekeeper");
+    let mut publisher = node.publisher::<TimeState>(services::TIME_STATE).unwrap();
+    let child = env
+        .command(&["status", "--json", "--window", "2.5"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let base = monotonic_now_ns();
+    let o = publish_until_exit(&mut publisher, child, Duration::from_secs(1), |k| {
+        let mut t = TimeState::unknown();
+        t.computed_host_ns = base + i64::try_from(k).unwrap() * 1_000_000_000;
+        t.seq = k;
+        t
+    });
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let time = service(&r, services::TIME_STATE);
+    let samples = time["samples"].as_u64().unwrap();
+    let rate = time["rate_hz"].as_f64().unwrap();
+    println!("{samples} samples of a 1 Hz service in 2.5 s: {rate} Hz");
+    assert!((2..=3).contains(&samples), "{time}");
+    assert!((rate - 1.0).abs() < 0.01, "1 Hz shown as {rate} Hz: {time}");
+    let rows: Vec<&Value> = r["processes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["name"] == "timekeeper")
+        .collect();
+    assert_eq!(rows.len(), 1, "{:#}", r["processes"]);
+    drop((publisher, node));
+    env.finish();
+}
+
 /// `echo`: enumerations by name (`status=aligned`), `--raw` for their numbers, and a field
 /// asked for by `--fields` printed as `null` when it has no value.
 #[test]
