@@ -60,6 +60,31 @@ fn a_configuration_error_is_one_message_in_the_users_words_without_a_backtrace()
 }
 
 #[test]
+fn a_number_flag_says_what_it_expected() {
+    let env = TestEnv::new("flagnum");
+    for (args, wanted) in [
+        (
+            &["echo", "navsync/nav/state", "--count", "x"][..],
+            "expected a whole number",
+        ),
+        (&["echo", "navsync/nav/state", "--rate", "fast"], "expected a number"),
+        (&["estimator", "--gnss-vel-std", "fast"], "is not a number"),
+    ] {
+        let (ok, err) = run(&env, &[("RUST_BACKTRACE", "1")], args);
+        assert!(!ok, "{args:?} accepted");
+        assert!(err.contains(wanted), "{args:?}: {err}");
+        assert!(
+            !err.contains("invalid digit") && !err.contains("float literal"),
+            "Rust's wording: {err}"
+        );
+        assert!(!err.contains("acktrace"), "{err}");
+    }
+    // Help is still help, on stdout, with success.
+    let o = env.command(&["echo", "--help"]).output().unwrap();
+    assert!(o.status.success() && String::from_utf8_lossy(&o.stdout).contains("--raw"));
+}
+
+#[test]
 fn only_standard_baud_rates_are_accepted() {
     let env = TestEnv::new("baud");
     let file = env.dir.join("navsync.toml");
