@@ -19,7 +19,8 @@ fn the_example_is_valid_and_complete() {
     let l = Loaded::parse(EXAMPLE, Path::new("navsync.toml.example")).unwrap_or_else(|e| panic!("{e}"));
     let c = &l.config;
     assert_eq!(c.gnss["0"].baud, Some(Baud::Auto));
-    assert_eq!(c.gnss["0"].protocol, Some(Protocol::Nmea));
+    assert_eq!(c.gnss["0"].protocol, Some(Protocol::Auto));
+    assert_eq!(c.gnss["0"].configure, Some(false));
     assert_eq!(c.gnss["0"].lever_arm_m, [0.10, 0.0, -1.20]);
     assert_eq!(c.pps["0"].source.to_string(), "kernel:/dev/pps0");
     assert_eq!(c.imu["0"].axes, Some("x,-y,-z".parse().unwrap()));
