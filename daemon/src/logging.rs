@@ -6,6 +6,15 @@ use tracing::Level;
 use tracing_subscriber::filter::Targets;
 use tracing_subscriber::prelude::*;
 
+/// Whether `$RUST_LOG` asks for debug (or trace) messages: then an error also shows its
+/// backtrace, as with `-v`.
+pub fn debug_requested() -> bool {
+    std::env::var("RUST_LOG").is_ok_and(|s| {
+        let s = s.to_ascii_lowercase();
+        s.contains("debug") || s.contains("trace")
+    })
+}
+
 /// Installs the subscriber (once; later calls do nothing).
 pub fn init(config_level: Option<&str>) {
     let filter: Targets = std::env::var("RUST_LOG")

@@ -3,6 +3,7 @@
 //! code live in its module (`live/` process shells, `tools/` offline tools).
 
 use std::path::PathBuf;
+use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -18,6 +19,10 @@ struct Cli {
     /// Configuration file (default /etc/navsync/navsync.toml when it exists); flags override it.
     #[arg(long, global = true, value_name = "FILE")]
     config: Option<PathBuf>,
+    /// Debug logging (unless RUST_LOG says otherwise), and an error's backtrace when one was
+    /// captured (RUST_BACKTRACE=1). Without it, an error is one message and no backtrace.
+    #[arg(short, long, global = true)]
+    verbose: bool,
     #[command(subcommand)]
     cmd: Cmd,
 }
@@ -81,13 +86,66 @@ enum Cmd {
     Install(install::Options),
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return flag_error(e),
+    };
+    let verbose = cli.verbose || logging::debug_requested();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // The message and its causes on one line; a backtrace only when asked for: a
+            // configuration or flag error is the user's to fix, not a crash to debug.
+            eprintln!("Error: {e:#}");
+            if verbose && e.backtrace().status() == std::backtrace::BacktraceStatus::Captured {
+                eprintln!("\nBacktrace:\n{}", e.backtrace());
+            }
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// A command-line error in the user's words: the standard library's number parsers say
+/// "invalid digit found in string" or "invalid float literal"; the message says what was
+/// expected. Help and version go out as clap prints them.
+fn flag_error(e: clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        e.exit();
+    }
+    eprint!("{}", user_words(&e.render().to_string()));
+    ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(2))
+}
+
+/// Rust's wording of a number that did not parse, as the user would say it.
+fn user_words(message: &str) -> String {
+    [
+        ("invalid digit found in string", "expected a whole number"),
+        ("invalid float literal", "expected a number"),
+        ("cannot parse integer from empty string", "expected a whole number"),
+        ("cannot parse float from empty string", "expected a number"),
+        ("number too large to fit in target type", "a number too large"),
+        ("number too small to fit in target type", "a number too small"),
+    ]
+    .iter()
+    .fold(message.to_string(), |m, (rust, user)| m.replace(rust, user))
+}
+
+fn run(cli: Cli) -> Result<()> {
     if matches!(cli.cmd, Cmd::CheckConfig) {
         return check_config::run(cli.config.as_deref());
     }
     let cfg = config::load(cli.config.as_deref())?;
-    logging::init(cfg.config.logging.level.as_deref());
+    let level = if cli.verbose {
+        Some("debug")
+    } else {
+        cfg.config.logging.level.as_deref()
+    };
+    logging::init(level);
     match cli.cmd {
         Cmd::Gnss(o) => gnss::run(o, &cfg),
         Cmd::Imu(o) => imu::run(o, &cfg),
@@ -128,6 +186,28 @@ mod tests {
     /// clap's own consistency checks of every subcommand (unique ids and groups, valid
     /// `requires`/`conflicts_with` references), which otherwise only fire when a debug build
     /// parses that subcommand.
+    #[test]
+    fn number_flags_say_what_was_expected() {
+        use clap::Parser;
+        for (args, wanted) in [
+            (
+                &["echo", "navsync/nav/state", "--count", "x"][..],
+                "expected a whole number",
+            ),
+            (&["echo", "navsync/nav/state", "--rate", "fast"], "expected a number"),
+        ] {
+            let e = super::Cli::try_parse_from(std::iter::once("navsync").chain(args.iter().copied()))
+                .err()
+                .unwrap_or_else(|| panic!("{args:?} accepted"));
+            let text = super::user_words(&e.render().to_string());
+            assert!(text.contains(wanted), "{args:?}: {text}");
+            assert!(
+                !text.contains("invalid digit") && !text.contains("float literal"),
+                "{text}"
+            );
+        }
+    }
+
     #[test]
     fn the_command_line_is_consistent() {
         super::Cli::command().debug_assert();

@@ -288,7 +288,7 @@ pub fn apply_file(s: &mut Settings, cfg: &Loaded) -> Result<(), ConfigError> {
             let at = format!("{section}.{key}");
             match s.set_value(section, key, value.clone()) {
                 Some(Ok(())) => {}
-                Some(Err(e)) => return Err(cfg.error_at(&at, e.message().trim().to_string())),
+                Some(Err(e)) => return Err(cfg.error_at(&at, super::user_wording(e.message()))),
                 None => {
                     let known: Vec<_> = Settings::specs()
                         .into_iter()

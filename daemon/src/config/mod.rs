@@ -29,8 +29,9 @@
 //! Sections deserialise straight into the types the roles use (the drivers' `Baud`,
 //! `Protocol`, `ImuSource`, PPS `SourceSpec`, `AxisMap`, the IMU preset), with the same text
 //! as on the command line. Errors name the file, the line, the column and the field, and say
-//! what was expected (`navsync.toml:12:11: imu.0.rate_hz: invalid type: string "fast",
-//! expected f64`); keys the file does not know are errors, not silently ignored.
+//! what was expected in the user's words, not Rust's ([`user_wording`]: `navsync.toml:12:11:
+//! imu.0.rate_hz: expected a number, found "fast" (text)`); keys the file does not know are
+//! errors, not silently ignored.
 //! [`Loaded::load`] checks what the types cannot (ranges, ids, cross references).
 //!
 //! Precedence, per field, is explicit in each role's options: a flag given on the command
@@ -104,6 +105,70 @@ impl fmt::Display for ConfigError {
 }
 
 impl std::error::Error for ConfigError {}
+
+/// A deserialiser's message in the words of a configuration file's reader: serde's
+/// `invalid type: string "fast", expected f64` becomes `expected a number, found "fast"
+/// (text)`, Rust's type names (`f64`, `u32`, `a sequence`, …) what one writes in TOML.
+/// Other messages are kept as they are.
+pub fn user_wording(message: &str) -> String {
+    let message = message.trim();
+    for head in ["invalid type: ", "invalid value: ", "invalid length "] {
+        if let Some((found, expected)) = message
+            .strip_prefix(head)
+            .and_then(|rest| rest.rsplit_once(", expected "))
+        {
+            return format!("expected {}, found {}", expected_words(expected), found_words(found));
+        }
+    }
+    message.to_string()
+}
+
+/// What serde says was expected, as a reader of TOML says it.
+fn expected_words(e: &str) -> String {
+    let e = e.trim();
+    match e {
+        "f64" | "f32" => "a number".into(),
+        "u8" | "u16" | "u32" | "u64" | "u128" | "usize" => "a whole number ≥ 0".into(),
+        "i8" | "i16" | "i32" | "i64" | "i128" | "isize" => "a whole number".into(),
+        "a boolean" => "true or false".into(),
+        "a string" | "a borrowed string" => "text in quotes".into(),
+        "a sequence" => "a list [...]".into(),
+        "a map" => "a table".into(),
+        _ => {
+            if let Some(n) = e
+                .strip_prefix("an array of length ")
+                .or_else(|| e.strip_prefix("a tuple of size "))
+            {
+                format!("a list of {n} values [...]")
+            } else if let Some(name) = e.strip_prefix("struct ") {
+                format!("a table ({name})")
+            } else {
+                e.to_string()
+            }
+        }
+    }
+}
+
+/// What serde says it found, as written in the file.
+fn found_words(f: &str) -> String {
+    let f = f.trim();
+    let quoted = |s: &str| s.trim_matches('`').to_string();
+    if let Some(s) = f.strip_prefix("string ") {
+        format!("{s} (text)")
+    } else if let Some(s) = f
+        .strip_prefix("integer ")
+        .or_else(|| f.strip_prefix("floating point "))
+        .or_else(|| f.strip_prefix("boolean "))
+    {
+        quoted(s)
+    } else {
+        match f {
+            "sequence" => "a list".into(),
+            "map" => "a table".into(),
+            other => other.to_string(),
+        }
+    }
+}
 
 /// `[logging]`.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
@@ -362,7 +427,7 @@ impl Loaded {
                 file: file.to_path_buf(),
                 line: span.as_ref().map(|s| map.line_col(s.start)),
                 field: span.and_then(|s| map.field_at(s.start)).map(str::to_string),
-                message: e.message().trim().to_string(),
+                message: user_wording(e.message()),
             }
         })?;
         let loaded = Self {

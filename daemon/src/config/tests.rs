@@ -19,7 +19,8 @@ fn the_example_is_valid_and_complete() {
     let l = Loaded::parse(EXAMPLE, Path::new("navsync.toml.example")).unwrap_or_else(|e| panic!("{e}"));
     let c = &l.config;
     assert_eq!(c.gnss["0"].baud, Some(Baud::Auto));
-    assert_eq!(c.gnss["0"].protocol, Some(Protocol::Nmea));
+    assert_eq!(c.gnss["0"].protocol, Some(Protocol::Auto));
+    assert_eq!(c.gnss["0"].configure, Some(false));
     assert_eq!(c.gnss["0"].lever_arm_m, [0.10, 0.0, -1.20]);
     assert_eq!(c.pps["0"].source.to_string(), "kernel:/dev/pps0");
     assert_eq!(c.imu["0"].axes, Some("x,-y,-z".parse().unwrap()));
@@ -66,7 +67,21 @@ fn wrong_type_names_the_field() {
     let e = err("[imu.0]\nsource = \"sim\"\nrate_hz = \"fast\"\n");
     assert_eq!(e.line, Some((3, 11)), "{e}");
     assert_eq!(e.field.as_deref(), Some("imu.0.rate_hz"), "{e}");
-    assert!(e.message.contains("expected"), "{e}");
+    assert_eq!(e.message, "expected a number, found \"fast\" (text)", "{e}");
+    assert_eq!(
+        e.to_string(),
+        "t.toml:3:11: imu.0.rate_hz: expected a number, found \"fast\" (text)"
+    );
+    let e = err("[outputs.ntpshm]\nunit = -1\n");
+    assert_eq!(e.message, "expected a whole number ≥ 0, found -1", "{e}");
+    let e = err("[gps.0]\nport = \"/dev/x\"\nconfigure = \"yes\"\n");
+    assert_eq!(e.message, "expected true or false, found \"yes\" (text)", "{e}");
+    // The estimator's settings (read by their declarations) say it the same way.
+    let e = err("[estimator]\ngnss_vel_std_mps = \"fast\"\n");
+    assert_eq!(
+        e.to_string(),
+        "t.toml:2:20: estimator.gnss_vel_std_mps: expected a number, found \"fast\" (text)"
+    );
     let e = err("[gps.0]\nport = \"/dev/x\"\nbaud = \"fast\"\n");
     assert_eq!(e.field.as_deref(), Some("gps.0.baud"), "{e}");
     assert!(e.message.contains("\"auto\""), "{e}");
@@ -75,6 +90,7 @@ fn wrong_type_names_the_field() {
     let e = err("[gps.0]\nport = \"/dev/x\"\nbaud = 12345\n");
     assert_eq!(e.field.as_deref(), Some("gps.0.baud"), "{e}");
     assert!(e.message.contains("standard baud rate"), "{e}");
+    assert!(e.message.ends_with("found 12345"), "{e}");
     let e = err("[gps.0]\nbaud = 9600\n");
     assert!(e.message.contains("missing field `port`"), "{e}");
     // `[gnss.ID]` is the name; `[gps.ID]` reads the same.
@@ -90,6 +106,39 @@ fn wrong_type_names_the_field() {
     assert_eq!(e.field.as_deref(), Some("imu.0.axes"), "{e}");
     let e = err("[imu.0]\nsource = \"sim\"\nmounting = { rotation_deg = [0, 0] }\n");
     assert_eq!(e.line.map(|l| l.0), Some(3), "{e}");
+}
+
+#[test]
+fn serde_wording_becomes_the_readers() {
+    for (serde, user) in [
+        (
+            "invalid type: string \"fast\", expected f64",
+            "expected a number, found \"fast\" (text)",
+        ),
+        (
+            "invalid type: integer `3`, expected a string",
+            "expected text in quotes, found 3",
+        ),
+        (
+            "invalid type: floating point `1.5`, expected u32",
+            "expected a whole number ≥ 0, found 1.5",
+        ),
+        (
+            "invalid type: boolean `true`, expected i64",
+            "expected a whole number, found true",
+        ),
+        (
+            "invalid type: sequence, expected a boolean",
+            "expected true or false, found a list",
+        ),
+        (
+            "invalid length 2, expected an array of length 3",
+            "expected a list of 3 values [...], found 2",
+        ),
+        ("missing field `port`", "missing field `port`"),
+    ] {
+        assert_eq!(user_wording(serde), user, "{serde}");
+    }
 }
 
 #[test]

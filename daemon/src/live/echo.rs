@@ -6,6 +6,10 @@
 //!   are rejected before anything is received.
 //! * `--rate N` prints at most N lines per second (the newest sample when a line is due;
 //!   the others are skipped).
+//!   A field asked for is always printed, `null` when it has no value (a NaN, an unknown time).
+//! * Enumerations print as their names (`status=aligned time_status=locked
+//!   stamp.source=kernel-pps`); `--raw` prints their numbers. `--json` is the recordings'
+//!   encoding and keeps the numbers.
 //! * `--hz` prints, once per second, the measured rate instead of the samples: samples per
 //!   second of wall time, the mean/min/max spacing of their host stamps, and sequence gaps.
 
@@ -42,6 +46,10 @@ pub struct EchoArgs {
     /// Print only these fields, e.g. `lat_deg,lon_deg,stamp.host_ns,vel_ned_mps[2]`.
     #[arg(long, value_delimiter = ',')]
     pub fields: Vec<String>,
+    /// Enumerations as their numbers (status=1) instead of their names (status=aligned).
+    /// `--json` always gives the numbers.
+    #[arg(long)]
+    pub raw: bool,
     /// Receive through Zenoh from this endpoint (e.g. tcp/192.168.1.10:7447) instead of the
     /// local iceoryx2: one JSON line per sample with its instance and sequence number (needs
     /// the `zenoh` feature).
@@ -281,13 +289,22 @@ fn echo<T: navsync_shared::ipc::IpcSample>(
     let mut window_start = Instant::now();
     let print = |out: &mut std::io::StdoutLock, sample: &T| -> Result<(), EchoError> {
         let mut v = to_json(sample);
-        if !fields.is_empty() {
-            v = select(&v, &fields);
+        if !args.json && !args.raw {
+            name_enums(T::TYPE_NAME, &mut v);
         }
-        if args.json {
-            writeln!(out, "{v}")?;
+        if fields.is_empty() {
+            if args.json {
+                writeln!(out, "{v}")?;
+            } else {
+                writeln!(out, "{}", human(&v))?;
+            }
         } else {
-            writeln!(out, "{}", human(&v))?;
+            let v = select(&v, &fields);
+            if args.json {
+                writeln!(out, "{v}")?;
+            } else {
+                writeln!(out, "{}", human_selected(&v))?;
+            }
         }
         Ok(())
     };
@@ -345,6 +362,101 @@ fn echo<T: navsync_shared::ipc::IpcSample>(
         }
     }
     Ok(())
+}
+
+/// The name of value `v` of an enumerated field: `path` is the field's path with array
+/// indices as `[]` (`imu[].reason`), `sample` the sample type's name without its version.
+/// `None`: not an enumeration, or a value without a name (printed as its number).
+fn enum_name(sample: &str, path: &str, v: u64) -> Option<&'static str> {
+    let v = u8::try_from(v).ok()?;
+    let named = |name: &'static str| (name != "unknown").then_some(name);
+    match (sample, path) {
+        (_, "stamp.source") if v <= 7 => Some(StampSource::from_u8(v).name()),
+        ("NavState", "status") => named(NavStatus::name(v)),
+        ("NavState" | "TimeState", "time_status" | "status") if v <= 4 => Some(TimeStatus::from_u8(v).name()),
+        ("NavState" | "TimeState", "imu[].reason") => named(ImuSyncReason::name(v)),
+        ("GnssFix", "mode") => ["unknown", "no-fix", "2d", "3d"].get(usize::from(v)).copied(),
+        ("GnssFix", "quality") => match v {
+            0 => Some("invalid"),
+            1 => Some("gps"),
+            2 => Some("dgps"),
+            3 => Some("pps"),
+            4 => Some("rtk-fixed"),
+            5 => Some("rtk-float"),
+            6 => Some("dead-reckoning"),
+            7 => Some("manual"),
+            8 => Some("simulation"),
+            255 => Some("unknown"),
+            _ => None,
+        },
+        ("GnssFix", "protocol") => match v {
+            GNSS_PROTOCOL_NMEA => Some("nmea"),
+            GNSS_PROTOCOL_UBX => Some("ubx"),
+            _ => None,
+        },
+        ("GnssTimePulse", "time_base") => ["gnss", "utc"].get(usize::from(v)).copied(),
+        _ => None,
+    }
+}
+
+/// Replaces the numbers of the enumerated fields of a sample of type `type_name` by their
+/// names ([`enum_name`]).
+fn name_enums(type_name: &str, v: &mut Value) {
+    fn walk(sample: &str, path: &mut String, v: &mut Value) {
+        match v {
+            Value::Object(m) => {
+                for (k, x) in m.iter_mut() {
+                    let len = path.len();
+                    if !path.is_empty() {
+                        path.push('.');
+                    }
+                    path.push_str(k);
+                    walk(sample, path, x);
+                    path.truncate(len);
+                }
+            }
+            Value::Array(a) => {
+                let len = path.len();
+                path.push_str("[]");
+                for x in a.iter_mut().filter(|x| x.is_object()) {
+                    walk(sample, path, x);
+                }
+                path.truncate(len);
+            }
+            Value::Number(n) => {
+                if let Some(name) = n.as_u64().and_then(|x| enum_name(sample, path, x)) {
+                    *v = Value::String(name.to_string());
+                }
+            }
+            _ => {}
+        }
+    }
+    // `navsync.NavState.v2` → `NavState`.
+    let sample = type_name.split('.').nth(1).unwrap_or(type_name);
+    walk(sample, &mut String::new(), v);
+}
+
+/// The line of `--fields`: every field asked for, in the order asked, `null` when it has no
+/// value (the full line leaves unknowns out; a field asked for is never dropped).
+fn human_selected(v: &Value) -> String {
+    let mut parts = Vec::new();
+    if let Value::Object(m) = v {
+        for (k, x) in m {
+            match x {
+                Value::Null => parts.push(format!("{k}=null")),
+                Value::String(s) if s.is_empty() => parts.push(format!("{k}=\"\"")),
+                _ => {
+                    let before = parts.len();
+                    flatten(k, x, &mut parts);
+                    if parts.len() == before {
+                        // An object or array whose every part is empty.
+                        parts.push(format!("{k}={x}"));
+                    }
+                }
+            }
+        }
+    }
+    parts.join(" ")
 }
 
 /// One line of `key=value` pairs, nested keys dotted, unknown (null) values and empty
@@ -454,6 +566,40 @@ mod tests {
         for bad in ["lat", "stamp.nope", "vel_ned_mps[3]", "vel_ned_mps[x]", "a..b"] {
             assert!(field_paths::<NavState>(&[bad.into()]).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn enums_print_as_names_and_asked_for_nulls_as_null() {
+        let mut n = NavState::zeroed();
+        n.status = NavStatus::Aligned as u8;
+        n.time_status = TimeStatus::Locked as u8;
+        n.imu_count = 1;
+        n.imu[0].reason = ImuSyncReason::Converging as u8;
+        n.gnss_delay_s = f64::NAN;
+        let mut v = to_json(&n);
+        name_enums(NavState::TYPE_NAME, &mut v);
+        assert_eq!(v["status"], "aligned");
+        assert_eq!(v["time_status"], "locked");
+        assert_eq!(v["imu"][0]["reason"], "converging");
+        assert_eq!(v["imu_count"], 1, "not an enumeration");
+        let line = human(&v);
+        assert!(
+            line.contains("status=aligned") && line.contains("time_status=locked"),
+            "{line}"
+        );
+        let paths = field_paths::<NavState>(&["status".into(), "gnss_delay_s".into(), "seq".into()]).unwrap();
+        assert_eq!(
+            human_selected(&select(&v, &paths)),
+            "status=aligned gnss_delay_s=null seq=0"
+        );
+        let mut fix = to_json(&GnssFix::empty(Stamp::host(5, 1, StampSource::KernelPps)));
+        name_enums(GnssFix::TYPE_NAME, &mut fix);
+        assert_eq!(fix["stamp"]["source"], "kernel-pps");
+        // A value without a name stays a number.
+        n.status = 200;
+        let mut v = to_json(&n);
+        name_enums(NavState::TYPE_NAME, &mut v);
+        assert_eq!(v["status"], 200);
     }
 
     #[test]

@@ -24,7 +24,7 @@ pub struct Options {
     #[arg(long = "loop")]
     pub looped: bool,
     /// Line rate of the emulated device: paces raw captures; a reader at another rate gets garbage.
-    #[arg(long)]
+    #[arg(long, value_parser = standard_baud)]
     pub baud: Option<u32>,
     /// Wait until a reader has opened the port (and flushed it) before sending.
     #[arg(long)]
@@ -32,6 +32,16 @@ pub struct Options {
     /// Seconds to keep the port open after the end.
     #[arg(long, default_value_t = 1.0)]
     pub hold: f64,
+}
+
+/// A standard line rate (termios's, as a serial device takes: 9600, 115200, …).
+fn standard_baud(s: &str) -> Result<u32, String> {
+    match s.parse::<navsync_drivers::gnss::driver::Baud>()? {
+        navsync_drivers::gnss::driver::Baud::Fixed(b) => Ok(b),
+        navsync_drivers::gnss::driver::Baud::Auto => {
+            Err("`auto`: expected a standard baud rate (9600, 115200, …)".into())
+        }
+    }
 }
 
 /// Plays the capture; prints what was sent.

@@ -4,7 +4,9 @@
 //! Discovery is iceoryx2's own: [`Node::list`] finds the processes (nodes) under the navsync
 //! resource prefix (`$NAVSYNC_IPC_PREFIX` or `navsync_`), `Service::list` the services. Every
 //! navsync publish-subscribe service is opened (never created) and subscribed to for the
-//! measurement window: the rate is what arrived in it, the last-sample age is the host clock
+//! measurement window: the rate is the number of intervals between the samples that arrived
+//! in it over the time their own stamps span (so a 1 Hz service over a 2 s window is 1 Hz,
+//! whether 2 or 3 of its samples fell in the window), the last-sample age is the host clock
 //! minus the newest sample's own stamp (`CLOCK_MONOTONIC`), and publisher/subscriber counts
 //! come from the service's dynamic configuration (this process's own subscriber not counted).
 //! The latest `Health` of each process gives its counters; the latest `TimeState` and
@@ -18,6 +20,11 @@
 //! without cleaning up (`kill -9`: listed before this process's own node reclaims it) or
 //! vanished between two refreshes of `--watch`, so a killed process is reported, not silently
 //! missing.
+//!
+//! A process is one row even when it holds two iceoryx2 nodes (a publisher of `NavState` or
+//! `TimeState` has a second one, on iceoryx2's stock service type, for the Python clients).
+//! With nothing running under the prefix (no process, no service), a single report says so
+//! and exits non-zero.
 //!
 //! `--json` prints one JSON document (one line per refresh with `--watch`); `--watch S`
 //! refreshes every S seconds until Ctrl-C (`--count N` refreshes, then exits).
@@ -69,6 +76,12 @@ pub enum StatusError {
     /// Listing nodes or services failed.
     #[error("{0}")]
     Discovery(String),
+    /// No navsync process or service under the prefix.
+    #[error(
+        "nothing is running under the iceoryx2 prefix `{0}`: no navsync process, no service \
+         (the services' prefix and root are set by [ipc].prefix, $NAVSYNC_IPC_PREFIX and $NAVSYNC_IPC_ROOT)"
+    )]
+    NothingRunning(String),
     /// stdout closed.
     #[error("writing output: {0}")]
     Io(#[from] std::io::Error),
@@ -76,8 +89,9 @@ pub enum StatusError {
 
 /// One observed service, type-erased.
 trait Monitor {
-    /// Drains the subscriber; returns how many samples arrived.
-    fn poll(&mut self) -> usize;
+    /// Drains the subscriber; returns how many samples arrived and the host stamps of the
+    /// first and the last of them.
+    fn poll(&mut self) -> (usize, Option<(i64, i64)>);
     /// (publishers, subscribers) on the service, including this process's subscriber.
     fn ports(&self) -> (usize, usize);
     /// Host stamp of the newest sample ever received.
@@ -94,13 +108,17 @@ struct Typed<T: navsync_shared::ipc::IpcSample> {
 }
 
 impl<T: navsync_shared::ipc::IpcSample> Monitor for Typed<T> {
-    fn poll(&mut self) -> usize {
+    fn poll(&mut self) -> (usize, Option<(i64, i64)>) {
         let mut n = 0;
+        let mut stamps: Option<(i64, i64)> = None;
         while let Ok(Some(s)) = self.sub.receive() {
-            self.latest = Some(s.payload().0);
+            let sample = s.payload().0;
+            let h = (self.wrap)(sample).host_ns();
+            stamps = Some(stamps.map_or((h, h), |(first, _)| (first, h)));
+            self.latest = Some(sample);
             n += 1;
         }
-        n
+        (n, stamps)
     }
     fn ports(&self) -> (usize, usize) {
         let d = self.factory.dynamic_config();
@@ -159,6 +177,8 @@ struct Watched {
     monitor: Box<dyn Monitor>,
     /// Samples since the interval started.
     interval_samples: u64,
+    /// Host stamps of the first and the last of them.
+    interval_stamps: Option<(i64, i64)>,
     total: u64,
     last_arrival: Option<Instant>,
     /// Names of the nodes attached to the service, from discovery.
@@ -304,6 +324,7 @@ impl Status {
                             kind,
                             monitor,
                             interval_samples: 0,
+                            interval_stamps: None,
                             total: 0,
                             last_arrival: None,
                             nodes,
@@ -318,7 +339,11 @@ impl Status {
 
     fn poll(&mut self) {
         for w in self.services.values_mut() {
-            let n = w.monitor.poll() as u64;
+            let (n, stamps) = w.monitor.poll();
+            let n = n as u64;
+            if let Some((first, last)) = stamps {
+                w.interval_stamps = Some(w.interval_stamps.map_or((first, last), |(f, _)| (f, last)));
+            }
             if n > 0 {
                 w.interval_samples += n;
                 w.total += n;
@@ -344,13 +369,14 @@ impl Status {
                 "publishers": publishers,
                 "subscribers": subscribers.saturating_sub(1),
                 "nodes": w.nodes,
-                "rate_hz": w.interval_samples as f64 / span,
+                "rate_hz": rate_hz(w.interval_samples, w.interval_stamps, span),
                 "samples": w.interval_samples,
                 "received_total": w.total,
                 "last_sample_age_s": w.monitor.last_host_ns().map(age),
                 "last_received_s": w.last_arrival.map(|t| now.duration_since(t).as_secs_f64()),
             }));
             w.interval_samples = 0;
+            w.interval_stamps = None;
             match w.monitor.latest() {
                 Some(AnySample::Health(h)) => health.push(health_json(&h, now_ns)),
                 Some(AnySample::Time(t)) => time = Some(time_json(&t, now_ns)),
@@ -397,6 +423,18 @@ impl Status {
             "time_marks": marks,
             "nav": nav,
         })
+    }
+}
+
+/// The rate of `samples` that arrived in a window of `span_s` seconds, their own host stamps
+/// spanning `stamps` (first, last): the intervals between them over the time they span. A
+/// count over the window would show 1 Hz as 1.5 Hz when 3 samples of a 1 Hz service fall in a
+/// 2 s window. With fewer than two samples (or stamps that do not advance), the count over
+/// the window.
+pub fn rate_hz(samples: u64, stamps: Option<(i64, i64)>, span_s: f64) -> f64 {
+    match stamps {
+        Some((first, last)) if samples >= 2 && last > first => (samples - 1) as f64 / ((last - first) as f64 * 1e-9),
+        _ => samples as f64 / span_s.max(1e-3),
     }
 }
 
@@ -561,6 +599,15 @@ fn list_processes(
     })
     .map_err(|e| StatusError::Discovery(format!("listing nodes: {e:?}")))?;
     processes.sort_by(|a, b| (&a.name, a.pid).cmp(&(&b.name, b.pid)));
+    // One process, one row: a process may hold two nodes of the same name (the stock
+    // transport's beside navsync's, for a `NavState`/`TimeState` publisher's Python wake-up).
+    processes.dedup_by(|later, kept| {
+        let same = later.pid.is_some() && later.name == kept.name && later.pid == kept.pid;
+        if same && kept.state != "alive" {
+            kept.state = later.state;
+        }
+        same
+    });
     Ok(processes)
 }
 
@@ -589,9 +636,21 @@ pub fn render_text(r: &Value) -> String {
             p["why"].as_str().map_or(String::new(), |w| format!("  {w}"))
         );
     }
+    // The columns as wide as their longest entry (a type name such as
+    // navsync.GnssTimePulse.v1 overflowed a fixed width and shifted the row).
+    let width = |key: &str, header: &str| {
+        services
+            .iter()
+            .filter_map(|v| v[key].as_str())
+            .map(|x| x.chars().count())
+            .chain([header.len()])
+            .max()
+            .unwrap_or(0)
+    };
+    let (nw, tw) = (width("name", "SERVICE"), width("type", "TYPE"));
     let _ = writeln!(
         s,
-        "\n{:<28} {:<22} {:>3} {:>3} {:>9} {:>10}  NODES",
+        "\n{:<nw$} {:<tw$} {:>3} {:>3} {:>9} {:>10}  NODES",
         "SERVICE", "TYPE", "PUB", "SUB", "RATE Hz", "LAST AGE"
     );
     for v in services {
@@ -601,11 +660,11 @@ pub fn render_text(r: &Value) -> String {
             .unwrap_or_default();
         let _ = writeln!(
             s,
-            "{:<28} {:<22} {:>3} {:>3} {:>9} {:>10}  {}",
+            "{:<nw$} {:<tw$} {:>3} {:>3} {:>9} {:>10}  {}",
             v["name"].as_str().unwrap_or(""),
             v["type"].as_str().unwrap_or(""),
-            v["publishers"],
-            v["subscribers"],
+            v["publishers"].to_string(),
+            v["subscribers"].to_string(),
             num(&v["rate_hz"], 1),
             seconds(&v["last_sample_age_s"]),
             nodes.join(",")
@@ -637,12 +696,15 @@ pub fn render_text(r: &Value) -> String {
             num(&d0["max"], 6),
             d0["epochs"]
         );
-        let _ = writeln!(
-            s,
-            "      GNSS delay Δ {} ± {} s",
-            num(&t["gnss_delay_s"], 4),
-            num(&t["gnss_delay_std_s"], 4)
-        );
+        if !r["nav"].is_object() {
+            // Else it is on the NAV line (the same estimate).
+            let _ = writeln!(
+                s,
+                "      GNSS delay Δ {} ± {} s",
+                num(&t["gnss_delay_s"], 4),
+                num(&t["gnss_delay_std_s"], 4)
+            );
+        }
     } else {
         let _ = writeln!(s, "\nTIME  no time state");
     }
@@ -757,6 +819,9 @@ pub fn render_text(r: &Value) -> String {
 pub fn run(args: &StatusArgs) -> Result<(), StatusError> {
     let mut st = Status::new()?;
     st.discover()?;
+    if args.watch.is_none() && st.processes.is_empty() && st.gone.is_empty() && st.services.is_empty() {
+        return Err(StatusError::NothingRunning(ipc::prefix()));
+    }
     let mut out = std::io::stdout().lock();
     let tty = std::io::IsTerminal::is_terminal(&std::io::stdout());
     let interval = args.watch.unwrap_or(args.window);
@@ -813,5 +878,44 @@ mod tests {
         assert_eq!(refine_state("dead", None, None).0, "gone");
         assert_eq!(refine_state("gone", None, None), ("gone", None));
         assert_eq!(refine_state("inaccessible", None, None), ("inaccessible", None));
+    }
+
+    #[test]
+    fn service_columns_line_up_whatever_the_type_name() {
+        let service = |name: &str, ty: &str| {
+            json!({"name": name, "type": ty, "publishers": 1, "subscribers": 0, "rate_hz": 1.0,
+                   "last_sample_age_s": 0.1, "nodes": ["gnss-0"]})
+        };
+        let r = json!({
+            "prefix": "p_", "interval_s": 2.0, "processes": [],
+            "services": [
+                service("navsync/gnss/0/timepulse", "navsync.GnssTimePulse.v1"),
+                service("navsync/nav/state", "navsync.NavState.v2"),
+            ],
+        });
+        let text = render_text(&r);
+        let rows: Vec<&str> = text
+            .lines()
+            .filter(|l| l.starts_with("SERVICE") || l.starts_with("navsync/"))
+            .collect();
+        assert_eq!(rows.len(), 3, "{text}");
+        // The header's PUB and SUB columns hold each row's 1 and 0.
+        let at = rows[0].find("PUB").expect("header");
+        for row in &rows[1..] {
+            assert_eq!(&row[at + 2..at + 3], "1", "{text}");
+            assert_eq!(&row[at + 6..at + 7], "0", "{text}");
+        }
+    }
+
+    #[test]
+    fn the_rate_counts_intervals_between_samples() {
+        // 1 Hz: three samples 1 s apart fell in a 2.1 s window (a count said 1.43 Hz).
+        let r = rate_hz(3, Some((0, 2_000_000_000)), 2.1);
+        assert!((r - 1.0).abs() < 1e-12, "{r}");
+        // Two samples 1 s apart in the same window: 1 Hz as well.
+        assert!((rate_hz(2, Some((5, 1_000_000_005)), 2.1) - 1.0).abs() < 1e-12);
+        // One sample: the count over the window; none: 0.
+        assert!((rate_hz(1, Some((7, 7)), 2.0) - 0.5).abs() < 1e-12);
+        assert_eq!(rate_hz(0, None, 2.0), 0.0);
     }
 }

@@ -1,5 +1,16 @@
 //! `navsync install`: the binary, the systemd units, sysusers/tmpfiles/udev files and the
-//! example configuration into place (README "## Running as a service").
+//! example configuration into place (docs/guide/install.md).
+//!
+//! Two layouts. Without `--prefix`, the administrator's system install: the binary to
+//! `/usr/local/bin/navsync`, everything else to `/etc` (where systemd, udev and every navsync
+//! command look first). With `--prefix DIR`, everything under `DIR` and nothing outside it:
+//! `DIR/bin/navsync`, `DIR/lib/systemd/system/`, `DIR/lib/sysusers.d/`, `DIR/lib/tmpfiles.d/`,
+//! `DIR/lib/udev/rules.d/` and `DIR/etc/navsync/`, the units naming that binary and that
+//! configuration file (systemd, systemd-sysusers, systemd-tmpfiles and udev read
+//! `/usr/local/lib/…` as well as `/etc`, so `--prefix /usr/local` is a working install).
+//! `--root DIR` stages either layout below DIR (an image or a package tree: the files go to
+//! `DIR/…`, the units name the paths without `DIR`). `--dry-run` writes nothing and lists
+//! what would be written. An existing configuration file is never overwritten.
 
 use std::path::{Path, PathBuf};
 
@@ -8,23 +19,60 @@ use anyhow::{Context, Result};
 /// `navsync install`.
 #[derive(clap::Args, Debug)]
 pub struct Options {
-    /// Installation prefix: the binary goes to PREFIX/bin/navsync, which the units run.
-    #[arg(long, default_value = "/usr/local")]
-    pub prefix: PathBuf,
-    /// Staging root (an image or package tree): every file goes below it.
-    #[arg(long, default_value = "/")]
+    /// Install everything under DIR and nothing outside it: DIR/bin/navsync, the units in
+    /// DIR/lib/systemd/system, sysusers, tmpfiles and udev files in DIR/lib/…, the
+    /// configuration in DIR/etc/navsync (the units name both). Without it: the binary to
+    /// /usr/local/bin and the rest to /etc.
+    #[arg(long, value_name = "DIR")]
+    pub prefix: Option<PathBuf>,
+    /// Staging root (an image or a package tree): every file goes below DIR, while the units
+    /// name the paths as they will be on the target (without DIR).
+    #[arg(long, value_name = "DIR", default_value = "/")]
     pub root: PathBuf,
+    /// Write nothing: list every file that would be written (and an existing configuration
+    /// that would be kept).
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
-/// Installs and prints every file written and what to do next.
+/// Installs (or, with `--dry-run`, lists) every file and says what to do next.
 pub fn run(opts: Options) -> Result<()> {
-    let done = install(&opts.prefix, &opts.root)?;
-    for f in &done.files {
-        println!("{}", f.display());
+    let layout = Layout::new(opts.prefix.as_deref())?;
+    let plan = plan(&layout, &opts.root)?;
+    let mut out = std::io::stdout().lock();
+    use std::io::Write as _;
+    for step in &plan {
+        match step {
+            Step::Write { path, .. } | Step::CopySelf { path } if opts.dry_run => {
+                writeln!(out, "would write {}", path.display())?;
+            }
+            Step::Keep { path } if opts.dry_run => {
+                writeln!(out, "would keep {} (it exists: never overwritten)", path.display())?;
+            }
+            Step::Keep { path } => {
+                eprintln!("kept {}: it exists and is never overwritten", path.display());
+            }
+            _ => {}
+        }
     }
+    if opts.dry_run {
+        eprintln!("dry run: nothing was written");
+        return Ok(());
+    }
+    for step in &plan {
+        if let Some(path) = apply(step)? {
+            writeln!(out, "{}", path.display())?;
+        }
+    }
+    let conf = layout.config.display();
+    let check = if layout.config == Path::new(crate::config::DEFAULT_PATH) {
+        "navsync check-config".to_string()
+    } else {
+        format!("navsync --config {conf} check-config")
+    };
     eprintln!(
         "then: systemd-sysusers; systemd-tmpfiles --create; udevadm control --reload; systemctl daemon-reload; \
-         edit /etc/navsync/navsync.toml; navsync check-config; systemctl enable --now navsync.target"
+         edit {conf}; {check}; systemctl enable --now navsync.target"
     );
     Ok(())
 }
@@ -70,58 +118,156 @@ const TMPFILES: &str = include_str!("../../../systemd/navsync.tmpfiles");
 const UDEV: &str = include_str!("../../../systemd/99-navsync.rules");
 const EXAMPLE: &str = include_str!("../../../systemd/navsync.toml.example");
 
-/// Where `navsync install` put what.
-#[derive(Debug, Default)]
-pub struct Installed {
-    /// Every file written.
-    pub files: Vec<PathBuf>,
+/// Where the installed files go on the target (without `--root`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Layout {
+    /// The binary the units run.
+    pub bin: PathBuf,
+    /// The systemd system units.
+    pub units: PathBuf,
+    /// The sysusers.d file.
+    pub sysusers: PathBuf,
+    /// The tmpfiles.d file.
+    pub tmpfiles: PathBuf,
+    /// The udev rule.
+    pub udev: PathBuf,
+    /// The configuration file the units read (the example beside it, `.example`).
+    pub config: PathBuf,
 }
 
-/// `navsync install --prefix PREFIX [--root ROOT]`: the binary to `ROOT/PREFIX/bin/navsync`,
-/// the units (their `ExecStart=` pointing at `PREFIX/bin/navsync`) to
-/// `ROOT/etc/systemd/system/`, sysusers.d, tmpfiles.d and the udev rules to `ROOT/etc/…`,
-/// the example to `ROOT/etc/navsync/navsync.toml.example` and, when there is none yet,
-/// `ROOT/etc/navsync/navsync.toml`. `ROOT` (default `/`) stages an image or a package.
-pub fn install(prefix: &Path, root: &Path) -> Result<Installed> {
+impl Layout {
+    /// Without a prefix the system layout (binary in `/usr/local/bin`, the rest in `/etc`);
+    /// with one, everything under it.
+    pub fn new(prefix: Option<&Path>) -> Result<Self> {
+        let Some(p) = prefix else {
+            return Ok(Self {
+                bin: "/usr/local/bin/navsync".into(),
+                units: "/etc/systemd/system".into(),
+                sysusers: "/etc/sysusers.d/navsync.conf".into(),
+                tmpfiles: "/etc/tmpfiles.d/navsync.conf".into(),
+                udev: "/etc/udev/rules.d/99-navsync.rules".into(),
+                config: crate::config::DEFAULT_PATH.into(),
+            });
+        };
+        anyhow::ensure!(p.is_absolute(), "--prefix {}: expected an absolute path", p.display());
+        anyhow::ensure!(
+            p.components().all(|c| !matches!(c, std::path::Component::ParentDir)),
+            "--prefix {}: expected a path without `..`",
+            p.display()
+        );
+        anyhow::ensure!(
+            p != Path::new("/"),
+            "--prefix /: expected a directory other than / (use no --prefix for the system layout)"
+        );
+        Ok(Self {
+            bin: p.join("bin/navsync"),
+            units: p.join("lib/systemd/system"),
+            sysusers: p.join("lib/sysusers.d/navsync.conf"),
+            tmpfiles: p.join("lib/tmpfiles.d/navsync.conf"),
+            udev: p.join("lib/udev/rules.d/99-navsync.rules"),
+            config: p.join("etc/navsync/navsync.toml"),
+        })
+    }
+
+    /// The example configuration, beside the configuration.
+    pub fn example(&self) -> PathBuf {
+        self.config.with_extension("toml.example")
+    }
+
+    /// A shipped unit's text with its paths made this layout's: the binary and the
+    /// configuration directory.
+    pub fn unit_text(&self, unit: &str) -> String {
+        let conf_dir = self.config.parent().unwrap_or(Path::new("/etc/navsync"));
+        rewrite_exec(unit, &self.bin).replace("/etc/navsync/", &format!("{}/", conf_dir.display()))
+    }
+}
+
+/// One thing the install does.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Step {
+    /// This executable copied to `path`.
+    CopySelf {
+        /// Where (under the root).
+        path: PathBuf,
+    },
+    /// `text` written to `path` with `mode`.
+    Write {
+        /// Where (under the root).
+        path: PathBuf,
+        /// The contents.
+        text: String,
+        /// Permission bits.
+        mode: u32,
+    },
+    /// An existing configuration file left as it is.
+    Keep {
+        /// Where (under the root).
+        path: PathBuf,
+    },
+}
+
+/// Every step of an install of `layout` below `root`, in order; nothing is touched.
+pub fn plan(layout: &Layout, root: &Path) -> Result<Vec<Step>> {
     anyhow::ensure!(
-        prefix.is_absolute(),
-        "--prefix {}: expected an absolute path",
-        prefix.display()
+        root.is_absolute(),
+        "--root {}: expected an absolute path",
+        root.display()
     );
     let under = |p: &Path| root.join(p.strip_prefix("/").unwrap_or(p));
-    let bin = prefix.join("bin/navsync");
-    let mut done = Installed::default();
-    let exe = std::env::current_exe().context("locating this executable")?;
-    let bin_dst = under(&bin);
-    std::fs::create_dir_all(bin_dst.parent().expect("bin dir"))?;
-    // Copy to a temporary name and rename: replacing a running binary in place fails (ETXTBSY).
-    let tmp = bin_dst.with_extension("new");
-    std::fs::copy(&exe, &tmp).with_context(|| format!("copying {} to {}", exe.display(), tmp.display()))?;
-    std::fs::rename(&tmp, &bin_dst)?;
-    done.files.push(bin_dst);
-    let mut write = |path: PathBuf, text: &str, mode: u32| -> Result<()> {
-        use std::os::unix::fs::PermissionsExt;
-        if let Some(d) = path.parent() {
+    let write = |p: &Path, text: String, mode: u32| Step::Write {
+        path: under(p),
+        text,
+        mode,
+    };
+    let mut steps = vec![Step::CopySelf {
+        path: under(&layout.bin),
+    }];
+    for (name, text) in SHIPPED {
+        steps.push(write(&layout.units.join(name), layout.unit_text(text), 0o644));
+    }
+    steps.push(write(&layout.sysusers, SYSUSERS.to_string(), 0o644));
+    steps.push(write(&layout.tmpfiles, TMPFILES.to_string(), 0o644));
+    steps.push(write(&layout.udev, UDEV.to_string(), 0o644));
+    steps.push(write(&layout.example(), EXAMPLE.to_string(), 0o644));
+    let conf = under(&layout.config);
+    // symlink_metadata: a dangling link is something there too, never written through.
+    if conf.symlink_metadata().is_ok() {
+        steps.push(Step::Keep { path: conf });
+    } else {
+        steps.push(write(&layout.config, EXAMPLE.to_string(), 0o640));
+    }
+    Ok(steps)
+}
+
+/// Carries out one step; the path written, if any.
+fn apply(step: &Step) -> Result<Option<PathBuf>> {
+    use std::os::unix::fs::PermissionsExt;
+    let mkdir = |p: &Path| -> Result<()> {
+        if let Some(d) = p.parent() {
             std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
         }
-        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
-        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode))?;
-        done.files.push(path);
         Ok(())
     };
-    let unit_dir = under(Path::new("/etc/systemd/system"));
-    for (name, text) in SHIPPED {
-        write(unit_dir.join(name), &rewrite_exec(text, &bin), 0o644)?;
+    match step {
+        Step::CopySelf { path } => {
+            let exe = std::env::current_exe().context("locating this executable")?;
+            mkdir(path)?;
+            // Copy to a temporary name and rename: replacing a running binary in place fails
+            // (ETXTBSY).
+            let tmp = path.with_extension("new");
+            std::fs::copy(&exe, &tmp).with_context(|| format!("copying {} to {}", exe.display(), tmp.display()))?;
+            std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
+            Ok(Some(path.clone()))
+        }
+        Step::Write { path, text, mode } => {
+            mkdir(path)?;
+            std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+            std::fs::set_permissions(path, std::fs::Permissions::from_mode(*mode))
+                .with_context(|| format!("setting the mode of {}", path.display()))?;
+            Ok(Some(path.clone()))
+        }
+        Step::Keep { .. } => Ok(None),
     }
-    write(under(Path::new("/etc/sysusers.d/navsync.conf")), SYSUSERS, 0o644)?;
-    write(under(Path::new("/etc/tmpfiles.d/navsync.conf")), TMPFILES, 0o644)?;
-    write(under(Path::new("/etc/udev/rules.d/99-navsync.rules")), UDEV, 0o644)?;
-    write(under(Path::new("/etc/navsync/navsync.toml.example")), EXAMPLE, 0o644)?;
-    let conf = under(Path::new("/etc/navsync/navsync.toml"));
-    if !conf.exists() {
-        write(conf, EXAMPLE, 0o640)?;
-    }
-    Ok(done)
 }
 
 /// The unit text with `/usr/local/bin/navsync` replaced by `bin`.
@@ -140,5 +286,47 @@ mod tests {
             let r = rewrite_exec(text, Path::new("/opt/ns/bin/navsync"));
             assert!(r.contains("ExecStart=/opt/ns/bin/navsync "), "{name}");
         }
+    }
+
+    #[test]
+    fn a_prefix_holds_every_path_and_the_units_name_its_binary_and_configuration() {
+        let l = Layout::new(Some(Path::new("/opt/ns"))).unwrap();
+        let steps = plan(&l, Path::new("/")).unwrap();
+        assert_eq!(steps.len(), SHIPPED.len() + 6);
+        for s in &steps {
+            let (Step::CopySelf { path } | Step::Write { path, .. } | Step::Keep { path }) = s;
+            assert!(path.starts_with("/opt/ns/"), "{}", path.display());
+        }
+        for (name, text) in SHIPPED.iter().filter(|(n, _)| n.ends_with(".service")) {
+            let t = l.unit_text(text);
+            assert!(t.contains("ExecStart=/opt/ns/bin/navsync "), "{name}");
+            assert!(
+                !t.replace("/opt/ns/etc/navsync/", "").contains("/etc/navsync/"),
+                "{name}: {t}"
+            );
+            assert!(!t.contains("/usr/local/bin/"), "{name}");
+        }
+        let est = l.unit_text(
+            SHIPPED
+                .iter()
+                .find(|(n, _)| *n == "navsync-estimator.service")
+                .unwrap()
+                .1,
+        );
+        assert!(
+            est.contains("--config /opt/ns/etc/navsync/navsync.toml estimator"),
+            "{est}"
+        );
+        let staged = plan(&l, Path::new("/stage")).unwrap();
+        assert!(matches!(&staged[0], Step::CopySelf { path } if path == Path::new("/stage/opt/ns/bin/navsync")));
+        for bad in ["rel/dir", "/a/../etc", "/"] {
+            assert!(Layout::new(Some(Path::new(bad))).is_err(), "{bad}");
+        }
+        let sys = Layout::new(None).unwrap();
+        assert_eq!(sys.config, Path::new("/etc/navsync/navsync.toml"));
+        assert_eq!(
+            sys.unit_text("--config /etc/navsync/navsync.toml"),
+            "--config /etc/navsync/navsync.toml"
+        );
     }
 }

@@ -114,8 +114,12 @@ impl FromStr for ImuSource {
                         let baud = b
                             .parse::<u32>()
                             .ok()
-                            .filter(|b| *b > 0)
-                            .ok_or_else(|| format!("`{b}` in `{s}` is not a baud rate (a positive integer)"))?;
+                            .filter(|b| crate::gnss::driver::STANDARD_BAUDS.contains(b))
+                            .ok_or_else(|| {
+                                format!(
+                                    "`{b}` in `{s}` is not a standard baud rate (115200, 230400, 460800, 921600, …)"
+                                )
+                            })?;
                         (p, baud)
                     }
                     _ => (rest, xsens::DEFAULT_BAUD),
@@ -298,11 +302,9 @@ mod tests {
                 "{e}"
             );
         }
-        assert!(
-            "xsens:/dev/x:0"
-                .parse::<ImuSource>()
-                .unwrap_err()
-                .contains("not a baud rate")
-        );
+        for bad in ["xsens:/dev/x:0", "xsens:/dev/x:12345"] {
+            let e = bad.parse::<ImuSource>().unwrap_err();
+            assert!(e.contains("not a standard baud rate"), "{bad}: {e}");
+        }
     }
 }

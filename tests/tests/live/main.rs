@@ -1,7 +1,7 @@
 //! Live sets of processes and the ways in for other programs: `navsync demo`, `status`, `echo`,
 //! the Rust client API, Python over iceoryx2 and `ctypes`, `gpsd-server`, the health table, the
-//! futex wake-ups, a PPS source going silent, the systemd units and the shared memory's
-//! permissions. One test binary; its tests run concurrently, each in its own `TestEnv`.
+//! futex wake-ups, a PPS source going silent, the systemd units, `navsync install`, the
+//! shared memory's permissions and how user errors are reported. One test binary; its tests run concurrently, each in its own `TestEnv`.
 
 mod clients_common;
 
@@ -10,6 +10,7 @@ mod demo;
 mod faults_pps_silence_live;
 mod gpsd_server;
 mod health_table;
+mod install;
 mod ipc_wake;
 mod python_iceoryx2;
 mod python_types;
@@ -17,3 +18,4 @@ mod reliability;
 mod shm_permissions;
 mod status_echo;
 mod systemd_units;
+mod user_errors;

@@ -230,3 +230,144 @@ fn status_and_echo_see_the_live_processes() {
     drop((_nav_sub, _imu_sub, node));
     env.finish();
 }
+
+/// Publishes `make(k)` every `period` until `child` exits; its output.
+fn publish_until_exit<T: navsync_shared::ipc::IpcSample>(
+    publisher: &mut navsync_shared::ipc::Publisher<T>,
+    child: std::process::Child,
+    period: Duration,
+    make: impl Fn(u64) -> T,
+) -> std::process::Output {
+    let mut child = child;
+    let t0 = std::time::Instant::now();
+    for k in 0u64.. {
+        if child.try_wait().unwrap().is_some() || t0.elapsed() > Duration::from_secs(30) {
+            break;
+        }
+        publisher.publish(&make(k)).unwrap();
+        let next = period * u32::try_from(k + 1).unwrap();
+        std::thread::sleep(next.saturating_sub(t0.elapsed()));
+    }
+    let _ = child.kill();
+    child.wait_with_output().unwrap()
+}
+
+/// `status`: a 1 Hz service is 1 Hz over a window that holds 2 or 3 of its samples (the
+/// intervals between them are counted, not the samples); a process with two iceoryx2 nodes
+/// (a `TimeState` publisher has one more for the Python clients' wake-up) is one row; with
+/// nothing running it says so and fails, without a backtrace even with RUST_BACKTRACE=1.
+#[test]
+fn status_rates_count_intervals_a_process_is_one_row_and_nothing_running_fails() {
+    use navsync_shared::samples::TimeState;
+    use navsync_shared::time::monotonic_now_ns;
+    use std::process::Stdio;
+
+    let env = TestEnv::new("statusrate");
+    let o = env
+        .command(&["status", "--window", "0.5"])
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "nothing running, yet: {err}");
+    assert!(err.contains("nothing is running under the iceoryx2 prefix"), "{err}");
+    assert!(!err.contains("acktrace"), "{err}");
+
+    let node = env.node("timekeeper");
+    let mut publisher = node.publisher::<TimeState>(services::TIME_STATE).unwrap();
+    let child = env
+        .command(&["status", "--json", "--window", "2.5"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let base = monotonic_now_ns();
+    let o = publish_until_exit(&mut publisher, child, Duration::from_secs(1), |k| {
+        let mut t = TimeState::unknown();
+        t.computed_host_ns = base + i64::try_from(k).unwrap() * 1_000_000_000;
+        t.seq = k;
+        t
+    });
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let time = service(&r, services::TIME_STATE);
+    let samples = time["samples"].as_u64().unwrap();
+    let rate = time["rate_hz"].as_f64().unwrap();
+    println!("{samples} samples of a 1 Hz service in 2.5 s: {rate} Hz");
+    assert!((2..=3).contains(&samples), "{time}");
+    assert!((rate - 1.0).abs() < 0.01, "1 Hz shown as {rate} Hz: {time}");
+    let rows: Vec<&Value> = r["processes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["name"] == "timekeeper")
+        .collect();
+    assert_eq!(rows.len(), 1, "{:#}", r["processes"]);
+    drop((publisher, node));
+    env.finish();
+}
+
+/// `echo`: enumerations by name (`status=aligned`), `--raw` for their numbers, and a field
+/// asked for by `--fields` printed as `null` when it has no value.
+#[test]
+fn echo_names_enums_and_prints_asked_for_nulls() {
+    use navsync_shared::reflect::Reflect;
+    use navsync_shared::samples::{ImuSyncReason, NavStatus, TimeStatus};
+    use std::process::Stdio;
+
+    let env = TestEnv::new("echoenum");
+    let node = env.node("navigator");
+    let mut publisher = node.publisher::<NavState>(services::NAV_STATE).unwrap();
+    let make = |k: u64| {
+        let mut n = NavState::zeroed();
+        n.seq = k;
+        n.status = NavStatus::Aligned as u8;
+        n.time_status = TimeStatus::Locked as u8;
+        n.imu_count = 1;
+        n.imu[0].reason = ImuSyncReason::Converging as u8;
+        n.gnss_delay_s = f64::NAN;
+        n.lat_deg = 48.5;
+        n
+    };
+    let mut echo = |args: &[&str]| {
+        let child = env
+            .command(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let o = publish_until_exit(&mut publisher, child, Duration::from_millis(50), make);
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let fields = "status,time_status,gnss_delay_s,lat_deg,imu[0].reason";
+    let out = echo(&["echo", services::NAV_STATE, "--count", "1", "--fields", fields]);
+    assert_eq!(
+        out.trim(),
+        "status=aligned time_status=locked gnss_delay_s=null lat_deg=48.5 imu[0].reason=converging"
+    );
+    let out = echo(&["echo", services::NAV_STATE, "--count", "1", "--raw", "--fields", fields]);
+    assert_eq!(
+        out.trim(),
+        "status=1 time_status=1 gnss_delay_s=null lat_deg=48.5 imu[0].reason=6"
+    );
+    let out = echo(&["echo", services::NAV_STATE, "--count", "1"]);
+    assert!(
+        out.contains(" status=aligned ") && out.contains("time_status=locked"),
+        "{out}"
+    );
+    let out = echo(&[
+        "echo",
+        services::NAV_STATE,
+        "--count",
+        "1",
+        "--json",
+        "--fields",
+        fields,
+    ]);
+    let v: Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(v["status"], 1, "JSON keeps the recordings' numbers: {v}");
+    assert!(v["gnss_delay_s"].is_null(), "{v}");
+    drop((publisher, node));
+    env.finish();
+}
