@@ -165,6 +165,10 @@ fn malformed_input_is_dropped_counted_and_logged_once_per_kind() {
             &link.display().to_string(),
             "--baud",
             "115200",
+            // The NMEA decoder's own counters are the subject (auto, the default, counts the
+            // sentences it hands to it under ubx_* names too).
+            "--protocol",
+            "nmea",
             "--id",
             "0",
         ],
@@ -231,6 +235,8 @@ fn wrong_baud_is_noise_and_auto_hunts_to_the_right_rate() {
             &la.display().to_string(),
             "--baud",
             "9600",
+            "--protocol",
+            "nmea",
             "--id",
             "fixed",
         ],
