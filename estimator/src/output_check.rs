@@ -3,7 +3,7 @@
 //! act on. Used by the offline runs (the summary's `problem`; offline commands exit non-zero)
 //! and by the live estimator (`Health` counter `nav_usable` and a warning).
 
-use navsync_wire::samples::{NavState, NavStatus};
+use navsync_wire::samples::{INTEGRITY_INCONSISTENT, NavState, NavStatus};
 
 /// Fewer usable states than this share of the states since the platform first moved is a
 /// problem (before that the heading may not be observable: a stationary start waits).
@@ -41,6 +41,8 @@ pub struct OutputCheck {
     pub usable: u64,
     /// States not aligned before any fix showed the platform moving (the stationary start).
     pub waiting_for_motion: u64,
+    /// Aligned states the integrity monitor flagged inconsistent (not usable).
+    pub inconsistent: u64,
 }
 
 impl OutputCheck {
@@ -52,7 +54,10 @@ impl OutputCheck {
         }
         if s.status != NavStatus::Aligning as u8 {
             self.aligned += 1;
-            if s.utc_ns != i64::MIN {
+            if s.integrity & INTEGRITY_INCONSISTENT != 0 {
+                // The integrity monitor finds its innovations inconsistent with its σ.
+                self.inconsistent += 1;
+            } else if s.utc_ns != i64::MIN {
                 self.usable += 1;
             }
         }
@@ -94,8 +99,8 @@ impl OutputCheck {
             )
         } else {
             format!(
-                "only {} of {} navigation states are usable (aligned, with a GNSS time; {} more before the \
-                 platform moved)",
+                "only {} of {} navigation states are usable (aligned, consistent, with a GNSS time; {} more \
+                 before the platform moved)",
                 self.usable, expected, self.waiting_for_motion
             )
         };
@@ -123,6 +128,13 @@ impl OutputCheck {
                     seen.fixes
                 )
             }
+        } else if self.inconsistent * 2 >= self.aligned {
+            format!(
+                "the integrity monitor found the filter inconsistent with its fixes in {} of {} aligned states \
+                 (fixes rejected, its covariance inflated): its estimates are not trustworthy (a wrong time \
+                 synchronisation, a receiver latency beyond the fusion horizon, or an IMU model far off)",
+                self.inconsistent, self.aligned
+            )
         } else if seen.pps_used == 0 && seen.fixes_used == 0 {
             format!(
                 "the states have no GNSS time: no PPS edge was used and no fix could be labelled ({} of {} \

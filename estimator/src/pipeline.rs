@@ -108,6 +108,8 @@ pub struct Pipeline {
     nav: Navigator,
     array: ImuArray,
     stamping: Option<FixStamping>,
+    /// The last GNSS time label given to a state, ns (labels never go back).
+    last_utc_ns: i64,
     device_timing: DeviceTiming,
     counters: PipelineCounters,
     nav_seq: u64,
@@ -138,6 +140,7 @@ impl Pipeline {
             nav,
             array,
             stamping: None,
+            last_utc_ns: i64::MIN,
             device_timing,
             counters: PipelineCounters::default(),
             nav_seq: 0,
@@ -491,6 +494,16 @@ impl Pipeline {
             Some(u) => u,
             None => i64::MIN,
         };
+        // A later state never gets an earlier label: while Δ's estimate falls faster than the
+        // IMU steps, the labels follow 1 ns apart (within Δ's σ of their times). A step back of
+        // a second or more is a new time line (a reset of the mapping) and is kept.
+        if s.utc_ns != i64::MIN {
+            let next = self.last_utc_ns.saturating_add(1);
+            if s.utc_ns < next && next - s.utc_ns < 1_000_000_000 {
+                s.utc_ns = next;
+            }
+            self.last_utc_ns = s.utc_ns;
+        }
         s.time_status = self.time.status() as u8;
         (s.imu, s.imu_count) = self.array.table();
         s

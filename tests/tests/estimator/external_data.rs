@@ -280,3 +280,43 @@ fn a_parked_vehicle_publishes_no_heading_and_says_why() {
         &rows[..rows.len().min(400)]
     );
 }
+
+/// The randomized sweep (`tests/python/sweep.py`, issue 34), a few short drives drawn from a
+/// fixed seed: car, pedestrian or robot, any heading and place, IMU grade, GNSS σ and rate,
+/// lever arm, PPS or a receipt latency; navsync with its defaults. No output row is NaN and no
+/// run fails silently: a run that exits 0 has usable output and no problem, one that fails
+/// says why. (The 2σ coverage the sweep also reports is not yet within 90–99 % for yaw and on
+/// slow drives: docs/benchmarks/sweep.md.)
+#[test]
+fn a_randomized_sweep_never_gives_nan_nor_fails_silently() {
+    let env = TestEnv::new("sweep");
+    let work = env.dir.join("work");
+    let r = bench(
+        &env,
+        "sweep.py",
+        &[
+            "--work".into(),
+            work.display().to_string(),
+            "--runs".into(),
+            "6".into(),
+            "--duration".into(),
+            "90".into(),
+            "--seed".into(),
+            "3".into(),
+        ],
+    );
+    assert_eq!(f(&r, &["runs"]), 6.0);
+    assert_eq!(f(&r, &["nan_runs"]), 0.0, "runs with NaN: {r}");
+    assert_eq!(f(&r, &["silent_failures"]), 0.0, "silent failures: {r}");
+    let detail = r["detail"].as_array().unwrap();
+    for d in detail {
+        let exit = d["exit"].as_i64().unwrap();
+        let problem = d["problem"].as_str();
+        assert!(
+            (exit == 0 && problem.is_none() && d["usable_states"].as_u64().unwrap() > 0)
+                || (exit != 0 && problem.is_some_and(|p| !p.is_empty())),
+            "run {}: exit {exit}, problem {problem:?}",
+            d["index"]
+        );
+    }
+}
