@@ -8,6 +8,10 @@ use navsync_wire::samples::{INTEGRITY_INCONSISTENT, NavState, NavStatus};
 /// Fewer usable states than this share of the states since the platform first moved is a
 /// problem (before that the heading may not be observable: a stationary start waits).
 pub const MIN_USABLE_SHARE: f64 = 0.5;
+/// A run whose aligned states the integrity monitor flags inconsistent this often (nearly
+/// throughout: a filter that does not follow its fixes) is reported as not trustworthy; a
+/// flag now and then (after a GNSS outage, a bias step) is what the flag is for.
+pub const MAX_INCONSISTENT_SHARE: f64 = 0.9;
 
 /// What the pipeline saw, for the diagnosis.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -55,9 +59,11 @@ impl OutputCheck {
         if s.status != NavStatus::Aligning as u8 {
             self.aligned += 1;
             if s.integrity & INTEGRITY_INCONSISTENT != 0 {
-                // The integrity monitor finds its innovations inconsistent with its σ.
+                // The integrity monitor finds its innovations inconsistent with its σ (the
+                // state is published with its σ inflated and the flag).
                 self.inconsistent += 1;
-            } else if s.utc_ns != i64::MIN {
+            }
+            if s.utc_ns != i64::MIN {
                 self.usable += 1;
             }
         }
@@ -89,8 +95,17 @@ impl OutputCheck {
             );
         }
         let expected = self.states - self.waiting_for_motion;
-        if self.usable > 0 && self.usable as f64 >= MIN_USABLE_SHARE * expected as f64 {
+        let consistent = (self.inconsistent as f64) < MAX_INCONSISTENT_SHARE * self.aligned as f64;
+        if self.usable > 0 && self.usable as f64 >= MIN_USABLE_SHARE * expected as f64 && consistent {
             return None;
+        }
+        if self.usable > 0 && !consistent {
+            return Some(format!(
+                "the integrity monitor found the filter inconsistent with its fixes in {} of {} aligned states \
+                 (fixes rejected, its covariance inflated): its estimates are not trustworthy (a wrong time \
+                 synchronisation, a receiver latency beyond the fusion horizon, or an IMU model far off)",
+                self.inconsistent, self.aligned
+            ));
         }
         let share = if expected == 0 {
             format!(
@@ -99,8 +114,8 @@ impl OutputCheck {
             )
         } else {
             format!(
-                "only {} of {} navigation states are usable (aligned, consistent, with a GNSS time; {} more \
-                 before the platform moved)",
+                "only {} of {} navigation states are usable (aligned, with a GNSS time; {} more before the \
+                 platform moved)",
                 self.usable, expected, self.waiting_for_motion
             )
         };
@@ -128,13 +143,6 @@ impl OutputCheck {
                     seen.fixes
                 )
             }
-        } else if self.inconsistent * 2 >= self.aligned {
-            format!(
-                "the integrity monitor found the filter inconsistent with its fixes in {} of {} aligned states \
-                 (fixes rejected, its covariance inflated): its estimates are not trustworthy (a wrong time \
-                 synchronisation, a receiver latency beyond the fusion horizon, or an IMU model far off)",
-                self.inconsistent, self.aligned
-            )
         } else if seen.pps_used == 0 && seen.fixes_used == 0 {
             format!(
                 "the states have no GNSS time: no PPS edge was used and no fix could be labelled ({} of {} \
