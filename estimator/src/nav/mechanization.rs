@@ -80,7 +80,6 @@ struct EarthAt {
 /// radii, earth rate and gravity by < 1e−9 relative; only the velocity-dependent transport rate
 /// is re-evaluated at the mid-points the algorithm asks for.
 struct EarthCache {
-    lat: f64,
     h: f64,
     tan_lat: f64,
     rm: f64,
@@ -94,7 +93,6 @@ impl EarthCache {
         let (rm, rn) = earth::radii(lat);
         let (sl, cl) = lat.sin_cos();
         Self {
-            lat,
             h,
             tan_lat: sl / cl,
             rm,
