@@ -118,7 +118,7 @@ pub fn python_with(dir: &Path, packages: &[&str]) -> Result<(PathBuf, Option<Pat
 
 /// Path of the gpsd NMEA corpus provided beside the checkout.
 pub fn corpus_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/corpora/gpsd-nmea")
+    shared_material("corpora/gpsd-nmea")
 }
 
 static SEQ: AtomicU32 = AtomicU32::new(0);

@@ -391,6 +391,12 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
         .map_err(|e| DemoError::Child(format!("scenario: {e}")))?;
         let imu_model = sim_cfg.imu.preset.name().to_string();
         let vel_std = sim_cfg.gnss.velocity_sigma_mps.max(0.01).to_string();
+        // Stated where users see them (a recording of the demo keeps them too:
+        // navsync/estimator/settings).
+        eprintln!(
+            "demo: estimator --imus {imu_list} --imu-model {imu_model} --gnss-vel-std {vel_std} (the simulated \
+             devices' IMU class and receiver velocity noise)"
+        );
         procs.push(spawn(
             "estimator",
             &[
