@@ -199,10 +199,10 @@ fn gnss_latency_runs_on_real_captures() {
         let f = |k: &str| r[k].as_f64();
         let path = r["path"].as_str().unwrap();
         if (path.starts_with("navsync") || path.starts_with("floor")) && r["note"].is_null() {
-            assert_eq!(r["epochs"], 20, "{r}");
+            assert_eq!(r["epochs"], 15, "{r}");
             assert_eq!(
                 (r["received"].as_u64(), r["extra"].as_u64()),
-                (Some(20), Some(0)),
+                (Some(15), Some(0)),
                 "one fix per epoch: {r}"
             );
         }
