@@ -67,10 +67,6 @@ def run(cmd, log):
         return subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT).returncode
 
 
-def wrap180(x):
-    return (x + 180.0) % 360.0 - 180.0
-
-
 def coverage(nav_path, std_path, truth_path):
     """Per output epoch: (|e_N| <= 2 sN, |e_E| <= 2 sE, |e_yaw| <= 2 s_yaw), and any NaN."""
     try:
@@ -96,8 +92,8 @@ def coverage(nav_path, std_path, truth_path):
     rm = score_truth.A * (1.0 - score_truth.E2) / (1.0 - score_truth.E2 * s2) ** 1.5
     h = np.interp(t, truth[:, 1], truth[:, 4])
     e_n = np.radians(nav[:, 2] - lat) * (rm + h)
-    e_e = np.radians(wrap180(nav[:, 3] - lon)) * (rn + h) * np.cos(np.radians(lat))
-    e_yaw = wrap180(nav[:, 10] - np.degrees(yaw_t))
+    e_e = np.radians(score_truth.wrap180(nav[:, 3] - lon)) * (rn + h) * np.cos(np.radians(lat))
+    e_yaw = score_truth.wrap180(nav[:, 10] - np.degrees(yaw_t))
     ok = np.stack([np.abs(e_n) <= 2 * s[:, 1], np.abs(e_e) <= 2 * s[:, 2], np.abs(e_yaw) <= 2 * s[:, 9]], -1)
     return ok, nan
 

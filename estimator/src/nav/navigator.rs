@@ -41,6 +41,15 @@ const HORIZON_MARGIN_S: f64 = 0.02;
 /// How fast the adaptive horizon's memory of a long delay fades, per fix, s.
 const HORIZON_DECAY_S: f64 = 0.01;
 
+/// Gives the bias states at least `model`'s turn-on σ (a widened model: the estimates kept).
+fn reopen_bias_std(f: &mut DelayedFilter, model: &ProcessNoise) {
+    for i in 0..3 {
+        let (g, a) = (BG + i, BA + i);
+        f.eskf.p[(g, g)] = f.eskf.p[(g, g)].max(model.gyro_bias_init_std[i].powi(2));
+        f.eskf.p[(a, a)] = f.eskf.p[(a, a)].max(model.accel_bias_init_std[i].powi(2));
+    }
+}
+
 /// Clears the sensor-error estimates of `f` (biases, scale factors) and re-opens their
 /// covariance to the model's turn-on σ, decorrelated from the other states.
 fn reset_sensor_errors(f: &mut DelayedFilter, noise: &ProcessNoise) {
@@ -804,11 +813,7 @@ impl Navigator {
                     // the estimates are kept and their σ reopened to the wider turn-on σ.
                     self.widened = true;
                     self.cfg.noise = wider;
-                    for i in 0..3 {
-                        let (g, a) = (BG + i, BA + i);
-                        f.eskf.p[(g, g)] = f.eskf.p[(g, g)].max(wider.gyro_bias_init_std[i].powi(2));
-                        f.eskf.p[(a, a)] = f.eskf.p[(a, a)].max(wider.accel_bias_init_std[i].powi(2));
-                    }
+                    reopen_bias_std(f, &wider);
                 } else {
                     // Beyond any IMU's: the navigation states are sound; the sensor errors are
                     // re-learnt from their turn-on σ, decorrelated from the rest.
@@ -837,11 +842,7 @@ impl Navigator {
                             // errors get at least the wider model's turn-on σ.
                             self.cfg.noise = wider;
                             f.eskf.p *= nis;
-                            for i in 0..3 {
-                                let (g, a) = (BG + i, BA + i);
-                                f.eskf.p[(g, g)] = f.eskf.p[(g, g)].max(wider.gyro_bias_init_std[i].powi(2));
-                                f.eskf.p[(a, a)] = f.eskf.p[(a, a)].max(wider.accel_bias_init_std[i].powi(2));
-                            }
+                            reopen_bias_std(f, &wider);
                         }
                     }
                 }
