@@ -28,7 +28,7 @@ enum Cmd {
     /// → gpspipe in the same run, on real captures written epoch by epoch into pseudo-terminals.
     GnssLatency(gnss_latency::GnssLatencyArgs),
     /// A NavState from host A's iceoryx2 to host B's through two Zenoh bridges over a veth
-    /// link between network namespaces (root; a navsync built with --features zenoh).
+    /// link between network namespaces (root; a navsync built with its default feature `zenoh`).
     Zenoh(zenoh::ZenohBenchArgs),
     /// The machine's own wake-up stalls: a sleeper per CPU at a fixed rate, no navsync code
     /// (read beside the latency benchmarks; finds stalls that keep the phase of a 100 ms cycle).

@@ -2,7 +2,7 @@
 //! (namespace A) → TCP over a veth link → `navsync bridge zenoh --import` (namespace B) → a
 //! subscriber on host B's iceoryx2; latency from the publish (`host_ns`, the machine's one
 //! `CLOCK_MONOTONIC`) to the receipt, at each rate, and the bridges' CPU time per message.
-//! Needs root (network namespaces) and a navsync built with `--features zenoh`.
+//! Needs root (network namespaces) and a navsync built with its default feature `zenoh`.
 
 use std::time::{Duration, Instant};
 

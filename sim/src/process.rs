@@ -302,11 +302,9 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
     let start_utc = realtime_now_ns() + (args.utc_offset_s * 1e9) as i64 + 300_000_000;
     let mut world = World::new(&cfg, start_host, start_utc)?;
     let end_host = args.duration_s.map(|d| start_host + (d * 1e9) as i64);
-    info!(
-        imus = cfg.imu.count,
-        duration_s = world.duration_s(),
-        "simulation running"
-    );
+    // How long this run lasts: the scenario, or `--duration` when that ends it sooner.
+    let run_s = args.duration_s.map_or(world.duration_s(), |d| d.min(world.duration_s()));
+    info!(imus = cfg.imu.count, duration_s = run_s, "simulation running");
 
     let mut next = world.next_event();
     navsync_shared::sd_notify::ready("simulation running");

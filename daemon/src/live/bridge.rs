@@ -206,7 +206,7 @@ fn run(_: Settings) -> Result<()> {
 
 /// What a navsync without the `zenoh` feature says.
 pub const NO_ZENOH: &str =
-    "this navsync was built without Zenoh: build it with `cargo build --release --features zenoh`";
+    "this navsync was built without Zenoh (`--no-default-features`): build it with the default features";
 
 /// `navsync echo --zenoh ENDPOINT SERVICE`.
 #[cfg(feature = "zenoh")]

@@ -13,9 +13,11 @@
 //! publishes them, as it would a real MTi. `--imu-output direct` keeps the shortcut.
 
 use std::collections::BTreeMap;
-use std::io::{IsTerminal, Write};
+use std::io::{BufRead, BufReader, IsTerminal, Write};
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{Receiver, Sender};
 use std::time::{Duration, Instant};
 
 use navsync_drivers::imu::xsens::sim_device::{SIM_BAUD, sim_port};
@@ -78,19 +80,66 @@ struct Proc {
     child: Child,
 }
 
-fn spawn(name: &'static str, args: &[String]) -> Result<Proc, DemoError> {
+/// Starts `navsync ARGS` as the child `name`; its log lines (`name: line`) go to `logs`,
+/// forwarded by a reader thread of its own, so the demo prints them above its status line
+/// instead of through it.
+fn spawn(name: &'static str, args: &[String], logs: &Sender<String>) -> Result<Proc, DemoError> {
     let exe = std::env::current_exe()?;
     // The children are the demo's, not the service manager's: they neither report readiness
     // nor feed a watchdog of their own.
-    let child = Command::new(exe)
-        .args(args)
+    let mut cmd = Command::new(exe);
+    cmd.args(args)
         .env_remove("NOTIFY_SOCKET")
         .env_remove("WATCHDOG_USEC")
         .env_remove("WATCHDOG_PID")
+        .stderr(Stdio::piped())
+        // A group of its own: the terminal's Ctrl-C reaches the demo only, which then stops the
+        // children in order (see `stop_all`).
+        .process_group(0);
+    // SAFETY: prctl(2) is async-signal-safe; the child asks for SIGTERM should the demo die
+    // without stopping it (it is no longer in the terminal's process group).
+    unsafe {
+        cmd.pre_exec(|| {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+            Ok(())
+        });
+    }
+    let mut child = cmd
         .spawn()
         .map_err(|e| DemoError::Child(format!("starting `navsync {}`: {e}", args.join(" "))))?;
+    if let Some(stderr) = child.stderr.take() {
+        let tx = logs.clone();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                if tx.send(format!("{name}: {line}")).is_err() {
+                    break;
+                }
+            }
+        });
+    }
     info!(name, pid = child.id(), "started");
     Ok(Proc { name, child })
+}
+
+/// Prints the children's log lines that arrived; on a terminal each above the status line
+/// `status` (cleared, then drawn again below them).
+fn print_child_logs(logs: &Receiver<String>, tty: bool, status: Option<&str>) {
+    let mut err = std::io::stderr().lock();
+    let mut any = false;
+    while let Ok(line) = logs.try_recv() {
+        if tty && !any {
+            let _ = write!(err, "\r\x1b[2K");
+        }
+        any = true;
+        let _ = writeln!(err, "{line}");
+    }
+    if any
+        && tty
+        && let Some(s) = status
+    {
+        let _ = write!(err, "{s}");
+    }
+    let _ = err.flush();
 }
 
 fn wait_for_path(p: &Path, procs: &mut [Proc], timeout: Duration) -> Result<(), DemoError> {
@@ -112,15 +161,15 @@ fn wait_for_path(p: &Path, procs: &mut [Proc], timeout: Duration) -> Result<(), 
     Ok(())
 }
 
-/// Sends SIGTERM to every child (last started first) and waits; SIGKILL after 5 s.
+/// Stops the children one after the other, last started first (the estimator, then the
+/// drivers, the simulator last, so no driver sees its pseudo-terminal vanish under it): SIGTERM,
+/// then SIGKILL after 5 s.
 fn stop_all(procs: &mut Vec<Proc>) -> Vec<(String, String)> {
     let mut report = Vec::new();
-    for p in procs.iter().rev() {
+    for p in procs.iter_mut().rev() {
         // SAFETY: signalling our own child by pid.
         unsafe { libc::kill(p.child.id() as libc::pid_t, libc::SIGTERM) };
-    }
-    let t0 = Instant::now();
-    for p in procs.iter_mut().rev() {
+        let t0 = Instant::now();
         let status = loop {
             match p.child.try_wait() {
                 Ok(Some(st)) => break st.to_string(),
@@ -284,6 +333,7 @@ impl Monitor {
         let fix_hz = get(&self.counts, &services::gnss_fix("0")) as f64 / window_s;
         let pps_hz = get(&self.counts, &services::pps_edge("0")) as f64 / window_s;
         let time = match &self.latest_time {
+            Some(t) if !t.offset_std_ns.is_finite() => format!("time {}", t.status().name()),
             Some(t) => format!(
                 "time {} ±{:.2} µs, err {:+.2} µs, d0 {}",
                 t.status().name(),
@@ -301,9 +351,28 @@ impl Monitor {
             c.window = 0;
         }
         format!(
-            "[{elapsed_s:6.1} s] imu {:.0} Hz  pps {pps_hz:.1} Hz  gnss {fix_hz:.1} Hz  {time}",
-            imu_hz as f64 / window_s
+            "[{elapsed_s:6.1} s] imu {:.0} Hz  pps {pps_hz:.1} Hz  gnss {fix_hz:.1} Hz  {time}  {}",
+            imu_hz as f64 / window_s,
+            nav_status(self.latest_nav.as_ref())
         )
+    }
+}
+
+/// The navigation part of the status line: the filter's status, and once it navigates, where
+/// the vehicle is (latitude, longitude in degrees) with the horizontal 1σ (m).
+fn nav_status(n: Option<&NavState>) -> String {
+    match n {
+        None => "nav -".into(),
+        Some(n) if n.status == NavStatus::Aligning as u8 || !n.lat_deg.is_finite() => {
+            format!("nav {}", NavStatus::name(n.status))
+        }
+        Some(n) => format!(
+            "nav {} {:.6},{:.6} ±{:.2} m",
+            NavStatus::name(n.status),
+            n.lat_deg,
+            n.lon_deg,
+            n.pos_std_ned_m[0].hypot(n.pos_std_ned_m[1])
+        ),
     }
 }
 
@@ -347,10 +416,18 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
                 .push((p.clone(), node.subscriber(&services::health(&p))?));
         }
     }
+    // The simulator runs as long as the demo (it would otherwise log the scenario's length).
+    if let Some(d) = args.duration_s
+        && !args.sim_args.iter().any(|a| a == "--duration")
+    {
+        sim_args.extend(["--duration".into(), format!("{}", d + 2.0)]);
+    }
     sim_args.extend(args.sim_args.iter().cloned());
     let imu_list = (0..args.imus).map(|i| i.to_string()).collect::<Vec<_>>().join(",");
 
-    let mut procs = vec![spawn("sim", &sim_args)?];
+    let (log_tx, log_rx) = std::sync::mpsc::channel::<String>();
+    let tty = std::io::stderr().is_terminal();
+    let mut procs = vec![spawn("sim", &sim_args, &log_tx)?];
     let result = (|| -> Result<(), DemoError> {
         wait_for_path(&link, &mut procs, Duration::from_secs(10))?;
         procs.push(spawn(
@@ -367,6 +444,7 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
                 "0",
             ]
             .map(String::from),
+            &log_tx,
         )?);
         if xsens {
             for (i, name) in IMU_PROCS.iter().enumerate().take(args.imus) {
@@ -376,12 +454,14 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
                 procs.push(spawn(
                     name,
                     &["imu", "--source", &source, "--id", &i.to_string()].map(String::from),
+                    &log_tx,
                 )?);
             }
         }
         procs.push(spawn(
             "pps",
             &["pps", "--source", "sim", "--id", "0"].map(String::from),
+            &log_tx,
         )?);
         // Tell the filter what the simulated devices are (IMU class, receiver velocity noise).
         let sim_cfg = load_config(&SimArgs {
@@ -413,11 +493,20 @@ pub fn run(args: &DemoArgs) -> Result<(), DemoError> {
                 &vel_std,
             ]
             .map(String::from),
+            &log_tx,
         )?);
         navsync_shared::sd_notify::ready("demo running");
-        monitor_loop(&node, &mut monitor, &mut procs, args.duration_s)
+        monitor_loop(&node, &mut monitor, &mut procs, args.duration_s, &log_rx)
     })();
+    if tty {
+        eprintln!();
+    }
     let exits = stop_all(&mut procs);
+    // Every child has exited: its reader thread ends at the end of its output.
+    drop(log_tx);
+    while let Ok(line) = log_rx.recv_timeout(Duration::from_millis(500)) {
+        eprintln!("{line}");
+    }
     let _ = monitor.drain();
     let _ = std::fs::remove_dir_all(&dir);
     print_summary(&mut monitor, &exits);
@@ -429,11 +518,14 @@ fn monitor_loop(
     monitor: &mut Monitor,
     procs: &mut [Proc],
     duration_s: Option<f64>,
+    logs: &Receiver<String>,
 ) -> Result<(), DemoError> {
     let t0 = Instant::now();
     let mut last_line = Instant::now();
     let tty = std::io::stderr().is_terminal();
+    let mut status: Option<String> = None;
     loop {
+        print_child_logs(logs, tty, status.as_deref());
         // The monitor is a display: it wakes every 100 ms and drains what arrived (every service
         // buffers far more than 100 ms of samples) instead of waking for each of ~5000 samples/s.
         if !node.sleep(Duration::from_millis(100)) {
@@ -460,6 +552,7 @@ fn monitor_loop(
                 let _ = writeln!(err, "{line}");
             }
             let _ = err.flush();
+            status = Some(line);
             last_line = Instant::now();
         }
         if duration_s.is_some_and(|d| elapsed >= d) {
@@ -508,26 +601,39 @@ fn print_summary(m: &mut Monitor, exits: &[(String, String)]) {
             f.lat_deg, f.lon_deg, f.alt_msl_m, f.mode
         );
     }
+    // The counters that moved (every one is in `navsync echo navsync/health/…`).
     for (p, h) in &m.latest_health {
         let counters: Vec<String> = h
             .counters
             .iter()
-            .filter(|c| c.name[0] != 0)
+            .filter(|c| c.name[0] != 0 && c.value != 0)
             .map(|c| format!("{}={}", str_of(&c.name), c.value))
             .collect();
-        let _ = writeln!(out, "health {p}: {}", counters.join(" "));
+        if !counters.is_empty() {
+            let _ = writeln!(out, "health {p}: {}", counters.join(" "));
+        }
     }
     // The accuracy report of the run against the simulated truth (the same as
     // `navsync replay --estimate` prints).
     let imu0 = m.counts.get(&services::imu_sample("0")).map_or(0, |c| c.total);
     let fixes = m.counts.get(&services::gnss_fix("0")).map_or(0, |c| c.total);
     let rejected = m.latest_nav.as_ref().map_or(0, |n| n.fixes_rejected as u64);
-    let summary = m.eval.summary(
+    let mut summary = m.eval.summary(
         (imu0, fixes, rejected),
         m.started.elapsed().as_secs_f64(),
         0.0,
         DelayTruth::Zero,
     );
+    if summary.pos_rms_m.is_none() && summary.problem.is_none() {
+        let status = m
+            .latest_nav
+            .as_ref()
+            .map_or("no navigation state", |n| NavStatus::name(n.status));
+        summary.problem = Some(format!(
+            "no accuracy yet: the filter never navigated ({status}); it aligns once the vehicle moves \
+             (a simulated drive starts by standing still): run the demo longer"
+        ));
+    }
     let _ = writeln!(
         out,
         "\n--- accuracy against the simulated truth ---\n{}",

@@ -17,13 +17,16 @@
 //! track, speed, climb; error estimates `epx`/`epy`/`epv`/`eph`/`eps`/`epc`/`epd`/`sep` as
 //! 2σ (≈95 %, gpsd's convention) of the filter's covariance, `ept` the time mapping's 2σ);
 //! mode 3 once the filter is aligned (status 6 "GNSS+DR", 5 "DR" while INS-only), mode 1 while
-//! aligning. `ATT` has roll, pitch, heading (= yaw) in degrees; `IMU` the bias-compensated
+//! aligning without a fresh fix. `ATT` has roll, pitch, heading (= yaw) in degrees; `IMU` the bias-compensated
 //! specific force (m/s²) and rate (°/s) in body FRD axes; `SKY` the receiver's DOPs and
 //! satellites used.
 //!
-//! With `--report fix`, `TPV` is the fused state while the estimator's state is aligned and
-//! fresh (under [`FRESH_NAV_NS`] old), otherwise the receiver's own fix ([`tpv_of_fix`]), so a
-//! receiver alone serves gpsd clients too; `ATT` and `IMU` come with the fused state only.
+//! In both modes `TPV` is the fused state while the estimator's state is aligned and fresh
+//! (under [`FRESH_NAV_NS`] old), otherwise the receiver's own fix ([`tpv_of_fix`]): with
+//! `--report period`, while the state is still aligning and the fix is fresh, and once per
+//! period of the fixes' time while no fused state is fresh. So a receiver alone serves gpsd
+//! clients, and a standing vehicle with a 3D fix is not reported as mode 1; `ATT` and `IMU`
+//! come with the fused state only.
 //!
 //! `?POLL` answers the fused state while it is fresh (under [`FRESH_NAV_NS`] old), else the
 //! receiver's fix while that is fresh (under [`FRESH_FIX_NS`]), else no fix: a `TPV` of mode 1
@@ -616,17 +619,32 @@ impl Latest {
     }
 }
 
-/// A report of the fused state: TPV, ATT, IMU, and SKY once a fix was seen.
-fn period_report(n: &NavState, latest: &Latest) -> Vec<String> {
-    let mut lines = vec![
-        tpv(n, latest.fix.as_ref(), latest.time.as_ref()).to_string(),
-        att(n).to_string(),
-        imu(n).to_string(),
-    ];
+/// A period's report (`--report period`) on the fused state `n`: TPV, ATT, IMU, and SKY once a
+/// fix was seen. While `n` is not aligned (the vehicle still standing before its alignment)
+/// and the receiver's fix is under [`FRESH_FIX_NS`] old at `now_ns` (host monotonic), the
+/// fix's own TPV instead (a receiver with a 3D fix is not reported as mode 1).
+fn period_report(n: &NavState, latest: &Latest, now_ns: i64) -> Vec<String> {
+    let aligned = n.status != NavStatus::Aligning as u8 && n.lat_deg.is_finite();
+    let fresh_fix = latest.fix.filter(|f| (now_ns - f.stamp.host_ns).abs() < FRESH_FIX_NS);
+    let mut lines = match fresh_fix {
+        Some(f) if !aligned && f.mode >= 2 => vec![tpv_of_fix(&f, latest.time.as_ref()).to_string()],
+        _ => vec![
+            tpv(n, latest.fix.as_ref(), latest.time.as_ref()).to_string(),
+            att(n).to_string(),
+            imu(n).to_string(),
+        ],
+    };
     if let Some(f) = &latest.fix {
         lines.push(sky(f).to_string());
     }
     lines
+}
+
+/// A period's report (`--report period`) when no fused state is fresh (no estimator running,
+/// or a dead one): the receiver's fix as its own TPV, then SKY, so a receiver alone serves
+/// gpsd clients in the default mode too.
+fn fix_period_report(fix: &GnssFix, latest: &Latest) -> Vec<String> {
+    vec![tpv_of_fix(fix, latest.time.as_ref()).to_string(), sky(fix).to_string()]
 }
 
 /// The report of the latest fix's epoch (`--report fix`): the fused state's TPV, ATT and IMU
@@ -751,6 +769,7 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
     let mut clients: Vec<Client> = Vec::new();
     let mut latest = Latest::default();
     let mut last_slot: Option<i64> = None;
+    let mut last_fix_slot: Option<i64> = None;
     let mut rx = [0u8; 2048];
     while !node.termination_requested() {
         // poll(2): the listener, the fix subscriber's wake-up (a fix is reported the moment
@@ -880,9 +899,27 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
             new_fixes += 1;
             true
         })?;
+        let now_ns = monotonic_now_ns();
+        // Without a fresh fused state, the period's first fix (by its UTC, else host time).
+        let nav_fresh = latest.nav.is_some_and(|n| (now_ns - n.host_ns).abs() < FRESH_NAV_NS);
+        let due_fix = latest.fix.filter(|f| {
+            let t = if f.utc_ns != i64::MIN {
+                f.utc_ns
+            } else {
+                f.stamp.host_ns
+            };
+            let slot = t.div_euclid(period_ns);
+            let due = new_fixes > 0 && !nav_fresh && due.is_none() && last_fix_slot != Some(slot);
+            if due {
+                last_fix_slot = Some(slot);
+            }
+            due
+        });
         let lines = match args.report {
-            ReportOn::Period => due.map(|n| period_report(&n, &latest)),
-            ReportOn::Fix if new_fixes > 0 => fix_report(&latest, monotonic_now_ns()),
+            ReportOn::Period => due
+                .map(|n| period_report(&n, &latest, now_ns))
+                .or_else(|| due_fix.map(|f| fix_period_report(&f, &latest))),
+            ReportOn::Fix if new_fixes > 0 => fix_report(&latest, now_ns),
             ReportOn::Fix => None,
         };
         if let Some(lines) = lines {

@@ -133,11 +133,14 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayStats, ReplayError> {
         let mut t0: Option<u64> = None;
         let mut last_progress = 0i64;
         let mut lap_published = 0u64;
+        // Recording time of the last sample published (ns since the lap's first).
+        let mut last_rel_ns = 0u64;
         while let Some(m) = reader.next_sample()? {
             if !any_matches(&globs, m.service) {
                 continue;
             }
             let rel_ns = m.publish_time.saturating_sub(*t0.get_or_insert(m.publish_time));
+            last_rel_ns = rel_ns;
             if let Speed::Factor(f) = args.speed {
                 let target = start + (rel_ns as f64 / f) as i64;
                 loop {
@@ -176,7 +179,7 @@ pub fn run(args: &ReplayArgs) -> Result<ReplayStats, ReplayError> {
             warn!("{}: {c}; replayed the rest", args.input.display());
         }
         if args.progress {
-            progress(tty, 1.0, 0, stats.published, args.speed, stats.laps);
+            progress(tty, 1.0, last_rel_ns, stats.published, args.speed, stats.laps);
         }
         stats.laps += 1;
         if !args.looped || lap_published == 0 || node.termination_requested() {

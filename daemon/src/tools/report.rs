@@ -514,6 +514,27 @@ fn histogram(title: &str, xlabel: &str, values: &[f64]) -> String {
             bh
         );
     }
+    // The y axis: counts per bin.
+    let ystep = nice_step(cmax, 5.0).max(1.0);
+    let mut c = 0.0;
+    while c <= cmax + 1e-9 {
+        let y = mt + ph - c / cmax * (ph - 10.0);
+        let _ = write!(
+            s,
+            r##"<line x1="{}" y1="{y:.1}" x2="{ml}" y2="{y:.1}" stroke="#444"/><text x="{}" y="{:.1}" font-size="11" text-anchor="end">{}</text>"##,
+            ml - 4.0,
+            ml - 6.0,
+            y + 4.0,
+            fmt_tick(c, ystep)
+        );
+        c += ystep;
+    }
+    let _ = write!(
+        s,
+        r#"<text x="16" y="{:.1}" font-size="12" text-anchor="middle" transform="rotate(-90 16 {:.1})">epochs per bin</text>"#,
+        mt + ph / 2.0,
+        mt + ph / 2.0
+    );
     let step = nice_step(hi - lo + width, 8.0);
     let mut t = (lo / step).ceil() * step;
     while t <= hi + width {
@@ -606,9 +627,12 @@ fn render(args: &ReportArgs, d: &Data) -> String {
     if let Some(p) = &d.problem {
         summary.push(("WARNING".into(), p.clone()));
     }
-    for (service, n) in &d.counts {
-        summary.push((service.clone(), format!("{n} samples")));
-    }
+    // The sample counts go below the figures: the accuracy comes first.
+    let counts: Vec<(String, String)> = d
+        .counts
+        .iter()
+        .map(|(service, n)| (service.clone(), format!("{n} samples")))
+        .collect();
     // Local frame: metres north/east of the first position.
     let origin = d
         .truth
@@ -947,6 +971,8 @@ fn render(args: &ReportArgs, d: &Data) -> String {
         "d0 (ms)",
         &d0,
     ));
+    body.push_str("<h2>Samples</h2>");
+    body.push_str(&html_table(&counts));
 
     format!(
         r#"<!DOCTYPE html>
@@ -1022,6 +1048,10 @@ mod tests {
         assert!(svg.contains(">0.5<") && svg.contains(">-0.5<"), "y ticks");
         let h = histogram("h", "x", &[1.0, 1.1, 1.2, 2.0, 2.0, 3.5]);
         assert_eq!(h.matches("class=\"bar\"").count(), 5);
+        assert!(
+            h.contains("epochs per bin") && h.contains(">0<") && h.contains(">3<"),
+            "y axis: {h}"
+        );
         assert!(plot("e", "x", "y", &[], false).contains("no data"));
         assert_eq!(nice_step(10.0, 5.0), 2.0);
         assert_eq!(nice_step(0.7, 8.0), 0.1);

@@ -18,9 +18,14 @@ use navsync_tests::TestEnv;
 use serde_json::Value;
 
 fn listening_port(env: &mut TestEnv) -> u16 {
+    listening_port_of(env, "gpsd")
+}
+
+/// The port the gpsd server spawned as `name` listens on.
+fn listening_port_of(env: &mut TestEnv, name: &str) -> u16 {
     let t0 = Instant::now();
     loop {
-        if let Some(l) = env.log("gpsd").lines().find(|l| l.contains("listening on ")) {
+        if let Some(l) = env.log(name).lines().find(|l| l.contains("listening on ")) {
             return l.rsplit(':').next().unwrap().trim().parse().unwrap();
         }
         env.assert_running();
@@ -283,7 +288,8 @@ fn gpsd_clients_read_the_fused_state() {
 
 /// `--report fix` with a receiver alone (no estimator): one TPV (then SKY) per receiver epoch,
 /// as gpsd sends them, carrying that epoch's fix: a real capture (bu353s4, NMEA) played into a
-/// pseudo-terminal, `navsync gnss` on it.
+/// pseudo-terminal, `navsync gnss` on it. Beside it a server in the default mode
+/// (`--report period`) reports the same fixes, one per second of their time.
 #[test]
 fn fix_reports_follow_the_receivers_epochs() {
     let mut env = TestEnv::new("gpsdfix");
@@ -322,10 +328,17 @@ fn fix_reports_follow_the_receivers_epochs() {
             "rx",
         ],
     );
+    env.spawn(
+        "gpsd-period",
+        &["gpsd-server", "--listen", "127.0.0.1:0", "--gnss-id", "rx"],
+    );
     let port = listening_port(&mut env);
     let mut c = Conn::open(port);
     assert_eq!(c.next().unwrap()["class"], "VERSION");
     c.send("?WATCH={\"enable\":true,\"json\":true};\n");
+    let mut p = Conn::open(listening_port_of(&mut env, "gpsd-period"));
+    assert_eq!(p.next().unwrap()["class"], "VERSION");
+    p.send("?WATCH={\"enable\":true,\"json\":true};\n");
     let mut tpvs: Vec<Value> = Vec::new();
     let mut got: Vec<navsync_shared::samples::GnssFix> = Vec::new();
     while tpvs.len() < 12 {
@@ -360,7 +373,39 @@ fn fix_reports_follow_the_receivers_epochs() {
     let n = times.len();
     times.dedup();
     assert_eq!(times.len(), n, "one report per epoch");
+
+    // The default mode: the receiver's fix (a 3D fix reported as such), at most one per second.
+    let mut period_tpvs: Vec<Value> = Vec::new();
+    while period_tpvs.len() < 4 {
+        let v = p.next().expect("connection closed");
+        if v["class"] == "TPV" {
+            period_tpvs.push(v);
+        }
+    }
+    while let Some(f) = fixes.receive().unwrap() {
+        got.push(f);
+    }
+    for t in &period_tpvs[1..] {
+        let time = t["time"].as_str().unwrap_or_else(|| panic!("no time: {t}"));
+        let f = got
+            .iter()
+            .find(|f| navsync_shared::time::format_rfc3339_ms(f.utc_ns) == time)
+            .unwrap_or_else(|| panic!("default mode: no fix of {time} among {} fixes", got.len()));
+        assert_eq!(t["mode"].as_u64(), Some(u64::from(f.mode.max(1))), "{t}");
+    }
+    assert!(
+        period_tpvs.iter().any(|t| t["mode"].as_u64() >= Some(2)),
+        "the default mode never reported the receiver's fix: {period_tpvs:?}"
+    );
+    let seconds: Vec<&str> = period_tpvs
+        .iter()
+        .filter_map(|t| t["time"].as_str()?.get(..19))
+        .collect();
+    assert!(
+        seconds.windows(2).all(|w| w[0] != w[1]),
+        "more than one report per second: {seconds:?}"
+    );
     println!("{} TPVs, each its epoch's fix ({} fixes seen)", tpvs.len(), got.len());
-    drop((c, fixes, node));
+    drop((c, p, fixes, node));
     env.finish();
 }

@@ -308,6 +308,19 @@ fn rosbags_and_mcap_read_every_recording_and_navsync_reads_theirs() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The progress line ends at the recording's end, not at t+0.
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    let last = stderr
+        .lines()
+        .rfind(|l| l.contains("100%"))
+        .unwrap_or_else(|| panic!("no final progress line:\n{stderr}"));
+    let t_end: f64 = last
+        .split("t+")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no t+ in {last}"));
+    assert!(t_end > 1.0, "the final progress line says t+{t_end} s: {last}");
     std::thread::sleep(Duration::from_millis(700));
     // SAFETY: signalling our own child.
     unsafe { libc::kill(recorder.id() as libc::pid_t, libc::SIGTERM) };

@@ -120,6 +120,10 @@ fn the_report_shows_its_plots() {
     }
     assert!(html.contains("computed by the estimator over the recording"));
     assert!(html.contains("horizontal position error"));
+    // The accuracy comes first, the sample counts after the figures.
+    let first_count = html.find(" samples</td>").expect("sample counts");
+    let first_plot = html.find("<svg").expect("figures");
+    assert!(first_plot < first_count, "sample counts before the figures");
     // d0 of the recording: the simulator's 0.6 s receiver latency.
     let bars = html.matches("class=\"bar\"").count();
     assert!(bars >= 5, "{bars} histogram bars");

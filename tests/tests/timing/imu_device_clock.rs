@@ -25,6 +25,9 @@ use navsync_tests::{TestEnv, write_drive_scenario};
 /// IMU rate of the scenario, Hz.
 const RATE_HZ: f64 = 200.0;
 
+/// How long the simulator runs, s.
+const SCENARIO_S: f64 = 45.0;
+
 fn wait_gone(env: &mut TestEnv, name: &str, timeout: Duration) {
     let t0 = Instant::now();
     while env.is_running(name) {
@@ -80,7 +83,7 @@ fn xsens_samples_are_timed_by_their_device_clock_to_microseconds() {
     let _alone = navsync_tests::alone();
     let mut env = TestEnv::new("devclock");
     let scenario = env.dir.join("drive.toml");
-    write_drive_scenario(&scenario, 45.0, 1, RATE_HZ);
+    write_drive_scenario(&scenario, SCENARIO_S, 1, RATE_HZ);
     let rec = env.dir.join("imu.mcap");
     let rec_s = rec.display().to_string();
     env.spawn(
@@ -96,7 +99,14 @@ fn xsens_samples_are_timed_by_their_device_clock_to_microseconds() {
     );
     env.wait_for_path(&rec, Duration::from_secs(20));
     env.spawn_pipeline(&scenario, 1);
-    wait_gone(&mut env, "sim", Duration::from_secs(150));
+    // 45 s of the drive (its trajectory runs on past that), then the simulator is stopped.
+    let t_sim = Instant::now();
+    while t_sim.elapsed() < Duration::from_secs(SCENARIO_S as u64) {
+        env.assert_running();
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    env.signal("sim", libc::SIGTERM);
+    wait_gone(&mut env, "sim", Duration::from_secs(20));
     std::thread::sleep(Duration::from_millis(1500));
     env.signal("record", libc::SIGTERM);
     wait_gone(&mut env, "record", Duration::from_secs(20));
