@@ -35,7 +35,8 @@ import sys
 
 import numpy as np
 
-# The dataset beside the checkout (../shared/datasets/), else under $NAVSYNC_SHARED_DIR.
+# The dataset under $NAVSYNC_SHARED_DIR/datasets/ when it is set, else beside the checkout
+# (../shared/datasets/).
 DEFAULT_DATA = os.path.normpath(os.path.join(
     os.environ.get("NAVSYNC_SHARED_DIR",
                    os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "..", "shared")),
