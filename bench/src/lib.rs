@@ -1,6 +1,6 @@
 //! # navsync-bench
 //!
-//! The benchmarks behind the README's performance and timing tables, as a crate of their own
+//! The benchmarks behind the tables of docs/benchmarks/, as a crate of their own
 //! so the production `navsync` binary does not carry them. Each is one subcommand of the
 //! `navsync-bench` binary with one options struct, prints a table and writes JSON with
 //! `--json FILE`; `--quick` is the smoke-test size CI runs (`tests/tests/timing/bench_smoke.rs`).

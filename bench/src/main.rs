@@ -1,4 +1,4 @@
-//! `navsync-bench`: the benchmarks (README "## Performance" and "## Timing"); one options
+//! `navsync-bench`: the benchmarks (docs/benchmarks/); one options
 //! struct per subcommand, passed whole to its module.
 
 use anyhow::{Context, Result};
@@ -14,7 +14,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Offline timing benchmark: clock model, holdover, d0 (the table in the README's "## Timing").
+    /// Offline timing benchmark: clock model, holdover, d0 (the table in docs/benchmarks/timing.md).
     Timing,
     /// IPC latency between processes: iceoryx2 services against a Unix-domain socket.
     Ipc(ipc::IpcBenchArgs),

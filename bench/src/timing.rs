@@ -41,7 +41,7 @@ pub struct TimingCase {
 }
 
 impl TimingCase {
-    /// The cases of the README table.
+    /// The cases of the table in docs/benchmarks/timing.md.
     pub fn standard() -> Vec<TimingCase> {
         let base = TimingCase {
             name: "kernel PPS, 1 µs jitter",

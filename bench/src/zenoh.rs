@@ -236,7 +236,7 @@ fn run_case(link: &NetnsPair, rate: f64, secs: f64) -> Result<ZenohCase, ZenohBe
     })
 }
 
-/// The README table.
+/// The table of docs/benchmarks/performance.md ("Zenoh bridge latency").
 pub fn table(r: &ZenohReport) -> String {
     let mut s = String::from(
         "| rate | sent | received | p50 µs | p99 µs | p99.9 µs | max µs | bridge A CPU µs/msg | bridge B CPU µs/msg |\n|---|---|---|---|---|---|---|---|---|\n",

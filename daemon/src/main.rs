@@ -82,7 +82,7 @@ enum Cmd {
     /// starting anything: errors name the file, line, field and what was expected.
     CheckConfig,
     /// Installs the binary, the systemd units, sysusers/tmpfiles/udev files and the example
-    /// configuration (README "## Running as a service").
+    /// configuration (docs/guide/install.md).
     Install(install::Options),
 }
 

@@ -35,8 +35,8 @@ REPO = os.path.dirname(os.path.dirname(HERE))
 DEFAULT_DATA = os.environ.get(
     "NAVSYNC_DRIVE0708_DIR",
     os.path.join(os.path.dirname(REPO), "shared", "datasets", "rtklibexplorer-drive0708"))
-if not os.path.isdir(DEFAULT_DATA) and os.path.isdir("/work/shared/datasets/rtklibexplorer-drive0708"):
-    DEFAULT_DATA = "/work/shared/datasets/rtklibexplorer-drive0708"
+if not os.path.isdir(DEFAULT_DATA) and os.environ.get("NAVSYNC_SHARED_DIR"):
+    DEFAULT_DATA = os.path.join(os.environ["NAVSYNC_SHARED_DIR"], "datasets", "rtklibexplorer-drive0708")
 
 
 def windows_args(n, data):

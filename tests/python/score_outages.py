@@ -35,7 +35,12 @@ import sys
 
 import numpy as np
 
-DEFAULT_DATA = "/work/shared/datasets/rtklibexplorer-drive0708"
+# The dataset under $NAVSYNC_SHARED_DIR/datasets/ when it is set, else beside the checkout
+# (../shared/datasets/).
+DEFAULT_DATA = os.path.normpath(os.path.join(
+    os.environ.get("NAVSYNC_SHARED_DIR",
+                   os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "..", "shared")),
+    "datasets", "rtklibexplorer-drive0708"))
 A = 6378137.0
 E2 = (1.0 / 298.257223563) * (2.0 - 1.0 / 298.257223563)
 

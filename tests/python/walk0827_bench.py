@@ -37,8 +37,8 @@ REPO = os.path.dirname(os.path.dirname(HERE))
 DEFAULT_DATA = os.environ.get(
     "NAVSYNC_WALK0827_DIR",
     os.path.join(os.path.dirname(REPO), "shared", "datasets", "rtklibexplorer-walk0827"))
-if not os.path.isdir(DEFAULT_DATA) and os.path.isdir("/work/shared/datasets/rtklibexplorer-walk0827"):
-    DEFAULT_DATA = "/work/shared/datasets/rtklibexplorer-walk0827"
+if not os.path.isdir(DEFAULT_DATA) and os.environ.get("NAVSYNC_SHARED_DIR"):
+    DEFAULT_DATA = os.path.join(os.environ["NAVSYNC_SHARED_DIR"], "datasets", "rtklibexplorer-walk0827")
 
 LEVER = [0.0, -0.05, 0.0]
 PHASES = {"A": (408667.0, 3), "B": (408689.5, 2)}
