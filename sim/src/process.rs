@@ -303,7 +303,9 @@ pub fn run(args: &SimArgs) -> Result<(), SimProcessError> {
     let mut world = World::new(&cfg, start_host, start_utc)?;
     let end_host = args.duration_s.map(|d| start_host + (d * 1e9) as i64);
     // How long this run lasts: the scenario, or `--duration` when that ends it sooner.
-    let run_s = args.duration_s.map_or(world.duration_s(), |d| d.min(world.duration_s()));
+    let run_s = args
+        .duration_s
+        .map_or(world.duration_s(), |d| d.min(world.duration_s()));
     info!(imus = cfg.imu.count, duration_s = run_s, "simulation running");
 
     let mut next = world.next_event();

@@ -72,7 +72,9 @@ pub fn run(opts: Options) -> Result<()> {
     };
     eprintln!(
         "then: systemd-sysusers; systemd-tmpfiles --create; udevadm control --reload; systemctl daemon-reload; \
-         edit {conf}; {check}; systemctl enable --now navsync.target"
+         edit {conf}; {check}; systemctl enable navsync-estimator navsync-gnss@0 navsync-pps@0 navsync-imu@0 \
+         (one instance per device of {conf}; optional: navsync-ntpshm navsync-gpsd-server navsync-record); \
+         systemctl start navsync.target"
     );
     Ok(())
 }
@@ -226,7 +228,13 @@ pub fn plan(layout: &Layout, root: &Path) -> Result<Vec<Step>> {
         steps.push(write(&layout.units.join(name), layout.unit_text(text), 0o644));
     }
     steps.push(write(&layout.sysusers, SYSUSERS.to_string(), 0o644));
-    steps.push(write(&layout.tmpfiles, TMPFILES.to_string(), 0o644));
+    // The configuration is written root's, 0640; tmpfiles.d(5) `z` gives it the navsync group
+    // once systemd-sysusers has created it, so the services (user navsync) can read it.
+    let tmpfiles = format!(
+        "{TMPFILES}# The configuration file: readable by the services (group navsync), not by others.\nz {} 0640 root navsync -\n",
+        layout.config.display()
+    );
+    steps.push(write(&layout.tmpfiles, tmpfiles, 0o644));
     steps.push(write(&layout.udev, UDEV.to_string(), 0o644));
     steps.push(write(&layout.example(), EXAMPLE.to_string(), 0o644));
     let conf = under(&layout.config);

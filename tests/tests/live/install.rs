@@ -183,6 +183,12 @@ fn install_stays_in_its_prefix_lists_on_dry_run_and_keeps_a_configuration() {
         );
     }
     let conf = prefix.join("etc/navsync/navsync.toml");
+    // The configuration (0640, root's) gets the services' group from tmpfiles.d.
+    let tmpfiles = std::fs::read_to_string(prefix.join("lib/tmpfiles.d/navsync.conf")).unwrap();
+    assert!(
+        tmpfiles.contains(&format!("z {} 0640 root navsync -", conf.display())),
+        "{tmpfiles}"
+    );
     let o = Command::new(navsync_bin())
         .args(["--config", conf.to_str().unwrap(), "check-config"])
         .output()
