@@ -78,6 +78,9 @@ enum Cmd {
     Decode(decode::Options),
     /// Prints the sample layouts as Python ctypes structures (shared/python/navsync_types.py).
     PythonTypes,
+    /// Prints the configuration reference of the estimator's settings as Markdown
+    /// (docs/guide/configuration.md), generated from their declarations.
+    ConfigReference,
     /// Checks the configuration file (--config, default /etc/navsync/navsync.toml) without
     /// starting anything: errors name the file, line, field and what was expected.
     CheckConfig,
@@ -139,6 +142,12 @@ fn run(cli: Cli) -> Result<()> {
     if matches!(cli.cmd, Cmd::CheckConfig) {
         return check_config::run(cli.config.as_deref());
     }
+    if matches!(cli.cmd, Cmd::ConfigReference) {
+        use std::io::Write;
+        return std::io::stdout()
+            .write_all(config::estimator::reference().as_bytes())
+            .context("writing stdout");
+    }
     let cfg = config::load(cli.config.as_deref())?;
     let level = if cli.verbose {
         Some("debug")
@@ -174,7 +183,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Report(o) => report::main(o, &cfg),
         Cmd::Decode(o) => decode::run(o),
         Cmd::PythonTypes => python_types::run().context("writing stdout"),
-        Cmd::CheckConfig => Ok(()),
+        Cmd::CheckConfig | Cmd::ConfigReference => Ok(()),
         Cmd::Install(o) => install::run(o),
     }
 }

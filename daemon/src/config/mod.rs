@@ -280,6 +280,12 @@ pub struct NtpShmOutput {
     /// SHM unit (key 0x4e545030 + unit).
     #[serde(default)]
     pub unit: u32,
+    /// chrony's SOCK refclock socket to send each sample to as well (`refclock SOCK PATH`).
+    #[serde(default)]
+    pub sock: Option<PathBuf>,
+    /// Withhold a sample whose mapping 1σ exceeds this many µs (default 1000).
+    #[serde(default)]
+    pub max_std_us: Option<f64>,
 }
 
 /// `[outputs.record]`.
@@ -496,6 +502,13 @@ impl Loaded {
             Some(i) => Err(self.error_at(&format!("{path}[{i}]"), format!("{}: expected {what}", v[i]))),
             None => Ok(()),
         };
+        if let Some(n) = &c.outputs.ntpshm {
+            positive(
+                "outputs.ntpshm.max_std_us".into(),
+                n.max_std_us,
+                "a number of µs above 0",
+            )?;
+        }
         if let Some(l) = &c.logging.level
             && !valid_level(l)
         {

@@ -30,7 +30,13 @@ fn the_example_is_valid_and_complete() {
     assert_eq!(s.inputs.imus, vec!["0".to_string(), "1".to_string()]);
     assert_eq!(s.nav.coupling, Coupling::Loose);
     assert_eq!(s.nav.receiver_oscillator, ReceiverOscillator::Tcxo);
-    assert_eq!(c.outputs.ntpshm, Some(NtpShmOutput { unit: 0 }));
+    assert_eq!(
+        c.outputs.ntpshm,
+        Some(NtpShmOutput {
+            unit: 0,
+            ..Default::default()
+        })
+    );
     assert_eq!(c.logging.level.as_deref(), Some("info"));
 }
 

@@ -1,6 +1,8 @@
-//! `navsync ntpshm --unit N`: exports navsync's GNSS time to chrony or ntpd through the NTP
-//! shared-memory reference clock (ntpd's `refclock_shm.c` driver, "type 28"; chrony's
-//! `refclock SHM N`; gpsd writes the same segment).
+//! `navsync ntpshm --unit N [--sock PATH] [--max-std-us F]`: exports navsync's GNSS time to
+//! chrony or ntpd through the NTP shared-memory reference clock (ntpd's `refclock_shm.c`
+//! driver, "type 28"; chrony's `refclock SHM N`; gpsd writes the same segment), and with
+//! `--sock` through chrony's socket reference clock too (`refclock SOCK PATH`, the interface
+//! gpsd uses: one datagram per sample, chrony's `refclock_sock.c` `struct sock_sample`).
 //!
 //! The segment is System V shared memory with key `0x4e545030 + N` ("NTP0" + unit) holding
 //! one [`ShmTime`]. The writer uses mode 1, the count/valid protocol: set `valid = 0`,
@@ -20,6 +22,12 @@
 //! disciplining through a PPS or GNSS loss; the mapping's uncertainty grows honestly and is
 //! written as `precision`), or software sync; nothing while it is acquiring or unknown, and
 //! nothing when no `TimeState` arrived for [`STALE_AFTER_NS`] (the estimator is gone).
+//!
+//! The bound. A sample whose mapping 1σ at the instant exceeds `--max-std-us` (default
+//! [`DEFAULT_MAX_STD_US`]) is withheld, on both interfaces: a long holdover or a software-only
+//! mapping then stops feeding chrony, which sees the refclock go unreachable and falls back on
+//! its own selection and holdover (the SHM `precision` field carries the σ, but chrony's SOCK
+//! sample has no such field). Counted as `withheld_over_bound`.
 
 use std::time::Duration;
 
@@ -36,6 +44,64 @@ pub const NTP_SHM_BASE_KEY: i32 = 0x4e54_5030;
 const MAX_IPC_ERRORS: u32 = 100;
 /// A `TimeState` older than this is not exported, ns.
 pub const STALE_AFTER_NS: i64 = 5 * NS_PER_S;
+/// Default bound on the exported mapping's 1σ, µs: beyond it a sample is withheld.
+pub const DEFAULT_MAX_STD_US: f64 = 1000.0;
+/// `struct sock_sample`'s protocol identifier ("SOCK"; chrony `refclock_sock.c`).
+pub const SOCK_MAGIC: i32 = 0x534f_434b;
+
+/// chrony's `struct sock_sample` (`refclock_sock.c`), native layout: one datagram per sample.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SockSample {
+    /// System time of the measurement (`struct timeval`), seconds since 1970.
+    pub tv_sec: libc::time_t,
+    /// Its µs part.
+    pub tv_usec: libc::suseconds_t,
+    /// True (GNSS) time minus the system time at `tv`, s.
+    pub offset: f64,
+    /// 0: the sample carries the whole time, not only a pulse.
+    pub pulse: i32,
+    /// 0 normal, 1 insert, 2 delete a leap second.
+    pub leap: i32,
+    /// Padding.
+    pub pad: i32,
+    /// [`SOCK_MAGIC`].
+    pub magic: i32,
+}
+
+impl SockSample {
+    /// The datagram of `s`: the system time at the instant and GNSS minus system time.
+    pub fn of(s: &ShmSample) -> Self {
+        let (sec, usec, _) = split(s.receive_ns);
+        // The offset from the µs-truncated system time chrony receives (tv), ns exact.
+        let tv_ns = s.receive_ns - s.receive_ns.rem_euclid(1000);
+        Self {
+            tv_sec: sec,
+            tv_usec: usec as libc::suseconds_t,
+            offset: (s.clock_ns - tv_ns) as f64 * 1e-9,
+            pulse: 0,
+            leap: 0,
+            pad: 0,
+            magic: SOCK_MAGIC,
+        }
+    }
+
+    /// The datagram's bytes: each field at its `repr(C)` offset, native byte order, any
+    /// padding zero.
+    pub fn bytes(&self) -> [u8; size_of::<SockSample>()] {
+        use std::mem::offset_of;
+        let mut b = [0u8; size_of::<SockSample>()];
+        let mut put = |at: usize, v: &[u8]| b[at..at + v.len()].copy_from_slice(v);
+        put(offset_of!(SockSample, tv_sec), &self.tv_sec.to_ne_bytes());
+        put(offset_of!(SockSample, tv_usec), &self.tv_usec.to_ne_bytes());
+        put(offset_of!(SockSample, offset), &self.offset.to_ne_bytes());
+        put(offset_of!(SockSample, pulse), &self.pulse.to_ne_bytes());
+        put(offset_of!(SockSample, leap), &self.leap.to_ne_bytes());
+        put(offset_of!(SockSample, pad), &self.pad.to_ne_bytes());
+        put(offset_of!(SockSample, magic), &self.magic.to_ne_bytes());
+        b
+    }
+}
 
 /// ntpd's `struct shmTime` (ntpd `refclock_shm.c`, gpsd `ntpshm.h`), native layout.
 #[repr(C)]
@@ -81,9 +147,9 @@ pub struct ShmSample {
 }
 
 /// The sample for instant `host_ns` (`CLOCK_MONOTONIC`) read as `realtime_ns` on the system
-/// clock, from the mapping `state` received at host time `state_rx_ns`; `None` when the
-/// mapping must not be exported. Pure.
-pub fn sample_for(state: &TimeState, host_ns: i64, realtime_ns: i64) -> Option<ShmSample> {
+/// clock, from the mapping `state`; `None` when the mapping must not be exported (not usable,
+/// stale, or its 1σ at the instant above `max_std_ns`). Pure.
+pub fn sample_for(state: &TimeState, host_ns: i64, realtime_ns: i64, max_std_ns: f64) -> Option<ShmSample> {
     if !matches!(
         state.status(),
         TimeStatus::Locked | TimeStatus::Holdover | TimeStatus::Software
@@ -94,6 +160,10 @@ pub fn sample_for(state: &TimeState, host_ns: i64, realtime_ns: i64) -> Option<S
         return None;
     }
     let sigma_s = state.utc_std_ns_at(host_ns) * 1e-9;
+    // A σ that is not a number is over any bound.
+    if sigma_s.is_nan() || sigma_s * 1e9 > max_std_ns {
+        return None;
+    }
     let precision = if sigma_s.is_finite() && sigma_s > 0.0 {
         sigma_s.log2().ceil().clamp(-30.0, 0.0) as i32
     } else {
@@ -171,6 +241,14 @@ pub enum NtpShmError {
         key: i32,
         /// What is wrong with it.
         problem: String,
+    },
+    /// The socket for chrony's SOCK refclock could not be created.
+    #[error("socket for chrony's refclock {path}: {source}")]
+    Sock {
+        /// The refclock's path.
+        path: std::path::PathBuf,
+        /// Cause.
+        source: std::io::Error,
     },
     /// IPC failure.
     #[error(transparent)]
@@ -320,6 +398,33 @@ pub struct NtpShmArgs {
     /// [default: [outputs.ntpshm].unit, else 0].
     #[arg(long)]
     pub unit: Option<u32>,
+    /// Also send each sample to chrony's socket refclock at PATH (chrony: `refclock SOCK PATH`;
+    /// chronyd creates the socket) [default: [outputs.ntpshm].sock, else none].
+    #[arg(long, value_name = "PATH")]
+    pub sock: Option<std::path::PathBuf>,
+    /// Withhold a sample whose time mapping 1σ exceeds this many µs (chrony then falls back on
+    /// its other sources and its own holdover) [default: [outputs.ntpshm].max_std_us, else 1000].
+    #[arg(long, value_name = "US", value_parser = positive_us)]
+    pub max_std_us: Option<f64>,
+}
+
+/// A bound in µs: a finite number above 0.
+fn positive_us(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("`{s}`: expected a number of µs above 0")),
+    }
+}
+
+/// What `navsync ntpshm` exports, and where.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Export {
+    /// SHM unit.
+    pub unit: u32,
+    /// chrony's SOCK refclock socket, if any.
+    pub sock: Option<std::path::PathBuf>,
+    /// Bound on the mapping's 1σ, ns.
+    pub max_std_ns: f64,
 }
 
 /// Runs `navsync ntpshm` with the unit: flag, else `[outputs.ntpshm].unit`, else 0.
@@ -329,11 +434,24 @@ pub fn main(opts: NtpShmArgs, cfg: &crate::config::Loaded) -> anyhow::Result<()>
         .unit
         .or(cfg.config.outputs.ntpshm.as_ref().map(|n| n.unit))
         .unwrap_or(0);
-    run(unit).context("ntpshm")
+    let file = cfg.config.outputs.ntpshm.as_ref();
+    let sock = opts.sock.or_else(|| file.and_then(|n| n.sock.clone()));
+    // The file's value was checked when the file was read (`Loaded::check`), a flag's by clap.
+    let max_std_us = opts
+        .max_std_us
+        .or(file.and_then(|n| n.max_std_us))
+        .unwrap_or(DEFAULT_MAX_STD_US);
+    run(&Export {
+        unit,
+        sock,
+        max_std_ns: max_std_us * 1e3,
+    })
+    .context("ntpshm")
 }
 
-/// Runs the exporter for SHM `unit` until SIGINT/SIGTERM.
-pub fn run(unit: u32) -> Result<(), NtpShmError> {
+/// Runs the exporter until SIGINT/SIGTERM.
+pub fn run(export: &Export) -> Result<(), NtpShmError> {
+    let unit = export.unit;
     let process = format!("ntpshm-{unit}");
     let _span = info_span!("ntpshm", unit).entered();
     let node = IpcNode::new(&process)?;
@@ -342,9 +460,26 @@ pub fn run(unit: u32) -> Result<(), NtpShmError> {
     let c_written = health.counter("samples_written")?;
     let c_skipped = health.counter("seconds_not_exported")?;
     let c_holdover = health.counter("holdover_samples")?;
+    let c_withheld = health.counter("withheld_over_bound")?;
+    let c_sock_sent = health.counter("sock_samples_sent")?;
+    let c_sock_failed = health.counter("sock_send_failed")?;
     let mut shm = ShmSegment::open(unit)?;
+    // Unbound: each datagram is addressed to chrony's socket, which may come and go.
+    let sock = match &export.sock {
+        Some(path) => Some((
+            std::os::unix::net::UnixDatagram::unbound().map_err(|source| NtpShmError::Sock {
+                path: path.clone(),
+                source,
+            })?,
+            path,
+        )),
+        None => None,
+    };
+    let mut sock_failing = false;
     info!(
         key = format!("{:#x}", ShmSegment::key(unit)),
+        sock = ?export.sock,
+        max_std_us = export.max_std_ns * 1e-3,
         "NTP SHM exporter running"
     );
     let mut latest: Option<TimeState> = None;
@@ -384,11 +519,30 @@ pub fn run(unit: u32) -> Result<(), NtpShmError> {
         let (h, real) = paired_clocks_ns();
         match latest
             .as_ref()
-            .and_then(|s| sample_for(s, h, real).map(|x| (x, s.status())))
+            .and_then(|s| sample_for(s, h, real, export.max_std_ns).map(|x| (x, s.status())))
         {
             Some((sample, status)) => {
                 shm.write(&sample);
                 health.add(c_written, 1);
+                if let Some((socket, path)) = &sock {
+                    match socket.send_to(&SockSample::of(&sample).bytes(), path) {
+                        Ok(_) => {
+                            health.add(c_sock_sent, 1);
+                            sock_failing = false;
+                        }
+                        Err(e) => {
+                            health.add(c_sock_failed, 1);
+                            if !sock_failing {
+                                warn!(
+                                    "sending to chrony's socket {}: {e} (is chronyd running with `refclock SOCK {}`?)",
+                                    path.display(),
+                                    path.display()
+                                );
+                                sock_failing = true;
+                            }
+                        }
+                    }
+                }
                 if status == TimeStatus::Holdover {
                     health.add(c_holdover, 1);
                 }
@@ -397,7 +551,15 @@ pub fn run(unit: u32) -> Result<(), NtpShmError> {
                     last_status = status;
                 }
             }
-            None => health.add(c_skipped, 1),
+            None => {
+                health.add(c_skipped, 1);
+                if latest
+                    .as_ref()
+                    .is_some_and(|s| sample_for(s, h, real, f64::INFINITY).is_some())
+                {
+                    health.add(c_withheld, 1);
+                }
+            }
         }
         if let Err(e) = health.maybe_publish(now) {
             warn!("publishing health: {e}");
@@ -500,17 +662,44 @@ mod tests {
     #[test]
     fn sample_pairs_gnss_time_and_system_time_of_one_instant() {
         let s = locked(5_000_000_000, 1_790_000_000_000_000_000);
-        let x = sample_for(&s, 5_500_000_000, 1_790_000_000_250_000_123).expect("sample");
+        let x = sample_for(&s, 5_500_000_000, 1_790_000_000_250_000_123, 1e6).expect("sample");
         assert_eq!(x.clock_ns, 1_790_000_000_000_000_000 + 500_000_000 + 500);
         assert_eq!(x.receive_ns, 1_790_000_000_250_000_123);
         assert_eq!(x.precision, -20, "σ ≈ 0.5 µs → 2^-20 s");
         let mut acquiring = s;
         acquiring.status = TimeStatus::Acquiring as u8;
-        assert_eq!(sample_for(&acquiring, 5_500_000_000, 0), None);
-        assert_eq!(sample_for(&s, 5_000_000_000 + STALE_AFTER_NS + 1, 0), None, "stale");
+        assert_eq!(sample_for(&acquiring, 5_500_000_000, 0, 1e6), None);
+        assert_eq!(
+            sample_for(&s, 5_000_000_000 + STALE_AFTER_NS + 1, 0, 1e6),
+            None,
+            "stale"
+        );
         let mut holdover = s;
         holdover.status = TimeStatus::Holdover as u8;
-        assert!(sample_for(&holdover, 6_000_000_000, 0).is_some());
+        assert!(sample_for(&holdover, 6_000_000_000, 0, 1e6).is_some());
+        // The bound: σ ≈ 0.5 µs passes 1 µs, not 0.4 µs.
+        assert!(sample_for(&s, 5_500_000_000, 0, 1_000.0).is_some());
+        assert_eq!(sample_for(&s, 5_500_000_000, 0, 400.0), None, "over the bound");
+    }
+
+    #[test]
+    fn sock_sample_is_chronys_struct() {
+        let x = ShmSample {
+            clock_ns: 1_700_000_001_250_000_500,
+            receive_ns: 1_700_000_001_125_000_999,
+            precision: -20,
+        };
+        let d = SockSample::of(&x);
+        assert_eq!((d.tv_sec, d.tv_usec), (1_700_000_001, 125_000));
+        assert!((d.offset - 0.125_000_5).abs() < 1e-12, "{}", d.offset);
+        assert_eq!((d.pulse, d.leap, d.magic), (0, 0, 0x534f_434b));
+        if size_of::<libc::time_t>() == 8 {
+            // chrony's struct sock_sample on LP64: timeval 16, double 8, four ints.
+            assert_eq!(size_of::<SockSample>(), 40);
+            let b = d.bytes();
+            assert_eq!(&b[36..40], &SOCK_MAGIC.to_ne_bytes());
+            assert_eq!(f64::from_ne_bytes(b[16..24].try_into().unwrap()), d.offset);
+        }
     }
 
     #[test]

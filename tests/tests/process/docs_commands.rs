@@ -859,3 +859,26 @@ fn the_checks_find_a_wrong_flag() {
     assert!(!errors.iter().any(|e| e.contains("/dev/x")), "{errors:#?}");
     assert!(!errors.iter().any(|e| e.contains("pps")), "{errors:#?}");
 }
+
+/// `docs/guide/configuration.md` is what `navsync config-reference` prints: the reference of
+/// every declared estimator setting, generated from the declarations, never edited by hand.
+#[test]
+fn the_configuration_reference_is_generated_from_the_declarations() {
+    let o = std::process::Command::new(navsync_tests::navsync_bin())
+        .arg("config-reference")
+        .output()
+        .expect("navsync config-reference");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let generated = String::from_utf8(o.stdout).unwrap();
+    assert!(
+        generated.contains("| `gate_scale` | `--gate-scale` |"),
+        "a declared setting is missing:\n{generated}"
+    );
+    let path = repo().join("docs/guide/configuration.md");
+    let kept = std::fs::read_to_string(&path).unwrap_or_default();
+    assert!(
+        kept == generated,
+        "{} differs from `navsync config-reference`: regenerate it with\n  target/debug/navsync config-reference > docs/guide/configuration.md",
+        path.display()
+    );
+}

@@ -3,7 +3,9 @@
 //! pps → estimator → `navsync/time/state` → `navsync ntpshm --unit U` → SHM segment
 //! 0x4e545030 + U → `chronyd -x` (never touches the clock; its own config, pid, drift and
 //! command socket in the test's scratch directory; `refclock SHM U`). `chronyc tracking` must
-//! report the system clock 0.125 s slow of the reference within 1 ms.
+//! report the system clock 0.125 s slow of the reference within 1 ms. The same samples go to
+//! chrony's socket refclock as well (`ntpshm --sock`, `refclock SOCK PATH … noselect`): chrony
+//! must measure the same offset through it, within 1 ms of the SHM refclock's.
 //!
 //! Needs the Debian package `chrony` (`.ci/run` installs it when it can). Where `chronyd` is
 //! not installed or cannot start (e.g. not root), the test prints why and is skipped.
@@ -49,6 +51,16 @@ fn chronyc(sock: &Path, args: &[&str]) -> Option<String> {
 fn tracking_offset(csv: &str) -> Option<(String, f64)> {
     let f: Vec<&str> = csv.trim().split(',').collect();
     Some((f.get(1)?.to_string(), f.get(4)?.parse().ok()?))
+}
+
+/// Source `name`'s reach register (octal, as chronyc prints it) and last sample's adjusted
+/// offset (s) from `chronyc -c sources` (fields: mode, state, name, stratum, poll, reach, last rx,
+/// adjusted offset, measured offset, error).
+fn source_offset(csv: &str, name: &str) -> Option<(String, f64)> {
+    csv.lines().find_map(|l| {
+        let f: Vec<&str> = l.trim().split(',').collect();
+        (f.get(2) == Some(&name)).then(|| Some((f.get(5)?.to_string(), f.get(7)?.parse().ok()?)))?
+    })
 }
 
 struct Chronyd {
@@ -98,18 +110,21 @@ fn chrony_sees_the_gnss_time_offset_within_1_ms() {
     // chronyd refuses a command-socket directory that others can access.
     std::fs::set_permissions(&cdir, std::os::unix::fs::PermissionsExt::from_mode(0o700)).expect("chmod 700");
     let sock = cdir.join("chronyd.sock");
+    let refclock_sock = cdir.join("navsync.sock");
     let conf = cdir.join("chrony.conf");
     std::fs::write(
         &conf,
         format!(
             "refclock SHM {unit} refid NAVS poll 2 dpoll 0 precision 1e-6\n\
+             refclock SOCK {rs} refid NSCK poll 2 precision 1e-6 noselect\n\
              pidfile {d}/chronyd.pid\n\
              driftfile {d}/chrony.drift\n\
              bindcmdaddress {sock}\n\
              cmdport 0\n\
              port 0\n",
             d = cdir.display(),
-            sock = sock.display()
+            sock = sock.display(),
+            rs = refclock_sock.display()
         ),
     )
     .expect("chrony.conf");
@@ -138,7 +153,8 @@ fn chrony_sees_the_gnss_time_offset_within_1_ms() {
     env.spawn("gnss", &["gnss", "--port", &link_s, "--baud", "115200", "--id", "0"]);
     env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
     env.spawn("estimator", &["estimator", "--gnss", "0", "--pps", "0", "--imus", "0"]);
-    env.spawn("ntpshm", &["ntpshm", "--unit", &unit_s]);
+    let refclock_sock_s = refclock_sock.display().to_string();
+    env.spawn("ntpshm", &["ntpshm", "--unit", &unit_s, "--sock", &refclock_sock_s]);
 
     // SAFETY: geteuid has no preconditions.
     let root = unsafe { libc::geteuid() } == 0;
@@ -195,6 +211,17 @@ fn chrony_sees_the_gnss_time_offset_within_1_ms() {
             }
         }
     }
+    // The socket refclock: measured (reached) with the same offset as the SHM one.
+    let mut by_sock = None;
+    let t1 = Instant::now();
+    while t1.elapsed() < Duration::from_secs(20) {
+        let csv = chronyc(&sock, &["-n", "-c", "sources"]).unwrap_or_default();
+        by_sock = source_offset(&csv, "NSCK").zip(source_offset(&csv, "NAVS"));
+        if by_sock.as_ref().is_some_and(|((reach, _), _)| reach != "0") {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(1000));
+    }
     let sources = chronyc(&sock, &["-n", "sources", "-v"]).unwrap_or_default();
     let stats = chronyc(&sock, &["-n", "sourcestats"]).unwrap_or_default();
     println!("chrony tracking (refid, system clock slow of reference by s): {last:?}\n{sources}\n{stats}");
@@ -211,6 +238,20 @@ fn chrony_sees_the_gnss_time_offset_within_1_ms() {
         "chrony sees the system clock {off} s slow of navsync's GNSS time, expected {UTC_OFFSET_S} ± 0.001 s"
     );
     assert!(good >= 3, "offset not stable over three readings");
+    let ((reach, off_sock), (_, off_shm)) =
+        by_sock.unwrap_or_else(|| panic!("no SOCK refclock in chronyc sources\n{sources}\n{chrony_log}"));
+    assert_ne!(
+        reach,
+        "0",
+        "chrony never received a SOCK sample\n{sources}\n{}",
+        env.log("ntpshm")
+    );
+    // Adjusted offsets (chrony's clock model already holds the 0.125 s the tracking shows):
+    // the two refclocks agree, so the SOCK samples carry the same 0.125 s.
+    assert!(
+        (off_sock - off_shm).abs() < 1e-3,
+        "the SOCK refclock's adjusted offset {off_sock} s against the SHM refclock's {off_shm} s\n{sources}"
+    );
     drop((time, node));
     remove_shm(unit);
     env.finish();
