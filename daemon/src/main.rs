@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use navsync::live::{
-    bridge, demo, echo, estimator, feed, gnss, gpsd_server, imu, ntpshm, pps, record, replay, sim, status,
+    bridge, demo, echo, estimator, feed, gnss, gpsd_server, imu, nmea_out, ntpshm, pps, record, replay, sim, status,
 };
 use navsync::tools::{analyze, check_config, convert, decode, eval, install, kf_gins, python_types, report};
 use navsync::{config, logging};
@@ -61,6 +61,9 @@ enum Cmd {
     Bridge(bridge::Command),
     /// Exports GNSS time (`navsync/time/state`) to chrony/ntpd as an NTP shared-memory refclock.
     Ntpshm(ntpshm::NtpShmArgs),
+    /// Writes $GPRMC and $GPZDA right after each GNSS second into a serial port, for LiDARs
+    /// and cameras that take NMEA time beside a PPS line.
+    NmeaOut(nmea_out::NmeaOutArgs),
     /// Serves the fused state to gpsd clients (gpsd JSON protocol).
     GpsdServer(gpsd_server::GpsdArgs),
     /// Offline analyses of a recording.
@@ -176,6 +179,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Replay(o) => replay::main(o, &cfg),
         Cmd::Convert(o) => convert::run(&o, &cfg).context("convert"),
         Cmd::Ntpshm(o) => ntpshm::main(o, &cfg),
+        Cmd::NmeaOut(o) => nmea_out::run(&o).context("nmea-out"),
         Cmd::GpsdServer(o) => gpsd_server::run(&o).context("gpsd-server"),
         Cmd::Analyze(c) => analyze::main(c, &cfg),
         Cmd::Import(c) => kf_gins::main(c),

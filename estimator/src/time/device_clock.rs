@@ -244,7 +244,11 @@ impl DeviceClock {
         };
         let event_host = host_ns - self.cfg.host_stamp_latency_ns.round() as i64;
         let utc = time.utc_ns_at(event_host);
-        let map_sigma = time.utc_std_ns_at(event_host);
+        // A mapping whose σ is not known (NaN: a term of it was never set) adds none here, as
+        // the device clock has always taken it.
+        let map_sigma = Some(time.utc_std_ns_at(event_host))
+            .filter(|s| !s.is_nan())
+            .unwrap_or(0.0);
         let sigma = (self.cfg.host_stamp_sigma_ns.powi(2) + map_sigma.powi(2)).sqrt();
         let r = self.fuse(self.device_ns(ext), utc, sigma);
         if r == DeviceUpdate::Used {

@@ -12,6 +12,7 @@ mod gpsd_server;
 mod health_table;
 mod install;
 mod ipc_wake;
+mod nmea_out;
 mod python_iceoryx2;
 mod python_types;
 mod reliability;

@@ -217,7 +217,8 @@ impl TimeState {
             + dt * dt * p11
             + self.q_offset_ns2_per_s * dt
             + self.q_rate_per_s * 1e18 * dt * dt * dt / 3.0;
-        var.max(0.0).sqrt()
+        // A term that is not known (NaN) leaves the σ unknown, never 0 (`f64::max` drops NaN).
+        if var.is_nan() { f64::NAN } else { var.max(0.0).sqrt() }
     }
 
     /// Inverse mapping: the host time at which UTC reads `utc_ns`.

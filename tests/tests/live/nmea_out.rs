@@ -1,0 +1,131 @@
+//! `navsync nmea-out` on a pseudo-terminal, read as a LiDAR's NMEA input would: right after
+//! each GNSS second of the published time mapping, `$GPRMC` then `$GPZDA` of that second, with
+//! valid checksums, consecutive seconds, the fused position while the state is aligned; each
+//! pair arrives after its second began and before the next one.
+
+use std::time::{Duration, Instant};
+
+use navsync_shared::reflect::Reflect;
+use navsync_shared::samples::{NavState, NavStatus, TimeState, TimeStatus};
+use navsync_shared::services;
+use navsync_shared::time::{NS_PER_S, monotonic_now_ns, realtime_now_ns};
+use navsync_tests::TestEnv;
+
+/// GNSS time minus the system clock in this test's mapping, ns.
+const OFFSET_NS: i64 = 375_000_000;
+
+#[test]
+fn nmea_out_writes_rmc_and_zda_after_each_gnss_second() {
+    let mut env = TestEnv::new("nmeaout");
+    let node = env.node("mapping");
+    let mut time_pub = node.publisher::<TimeState>(services::TIME_STATE).unwrap();
+    let mut nav_pub = node.publisher::<NavState>(services::NAV_STATE).unwrap();
+    let pty = navsync_drivers::pty::Pty::open(None).expect("a pseudo-terminal");
+    let port = pty.path().display().to_string();
+    // One mapping for the whole test: UTC = host time + (realtime − monotonic) + OFFSET.
+    let (h0, r0) = (monotonic_now_ns(), realtime_now_ns());
+    let mut t = TimeState::unknown();
+    t.status = TimeStatus::Locked as u8;
+    t.ref_host_ns = h0;
+    t.ref_utc_ns = r0 + OFFSET_NS;
+    t.offset_std_ns = 500.0;
+    t.rate_std = 1e-9;
+    let mut n = NavState::zeroed();
+    n.status = NavStatus::Aligned as u8;
+    n.lat_deg = 48.137154;
+    n.lon_deg = -11.576124;
+    n.vel_ned_mps = [5.0, 0.0, 0.0];
+    env.spawn("nmea-out", &["nmea-out", "--port", &port, "--baud", "9600"]);
+
+    let mut pty = pty;
+    let mut chunks: Vec<(i64, Vec<u8>)> = Vec::new();
+    let mut buf = [0u8; 512];
+    let t0 = Instant::now();
+    let mut last_pub = Instant::now() - Duration::from_secs(1);
+    while t0.elapsed() < Duration::from_millis(4500) {
+        if last_pub.elapsed() > Duration::from_millis(100) {
+            let now = monotonic_now_ns();
+            t.computed_host_ns = now;
+            n.host_ns = now;
+            time_pub.publish(&t).unwrap();
+            nav_pub.publish(&n).unwrap();
+            last_pub = Instant::now();
+        }
+        while let Ok(k) = pty.read(&mut buf) {
+            if k == 0 {
+                break;
+            }
+            chunks.push((monotonic_now_ns(), buf[..k].to_vec()));
+        }
+        env.assert_running();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+
+    // Sentences, each with the host time its first byte was read.
+    let mut lines: Vec<(i64, String)> = Vec::new();
+    let mut cur = String::new();
+    let mut cur_at = 0;
+    for (at, bytes) in &chunks {
+        for &b in bytes {
+            if cur.is_empty() {
+                cur_at = *at;
+            }
+            if b == b'\n' {
+                lines.push((cur_at, cur.trim_end().to_string()));
+                cur.clear();
+            } else {
+                cur.push(b as char);
+            }
+        }
+    }
+    assert!(
+        lines.len() >= 6,
+        "{} sentences: {lines:?}\n{}",
+        lines.len(),
+        env.log("nmea-out")
+    );
+    let mut seconds = Vec::new();
+    for pair in lines.chunks(2).filter(|p| p.len() == 2) {
+        let (rmc_at, rmc) = &pair[0];
+        let (_, zda) = &pair[1];
+        for s in [rmc, zda] {
+            let (body, cs) = s[1..].split_once('*').unwrap_or_else(|| panic!("no checksum: {s}"));
+            let sum = body.bytes().fold(0u8, |a, b| a ^ b);
+            assert_eq!(u8::from_str_radix(cs, 16).ok(), Some(sum), "checksum of {s}");
+        }
+        assert!(
+            rmc.starts_with("$GPRMC,") && zda.starts_with("$GPZDA,"),
+            "{rmc} / {zda}"
+        );
+        let f: Vec<&str> = rmc.split(',').collect();
+        assert_eq!((f[2], f[4], f[6]), ("A", "N", "W"), "{rmc}");
+        assert_eq!(f[1], zda.split(',').nth(1).unwrap(), "RMC and ZDA of one second");
+        // The second the pair names, as UTC ns, and the host time it began at by the mapping.
+        let z: Vec<&str> = zda.split(',').collect();
+        let hms = z[1];
+        let (hh, mm, ss): (i64, i64, i64) = (
+            hms[0..2].parse().unwrap(),
+            hms[2..4].parse().unwrap(),
+            hms[4..6].parse().unwrap(),
+        );
+        let day_ns = (r0 + OFFSET_NS).div_euclid(86_400 * NS_PER_S) * 86_400 * NS_PER_S;
+        let mut utc = day_ns + ((hh * 60 + mm) * 60 + ss) * NS_PER_S;
+        if utc < r0 + OFFSET_NS - 3600 * NS_PER_S {
+            utc += 86_400 * NS_PER_S; // the test crossed midnight UTC
+        }
+        let begins = t.host_ns_at(utc);
+        let after = (rmc_at - begins) as f64 * 1e-9;
+        assert!(
+            (0.0..1.0).contains(&after),
+            "{rmc} read {after:.3} s after its second began (must be within that second)"
+        );
+        seconds.push(utc);
+    }
+    assert!(seconds.len() >= 3, "{seconds:?}");
+    assert!(
+        seconds.windows(2).all(|w| w[1] - w[0] == NS_PER_S),
+        "not consecutive seconds: {seconds:?}"
+    );
+    drop((time_pub, nav_pub, node));
+    env.finish();
+}
