@@ -99,6 +99,10 @@ const SHIPPED: &[(&str, &str)] = &[
         include_str!("../../../systemd/navsync-estimator.service"),
     ),
     (
+        "navsync-nmea-out@.service",
+        include_str!("../../../systemd/navsync-nmea-out@.service"),
+    ),
+    (
         "navsync-ntpshm.service",
         include_str!("../../../systemd/navsync-ntpshm.service"),
     ),
