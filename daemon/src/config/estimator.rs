@@ -399,14 +399,14 @@ pub fn reference() -> String {
          `systemd/navsync.toml.example`; `navsync check-config` checks a whole file.\n",
     );
     let specs = Settings::specs();
-    let mut sections: Vec<&str> = specs.iter().filter_map(|s| s.section).collect();
-    sections.dedup();
-    let mut seen = Vec::new();
-    for section in sections.into_iter().chain([""]) {
-        if seen.contains(&section) {
-            continue;
+    // The file's sections in declaration order, then "" for the flags without a file key.
+    let mut sections: Vec<&str> = Vec::new();
+    for section in specs.iter().filter_map(|s| s.section).chain([""]) {
+        if !sections.contains(&section) {
+            sections.push(section);
         }
-        seen.push(section);
+    }
+    for section in sections {
         let rows: Vec<&&Spec> = specs
             .iter()
             .filter(|s| s.section.unwrap_or("") == section && (s.section.is_some() || s.flag.is_some()))

@@ -410,13 +410,18 @@ fn iso_time(utc_ns: i64) -> Option<Value> {
     (utc_ns != i64::MIN).then(|| json!(format_rfc3339_ms(utc_ns)))
 }
 
+/// Whether `n` navigates: past its alignment, with a position.
+fn navigates(n: &NavState) -> bool {
+    n.status != NavStatus::Aligning as u8 && n.lat_deg.is_finite() && n.lon_deg.is_finite()
+}
+
 /// The `TPV` object of a navigation state (with the latest fix for the geoid separation and
 /// the latest time state for the time error).
 pub fn tpv(n: &NavState, fix: Option<&GnssFix>, time: Option<&TimeState>) -> Value {
     let mut m = Map::new();
     m.insert("class".into(), json!("TPV"));
     m.insert("device".into(), json!(DEVICE));
-    let aligned = n.status != NavStatus::Aligning as u8 && n.lat_deg.is_finite() && n.lon_deg.is_finite();
+    let aligned = navigates(n);
     m.insert("mode".into(), json!(if aligned { 3 } else { 1 }));
     if aligned {
         let dr = n.status == NavStatus::InsOnly as u8;
@@ -611,6 +616,12 @@ struct Latest {
 }
 
 impl Latest {
+    /// The receiver's latest fix while it is under [`FRESH_FIX_NS`] old at `now_ns` (host
+    /// monotonic).
+    fn fresh_fix(&self, now_ns: i64) -> Option<GnssFix> {
+        self.fix.filter(|f| (now_ns - f.stamp.host_ns).abs() < FRESH_FIX_NS)
+    }
+
     fn activated(&self) -> String {
         self.nav
             .filter(|n| n.utc_ns != i64::MIN)
@@ -624,10 +635,8 @@ impl Latest {
 /// and the receiver's fix is under [`FRESH_FIX_NS`] old at `now_ns` (host monotonic), the
 /// fix's own TPV instead (a receiver with a 3D fix is not reported as mode 1).
 fn period_report(n: &NavState, latest: &Latest, now_ns: i64) -> Vec<String> {
-    let aligned = n.status != NavStatus::Aligning as u8 && n.lat_deg.is_finite();
-    let fresh_fix = latest.fix.filter(|f| (now_ns - f.stamp.host_ns).abs() < FRESH_FIX_NS);
-    let mut lines = match fresh_fix {
-        Some(f) if !aligned && f.mode >= 2 => vec![tpv_of_fix(&f, latest.time.as_ref()).to_string()],
+    let mut lines = match latest.fresh_fix(now_ns) {
+        Some(f) if !navigates(n) && f.mode >= 2 => vec![tpv_of_fix(&f, latest.time.as_ref()).to_string()],
         _ => vec![
             tpv(n, latest.fix.as_ref(), latest.time.as_ref()).to_string(),
             att(n).to_string(),
@@ -652,9 +661,9 @@ fn fix_period_report(fix: &GnssFix, latest: &Latest) -> Vec<String> {
 /// fix's own TPV; then SKY.
 fn fix_report(latest: &Latest, now_ns: i64) -> Option<Vec<String>> {
     let fix = latest.fix.as_ref()?;
-    let fused = latest.nav.filter(|n| {
-        n.status != NavStatus::Aligning as u8 && n.lat_deg.is_finite() && (now_ns - n.host_ns).abs() < FRESH_NAV_NS
-    });
+    let fused = latest
+        .nav
+        .filter(|n| navigates(n) && (now_ns - n.host_ns).abs() < FRESH_NAV_NS);
     let mut lines = match fused {
         Some(n) => vec![
             tpv(&n, Some(fix), latest.time.as_ref()).to_string(),
@@ -673,7 +682,7 @@ fn poll_reply(latest: &Latest, now_ns: i64) -> Value {
     let fresh_nav = latest
         .nav
         .filter(|n| (now_ns - n.host_ns).abs() < FRESH_NAV_NS && n.status != NavStatus::Aligning as u8);
-    let fresh_fix = latest.fix.filter(|f| (now_ns - f.stamp.host_ns).abs() < FRESH_FIX_NS);
+    let fresh_fix = latest.fresh_fix(now_ns);
     let (tpv, active) = match (&fresh_nav, &fresh_fix) {
         (Some(n), fix) => (tpv(n, fix.as_ref().or(latest.fix.as_ref()), latest.time.as_ref()), 1),
         (None, Some(f)) => (tpv_of_fix(f, latest.time.as_ref()), 1),

@@ -7,7 +7,7 @@
 //! date, mode; ZDA: time, day, month, year, zone 00:00). RMC's status is `A` with the fused
 //! position while the estimator's state is aligned and fresh, else `V` with empty position
 //! fields (the time is valid whenever a sentence is written). Nothing is written while the time
-//! mapping is not usable (acquiring, unknown, or no `TimeState` for [`STALE_AFTER_NS`]), or
+//! mapping is not usable (acquiring, unknown, or no `TimeState` for [`ntpshm::STALE_AFTER_NS`](crate::live::ntpshm::STALE_AFTER_NS)), or
 //! when its 1σ exceeds `--max-std-us`: a sensor then keeps its own clock rather than take a
 //! wrong second. Counters in `navsync/health/nmea-out`.
 
@@ -15,15 +15,14 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 
+use crate::live::ntpshm::exportable_std_ns;
 use navsync_shared::health_reporter::HealthReporter;
-use navsync_shared::samples::{NavState, NavStatus, TimeState, TimeStatus};
+use navsync_shared::samples::{NavState, NavStatus, TimeState};
 use navsync_shared::services;
 use navsync_shared::time::{NS_PER_S, civil_from_utc_ns, monotonic_now_ns};
 use navsync_sim::nmea::{KNOTS_PER_MPS, format_lat, format_lon, frame};
 use tracing::{info, info_span, warn};
 
-/// A `TimeState` older than this (host time since it was computed) is not used, ns.
-pub const STALE_AFTER_NS: i64 = 5 * NS_PER_S;
 /// A `NavState` older than this gives no position (RMC status `V`), ns.
 const NAV_FRESH_NS: i64 = 500_000_000;
 
@@ -75,17 +74,7 @@ pub fn sentences(utc_s_ns: i64, nav: Option<&NavState>) -> Vec<u8> {
 /// The GNSS second to write next and the host time (`CLOCK_MONOTONIC` ns) it begins at, from
 /// the mapping `t` at host time `now_ns`; `None` when the mapping must not be used. Pure.
 pub fn next_second(t: &TimeState, now_ns: i64, max_std_ns: f64) -> Option<(i64, i64)> {
-    if !matches!(
-        t.status(),
-        TimeStatus::Locked | TimeStatus::Holdover | TimeStatus::Software
-    ) || now_ns - t.computed_host_ns > STALE_AFTER_NS
-    {
-        return None;
-    }
-    let std = t.utc_std_ns_at(now_ns);
-    if std.is_nan() || std > max_std_ns {
-        return None;
-    }
+    exportable_std_ns(t, now_ns, max_std_ns)?;
     let second = (t.utc_ns_at(now_ns).div_euclid(NS_PER_S) + 1) * NS_PER_S;
     Some((second, t.host_ns_at(second)))
 }
@@ -181,6 +170,8 @@ pub fn run(args: &NmeaOutArgs) -> Result<(), NmeaOutError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::live::ntpshm::STALE_AFTER_NS;
+    use navsync_shared::samples::TimeStatus;
 
     #[test]
     fn rmc_and_zda_of_a_second() {

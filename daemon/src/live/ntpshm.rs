@@ -150,20 +150,7 @@ pub struct ShmSample {
 /// clock, from the mapping `state`; `None` when the mapping must not be exported (not usable,
 /// stale, or its 1σ at the instant above `max_std_ns`). Pure.
 pub fn sample_for(state: &TimeState, host_ns: i64, realtime_ns: i64, max_std_ns: f64) -> Option<ShmSample> {
-    if !matches!(
-        state.status(),
-        TimeStatus::Locked | TimeStatus::Holdover | TimeStatus::Software
-    ) {
-        return None;
-    }
-    if host_ns - state.computed_host_ns > STALE_AFTER_NS {
-        return None;
-    }
-    let sigma_s = state.utc_std_ns_at(host_ns) * 1e-9;
-    // A σ that is not a number is over any bound.
-    if sigma_s.is_nan() || sigma_s * 1e9 > max_std_ns {
-        return None;
-    }
+    let sigma_s = exportable_std_ns(state, host_ns, max_std_ns)? * 1e-9;
     let precision = if sigma_s.is_finite() && sigma_s > 0.0 {
         sigma_s.log2().ceil().clamp(-30.0, 0.0) as i32
     } else {
@@ -174,6 +161,19 @@ pub fn sample_for(state: &TimeState, host_ns: i64, realtime_ns: i64, max_std_ns:
         receive_ns: realtime_ns,
         precision,
     })
+}
+
+/// The 1σ (ns) of the mapping `state` at host time `host_ns` when GNSS time may be handed on
+/// from it (to chrony, ntpd or a sensor): locked, in holdover or software sync, computed at
+/// most [`STALE_AFTER_NS`] ago, σ known and at most `max_std_ns`. Pure.
+pub fn exportable_std_ns(state: &TimeState, host_ns: i64, max_std_ns: f64) -> Option<f64> {
+    let usable = matches!(
+        state.status(),
+        TimeStatus::Locked | TimeStatus::Holdover | TimeStatus::Software
+    ) && host_ns - state.computed_host_ns <= STALE_AFTER_NS;
+    let std = state.utc_std_ns_at(host_ns);
+    // A σ that is not a number is over any bound.
+    (usable && !std.is_nan() && std <= max_std_ns).then_some(std)
 }
 
 fn split(ns: i64) -> (libc::time_t, i32, u32) {
