@@ -10,7 +10,9 @@ use clap::{Parser, Subcommand};
 use navsync::live::{
     bridge, demo, echo, estimator, feed, gnss, gpsd_server, imu, nmea_out, ntpshm, pps, record, replay, sim, status,
 };
-use navsync::tools::{analyze, check_config, convert, decode, eval, install, kf_gins, python_types, report};
+use navsync::tools::{
+    analyze, check_config, convert, decode, eval, install, kf_gins, ptp_config, python_types, report,
+};
 use navsync::{config, logging};
 
 #[derive(Parser)]
@@ -90,6 +92,9 @@ enum Cmd {
     /// Installs the binary, the systemd units, sysusers/tmpfiles/udev files and the example
     /// configuration (docs/guide/install.md).
     Install(install::Options),
+    /// Writes linuxptp's configuration for the vehicle network: ptp4l as the grandmaster fed
+    /// from the disciplined system clock (phc2sys), or a slave (docs/guide/timing.md).
+    PtpConfig(ptp_config::Options),
 }
 
 fn main() -> ExitCode {
@@ -189,6 +194,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::PythonTypes => python_types::run().context("writing stdout"),
         Cmd::CheckConfig | Cmd::ConfigReference => Ok(()),
         Cmd::Install(o) => install::run(o),
+        Cmd::PtpConfig(o) => ptp_config::run(&o).context("ptp-config"),
     }
 }
 

@@ -9,6 +9,7 @@ pub mod eval;
 pub mod install;
 pub mod kf_gins;
 pub mod kf_gins_config;
+pub mod ptp_config;
 pub mod python_types;
 pub mod report;
 pub mod sim_fast;
