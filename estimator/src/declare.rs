@@ -122,6 +122,16 @@ impl SettingValue for Vec<String> {
     }
 }
 
+/// A text (a path, a name), as given.
+impl SettingValue for String {
+    fn parse_text(text: &str) -> Result<Self, String> {
+        Ok(text.to_string())
+    }
+    fn show(&self) -> String {
+        self.clone()
+    }
+}
+
 /// An optional value: `none` when absent.
 impl<T: SettingValue> SettingValue for Option<T> {
     fn parse_text(text: &str) -> Result<Self, String> {

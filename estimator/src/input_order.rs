@@ -64,7 +64,9 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 
 use navsync_wire::reflect::fixed_str;
-use navsync_wire::samples::{AnySample, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, PpsEdge, SimTruth};
+use navsync_wire::samples::{
+    AnySample, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, NetworkTime, PpsEdge, SimTruth,
+};
 
 /// Hold of PPS edges after their stamp, ns.
 pub const PPS_HOLD_NS: i64 = 50_000_000;
@@ -106,6 +108,9 @@ pub fn order_key(s: &AnySample) -> OrderKey {
         AnySample::Raw(r) => (r.stamp.host_ns.saturating_add(FIX_HOLD_NS), 1, [1; 8], r.stamp.seq),
         AnySample::NavData(d) => (d.stamp.host_ns, 7, [2; 8], d.stamp.seq),
         AnySample::Settings(x) => (x.host_ns, 6, [1; 8], x.seq),
+        // A reading of the network time service: at its own host time, before the IMU sample
+        // of the same instant (like an edge, without the hold: it is complete when published).
+        AnySample::NetworkTime(t) => (t.host_ns, 0, [3; 8], t.seq),
     };
     OrderKey { at_ns, rank, id, seq }
 }
@@ -130,6 +135,8 @@ pub enum Input {
     NavData(GnssNavData),
     /// The simulator's truth (offline evaluation).
     Truth(SimTruth),
+    /// A reading of the network time service.
+    NetworkTime(NetworkTime),
     /// Any other sample: only its place in the order.
     Other(OrderKey),
 }
@@ -144,6 +151,7 @@ impl From<AnySample> for Input {
             AnySample::Truth(x) => Self::Truth(x),
             AnySample::Raw(x) => Self::Raw(Box::new(x)),
             AnySample::NavData(x) => Self::NavData(x),
+            AnySample::NetworkTime(x) => Self::NetworkTime(x),
             other => Self::Other(order_key(&other)),
         }
     }
@@ -194,6 +202,12 @@ impl Input {
                 rank: 7,
                 id: [2; 8],
                 seq: d.stamp.seq,
+            },
+            Self::NetworkTime(t) => OrderKey {
+                at_ns: t.host_ns,
+                rank: 0,
+                id: [3; 8],
+                seq: t.seq,
             },
             Self::Other(k) => *k,
         }

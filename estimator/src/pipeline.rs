@@ -10,8 +10,8 @@
 
 use navsync_wire::reflect::Reflect;
 use navsync_wire::samples::{
-    GnssFix, GnssNavData, GnssRaw, GnssTimePulse, IMU_FLAG_RECEIVER_CLOCK, ImuSample, NavState, PpsEdge, TimeState,
-    TimeStatus,
+    GnssFix, GnssNavData, GnssRaw, GnssTimePulse, IMU_FLAG_RECEIVER_CLOCK, ImuSample, NavState, NetworkTime, PpsEdge,
+    TimeState, TimeStatus,
 };
 
 use crate::gnss::ranges::{EphemerisStore, RangeBuildCounts, RangeEpoch};
@@ -204,6 +204,7 @@ impl Pipeline {
             Input::TimePulse(t) => self.on_time_pulse(t),
             Input::Raw(r) => self.on_raw(r),
             Input::NavData(d) => self.on_nav_data(d),
+            Input::NetworkTime(t) => out.time_changed = self.on_network_time(t),
             Input::Truth(_) | Input::Other(_) => {}
         }
         out
@@ -213,6 +214,15 @@ impl Pipeline {
     pub fn on_pps(&mut self, edge: &PpsEdge) -> bool {
         self.catch_up();
         self.time.on_pps(edge)
+    }
+
+    /// Feeds a reading of the network time service (a host without a receiver); true when the
+    /// time mapping changed.
+    pub fn on_network_time(&mut self, t: &NetworkTime) -> bool {
+        self.catch_up();
+        let changed = self.time.on_network_time(t);
+        self.time.tick(t.host_ns);
+        changed
     }
 
     /// Feeds a receiver's report of its next time pulse (UBX TIM-TP): labels the next edge.
@@ -246,7 +256,7 @@ impl Pipeline {
     /// is acquiring or when the epoch's time is unknown.
     fn epoch_stamp(&mut self, utc_ns: i64, receipt_ns: i64) -> Option<i64> {
         let stamping = match self.time.status() {
-            TimeStatus::Locked | TimeStatus::Holdover if !self.cfg.time.software_sync => FixStamping::Epoch,
+            st if st.is_clock_mapped() && !self.cfg.time.software_sync => FixStamping::Epoch,
             TimeStatus::Software => FixStamping::Receipt,
             _ if self.cfg.time.software_sync => FixStamping::Receipt,
             _ => {
@@ -366,8 +376,7 @@ impl Pipeline {
         if s.flags & IMU_FLAG_RECEIVER_CLOCK != 0 {
             // One crystal: the receiver clock's reading less its bias is GPS time (hardware
             // time mapping only: under software sync the mapping is the fixes' receipt).
-            let hardware =
-                !self.cfg.time.software_sync && matches!(self.time.status(), TimeStatus::Locked | TimeStatus::Holdover);
+            let hardware = !self.cfg.time.software_sync && self.time.status().is_clock_mapped();
             let bias = self
                 .nav
                 .receiver_clock(s.stamp.host_ns)
@@ -480,7 +489,7 @@ impl Pipeline {
         // receipt minus Δ̂ already).
         let (d, d_std) = self.nav.gnss_delay();
         self.time.set_gnss_delay(d, d_std);
-        let hardware = matches!(self.time.status(), TimeStatus::Locked | TimeStatus::Holdover);
+        let hardware = self.time.status().is_clock_mapped();
         // The sample's time: on the input's exact time axis when it declares one, else from the
         // clock model. With the fixes' epochs known in GNSS time (PPS, or an import's epoch
         // tags) a Δ is the IMU stamps' own offset from GNSS time, and the label is corrected by

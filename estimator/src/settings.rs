@@ -50,6 +50,48 @@ crate::settings_group! {
         /// IMU ids (`navsync/imu/{id}/sample`), the reference (which paces the output) first
         /// (in the file, every `[imu.*]` in id order when not given).
         pub imus: Vec<String> = vec!["0".into()], file "estimator", flag "imus", check ids(1, 8);
+        /// Where the host clock's GNSS time comes from: gnss (the receivers' PPS and fixes),
+        /// chrony (a host without a receiver on a master's time base: chronyd's tracking report
+        /// through its command socket) or system (the kernel's NTP state of a clock a time
+        /// daemon disciplines). With chrony or system the PPS inputs are not read.
+        pub time_source: TimeSource = TimeSource::Gnss, file "estimator", flag "time-source";
+        /// chronyd's command socket, read with `time_source = "chrony"` (chrony.conf
+        /// `bindcmdaddress`).
+        pub chrony_socket: String = "/run/chrony/chronyd.sock".into(), file "estimator", flag "chrony-socket";
+    }
+}
+
+/// Where the host clock's GNSS time comes from ([`Inputs::time_source`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TimeSource {
+    /// The receivers' PPS edges and fixes (the default).
+    #[default]
+    Gnss,
+    /// chronyd's tracking report (`chronyc tracking` through the command socket).
+    Chrony,
+    /// The kernel's NTP state (`adjtimex(2)`): a clock chronyd or ntpd disciplines.
+    System,
+}
+
+impl TimeSource {
+    /// True for the sources that are a network time service.
+    pub fn is_network(self) -> bool {
+        !matches!(self, Self::Gnss)
+    }
+}
+
+crate::enum_setting!(TimeSource);
+
+impl std::str::FromStr for TimeSource {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "gnss" => Ok(Self::Gnss),
+            "chrony" => Ok(Self::Chrony),
+            "system" => Ok(Self::System),
+            _ => Err(format!("unknown time source `{s}`, expected gnss, chrony or system")),
+        }
     }
 }
 

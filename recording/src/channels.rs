@@ -27,7 +27,7 @@ use navsync_shared::json::{from_json, from_json_onto, schema, to_json};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{
     AnySample, EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState,
-    PpsEdge, SimTruth, TimeState,
+    NetworkTime, PpsEdge, SimTruth, TimeState,
 };
 use navsync_shared::services::ServiceKind;
 use navsync_shared::{cdr, ros2msg};
@@ -185,6 +185,7 @@ sample_type!(GnssEvent, GnssEvent, Event);
 sample_type!(GnssRaw, GnssRaw, Raw);
 sample_type!(GnssNavData, GnssNavData, NavData);
 sample_type!(EstimatorSettings, EstimatorSettings, Settings);
+sample_type!(NetworkTime, NetworkTime, NetworkTime);
 
 /// Evaluates `$body` with the type alias `$T` set to the sample type of `$kind`.
 #[macro_export]
@@ -239,6 +240,10 @@ macro_rules! with_sample_type {
                 type $T = navsync_shared::samples::EstimatorSettings;
                 $body
             }
+            navsync_shared::services::ServiceKind::NetworkTime => {
+                type $T = navsync_shared::samples::NetworkTime;
+                $body
+            }
         }
     };
 }
@@ -258,6 +263,7 @@ pub fn sample_json(sample: &AnySample) -> serde_json::Value {
         AnySample::Raw(x) => to_json(x),
         AnySample::NavData(x) => to_json(x),
         AnySample::Settings(x) => to_json(x),
+        AnySample::NetworkTime(x) => to_json(x),
     }
 }
 
@@ -276,6 +282,7 @@ fn encode_cdr(sample: &AnySample, out: &mut Vec<u8>) {
         AnySample::Raw(x) => cdr::encode(x, out),
         AnySample::NavData(x) => cdr::encode(x, out),
         AnySample::Settings(x) => cdr::encode(x, out),
+        AnySample::NetworkTime(x) => cdr::encode(x, out),
     }
 }
 

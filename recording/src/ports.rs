@@ -32,6 +32,8 @@ pub enum AnySubscriber {
     NavData(Subscriber<navsync_shared::samples::GnssNavData>),
     /// `navsync/estimator/settings`
     Settings(Subscriber<navsync_shared::samples::EstimatorSettings>),
+    /// `navsync/time/network`
+    NetworkTime(Subscriber<navsync_shared::samples::NetworkTime>),
 }
 
 macro_rules! each_subscriber {
@@ -49,6 +51,7 @@ macro_rules! each_subscriber {
             AnySubscriber::Raw($s) => $body,
             AnySubscriber::NavData($s) => $body,
             AnySubscriber::Settings($s) => $body,
+            AnySubscriber::NetworkTime($s) => $body,
         }
     };
 }
@@ -74,6 +77,7 @@ impl AnySubscriber {
             ServiceKind::GnssRaw => Self::Raw(node.input(service)?),
             ServiceKind::GnssNavData => Self::NavData(node.input(service)?),
             ServiceKind::EstimatorSettings => Self::Settings(node.input(service)?),
+            ServiceKind::NetworkTime => Self::NetworkTime(node.input(service)?),
         })
     }
 
@@ -114,6 +118,8 @@ pub enum AnyPublisher {
     NavData(Publisher<navsync_shared::samples::GnssNavData>),
     /// `navsync/estimator/settings`
     Settings(Publisher<navsync_shared::samples::EstimatorSettings>),
+    /// `navsync/time/network`
+    NetworkTime(Publisher<navsync_shared::samples::NetworkTime>),
 }
 
 impl AnyPublisher {
@@ -132,6 +138,7 @@ impl AnyPublisher {
             ServiceKind::GnssRaw => Self::Raw(node.publisher(service)?),
             ServiceKind::GnssNavData => Self::NavData(node.publisher(service)?),
             ServiceKind::EstimatorSettings => Self::Settings(node.publisher(service)?),
+            ServiceKind::NetworkTime => Self::NetworkTime(node.publisher(service)?),
         })
     }
 
@@ -150,6 +157,7 @@ impl AnyPublisher {
             Self::Raw(p) => pub_as(p, sample),
             Self::NavData(p) => pub_as(p, sample),
             Self::Settings(p) => pub_as(p, sample),
+            Self::NetworkTime(p) => pub_as(p, sample),
         }
     }
 }

@@ -746,6 +746,45 @@ class EstimatorSettings(ctypes.Structure):
         return "navsync.EstimatorSettings.v1"
 
 
+class NetworkTime(ctypes.Structure):
+    """A reading of the network time service of a host without a receiver (navsync/time/network)."""
+
+    _fields_ = [
+        # Host time of the reading (`CLOCK_MONOTONIC` ns, the middle of the query).
+        ("host_ns", ctypes.c_int64),
+        # UTC at `host_ns` as the source has it, ns since 1970: the system clock (`CLOCK_REALTIME`) read beside `host_ns` plus the source's pending correction.
+        ("utc_ns", ctypes.c_int64),
+        # Reading sequence number.
+        ("seq", ctypes.c_uint64),
+        # 1-sigma of `utc_ns`, ns (see [`NetworkTime::max_error_ns`] for how it is derived).
+        ("std_ns", ctypes.c_double),
+        # The source's bound on the error of `utc_ns`, ns: chrony's root dispersion plus half its root delay (chronyc(1), "tracking"), or the kernel's `maxerror` (adjtimex(2)).
+        ("max_error_ns", ctypes.c_double),
+        # Fractional frequency error of the host clock the source sees, d(UTC)/d(host) − 1 (NaN when it does not say).
+        ("rate_error", ctypes.c_double),
+        # The source's stratum (1: its server has a reference clock; 0 when not known).
+        ("stratum", ctypes.c_uint8),
+        # A [`NetworkSource`] as `u8`.
+        ("source", ctypes.c_uint8),
+        # 1 when the source says it is synchronised (chrony's leap status not "not synchronised"; the kernel's `STA_UNSYNC` clear).
+        ("synchronised", ctypes.c_uint8),
+        # Reserved, zero.
+        ("reserved", (ctypes.c_char * 5)),
+    ]
+
+    #: Size in bytes of the Rust type.
+    RUST_SIZE = 56
+    #: Alignment in bytes of the Rust type.
+    RUST_ALIGN = 8
+    #: Byte offset of every field in the Rust type.
+    RUST_OFFSETS = {"host_ns": 0, "utc_ns": 8, "seq": 16, "std_ns": 24, "max_error_ns": 32, "rate_error": 40, "stratum": 48, "source": 49, "synchronised": 50, "reserved": 51}
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name (with the layout version)."""
+        return "navsync.NetworkTime.v1"
+
+
 #: Publish-subscribe QoS per sample type: history, subscriber buffer.
 QOS = {
     "GnssFix": {"history": 1, "buffer": 64},
@@ -760,6 +799,7 @@ QOS = {
     "GnssRaw": {"history": 1, "buffer": 64},
     "GnssNavData": {"history": 0, "buffer": 256},
     "EstimatorSettings": {"history": 1, "buffer": 4},
+    "NetworkTime": {"history": 1, "buffer": 16},
 }
 
 
@@ -774,11 +814,12 @@ def service_type(service):
         if p[1] == "health":
             return Health if p[2] else None
         return {("time", "state"): TimeState, ("nav", "state"): NavState, ("sim", "truth"): SimTruth,
-                ("sim", "pps"): PpsEdge, ("estimator", "settings"): EstimatorSettings}.get((p[1], p[2]))
+                ("sim", "pps"): PpsEdge, ("estimator", "settings"): EstimatorSettings,
+                ("time", "network"): NetworkTime}.get((p[1], p[2]))
     return None
 
 
 #: NavState.status values.
 NAV_STATUS = {0: "aligning", 1: "aligned", 2: "ins-only", 3: "degraded"}
 #: TimeState.status and NavState.time_status values.
-TIME_STATUS = {0: "none", 1: "locked", 2: "holdover", 3: "software", 4: "acquiring"}
+TIME_STATUS = {0: "none", 1: "locked", 2: "holdover", 3: "software", 4: "acquiring", 5: "network"}

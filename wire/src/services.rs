@@ -11,6 +11,7 @@
 //! | `navsync/pps/{id}/edge` | [`PpsEdge`] | `navsync pps` (or the simulator) |
 //! | `navsync/imu/{id}/sample` | [`ImuSample`] | `navsync imu` (or the simulator) |
 //! | `navsync/time/state` | [`TimeState`] | `navsync estimator` |
+//! | `navsync/time/network` | [`NetworkTime`] | `navsync estimator --time-source chrony\|system` (its readings of the network time service) |
 //! | `navsync/nav/state` | [`NavState`] | `navsync estimator` |
 //! | `navsync/health/{process}` | [`Health`] | every process |
 //! | `navsync/estimator/settings` | [`EstimatorSettings`] | `navsync estimator` (its settings in force, about once per second) |
@@ -23,7 +24,7 @@
 use crate::reflect::Reflect;
 use crate::samples::{
     AnySample, EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState,
-    PpsEdge, SimTruth, TimeState,
+    NetworkTime, PpsEdge, SimTruth, TimeState,
 };
 
 /// Environment variable with the iceoryx2 resource prefix (default [`DEFAULT_PREFIX`]).
@@ -72,6 +73,9 @@ pub fn health(process: &str) -> String {
 }
 /// The time mapping.
 pub const TIME_STATE: &str = "navsync/time/state";
+/// The readings of the network time service an estimator without a receiver maps its host
+/// clock with.
+pub const NETWORK_TIME: &str = "navsync/time/network";
 /// The navigation solution.
 pub const NAV_STATE: &str = "navsync/nav/state";
 /// The estimator's settings in force.
@@ -109,6 +113,8 @@ pub enum ServiceKind {
     GnssNavData,
     /// [`EstimatorSettings`]
     EstimatorSettings,
+    /// [`NetworkTime`]
+    NetworkTime,
 }
 
 impl ServiceKind {
@@ -127,11 +133,12 @@ impl ServiceKind {
             AnySample::Raw(_) => Self::GnssRaw,
             AnySample::NavData(_) => Self::GnssNavData,
             AnySample::Settings(_) => Self::EstimatorSettings,
+            AnySample::NetworkTime(_) => Self::NetworkTime,
         }
     }
 
     /// All kinds.
-    pub const ALL: [ServiceKind; 12] = [
+    pub const ALL: [ServiceKind; 13] = [
         Self::GnssFix,
         Self::PpsEdge,
         Self::ImuSample,
@@ -144,6 +151,7 @@ impl ServiceKind {
         Self::GnssRaw,
         Self::GnssNavData,
         Self::EstimatorSettings,
+        Self::NetworkTime,
     ];
 
     /// The kind's position in [`ALL`](Self::ALL): its event id on [`WAKE`].
@@ -163,6 +171,7 @@ impl ServiceKind {
             ["navsync", "pps", id, "edge"] if !id.is_empty() => Some(Self::PpsEdge),
             ["navsync", "imu", id, "sample"] if !id.is_empty() => Some(Self::ImuSample),
             ["navsync", "time", "state"] => Some(Self::TimeState),
+            ["navsync", "time", "network"] => Some(Self::NetworkTime),
             ["navsync", "nav", "state"] => Some(Self::NavState),
             ["navsync", "health", p] if !p.is_empty() => Some(Self::Health),
             ["navsync", "estimator", "settings"] => Some(Self::EstimatorSettings),
@@ -187,6 +196,7 @@ impl ServiceKind {
             Self::GnssRaw => GnssRaw::TYPE_NAME,
             Self::GnssNavData => GnssNavData::TYPE_NAME,
             Self::EstimatorSettings => EstimatorSettings::TYPE_NAME,
+            Self::NetworkTime => NetworkTime::TYPE_NAME,
         }
     }
 
@@ -214,7 +224,7 @@ impl ServiceKind {
                 history: 0,
                 buffer: 256,
             },
-            Self::TimeState | Self::Health => Qos { history: 1, buffer: 16 },
+            Self::TimeState | Self::Health | Self::NetworkTime => Qos { history: 1, buffer: 16 },
             // About once per second; a recorder started later gets the last one.
             Self::EstimatorSettings => Qos { history: 1, buffer: 4 },
         }

@@ -118,6 +118,7 @@ pub fn run(args: &EchoArgs) -> Result<(), EchoError> {
         ServiceKind::GnssRaw => echo::<GnssRaw>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
         ServiceKind::GnssNavData => echo::<GnssNavData>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
         ServiceKind::EstimatorSettings => echo::<EstimatorSettings>(args, |s| (s.host_ns, Some(s.seq))),
+        ServiceKind::NetworkTime => echo::<NetworkTime>(args, |s| (s.host_ns, Some(s.seq))),
     }
 }
 
@@ -373,7 +374,7 @@ fn enum_name(sample: &str, path: &str, v: u64) -> Option<&'static str> {
     match (sample, path) {
         (_, "stamp.source") if v <= 7 => Some(StampSource::from_u8(v).name()),
         ("NavState", "status") => named(NavStatus::name(v)),
-        ("NavState" | "TimeState", "time_status" | "status") if v <= 4 => Some(TimeStatus::from_u8(v).name()),
+        ("NavState" | "TimeState", "time_status" | "status") if v <= 5 => Some(TimeStatus::from_u8(v).name()),
         ("NavState" | "TimeState", "imu[].reason") => named(ImuSyncReason::name(v)),
         ("GnssFix", "mode") => ["unknown", "no-fix", "2d", "3d"].get(usize::from(v)).copied(),
         ("GnssFix", "quality") => match v {

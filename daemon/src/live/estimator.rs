@@ -17,7 +17,7 @@ use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::latency_histogram::LatencyHistogram;
 use navsync_shared::samples::{
     AnySample, EstimatorSettings, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, NavState, NavStatus,
-    PpsEdge, TimeState,
+    NetworkTime, PpsEdge, TimeState,
 };
 use navsync_shared::services::{self, ServiceKind};
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
@@ -102,6 +102,9 @@ pub enum EstimatorError {
     /// The dead-node reclaimer thread could not be started.
     #[error("starting the dead-node reclaimer thread: {0}")]
     Reclaimer(#[from] std::io::Error),
+    /// The network time reader thread could not be started.
+    #[error("starting the network time reader thread: {0}")]
+    NetworkTime(std::io::Error),
     /// A health counter could not be registered.
     #[error(transparent)]
     Health(#[from] navsync_shared::health_reporter::HealthError),
@@ -113,10 +116,18 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     let node = IpcNode::new("estimator")?;
     // Dead drivers' publishers stop counting once their node is reclaimed: off this loop.
     let _reclaimer = super::reclaimer::Reclaimer::start("estimator-reclaim", RECLAIM_INTERVAL)?;
+    // A network time service instead of the receivers' PPS (a host without a receiver).
+    let network = super::network_time::NetworkTimeReader::start(args.inputs.time_source, &args.inputs.chrony_socket)
+        .map_err(EstimatorError::NetworkTime)?;
+    let mut network_pub = match network {
+        Some(_) => Some(node.publisher::<NetworkTime>(services::NETWORK_TIME)?),
+        None => None,
+    };
     let pps: Vec<Subscriber<PpsEdge>> = args
         .inputs
         .pps
         .iter()
+        .filter(|_| network.is_none())
         .map(|id| node.input(&services::pps_edge(id)))
         .collect::<Result<_, _>>()?;
     let gnss: Vec<Subscriber<GnssFix>> = args
@@ -179,6 +190,8 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     let c_pps = health.counter("pps_used")?;
     let c_pps_rej = health.counter("pps_rejected")?;
     let c_pps_rx = health.counter("pps_labelled_by_rx")?;
+    let c_net_used = health.counter("network_time_used")?;
+    let c_net_rej = health.counter("network_time_rejected")?;
     let c_fixes = health.counter("gnss_fixes")?;
     let c_imu = health.counter("imu_samples")?;
     let c_imu_gap = health.counter("imu_seq_gaps")?;
@@ -228,10 +241,11 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     // drained below; flagged in Health at once (`stale_<kind>_<id>`: host ns when declared).
     let mut live = Liveness::default();
     let mut c_stale = Vec::new();
+    let pps_ids: &[String] = if network.is_some() { &[] } else { &args.inputs.pps };
     for (kind, ids, nominal_ns) in [
-        ("imu", &args.inputs.imus, 10_000_000),
-        ("pps", &args.inputs.pps, NS_PER_S),
-        ("gnss", &args.inputs.gnss, NS_PER_S),
+        ("imu", args.inputs.imus.as_slice(), 10_000_000),
+        ("pps", pps_ids, NS_PER_S),
+        ("gnss", args.inputs.gnss.as_slice(), NS_PER_S),
     ] {
         for id in ids {
             live.add(&format!("{kind}_{id}"), nominal_ns);
@@ -329,6 +343,14 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
                 feed.push(AnySample::GnssFix(fix), ());
                 true
             })?;
+        }
+        if let (Some(reader), Some(publisher)) = (&network, &mut network_pub) {
+            reader.drain(|t| {
+                if let Err(e) = publisher.publish(&t) {
+                    warn!("publishing network time: {e}");
+                }
+                feed.push(AnySample::NetworkTime(t), ());
+            });
         }
         for s in &time_pulses {
             s.drain(|tp| {
@@ -437,6 +459,8 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         health.set(c_pps, tc.pps_used);
         health.set(c_pps_rej, tc.rejected());
         health.set(c_pps_rx, tc.pps_labelled_by_receiver);
+        health.set(c_net_used, tc.network_used);
+        health.set(c_net_rej, tc.network_rejected);
         health.set(c_holdovers, tc.holdovers);
         health.set(c_relocks, tc.relocks);
         let est = feed.pipeline();

@@ -10,6 +10,7 @@ pub mod gnss;
 pub mod gpsd_server;
 pub mod imu;
 pub mod liveness;
+pub mod network_time;
 pub mod nmea_out;
 pub mod ntpshm;
 pub mod pps;

@@ -168,6 +168,7 @@ fn open_monitor(node: &IpcNode, service: &str, kind: ServiceKind) -> Result<Box<
         ServiceKind::GnssRaw => open_typed::<GnssRaw>(node, service, AnySample::Raw),
         ServiceKind::GnssNavData => open_typed::<GnssNavData>(node, service, AnySample::NavData),
         ServiceKind::EstimatorSettings => open_typed::<EstimatorSettings>(node, service, AnySample::Settings),
+        ServiceKind::NetworkTime => open_typed::<NetworkTime>(node, service, AnySample::NetworkTime),
     }
 }
 

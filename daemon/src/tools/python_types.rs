@@ -62,6 +62,7 @@ fn types() -> Vec<Ty> {
         ty::<GnssRaw>("The raw measurements of one receiver epoch (navsync/gnss/{id}/raw)."),
         ty::<GnssNavData>("One broadcast navigation data subframe (navsync/gnss/{id}/nav-data)."),
         ty::<EstimatorSettings>("The estimator's settings in force as JSON (navsync/estimator/settings)."),
+        ty::<NetworkTime>("A reading of the network time service of a host without a receiver (navsync/time/network)."),
     ]
 }
 
@@ -187,14 +188,15 @@ def service_type(service):
         if p[1] == "health":
             return Health if p[2] else None
         return {("time", "state"): TimeState, ("nav", "state"): NavState, ("sim", "truth"): SimTruth,
-                ("sim", "pps"): PpsEdge, ("estimator", "settings"): EstimatorSettings}.get((p[1], p[2]))
+                ("sim", "pps"): PpsEdge, ("estimator", "settings"): EstimatorSettings,
+                ("time", "network"): NetworkTime}.get((p[1], p[2]))
     return None
 
 
 #: NavState.status values.
 NAV_STATUS = {0: "aligning", 1: "aligned", 2: "ins-only", 3: "degraded"}
 #: TimeState.status and NavState.time_status values.
-TIME_STATUS = {0: "none", 1: "locked", 2: "holdover", 3: "software", 4: "acquiring"}
+TIME_STATUS = {0: "none", 1: "locked", 2: "holdover", 3: "software", 4: "acquiring", 5: "network"}
 "#,
     );
     s

@@ -16,12 +16,19 @@
 //! epoch u: UTC(h) = u + (h − (r − Δ̂)), with Δ̂ the navigation filter's GNSS delay (the
 //! receiver's output latency as the IMU's clock sees it; 0 before the filter has one).
 //!
+//! Network time (a host without a receiver, `--time-source chrony|system`): each
+//! [`NetworkTime`] reading is a measurement of UTC − host at its host time with the service's
+//! own σ, fused by the same clock model while no PPS keeps the mapping locked; the status is
+//! `network`, and holdover when readings stop for [`NETWORK_HOLDOVER_AFTER_NS`]. A network
+//! service's successive readings are not independent (chrony filters its own measurements), so
+//! the published σ never falls below the latest reading's own.
+//!
 //! Trust. An edge counts only if the receiver reported a valid fix in the last
 //! [`FIX_TRUST_NS`]; without one, the edge is rejected and the mapping goes into holdover.
 //!
 //! Pure state machine: fed with samples, no clocks or IPC inside.
 
-use navsync_wire::samples::{GnssFix, GnssTimePulse, PpsEdge, TimeState, TimeStatus};
+use navsync_wire::samples::{GnssFix, GnssTimePulse, NetworkTime, PpsEdge, TimeState, TimeStatus};
 use navsync_wire::time::{NS_PER_S, gps_minus_utc_s};
 
 use super::clock_model::{ClockModel, ClockUpdate, OscillatorNoise};
@@ -34,6 +41,11 @@ pub const EDGE_GATE_NS: i64 = 100_000_000;
 pub const FIX_TRUST_NS: i64 = 2_500_000_000;
 /// No accepted edge for this long: holdover, ns.
 pub const HOLDOVER_AFTER_NS: i64 = 1_500_000_000;
+/// No network time reading accepted for this long: holdover, ns (readings come about once a
+/// second).
+pub const NETWORK_HOLDOVER_AFTER_NS: i64 = 5_000_000_000;
+/// Rate-error 1-sigma the mapping starts with from a first network reading: any crystal.
+const NETWORK_INITIAL_RATE_SIGMA: f64 = 1e-4;
 /// Updates needed before the mapping is declared locked.
 const LOCK_UPDATES: u64 = 3;
 /// Offset 1-sigma below which the mapping is declared locked, ns.
@@ -112,6 +124,13 @@ pub struct TimeSyncCounters {
     pub holdovers: u64,
     /// Times the status came back to locked after a holdover (edges accepted again).
     pub relocks: u64,
+    /// Network time readings fused.
+    pub network_used: u64,
+    /// Network time readings not fused: the service not synchronised, its σ not finite, or
+    /// beyond the clock model's gate.
+    pub network_rejected: u64,
+    /// Network time readings left aside because PPS keeps the mapping locked.
+    pub network_ignored: u64,
 }
 
 impl TimeSyncCounters {
@@ -151,6 +170,8 @@ pub struct TimeSync {
     gnss_delay: (f64, f64),
     /// The receiver's report of its next time pulse, waiting for the edge it labels.
     next_pulse: Option<NextPulse>,
+    /// Host time and σ (ns) of the last network time reading fused.
+    last_network: Option<(i64, f64)>,
 }
 
 /// What a receiver said about its next time pulse (UBX TIM-TP).
@@ -187,7 +208,37 @@ impl TimeSync {
             last_fix_label: None,
             gnss_delay: (f64::NAN, f64::NAN),
             next_pulse: None,
+            last_network: None,
         }
+    }
+
+    /// Feeds one reading of the network time service (module docs). Returns true when the
+    /// mapping was updated.
+    pub fn on_network_time(&mut self, t: &NetworkTime) -> bool {
+        if self.status == TimeStatus::Locked {
+            self.counters.network_ignored += 1;
+            return false;
+        }
+        let sigma = t.std_ns;
+        if t.synchronised == 0 || !sigma.is_finite() || sigma <= 0.0 || t.utc_ns == i64::MIN {
+            self.counters.network_rejected += 1;
+            return false;
+        }
+        if !self.clock.is_initialized() {
+            self.clock.init(t.host_ns, t.utc_ns, sigma, NETWORK_INITIAL_RATE_SIGMA);
+        } else if let ClockUpdate::Rejected(_) = self.clock.update(t.host_ns, t.utc_ns, sigma) {
+            self.counters.network_rejected += 1;
+            // The same rule as for edges: a persistent disagreement starts over.
+            self.reject_edge();
+            return false;
+        }
+        self.counters.network_used += 1;
+        self.consecutive_rejects = 0;
+        self.last_network = Some((t.host_ns, sigma));
+        self.leap_s = gps_minus_utc_s(t.utc_ns);
+        self.status = TimeStatus::Network;
+        self.pending = [None; 4];
+        true
     }
 
     /// Feeds the receiver's report of its next time pulse (UBX TIM-TP): the next PPS edge is
@@ -416,7 +467,7 @@ impl TimeSync {
                 self.pending = [None; 4];
             }
         }
-        if self.clock.is_initialized() && matches!(self.status, TimeStatus::Locked | TimeStatus::Holdover) {
+        if self.clock.is_initialized() && self.status.is_clock_mapped() {
             // Receiver output latency: first byte minus the host time of the epoch's PPS.
             let epoch_host = self.clock_host_ns_at(fix.utc_ns);
             self.latency.push((h - epoch_host) as f64 * 1e-9);
@@ -427,7 +478,7 @@ impl TimeSync {
     /// Host time at which UTC read `utc_ns` by the current mapping (the inverse of
     /// [`utc_ns_at_host`](Self::utc_ns_at_host)); `None` without one.
     pub fn host_ns_at_utc(&self, utc_ns: i64) -> Option<i64> {
-        if self.clock.is_initialized() && matches!(self.status, TimeStatus::Locked | TimeStatus::Holdover) {
+        if self.clock.is_initialized() && self.status.is_clock_mapped() {
             return Some(self.clock_host_ns_at(utc_ns));
         }
         if self.status == TimeStatus::Software
@@ -451,7 +502,7 @@ impl TimeSync {
     /// UTC at host time `host_ns` by the current mapping: PPS-based (locked or in holdover), or
     /// under software sync through the latest fix and the GNSS delay (module docs).
     pub fn utc_ns_at_host(&self, host_ns: i64) -> Option<i64> {
-        if self.clock.is_initialized() && matches!(self.status, TimeStatus::Locked | TimeStatus::Holdover) {
+        if self.clock.is_initialized() && self.status.is_clock_mapped() {
             return Some(self.clock.utc_ns_at(host_ns));
         }
         if self.status == TimeStatus::Software
@@ -470,6 +521,14 @@ impl TimeSync {
 
     /// Advances the status with the passage of host time (holdover when edges stop).
     pub fn tick(&mut self, now_host_ns: i64) {
+        if self.status == TimeStatus::Network
+            && self
+                .last_network
+                .is_some_and(|(h, _)| now_host_ns - h > NETWORK_HOLDOVER_AFTER_NS)
+        {
+            self.status = TimeStatus::Holdover;
+            self.counters.holdovers += 1;
+        }
         if self.status == TimeStatus::Locked
             && self
                 .last_used_host_ns
@@ -512,6 +571,10 @@ impl TimeSync {
             s.ref_utc_ns = self.clock.utc_ns_at_state();
             s.rate_error = self.clock.rate_error();
             s.offset_std_ns = p[(0, 0)].max(0.0).sqrt();
+            if let Some((_, floor)) = self.last_network.filter(|_| self.status != TimeStatus::Locked) {
+                // Correlated readings: never more confident than the service itself.
+                s.offset_std_ns = s.offset_std_ns.max(floor);
+            }
             s.rate_std = p[(1, 1)].max(0.0).sqrt();
             s.offset_rate_cov_ns = p[(0, 1)];
         } else if let Some((h, utc)) = self.last_fix_label {
@@ -612,5 +675,42 @@ mod tests {
         assert!(n1 >= 35, "{n1} edges labelled by the receiver");
         assert!(without > 2.0, "the sawtooth shows without qErr: {without} ns");
         assert!(with < 1.5, "with qErr applied: {with} ns");
+    }
+
+    fn reading(host_ns: i64, utc_ns: i64, std_ns: f64) -> NetworkTime {
+        let mut t = NetworkTime::zeroed();
+        (t.host_ns, t.utc_ns, t.std_ns, t.synchronised) = (host_ns, utc_ns, std_ns, 1);
+        t
+    }
+
+    #[test]
+    fn network_time_maps_the_host_clock_with_its_own_sigma_and_holds_over_when_it_stops() {
+        let mut ts = TimeSync::new(TimeSyncConfig::default());
+        // A host 3 ppm fast; readings once a second with σ 20 µs and errors within ±5 µs.
+        let utc_of = |h: i64| U0 + ((h - H0) as f64 / (1.0 + 3e-6)).round() as i64;
+        for k in 0..60i64 {
+            let h = H0 + k * NS_PER_S;
+            let noise = ((k * 7919) % 11 - 5) * 1000;
+            assert!(ts.on_network_time(&reading(h, utc_of(h) + noise, 20_000.0)));
+            ts.tick(h);
+        }
+        assert_eq!(ts.status(), TimeStatus::Network);
+        let h = H0 + 59 * NS_PER_S + NS_PER_S / 2;
+        let s = ts.time_state(h);
+        let err = (s.utc_ns_at(h) - utc_of(h)) as f64;
+        // Never more confident than one reading (they are not independent).
+        assert!(s.offset_std_ns >= 20_000.0, "σ {}", s.offset_std_ns);
+        assert!(err.abs() < 10_000.0, "error {err} ns");
+        // An unsynchronised service is not fused; silence means holdover.
+        let mut unsync = reading(h, utc_of(h), 20_000.0);
+        unsync.synchronised = 0;
+        assert!(!ts.on_network_time(&unsync));
+        assert_eq!(ts.counters().network_rejected, 1);
+        ts.tick(H0 + 59 * NS_PER_S + NETWORK_HOLDOVER_AFTER_NS + 1);
+        assert_eq!(ts.status(), TimeStatus::Holdover);
+        // Readings again: network.
+        let h = H0 + 70 * NS_PER_S;
+        assert!(ts.on_network_time(&reading(h, utc_of(h), 20_000.0)));
+        assert_eq!(ts.status(), TimeStatus::Network);
     }
 }

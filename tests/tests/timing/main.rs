@@ -13,6 +13,7 @@ mod gnss_path;
 mod idle_polling;
 mod imu_device_clock;
 mod live_pipeline;
+mod network_time;
 mod ptp;
 mod receiver_latency;
 mod soak;

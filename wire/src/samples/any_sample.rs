@@ -1,8 +1,8 @@
 //! Any navsync sample, tagged with its type: what a recording holds and a replay publishes.
 
 use super::{
-    EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState, PpsEdge,
-    SimTruth, TimeState,
+    EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState,
+    NetworkTime, PpsEdge, SimTruth, TimeState,
 };
 
 /// A sample of any navsync type. Variants differ in size (a `Health` report is ~2.4 kB); the
@@ -34,6 +34,8 @@ pub enum AnySample {
     NavData(GnssNavData),
     /// `navsync/estimator/settings`
     Settings(EstimatorSettings),
+    /// `navsync/time/network`
+    NetworkTime(NetworkTime),
 }
 
 impl AnySample {
@@ -52,6 +54,7 @@ impl AnySample {
             Self::Raw(r) => r.stamp.host_ns,
             Self::NavData(d) => d.stamp.host_ns,
             Self::Settings(s) => s.host_ns,
+            Self::NetworkTime(t) => t.host_ns,
         }
     }
 }

@@ -49,6 +49,7 @@ fn all() -> Vec<String> {
         signature::<GnssRaw>(),
         signature::<GnssNavData>(),
         signature::<EstimatorSettings>(),
+        signature::<NetworkTime>(),
     ]
 }
 
@@ -72,6 +73,7 @@ fn field_tables_describe_the_real_layout() {
     check::<GnssRaw>();
     check::<GnssNavData>();
     check::<EstimatorSettings>();
+    check::<NetworkTime>();
 }
 
 #[test]

@@ -22,6 +22,7 @@ mod imu_sample;
 #[cfg(test)]
 mod layout_contract;
 mod nav_state;
+mod network_time;
 mod pps_edge;
 mod sim_truth;
 mod stamp;
@@ -37,6 +38,7 @@ pub use gnss_time_pulse::GnssTimePulse;
 pub use health::{Counter, Health, MAX_COUNTERS, MAX_RATES, RateEntry};
 pub use imu_sample::{IMU_FLAG_RECEIVER_CLOCK, IMU_FLAG_SATURATED, ImuSample};
 pub use nav_state::{INTEGRITY_HEADING_UNKNOWN, INTEGRITY_INCONSISTENT, INTEGRITY_RECOVERING, NavState, NavStatus};
+pub use network_time::{NetworkSource, NetworkTime};
 pub use pps_edge::PpsEdge;
 pub use sim_truth::SimTruth;
 pub use stamp::{Stamp, StampSource};

@@ -144,6 +144,9 @@ pub enum TimeStatus {
     Software = 3,
     /// PPS seen but not yet labelled or converged.
     Acquiring = 4,
+    /// No receiver: the host clock mapped through a network time service (chrony, or the
+    /// kernel's NTP state; `--time-source chrony|system`), σ from that service's error bound.
+    Network = 5,
 }
 
 impl TimeStatus {
@@ -154,8 +157,15 @@ impl TimeStatus {
             2 => Self::Holdover,
             3 => Self::Software,
             4 => Self::Acquiring,
+            5 => Self::Network,
             _ => Self::None,
         }
+    }
+
+    /// True when the host clock is mapped to GNSS time by a clock model (PPS locked, in
+    /// holdover, or through a network time service), rather than by software sync or not at all.
+    pub fn is_clock_mapped(self) -> bool {
+        matches!(self, Self::Locked | Self::Holdover | Self::Network)
     }
 
     /// Lower-case name.
@@ -166,6 +176,7 @@ impl TimeStatus {
             Self::Holdover => "holdover",
             Self::Software => "software",
             Self::Acquiring => "acquiring",
+            Self::Network => "network",
         }
     }
 }
