@@ -8,7 +8,8 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use navsync::live::{
-    bridge, demo, echo, estimator, feed, gnss, gpsd_server, imu, nmea_out, ntpshm, pps, record, replay, sim, status,
+    bridge, demo, echo, estimator, feed, gnss, gpsd_server, imu, nmea_out, ntpshm, pps, pps_out, record, replay, sim,
+    status,
 };
 use navsync::tools::{
     analyze, check_config, convert, decode, eval, install, kf_gins, ptp_config, python_types, report,
@@ -66,6 +67,9 @@ enum Cmd {
     /// Writes $GPRMC and $GPZDA right after each GNSS second into a serial port, for LiDARs
     /// and cameras that take NMEA time beside a PPS line.
     NmeaOut(nmea_out::NmeaOutArgs),
+    /// A pulse at each GNSS second for sensors: a GPIO line, a PTP hardware clock's periodic
+    /// output, or a file (tests).
+    PpsOut(pps_out::PpsOutArgs),
     /// Serves the fused state to gpsd clients (gpsd JSON protocol).
     GpsdServer(gpsd_server::GpsdArgs),
     /// Offline analyses of a recording.
@@ -185,6 +189,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Convert(o) => convert::run(&o, &cfg).context("convert"),
         Cmd::Ntpshm(o) => ntpshm::main(o, &cfg),
         Cmd::NmeaOut(o) => nmea_out::run(&o).context("nmea-out"),
+        Cmd::PpsOut(o) => pps_out::run(&o).context("pps-out"),
         Cmd::GpsdServer(o) => gpsd_server::run(&o).context("gpsd-server"),
         Cmd::Analyze(c) => analyze::main(c, &cfg),
         Cmd::Import(c) => kf_gins::main(c),

@@ -9,6 +9,8 @@
 //!   → `navsync/pps/{id}/edge`.
 //! - [`imu`]: IMUs (Linux IIO devices, Xsens MTi over serial, the simulator's IMUs) →
 //!   `navsync/imu/{id}/sample`.
+//! - [`pulse_out`]: pulse outputs for sensors (a GPIO line, a PTP hardware clock's periodic
+//!   output, a file for tests), driven by `navsync pps-out`.
 //! - [`feed`]: replays a capture into a pseudo-terminal, as a device would send it.
 //! - [`pty`]: pseudo-terminals, through which the simulator (crate `navsync-sim`) and the
 //!   feeder talk to the GNSS driver exactly as a receiver would.
@@ -32,4 +34,5 @@ pub mod gnss;
 pub mod imu;
 pub mod pps;
 pub mod pty;
+pub mod pulse_out;
 pub mod rate_log;

@@ -15,11 +15,11 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use crate::live::ntpshm::exportable_std_ns;
+use crate::live::gnss_seconds::{SecondPacer, Tick};
 use navsync_shared::health_reporter::HealthReporter;
-use navsync_shared::samples::{NavState, NavStatus, TimeState};
+use navsync_shared::samples::{NavState, NavStatus};
 use navsync_shared::services;
-use navsync_shared::time::{NS_PER_S, civil_from_utc_ns, monotonic_now_ns};
+use navsync_shared::time::{civil_from_utc_ns, monotonic_now_ns};
 use navsync_sim::nmea::{KNOTS_PER_MPS, format_lat, format_lon, frame};
 use tracing::{info, info_span, warn};
 
@@ -71,14 +71,6 @@ pub fn sentences(utc_s_ns: i64, nav: Option<&NavState>) -> Vec<u8> {
     out
 }
 
-/// The GNSS second to write next and the host time (`CLOCK_MONOTONIC` ns) it begins at, from
-/// the mapping `t` at host time `now_ns`; `None` when the mapping must not be used. Pure.
-pub fn next_second(t: &TimeState, now_ns: i64, max_std_ns: f64) -> Option<(i64, i64)> {
-    exportable_std_ns(t, now_ns, max_std_ns)?;
-    let second = (t.utc_ns_at(now_ns).div_euclid(NS_PER_S) + 1) * NS_PER_S;
-    Some((second, t.host_ns_at(second)))
-}
-
 /// Errors of `navsync nmea-out`.
 #[derive(Debug, thiserror::Error)]
 pub enum NmeaOutError {
@@ -103,7 +95,7 @@ pub fn run(args: &NmeaOutArgs) -> Result<(), NmeaOutError> {
     let port_name = args.port.display().to_string();
     let _span = info_span!("nmea-out", port = %port_name).entered();
     let node = navsync_shared::ipc::IpcNode::new("nmea-out")?;
-    let time = node.subscriber::<TimeState>(services::TIME_STATE)?;
+    let mut pacer = SecondPacer::new(&node, args.max_std_us * 1e3, 0)?;
     let nav = node.subscriber::<NavState>(services::NAV_STATE)?;
     let mut health = HealthReporter::new(&node, "nmea-out")?;
     let c_written = health.counter("seconds_written")?;
@@ -118,35 +110,22 @@ pub fn run(args: &NmeaOutArgs) -> Result<(), NmeaOutError> {
         })?;
     info!(baud = args.baud, "nmea-out running");
     navsync_shared::sd_notify::ready("nmea-out running");
-    let (mut latest_time, mut latest_nav): (Option<TimeState>, Option<NavState>) = (None, None);
-    let mut last_written: Option<i64> = None;
-    let max_std_ns = args.max_std_us * 1e3;
+    let mut latest_nav: Option<NavState> = None;
     while !node.termination_requested() {
         navsync_shared::sd_notify::watchdog();
-        while let Some(t) = time.receive()? {
-            latest_time = Some(t);
-        }
         while let Some(n) = nav.receive()? {
             latest_nav = Some(n);
         }
-        let now = monotonic_now_ns();
-        let Some((second, at)) = latest_time.as_ref().and_then(|t| next_second(t, now, max_std_ns)) else {
-            health.add(c_skipped, 1);
-            node.sleep(Duration::from_millis(200));
-            let _ = health.maybe_publish(monotonic_now_ns());
-            continue;
-        };
-        if last_written == Some(second) {
-            node.sleep(Duration::from_millis(20));
-            continue;
-        }
-        // Sleep to the second's beginning (at most 200 ms at a time, to see a stop request).
-        if at > now {
-            navsync_shared::pacing::sleep_until(at.min(now + 200_000_000), 0);
-            if at > monotonic_now_ns() {
+        // Sleep to the next second's beginning (at most 200 ms at a time, to see a stop request).
+        let second = match pacer.next(&node)? {
+            Tick::Second { second, .. } => second,
+            Tick::Pending => continue,
+            Tick::Unusable => {
+                health.add(c_skipped, 1);
+                let _ = health.maybe_publish(monotonic_now_ns());
                 continue;
             }
-        }
+        };
         let fresh_nav = latest_nav
             .as_ref()
             .filter(|n| n.status != NavStatus::Aligning as u8 && (monotonic_now_ns() - n.host_ns).abs() < NAV_FRESH_NS);
@@ -158,7 +137,6 @@ pub fn run(args: &NmeaOutArgs) -> Result<(), NmeaOutError> {
                 warn!("writing: {e}");
             }
         }
-        last_written = Some(second);
         let _ = health.maybe_publish(monotonic_now_ns());
     }
     navsync_shared::sd_notify::stopping();
@@ -170,8 +148,7 @@ pub fn run(args: &NmeaOutArgs) -> Result<(), NmeaOutError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::live::ntpshm::STALE_AFTER_NS;
-    use navsync_shared::samples::TimeStatus;
+    use navsync_shared::time::NS_PER_S;
 
     #[test]
     fn rmc_and_zda_of_a_second() {
@@ -205,31 +182,6 @@ mod tests {
         assert!(
             text.starts_with("$GPRMC,213005.00,A,2330.0000000,S,01115.0000000,E,19.44,90.0,041226,,,A*"),
             "{text}"
-        );
-    }
-
-    #[test]
-    fn the_next_second_by_the_mapping() {
-        let mut t = TimeState::unknown();
-        t.status = TimeStatus::Locked as u8;
-        t.ref_host_ns = 10 * NS_PER_S;
-        t.ref_utc_ns = 1_796_419_805 * NS_PER_S + 250_000_000;
-        t.computed_host_ns = t.ref_host_ns;
-        t.offset_std_ns = 500.0;
-        t.rate_std = 1e-9;
-        let (s, at) = next_second(&t, t.ref_host_ns, 1e6).unwrap();
-        assert_eq!(s, 1_796_419_806 * NS_PER_S);
-        assert_eq!(at, t.ref_host_ns + 750_000_000);
-        assert_eq!(next_second(&t, t.ref_host_ns, 100.0), None, "σ over the bound");
-        assert_eq!(next_second(&t, t.ref_host_ns + STALE_AFTER_NS + 1, 1e6), None, "stale");
-        t.status = TimeStatus::Acquiring as u8;
-        assert_eq!(next_second(&t, t.ref_host_ns, 1e6), None);
-        t.status = TimeStatus::Locked as u8;
-        t.rate_std = f64::NAN;
-        assert_eq!(
-            next_second(&t, t.ref_host_ns, 1e6),
-            None,
-            "an unknown σ is over any bound"
         );
     }
 }

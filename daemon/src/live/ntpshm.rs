@@ -408,8 +408,8 @@ pub struct NtpShmArgs {
     pub max_std_us: Option<f64>,
 }
 
-/// A bound in µs: a finite number above 0.
-fn positive_us(s: &str) -> Result<f64, String> {
+/// A bound in µs: a finite number above 0 (`--max-std-us` of the exports).
+pub(crate) fn positive_us(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
         _ => Err(format!("`{s}`: expected a number of µs above 0")),

@@ -103,6 +103,10 @@ const SHIPPED: &[(&str, &str)] = &[
         include_str!("../../../systemd/navsync-nmea-out@.service"),
     ),
     (
+        "navsync-pps-out@.service",
+        include_str!("../../../systemd/navsync-pps-out@.service"),
+    ),
+    (
         "navsync-ntpshm.service",
         include_str!("../../../systemd/navsync-ntpshm.service"),
     ),

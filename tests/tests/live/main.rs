@@ -13,6 +13,7 @@ mod health_table;
 mod install;
 mod ipc_wake;
 mod nmea_out;
+mod pps_out;
 mod python_iceoryx2;
 mod python_types;
 mod reliability;
