@@ -51,13 +51,14 @@ crate::settings_group! {
         /// (in the file, every `[imu.*]` in id order when not given).
         pub imus: Vec<String> = vec!["0".into()], file "estimator", flag "imus", check ids(1, 8);
         /// Where the host clock's GNSS time comes from: gnss (the receivers' PPS and fixes),
-        /// chrony (a host without a receiver on a master's time base: chronyd's tracking report
-        /// through its command socket) or system (the kernel's NTP state of a clock a time
+        /// chrony (a host without a receiver on a master's time base: chronyd's tracking report,
+        /// `chronyc tracking`) or system (the kernel's NTP state of a clock a time
         /// daemon disciplines). With chrony or system the PPS inputs are not read.
         pub time_source: TimeSource = TimeSource::Gnss, file "estimator", flag "time-source";
-        /// chronyd's command socket, read with `time_source = "chrony"` (chrony.conf
-        /// `bindcmdaddress`).
-        pub chrony_socket: String = "/run/chrony/chronyd.sock".into(), file "estimator", flag "chrony-socket";
+        /// Where chronyd answers `chronyc tracking` with `time_source = "chrony"` (chronyc's
+        /// `-h`): an address (chronyd's command port 323, open to local users for monitoring) or
+        /// the path of its Unix command socket (root and chronyd's user only).
+        pub chrony_address: String = "127.0.0.1".into(), file "estimator", flag "chrony-address";
     }
 }
 

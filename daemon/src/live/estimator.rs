@@ -117,7 +117,7 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     // Dead drivers' publishers stop counting once their node is reclaimed: off this loop.
     let _reclaimer = super::reclaimer::Reclaimer::start("estimator-reclaim", RECLAIM_INTERVAL)?;
     // A network time service instead of the receivers' PPS (a host without a receiver).
-    let network = super::network_time::NetworkTimeReader::start(args.inputs.time_source, &args.inputs.chrony_socket)
+    let network = super::network_time::NetworkTimeReader::start(args.inputs.time_source, &args.inputs.chrony_address)
         .map_err(EstimatorError::NetworkTime)?;
     let mut network_pub = match network {
         Some(_) => Some(node.publisher::<NetworkTime>(services::NETWORK_TIME)?),

@@ -3,7 +3,7 @@
 //! estimator's loop as a [`NetworkTime`] sample (published on `navsync/time/network`, fused
 //! by the time synchronisation, status `network`).
 //!
-//! - chrony: `chronyc -c -n -h SOCKET tracking` (chronyc(1), "tracking"; the CSV fields in
+//! - chrony: `chronyc -c -n -h ADDRESS tracking` (chronyc(1), "tracking"; the CSV fields in
 //!   [`parse_chrony_tracking`]). chronyd's "System time" is the correction it still has to
 //!   apply to the system clock (positive: the clock is slow), so UTC = `CLOCK_REALTIME` + that
 //!   correction, whether chronyd slews the clock or only tracks it (`chronyd -x`, where the
@@ -16,7 +16,6 @@
 //! `maxclockerror` since its last update), so [`BOUND_TO_SIGMA`] of it is taken as 1σ; the
 //! time-sync test in tests/tests/timing/network_time.rs measures the error against that σ.
 
-use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -65,10 +64,10 @@ impl ChronyTracking {
 #[derive(Debug, thiserror::Error)]
 pub enum NetworkTimeError {
     /// `chronyc` could not run or failed.
-    #[error("chronyc -h {socket}: {why}")]
+    #[error("chronyc -h {address}: {why}")]
     Chronyc {
-        /// The command socket.
-        socket: PathBuf,
+        /// chronyd's command address or socket.
+        address: String,
         /// What went wrong.
         why: String,
     },
@@ -138,14 +137,13 @@ pub fn chrony_sample(t: &ChronyTracking, host_ns: i64, realtime_ns: i64, seq: u6
     s
 }
 
-fn read_chrony(socket: &Path) -> Result<ChronyTracking, NetworkTimeError> {
+fn read_chrony(address: &str) -> Result<ChronyTracking, NetworkTimeError> {
     let fail = |why: String| NetworkTimeError::Chronyc {
-        socket: socket.to_path_buf(),
+        address: address.to_string(),
         why,
     };
     let mut child = Command::new("chronyc")
-        .args(["-c", "-n", "-h"])
-        .arg(socket)
+        .args(["-c", "-n", "-h", address])
         .arg("tracking")
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
@@ -207,19 +205,19 @@ pub struct NetworkTimeReader {
 }
 
 impl NetworkTimeReader {
-    /// Starts reading `source` (`chrony` through `socket`, or `system`); `None` for
-    /// [`TimeSource::Gnss`].
-    pub fn start(source: TimeSource, socket: &str) -> std::io::Result<Option<Self>> {
+    /// Starts reading `source` (`chrony` at `address`, chronyc's `-h`, or `system`); `None`
+    /// for [`TimeSource::Gnss`].
+    pub fn start(source: TimeSource, address: &str) -> std::io::Result<Option<Self>> {
         if !source.is_network() {
             return Ok(None);
         }
         let stop = Arc::new(AtomicBool::new(false));
         let (tx, rx) = channel();
-        let socket = PathBuf::from(socket);
+        let address = address.to_string();
         let flag = stop.clone();
         let thread = std::thread::Builder::new()
             .name("network-time".into())
-            .spawn(move || read_loop(source, &socket, &flag, &tx))?;
+            .spawn(move || read_loop(source, &address, &flag, &tx))?;
         Ok(Some(Self {
             stop,
             thread: Some(thread),
@@ -244,13 +242,13 @@ impl Drop for NetworkTimeReader {
     }
 }
 
-fn read_loop(source: TimeSource, socket: &Path, stop: &AtomicBool, tx: &Sender<NetworkTime>) {
+fn read_loop(source: TimeSource, address: &str, stop: &AtomicBool, tx: &Sender<NetworkTime>) {
     let mut seq = 0u64;
     let mut failing = false;
     while !stop.load(Ordering::Relaxed) {
         let t0 = Instant::now();
         let reading = match source {
-            TimeSource::Chrony => read_chrony(socket).map(|t| {
+            TimeSource::Chrony => read_chrony(address).map(|t| {
                 let (host_ns, realtime_ns) = paired_clocks_ns();
                 chrony_sample(&t, host_ns, realtime_ns, seq)
             }),

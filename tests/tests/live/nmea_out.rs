@@ -129,3 +129,152 @@ fn nmea_out_writes_rmc_and_zda_after_each_gnss_second() {
     drop((time_pub, nav_pub, node));
     env.finish();
 }
+
+/// The gpsd binary, or why the test cannot run.
+fn gpsd_bin() -> Result<std::path::PathBuf, String> {
+    let bin = ["/usr/sbin/gpsd", "/usr/bin/gpsd", "/usr/local/sbin/gpsd"]
+        .iter()
+        .map(std::path::PathBuf::from)
+        .find(|p| p.exists())
+        .ok_or("gpsd is not installed (Debian package `gpsd`; .ci/run installs it as root)")?;
+    Ok(bin)
+}
+
+/// A real gpsd takes `nmea-out` as its time source: nmea-out → pseudo-terminal → (this test
+/// relays the bytes) → a second pseudo-terminal → `gpsd -N -n -b` → its JSON socket: every
+/// TPV's `time` is the GNSS second of the published mapping whose sentences just came, for
+/// consecutive seconds.
+#[test]
+fn gpsd_takes_nmea_out_as_its_time_source() {
+    use std::io::{BufRead, BufReader, Write};
+    let bin = match gpsd_bin() {
+        Ok(b) => b,
+        Err(why) => {
+            println!("SKIPPED: {why}");
+            return;
+        }
+    };
+    let mut env = TestEnv::new("nmeagpsd");
+    let node = env.node("mapping");
+    let mut time_pub = node.publisher::<TimeState>(services::TIME_STATE).unwrap();
+    let mut nav_pub = node.publisher::<NavState>(services::NAV_STATE).unwrap();
+    let mut out = navsync_drivers::pty::Pty::open(None).expect("a pseudo-terminal");
+    let port = out.path().display().to_string();
+    let gpsd_link = env.dir.join("gpsd-tty");
+    let mut into_gpsd = navsync_drivers::pty::Pty::open(Some(&gpsd_link)).expect("a pseudo-terminal");
+    let (h0, r0) = (monotonic_now_ns(), realtime_now_ns());
+    let mut t = TimeState::unknown();
+    t.status = TimeStatus::Locked as u8;
+    t.ref_host_ns = h0;
+    t.ref_utc_ns = r0 + OFFSET_NS;
+    t.offset_std_ns = 500.0;
+    t.rate_std = 1e-9;
+    t.leap_s = 18;
+    let mut n = NavState::zeroed();
+    n.status = NavStatus::Aligned as u8;
+    n.lat_deg = 48.137154;
+    n.lon_deg = 11.576124;
+    n.vel_ned_mps = [0.0, 5.0, 0.0];
+    env.spawn("nmea-out", &["nmea-out", "--port", &port, "--baud", "9600"]);
+    let tcp = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+        .to_string();
+    let gpsd = std::process::Command::new(&bin)
+        .args(["-N", "-n", "-b", "-S", &tcp, "-F"])
+        .arg(env.dir.join("gpsd.sock"))
+        .arg(&gpsd_link)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::fs::File::create(env.dir.join("gpsd.log")).expect("log"))
+        .spawn()
+        .expect("starting gpsd");
+    let _gpsd = navsync_bench::netns::StopOnDrop(gpsd);
+
+    // gpsd's JSON stream, read on a thread; TPV lines with the host time they came.
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    let tcp_port = tcp.clone();
+    std::thread::spawn(move || {
+        let t0 = Instant::now();
+        let stream = loop {
+            match std::net::TcpStream::connect(format!("127.0.0.1:{tcp_port}")) {
+                Ok(s) => break s,
+                Err(_) if t0.elapsed() < Duration::from_secs(10) => std::thread::sleep(Duration::from_millis(50)),
+                Err(_) => return,
+            }
+        };
+        let mut w = stream.try_clone().expect("clone");
+        let _ = w.write_all(b"?WATCH={\"enable\":true,\"json\":true}\n");
+        for line in BufReader::new(stream).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                return;
+            }
+        }
+    });
+
+    let mut tpv_times: Vec<String> = Vec::new();
+    let mut zda_seconds: Vec<String> = Vec::new();
+    let mut pending = String::new();
+    let mut buf = [0u8; 512];
+    let t0 = Instant::now();
+    let mut last_pub = Instant::now() - Duration::from_secs(1);
+    while t0.elapsed() < Duration::from_secs(12) && tpv_times.len() < 6 {
+        if last_pub.elapsed() > Duration::from_millis(100) {
+            let now = monotonic_now_ns();
+            t.computed_host_ns = now;
+            n.host_ns = now;
+            time_pub.publish(&t).unwrap();
+            nav_pub.publish(&n).unwrap();
+            last_pub = Instant::now();
+        }
+        // The relay: what nmea-out wrote, into gpsd's terminal.
+        while let Ok(k) = out.read(&mut buf) {
+            if k == 0 {
+                break;
+            }
+            into_gpsd.write(&buf[..k]).expect("relaying to gpsd");
+            pending.push_str(&String::from_utf8_lossy(&buf[..k]));
+        }
+        while let Some(i) = pending.find('\n') {
+            let line: String = pending.drain(..=i).collect();
+            if let Some(hms) = line.strip_prefix("$GPZDA,").and_then(|r| r.get(..6)) {
+                zda_seconds.push(hms.to_string());
+            }
+        }
+        while let Ok(line) = rx.try_recv() {
+            if line.contains("\"class\":\"TPV\"")
+                && let Some(time) = line.split("\"time\":\"").nth(1).and_then(|r| r.split('"').next())
+            {
+                tpv_times.push(time.to_string());
+            }
+        }
+        env.assert_running();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let log = std::fs::read_to_string(env.dir.join("gpsd.log")).unwrap_or_default();
+    println!("gpsd TPV times: {tpv_times:?}\nnmea-out ZDA seconds: {zda_seconds:?}");
+    assert!(tpv_times.len() >= 4, "gpsd reported {} TPVs with a time\n{log}", tpv_times.len());
+    // Each TPV time is a whole second the mapping named (a ZDA of nmea-out), consecutive.
+    let mut secs = Vec::new();
+    for time in &tpv_times {
+        // 2026-12-05T00:25:03.000Z
+        let hms: String = time.get(11..19).unwrap_or("").replace(':', "");
+        assert!(time.ends_with(".000Z"), "TPV time {time} is not a whole second");
+        assert!(zda_seconds.contains(&hms), "TPV time {time} is not a second nmea-out named: {zda_seconds:?}");
+        let civil = navsync_shared::time::civil_from_utc_ns(r0 + OFFSET_NS);
+        let day = format!("{:04}-{:02}-{:02}", civil.year, civil.month, civil.day);
+        if !time.starts_with(&day) {
+            println!("the test crossed midnight UTC: {time} vs {day}");
+        }
+        let s: i64 = hms.parse::<i64>().map(|v| (v / 10000) * 3600 + (v / 100 % 100) * 60 + v % 100).unwrap();
+        secs.push(s);
+    }
+    // gpsd may report one cycle in more than one TPV (RMC, then ZDA): one second each.
+    secs.dedup();
+    assert!(
+        secs.len() >= 3 && secs.windows(2).all(|w| (w[1] - w[0]).rem_euclid(86_400) == 1),
+        "TPV times not one per second: {tpv_times:?}"
+    );
+    drop((time_pub, nav_pub, node));
+    env.finish();
+}

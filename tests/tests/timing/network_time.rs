@@ -5,7 +5,7 @@
 //!   oscillator 0.5 ppm off) → gnss, pps → estimator → `ntpshm --sock` → chronyd A (`refclock
 //!   SOCK`, namespace A), which serves NTP on its veth address;
 //! - host B (prefix B): chronyd B (namespace B, `server A minpoll -2`), and `navsync estimator
-//!   --time-source chrony --chrony-socket B` with a simulated IMU of its own.
+//!   --time-source chrony --chrony-address B` with a simulated IMU of its own.
 //!
 //! Both namespaces share `CLOCK_MONOTONIC`, so the simulator's truth (UTC at every host time)
 //! gives the exact error of A's and B's GNSS time. Checked:
@@ -13,7 +13,7 @@
 //!   A selects the refclock (its `sources`/`sourcestats` printed beside the figures);
 //! - B: status `network`, error against the truth ≤ 50 µs at p99, |error| ≤ 2σ for ≥ 95 % of
 //!   the states and ≤ 3σ for all; B's NavStates carry GNSS time within the same bound;
-//! - a 40 s GNSS blackout on A (the simulator's outage: no fixes, so no trusted PPS): A in
+//! - a 60 s GNSS blackout on A (the simulator's outage: no fixes, so no trusted PPS): A in
 //!   holdover within 10 µs, B following it within 100 µs, both with σ covering the error.
 //!
 //! Needs root (namespaces), `ip`, `chronyd`/`chronyc` (Debian `chrony`; `.ci/run` installs it);
@@ -26,7 +26,7 @@ use std::time::{Duration, Instant};
 use navsync_bench::netns::{NetnsPair, StopOnDrop};
 use navsync_shared::samples::{NavState, PpsEdge, SimTruth, TimeState, TimeStatus};
 use navsync_shared::services;
-use navsync_tests::{TestEnv, quantile};
+use navsync_tests::{TestEnv, quantile, write_drive_scenario};
 
 /// GNSS time minus the system clock in the simulation, s.
 const UTC_OFFSET_S: f64 = 0.125;
@@ -36,10 +36,10 @@ fn run_s() -> f64 {
     std::env::var("NAVSYNC_NETWORK_TIME_RUN_S")
         .ok()
         .and_then(|v| v.parse::<f64>().ok())
-        .map_or(125.0, |v| v.max(125.0))
+        .map_or(145.0, |v| v.max(145.0))
 }
 /// The GNSS blackout on host A: start and length, s of scenario time.
-const BLACKOUT: (f64, f64) = (75.0, 40.0);
+const BLACKOUT: (f64, f64) = (75.0, 60.0);
 
 fn chronyd_path() -> Option<PathBuf> {
     ["/usr/sbin/chronyd", "/sbin/chronyd", "/usr/bin/chronyd"]
@@ -166,10 +166,16 @@ fn a_host_without_receiver_keeps_gnss_time_through_chrony_over_the_network() {
     let run_s = run_s();
     let (run, offset) = (run_s.to_string(), UTC_OFFSET_S.to_string());
     let outage = format!("{}:{}", BLACKOUT.0, BLACKOUT.1);
+    // A drive as long as the run (the default scenario ends after 10 minutes).
+    let scenario = a.dir.join("drive.toml");
+    write_drive_scenario(&scenario, run_s + 10.0, 1, 100.0);
+    let scenario_s = scenario.display().to_string();
     a.spawn(
         "sim",
         &[
             "sim",
+            "--scenario",
+            &scenario_s,
             "--pty-link",
             &gnss_s,
             "--imus",
@@ -216,7 +222,7 @@ fn a_host_without_receiver_keeps_gnss_time_through_chrony_over_the_network() {
         &format!("server {} iburst minpoll -2 maxpoll -2\nport 0\n", link.addr[0]),
     );
     let sock_b = cdir_b.join("chronyd.sock").display().to_string();
-    b.spawn("sim", &["sim", "--imus", "1", "--duration", &run]);
+    b.spawn("sim", &["sim", "--scenario", &scenario_s, "--imus", "1", "--duration", &run]);
     b.spawn(
         "estimator",
         &[
@@ -225,7 +231,7 @@ fn a_host_without_receiver_keeps_gnss_time_through_chrony_over_the_network() {
             "0",
             "--time-source",
             "chrony",
-            "--chrony-socket",
+            "--chrony-address",
             &sock_b,
         ],
     );
