@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use navsync::live::{
     bridge, demo, echo, estimator, feed, gnss, gpsd_server, imu, nmea_out, ntpshm, pps, pps_out, record, replay, sim,
-    status,
+    status, web,
 };
 use navsync::tools::{
     analyze, check_config, convert, decode, eval, install, kf_gins, ptp_config, python_types, report,
@@ -72,6 +72,9 @@ enum Cmd {
     PpsOut(pps_out::PpsOutArgs),
     /// Serves the fused state to gpsd clients (gpsd JSON protocol).
     GpsdServer(gpsd_server::GpsdArgs),
+    /// The running system in a browser (a live page, Server-Sent Events) and Prometheus
+    /// metrics (/metrics), on 127.0.0.1:8080 by default.
+    Web(web::WebArgs),
     /// Offline analyses of a recording.
     #[command(subcommand)]
     Analyze(analyze::Command),
@@ -191,6 +194,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::NmeaOut(o) => nmea_out::run(&o).context("nmea-out"),
         Cmd::PpsOut(o) => pps_out::run(&o).context("pps-out"),
         Cmd::GpsdServer(o) => gpsd_server::run(&o).context("gpsd-server"),
+        Cmd::Web(o) => web::run(&o).context("web"),
         Cmd::Analyze(c) => analyze::main(c, &cfg),
         Cmd::Import(c) => kf_gins::main(c),
         Cmd::Eval(o) => eval::run(&o).map(drop).context("eval"),

@@ -306,7 +306,8 @@ fn deliver(c: &mut Client, lines: &[String], max_pending_bytes: usize) -> Delive
     }
 }
 
-fn set_send_buffer(s: &TcpStream, bytes: libc::c_int) {
+/// Bounds the kernel's send buffer of a client socket to `bytes` (also `navsync web`'s).
+pub(crate) fn set_send_buffer(s: &TcpStream, bytes: libc::c_int) {
     // SAFETY: setsockopt on a socket we own, with a pointer to a live int of the stated size.
     unsafe {
         libc::setsockopt(

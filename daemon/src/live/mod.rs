@@ -21,3 +21,4 @@ pub mod record;
 pub mod replay;
 pub mod sim;
 pub mod status;
+pub mod web;

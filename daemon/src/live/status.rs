@@ -228,7 +228,10 @@ struct Process {
     state: &'static str,
 }
 
-struct Status {
+/// What `navsync status` gathers, for any process that shows it (`status`, `web`): the
+/// processes and services under the prefix ([`Status::discover`]), their samples
+/// ([`Status::poll`]) and one report over the interval since the last ([`Status::report`]).
+pub struct Status {
     node: IpcNode,
     services: BTreeMap<String, Watched>,
     processes: Vec<Process>,
@@ -240,13 +243,18 @@ struct Status {
 
 impl Status {
     fn new() -> Result<Self, StatusError> {
+        Self::named(&format!("status-{}", std::process::id()))
+    }
+
+    /// Gathering through an iceoryx2 node named `name` (the process's name as others see it).
+    pub fn named(name: &str) -> Result<Self, StatusError> {
         // The dead nodes first: creating our node reclaims them, and they would vanish.
         let gone = list_processes(&ipc::config()?, None)?
             .into_iter()
             .filter(|p| p.state == "dead")
             .map(|p| Process { state: "gone", ..p })
             .collect();
-        let node = IpcNode::new(&format!("status-{}", std::process::id()))?;
+        let node = IpcNode::new(name)?;
         Ok(Self {
             node,
             services: BTreeMap::new(),
@@ -257,8 +265,20 @@ impl Status {
         })
     }
 
+    /// The iceoryx2 node it gathers through.
+    pub fn node(&self) -> &IpcNode {
+        &self.node
+    }
+
+    /// The newest sample of every service watched, by service name.
+    pub fn latest_samples(&self) -> impl Iterator<Item = (&str, AnySample)> + '_ {
+        self.services
+            .iter()
+            .filter_map(|(name, w)| w.monitor.latest().map(|s| (name.as_str(), s)))
+    }
+
     /// Finds processes and services; subscribes to new services, forgets vanished ones.
-    fn discover(&mut self) -> Result<(), StatusError> {
+    pub fn discover(&mut self) -> Result<(), StatusError> {
         let config = ipc::config()?;
         let own = *self.node.node().id();
         let processes = list_processes(&config, Some(own))?;
@@ -338,7 +358,8 @@ impl Status {
         Ok(())
     }
 
-    fn poll(&mut self) {
+    /// Takes what arrived on every service watched.
+    pub fn poll(&mut self) {
         for w in self.services.values_mut() {
             let (n, stamps) = w.monitor.poll();
             let n = n as u64;
@@ -354,7 +375,7 @@ impl Status {
     }
 
     /// The report over the interval since the last one, as JSON; starts the next interval.
-    fn report(&mut self) -> Value {
+    pub fn report(&mut self) -> Value {
         let now_ns = monotonic_now_ns();
         let now = Instant::now();
         let span = now.duration_since(self.interval_start).as_secs_f64().max(1e-3);

@@ -73,7 +73,7 @@ pub fn run(opts: Options) -> Result<()> {
     eprintln!(
         "then: systemd-sysusers; systemd-tmpfiles --create; udevadm control --reload; systemctl daemon-reload; \
          edit {conf}; {check}; systemctl enable navsync-estimator navsync-gnss@0 navsync-pps@0 navsync-imu@0 \
-         (one instance per device of {conf}; optional: navsync-ntpshm navsync-gpsd-server navsync-record); \
+         (one instance per device of {conf}; optional: navsync-ntpshm navsync-gpsd-server navsync-web navsync-record); \
          systemctl start navsync.target"
     );
     Ok(())
@@ -117,6 +117,10 @@ const SHIPPED: &[(&str, &str)] = &[
     (
         "navsync-gpsd-server.service",
         include_str!("../../../systemd/navsync-gpsd-server.service"),
+    ),
+    (
+        "navsync-web.service",
+        include_str!("../../../systemd/navsync-web.service"),
     ),
     (
         "navsync-bridge-zenoh.service",

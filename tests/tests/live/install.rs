@@ -139,7 +139,7 @@ fn install_stays_in_its_prefix_lists_on_dry_run_and_keeps_a_configuration() {
     let o = inst.run(&["--prefix", p, "--dry-run"]);
     assert!(o.status.success(), "{}\n{}", o.status, text(&o.stderr));
     let listed: Vec<String> = text(&o.stdout).lines().map(str::to_string).collect();
-    assert_eq!(listed.len(), 17, "{listed:?}");
+    assert_eq!(listed.len(), 18, "{listed:?}");
     for l in &listed {
         let path = l.strip_prefix("would write ").unwrap_or_else(|| panic!("{l}"));
         assert!(Path::new(path).starts_with(&prefix), "{l}");
@@ -157,7 +157,7 @@ fn install_stays_in_its_prefix_lists_on_dry_run_and_keeps_a_configuration() {
     let mut printed: Vec<PathBuf> = text(&o.stdout).lines().map(PathBuf::from).collect();
     printed.sort();
     assert_eq!(printed, files_under(&prefix), "printed vs written");
-    assert_eq!(printed.len(), 17, "{printed:?}");
+    assert_eq!(printed.len(), 18, "{printed:?}");
     assert!(
         text(&o.stderr).contains(&format!("--config {p}/etc/navsync/navsync.toml check-config")),
         "{}",
@@ -214,7 +214,7 @@ fn install_stays_in_its_prefix_lists_on_dry_run_and_keeps_a_configuration() {
     let o = inst.run(&["--prefix", "/opt/navsync", "--root", stage.to_str().unwrap()]);
     assert!(o.status.success(), "{}\n{}", o.status, text(&o.stderr));
     let staged = files_under(&stage);
-    assert_eq!(staged.len(), 17, "{staged:?}");
+    assert_eq!(staged.len(), 18, "{staged:?}");
     assert!(
         staged.iter().all(|f| f.starts_with(stage.join("opt/navsync"))),
         "{staged:?}"

@@ -1,5 +1,5 @@
 //! Live sets of processes and the ways in for other programs: `navsync demo`, `status`, `echo`,
-//! the Rust client API, Python over iceoryx2 and `ctypes`, `gpsd-server`, the health table, the
+//! the Rust client API, Python over iceoryx2 and `ctypes`, `gpsd-server`, `web`, the health table, the
 //! futex wake-ups, a PPS source going silent, the systemd units, `navsync install`, the
 //! shared memory's permissions and how user errors are reported. One test binary; its tests run concurrently, each in its own `TestEnv`.
 
@@ -21,3 +21,4 @@ mod shm_permissions;
 mod status_echo;
 mod systemd_units;
 mod user_errors;
+mod web;
