@@ -12,6 +12,12 @@ pub const MIN_USABLE_SHARE: f64 = 0.5;
 /// throughout: a filter that does not follow its fixes) is reported as not trustworthy; a
 /// flag now and then (after a GNSS outage, a bias step) is what the flag is for.
 pub const MAX_INCONSISTENT_SHARE: f64 = 0.9;
+/// More of the fixes than this share arriving behind the delayed filter (later than the fusion
+/// horizon allows, so never fused) is a problem: the states coast on the IMU between the fixes
+/// that do arrive in time, with no word about it otherwise.
+pub const MAX_TOO_OLD_SHARE: f64 = 0.1;
+/// Fixes needed before the share of late ones is judged.
+const MIN_FIXES_FOR_SHARE: u64 = 10;
 
 /// What the pipeline saw, for the diagnosis.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -32,6 +38,10 @@ pub struct InputsSeen {
     pub heading_banks: u64,
     /// Resets of the filter by the integrity monitor.
     pub integrity_resets: u64,
+    /// Fixes that arrived behind the delayed filter and were not fused.
+    pub fixes_too_old: u64,
+    /// The fusion horizon, s.
+    pub fusion_horizon_s: f64,
 }
 
 /// Counts of navigation states by usability.
@@ -74,6 +84,14 @@ impl OutputCheck {
     pub fn problem(&self, seen: &InputsSeen) -> Option<String> {
         if let Some(p) = self.usability(seen) {
             return Some(p);
+        }
+        if seen.fixes >= MIN_FIXES_FOR_SHARE && seen.fixes_too_old as f64 > MAX_TOO_OLD_SHARE * seen.fixes as f64 {
+            return Some(format!(
+                "{} of {} fixes arrived later than the fusion horizon ({:.1} s) allows and were not fused: the \
+                 receiver's output latency (or the GNSS delay) exceeds it, and the states coast on the IMU \
+                 between the fixes that came in time; raise --horizon ([estimator] fusion_horizon_s)",
+                seen.fixes_too_old, seen.fixes, seen.fusion_horizon_s
+            ));
         }
         (seen.integrity_resets > 0).then(|| {
             format!(
@@ -217,5 +235,25 @@ mod tests {
             c.problem(&searching).unwrap().contains("heading was not observable"),
             "{c:?}"
         );
+    }
+
+    #[test]
+    fn fixes_behind_the_horizon_are_a_problem() {
+        let mut c = OutputCheck::default();
+        (0..100).for_each(|_| c.add(&state(NavStatus::Aligned, 1), true));
+        let seen = InputsSeen {
+            fixes: 100,
+            fixes_used: 80,
+            fixes_too_old: 20,
+            fusion_horizon_s: 1.5,
+            ..Default::default()
+        };
+        let p = c.problem(&seen).expect("20 % of the fixes never fused");
+        assert!(p.contains("20 of 100 fixes") && p.contains("--horizon"), "{p}");
+        let few = InputsSeen {
+            fixes_too_old: 5,
+            ..seen
+        };
+        assert_eq!(c.problem(&few), None);
     }
 }

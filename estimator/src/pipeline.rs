@@ -451,6 +451,8 @@ impl Pipeline {
             align_min_speed_mps: self.cfg.nav.align.align_min_speed_mps,
             heading_banks: self.nav.counters().heading_banks,
             integrity_resets: self.nav.integrity().resets,
+            fixes_too_old: self.nav.counters().fixes_too_old,
+            fusion_horizon_s: self.cfg.nav.fusion_horizon_s,
         }
     }
 
