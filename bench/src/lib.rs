@@ -11,6 +11,7 @@
 //! - [`throughput`]: IMU samples per second through the estimator library.
 //! - [`timing`]: the time synchronisation against the simulated host oscillator (offline).
 //! - [`zenoh`]: a NavState across two network namespaces through two Zenoh bridges.
+//! - [`history`]: a `state_at` query of the history of states from another process.
 //! - [`host`]: the machine's own wake-up lateness and stalls, no navsync code involved.
 //! - [`netns`]: two "hosts" on one machine (network namespaces and a veth pair).
 //! - [`util`]: percentiles, the machine's state, child processes, JSON.
@@ -21,6 +22,7 @@
 
 pub mod e2e;
 pub mod gnss_latency;
+pub mod history;
 pub mod host;
 pub mod ipc;
 pub mod netns;

@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use navsync_bench::{e2e, gnss_latency, host, ipc, throughput, timing, zenoh};
+use navsync_bench::{e2e, gnss_latency, history, host, ipc, throughput, timing, zenoh};
 
 #[derive(Parser)]
 #[command(name = "navsync-bench", version, about = "navsync's benchmarks")]
@@ -30,6 +30,9 @@ enum Cmd {
     /// A NavState from host A's iceoryx2 to host B's through two Zenoh bridges over a veth
     /// link between network namespaces (root; a navsync built with its default feature `zenoh`).
     Zenoh(zenoh::ZenohBenchArgs),
+    /// A `state_at` query of the history of states from another process than its writer's
+    /// (p50/p99 per query, a writer at 1 kHz).
+    History(history::HistoryArgs),
     /// The machine's own wake-up stalls: a sleeper per CPU at a fixed rate, no navsync code
     /// (read beside the latency benchmarks; finds stalls that keep the phase of a 100 ms cycle).
     Host(host::HostArgs),
@@ -59,6 +62,8 @@ enum Helper {
         #[arg(long)]
         service: String,
     },
+    /// Writes a history of states at 1 kHz (`history`).
+    HistoryWriter(history::WriterArgs),
     /// Prints the time and size of every read on a terminal (`gnss-latency`'s floor).
     PtyRead {
         /// The terminal, e.g. /dev/pts/7.
@@ -81,6 +86,8 @@ fn main() -> Result<()> {
         Cmd::GnssLatency(a) => drop(gnss_latency::run(&a).context("GNSS latency benchmark")?),
         Cmd::Zenoh(a) => drop(zenoh::run(&a).context("Zenoh benchmark")?),
         Cmd::Host(a) => drop(host::run(&a).context("host benchmark")?),
+        Cmd::History(a) => drop(history::run(&a).context("history benchmark")?),
+        Cmd::Helper(Helper::HistoryWriter(a)) => history::helper_writer(&a).context("history-writer")?,
         Cmd::Helper(Helper::GnssSub { service }) => gnss_latency::helper_sub(&service).context("gnss-sub")?,
         Cmd::Helper(Helper::PtyRead { port }) => gnss_latency::helper_pty_read(&port).context("pty-read")?,
         Cmd::Helper(Helper::IpcPub(a)) => ipc::helper_pub(&a).context("ipc-pub")?,

@@ -15,7 +15,7 @@ use navsync_wire::services;
 
 use crate::array::imu_array::{ArrayConfig, UnitConfig};
 use crate::array::imu_offset::OffsetConfig;
-use crate::declare::checks::{count_within, ids, positive};
+use crate::declare::checks::{count_within, ids, positive, within};
 use crate::declare::{Group, Invalid, Spec};
 use crate::evaluation::DelayTruth;
 use crate::nav::error_state::ProcessNoise;
@@ -59,6 +59,10 @@ crate::settings_group! {
         /// `-h`): an address (chronyd's command port 323, open to local users for monitoring) or
         /// the path of its Unix command socket (root and chronyd's user only).
         pub chrony_address: String = "127.0.0.1".into(), file "estimator", flag "chrony-address";
+        /// Seconds of navigation states kept in shared memory for `state_at` queries (the
+        /// client API's `History`): 1000 records of 256 bytes a second, enough for a reference
+        /// IMU at up to 1 kHz (10 s: 2.56 MB).
+        pub history_s: f64 = 10.0, file "estimator", flag "history-s", check within(1.0, 300.0);
     }
 }
 

@@ -16,6 +16,8 @@
 //! 5. [`earth`]: the WGS-84 model (radii, normal gravity, earth rate, transport rate).
 //! 6. [`reflect`] and [`json`]: the field tables behind the layout contract and the JSON codec.
 //! 7. [`client`]: subscribing from other programs (`NavClient::connect()?.next(timeout)`).
+//! 8. [`history`]: the pose at any recent instant, from the estimator's states in shared
+//!    memory (`History::open()?.state_at_host(t)`).
 //!
 //! Frames: navigation frame NED (north-east-down), body frame FRD (forward-right-down).
 //! Times: integer nanoseconds; `host_ns` is `CLOCK_MONOTONIC`.
@@ -25,6 +27,7 @@ pub use navsync_wire::{cdr, earth, imu_spec, json, reflect, ros2msg, samples, se
 pub mod client;
 pub mod cpu_wakeup;
 pub mod health_reporter;
+pub mod history;
 pub mod ipc;
 pub mod latency_histogram;
 pub mod pacing;

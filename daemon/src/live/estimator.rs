@@ -13,6 +13,7 @@
 use std::time::Duration;
 
 use navsync_shared::health_reporter::HealthReporter;
+use navsync_shared::history;
 use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
 use navsync_shared::latency_histogram::LatencyHistogram;
 use navsync_shared::samples::{
@@ -212,6 +213,13 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
 
     let mut feed: Feed = Feed::new(args.pipeline_config());
     let mut nav_pub = node.publisher::<NavState>(services::NAV_STATE)?;
+    // The states of the last `history_s` in shared memory, for `state_at` queries.
+    let mut history = history::HistoryWriter::create(
+        &navsync_shared::ipc::prefix(),
+        history::capacity_for(args.inputs.history_s),
+    )
+    .inspect_err(|e| warn!("no history of states for state_at queries: {e}"))
+    .ok();
     let c_nav = health.counter("nav_states")?;
     // Never silent: states usable by a subscriber (aligned, with a GNSS time); a warning
     // with the reason every minute while they are missing or far fewer than the states.
@@ -384,6 +392,9 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
                 }
                 if let Err(e) = nav_pub.publish(state) {
                     warn!("publishing nav state: {e}");
+                }
+                if let Some(h) = &mut history {
+                    h.append(state, history::Source::Predicted);
                 }
                 latency.record(monotonic_now_ns() - t_in);
                 health.add(c_nav, 1);

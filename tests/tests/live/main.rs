@@ -10,6 +10,7 @@ mod demo;
 mod faults_pps_silence_live;
 mod gpsd_server;
 mod health_table;
+mod history;
 mod install;
 mod ipc_wake;
 mod nmea_out;

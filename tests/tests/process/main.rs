@@ -11,6 +11,7 @@ static GLOBAL: navsync_tests::CountingAllocator = navsync_tests::CountingAllocat
 mod alarm_timeouts;
 mod docs_commands;
 mod no_alloc_drivers;
+mod no_alloc_history;
 mod no_alloc_tight;
 mod termination_latch;
 mod termination_sleep;
