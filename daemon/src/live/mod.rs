@@ -6,6 +6,7 @@ pub mod demo;
 pub mod echo;
 pub mod estimator;
 pub mod feed;
+pub mod foxglove;
 pub mod gnss;
 pub mod gnss_seconds;
 pub mod gpsd_server;

@@ -89,6 +89,13 @@ pub struct WebArgs {
     /// A client that does not take a write for this long is dropped, s.
     #[arg(long = "write-timeout", value_name = "S", default_value = "5", value_parser = super::echo::positive_seconds)]
     pub write_timeout: Duration,
+    /// Also serve Foxglove's live protocol (the Foxglove WebSocket protocol, subprotocol
+    /// `foxglove.websocket.v1`; Foxglove's and Lichtblick's "Foxglove WebSocket" connection, port
+    /// 8765 by convention) on this address, every navsync service as a channel in the
+    /// recordings' schemas and CDR; loopback unless --allow-remote; at most --max-connections
+    /// clients.
+    #[arg(long, value_name = "ADDR")]
+    pub foxglove_listen: Option<SocketAddr>,
 }
 
 fn at_least_one(s: &str) -> Result<usize, String> {
@@ -1285,6 +1292,33 @@ pub fn run(args: &WebArgs) -> Result<(), WebError> {
         write_timeout: args.write_timeout,
         loopback_only: local.ip().is_loopback(),
     });
+    let foxglove = match args.foxglove_listen {
+        Some(addr) => {
+            check_listen(addr, args.allow_remote)?;
+            let l = TcpListener::bind(addr).map_err(|source| WebError::Io {
+                what: format!("listening on {addr} (--foxglove-listen)"),
+                source,
+            })?;
+            if let Ok(a) = l.local_addr() {
+                eprintln!("navsync web: Foxglove WebSocket on ws://{a}/");
+            }
+            let server =
+                super::foxglove::FoxgloveServer::start(l, args.max_connections).map_err(|source| WebError::Io {
+                    what: "starting the Foxglove server".into(),
+                    source,
+                })?;
+            let names = [
+                "foxglove_clients",
+                "foxglove_refused",
+                "foxglove_dropped",
+                "foxglove_messages",
+                "foxglove_ignored",
+            ];
+            let ids = names.iter().map(|n| health.counter(n)).collect::<Result<Vec<_>, _>>()?;
+            Some((server, ids))
+        }
+        None => None,
+    };
     let mut track = Track::default();
     st.discover()?;
     st.poll();
@@ -1330,6 +1364,13 @@ pub fn run(args: &WebArgs) -> Result<(), WebError> {
         }
         for (c, id) in &ids {
             health.set(*id, shared.value(*c));
+        }
+        if let Some((server, fids)) = &foxglove {
+            let c = &server.counts;
+            let values = [&c.clients, &c.refused, &c.dropped, &c.messages, &c.ignored];
+            for (id, v) in fids.iter().zip(values) {
+                health.set(*id, v.load(Ordering::Relaxed));
+            }
         }
         health.maybe_publish(monotonic_now_ns())?;
         navsync_shared::sd_notify::watchdog();

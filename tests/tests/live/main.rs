@@ -8,6 +8,7 @@ mod clients_common;
 mod client_api;
 mod demo;
 mod faults_pps_silence_live;
+mod foxglove;
 mod gpsd_server;
 mod health_table;
 mod history;
