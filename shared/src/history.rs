@@ -441,6 +441,18 @@ fn open_fd(path: &Path, flags: i32, mode: u32) -> Result<OwnedFd, std::io::Error
     Ok(unsafe { OwnedFd::from_raw_fd(fd) })
 }
 
+/// Whether `gid` is this process's effective group or one of its supplementary groups.
+fn in_my_groups(gid: u32) -> bool {
+    // SAFETY: getegid has no preconditions.
+    if unsafe { libc::getegid() } == gid {
+        return true;
+    }
+    let mut groups = vec![0 as libc::gid_t; 256];
+    // SAFETY: the buffer holds `groups.len()` entries.
+    let n = unsafe { libc::getgroups(groups.len() as libc::c_int, groups.as_mut_ptr()) };
+    n > 0 && groups[..n as usize].contains(&gid)
+}
+
 fn try_lock(fd: &OwnedFd) -> bool {
     // SAFETY: flock on an open descriptor.
     unsafe { libc::flock(fd.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) == 0 }
@@ -591,6 +603,8 @@ pub struct History {
     map: Mapping,
     capacity: u64,
     path: PathBuf,
+    /// The file's device and inode ([`History::is_current`]).
+    id: (u64, u64),
 }
 
 /// How often a query starts again when the writer lapped what it read, and how often it reads
@@ -611,7 +625,8 @@ impl History {
 
     /// Opens the history at `path`. The file must be a regular file that neither its group nor
     /// others may write, owned by this user, root, or the owner of iceoryx2's root directory
-    /// (the navsync service user).
+    /// (the navsync service user), or of one of this process's groups (the estimator's group
+    /// reads it: only a member can give a file that group).
     pub fn open_at(path: &Path) -> Result<Self, HistoryError> {
         let refused = |why: String| HistoryError::Refused {
             path: path.to_path_buf(),
@@ -633,12 +648,14 @@ impl History {
         }
         let me = crate::runtime_dir::effective_uid();
         let service_user = std::fs::metadata(crate::ipc::root_dir()).map(|d| d.uid()).ok();
-        if m.uid() != me && m.uid() != 0 && Some(m.uid()) != service_user {
+        if m.uid() != me && m.uid() != 0 && Some(m.uid()) != service_user && !in_my_groups(m.gid()) {
             return Err(refused(format!(
-                "it belongs to uid {}, neither this user ({me}), root, nor the owner of iceoryx2's root",
-                m.uid()
+                "it belongs to uid {} and gid {}: neither this user ({me}), root, the owner of iceoryx2's root nor one of this process's groups",
+                m.uid(),
+                m.gid()
             )));
         }
+        let id = (m.dev(), m.ino());
         let len = m.len() as usize;
         if len < HEADER_WORDS * 8 {
             return Err(refused(format!("{len} bytes: shorter than the header")));
@@ -675,6 +692,7 @@ impl History {
             map,
             capacity,
             path: path.to_path_buf(),
+            id,
         })
     }
 
@@ -686,6 +704,12 @@ impl History {
     /// Its capacity in records.
     pub fn capacity(&self) -> u64 {
         self.capacity
+    }
+
+    /// False once the file at the path is no longer the one mapped (its writer stopped, or a
+    /// restarted estimator made a new one): open it again. A `stat(2)`, not for every query.
+    pub fn is_current(&self) -> bool {
+        std::fs::symlink_metadata(&self.path).is_ok_and(|m| (m.dev(), m.ino()) == self.id)
     }
 
     /// Records written so far (the write index).
@@ -1071,10 +1095,12 @@ mod tests {
         ));
         let mode = std::fs::metadata(&path).unwrap().mode() & 0o777;
         assert_eq!(mode, 0o640);
+        assert!(h.is_current());
         drop(w);
         assert!(!path.exists());
-        // The reader keeps its mapping.
+        // The reader keeps its mapping, and knows it is no longer the file.
         assert_eq!(h.write_index(), 200);
+        assert!(!h.is_current());
     }
 
     #[test]
