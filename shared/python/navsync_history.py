@@ -73,6 +73,9 @@ class History:
             st = os.fstat(fd)
             if st.st_mode & 0o022:
                 raise HistoryError(f"{self.path}: others may write it")
+            if st.st_uid not in (os.geteuid(), 0) and st.st_gid not in (os.getegid(), *os.getgroups()):
+                raise HistoryError(f"{self.path}: belongs to uid {st.st_uid}, gid {st.st_gid}: not this user's")
+            self._id = (st.st_dev, st.st_ino)
             self.map = mmap.mmap(fd, st.st_size, mmap.MAP_SHARED, mmap.PROT_READ)
         finally:
             os.close(fd)
@@ -81,6 +84,14 @@ class History:
         if w[0] != MAGIC or w[1] != LAYOUT_VERSION or name != TYPE_NAME or w[7] != RECORD_WORDS:
             raise HistoryError(f"{self.path}: not a history of layout {LAYOUT_VERSION} of {TYPE_NAME}")
         self.capacity = w[6]
+
+    def is_current(self):
+        """False once the file at the path is another (a restarted estimator's): open it again."""
+        try:
+            st = os.stat(self.path, follow_symlinks=False)
+        except FileNotFoundError:
+            return False
+        return (st.st_dev, st.st_ino) == self._id
 
     def write_index(self):
         return struct.unpack_from("<Q", self.map, 9 * 8)[0]
