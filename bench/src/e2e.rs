@@ -24,6 +24,13 @@
 //!
 //! CPU is `utime + stime` from `/proc/PID/stat` over the measured window; memory is each
 //! process's peak RSS (`VmHWM`) at the end.
+//!
+//! `--compare-web` runs each case twice, side by side: as above, then with a watched vehicle's
+//! extra load ([`web_load`]): `navsync web` with its Foxglove server, an open page, a scrape of
+//! `/metrics` every second and a Foxglove client subscribed to every channel. Their cost to
+//! the estimator is the difference of the two rows.
+
+mod web_load;
 
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
@@ -87,6 +94,11 @@ pub struct E2eArgs {
     /// A short run (2 IMUs, 3 s warm-up, 5 s measured) for smoke tests.
     #[arg(long)]
     pub quick: bool,
+    /// Run each case twice: without and with `navsync web`, its Foxglove server and their
+    /// clients (an open page, a Prometheus scrape every second, a Foxglove client on every
+    /// channel), to show what watching costs the estimator.
+    #[arg(long)]
+    pub compare_web: bool,
     /// Write the results as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -125,6 +137,12 @@ pub struct E2eCase {
     pub realtime: Option<u8>,
     /// The CPU the latency chain was pinned to, if it was.
     pub pin_chain: Option<usize>,
+    /// Run with `navsync web`, its Foxglove server and their clients (`--compare-web`).
+    pub web: bool,
+    /// Foxglove messages the watching client received in the run (0 without web).
+    pub foxglove_messages: u64,
+    /// Bytes the page's event stream and the scrapes received (0 without web).
+    pub web_http_bytes: u64,
     /// Measured window, s.
     pub window_s: f64,
     /// NavStates received in the window.
@@ -228,7 +246,7 @@ fn wait_path(env: &mut BenchEnv, p: &std::path::Path) -> Result<(), E2eError> {
 }
 
 /// Runs one IMU count.
-pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
+pub fn run_case(args: &E2eArgs, imus: usize, web: bool) -> Result<E2eCase, E2eError> {
     let mut env = BenchEnv::new("e2e")?;
     let scenario = env.dir.join("bench_1khz.toml");
     std::fs::write(&scenario, BENCH_SCENARIO)?;
@@ -324,6 +342,31 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
         false,
     )?;
     pids.push(("estimator".into(), pid));
+    let watchers = if web {
+        let port = || {
+            std::net::TcpListener::bind("127.0.0.1:0")
+                .and_then(|l| l.local_addr())
+                .map(|a| a.to_string())
+        };
+        let (http, fox) = (port()?, port()?);
+        let (pid, _) = env.spawn(
+            "web",
+            &[
+                s("web"),
+                s("--listen"),
+                http.clone(),
+                s("--foxglove-listen"),
+                fox.clone(),
+            ],
+            false,
+        )?;
+        pids.push(("web".into(), pid));
+        // The web process discovers the services once a second.
+        std::thread::sleep(Duration::from_secs(2));
+        Some(web_load::WebLoad::start(&http, &fox))
+    } else {
+        None
+    };
     if let Some(prio) = args.realtime {
         // The latency chain on top, each stage above the next: the reference IMU's driver,
         // the estimator, the subscriber; below them the other drivers, whose samples the
@@ -374,6 +417,13 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
         Duration::from_secs_f64(args.duration_s + 30.0),
     )?;
     let window = t0.elapsed().as_secs_f64();
+    let (foxglove_messages, web_http_bytes) = watchers.as_ref().map_or((0, 0), |w| {
+        (
+            w.foxglove_messages.load(std::sync::atomic::Ordering::Relaxed),
+            w.http_bytes.load(std::sync::atomic::Ordering::Relaxed),
+        )
+    });
+    drop(watchers);
     let processes: Vec<ProcFigures> = pids
         .iter()
         .zip(&cpu0)
@@ -394,6 +444,9 @@ pub fn run_case(args: &E2eArgs, imus: usize) -> Result<E2eCase, E2eError> {
         imu_path: args.imu_path,
         realtime: args.realtime,
         pin_chain: args.pin_chain,
+        web,
+        foxglove_messages,
+        web_http_bytes,
         window_s: v["window_s"].as_f64().unwrap_or(f64::NAN),
         nav_states: v["nav_states"].as_u64().unwrap_or(0),
         matched: v["matched"].as_u64().unwrap_or(0),
@@ -421,10 +474,13 @@ pub fn run(args: &E2eArgs) -> Result<E2eReport, E2eError> {
         cases: Vec::new(),
     };
     let _wakeup = util::wakeup_hold(args.realtime.is_some() || args.idle_polling, &mut report.machine);
+    let web_modes: &[bool] = if args.compare_web { &[false, true] } else { &[false] };
     for &n in &args.imus {
-        let c = run_case(args, n)?;
-        eprintln!("{}", latency_row(&c));
-        report.cases.push(c);
+        for &web in web_modes {
+            let c = run_case(args, n, web)?;
+            eprintln!("{}", latency_row(&c));
+            report.cases.push(c);
+        }
     }
     report.machine.finish();
     println!("{}", table(&report));
@@ -461,6 +517,13 @@ fn latency_row(c: &E2eCase) -> String {
             if let Some(cpu) = c.pin_chain {
                 label += &format!(", chain on CPU {cpu}");
             }
+            if c.web {
+                label += &format!(
+                    ", watched: web + Foxglove, {} messages, {} kB",
+                    c.foxglove_messages,
+                    c.web_http_bytes / 1000
+                );
+            }
             label
         },
         c.nav_states,
@@ -492,8 +555,9 @@ pub fn table(r: &E2eReport) -> String {
     }
     for c in &r.cases {
         s.push_str(&format!(
-            "\n{} IMU(s): per process\n\n| process | CPU (% of one core) | peak RSS MiB |\n|---|---|---|\n",
-            c.imus
+            "\n{} IMU(s){}: per process\n\n| process | CPU (% of one core) | peak RSS MiB |\n|---|---|---|\n",
+            c.imus,
+            if c.web { ", watched" } else { "" }
         ));
         for p in &c.processes {
             s.push_str(&format!(

@@ -1,0 +1,129 @@
+//! The watchers of `navsync-bench e2e --compare-web`: what a watched vehicle runs besides the
+//! pipeline. `navsync web` with its Foxglove server, an open page (the `/events` stream read to
+//! the end), a Prometheus scrape of `/metrics` once a second, and a Foxglove client subscribed
+//! to every channel (the WebSocket protocol, as Foxglove does it: tungstenite's client).
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use tungstenite::Message;
+use tungstenite::client::IntoClientRequest;
+
+/// The clients' threads and what they received; stopped on drop.
+pub struct WebLoad {
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+    /// Bytes the page's event stream and the scrapes received.
+    pub http_bytes: Arc<AtomicU64>,
+    /// Foxglove messages received.
+    pub foxglove_messages: Arc<AtomicU64>,
+}
+
+fn get(addr: &str, path: &str, stop: &AtomicBool, bytes: &AtomicU64) {
+    let Ok(mut s) = TcpStream::connect(addr) else { return };
+    let _ = s.set_read_timeout(Some(Duration::from_millis(500)));
+    let _ = write!(s, "GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n");
+    let mut buf = [0u8; 16384];
+    while !stop.load(Ordering::Relaxed) {
+        match s.read(&mut buf) {
+            Ok(0) => return,
+            Ok(n) => {
+                bytes.fetch_add(n as u64, Ordering::Relaxed);
+            }
+            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+            Err(_) => return,
+        }
+    }
+}
+
+fn foxglove(addr: &str, stop: &AtomicBool, messages: &AtomicU64) -> Result<(), String> {
+    let stream = TcpStream::connect(addr).map_err(|e| e.to_string())?;
+    let mut req = format!("ws://{addr}/")
+        .into_client_request()
+        .map_err(|e| e.to_string())?;
+    let proto = "foxglove.websocket.v1".parse().map_err(|_| "header".to_string())?;
+    req.headers_mut().insert("Sec-WebSocket-Protocol", proto);
+    let (mut ws, _) = tungstenite::client(req, stream).map_err(|e| e.to_string())?;
+    let _ = ws.get_ref().set_read_timeout(Some(Duration::from_millis(500)));
+    let mut next_sub = 0u32;
+    while !stop.load(Ordering::Relaxed) {
+        match ws.read() {
+            Ok(Message::Text(t)) => {
+                // Subscribe to every channel advertised.
+                let v: serde_json::Value = serde_json::from_str(t.as_str()).unwrap_or_default();
+                if v["op"] == "advertise" {
+                    let subs: Vec<serde_json::Value> = v["channels"]
+                        .as_array()
+                        .into_iter()
+                        .flatten()
+                        .filter_map(|c| c["id"].as_u64())
+                        .map(|id| {
+                            next_sub += 1;
+                            serde_json::json!({"id": next_sub, "channelId": id})
+                        })
+                        .collect();
+                    let op = serde_json::json!({"op": "subscribe", "subscriptions": subs});
+                    ws.send(Message::text(op.to_string())).map_err(|e| e.to_string())?;
+                }
+            }
+            Ok(Message::Binary(_)) => {
+                messages.fetch_add(1, Ordering::Relaxed);
+            }
+            Ok(_) => {}
+            Err(tungstenite::Error::Io(e))
+                if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+            Err(e) => return Err(e.to_string()),
+        }
+    }
+    Ok(())
+}
+
+impl WebLoad {
+    /// Connects the watchers to `navsync web` at `http` (page and metrics) and `foxglove`.
+    pub fn start(http: &str, foxglove_addr: &str) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let http_bytes = Arc::new(AtomicU64::new(0));
+        let foxglove_messages = Arc::new(AtomicU64::new(0));
+        let mut threads = Vec::new();
+        {
+            let (stop, bytes, addr) = (stop.clone(), http_bytes.clone(), http.to_string());
+            threads.push(std::thread::spawn(move || get(&addr, "/events", &stop, &bytes)));
+        }
+        {
+            let (stop, bytes, addr) = (stop.clone(), http_bytes.clone(), http.to_string());
+            threads.push(std::thread::spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    get(&addr, "/metrics", &AtomicBool::new(false), &bytes);
+                    std::thread::sleep(Duration::from_secs(1));
+                }
+            }));
+        }
+        {
+            let (stop, n, addr) = (stop.clone(), foxglove_messages.clone(), foxglove_addr.to_string());
+            threads.push(std::thread::spawn(move || {
+                if let Err(e) = foxglove(&addr, &stop, &n) {
+                    eprintln!("foxglove watcher: {e}");
+                }
+            }));
+        }
+        Self {
+            stop,
+            threads,
+            http_bytes,
+            foxglove_messages,
+        }
+    }
+}
+
+impl Drop for WebLoad {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
