@@ -111,6 +111,8 @@ pub fn order_key(s: &AnySample) -> OrderKey {
         // A reading of the network time service: at its own host time, before the IMU sample
         // of the same instant (like an edge, without the hold: it is complete when published).
         AnySample::NetworkTime(t) => (t.host_ns, 0, [3; 8], t.seq),
+        // The receiver's sky (not an input of the filter): at its stamp, with the other reports.
+        AnySample::Sky(s) => (s.stamp.host_ns, 7, [3; 8], s.stamp.seq),
     };
     OrderKey { at_ns, rank, id, seq }
 }

@@ -26,8 +26,8 @@ use super::mcap_reader::{Channel, Schema};
 use navsync_shared::json::{from_json, from_json_onto, schema, to_json};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{
-    AnySample, EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState,
-    NetworkTime, PpsEdge, SimTruth, TimeState,
+    AnySample, EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, Health, ImuSample,
+    NavState, NetworkTime, PpsEdge, SimTruth, TimeState,
 };
 use navsync_shared::services::ServiceKind;
 use navsync_shared::{cdr, ros2msg};
@@ -186,6 +186,7 @@ sample_type!(GnssRaw, GnssRaw, Raw);
 sample_type!(GnssNavData, GnssNavData, NavData);
 sample_type!(EstimatorSettings, EstimatorSettings, Settings);
 sample_type!(NetworkTime, NetworkTime, NetworkTime);
+sample_type!(GnssSky, GnssSky, Sky);
 
 /// Evaluates `$body` with the type alias `$T` set to the sample type of `$kind`.
 #[macro_export]
@@ -244,6 +245,10 @@ macro_rules! with_sample_type {
                 type $T = navsync_shared::samples::NetworkTime;
                 $body
             }
+            navsync_shared::services::ServiceKind::GnssSky => {
+                type $T = navsync_shared::samples::GnssSky;
+                $body
+            }
         }
     };
 }
@@ -264,6 +269,7 @@ pub fn sample_json(sample: &AnySample) -> serde_json::Value {
         AnySample::NavData(x) => to_json(x),
         AnySample::Settings(x) => to_json(x),
         AnySample::NetworkTime(x) => to_json(x),
+        AnySample::Sky(x) => to_json(x),
     }
 }
 
@@ -283,6 +289,7 @@ fn encode_cdr(sample: &AnySample, out: &mut Vec<u8>) {
         AnySample::NavData(x) => cdr::encode(x, out),
         AnySample::Settings(x) => cdr::encode(x, out),
         AnySample::NetworkTime(x) => cdr::encode(x, out),
+        AnySample::Sky(x) => cdr::encode(x, out),
     }
 }
 

@@ -34,6 +34,8 @@ pub enum AnySubscriber {
     Settings(Subscriber<navsync_shared::samples::EstimatorSettings>),
     /// `navsync/time/network`
     NetworkTime(Subscriber<navsync_shared::samples::NetworkTime>),
+    /// `navsync/gnss/{id}/sky`
+    Sky(Subscriber<navsync_shared::samples::GnssSky>),
 }
 
 macro_rules! each_subscriber {
@@ -52,6 +54,7 @@ macro_rules! each_subscriber {
             AnySubscriber::NavData($s) => $body,
             AnySubscriber::Settings($s) => $body,
             AnySubscriber::NetworkTime($s) => $body,
+            AnySubscriber::Sky($s) => $body,
         }
     };
 }
@@ -78,6 +81,7 @@ impl AnySubscriber {
             ServiceKind::GnssNavData => Self::NavData(node.input(service)?),
             ServiceKind::EstimatorSettings => Self::Settings(node.input(service)?),
             ServiceKind::NetworkTime => Self::NetworkTime(node.input(service)?),
+            ServiceKind::GnssSky => Self::Sky(node.input(service)?),
         })
     }
 
@@ -120,6 +124,8 @@ pub enum AnyPublisher {
     Settings(Publisher<navsync_shared::samples::EstimatorSettings>),
     /// `navsync/time/network`
     NetworkTime(Publisher<navsync_shared::samples::NetworkTime>),
+    /// `navsync/gnss/{id}/sky`
+    Sky(Publisher<navsync_shared::samples::GnssSky>),
 }
 
 impl AnyPublisher {
@@ -139,6 +145,7 @@ impl AnyPublisher {
             ServiceKind::GnssNavData => Self::NavData(node.publisher(service)?),
             ServiceKind::EstimatorSettings => Self::Settings(node.publisher(service)?),
             ServiceKind::NetworkTime => Self::NetworkTime(node.publisher(service)?),
+            ServiceKind::GnssSky => Self::Sky(node.publisher(service)?),
         })
     }
 
@@ -158,6 +165,7 @@ impl AnyPublisher {
             Self::NavData(p) => pub_as(p, sample),
             Self::Settings(p) => pub_as(p, sample),
             Self::NetworkTime(p) => pub_as(p, sample),
+            Self::Sky(p) => pub_as(p, sample),
         }
     }
 }

@@ -785,6 +785,70 @@ class NetworkTime(ctypes.Structure):
         return "navsync.NetworkTime.v1"
 
 
+class SkySatellite(ctypes.Structure):
+    """One satellite as the receiver sees it (elevation, azimuth, C/N0, used)."""
+
+    _fields_ = [
+        # Elevation above the local horizon, degrees (−90..=90); NaN when the receiver does not know it.
+        ("elevation_deg", ctypes.c_float),
+        # Azimuth, degrees clockwise from true north (0..360); NaN when not known.
+        ("azimuth_deg", ctypes.c_float),
+        # GNSS id, the same numbering as [`super::RawMeasurement::gnss_id`] (u-blox: 0 GPS, 1 SBAS, 2 Galileo, 3 BeiDou, 4 IMES, 5 QZSS, 6 GLONASS).
+        ("gnss_id", ctypes.c_uint8),
+        # Satellite id within the system (u-blox `svId`: GPS PRN, SBAS PRN 120–158, GLONASS slot 1–32 or 255 unknown, Galileo/BeiDou/QZSS PRN).
+        ("sv_id", ctypes.c_uint8),
+        # Carrier-to-noise density, dB-Hz; 0 when not tracked or not known.
+        ("cno_dbhz", ctypes.c_uint8),
+        # 1 when the receiver's navigation solution uses the satellite, else 0.
+        ("used", ctypes.c_uint8),
+    ]
+
+    #: Size in bytes of the Rust type.
+    RUST_SIZE = 12
+    #: Alignment in bytes of the Rust type.
+    RUST_ALIGN = 4
+    #: Byte offset of every field in the Rust type.
+    RUST_OFFSETS = {"elevation_deg": 0, "azimuth_deg": 4, "gnss_id": 8, "sv_id": 9, "cno_dbhz": 10, "used": 11}
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name (with the layout version)."""
+        return "navsync.SkySatellite.v1"
+
+
+class GnssSky(ctypes.Structure):
+    """The satellites a receiver reported with one epoch (navsync/gnss/{id}/sky)."""
+
+    _fields_ = [
+        # Receipt stamp (host time of the first byte of the epoch's first message or sentence that carried the satellites) and the driver's sky counter.
+        ("stamp", Stamp),
+        # The epoch's UTC time, ns since 1970; `i64::MIN` when not known.
+        ("utc_ns", ctypes.c_int64),
+        # Satellites in `sats`.
+        ("num_sats", ctypes.c_uint8),
+        # Satellites the receiver reported beyond [`MAX_SKY_SATELLITES`] (dropped).
+        ("dropped", ctypes.c_uint8),
+        # The `GNSS_PROTOCOL_*` of the receiver's report (see `GnssFix::protocol`).
+        ("protocol", ctypes.c_uint8),
+        # Reserved, zero.
+        ("reserved", (ctypes.c_char * 5)),
+        # The satellites, `num_sats` of them.
+        ("sats", (SkySatellite * 64)),
+    ]
+
+    #: Size in bytes of the Rust type.
+    RUST_SIZE = 816
+    #: Alignment in bytes of the Rust type.
+    RUST_ALIGN = 8
+    #: Byte offset of every field in the Rust type.
+    RUST_OFFSETS = {"stamp": 0, "utc_ns": 32, "num_sats": 40, "dropped": 41, "protocol": 42, "reserved": 43, "sats": 48}
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name (with the layout version)."""
+        return "navsync.GnssSky.v1"
+
+
 #: Publish-subscribe QoS per sample type: history, subscriber buffer.
 QOS = {
     "GnssFix": {"history": 1, "buffer": 64},
@@ -800,6 +864,7 @@ QOS = {
     "GnssNavData": {"history": 0, "buffer": 256},
     "EstimatorSettings": {"history": 1, "buffer": 4},
     "NetworkTime": {"history": 1, "buffer": 16},
+    "GnssSky": {"history": 1, "buffer": 16},
 }
 
 
@@ -809,7 +874,7 @@ def service_type(service):
     if len(p) == 4 and p[0] == "navsync" and p[2]:
         return {("gnss", "fix"): GnssFix, ("gnss", "hnr"): GnssFix, ("pps", "edge"): PpsEdge, ("imu", "sample"): ImuSample,
                 ("gnss", "timepulse"): GnssTimePulse, ("gnss", "event"): GnssEvent, ("gnss", "raw"): GnssRaw,
-                ("gnss", "nav-data"): GnssNavData}.get((p[1], p[3]))
+                ("gnss", "nav-data"): GnssNavData, ("gnss", "sky"): GnssSky}.get((p[1], p[3]))
     if len(p) == 3 and p[0] == "navsync":
         if p[1] == "health":
             return Health if p[2] else None

@@ -8,6 +8,7 @@
 //! | `navsync/gnss/{id}/event` | [`GnssEvent`] | `navsync gnss` (UBX TIM-TM2) |
 //! | `navsync/gnss/{id}/raw` | [`GnssRaw`] | `navsync gnss` (UBX RXM-RAWX) |
 //! | `navsync/gnss/{id}/nav-data` | [`GnssNavData`] | `navsync gnss` (UBX RXM-SFRBX) |
+//! | `navsync/gnss/{id}/sky` | [`GnssSky`] | `navsync gnss` (the satellites of an epoch: NMEA GSV with GSA, UBX NAV-SAT or NAV-SVINFO) |
 //! | `navsync/pps/{id}/edge` | [`PpsEdge`] | `navsync pps` (or the simulator) |
 //! | `navsync/imu/{id}/sample` | [`ImuSample`] | `navsync imu` (or the simulator) |
 //! | `navsync/time/state` | [`TimeState`] | `navsync estimator` |
@@ -23,8 +24,8 @@
 
 use crate::reflect::Reflect;
 use crate::samples::{
-    AnySample, EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState,
-    NetworkTime, PpsEdge, SimTruth, TimeState,
+    AnySample, EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, Health, ImuSample,
+    NavState, NetworkTime, PpsEdge, SimTruth, TimeState,
 };
 
 /// Environment variable with the iceoryx2 resource prefix (default [`DEFAULT_PREFIX`]).
@@ -58,6 +59,11 @@ pub fn gnss_raw(id: &str) -> String {
 /// `navsync/gnss/{id}/nav-data`
 pub fn gnss_nav_data(id: &str) -> String {
     format!("navsync/gnss/{id}/nav-data")
+}
+/// `navsync/gnss/{id}/sky`: the satellites the receiver reports with an epoch (elevation,
+/// azimuth, C/N0, used in the solution).
+pub fn gnss_sky(id: &str) -> String {
+    format!("navsync/gnss/{id}/sky")
 }
 /// `navsync/pps/{id}/edge`
 pub fn pps_edge(id: &str) -> String {
@@ -115,6 +121,8 @@ pub enum ServiceKind {
     EstimatorSettings,
     /// [`NetworkTime`]
     NetworkTime,
+    /// [`GnssSky`]
+    GnssSky,
 }
 
 impl ServiceKind {
@@ -134,11 +142,12 @@ impl ServiceKind {
             AnySample::NavData(_) => Self::GnssNavData,
             AnySample::Settings(_) => Self::EstimatorSettings,
             AnySample::NetworkTime(_) => Self::NetworkTime,
+            AnySample::Sky(_) => Self::GnssSky,
         }
     }
 
     /// All kinds.
-    pub const ALL: [ServiceKind; 13] = [
+    pub const ALL: [ServiceKind; 14] = [
         Self::GnssFix,
         Self::PpsEdge,
         Self::ImuSample,
@@ -152,6 +161,7 @@ impl ServiceKind {
         Self::GnssNavData,
         Self::EstimatorSettings,
         Self::NetworkTime,
+        Self::GnssSky,
     ];
 
     /// The kind's position in [`ALL`](Self::ALL): its event id on [`WAKE`].
@@ -168,6 +178,7 @@ impl ServiceKind {
             ["navsync", "gnss", id, "event"] if !id.is_empty() => Some(Self::GnssEvent),
             ["navsync", "gnss", id, "raw"] if !id.is_empty() => Some(Self::GnssRaw),
             ["navsync", "gnss", id, "nav-data"] if !id.is_empty() => Some(Self::GnssNavData),
+            ["navsync", "gnss", id, "sky"] if !id.is_empty() => Some(Self::GnssSky),
             ["navsync", "pps", id, "edge"] if !id.is_empty() => Some(Self::PpsEdge),
             ["navsync", "imu", id, "sample"] if !id.is_empty() => Some(Self::ImuSample),
             ["navsync", "time", "state"] => Some(Self::TimeState),
@@ -197,6 +208,7 @@ impl ServiceKind {
             Self::GnssNavData => GnssNavData::TYPE_NAME,
             Self::EstimatorSettings => EstimatorSettings::TYPE_NAME,
             Self::NetworkTime => NetworkTime::TYPE_NAME,
+            Self::GnssSky => GnssSky::TYPE_NAME,
         }
     }
 
@@ -224,7 +236,8 @@ impl ServiceKind {
                 history: 0,
                 buffer: 256,
             },
-            Self::TimeState | Self::Health | Self::NetworkTime => Qos { history: 1, buffer: 16 },
+            // About once per second per receiver; a late subscriber (the web page) gets the last.
+            Self::TimeState | Self::Health | Self::NetworkTime | Self::GnssSky => Qos { history: 1, buffer: 16 },
             // About once per second; a recorder started later gets the last one.
             Self::EstimatorSettings => Qos { history: 1, buffer: 4 },
         }
@@ -284,6 +297,7 @@ mod tests {
     fn kinds_from_names() {
         assert_eq!(ServiceKind::of(&gnss_fix("0")), Some(ServiceKind::GnssFix));
         assert_eq!(ServiceKind::of(&gnss_hnr("0")), Some(ServiceKind::GnssFix));
+        assert_eq!(ServiceKind::of(&gnss_sky("0")), Some(ServiceKind::GnssSky));
         assert_eq!(ServiceKind::of(&imu_sample("3")), Some(ServiceKind::ImuSample));
         assert_eq!(ServiceKind::of(&health("gps-0")), Some(ServiceKind::Health));
         assert_eq!(ServiceKind::of(NAV_STATE), Some(ServiceKind::NavState));

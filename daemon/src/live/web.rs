@@ -7,8 +7,9 @@
 //! * `/events`: one JSON object per second (`text/event-stream`): what `navsync status --json`
 //!   reports (processes, services, health, time, nav; gathered by the same code,
 //!   [`super::status::Status`]) and what the page needs beside it ([`extras`]): the GNSS −
-//!   host clock offset and σ now, the navigation σ, each receiver's fix quality, the IMUs'
-//!   sample counts and the track in local ENU.
+//!   host clock offset and σ now, the navigation σ, each receiver's fix quality and sky (its
+//!   latest `GnssSky`: every satellite's azimuth, elevation, C/N0 and whether it is used, drawn
+//!   as a polar plot), the IMUs' sample counts and the track in local ENU.
 //! * `/metrics`: the same in Prometheus's text exposition format ([`metrics_text`]).
 //! * `/state.json`: the latest of those objects.
 //!
@@ -39,7 +40,7 @@ use std::time::{Duration, Instant};
 use navsync_shared::earth::ned_between;
 use navsync_shared::health_reporter::{CounterId, HealthReporter};
 use navsync_shared::ipc::IpcError;
-use navsync_shared::samples::{AnySample, GnssFix, NavState, NavStatus, TimeState};
+use navsync_shared::samples::{AnySample, GnssFix, GnssSky, NavState, NavStatus, TimeState};
 use navsync_shared::time::{format_rfc3339_ms, monotonic_now_ns, realtime_now_ns};
 use serde_json::{Value, json};
 use tracing::{info, warn};
@@ -791,6 +792,52 @@ fn fix_json(service: &str, f: &GnssFix, now_ns: i64) -> Value {
     })
 }
 
+/// The one-letter prefix of a GNSS id in satellite labels (RINEX's: G GPS, S SBAS, E Galileo,
+/// C BeiDou, J QZSS, R GLONASS; I for IMES) and the system's name.
+pub fn gnss_system(gnss_id: u8) -> (&'static str, &'static str) {
+    match gnss_id {
+        0 => ("G", "GPS"),
+        1 => ("S", "SBAS"),
+        2 => ("E", "Galileo"),
+        3 => ("C", "BeiDou"),
+        4 => ("I", "IMES"),
+        5 => ("J", "QZSS"),
+        6 => ("R", "GLONASS"),
+        _ => ("?", "other"),
+    }
+}
+
+/// A receiver's latest sky for the page: every satellite with its label (`G05`), elevation
+/// and azimuth (degrees, `null` when not known), C/N0 (dB-Hz, `null` when 0) and `used`.
+pub fn sky_json(service: &str, s: &GnssSky, now_ns: i64) -> Value {
+    let sats: Vec<Value> = s
+        .satellites()
+        .iter()
+        .map(|x| {
+            let (letter, system) = gnss_system(x.gnss_id);
+            json!({
+                "label": format!("{letter}{:02}", x.sv_id),
+                "system": system,
+                "gnss_id": x.gnss_id,
+                "sv_id": x.sv_id,
+                "el_deg": finite(f64::from(x.elevation_deg)),
+                "az_deg": finite(f64::from(x.azimuth_deg)),
+                "cno_dbhz": (x.cno_dbhz > 0).then_some(x.cno_dbhz),
+                "used": x.used != 0,
+            })
+        })
+        .collect();
+    json!({
+        "id": service_id(service),
+        "in_view": s.num_sats,
+        "used": s.used(),
+        "dropped": s.dropped,
+        "utc": (s.utc_ns != i64::MIN).then(|| format_rfc3339_ms(s.utc_ns)),
+        "age_s": (now_ns - s.stamp.host_ns) as f64 * 1e-9,
+        "satellites": sats,
+    })
+}
+
 /// The host's `CLOCK_MONOTONIC` and `CLOCK_REALTIME` at one instant (the realtime reading
 /// between two monotonic ones, paired with their midpoint).
 fn clocks_now() -> (i64, i64) {
@@ -804,11 +851,13 @@ fn clocks_now() -> (i64, i64) {
 pub fn extras<'a>(latest: impl Iterator<Item = (&'a str, AnySample)>, track: &mut Track) -> Value {
     let (mono, real) = clocks_now();
     let mut fixes = Vec::new();
+    let mut skies = Vec::new();
     let mut imu_samples = BTreeMap::new();
     let (mut time, mut nav) = (None, None);
     for (service, sample) in latest {
         match sample {
             AnySample::GnssFix(f) => fixes.push(fix_json(service, &f, mono)),
+            AnySample::Sky(s) => skies.push(sky_json(service, &s, mono)),
             AnySample::Imu(s) => {
                 imu_samples.insert(service_id(service).to_string(), s.stamp.seq + 1);
             }
@@ -840,6 +889,7 @@ pub fn extras<'a>(latest: impl Iterator<Item = (&'a str, AnySample)>, track: &mu
         "clock": clock,
         "nav_sigma": nav_sigma,
         "fixes": fixes,
+        "skies": skies,
         "imu_samples": imu_samples,
         "track": track.json(),
         "time_seq": time.map(|t| t.seq),
@@ -1165,6 +1215,24 @@ pub fn metrics_text(report: &Value, extra: &Value) -> String {
         "gauge",
         "Satellites the receiver used in its solution.",
         per_row(fixes, "gnss", "id", "sats_used"),
+    );
+    let skies = extra["skies"].as_array().map_or(&[][..], |v| v);
+    family(
+        &mut out,
+        "navsync_gnss_satellites",
+        "gauge",
+        "Satellites in the receiver's latest sky (navsync/gnss/{id}/sky), used in its solution or not.",
+        skies.iter().flat_map(|s| {
+            let id = s["id"].as_str().unwrap_or("");
+            let (n, used) = (num(&s["in_view"]), num(&s["used"]));
+            [
+                (labels(&[("receiver", id), ("used", "true")]), used.unwrap_or(f64::NAN)),
+                (
+                    labels(&[("receiver", id), ("used", "false")]),
+                    n.zip(used).map_or(f64::NAN, |(n, u)| n - u),
+                ),
+            ]
+        }),
     );
     family(
         &mut out,
@@ -1536,6 +1604,7 @@ mod tests {
             "clock": {"offset_s": -1.5e-6, "sigma_s": 2e-7},
             "imu_samples": {"0": 1000, "1": 998},
             "fixes": [{"id": "0", "mode": "3D", "sats_used": 9, "hdop": 0.9, "age_s": 0.3}],
+            "skies": [{"id": "0", "in_view": 12, "used": 9}],
             "nav_sigma": {"vel_std_ned_mps": [0.01, 0.01, 0.02], "att_std_deg": [0.1, 0.1, 0.5]},
         });
         let text = metrics_text(&report, &extra);
@@ -1551,6 +1620,8 @@ mod tests {
             "navsync_imu_offset_seconds{imu=\"1\"} 0.002\n",
             "navsync_process_up{process=\"est\\\"imator\\\\x\\ny\"} 1\n",
             "navsync_receiver_latency_seconds{stat=\"median\"} 0.12\n",
+            "navsync_gnss_satellites{receiver=\"0\",used=\"true\"} 9\n",
+            "navsync_gnss_satellites{receiver=\"0\",used=\"false\"} 3\n",
         ] {
             assert!(text.contains(needle), "{needle} missing:\n{text}");
         }
@@ -1599,6 +1670,45 @@ mod tests {
         n.lat_deg = f64::NAN;
         t.push(&n);
         assert_eq!(t.points.len(), TRACK_POINTS);
+    }
+
+    #[test]
+    fn a_sky_for_the_page() {
+        use navsync_shared::samples::{SkySatellite, Stamp, StampSource};
+        let mut s = GnssSky::empty(Stamp::host(1_000_000_000, 3, StampSource::Receipt));
+        s.push(SkySatellite {
+            elevation_deg: 45.0,
+            azimuth_deg: 270.0,
+            gnss_id: 0,
+            sv_id: 5,
+            cno_dbhz: 42,
+            used: 1,
+        });
+        s.push(SkySatellite {
+            gnss_id: 6,
+            sv_id: 12,
+            ..SkySatellite::EMPTY
+        });
+        let v = sky_json("navsync/gnss/rx1/sky", &s, 1_500_000_000);
+        assert_eq!(v["id"], "rx1");
+        assert_eq!((v["in_view"].as_u64(), v["used"].as_u64()), (Some(2), Some(1)));
+        assert!((v["age_s"].as_f64().unwrap() - 0.5).abs() < 1e-9);
+        let sats = v["satellites"].as_array().unwrap();
+        assert_eq!(sats[0]["label"], "G05");
+        assert_eq!(
+            (sats[0]["el_deg"].as_f64(), sats[0]["az_deg"].as_f64()),
+            (Some(45.0), Some(270.0))
+        );
+        assert_eq!(
+            (sats[0]["cno_dbhz"].as_u64(), sats[0]["used"].as_bool()),
+            (Some(42), Some(true))
+        );
+        // Unknown elevation, azimuth and C/N0 are null (the page leaves the satellite off the plot).
+        assert_eq!(sats[1]["label"], "R12");
+        assert!(sats[1]["el_deg"].is_null() && sats[1]["az_deg"].is_null() && sats[1]["cno_dbhz"].is_null());
+        assert_eq!(sats[1]["used"], false);
+        // The page draws it.
+        assert!(PAGE.contains("function renderSky(") && PAGE.contains("id=\"skies\""));
     }
 
     #[test]

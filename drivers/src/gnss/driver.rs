@@ -35,7 +35,7 @@ use std::time::{Duration, Instant};
 use navsync_shared::health_reporter::{CounterId, HealthError, HealthReporter};
 use navsync_shared::ipc::{IpcError, IpcNode, IpcSample, Publisher, Subscriber};
 use navsync_shared::reflect::fixed_str;
-use navsync_shared::samples::{GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, TimeState};
+use navsync_shared::samples::{GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, ImuSample, TimeState};
 use navsync_shared::services;
 use navsync_shared::time::{monotonic_now_ns, utc_ns_from_gps_ns};
 use serialport::{ClearBuffer, SerialPort, TTYPort};
@@ -238,7 +238,7 @@ fn configure_receiver(port: &mut TTYPort, node: &IpcNode) -> Result<ubx_configur
 }
 
 /// Publishers of what a receiver reports besides fixes (time pulses, time marks, raw
-/// measurements, subframes, its IMU, its high-rate fused solution), each created on its first sample, so a receiver that
+/// measurements, subframes, its IMU, its high-rate fused solution, its sky), each created on its first sample, so a receiver that
 /// sends none of them creates no service for them.
 struct ExtraPublishers<'n> {
     node: &'n IpcNode,
@@ -251,6 +251,8 @@ struct ExtraPublishers<'n> {
     imu: Option<Publisher<ImuSample>>,
     /// The receiver's high-rate fused solution (HNR-PVT), `navsync/gnss/{id}/hnr`.
     hnr: Option<Publisher<GnssFix>>,
+    /// The satellites of each epoch, `navsync/gnss/{id}/sky`.
+    sky: Option<Publisher<GnssSky>>,
     /// The estimator's host → GNSS time mapping (`navsync/time/state`), subscribed on the
     /// first time mark, and its latest state: a time mark's GNSS time is mapped back to the
     /// host clock with it ([`GnssEvent::rising_host_ns`]).
@@ -280,6 +282,7 @@ impl ExtraPublishers<'_> {
             GnssExtra::Raw(s) => publish_lazily(node, &mut self.raw, || services::gnss_raw(id), s),
             GnssExtra::NavData(s) => publish_lazily(node, &mut self.nav_data, || services::gnss_nav_data(id), s),
             GnssExtra::Hnr(s) => publish_lazily(node, &mut self.hnr, || services::gnss_hnr(id), s),
+            GnssExtra::Sky(s) => publish_lazily(node, &mut self.sky, || services::gnss_sky(id), s),
             GnssExtra::Imu(s) => match &self.imu_id {
                 Some(imu_id) => {
                     let mut s = *s;
@@ -489,6 +492,7 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
         nav_data: None,
         imu: None,
         hnr: None,
+        sky: None,
         time: None,
         time_state: None,
         events_unmapped: 0,

@@ -24,7 +24,7 @@ pub mod ubx;
 
 use std::str::FromStr;
 
-use navsync_shared::samples::{GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample};
+use navsync_shared::samples::{GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, ImuSample};
 
 use nmea::NmeaDecoder;
 use ubx::UbxDecoder;
@@ -51,7 +51,7 @@ pub trait GnssDecoder {
     fn describe(name: &str) -> Option<&'static str>;
     /// As [`push`](Self::push), also handing the receiver's other products to `extra` in
     /// stream order (time pulses, time marks, raw measurements, navigation data subframes,
-    /// the receiver's own IMU readings). Default: none (NMEA has none of these).
+    /// the receiver's own IMU readings, the satellites of an epoch). Default: none.
     fn push_extras(
         &mut self,
         bytes: &[u8],
@@ -83,6 +83,9 @@ pub enum GnssExtra<'a> {
     /// for `navsync/gnss/{id}/hnr`: a stream of its own, with its own sequence numbers and
     /// times, never mixed into the GNSS epochs of `navsync/gnss/{id}/fix`.
     Hnr(&'a GnssFix),
+    /// The satellites the receiver reported with an epoch (NMEA GSV with GSA, UBX NAV-SAT or
+    /// NAV-SVINFO), for `navsync/gnss/{id}/sky`.
+    Sky(&'a GnssSky),
 }
 
 /// The registry of receiver protocols: for each line `Variant = "name" => DecoderType` (with

@@ -59,11 +59,13 @@
 //! when fewer than 99 % of all of gpsd's timed epochs match (excepted epochs count as not
 //! matching).
 //!
-//! **SKY.** Where NAV-SAT or NAV-SVINFO is present, the satellites of each epoch are compared
-//! with gpsd's first SKY with satellites at that time (gpsd prints it on NAV-SAT/NAV-SVINFO;
-//! later SKYs of the same time come from NAV-SIG, which this front end does not decode):
-//! `uSat` with the satellites flagged used, and for every satellite gpsd lists (matched by
-//! `gnssid`/`svid`) its elevation and azimuth (whole degrees), where gpsd gives them.
+//! **SKY.** Where NAV-SAT or NAV-SVINFO is present, the `GnssSky` samples the decoder
+//! publishes (`navsync/gnss/{id}/sky`, the first per epoch time) are compared with gpsd's first
+//! SKY with satellites at that time (gpsd prints it on NAV-SAT/NAV-SVINFO; later SKYs of the
+//! same time come from NAV-SIG, which this front end does not decode): `uSat` with the
+//! satellites flagged used, and for every satellite gpsd lists (matched by `gnssid`/`svid`) its
+//! elevation and azimuth (whole degrees), where gpsd gives them, its C/N0 (`ss`, dB-Hz) and
+//! whether it is used.
 //!
 //! **PPS.** gpsd prints PPS and TOFF objects only for a PPS source, which `gpsfake` (that
 //! produced the `.chk` files) does not have: the corpus holds none. What corresponds to them
@@ -85,10 +87,9 @@ use std::path::{Path, PathBuf};
 use navsync_drivers::gnss::capture::{REPLAY_NS_PER_BYTE, decode_capture, epoch_json};
 use navsync_drivers::gnss::ubx::auto::AutoDecoder;
 use navsync_drivers::gnss::ubx::ecef::ned_from_ecef_velocity;
-use navsync_drivers::gnss::ubx::epoch::SatView;
 use navsync_drivers::gnss::{GnssDecoder, GnssExtra, Protocol};
 use navsync_shared::samples::{
-    FIX_GEOID_MODEL, GNSS_PROTOCOL_NMEA, GnssFix, UBX_MSG_HNR_PVT, UBX_MSG_NAV_PVT, UBX_MSG_NAV_VELNED,
+    FIX_GEOID_MODEL, GNSS_PROTOCOL_NMEA, GnssFix, GnssSky, UBX_MSG_HNR_PVT, UBX_MSG_NAV_PVT, UBX_MSG_NAV_VELNED,
 };
 use navsync_shared::time::{Civil, NS_PER_S, format_rfc3339_ms, gps_minus_utc_s, utc_ns_from_civil};
 use serde_json::Value;
@@ -578,8 +579,9 @@ struct Decoded {
     /// The HNR-PVT fixes (`navsync/gnss/{id}/hnr`, an output of its own), then the NAV epochs
     /// (which win where both have a time).
     all: Vec<GnssFix>,
-    /// Satellites reported with an epoch: (its time text, the view).
-    sats: Vec<(String, SatView)>,
+    /// The skies published (`GnssExtra::Sky`), the first per epoch time: (its time text, the
+    /// sample).
+    sats: Vec<(String, GnssSky)>,
     /// Every TIM-TP: (pulse UTC ns, the UTC of the NAV epoch that follows it: the first whose
     /// first byte arrived after the TIM-TP's).
     pulses: Vec<(i64, Option<i64>)>,
@@ -592,17 +594,12 @@ fn decode(log: &[u8]) -> Decoded {
     let mut hnr = Vec::new();
     let mut sats = Vec::new();
     let mut tp_host: Vec<(i64, i64)> = Vec::new();
-    let mut last_sats_itow = None;
+    let mut sky_times = std::collections::HashSet::new();
     let mut pulses_seen = 0;
     let header = header_len(log);
-    let mut on_fix = |f: &GnssFix, d: &AutoDecoder, fixes: &mut Vec<GnssFix>| {
-        fixes.push(*f);
-        let view = d.ubx().satellites();
-        if view.len > 0 && Some((view.itow_ms, view.utc_ns)) != last_sats_itow {
-            last_sats_itow = Some((view.itow_ms, view.utc_ns));
-            if view.utc_ns != i64::MIN {
-                sats.push((gpsd_time(view.utc_ns), *view));
-            }
+    let mut on_sky = |s: &GnssSky| {
+        if s.num_sats > 0 && s.utc_ns != i64::MIN && sky_times.insert(s.utc_ns) {
+            sats.push((gpsd_time(s.utc_ns), *s));
         }
     };
     for (i, b) in log.iter().enumerate().skip(header) {
@@ -613,15 +610,13 @@ fn decode(log: &[u8]) -> Decoded {
             read_ns,
             REPLAY_NS_PER_BYTE,
             &mut |f| new.push(*f),
-            &mut |x| {
-                if let GnssExtra::Hnr(h) = x {
-                    hnr.push(*h);
-                }
+            &mut |x| match x {
+                GnssExtra::Hnr(h) => hnr.push(*h),
+                GnssExtra::Sky(s) => on_sky(s),
+                _ => {}
             },
         );
-        for f in &new {
-            on_fix(f, &d, &mut fixes);
-        }
+        fixes.extend(new);
         let c = d.ubx().counters().epochs.time_pulses;
         if c != pulses_seen {
             pulses_seen = c;
@@ -632,9 +627,7 @@ fn decode(log: &[u8]) -> Decoded {
     }
     let mut new = Vec::new();
     d.flush(&mut |f| new.push(*f));
-    for f in &new {
-        on_fix(f, &d, &mut fixes);
-    }
+    fixes.extend(new);
     let nav = |f: &&GnssFix| f.protocol != GNSS_PROTOCOL_NMEA && f.sentences & UBX_MSG_HNR_PVT == 0;
     let pulses = tp_host
         .iter()
@@ -707,6 +700,9 @@ struct Row {
     sky_excepted: usize,
     sky_unexplained: usize,
     sky_missing: usize,
+    /// Satellites in our skies compared, and of them those gpsd lists (compared field by field).
+    sky_sats: usize,
+    sky_sats_compared: usize,
     pulses: usize,
     pulses_matched: usize,
     pulses_unexplained: usize,
@@ -839,6 +835,7 @@ fn check_sky(row: &mut Row, dec: &Decoded, chk: &str, used: &mut [usize]) {
         let fix = fix_at.get(time).copied();
         let mut diffs = Vec::new();
         let u_sat = sky.get("uSat").and_then(Value::as_u64).unwrap_or(0);
+        row.sky_sats += view.num_sats as usize;
         if u_sat != view.used() as u64 {
             diffs.push(Diff {
                 field: "sky_used",
@@ -862,21 +859,38 @@ fn check_sky(row: &mut Row, dec: &Decoded, chk: &str, used: &mut [usize]) {
                 continue;
             };
             if let Some(el) = get(s, "el")
-                && o.elevation_deg().map(f64::from) != Some(el)
+                && f64::from(o.elevation_deg) != el
             {
                 diffs.push(Diff {
                     field: "sky_el",
-                    detail: format!("{g}/{sv} gpsd {el} ours {:?}", o.elevation_deg()),
+                    detail: format!("{g}/{sv} gpsd {el} ours {}", o.elevation_deg),
                 });
             }
             if let Some(az) = get(s, "az")
-                && o.azimuth_deg().map(f64::from) != Some(az)
+                && f64::from(o.azimuth_deg) != az
             {
                 diffs.push(Diff {
                     field: "sky_az",
-                    detail: format!("{g}/{sv} gpsd {az} ours {:?}", o.azimuth_deg()),
+                    detail: format!("{g}/{sv} gpsd {az} ours {}", o.azimuth_deg),
                 });
             }
+            if let Some(ss) = get(s, "ss")
+                && f64::from(o.cno_dbhz) != ss
+            {
+                diffs.push(Diff {
+                    field: "sky_ss",
+                    detail: format!("{g}/{sv} gpsd {ss} ours {}", o.cno_dbhz),
+                });
+            }
+            if let Some(u) = s.get("used").and_then(Value::as_bool)
+                && u != (o.used != 0)
+            {
+                diffs.push(Diff {
+                    field: "sky_sat_used",
+                    detail: format!("{g}/{sv} gpsd {u} ours {}", o.used),
+                });
+            }
+            row.sky_sats_compared += 1;
         }
         if diffs.is_empty() {
             row.sky_matched += 1;
@@ -997,6 +1011,7 @@ fn gpsd_ubx_conformance() {
         sum(|r| r.pulses_unexplained),
     );
     let sky_missing = sum(|r| r.sky_missing);
+    let (sky_sats, sky_sats_compared) = (sum(|r| r.sky_sats), sum(|r| r.sky_sats_compared));
     println!(
         "{:<30} {:>5} {:>4} {:>5} {:>7} {:>6} {:>4} | {:>4} {:>5} {:>6} {:>4} {:>5} | {:>4} {:>5} {:>4} | fields gpsd derived; \
          first unexplained difference",
@@ -1051,7 +1066,8 @@ fn gpsd_ubx_conformance() {
         "TOTAL {} captures, {total} gpsd timed epochs: {matched} match ({:.2} %; {shifted} after a listed date \
          shift), {excepted} deliberate differences, {unexplained} unexplained. SKY: {sky} epochs, {sky_matched} \
          match, {sky_excepted} deliberate differences, {sky_unexplained} unexplained ({sky_missing} epochs with \
-         satellites but no gpsd SKY at their time). PPS: {pulses} TIM-TP pulses, \
+         satellites but no gpsd SKY at their time; {sky_sats} satellites, {sky_sats_compared} of them in gpsd's SKY: \
+         elevation, azimuth, ss, used compared). PPS: {pulses} TIM-TP pulses, \
          {pulses_matched} match, {pulses_unexplained} unexplained. Fields gpsd derived (not compared): {derived_total:?}",
         rows.len(),
         100.0 * matched as f64 / total.max(1) as f64,

@@ -1,7 +1,7 @@
 //! Any navsync sample, tagged with its type: what a recording holds and a replay publishes.
 
 use super::{
-    EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, Health, ImuSample, NavState,
+    EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, Health, ImuSample, NavState,
     NetworkTime, PpsEdge, SimTruth, TimeState,
 };
 
@@ -36,6 +36,8 @@ pub enum AnySample {
     Settings(EstimatorSettings),
     /// `navsync/time/network`
     NetworkTime(NetworkTime),
+    /// `navsync/gnss/{id}/sky`
+    Sky(GnssSky),
 }
 
 impl AnySample {
@@ -55,6 +57,7 @@ impl AnySample {
             Self::NavData(d) => d.stamp.host_ns,
             Self::Settings(s) => s.host_ns,
             Self::NetworkTime(t) => t.host_ns,
+            Self::Sky(s) => s.stamp.host_ns,
         }
     }
 }

@@ -50,6 +50,7 @@ fn all() -> Vec<String> {
         signature::<GnssNavData>(),
         signature::<EstimatorSettings>(),
         signature::<NetworkTime>(),
+        signature::<GnssSky>(),
     ]
 }
 
@@ -74,6 +75,7 @@ fn field_tables_describe_the_real_layout() {
     check::<GnssNavData>();
     check::<EstimatorSettings>();
     check::<NetworkTime>();
+    check::<GnssSky>();
 }
 
 #[test]

@@ -157,6 +157,9 @@ pub struct SatView {
     pub itow_ms: u32,
     /// The epoch's UTC time, ns since 1970 (`i64::MIN` when it had none).
     pub utc_ns: i64,
+    /// Receipt time of the first byte of the NAV-SAT/NAV-SVINFO message, host
+    /// `CLOCK_MONOTONIC` ns (`i64::MIN` before any).
+    pub host_ns: i64,
     /// They came from NAV-SVINFO (legacy satellite numbers converted) rather than NAV-SAT.
     pub from_svinfo: bool,
     /// `sats[..len]` are the satellites.
@@ -171,6 +174,7 @@ impl SatView {
     const EMPTY: SatView = SatView {
         itow_ms: 0,
         utc_ns: i64::MIN,
+        host_ns: i64::MIN,
         from_svinfo: false,
         sats: [SatInfo::EMPTY; MAX_SATS],
         len: 0,
@@ -191,6 +195,7 @@ impl SatView {
         Self {
             itow_ms: m.itow_ms,
             utc_ns: i64::MIN,
+            host_ns: i64::MIN,
             from_svinfo: false,
             sats: m.sats,
             len: m.len,
@@ -202,6 +207,7 @@ impl SatView {
         Self {
             itow_ms: m.itow_ms,
             utc_ns: i64::MIN,
+            host_ns: i64::MIN,
             from_svinfo: true,
             sats: m.sats,
             len: m.len,
@@ -756,6 +762,8 @@ pub struct EpochAssembler {
     /// Receiver's GPS − UTC, s (see [`EpochAssembler::leap_seconds`]), carried across epochs.
     leap_s: Option<i64>,
     sats: SatView,
+    /// Times [`EpochAssembler::satellites`] took a new view.
+    sat_views: u64,
     time_pulse: Option<TimePulse>,
     time_mark: Option<TimeMark>,
     /// The learned last NAV message of the cycle (by name).
@@ -788,6 +796,7 @@ impl EpochAssembler {
             geoid: GeoidCache::default(),
             leap_s: None,
             sats: SatView::EMPTY,
+            sat_views: 0,
             time_pulse: None,
             time_mark: None,
             cycle: CycleEnder::default(),
@@ -813,6 +822,12 @@ impl EpochAssembler {
     /// before the first).
     pub fn satellites(&self) -> &SatView {
         &self.sats
+    }
+
+    /// How many views [`EpochAssembler::satellites`] has taken so far: a new value means a new
+    /// view (an epoch with NAV-SAT/NAV-SVINFO emitted, or a late one for the epoch emitted).
+    pub fn satellite_views(&self) -> u64 {
+        self.sat_views
     }
 
     /// The last TIM-TP (time of the next pulse, its quantisation error).
@@ -849,14 +864,14 @@ impl EpochAssembler {
         if self.cur.open && self.cur.itow_ms != itow_ms {
             if self.last_itow_ms == Some(itow_ms) {
                 // For the epoch before the one being assembled.
-                return self.late(msg);
+                return self.late(msg, host_ns);
             }
             self.emit(Close::NextEpoch, out);
         }
         if !self.cur.open {
             if self.last_itow_ms == Some(itow_ms) {
                 // For the epoch just emitted (at NAV-EOE, the learned last message, on flush).
-                return self.late(msg);
+                return self.late(msg, host_ns);
             }
             if let Some((name, flushed_itow)) = self.flushed.take()
                 && flushed_itow != itow_ms
@@ -866,6 +881,15 @@ impl EpochAssembler {
             self.cur = Epoch::start(itow_ms, host_ns);
         }
         self.cur.merge(msg);
+        if let Some(v) = self.cur.sats.as_mut()
+            && match msg {
+                Message::NavSat(_) => !v.from_svinfo,
+                Message::NavSvinfo(_) => v.from_svinfo,
+                _ => false,
+            }
+        {
+            v.host_ns = host_ns;
+        }
         if self.cur.leap_s.is_some() {
             self.leap_s = self.cur.leap_s;
         }
@@ -897,7 +921,7 @@ impl EpochAssembler {
     /// A NAV message for an epoch already closed: it is not published again (every epoch is
     /// published once). Counted; the message it followed is no cycle ender; a satellite view
     /// still replaces that epoch's in [`EpochAssembler::satellites`].
-    fn late(&mut self, msg: &Message) {
+    fn late(&mut self, msg: &Message, host_ns: i64) {
         self.counters.late_messages += 1;
         if matches!(msg, Message::NavEoe(_)) {
             return;
@@ -917,8 +941,10 @@ impl EpochAssembler {
         };
         if let Some(mut v) = view {
             v.utc_ns = self.last_closed_utc_ns;
+            v.host_ns = host_ns;
             self.counters.sats_dropped += v.dropped as u64;
             self.sats = v;
+            self.sat_views += 1;
         }
     }
 
@@ -1035,6 +1061,7 @@ impl EpochAssembler {
             sats.utc_ns = fix.utc_ns;
             self.counters.sats_dropped += sats.dropped as u64;
             self.sats = sats;
+            self.sat_views += 1;
         }
         out(&fix);
     }

@@ -105,8 +105,10 @@ pub struct UbxDecoder {
     version: Option<MonVer>,
     /// The receiver's IMU readings being assembled into samples.
     esf: samples::EsfImu,
-    /// Sequence numbers of the extra samples: time pulses, time marks, raw, subframes.
-    extra_seq: [u64; 4],
+    /// Sequence numbers of the extra samples: time pulses, time marks, raw, subframes, skies.
+    extra_seq: [u64; 5],
+    /// The assembler's satellite views already published as skies.
+    sky_views: u64,
 }
 
 impl UbxDecoder {
@@ -160,6 +162,7 @@ impl UbxDecoder {
             version,
             esf,
             extra_seq,
+            sky_views,
         } = self;
         framer.push(bytes, read_host_ns, ns_per_byte, &mut |frame| match frame {
             Frame::Ubx {
@@ -221,6 +224,12 @@ impl UbxDecoder {
                             }
                         }
                         _ => {}
+                    }
+                    // A new satellite view (its epoch emitted, or a late NAV-SAT for it).
+                    if assembler.satellite_views() != *sky_views {
+                        *sky_views = assembler.satellite_views();
+                        let sky = samples::sky_sample(assembler.satellites(), next(4));
+                        on(Event::Extra(GnssExtra::Sky(&sky)));
                     }
                 }
                 Err(_) => messages.decode_errors += 1,

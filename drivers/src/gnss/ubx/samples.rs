@@ -1,5 +1,6 @@
 //! UBX messages as the samples navsync publishes beside the fixes: RXM-RAWX → [`GnssRaw`],
-//! RXM-SFRBX → [`GnssNavData`], ESF-MEAS → [`ImuSample`] (the receiver's own IMU). Pure.
+//! RXM-SFRBX → [`GnssNavData`], ESF-MEAS → [`ImuSample`] (the receiver's own IMU), the
+//! satellites of an epoch (NAV-SAT, NAV-SVINFO) → [`GnssSky`]. Pure.
 //!
 //! ESF-MEAS data types and scales (u-blox 8 / M8 Receiver Description, UBX-ESF-MEAS, "data
 //! type" table): 14/13/5 gyroscope x/y/z angular rate, deg/s × 2⁻¹², 16/17/18 accelerometer
@@ -10,11 +11,35 @@
 
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{
-    GnssNavData, GnssRaw, ImuSample, MAX_NAV_WORDS, MAX_RAW_MEASUREMENTS, RawMeasurement, Stamp, StampSource,
+    GNSS_PROTOCOL_UBX, GnssNavData, GnssRaw, GnssSky, ImuSample, MAX_NAV_WORDS, MAX_RAW_MEASUREMENTS, RawMeasurement,
+    SkySatellite, Stamp, StampSource,
 };
 
+use super::epoch::SatView;
 use super::esf::EsfMeas;
 use super::rxm::{RxmRawx, RxmSfrbx};
+
+/// The satellites of an epoch (NAV-SAT, or NAV-SVINFO with its legacy numbers converted) as a
+/// [`GnssSky`] sample stamped at the message's receipt with sequence number `seq`: elevation
+/// and azimuth where the message gives them (|elev| ≤ 90°, azimuth 0..=360°, 360 as 0), C/N0
+/// (0 not tracked), `svUsed`.
+pub fn sky_sample(v: &SatView, seq: u64) -> GnssSky {
+    let mut out = GnssSky::empty(Stamp::host(v.host_ns, seq, StampSource::Receipt));
+    out.utc_ns = v.utc_ns;
+    out.protocol = GNSS_PROTOCOL_UBX;
+    for s in v.satellites() {
+        out.push(SkySatellite {
+            elevation_deg: s.elevation_deg().map_or(f32::NAN, f32::from),
+            azimuth_deg: s.azimuth_deg().map_or(f32::NAN, f32::from),
+            gnss_id: s.gnss_id,
+            sv_id: s.sv_id,
+            cno_dbhz: s.cno_dbhz,
+            used: u8::from(s.used),
+        });
+    }
+    out.dropped = out.dropped.saturating_add(u8::try_from(v.dropped).unwrap_or(u8::MAX));
+    out
+}
 
 /// RXM-RAWX as a [`GnssRaw`] sample stamped at `host_ns` with sequence number `seq`.
 pub fn raw_sample(m: &RxmRawx, host_ns: i64, seq: u64) -> GnssRaw {
