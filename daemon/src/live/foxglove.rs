@@ -13,7 +13,8 @@
 //! - Read-only: client `advertise`/`publish` and other operations are ignored (counted as
 //!   `foxglove_ignored`). Bounded: at most `max_clients` at once (one more is closed after the
 //!   handshake with a close frame, counted), a client whose unsent data exceed
-//!   [`MAX_PENDING_BYTES`] (a slow reader) is dropped and counted.
+//!   [`MAX_PENDING_BYTES`] (a slow reader; its socket's send buffer is kept at 64 KiB) is dropped
+//!   and counted.
 
 use std::collections::HashMap;
 use std::net::{SocketAddr, TcpListener, TcpStream};
@@ -34,8 +35,11 @@ use tungstenite::{Message, WebSocket};
 /// The WebSocket subprotocol of the Foxglove protocol, version 1.
 pub const SUBPROTOCOL: &str = "foxglove.websocket.v1";
 /// Unsent bytes after which a client is a slow reader and is dropped (about a second of every
-/// service at full rate).
-pub const MAX_PENDING_BYTES: usize = 4 << 20;
+/// service of four IMUs at 1 kHz).
+pub const MAX_PENDING_BYTES: usize = 1 << 20;
+/// The kernel's send buffer of a client's socket, bytes: what a slow reader holds beyond
+/// [`MAX_PENDING_BYTES`] (the default grows to megabytes).
+const SOCKET_SEND_BUFFER: libc::c_int = 64 << 10;
 /// Opcode of a server `MessageData` binary frame.
 const OP_MESSAGE_DATA: u8 = 0x01;
 
@@ -140,6 +144,19 @@ fn accept_loop(
             .unwrap_or_else(|_| SocketAddr::from(([0, 0, 0, 0], 0)));
         // The handshake must not hang the accept loop.
         let _ = stream.set_read_timeout(Some(Duration::from_secs(5)));
+        {
+            use std::os::fd::AsRawFd;
+            // SAFETY: setting an int socket option on a socket this thread owns.
+            unsafe {
+                libc::setsockopt(
+                    stream.as_raw_fd(),
+                    libc::SOL_SOCKET,
+                    libc::SO_SNDBUF,
+                    (&SOCKET_SEND_BUFFER as *const libc::c_int).cast(),
+                    std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+                );
+            }
+        }
         let _ = stream.set_write_timeout(Some(Duration::from_secs(5)));
         // The signature is tungstenite's handshake callback's.
         #[allow(clippy::result_large_err)]

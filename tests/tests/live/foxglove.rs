@@ -169,3 +169,127 @@ fn hex_decode(s: &str) -> Vec<u8> {
         .map(|i| u8::from_str_radix(&s[i..i + 2], 16).expect("hex"))
         .collect()
 }
+
+/// A Foxglove client of this test: the handshake with the subprotocol, then every channel
+/// subscribed when `subscribe`.
+fn foxglove_client(addr: &str) -> Result<tungstenite::WebSocket<std::net::TcpStream>, String> {
+    use tungstenite::client::IntoClientRequest;
+    let stream = std::net::TcpStream::connect(addr).map_err(|e| e.to_string())?;
+    let mut req = format!("ws://{addr}/")
+        .into_client_request()
+        .map_err(|e| e.to_string())?;
+    req.headers_mut().insert(
+        "Sec-WebSocket-Protocol",
+        "foxglove.websocket.v1".parse().expect("header"),
+    );
+    tungstenite::client(req, stream)
+        .map(|(ws, _)| ws)
+        .map_err(|e| e.to_string())
+}
+
+/// Hostile Foxglove clients are bounded and counted: one more than `--max-connections` is
+/// closed (`foxglove_refused`), a client without the subprotocol is refused at the handshake,
+/// and a client that subscribes to everything and never reads is dropped once its unsent data
+/// pass the bound (`foxglove_dropped`); the estimator keeps publishing throughout.
+#[test]
+fn hostile_foxglove_clients_are_bounded_and_counted() {
+    use tungstenite::Message;
+    let mut env = TestEnv::new("foxhostile");
+    env.spawn("sim", &["sim", "--imus", "2", "--duration", "90"]);
+    env.spawn("estimator", &["estimator", "--imus", "0,1", "--software-sync"]);
+    let fox = format!("127.0.0.1:{}", free_port());
+    env.spawn(
+        "web",
+        &[
+            "web",
+            "--listen",
+            "127.0.0.1:0",
+            "--foxglove-listen",
+            &fox,
+            "--max-connections",
+            "2",
+            "--max-streams",
+            "1",
+        ],
+    );
+    let obs = env.node("observer");
+    let mut health = navsync_tests::HealthWatch::new(&obs, &["web"]);
+    let nav = obs.subscriber::<NavState>(services::NAV_STATE).unwrap();
+    std::thread::sleep(Duration::from_secs(3));
+
+    // Without the subprotocol: refused at the handshake.
+    let plain = std::net::TcpStream::connect(&fox).expect("connect");
+    assert!(
+        tungstenite::client(format!("ws://{fox}/"), plain).is_err(),
+        "a client without the subprotocol was accepted"
+    );
+    // Two clients are served; the third is closed.
+    let mut a = foxglove_client(&fox).expect("client a");
+    let _b = foxglove_client(&fox).expect("client b");
+    let third = foxglove_client(&fox).and_then(|mut c| {
+        c.get_ref().set_read_timeout(Some(Duration::from_secs(3))).ok();
+        loop {
+            match c.read() {
+                Ok(Message::Close(_)) | Err(_) => return Ok(false),
+                Ok(Message::Text(t)) if t.contains("serverInfo") => return Ok(true),
+                Ok(_) => {}
+            }
+        }
+    });
+    assert_eq!(third, Ok(false), "a third client was served beyond --max-connections 2");
+    // Client a subscribes to every channel and stops reading.
+    a.get_ref().set_read_timeout(Some(Duration::from_secs(3))).ok();
+    let mut subscribed = 0;
+    while subscribed == 0 {
+        match a.read() {
+            Ok(Message::Text(t)) if t.contains("\"advertise\"") => {
+                let v: Value = serde_json::from_str(t.as_str()).unwrap();
+                let subs: Vec<Value> = v["channels"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .enumerate()
+                    .map(|(i, c)| serde_json::json!({"id": i, "channelId": c["id"]}))
+                    .collect();
+                subscribed = subs.len();
+                let op = serde_json::json!({"op": "subscribe", "subscriptions": subs});
+                a.send(Message::text(op.to_string())).expect("subscribe");
+            }
+            Ok(_) => {}
+            Err(e) => panic!("client a: {e}"),
+        }
+    }
+    // Never read again: the server must drop it rather than buffer without end.
+    let t0 = std::time::Instant::now();
+    let mut counts = (0, 0);
+    while t0.elapsed() < Duration::from_secs(60) {
+        health.wait(Duration::from_secs(1));
+        env.assert_running();
+        counts = (
+            health.counter("web", "foxglove_refused").unwrap_or(0),
+            health.counter("web", "foxglove_dropped").unwrap_or(0),
+        );
+        if counts.0 >= 2 && counts.1 >= 1 {
+            break;
+        }
+    }
+    let mut states = 0;
+    while nav.receive().unwrap().is_some() {
+        states += 1;
+    }
+    println!(
+        "subscribed to {subscribed} channels; refused {}, dropped {} after {:.1} s; {states} NavStates meanwhile",
+        counts.0,
+        counts.1,
+        t0.elapsed().as_secs_f64()
+    );
+    assert!(counts.0 >= 2, "refused {} (the plain client and the third)", counts.0);
+    assert!(
+        counts.1 >= 1,
+        "the client that never reads was not dropped\n{}",
+        env.log("web")
+    );
+    assert!(states > 100, "the estimator stopped publishing: {states}");
+    drop((nav, health, obs, a));
+    env.finish();
+}

@@ -14,6 +14,39 @@ use navsync_tests::TestEnv;
 /// GNSS time minus the system clock in this test's mapping, ns.
 const OFFSET_NS: i64 = 375_000_000;
 
+/// One locked mapping for a whole test (UTC = host time + (realtime − monotonic) + OFFSET) and
+/// an aligned state at 48.137° N, `lon_deg`, moving at 5 m/s; with the realtime it was made at.
+fn mapping_and_state(lon_deg: f64) -> (TimeState, NavState, i64) {
+    let (h0, r0) = (monotonic_now_ns(), realtime_now_ns());
+    let mut t = TimeState::unknown();
+    t.status = TimeStatus::Locked as u8;
+    t.ref_host_ns = h0;
+    t.ref_utc_ns = r0 + OFFSET_NS;
+    t.offset_std_ns = 500.0;
+    t.rate_std = 1e-9;
+    t.leap_s = 18;
+    let mut n = NavState::zeroed();
+    n.status = NavStatus::Aligned as u8;
+    n.lat_deg = 48.137154;
+    n.lon_deg = lon_deg;
+    n.vel_ned_mps = [5.0, 0.0, 0.0];
+    (t, n, r0)
+}
+
+/// Publishes the mapping and the state, stamped now.
+fn publish_now(
+    t: &mut TimeState,
+    n: &mut NavState,
+    time_pub: &mut navsync_shared::ipc::Publisher<TimeState>,
+    nav_pub: &mut navsync_shared::ipc::Publisher<NavState>,
+) {
+    let now = monotonic_now_ns();
+    t.computed_host_ns = now;
+    n.host_ns = now;
+    time_pub.publish(t).unwrap();
+    nav_pub.publish(n).unwrap();
+}
+
 #[test]
 fn nmea_out_writes_rmc_and_zda_after_each_gnss_second() {
     let mut env = TestEnv::new("nmeaout");
@@ -22,19 +55,7 @@ fn nmea_out_writes_rmc_and_zda_after_each_gnss_second() {
     let mut nav_pub = node.publisher::<NavState>(services::NAV_STATE).unwrap();
     let pty = navsync_drivers::pty::Pty::open(None).expect("a pseudo-terminal");
     let port = pty.path().display().to_string();
-    // One mapping for the whole test: UTC = host time + (realtime − monotonic) + OFFSET.
-    let (h0, r0) = (monotonic_now_ns(), realtime_now_ns());
-    let mut t = TimeState::unknown();
-    t.status = TimeStatus::Locked as u8;
-    t.ref_host_ns = h0;
-    t.ref_utc_ns = r0 + OFFSET_NS;
-    t.offset_std_ns = 500.0;
-    t.rate_std = 1e-9;
-    let mut n = NavState::zeroed();
-    n.status = NavStatus::Aligned as u8;
-    n.lat_deg = 48.137154;
-    n.lon_deg = -11.576124;
-    n.vel_ned_mps = [5.0, 0.0, 0.0];
+    let (mut t, mut n, r0) = mapping_and_state(-11.576124);
     env.spawn("nmea-out", &["nmea-out", "--port", &port, "--baud", "9600"]);
 
     let mut pty = pty;
@@ -44,11 +65,7 @@ fn nmea_out_writes_rmc_and_zda_after_each_gnss_second() {
     let mut last_pub = Instant::now() - Duration::from_secs(1);
     while t0.elapsed() < Duration::from_millis(4500) {
         if last_pub.elapsed() > Duration::from_millis(100) {
-            let now = monotonic_now_ns();
-            t.computed_host_ns = now;
-            n.host_ns = now;
-            time_pub.publish(&t).unwrap();
-            nav_pub.publish(&n).unwrap();
+            publish_now(&mut t, &mut n, &mut time_pub, &mut nav_pub);
             last_pub = Instant::now();
         }
         while let Ok(k) = pty.read(&mut buf) {
@@ -162,19 +179,7 @@ fn gpsd_takes_nmea_out_as_its_time_source() {
     let port = out.path().display().to_string();
     let gpsd_link = env.dir.join("gpsd-tty");
     let mut into_gpsd = navsync_drivers::pty::Pty::open(Some(&gpsd_link)).expect("a pseudo-terminal");
-    let (h0, r0) = (monotonic_now_ns(), realtime_now_ns());
-    let mut t = TimeState::unknown();
-    t.status = TimeStatus::Locked as u8;
-    t.ref_host_ns = h0;
-    t.ref_utc_ns = r0 + OFFSET_NS;
-    t.offset_std_ns = 500.0;
-    t.rate_std = 1e-9;
-    t.leap_s = 18;
-    let mut n = NavState::zeroed();
-    n.status = NavStatus::Aligned as u8;
-    n.lat_deg = 48.137154;
-    n.lon_deg = 11.576124;
-    n.vel_ned_mps = [0.0, 5.0, 0.0];
+    let (mut t, mut n, r0) = mapping_and_state(11.576124);
     env.spawn("nmea-out", &["nmea-out", "--port", &port, "--baud", "9600"]);
     let tcp = std::net::TcpListener::bind("127.0.0.1:0")
         .and_then(|l| l.local_addr())
@@ -220,11 +225,7 @@ fn gpsd_takes_nmea_out_as_its_time_source() {
     let mut last_pub = Instant::now() - Duration::from_secs(1);
     while t0.elapsed() < Duration::from_secs(12) && tpv_times.len() < 6 {
         if last_pub.elapsed() > Duration::from_millis(100) {
-            let now = monotonic_now_ns();
-            t.computed_host_ns = now;
-            n.host_ns = now;
-            time_pub.publish(&t).unwrap();
-            nav_pub.publish(&n).unwrap();
+            publish_now(&mut t, &mut n, &mut time_pub, &mut nav_pub);
             last_pub = Instant::now();
         }
         // The relay: what nmea-out wrote, into gpsd's terminal.
@@ -253,20 +254,30 @@ fn gpsd_takes_nmea_out_as_its_time_source() {
     }
     let log = std::fs::read_to_string(env.dir.join("gpsd.log")).unwrap_or_default();
     println!("gpsd TPV times: {tpv_times:?}\nnmea-out ZDA seconds: {zda_seconds:?}");
-    assert!(tpv_times.len() >= 4, "gpsd reported {} TPVs with a time\n{log}", tpv_times.len());
+    assert!(
+        tpv_times.len() >= 4,
+        "gpsd reported {} TPVs with a time\n{log}",
+        tpv_times.len()
+    );
     // Each TPV time is a whole second the mapping named (a ZDA of nmea-out), consecutive.
     let mut secs = Vec::new();
     for time in &tpv_times {
         // 2026-12-05T00:25:03.000Z
         let hms: String = time.get(11..19).unwrap_or("").replace(':', "");
         assert!(time.ends_with(".000Z"), "TPV time {time} is not a whole second");
-        assert!(zda_seconds.contains(&hms), "TPV time {time} is not a second nmea-out named: {zda_seconds:?}");
+        assert!(
+            zda_seconds.contains(&hms),
+            "TPV time {time} is not a second nmea-out named: {zda_seconds:?}"
+        );
         let civil = navsync_shared::time::civil_from_utc_ns(r0 + OFFSET_NS);
         let day = format!("{:04}-{:02}-{:02}", civil.year, civil.month, civil.day);
         if !time.starts_with(&day) {
             println!("the test crossed midnight UTC: {time} vs {day}");
         }
-        let s: i64 = hms.parse::<i64>().map(|v| (v / 10000) * 3600 + (v / 100 % 100) * 60 + v % 100).unwrap();
+        let s: i64 = hms
+            .parse::<i64>()
+            .map(|v| (v / 10000) * 3600 + (v / 100 % 100) * 60 + v % 100)
+            .unwrap();
         secs.push(s);
     }
     // gpsd may report one cycle in more than one TPV (RMC, then ZDA): one second each.

@@ -222,7 +222,10 @@ fn a_host_without_receiver_keeps_gnss_time_through_chrony_over_the_network() {
         &format!("server {} iburst minpoll -2 maxpoll -2\nport 0\n", link.addr[0]),
     );
     let sock_b = cdir_b.join("chronyd.sock").display().to_string();
-    b.spawn("sim", &["sim", "--scenario", &scenario_s, "--imus", "1", "--duration", &run]);
+    b.spawn(
+        "sim",
+        &["sim", "--scenario", &scenario_s, "--imus", "1", "--duration", &run],
+    );
     b.spawn(
         "estimator",
         &[
