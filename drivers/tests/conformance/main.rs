@@ -6,5 +6,6 @@ mod gpsd_common;
 
 mod epoch_properties;
 mod gpsd_conformance;
+mod gpsd_nmea_sky;
 mod gpsd_ubx_conformance;
 mod pps_kernel_abi;

@@ -75,6 +75,7 @@ for cls in [v for v in vars(m).values() if isinstance(v, type) and issubclass(v,
 assert m.service_type("navsync/nav/state") is m.NavState
 assert m.service_type("navsync/imu/3/sample") is m.ImuSample
 assert m.service_type("navsync/health/gps-0") is m.Health
+assert m.service_type("navsync/gnss/0/sky") is m.GnssSky
 assert m.service_type("navsync/imu//sample") is None
 json.dump(report, sys.stdout)
 "#;
@@ -120,6 +121,9 @@ fn generated_python_types_are_current_and_match_the_rust_layouts() {
         rust::<GnssRaw>(),
         rust::<GnssNavData>(),
         rust::<EstimatorSettings>(),
+        rust::<NetworkTime>(),
+        rust::<SkySatellite>(),
+        rust::<GnssSky>(),
     ];
     assert_eq!(report.as_object().unwrap().len(), rust_layouts.len(), "{report}");
     let mut fields = 0;

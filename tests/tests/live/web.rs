@@ -4,6 +4,9 @@
 //!   `.ci/run` installs; skipped with the reason without it): two loads show different
 //!   states, and the values in the rendered DOM are those `navsync echo` printed for the same
 //!   state (the same sequence number), published within a second of the load;
+//! * the receiver's sky: a `GnssSky` the test publishes on `navsync/gnss/sky-test/sky` (the
+//!   simulator's NMEA receiver writes no GSV) is in the snapshot, drawn as a polar plot with one
+//!   dot per satellite (filled when used) and counted in `navsync_gnss_satellites`;
 //! * `/metrics`: every line of the exposition format parses, the names follow Prometheus's
 //!   rules; `promtool check metrics` is clean and a real Prometheus server scrapes it and
 //!   answers the offset and the IMU sample counter through its HTTP API (Debian's
@@ -20,7 +23,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::clients_common::{command_in, start_live, wait_ready};
-use navsync_shared::samples::NavState;
+use navsync_shared::samples::{GnssSky, NavState, SkySatellite, Stamp, StampSource};
 use navsync_shared::services;
 use navsync_shared::time::monotonic_now_ns;
 use navsync_tests::{HealthWatch, TestEnv, chromium, run_chromium};
@@ -175,6 +178,24 @@ fn the_page_shows_what_echo_shows_and_prometheus_scrapes_it() {
     let node = env.node("observer");
     wait_ready(&mut env, &node, true, Duration::from_secs(90));
     let port = port_of(&mut env, "web");
+    // A receiver's sky: three satellites, two used, one without a position in the sky.
+    let mut sky = GnssSky::empty(Stamp::host(monotonic_now_ns(), 0, StampSource::Receipt));
+    for (sv, el, az, cno, used) in [
+        (5, 60.0, 45.0, 47, 1),
+        (12, 20.0, 200.0, 30, 1),
+        (29, f32::NAN, f32::NAN, 0, 0),
+    ] {
+        sky.push(SkySatellite {
+            elevation_deg: el,
+            azimuth_deg: az,
+            gnss_id: 0,
+            sv_id: sv,
+            cno_dbhz: cno,
+            used,
+        });
+    }
+    let mut sky_pub = node.publisher::<GnssSky>(&services::gnss_sky("sky-test")).unwrap();
+    sky_pub.publish(&sky).unwrap();
 
     // The snapshot (once a second): the status report and what the page adds.
     let t0 = Instant::now();
@@ -193,6 +214,22 @@ fn the_page_shows_what_echo_shows_and_prometheus_scrapes_it() {
     assert!(s["imu_samples"]["0"].as_u64().unwrap() > 100, "{}", s["imu_samples"]);
     assert!(s["fixes"][0]["mode"] == "3D", "{}", s["fixes"]);
     assert!(!s["track"]["en_m"].as_array().unwrap().is_empty());
+    let t0 = Instant::now();
+    while s["skies"].as_array().is_none_or(Vec::is_empty) && t0.elapsed() < Duration::from_secs(5) {
+        // Published again, as a receiver does each epoch (a subscriber that comes later gets
+        // the publisher's history when it publishes next).
+        sky.stamp.seq += 1;
+        sky_pub.publish(&sky).unwrap();
+        std::thread::sleep(Duration::from_millis(200));
+        s = state(port);
+    }
+    let k = &s["skies"][0];
+    assert_eq!(
+        (k["id"].as_str(), k["in_view"].as_u64(), k["used"].as_u64()),
+        (Some("sky-test"), Some(3), Some(2)),
+        "{k}"
+    );
+    assert_eq!(k["satellites"][0]["label"], "G05");
     // The event stream: one state a second, each newer than the last.
     let mut es = open_stream(port);
     let (a, b) = (next_event(&mut es), next_event(&mut es));
@@ -222,6 +259,7 @@ fn the_page_shows_what_echo_shows_and_prometheus_scrapes_it() {
     metrics_and_prometheus(&mut env, port);
     hostile_clients(&mut env, &node, port);
     estimator_restarted(&mut env, &node, port);
+    drop(sky_pub);
     drop(node);
     env.finish();
 }
@@ -301,6 +339,10 @@ fn page_in_chromium(env: &mut TestEnv, port: u16) {
             dom.contains("<ellipse") && dom.contains("<polyline"),
             "the track is drawn"
         );
+        // The sky: two satellites drawn (the third has no position), both used ones filled.
+        assert_eq!(data_v(dom, "sky-sky-test"), "3");
+        assert_eq!(dom.matches("class=\"sat used\"").count(), 2, "the sky is drawn");
+        assert!(dom.contains(">G12<") && !dom.contains(">G29<"), "the sky's labels");
         println!(
             "Chromium load: nav state {seq} (lat {} lon {}), time state {tseq}, drift {drift:.4} ppm, {} event(s) from the stream",
             data_v(dom, "nav-lat"),
@@ -433,6 +475,11 @@ fn metrics_and_prometheus(env: &mut TestEnv, port: u16) {
         ("navsync_nav_status", &[("status", "aligned")]),
         ("navsync_time_status", &[("status", "locked")]),
         ("navsync_web_requests_total", &[]),
+        ("navsync_gnss_satellites", &[("receiver", "sky-test"), ("used", "true")]),
+        (
+            "navsync_gnss_satellites",
+            &[("receiver", "sky-test"), ("used", "false")],
+        ),
     ] {
         assert!(has(n, l), "{n}{l:?} missing:\n{text}");
     }

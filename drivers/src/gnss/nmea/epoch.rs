@@ -471,6 +471,16 @@ impl EpochAssembler {
         Some((core::str::from_utf8(&k.addr[1..len]).unwrap_or("?"), k.occurrence))
     }
 
+    /// The UTC of the epoch being assembled (the last one emitted when none is open or it has
+    /// no time tag yet), ns since 1970; `i64::MIN` before a time tag and a date are known.
+    pub fn epoch_utc_ns(&self) -> i64 {
+        let tod = if self.cur.open { self.cur.tod_ns } else { None }.or(self.last_emitted_tod);
+        match (tod, self.date) {
+            (Some(t), Some(a)) => a.days_at(t) * NS_PER_DAY + t,
+            _ => i64::MIN,
+        }
+    }
+
     /// Consumes one sentence (text from `$` to before CR/LF; `host_ns` the host time of its
     /// first byte) and calls `out` for every epoch it completes (0, 1 or 2: the previous
     /// epoch when this sentence starts a new one, this one if it is the cycle ender).

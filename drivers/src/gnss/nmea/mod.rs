@@ -1,23 +1,27 @@
 //! NMEA 0183: bytes → [`framer::LineFramer`] (sentences, each stamped with the host time of
 //! its first byte) → [`sentence`] (checksum, fields decoded into an update in SI units) →
-//! [`epoch::EpochAssembler`] (the updates of one time tag merged into one `GnssFix`).
-//! [`NmeaDecoder`] is the three as one [`GnssDecoder`].
+//! [`epoch::EpochAssembler`] (the updates of one time tag merged into one `GnssFix`); beside
+//! it [`sky::SkyAssembler`] (GSV with GSA → one `GnssSky` per cycle).
+//! [`NmeaDecoder`] is these as one [`GnssDecoder`].
 
 pub mod epoch;
 pub mod framer;
 pub mod sentence;
+pub mod sky;
 
 use navsync_shared::samples::GnssFix;
 
-use super::GnssDecoder;
+use super::{GnssDecoder, GnssExtra};
 use epoch::{EpochAssembler, EpochCounters};
 use framer::{FramerCounters, LineFramer};
+use sky::{SkyAssembler, SkyCounters};
 
 /// The NMEA front end as a [`GnssDecoder`]: pure, no allocation per byte or fix.
 #[derive(Debug, Clone, Default)]
 pub struct NmeaDecoder {
     framer: LineFramer,
     assembler: EpochAssembler,
+    sky: SkyAssembler,
 }
 
 impl NmeaDecoder {
@@ -26,11 +30,19 @@ impl NmeaDecoder {
         Self::default()
     }
 
+    /// Hands over the sky still being assembled (its GSV sentences were the last of the
+    /// stream), as [`GnssExtra::Sky`]. The live driver does not call it: there, the next
+    /// cycle's first fix sentence completes it.
+    pub fn flush_sky(&mut self, extra: &mut impl FnMut(GnssExtra<'_>)) {
+        self.sky.flush(&mut |k| extra(GnssExtra::Sky(k)));
+    }
+
     /// Everything counted so far.
     pub fn counters(&self) -> NmeaCounters {
         NmeaCounters {
             framer: *self.framer.counters(),
             epochs: *self.assembler.counters(),
+            sky: *self.sky.counters(),
         }
     }
 }
@@ -42,13 +54,40 @@ pub struct NmeaCounters {
     pub framer: FramerCounters,
     /// Sentence checks, decoding and epochs.
     pub epochs: EpochCounters,
+    /// GSV sentences and skies.
+    pub sky: SkyCounters,
 }
 
 impl GnssDecoder for NmeaDecoder {
     fn push(&mut self, bytes: &[u8], read_host_ns: i64, ns_per_byte: i64, out: &mut impl FnMut(&GnssFix)) {
-        let Self { framer, assembler } = self;
+        let Self { framer, assembler, .. } = self;
         framer.push(bytes, read_host_ns, ns_per_byte, &mut |s| {
             assembler.push(s.text, s.host_ns, out)
+        });
+    }
+
+    /// As `push`, with the sky of each cycle (GSV with GSA) as [`GnssExtra::Sky`], handed over
+    /// when the sentence after the cycle's GSV sentences arrives (after that sentence's fix,
+    /// if it completes one).
+    fn push_extras(
+        &mut self,
+        bytes: &[u8],
+        read_host_ns: i64,
+        ns_per_byte: i64,
+        out: &mut impl FnMut(&GnssFix),
+        extra: &mut impl FnMut(GnssExtra<'_>),
+    ) {
+        let Self { framer, assembler, sky } = self;
+        framer.push(bytes, read_host_ns, ns_per_byte, &mut |s| {
+            // The epoch a GSV falls into is known before the sentence is merged (a sentence
+            // that completes a sky is merged first: its fix goes out before the sky).
+            let utc = assembler.epoch_utc_ns();
+            let mut done = None;
+            sky.push(s.text, s.host_ns, utc, &mut |k| done = Some(*k));
+            assembler.push(s.text, s.host_ns, out);
+            if let Some(k) = done {
+                extra(GnssExtra::Sky(&k));
+            }
         });
     }
 
@@ -72,7 +111,8 @@ impl GnssDecoder for NmeaDecoder {
     fn each_counter(&self, f: &mut impl FnMut(&'static str, u64)) {
         let framer = self.framer.counters().named();
         let assembler = self.assembler.counters().named();
-        for (name, v) in framer.into_iter().chain(assembler) {
+        let sky = self.sky.counters().named();
+        for (name, v) in framer.into_iter().chain(assembler).chain(sky) {
             f(name, v);
         }
     }
@@ -92,6 +132,7 @@ impl GnssDecoder for NmeaDecoder {
             "nmea_late_sentences" => "NMEA fix sentences for an epoch already published dropped (not published twice)",
             "nmea_not_after_last" => "NMEA epochs held back: their time was not after the last one published",
             "nmea_time_resets" => "the receiver's time went back for good; the epoch order restarted",
+            "nmea_gsv_bad" => "malformed NMEA GSV sentences or satellites dropped",
             _ => return None,
         })
     }
