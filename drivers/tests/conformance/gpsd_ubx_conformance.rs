@@ -598,7 +598,9 @@ fn decode(log: &[u8]) -> Decoded {
     let mut pulses_seen = 0;
     let header = header_len(log);
     let mut on_sky = |s: &GnssSky| {
-        if s.num_sats > 0 && s.utc_ns != i64::MIN && sky_times.insert(s.utc_ns) {
+        // The UBX skies (an NMEA sky of the port's sentences, published while no UBX one is
+        // about, is not what this test compares).
+        if s.protocol != GNSS_PROTOCOL_NMEA && s.num_sats > 0 && s.utc_ns != i64::MIN && sky_times.insert(s.utc_ns) {
             sats.push((gpsd_time(s.utc_ns), *s));
         }
     };

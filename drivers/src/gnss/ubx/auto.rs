@@ -20,10 +20,14 @@
 //!   epoch of either protocol: a UBX epoch of the same time replaces it (the receiver sent
 //!   its sentences first), else it is published then.
 //!
+//! The skies (`GnssExtra::Sky`): UBX's (NAV-SAT, NAV-SVINFO) always; the NMEA ones (GSV with
+//! GSA) unless a UBX sky came within [`UBX_SKY_HOLD_NS`] before (counted,
+//! `auto_nmea_skies_dropped`), numbered anew like the fixes.
+//!
 //! The fixes emitted are numbered anew (`stamp.seq` 0, 1, 2, … whichever protocol each came
 //! from), so a gap in the sequence is a lost sample as everywhere else.
 
-use navsync_shared::samples::GnssFix;
+use navsync_shared::samples::{GnssFix, GnssSky};
 
 use super::{Event, UbxDecoder};
 use crate::gnss::nmea::NmeaDecoder;
@@ -38,6 +42,38 @@ pub const UBX_MAJORITY: u32 = 6;
 /// A UBX navigation solution this close (host time) to an NMEA epoch covers it: the same
 /// receiver epoch, or one of a receiver sending NMEA at up to 10 × its UBX rate.
 pub const UBX_COVER_NS: i64 = 1_500_000_000;
+/// An NMEA sky is not published within this long (host time) after a UBX sky: the receiver
+/// reports its satellites in UBX, the richer report.
+pub const UBX_SKY_HOLD_NS: i64 = 5_000_000_000;
+
+/// The skies of either protocol as one stream (see the module doc).
+#[derive(Debug, Clone, Copy, Default)]
+struct Skies {
+    /// Receipt time of the last UBX sky, host ns.
+    last_ubx_ns: Option<i64>,
+    /// Skies published (their sequence numbers).
+    emitted: u64,
+    /// NMEA skies dropped because UBX reports the sky.
+    suppressed: u64,
+}
+
+impl Skies {
+    fn publish(&mut self, from_ubx: bool, sky: &GnssSky, extra: &mut impl FnMut(GnssExtra<'_>)) {
+        if from_ubx {
+            self.last_ubx_ns = Some(sky.stamp.host_ns);
+        } else if self
+            .last_ubx_ns
+            .is_some_and(|t| sky.stamp.host_ns - t <= UBX_SKY_HOLD_NS)
+        {
+            self.suppressed += 1;
+            return;
+        }
+        let mut k = *sky;
+        k.stamp.seq = self.emitted;
+        self.emitted += 1;
+        extra(GnssExtra::Sky(&k));
+    }
+}
 
 /// UBX with NMEA fallback as one [`GnssDecoder`] (see the module doc).
 #[derive(Debug, Clone, Default)]
@@ -63,6 +99,8 @@ pub struct AutoDecoder {
     held_back: u64,
     /// Resets of the merged output's time line ([`Admit::Reset`]).
     resets: u64,
+    /// The skies of both protocols.
+    skies: Skies,
 }
 
 impl AutoDecoder {
@@ -238,18 +276,25 @@ impl GnssDecoder for AutoDecoder {
             order,
             held_back,
             resets,
+            skies,
         } = self;
         let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back, resets), fix, out);
         ubx.push_events(bytes, read_host_ns, ns_per_byte, &mut |ev| match ev {
             Event::Fix(fix) => Self::ubx_fix(vote, suppressed, pending, fix, out),
+            Event::Extra(GnssExtra::Sky(k)) => skies.publish(true, k, extra),
             Event::Extra(x) => extra(x),
             Event::NavSolution { host_ns } => vote.ubx_solution(host_ns),
             Event::Nmea { text, host_ns } => {
                 // The sentence, then its terminator, at the time of its `$` (rate 0: no
                 // back-dating within these pushes).
                 let mut emit = |fix: &GnssFix| Self::nmea_fix(vote, suppressed, pending, fix, out);
-                nmea.push(text, host_ns, 0, &mut emit);
-                nmea.push(b"\r\n", host_ns, 0, &mut emit);
+                let mut sky = |x: GnssExtra<'_>| {
+                    if let GnssExtra::Sky(k) = x {
+                        skies.publish(false, k, extra);
+                    }
+                };
+                nmea.push_extras(text, host_ns, 0, &mut emit, &mut sky);
+                nmea.push_extras(b"\r\n", host_ns, 0, &mut emit, &mut sky);
             }
         });
     }
@@ -265,6 +310,7 @@ impl GnssDecoder for AutoDecoder {
             order,
             held_back,
             resets,
+            ..
         } = self;
         let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back, resets), fix, out);
         ubx.flush(&mut |fix: &GnssFix| Self::ubx_fix(vote, suppressed, pending, fix, out));
@@ -294,6 +340,7 @@ impl GnssDecoder for AutoDecoder {
         f("auto_nmea_suppressed", self.suppressed);
         f("auto_not_after_last", self.held_back);
         f("auto_time_resets", self.resets);
+        f("auto_nmea_skies_dropped", self.skies.suppressed);
     }
 
     fn describe(name: &str) -> Option<&'static str> {
@@ -421,6 +468,45 @@ mod tests {
         let nmea = fixes.iter().filter(|f| f.protocol == GNSS_PROTOCOL_NMEA).count();
         assert_eq!(nmea, 20, "every NMEA epoch reported");
         assert_eq!(d.nmea_suppressed(), 0);
+    }
+
+    #[test]
+    fn an_nmea_port_reports_its_sky_unless_ubx_does() {
+        use navsync_shared::time::NS_PER_S;
+        let mut d = AutoDecoder::new();
+        let mut skies = Vec::new();
+        for (i, t) in ["120000.00", "120001.00"].iter().enumerate() {
+            let mut bytes = gga(t);
+            bytes.extend(nmea("GPGSA,A,3,05,13,,,,,,,,,,,1.6,1.3,0.9"));
+            bytes.extend(nmea("GPGSV,1,1,02,05,40,083,46,13,20,200,30"));
+            d.push_extras(&bytes, i as i64 * NS_PER_S, 0, &mut |_| {}, &mut |x| {
+                if let GnssExtra::Sky(k) = x {
+                    skies.push(*k);
+                }
+            });
+        }
+        // The first cycle's sky, completed by the second GGA.
+        assert_eq!(skies.len(), 1);
+        assert_eq!((skies[0].num_sats, skies[0].used(), skies[0].stamp.seq), (2, 2, 0));
+        // A UBX sky holds the NMEA ones back for a while; numbered as one stream.
+        let mut s = Skies::default();
+        let mut out = Vec::new();
+        for (from_ubx, host_ns) in [
+            (false, 0),
+            (true, 10 * NS_PER_S),
+            (false, 11 * NS_PER_S),
+            (false, 10 * NS_PER_S + UBX_SKY_HOLD_NS + 1),
+        ] {
+            let mut k = skies[0];
+            k.stamp.host_ns = host_ns;
+            s.publish(from_ubx, &k, &mut |x| {
+                if let GnssExtra::Sky(k) = x {
+                    out.push(*k);
+                }
+            });
+        }
+        assert_eq!(out.iter().map(|k| k.stamp.seq).collect::<Vec<_>>(), [0, 1, 2]);
+        assert_eq!(s.suppressed, 1);
     }
 
     #[test]
