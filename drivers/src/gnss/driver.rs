@@ -598,7 +598,7 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
                     None
                 }
                 Err(e) if e.kind() == ErrorKind::TimedOut => {
-                    dec.flush(&mut |fix| emit(fix, &mut health));
+                    dec.flush_extras(&mut |fix| emit(fix, &mut health), &mut |x| extras.publish(x));
                     if !idle {
                         idle = true;
                         let _ = port.set_timeout(IDLE_WAIT);
@@ -610,7 +610,7 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
             };
             if let Some(why) = closed {
                 // Everything of the epoch in progress has arrived: emit it, then reopen.
-                dec.flush(&mut |fix| emit(fix, &mut health));
+                dec.flush_extras(&mut |fix| emit(fix, &mut health), &mut |x| extras.publish(x));
                 dec.reset();
                 warn!("{}: {why}; reopening with backoff", args.port);
                 health.add(pc.reopens, 1);

@@ -63,6 +63,12 @@ pub trait GnssDecoder {
         let _ = extra;
         self.push(bytes, read_host_ns, ns_per_byte, out);
     }
+    /// As [`flush`](Self::flush), also handing over the products the idle line completes (the
+    /// sky of the epoch or cycle just ended). Default: [`flush`](Self::flush) alone.
+    fn flush_extras(&mut self, out: &mut impl FnMut(&GnssFix), extra: &mut impl FnMut(GnssExtra<'_>)) {
+        let _ = extra;
+        self.flush(out);
+    }
 }
 
 /// A receiver's product other than a fix, as the sample published for it.
@@ -167,6 +173,12 @@ macro_rules! gnss_protocols {
             fn flush(&mut self, out: &mut impl FnMut(&GnssFix)) {
                 match self {
                     $(Self::$variant(d) => d.flush(out),)*
+                }
+            }
+
+            fn flush_extras(&mut self, out: &mut impl FnMut(&GnssFix), extra: &mut impl FnMut(GnssExtra<'_>)) {
+                match self {
+                    $(Self::$variant(d) => d.flush_extras(out, extra),)*
                 }
             }
 

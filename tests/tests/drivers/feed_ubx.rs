@@ -3,37 +3,41 @@
 //! `navsync gnss --protocol auto` processes: the fixes on `navsync/gnss/{id}/fix` are, field by
 //! field, what the offline decoder makes of the same bytes, and the receiver's other products
 //! arrive on their services, as many as offline: TIM-TP on `…/timepulse` (u-blox-m8t-time),
-//! RXM-SFRBX subframes on `…/nav-data` (ublox-glo), and the NEO-M8L's own IMU (ESF-MEAS) as
-//! `navsync/imu/{imu_id}/sample` with `--imu-id`.
+//! RXM-SFRBX subframes on `…/nav-data` (ublox-glo), the NEO-M8L's own IMU (ESF-MEAS) as
+//! `navsync/imu/{imu_id}/sample` with `--imu-id`, and the skies of NAV-SAT/NAV-SVINFO on
+//! `…/sky` (every capture).
 
 use std::time::{Duration, Instant};
 
 use navsync_drivers::gnss::capture::gpsd_header;
 use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra, Protocol};
 use navsync_shared::ipc::Subscriber;
-use navsync_shared::samples::{GnssFix, GnssNavData, GnssTimePulse, ImuSample};
+use navsync_shared::samples::{GnssFix, GnssNavData, GnssSky, GnssTimePulse, ImuSample};
 use navsync_shared::services;
 use navsync_tests::{TestEnv, shared_material};
 
-/// What the offline decoder makes of a capture: fixes, time pulses, subframes, IMU samples.
-fn offline(bytes: &[u8]) -> (Vec<GnssFix>, usize, usize, usize) {
+/// What the offline decoder makes of a capture: fixes, time pulses, subframes, IMU samples,
+/// skies.
+fn offline(bytes: &[u8]) -> (Vec<GnssFix>, usize, usize, usize, usize) {
     let (header, _) = gpsd_header(bytes);
     let mut d = Decoder::new(Protocol::Auto);
-    let (mut fixes, mut pulses, mut subframes, mut imu) = (Vec::new(), 0, 0, 0);
+    let (mut fixes, mut pulses, mut subframes, mut imu, mut skies) = (Vec::new(), 0, 0, 0, 0);
+    let mut count = |x: GnssExtra<'_>| match x {
+        GnssExtra::TimePulse(_) => pulses += 1,
+        GnssExtra::NavData(_) => subframes += 1,
+        GnssExtra::Imu(_) => imu += 1,
+        GnssExtra::Sky(_) => skies += 1,
+        _ => {}
+    };
     d.push_extras(
         bytes.get(header..).unwrap_or(&[]),
         0,
         0,
         &mut |f| fixes.push(*f),
-        &mut |x| match x {
-            GnssExtra::TimePulse(_) => pulses += 1,
-            GnssExtra::NavData(_) => subframes += 1,
-            GnssExtra::Imu(_) => imu += 1,
-            _ => {}
-        },
+        &mut count,
     );
-    d.flush(&mut |f| fixes.push(*f));
-    (fixes, pulses, subframes, imu)
+    d.flush_extras(&mut |f| fixes.push(*f), &mut count);
+    (fixes, pulses, subframes, imu, skies)
 }
 
 fn same(a: f64, b: f64) -> bool {
@@ -51,8 +55,9 @@ fn ubx_captures_through_feed_and_gnss_match_the_offline_decoder() {
         pulses: Subscriber<GnssTimePulse>,
         nav: Subscriber<GnssNavData>,
         imu: Subscriber<ImuSample>,
-        got: (Vec<GnssFix>, usize, usize, usize),
-        want: (Vec<GnssFix>, usize, usize, usize),
+        sky: Subscriber<GnssSky>,
+        got: (Vec<GnssFix>, usize, usize, usize, usize),
+        want: (Vec<GnssFix>, usize, usize, usize, usize),
     }
     let mut runs = Vec::new();
     // One capture at a time, paced by the line rate and drained while it plays (a subscriber
@@ -67,7 +72,8 @@ fn ubx_captures_through_feed_and_gnss_match_the_offline_decoder() {
             pulses: node.subscriber(&services::gnss_time_pulse(&id)).unwrap(),
             nav: node.subscriber(&services::gnss_nav_data(&id)).unwrap(),
             imu: node.subscriber(&services::imu_sample(&imu_id)).unwrap(),
-            got: (Vec::new(), 0, 0, 0),
+            sky: node.subscriber(&services::gnss_sky(&id)).unwrap(),
+            got: (Vec::new(), 0, 0, 0, 0),
             want,
         };
         let link = env.dir.join(&id);
@@ -111,8 +117,9 @@ fn ubx_captures_through_feed_and_gnss_match_the_offline_decoder() {
             r.got.1 += r.pulses.for_each(|_| {}).unwrap();
             r.got.2 += r.nav.for_each(|_| {}).unwrap();
             r.got.3 += r.imu.for_each(|_| {}).unwrap();
-            let complete =
-                r.got.0.len() >= r.want.0.len() && (r.got.1, r.got.2, r.got.3) >= (r.want.1, r.want.2, r.want.3);
+            r.got.4 += r.sky.for_each(|_| {}).unwrap();
+            let complete = r.got.0.len() >= r.want.0.len()
+                && (r.got.1, r.got.2, r.got.3, r.got.4) >= (r.want.1, r.want.2, r.want.3, r.want.4);
             if complete || t0.elapsed() > Duration::from_secs(60) {
                 break;
             }
@@ -126,7 +133,7 @@ fn ubx_captures_through_feed_and_gnss_match_the_offline_decoder() {
     for (r, name) in runs.iter().zip(captures) {
         let (got, want) = (&r.got, &r.want);
         println!(
-            "{name}: fixes {}/{}, time pulses {}/{}, subframes {}/{}, IMU samples {}/{} (live/offline)",
+            "{name}: fixes {}/{}, time pulses {}/{}, subframes {}/{}, IMU samples {}/{}, skies {}/{} (live/offline)",
             got.0.len(),
             want.0.len(),
             got.1,
@@ -134,11 +141,13 @@ fn ubx_captures_through_feed_and_gnss_match_the_offline_decoder() {
             got.2,
             want.2,
             got.3,
-            want.3
+            want.3,
+            got.4,
+            want.4
         );
         assert_eq!(
-            (got.0.len(), got.1, got.2, got.3),
-            (want.0.len(), want.1, want.2, want.3),
+            (got.0.len(), got.1, got.2, got.3, got.4),
+            (want.0.len(), want.1, want.2, want.3, want.4),
             "{name}"
         );
         for (a, b) in got.0.iter().zip(&want.0) {
@@ -160,6 +169,11 @@ fn ubx_captures_through_feed_and_gnss_match_the_offline_decoder() {
     assert!(runs[0].want.3 > 100, "neo-m8l: {} IMU samples", runs[0].want.3);
     assert!(runs[1].want.1 > 100, "m8t-time: {} time pulses", runs[1].want.1);
     assert!(runs[2].want.2 > 500, "glo: {} subframes", runs[2].want.2);
+    assert!(
+        runs.iter().all(|r| r.want.4 > 10),
+        "skies: {:?}",
+        runs.iter().map(|r| r.want.4).collect::<Vec<_>>()
+    );
     drop((runs, node));
     env.finish();
 }

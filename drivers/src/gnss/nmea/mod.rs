@@ -31,8 +31,7 @@ impl NmeaDecoder {
     }
 
     /// Hands over the sky still being assembled (its GSV sentences were the last of the
-    /// stream), as [`GnssExtra::Sky`]. The live driver does not call it: there, the next
-    /// cycle's first fix sentence completes it.
+    /// stream, or of the burst before the line went idle), as [`GnssExtra::Sky`].
     pub fn flush_sky(&mut self, extra: &mut impl FnMut(GnssExtra<'_>)) {
         self.sky.flush(&mut |k| extra(GnssExtra::Sky(k)));
     }
@@ -93,6 +92,11 @@ impl GnssDecoder for NmeaDecoder {
 
     fn flush(&mut self, out: &mut impl FnMut(&GnssFix)) {
         self.assembler.flush(out);
+    }
+
+    fn flush_extras(&mut self, out: &mut impl FnMut(&GnssFix), extra: &mut impl FnMut(GnssExtra<'_>)) {
+        self.assembler.flush(out);
+        self.flush_sky(extra);
     }
 
     fn reset(&mut self) {

@@ -8,8 +8,9 @@
 //! `GQ`, …) and signal sends a group of its own; a receiver sends the groups of one cycle
 //! one after another, some with GSA or other sentences between the groups. The sky of a
 //! cycle is the GSV sentences up to the next fix sentence (GGA, RMC, GNS, GLL): it is complete
-//! when one arrives (or when a group starts again: a receiver that sends nothing but GSV), and
-//! stamped with the host time of its first GSV's first byte. A satellite reported on several signals is one entry (the first
+//! when one arrives, when a group starts again (a receiver that sends nothing but GSV) or when
+//! the line goes idle ([`SkyAssembler::flush`]), and stamped with the host time of its first
+//! GSV's first byte. A satellite reported on several signals is one entry (the first
 //! elevation and azimuth, the highest SNR).
 //!
 //! Used: the PRNs of the receiver's latest GSA group (the GSA sentences of one cycle, one per

@@ -300,6 +300,10 @@ impl GnssDecoder for AutoDecoder {
     }
 
     fn flush(&mut self, out: &mut impl FnMut(&GnssFix)) {
+        self.flush_extras(out, &mut |_| {});
+    }
+
+    fn flush_extras(&mut self, out: &mut impl FnMut(&GnssFix), extra: &mut impl FnMut(GnssExtra<'_>)) {
         let Self {
             ubx,
             nmea,
@@ -310,11 +314,22 @@ impl GnssDecoder for AutoDecoder {
             order,
             held_back,
             resets,
-            ..
+            skies,
         } = self;
         let out = &mut |fix: &GnssFix| Self::renumbered((emitted, order, held_back, resets), fix, out);
-        ubx.flush(&mut |fix: &GnssFix| Self::ubx_fix(vote, suppressed, pending, fix, out));
-        nmea.flush(&mut |fix| Self::nmea_fix(vote, suppressed, pending, fix, out));
+        ubx.flush_events(&mut |ev| match ev {
+            Event::Fix(fix) => Self::ubx_fix(vote, suppressed, pending, fix, out),
+            Event::Extra(GnssExtra::Sky(k)) => skies.publish(true, k, extra),
+            _ => {}
+        });
+        nmea.flush_extras(
+            &mut |fix| Self::nmea_fix(vote, suppressed, pending, fix, out),
+            &mut |x| {
+                if let GnssExtra::Sky(k) = x {
+                    skies.publish(false, k, extra);
+                }
+            },
+        );
         if let Some(p) = pending.take() {
             out(&p);
         }

@@ -226,9 +226,7 @@ impl UbxDecoder {
                         _ => {}
                     }
                     // A new satellite view (its epoch emitted, or a late NAV-SAT for it).
-                    if assembler.satellite_views() != *sky_views {
-                        *sky_views = assembler.satellite_views();
-                        let sky = samples::sky_sample(assembler.satellites(), next(4));
+                    if let Some(sky) = new_sky(assembler, sky_views, &mut extra_seq[4]) {
                         on(Event::Extra(GnssExtra::Sky(&sky)));
                     }
                 }
@@ -237,6 +235,14 @@ impl UbxDecoder {
             Frame::Nmea { text, host_ns } => on(Event::Nmea { text, host_ns }),
             Frame::Rtcm3 { .. } => {}
         });
+    }
+
+    /// As [`GnssDecoder::flush`], with the sky of the epoch it completes as [`Event::Extra`].
+    pub fn flush_events(&mut self, on: &mut impl FnMut(Event<'_>)) {
+        self.assembler.flush(&mut |fix| on(Event::Fix(fix)));
+        if let Some(sky) = new_sky(&self.assembler, &mut self.sky_views, &mut self.extra_seq[4]) {
+            on(Event::Extra(GnssExtra::Sky(&sky)));
+        }
     }
 
     /// What a growing UBX error counter means (shared with [`auto::AutoDecoder`]).
@@ -259,6 +265,17 @@ impl UbxDecoder {
             _ => return None,
         })
     }
+}
+
+/// The assembler's satellite view as a sky, when it is one not yet published (`published`:
+/// the views published so far; `seq`: the skies' sequence counter).
+fn new_sky(assembler: &EpochAssembler, published: &mut u64, seq: &mut u64) -> Option<navsync_shared::samples::GnssSky> {
+    if assembler.satellite_views() == *published {
+        return None;
+    }
+    *published = assembler.satellite_views();
+    *seq += 1;
+    Some(samples::sky_sample(assembler.satellites(), *seq - 1))
 }
 
 impl GnssDecoder for UbxDecoder {
@@ -287,6 +304,14 @@ impl GnssDecoder for UbxDecoder {
 
     fn flush(&mut self, out: &mut impl FnMut(&GnssFix)) {
         self.assembler.flush(out);
+    }
+
+    fn flush_extras(&mut self, out: &mut impl FnMut(&GnssFix), extra: &mut impl FnMut(GnssExtra<'_>)) {
+        self.flush_events(&mut |ev| match ev {
+            Event::Fix(fix) => out(fix),
+            Event::Extra(x) => extra(x),
+            Event::Nmea { .. } | Event::NavSolution { .. } => {}
+        });
     }
 
     fn reset(&mut self) {
