@@ -165,6 +165,11 @@ pub struct GnssArgs {
 }
 
 /// How long the receiver has to answer the MON-VER poll, and each configuration command.
+/// Health counters the driver registers besides its decoder's: the port's six
+/// (`PortCounters`), `extra_publish_errors`, `events_unmapped`, `configure_acked`,
+/// `configure_failed`. A decoder's counters and these must fit one `Health` report
+/// (`MAX_COUNTERS`): each decoder's test checks it.
+pub const DRIVER_COUNTERS: usize = 10;
 const CONFIGURE_ANSWER_TIMEOUT: Duration = Duration::from_millis(1500);
 
 /// Configures a u-blox receiver on `port` (module [`super::ubx::configure`]); what each
@@ -473,6 +478,7 @@ pub fn run(args: &GnssArgs) -> Result<(), GnssError> {
     let mut publisher = node.publisher::<GnssFix>(&services::gnss_fix(&args.id))?;
     let mut health = HealthReporter::new(&node, &process)?;
     let r_fix = health.rate("fixes_out")?;
+    // DRIVER_COUNTERS counts these and the four below.
     let pc = PortCounters {
         baud: health.counter("baud")?,
         hunts: health.counter("baud_hunts")?,
