@@ -470,6 +470,17 @@ pub fn run_in_own_process(here: &str) -> bool {
 /// Heap allocations counted by [`CountingAllocator`] since the process started.
 static ALLOCATIONS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
+thread_local! {
+    /// The same, of this thread only (a `const` initialiser: no lazy set-up, no destructor, so
+    /// the allocator may use it).
+    static THREAD_ALLOCATIONS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+}
+
+fn count_allocation() {
+    ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    THREAD_ALLOCATIONS.with(|c| c.set(c.get() + 1));
+}
+
 /// A global allocator that forwards to the system's and counts every allocation and
 /// reallocation of the process, for the no-allocation tests (`tests/tests/process/` installs it
 /// with `#[global_allocator] static GLOBAL: CountingAllocator = CountingAllocator;` and runs
@@ -479,7 +490,7 @@ pub struct CountingAllocator;
 // SAFETY: forwards to the system allocator; only counts.
 unsafe impl std::alloc::GlobalAlloc for CountingAllocator {
     unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        count_allocation();
         // SAFETY: the caller's contract is the system allocator's.
         unsafe { std::alloc::System.alloc(layout) }
     }
@@ -488,7 +499,7 @@ unsafe impl std::alloc::GlobalAlloc for CountingAllocator {
         unsafe { std::alloc::System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        count_allocation();
         // SAFETY: as above.
         unsafe { std::alloc::System.realloc(ptr, layout, new_size) }
     }
@@ -497,6 +508,12 @@ unsafe impl std::alloc::GlobalAlloc for CountingAllocator {
 /// Allocations counted so far by [`CountingAllocator`] (0 when it is not installed).
 pub fn allocations() -> u64 {
     ALLOCATIONS.load(Ordering::Relaxed)
+}
+
+/// Allocations of the calling thread so far (for code that runs on the caller's thread, where
+/// the test harness's own threads must not count).
+pub fn thread_allocations() -> u64 {
+    THREAD_ALLOCATIONS.with(std::cell::Cell::get)
 }
 
 /// `navsync decode --yuma` of gpsd's `ublox-ned-m8t-sbfrx3` capture: the real GPS almanac as
