@@ -65,7 +65,7 @@ use std::collections::BinaryHeap;
 
 use navsync_wire::reflect::fixed_str;
 use navsync_wire::samples::{
-    AnySample, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, NetworkTime, PpsEdge, SimTruth,
+    AnySample, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, NetworkTime, PpsEdge, SimTruth,
 };
 
 /// Hold of PPS edges after their stamp, ns.
@@ -113,6 +113,8 @@ pub fn order_key(s: &AnySample) -> OrderKey {
         AnySample::NetworkTime(t) => (t.host_ns, 0, [3; 8], t.seq),
         // The receiver's sky (not an input of the filter): at its stamp, with the other reports.
         AnySample::Sky(s) => (s.stamp.host_ns, 7, [3; 8], s.stamp.seq),
+        // An output of the estimator, as its navigation states.
+        AnySample::EventPose(e) => (e.host_ns, 4, [1; 8], e.seq),
     };
     OrderKey { at_ns, rank, id, seq }
 }
@@ -139,6 +141,9 @@ pub enum Input {
     Truth(SimTruth),
     /// A reading of the network time service.
     NetworkTime(NetworkTime),
+    /// A receiver's time mark of an external event, with the receiver's id (NUL-padded; the
+    /// service's `{id}`, which the sample does not hold).
+    Event(GnssEvent, [u8; 8]),
     /// Any other sample: only its place in the order.
     Other(OrderKey),
 }
@@ -154,12 +159,24 @@ impl From<AnySample> for Input {
             AnySample::Raw(x) => Self::Raw(Box::new(x)),
             AnySample::NavData(x) => Self::NavData(x),
             AnySample::NetworkTime(x) => Self::NetworkTime(x),
+            AnySample::Event(x) => Self::Event(x, [0; 8]),
             other => Self::Other(order_key(&other)),
         }
     }
 }
 
 impl Input {
+    /// The input of `sample` from service `service`: an event carries the receiver's id.
+    pub fn from_service(sample: AnySample, service: &str) -> Self {
+        match sample {
+            AnySample::Event(e) => {
+                let id = service.split('/').nth(2).unwrap_or("");
+                Self::Event(e, fixed_str(id))
+            }
+            other => Self::from(other),
+        }
+    }
+
     /// Its place in the canonical order (the same as [`order_key`] of the sample).
     pub fn key(&self) -> OrderKey {
         match self {
@@ -210,6 +227,12 @@ impl Input {
                 rank: 0,
                 id: [3; 8],
                 seq: t.seq,
+            },
+            Self::Event(e, _) => OrderKey {
+                at_ns: e.stamp.host_ns,
+                rank: 7,
+                id: [0; 8],
+                seq: e.stamp.seq,
             },
             Self::Other(k) => *k,
         }

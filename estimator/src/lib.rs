@@ -30,6 +30,7 @@
 pub mod array;
 pub mod declare;
 pub mod evaluation;
+pub mod events;
 pub mod feed;
 pub mod gnss;
 pub mod input_order;

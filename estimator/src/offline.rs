@@ -9,7 +9,7 @@
 use std::borrow::BorrowMut;
 use std::time::{Duration, Instant};
 
-use navsync_wire::samples::{AnySample, NavState, NavStatus, SimTruth, TimeState};
+use navsync_wire::samples::{AnySample, EventPose, NavState, NavStatus, SimTruth, TimeState};
 use navsync_wire::time::NS_PER_S;
 
 use crate::evaluation::{DelayTruth, Evaluator, Summary};
@@ -39,6 +39,10 @@ pub enum Output<'a> {
     /// time (live: the host clock when published), so time states differ from the live ones
     /// in that field and in how many there are; navigation states do not.
     Time(&'a TimeState),
+    /// The delayed filter's state at an instant it has fused past ([`Pipeline::drain_fused`]).
+    Fused(&'a NavState),
+    /// An event with its pose ([`crate::events`]).
+    Event(&'a EventPose),
 }
 
 /// Builds the estimator `settings` describe and runs it over `samples` (each with a tag `T`,
@@ -79,6 +83,8 @@ pub fn estimate_smoothed<T: Clone, S: Into<Input>, I: IntoIterator<Item = (S, T)
     // Time states with the number of navigation states before them (their place in the order).
     let mut times: Vec<(usize, TimeState, T)> = Vec::new();
     let mut truths: Vec<SimTruth> = Vec::new();
+    // Event poses (from the delayed filter's states, not the smoothed ones), after the states.
+    let mut events: Vec<(EventPose, T)> = Vec::new();
     let samples = samples.into_iter().map(|(s, t)| {
         let s: Input = s.into();
         if let Input::Truth(x) = &s {
@@ -94,6 +100,8 @@ pub fn estimate_smoothed<T: Clone, S: Into<Input>, I: IntoIterator<Item = (S, T)
         |o, tag: &T| match o {
             Output::Nav(n) => navs.push((*n, tag.clone())),
             Output::Time(t) => times.push((navs.len(), *t, tag.clone())),
+            Output::Event(e) => events.push((*e, tag.clone())),
+            Output::Fused(_) => {}
         },
     );
     let smoothed = feed.pipeline().nav().smoother().map(|l| l.smooth()).unwrap_or_default();
@@ -138,6 +146,9 @@ pub fn estimate_smoothed<T: Clone, S: Into<Input>, I: IntoIterator<Item = (S, T)
     }
     for (_, ts, tt) in ti {
         on_output(Output::Time(&ts), &tt);
+    }
+    for (e, tag) in &events {
+        on_output(Output::Event(e), tag);
     }
     OfflineRun {
         summary,
@@ -255,6 +266,15 @@ pub fn run_feed<T, P: BorrowMut<Pipeline>, S: Into<Input>, I: IntoIterator<Item 
         let t = Instant::now();
         let _ = feed.finish(&step);
         in_estimator += t.elapsed();
+        if all && feed.order().is_empty() {
+            // The end of the stream: the events still waiting go out (posed where the fused
+            // states reach them), with the last sample's tag.
+            feed.pipeline_mut().flush_events();
+        }
+        feed.pipeline_mut()
+            .drain_fused(&mut |s| on_output(Output::Fused(s), &step.tag));
+        feed.pipeline_mut()
+            .drain_event_poses(&mut |e| on_output(Output::Event(e), &step.tag));
         // Computing a time state does not change the navigation states (it only reads the
         // filter's Δ into the time synchroniser's report).
         if time_states

@@ -10,10 +10,11 @@
 
 use navsync_wire::reflect::Reflect;
 use navsync_wire::samples::{
-    GnssFix, GnssNavData, GnssRaw, GnssTimePulse, IMU_FLAG_RECEIVER_CLOCK, ImuSample, NavState, NetworkTime, PpsEdge,
-    TimeState, TimeStatus,
+    EventPose, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, IMU_FLAG_RECEIVER_CLOCK, ImuSample, NavState,
+    NetworkTime, PpsEdge, TimeState, TimeStatus,
 };
 
+use crate::events::{EventCounters, EventPoses};
 use crate::gnss::ranges::{EphemerisStore, RangeBuildCounts, RangeEpoch};
 use crate::gnss::spp::{self, SppSettings};
 use crate::input_order::Input;
@@ -25,6 +26,9 @@ use crate::nav::measurements::gnss::{self, GnssAccuracy};
 use crate::nav::navigator::{NavConfig, Navigator};
 use crate::time::device_timing::{DeviceTiming, DeviceTimingConfig};
 use crate::time::time_sync::{TimeSync, TimeSyncConfig};
+
+/// Fused states kept for a caller that has not taken them ([`Pipeline::drain_fused`]), at most.
+const MAX_UNDRAINED: usize = 8192;
 
 /// Prior of Δ under software sync and its 1-sigma, s: any receiver latency below the fusion
 /// horizon.
@@ -119,13 +123,23 @@ pub struct Pipeline {
     ephemerides: EphemerisStore,
     /// What the raw epochs left out, by reason.
     range_counts: RangeBuildCounts,
+    /// The delayed filter's states, labelled, since the caller last took them
+    /// ([`Pipeline::drain_fused`]).
+    fused: Vec<NavState>,
+    /// Host time and GNSS label of the last fused state given out, ns.
+    last_fused: (i64, i64),
+    /// Fused states left out because a number in them was not finite.
+    fused_not_finite: u64,
+    /// The events waiting for their pose, and the poses made.
+    events: EventPoses,
 }
 
 impl Pipeline {
     /// A fresh estimator.
     pub fn new(cfg: PipelineConfig) -> Self {
         let time = TimeSync::new(cfg.time);
-        let nav = Navigator::with_measurements(cfg.nav, cfg.measurements);
+        let mut nav = Navigator::with_measurements(cfg.nav, cfg.measurements);
+        nav.keep_fused();
         let mut array_cfg = cfg.array.clone();
         array_cfg.reference = array_cfg
             .units
@@ -147,6 +161,10 @@ impl Pipeline {
             catch_up_due: false,
             ephemerides: EphemerisStore::default(),
             range_counts: RangeBuildCounts::default(),
+            fused: Vec::with_capacity(64),
+            last_fused: (i64::MIN, i64::MIN),
+            fused_not_finite: 0,
+            events: EventPoses::default(),
         }
     }
 
@@ -189,7 +207,106 @@ impl Pipeline {
             self.array
                 .emit(&mut |v| nav.on_filter_imu(v.host_ns, v.dt_s, v.gyro_rps, v.accel_mps2));
             self.nav.catch_up(CATCH_UP_STEPS);
+            self.take_fused();
         }
+    }
+
+    /// Labels the delayed filter's new states with their GNSS time (as [`Self::nav_state`]
+    /// labels the present's), keeps the finite ones in time order for the caller and poses
+    /// the events they reach.
+    fn take_fused(&mut self) {
+        let mut fused = std::mem::take(&mut self.fused);
+        if fused.len() >= MAX_UNDRAINED {
+            // A caller that never takes them (a test driving the pipeline directly): bounded.
+            fused.clear();
+        }
+        let (d, _) = self.nav.gnss_delay();
+        let hardware = self.time.status().is_clock_mapped();
+        let time_status = self.time.status() as u8;
+        let mut last = self.last_fused;
+        let mut not_finite = 0;
+        let (time, axis, events) = (&self.time, self.cfg.time.time_axis, &mut self.events);
+        self.nav.drain_fused(&mut |s| {
+            let finite = [s.lat_deg, s.lon_deg, s.height_m]
+                .iter()
+                .chain(&s.vel_ned_mps)
+                .chain(&s.q_nb)
+                .chain(&s.pos_std_ned_m)
+                .chain(&s.vel_std_ned_mps)
+                .chain(&s.att_std_rad)
+                .all(|x| x.is_finite());
+            if !finite {
+                not_finite += 1;
+                return;
+            }
+            if s.host_ns <= last.0 {
+                return;
+            }
+            let mut s = *s;
+            let at_host = match axis {
+                Some(axis) => Some(axis.utc_ns_at(s.host_ns)),
+                None => time.utc_ns_at_host(s.host_ns),
+            };
+            s.utc_ns = match at_host {
+                Some(u) if hardware && d.is_finite() => u + (d * 1e9).round() as i64,
+                Some(u) => u,
+                None => i64::MIN,
+            };
+            // Labels never go back (as the present's).
+            if s.utc_ns != i64::MIN {
+                let next = last.1.saturating_add(1);
+                if s.utc_ns < next && next - s.utc_ns < 1_000_000_000 {
+                    s.utc_ns = next;
+                }
+                last.1 = s.utc_ns;
+            }
+            last.0 = s.host_ns;
+            s.time_status = time_status;
+            events.on_fused(&s);
+            fused.push(s);
+        });
+        self.last_fused = last;
+        self.fused_not_finite += not_finite;
+        self.fused = fused;
+    }
+
+    /// Hands each of the delayed filter's states made since the last call to `f`, oldest
+    /// first, labelled with its GNSS time: the state of an instant once every measurement up
+    /// to it is fused (what the history of states keeps as [`Source::Fused`](navsync_wire::interpolation::Source)).
+    pub fn drain_fused(&mut self, f: &mut dyn FnMut(&NavState)) {
+        for s in &self.fused {
+            f(s);
+        }
+        self.fused.clear();
+    }
+
+    /// Hands each event pose made since the last call to `f` ([`crate::events`]).
+    pub fn drain_event_poses(&mut self, f: &mut dyn FnMut(&EventPose)) {
+        self.events.drain(f);
+    }
+
+    /// Gives every event still waiting out (at the end of a stream): posed where the fused
+    /// states reach it, else without a pose.
+    pub fn flush_events(&mut self) {
+        self.catch_up();
+        self.events.flush();
+    }
+
+    /// The events' counters.
+    pub fn event_counters(&self) -> EventCounters {
+        self.events.counters()
+    }
+
+    /// Fused states left out because a number in them was not finite.
+    pub fn fused_not_finite(&self) -> u64 {
+        self.fused_not_finite
+    }
+
+    /// Takes a receiver's event report (TIM-TM2) from device `device_id`: each edge gets its
+    /// pose once the delayed filter has fused past it ([`Self::drain_event_poses`]).
+    pub fn on_event(&mut self, e: &GnssEvent, device_id: [u8; 8]) {
+        self.catch_up();
+        self.events.on_event(e, device_id);
     }
 
     /// Feeds one input of any kind: the one dispatch of every input to the `on_*` of its kind,
@@ -205,6 +322,7 @@ impl Pipeline {
             Input::Raw(r) => self.on_raw(r),
             Input::NavData(d) => self.on_nav_data(d),
             Input::NetworkTime(t) => out.time_changed = self.on_network_time(t),
+            Input::Event(e, id) => self.on_event(e, *id),
             Input::Truth(_) | Input::Other(_) => {}
         }
         out

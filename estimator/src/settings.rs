@@ -325,7 +325,14 @@ impl Settings {
             .iter()
             .filter(|_| tight)
             .flat_map(|id| [services::gnss_raw(id), services::gnss_nav_data(id)]);
-        pps.chain(gnss).chain(pulses).chain(imus).chain(raw).collect()
+        // A receiver's event marks (TIM-TM2): each gets its pose ([`crate::events`]).
+        let events = self.inputs.gnss.iter().map(|id| services::gnss_event(id));
+        pps.chain(gnss)
+            .chain(pulses)
+            .chain(events)
+            .chain(imus)
+            .chain(raw)
+            .collect()
     }
 
     /// Which Δ the filter should find (for the accuracy report against a simulated truth).

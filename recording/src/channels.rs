@@ -26,8 +26,8 @@ use super::mcap_reader::{Channel, Schema};
 use navsync_shared::json::{from_json, from_json_onto, schema, to_json};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{
-    AnySample, EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, Health, ImuSample,
-    NavState, NetworkTime, PpsEdge, SimTruth, TimeState,
+    AnySample, EstimatorSettings, EventPose, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, Health,
+    ImuSample, NavState, NetworkTime, PpsEdge, SimTruth, TimeState,
 };
 use navsync_shared::services::ServiceKind;
 use navsync_shared::{cdr, ros2msg};
@@ -187,6 +187,7 @@ sample_type!(GnssNavData, GnssNavData, NavData);
 sample_type!(EstimatorSettings, EstimatorSettings, Settings);
 sample_type!(NetworkTime, NetworkTime, NetworkTime);
 sample_type!(GnssSky, GnssSky, Sky);
+sample_type!(EventPose, EventPose, EventPose);
 
 /// Evaluates `$body` with the type alias `$T` set to the sample type of `$kind`.
 #[macro_export]
@@ -249,6 +250,10 @@ macro_rules! with_sample_type {
                 type $T = navsync_shared::samples::GnssSky;
                 $body
             }
+            navsync_shared::services::ServiceKind::EventPose => {
+                type $T = navsync_shared::samples::EventPose;
+                $body
+            }
         }
     };
 }
@@ -270,6 +275,7 @@ pub fn sample_json(sample: &AnySample) -> serde_json::Value {
         AnySample::Settings(x) => to_json(x),
         AnySample::NetworkTime(x) => to_json(x),
         AnySample::Sky(x) => to_json(x),
+        AnySample::EventPose(x) => to_json(x),
     }
 }
 
@@ -290,6 +296,7 @@ fn encode_cdr(sample: &AnySample, out: &mut Vec<u8>) {
         AnySample::Settings(x) => cdr::encode(x, out),
         AnySample::NetworkTime(x) => cdr::encode(x, out),
         AnySample::Sky(x) => cdr::encode(x, out),
+        AnySample::EventPose(x) => cdr::encode(x, out),
     }
 }
 

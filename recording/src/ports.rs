@@ -36,6 +36,8 @@ pub enum AnySubscriber {
     NetworkTime(Subscriber<navsync_shared::samples::NetworkTime>),
     /// `navsync/gnss/{id}/sky`
     Sky(Subscriber<navsync_shared::samples::GnssSky>),
+    /// `navsync/event/{id}/pose`
+    EventPose(Subscriber<navsync_shared::samples::EventPose>),
 }
 
 macro_rules! each_subscriber {
@@ -55,6 +57,7 @@ macro_rules! each_subscriber {
             AnySubscriber::Settings($s) => $body,
             AnySubscriber::NetworkTime($s) => $body,
             AnySubscriber::Sky($s) => $body,
+            AnySubscriber::EventPose($s) => $body,
         }
     };
 }
@@ -82,6 +85,7 @@ impl AnySubscriber {
             ServiceKind::EstimatorSettings => Self::Settings(node.input(service)?),
             ServiceKind::NetworkTime => Self::NetworkTime(node.input(service)?),
             ServiceKind::GnssSky => Self::Sky(node.input(service)?),
+            ServiceKind::EventPose => Self::EventPose(node.input(service)?),
         })
     }
 
@@ -126,6 +130,8 @@ pub enum AnyPublisher {
     NetworkTime(Publisher<navsync_shared::samples::NetworkTime>),
     /// `navsync/gnss/{id}/sky`
     Sky(Publisher<navsync_shared::samples::GnssSky>),
+    /// `navsync/event/{id}/pose`
+    EventPose(Publisher<navsync_shared::samples::EventPose>),
 }
 
 impl AnyPublisher {
@@ -146,6 +152,7 @@ impl AnyPublisher {
             ServiceKind::EstimatorSettings => Self::Settings(node.publisher(service)?),
             ServiceKind::NetworkTime => Self::NetworkTime(node.publisher(service)?),
             ServiceKind::GnssSky => Self::Sky(node.publisher(service)?),
+            ServiceKind::EventPose => Self::EventPose(node.publisher(service)?),
         })
     }
 
@@ -166,6 +173,7 @@ impl AnyPublisher {
             Self::Settings(p) => pub_as(p, sample),
             Self::NetworkTime(p) => pub_as(p, sample),
             Self::Sky(p) => pub_as(p, sample),
+            Self::EventPose(p) => pub_as(p, sample),
         }
     }
 }

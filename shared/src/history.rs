@@ -27,13 +27,17 @@
 //!
 //! Layout, little-endian 64-bit words: a header of [`HEADER_WORDS`] (magic `NAVSHIST`, layout
 //! version [`LAYOUT_VERSION`], the `NavState` type name it holds, 32 bytes, capacity, words per
-//! record, header words, the write index: records written so far, the writer's pid), then
-//! `capacity` records of [`RECORD_WORDS`] words ([`Record`]: word 0 the record's sequence
-//! lock, word 1 its index, then the state's fields; `docs/guide/history.md` has the table).
-//! Record `i` is in slot `i % capacity`; a record holds an estimator state ([`Source`]):
-//! predicted now, fused (the delayed filter's state at that instant) reserved for the next
-//! step of issue 39.
-//!
+//! record, header words, the write index of the predicted ring: records written so far, the
+//! writer's pid, the write index of the fused ring), then two rings of `capacity` records of
+//! [`RECORD_WORDS`] words each ([`Record`]: word 0 the record's sequence lock, word 1 its index,
+//! then the state's fields; `docs/guide/history.md` has the table): first the real-time
+//! predictor's states ([`Source::Predicted`], as published on `navsync/nav/state`), then the
+//! delayed filter's ([`Source::Fused`]: its state at each instant it stepped over, with every
+//! measurement up to that instant fused, about the fusion horizon behind the present).
+//! Record `i` of a ring is in its slot `i % capacity`. A query answers from the fused states
+//! where they reach the instant and from the predicted ones after them, so an answer improves
+//! once the delayed filter has passed its instant ([`Interpolated::sources`] says which).
+
 //! # Memory ordering (a sequence lock per record)
 //!
 //! One writer, any number of readers, and neither ever waits for the other: a reader stopped
@@ -60,18 +64,10 @@
 //!
 //! # Interpolation
 //!
-//! Between the records `a` and `b` around the instant, `τ = (t − t_a)/h`, `h = t_b − t_a`:
-//!
-//! - position: cubic Hermite (the basis `h00 = 2τ³ − 3τ² + 1`, `h10 = τ³ − 2τ² + τ`,
-//!   `h01 = −2τ³ + 3τ²`, `h11 = τ³ − τ²`; e.g. Kincaid & Cheney, *Numerical Analysis*, §6.3)
-//!   on `a`'s and `b`'s positions with their NED velocities as the end slopes, in a local NED
-//!   frame at `a` (north = Δφ·(R_M + h_a), east = Δλ·(R_N + h_a)·cos φ_a, down = −Δh, undone
-//!   the same way): exact for a constant acceleration (a quadratic is a cubic);
-//! - velocity: linear, i.e. a constant acceleration `(v_b − v_a)/h` over the interval (the
-//!   derivative of the position polynomial would add the position's noise to the velocity);
-//! - attitude: slerp of the quaternions (Shoemake, "Animating rotation with quaternion
-//!   curves", SIGGRAPH 1985) along the shorter arc, roll/pitch/yaw from the result;
-//! - σ's and UTC: linear; the answer carries the [`Source`] and status of both records.
+//! Between the two records around the instant as [`navsync_wire::interpolation`] describes
+//! (cubic Hermite position, linear velocity, slerp attitude, linear σ's), found by the rule of
+//! [`bracket_index`]; the estimator's event poses use the same functions on the same fused
+//! states, so an event's pose equals `state_at` of its time.
 //!
 //! [`History::state_at`] takes a UTC instant (ns since 1970, the GNSS time as UTC), finds the
 //! records around it by their UTC, maps it to host time linearly between them, and
@@ -82,14 +78,16 @@ use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering, fence};
 
-use crate::earth;
+pub use crate::interpolation::{
+    Interpolated, Pose, Record, Source, at_utc, bracket_index, hermite, interpolate, rpy_of, slerp,
+};
 use crate::reflect::Reflect;
 use crate::samples::NavState;
 
 /// `NAVSHIST`, little-endian, word 0 of the header.
 pub const MAGIC: u64 = u64::from_le_bytes(*b"NAVSHIST");
 /// The layout of the header and the records (word 1 of the header).
-pub const LAYOUT_VERSION: u64 = 1;
+pub const LAYOUT_VERSION: u64 = 2;
 /// Words of the header.
 pub const HEADER_WORDS: usize = 16;
 /// Words of one record (256 bytes).
@@ -106,8 +104,11 @@ mod hw {
     pub const CAPACITY: usize = 6;
     pub const RECORD_WORDS: usize = 7;
     pub const HEADER_WORDS: usize = 8;
+    /// Records written to the ring of predicted states.
     pub const WRITE_INDEX: usize = 9;
     pub const WRITER_PID: usize = 10;
+    /// Records written to the ring of fused states.
+    pub const FUSED_WRITE_INDEX: usize = 11;
 }
 
 /// Record word indices.
@@ -130,155 +131,64 @@ mod rw {
     pub const RPY: usize = 27;
 }
 
-/// Where a record's state comes from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum Source {
-    /// The real-time predictor's state, as published on `navsync/nav/state`.
-    Predicted = 1,
-    /// The delayed filter's state once it fused that instant (reserved: not written yet).
-    Fused = 2,
-}
-
-impl Source {
-    fn from_u8(v: u8) -> Option<Self> {
-        match v {
-            1 => Some(Self::Predicted),
-            2 => Some(Self::Fused),
-            _ => None,
+/// Writes `r` into the words of a record (word 0, the sequence, left out).
+fn encode(this: &Record, w: &mut [u64; RECORD_WORDS]) {
+    let f = |x: f64| x.to_bits();
+    w[rw::INDEX] = this.index;
+    w[rw::HOST_NS] = this.host_ns as u64;
+    w[rw::UTC_NS] = this.utc_ns as u64;
+    w[rw::LAT] = f(this.pose.lat_deg);
+    w[rw::LON] = f(this.pose.lon_deg);
+    w[rw::HEIGHT] = f(this.pose.height_m);
+    let mut put = |at: usize, v: &[f64]| {
+        for (k, x) in v.iter().enumerate() {
+            w[at + k] = x.to_bits();
         }
-    }
+    };
+    put(rw::VEL, &this.pose.vel_ned_mps);
+    put(rw::Q, &this.pose.q_nb);
+    put(rw::GYRO, &this.gyro_body_rps);
+    put(rw::POS_STD, &this.pose.pos_std_ned_m);
+    put(rw::VEL_STD, &this.pose.vel_std_ned_mps);
+    put(rw::ATT_STD, &this.pose.att_std_rad);
+    put(rw::RPY, &this.pose.rpy_rad);
+    w[rw::FLAGS] = u64::from_le_bytes([
+        this.source.map_or(0, |s| s as u8),
+        this.status,
+        this.time_status,
+        this.integrity,
+        0,
+        0,
+        0,
+        0,
+    ]);
 }
 
-/// Where the body is and how it moves at one instant, with the σ's.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Pose {
-    /// Latitude, degrees.
-    pub lat_deg: f64,
-    /// Longitude, degrees.
-    pub lon_deg: f64,
-    /// Height above the ellipsoid, m.
-    pub height_m: f64,
-    /// NED velocity, m/s.
-    pub vel_ned_mps: [f64; 3],
-    /// Attitude quaternion body→NED, [w, x, y, z].
-    pub q_nb: [f64; 4],
-    /// Roll, pitch, yaw (ZYX) of `q_nb`, rad.
-    pub rpy_rad: [f64; 3],
-    /// 1-σ position, NED, m.
-    pub pos_std_ned_m: [f64; 3],
-    /// 1-σ velocity, NED, m/s.
-    pub vel_std_ned_mps: [f64; 3],
-    /// 1-σ attitude, rad.
-    pub att_std_rad: [f64; 3],
-}
-
-/// One state of the history (a copy out of shared memory).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Record {
-    /// The record's index (records written before it).
-    pub index: u64,
-    /// Host time (`CLOCK_MONOTONIC` ns) of the state.
-    pub host_ns: i64,
-    /// UTC, ns since 1970 (`i64::MIN` while time is not known).
-    pub utc_ns: i64,
-    /// Position, velocity, attitude and their σ.
-    pub pose: Pose,
-    /// Angular rate, body FRD, rad/s.
-    pub gyro_body_rps: [f64; 3],
-    /// Where the state comes from (`None`: an unknown source byte).
-    pub source: Option<Source>,
-    /// The state's `NavStatus` as `u8`.
-    pub status: u8,
-    /// The state's `TimeStatus` as `u8`.
-    pub time_status: u8,
-    /// The state's integrity flags.
-    pub integrity: u8,
-}
-
-impl Record {
-    /// The record of `s` from `source`.
-    pub fn of(s: &NavState, source: Source) -> Self {
-        Self {
-            index: 0,
-            host_ns: s.host_ns,
-            utc_ns: s.utc_ns,
-            pose: Pose {
-                lat_deg: s.lat_deg,
-                lon_deg: s.lon_deg,
-                height_m: s.height_m,
-                vel_ned_mps: s.vel_ned_mps,
-                q_nb: s.q_nb,
-                rpy_rad: s.rpy_rad,
-                pos_std_ned_m: s.pos_std_ned_m,
-                vel_std_ned_mps: s.vel_std_ned_mps,
-                att_std_rad: s.att_std_rad,
-            },
-            gyro_body_rps: s.gyro_body_rps,
-            source: Some(source),
-            status: s.status,
-            time_status: s.time_status,
-            integrity: s.integrity,
-        }
-    }
-
-    fn encode(&self, w: &mut [u64; RECORD_WORDS]) {
-        let f = |x: f64| x.to_bits();
-        w[rw::INDEX] = self.index;
-        w[rw::HOST_NS] = self.host_ns as u64;
-        w[rw::UTC_NS] = self.utc_ns as u64;
-        w[rw::LAT] = f(self.pose.lat_deg);
-        w[rw::LON] = f(self.pose.lon_deg);
-        w[rw::HEIGHT] = f(self.pose.height_m);
-        let mut put = |at: usize, v: &[f64]| {
-            for (k, x) in v.iter().enumerate() {
-                w[at + k] = x.to_bits();
-            }
-        };
-        put(rw::VEL, &self.pose.vel_ned_mps);
-        put(rw::Q, &self.pose.q_nb);
-        put(rw::GYRO, &self.gyro_body_rps);
-        put(rw::POS_STD, &self.pose.pos_std_ned_m);
-        put(rw::VEL_STD, &self.pose.vel_std_ned_mps);
-        put(rw::ATT_STD, &self.pose.att_std_rad);
-        put(rw::RPY, &self.pose.rpy_rad);
-        w[rw::FLAGS] = u64::from_le_bytes([
-            self.source.map_or(0, |s| s as u8),
-            self.status,
-            self.time_status,
-            self.integrity,
-            0,
-            0,
-            0,
-            0,
-        ]);
-    }
-
-    fn decode(w: &[u64; RECORD_WORDS]) -> Self {
-        let f = |i: usize| f64::from_bits(w[i]);
-        let v3 = |i: usize| [f(i), f(i + 1), f(i + 2)];
-        let flags = w[rw::FLAGS].to_le_bytes();
-        Self {
-            index: w[rw::INDEX],
-            host_ns: w[rw::HOST_NS] as i64,
-            utc_ns: w[rw::UTC_NS] as i64,
-            pose: Pose {
-                lat_deg: f(rw::LAT),
-                lon_deg: f(rw::LON),
-                height_m: f(rw::HEIGHT),
-                vel_ned_mps: v3(rw::VEL),
-                q_nb: [f(rw::Q), f(rw::Q + 1), f(rw::Q + 2), f(rw::Q + 3)],
-                rpy_rad: v3(rw::RPY),
-                pos_std_ned_m: v3(rw::POS_STD),
-                vel_std_ned_mps: v3(rw::VEL_STD),
-                att_std_rad: v3(rw::ATT_STD),
-            },
-            gyro_body_rps: v3(rw::GYRO),
-            source: Source::from_u8(flags[0]),
-            status: flags[1],
-            time_status: flags[2],
-            integrity: flags[3],
-        }
+/// The record in the words `w`.
+fn decode(w: &[u64; RECORD_WORDS]) -> Record {
+    let f = |i: usize| f64::from_bits(w[i]);
+    let v3 = |i: usize| [f(i), f(i + 1), f(i + 2)];
+    let flags = w[rw::FLAGS].to_le_bytes();
+    Record {
+        index: w[rw::INDEX],
+        host_ns: w[rw::HOST_NS] as i64,
+        utc_ns: w[rw::UTC_NS] as i64,
+        pose: Pose {
+            lat_deg: f(rw::LAT),
+            lon_deg: f(rw::LON),
+            height_m: f(rw::HEIGHT),
+            vel_ned_mps: v3(rw::VEL),
+            q_nb: [f(rw::Q), f(rw::Q + 1), f(rw::Q + 2), f(rw::Q + 3)],
+            rpy_rad: v3(rw::RPY),
+            pos_std_ned_m: v3(rw::POS_STD),
+            vel_std_ned_mps: v3(rw::VEL_STD),
+            att_std_rad: v3(rw::ATT_STD),
+        },
+        gyro_body_rps: v3(rw::GYRO),
+        source: Source::from_u8(flags[0]),
+        status: flags[1],
+        time_status: flags[2],
+        integrity: flags[3],
     }
 }
 
@@ -425,8 +335,33 @@ impl Drop for Mapping {
     }
 }
 
+/// The rings of the file: the real-time predictor's states, and the delayed filter's.
+const RINGS: usize = 2;
+
 fn file_len(capacity: u64) -> usize {
-    (HEADER_WORDS + capacity as usize * RECORD_WORDS) * 8
+    (HEADER_WORDS + RINGS * capacity as usize * RECORD_WORDS) * 8
+}
+
+/// The ring of `source`'s states: 0 predicted, 1 fused.
+fn ring_of(source: Source) -> usize {
+    match source {
+        Source::Predicted => 0,
+        Source::Fused => 1,
+    }
+}
+
+/// The header word with the write index of ring `ring`.
+fn write_index_word(ring: usize) -> usize {
+    if ring == 0 {
+        hw::WRITE_INDEX
+    } else {
+        hw::FUSED_WRITE_INDEX
+    }
+}
+
+/// The first word of record `index` of ring `ring`.
+fn record_base(capacity: u64, ring: usize, index: u64) -> usize {
+    HEADER_WORDS + (ring * capacity as usize + (index % capacity) as usize) * RECORD_WORDS
 }
 
 fn open_fd(path: &Path, flags: i32, mode: u32) -> Result<OwnedFd, std::io::Error> {
@@ -467,8 +402,10 @@ pub struct HistoryWriter {
     /// The file's device and inode: removed at the end only while it is still this one.
     id: (u64, u64),
     capacity: u64,
-    next: u64,
-    last_host_ns: i64,
+    /// Records written, per ring.
+    next: [u64; RINGS],
+    /// The newest record's host time, per ring.
+    last_host_ns: [i64; RINGS],
     rejected: u64,
 }
 
@@ -534,26 +471,29 @@ impl HistoryWriter {
             _fd: fd,
             id: (m.dev(), m.ino()),
             capacity,
-            next: 0,
-            last_host_ns: i64::MIN,
+            next: [0; RINGS],
+            last_host_ns: [i64::MIN; RINGS],
             rejected: 0,
         })
     }
 
-    /// Appends `s` from `source`; false (and counted in [`rejected`](Self::rejected)) when its
-    /// host time is not after the last one's (the ring is in time order).
+    /// Appends `s` from `source` to that source's ring; false (and counted in
+    /// [`rejected`](Self::rejected)) when its host time is not after the last one's of that
+    /// ring (each ring is in time order).
     pub fn append(&mut self, s: &NavState, source: Source) -> bool {
-        if s.host_ns <= self.last_host_ns {
+        let ring = ring_of(source);
+        if s.host_ns <= self.last_host_ns[ring] {
             self.rejected += 1;
             return false;
         }
-        self.last_host_ns = s.host_ns;
+        self.last_host_ns[ring] = s.host_ns;
         let mut rec = Record::of(s, source);
-        rec.index = self.next;
+        let next = self.next[ring];
+        rec.index = next;
         let mut words = [0u64; RECORD_WORDS];
-        rec.encode(&mut words);
+        encode(&rec, &mut words);
         let w = self.map.words();
-        let base = HEADER_WORDS + (self.next % self.capacity) as usize * RECORD_WORDS;
+        let base = record_base(self.capacity, ring, next);
         let r = &w[base..base + RECORD_WORDS];
         let seq = r[rw::SEQ].load(Ordering::Relaxed);
         r[rw::SEQ].store(seq.wrapping_add(1) | 1, Ordering::Relaxed);
@@ -562,14 +502,19 @@ impl HistoryWriter {
             a.store(*v, Ordering::Relaxed);
         }
         r[rw::SEQ].store((seq | 1).wrapping_add(1), Ordering::Release);
-        self.next += 1;
-        w[hw::WRITE_INDEX].store(self.next, Ordering::Release);
+        self.next[ring] = next + 1;
+        w[write_index_word(ring)].store(next + 1, Ordering::Release);
         true
     }
 
-    /// Records written.
+    /// Records written to the ring of predicted states.
     pub fn written(&self) -> u64 {
-        self.next
+        self.next[0]
+    }
+
+    /// Records written to the ring of `source`'s states.
+    pub fn written_of(&self, source: Source) -> u64 {
+        self.next[ring_of(source)]
     }
 
     /// States refused because their host time was not after the previous one's.
@@ -712,9 +657,14 @@ impl History {
         std::fs::symlink_metadata(&self.path).is_ok_and(|m| (m.dev(), m.ino()) == self.id)
     }
 
-    /// Records written so far (the write index).
+    /// Records written so far to the ring of predicted states (its write index).
     pub fn write_index(&self) -> u64 {
-        self.map.words()[hw::WRITE_INDEX].load(Ordering::Acquire)
+        self.write_index_of(Source::Predicted)
+    }
+
+    /// Records written so far to the ring of `source`'s states.
+    pub fn write_index_of(&self, source: Source) -> u64 {
+        self.map.words()[write_index_word(ring_of(source))].load(Ordering::Acquire)
     }
 
     /// The writer's process id.
@@ -722,11 +672,17 @@ impl History {
         self.map.words()[hw::WRITER_PID].load(Ordering::Relaxed) as u32
     }
 
-    /// A consistent copy of record `index`; `None` when the writer lapped it (or it was never
-    /// written), `Err(Overrun)` when the writer stayed in the middle of it.
+    /// A consistent copy of record `index` of the predicted states; `None` when the writer
+    /// lapped it (or it was never written), `Err(Overrun)` when the writer stayed in the
+    /// middle of it.
     pub fn record(&self, index: u64) -> Result<Option<Record>, HistoryError> {
+        self.record_of(Source::Predicted, index)
+    }
+
+    /// [`record`](Self::record) of the ring of `source`'s states.
+    pub fn record_of(&self, source: Source, index: u64) -> Result<Option<Record>, HistoryError> {
         let w = self.map.words();
-        let base = HEADER_WORDS + (index % self.capacity) as usize * RECORD_WORDS;
+        let base = record_base(self.capacity, ring_of(source), index);
         let r = &w[base..base + RECORD_WORDS];
         let mut words = [0u64; RECORD_WORDS];
         for spin in 0..SPINS {
@@ -740,7 +696,7 @@ impl History {
                     if s1 == 0 || words[rw::INDEX] != index {
                         return Ok(None);
                     }
-                    return Ok(Some(Record::decode(&words)));
+                    return Ok(Some(decode(&words)));
                 }
             }
             if spin > 64 {
@@ -767,44 +723,50 @@ impl History {
     }
 
     /// The state at host time `host_ns` (`CLOCK_MONOTONIC`), interpolated between the two
-    /// records around it.
+    /// records around it: the fused states' where they reach, else the predicted states'.
     pub fn state_at_host(&self, host_ns: i64) -> Result<Interpolated, HistoryError> {
-        let (a, b) = self.bracket(host_ns, Clock::Host)?;
+        let (a, b) = self.bracket_either(host_ns, Clock::Host)?;
         Ok(interpolate(&a, &b, host_ns))
     }
 
     /// The state at UTC `utc_ns` (ns since 1970: the GNSS time as UTC), interpolated between
-    /// the two records around it; the host instant is mapped linearly between them.
+    /// the two records around it (fused where they reach, else predicted); the host instant
+    /// is mapped linearly between them.
     pub fn state_at(&self, utc_ns: i64) -> Result<Interpolated, HistoryError> {
-        let (a, b) = self.bracket(utc_ns, Clock::Utc)?;
+        let (a, b) = self.bracket_either(utc_ns, Clock::Utc)?;
         if a.utc_ns == i64::MIN || b.utc_ns == i64::MIN {
             return Err(HistoryError::TimeUnknown(utc_ns));
         }
-        let host_ns = if b.utc_ns == a.utc_ns {
-            a.host_ns
-        } else {
-            let f = (utc_ns - a.utc_ns) as f64 / (b.utc_ns - a.utc_ns) as f64;
-            a.host_ns + ((b.host_ns - a.host_ns) as f64 * f).round() as i64
-        };
-        let mut out = interpolate(&a, &b, host_ns);
-        out.utc_ns = utc_ns;
-        Ok(out)
+        Ok(at_utc(&a, &b, utc_ns))
     }
 
-    /// The records `a`, `b` (consecutive) with `key(a) ≤ t ≤ key(b)`.
-    fn bracket(&self, t: i64, clock: Clock) -> Result<(Record, Record), HistoryError> {
+    /// The records around `t` among the fused states, else among the predicted ones (an
+    /// instant the delayed filter has not reached yet, or before its first state).
+    fn bracket_either(&self, t: i64, clock: Clock) -> Result<(Record, Record), HistoryError> {
+        match self.bracket(Source::Fused, t, clock) {
+            Err(HistoryError::Overrun) => Err(HistoryError::Overrun),
+            Ok((a, b)) if clock == Clock::Host || (a.utc_ns != i64::MIN && b.utc_ns != i64::MIN) => Ok((a, b)),
+            _ => self.bracket(Source::Predicted, t, clock),
+        }
+    }
+
+    /// The records `a`, `b` (consecutive) of `source`'s ring with `key(a) ≤ t ≤ key(b)`,
+    /// found by the rule of [`bracket_index`].
+    fn bracket(&self, source: Source, t: i64, clock: Clock) -> Result<(Record, Record), HistoryError> {
         let key = |r: &Record| match clock {
             Clock::Host => r.host_ns,
             Clock::Utc => r.utc_ns,
         };
         'restart: for _ in 0..RESTARTS {
-            let n = self.write_index();
+            let n = self.write_index_of(source);
             if n < 2 {
                 return Err(HistoryError::Empty);
             }
             // The slot the writer fills next holds the oldest record: left out.
             let (mut lo, mut hi) = (n.saturating_sub(self.capacity - 1), n - 1);
-            let Some(mut b) = self.record(hi)? else { continue };
+            let Some(mut b) = self.record_of(source, hi)? else {
+                continue;
+            };
             if t > key(&b) {
                 return Err(HistoryError::TooNew {
                     requested: t,
@@ -812,7 +774,9 @@ impl History {
                     clock,
                 });
             }
-            let Some(mut a) = self.record(lo)? else { continue };
+            let Some(mut a) = self.record_of(source, lo)? else {
+                continue;
+            };
             if t < key(&a) {
                 return Err(HistoryError::TooOld {
                     requested: t,
@@ -822,7 +786,7 @@ impl History {
             }
             while hi - lo > 1 {
                 let mid = lo + (hi - lo) / 2;
-                let Some(m) = self.record(mid)? else {
+                let Some(m) = self.record_of(source, mid)? else {
                     continue 'restart;
                 };
                 if key(&m) <= t {
@@ -839,122 +803,10 @@ impl History {
     }
 }
 
-/// A state interpolated between two records of the history.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Interpolated {
-    /// The host instant, ns.
-    pub host_ns: i64,
-    /// Its UTC, ns since 1970 (`i64::MIN` when a record around it has none).
-    pub utc_ns: i64,
-    /// Position, velocity, attitude and their σ, interpolated.
-    pub pose: Pose,
-    /// Where the records before and after the instant come from.
-    pub sources: [Option<Source>; 2],
-    /// Their `NavStatus`es.
-    pub status: [u8; 2],
-    /// Their host times, ns.
-    pub bracket_host_ns: [i64; 2],
-    /// `τ = (t − t_a)/(t_b − t_a)`.
-    pub fraction: f64,
-}
-
-fn lerp(a: f64, b: f64, t: f64) -> f64 {
-    a + (b - a) * t
-}
-
-fn lerp3(a: [f64; 3], b: [f64; 3], t: f64) -> [f64; 3] {
-    std::array::from_fn(|i| lerp(a[i], b[i], t))
-}
-
-/// Cubic Hermite: the value at `τ` of the cubic through `p0`, `p1` with slopes `m0`, `m1`
-/// (per unit of τ).
-pub fn hermite(p0: f64, m0: f64, p1: f64, m1: f64, tau: f64) -> f64 {
-    let (t2, t3) = (tau * tau, tau * tau * tau);
-    (2.0 * t3 - 3.0 * t2 + 1.0) * p0 + (t3 - 2.0 * t2 + tau) * m0 + (-2.0 * t3 + 3.0 * t2) * p1 + (t3 - t2) * m1
-}
-
-/// Spherical linear interpolation of unit quaternions [w, x, y, z] along the shorter arc
-/// (Shoemake 1985); normalised.
-pub fn slerp(a: [f64; 4], b: [f64; 4], t: f64) -> [f64; 4] {
-    let mut dot: f64 = a.iter().zip(b.iter()).map(|(x, y)| x * y).sum();
-    let b = if dot < 0.0 {
-        dot = -dot;
-        b.map(|x| -x)
-    } else {
-        b
-    };
-    let (wa, wb) = if dot > 0.9995 {
-        (1.0 - t, t)
-    } else {
-        let th = dot.clamp(-1.0, 1.0).acos();
-        let s = th.sin();
-        (((1.0 - t) * th).sin() / s, (t * th).sin() / s)
-    };
-    let q: [f64; 4] = std::array::from_fn(|i| wa * a[i] + wb * b[i]);
-    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
-    if n > 0.0 { q.map(|x| x / n) } else { a }
-}
-
-/// Roll, pitch, yaw (ZYX Euler) of the body→NED quaternion [w, x, y, z], rad.
-pub fn rpy_of(q: [f64; 4]) -> [f64; 3] {
-    let [w, x, y, z] = q;
-    [
-        (2.0 * (w * x + y * z)).atan2(1.0 - 2.0 * (x * x + y * y)),
-        (2.0 * (w * y - z * x)).clamp(-1.0, 1.0).asin(),
-        (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z)),
-    ]
-}
-
-/// The state at `host_ns` between records `a` and `b` (`a` before `b`): see the
-/// [module](self) documentation for the formulas. Outside `[a, b]` it extrapolates.
-pub fn interpolate(a: &Record, b: &Record, host_ns: i64) -> Interpolated {
-    let h = (b.host_ns - a.host_ns) as f64 * 1e-9;
-    let tau = if h > 0.0 {
-        (host_ns - a.host_ns) as f64 * 1e-9 / h
-    } else {
-        0.0
-    };
-    let (pa, pb) = (&a.pose, &b.pose);
-    // Local NED at a.
-    let lat_a = pa.lat_deg.to_radians();
-    let (rm, rn) = earth::radii(lat_a);
-    let (kn, ke) = (rm + pa.height_m, (rn + pa.height_m) * lat_a.cos());
-    let d1 = [
-        (pb.lat_deg - pa.lat_deg).to_radians() * kn,
-        (pb.lon_deg - pa.lon_deg).to_radians() * ke,
-        -(pb.height_m - pa.height_m),
-    ];
-    let p: [f64; 3] = std::array::from_fn(|i| hermite(0.0, pa.vel_ned_mps[i] * h, d1[i], pb.vel_ned_mps[i] * h, tau));
-    let q_nb = slerp(pa.q_nb, pb.q_nb, tau);
-    let utc_ns = if a.utc_ns == i64::MIN || b.utc_ns == i64::MIN {
-        i64::MIN
-    } else {
-        a.utc_ns + ((b.utc_ns - a.utc_ns) as f64 * tau).round() as i64
-    };
-    Interpolated {
-        host_ns,
-        utc_ns,
-        pose: Pose {
-            lat_deg: pa.lat_deg + (p[0] / kn).to_degrees(),
-            lon_deg: pa.lon_deg + (p[1] / ke).to_degrees(),
-            height_m: pa.height_m - p[2],
-            vel_ned_mps: lerp3(pa.vel_ned_mps, pb.vel_ned_mps, tau),
-            q_nb,
-            rpy_rad: rpy_of(q_nb),
-            pos_std_ned_m: lerp3(pa.pos_std_ned_m, pb.pos_std_ned_m, tau),
-            vel_std_ned_mps: lerp3(pa.vel_std_ned_mps, pb.vel_std_ned_mps, tau),
-            att_std_rad: lerp3(pa.att_std_rad, pb.att_std_rad, tau),
-        },
-        sources: [a.source, b.source],
-        status: [a.status, b.status],
-        bracket_host_ns: [a.host_ns, b.host_ns],
-        fraction: tau,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::earth;
 
     /// A record on a straight line with constant acceleration (NED, from a point), at `t` s.
     fn on_line(t: f64, p0: [f64; 3], v0: [f64; 3], acc: [f64; 3]) -> Record {
@@ -1030,6 +882,65 @@ mod tests {
 
     fn temp_path(tag: &str) -> PathBuf {
         std::env::temp_dir().join(format!("navsync-history-{tag}-{}", std::process::id()))
+    }
+
+    #[test]
+    fn fused_states_answer_where_they_reach_and_the_predicted_after_them() {
+        let path = temp_path("fused");
+        let mut w = HistoryWriter::create_at(&path, 500).unwrap();
+        let h = History::open_at(&path).unwrap();
+        let (p0, v0, acc) = ([0.0; 3], [10.0, 0.0, 0.0], [0.5, 0.0, 0.0]);
+        let state = |t: f64, north_offset_m: f64| {
+            let mut s = NavState::zeroed();
+            let r = on_line(t, [p0[0] + north_offset_m, 0.0, 0.0], v0, acc);
+            (s.host_ns, s.utc_ns, s.lat_deg, s.lon_deg, s.height_m) =
+                (r.host_ns, r.utc_ns, r.pose.lat_deg, r.pose.lon_deg, r.pose.height_m);
+            s.vel_ned_mps = r.pose.vel_ned_mps;
+            s.q_nb = r.pose.q_nb;
+            s
+        };
+        // Predicted 1.00..2.99 s; fused (1 m further north: a correction) 1.00..1.99 s.
+        for k in 0..200 {
+            assert!(w.append(&state(1.0 + k as f64 * 0.01, 0.0), Source::Predicted));
+        }
+        for k in 0..100 {
+            assert!(w.append(&state(1.0 + k as f64 * 0.01, 1.0), Source::Fused));
+        }
+        assert_eq!(
+            (w.written_of(Source::Predicted), w.written_of(Source::Fused)),
+            (200, 100)
+        );
+        assert_eq!(h.write_index_of(Source::Fused), 100);
+        let lat_north = |x: &Interpolated, t: f64| {
+            let want = on_line(t, p0, v0, acc);
+            let (rm, _) = earth::radii(want.pose.lat_deg.to_radians());
+            (x.pose.lat_deg - want.pose.lat_deg).to_radians() * rm
+        };
+        let early = h.state_at_host(1_505_000_000).unwrap();
+        assert_eq!(early.sources, [Some(Source::Fused); 2]);
+        assert!(
+            (lat_north(&early, 1.505) - 1.0).abs() < 1e-3,
+            "{}",
+            lat_north(&early, 1.505)
+        );
+        // By UTC as by host time.
+        assert_eq!(h.state_at(early.utc_ns).unwrap().sources, [Some(Source::Fused); 2]);
+        let late = h.state_at_host(2_505_000_000).unwrap();
+        assert_eq!(late.sources, [Some(Source::Predicted); 2]);
+        assert!(lat_north(&late, 2.505).abs() < 1e-3);
+        // Between the newest fused state and the next predicted one: the predicted states.
+        assert_eq!(
+            h.state_at_host(1_995_000_000).unwrap().sources,
+            [Some(Source::Predicted); 2]
+        );
+        // The same two records and formula as any holder of them (the estimator's event poses).
+        let recs: Vec<Record> = (0..100)
+            .map(|i| h.record_of(Source::Fused, i).unwrap().unwrap())
+            .collect();
+        let t = early.utc_ns + 1234;
+        let (a, b) = bracket_index(recs.len(), |k| recs[k].utc_ns, t).unwrap();
+        assert_eq!(h.state_at(t).unwrap(), at_utc(&recs[a], &recs[b], t));
+        drop(w);
     }
 
     #[test]

@@ -22,7 +22,7 @@
 //! Frames: navigation frame NED (north-east-down), body frame FRD (forward-right-down).
 //! Times: integer nanoseconds; `host_ns` is `CLOCK_MONOTONIC`.
 
-pub use navsync_wire::{cdr, earth, imu_spec, json, reflect, ros2msg, samples, services, time};
+pub use navsync_wire::{cdr, earth, imu_spec, interpolation, json, reflect, ros2msg, samples, services, time};
 
 pub mod client;
 pub mod cpu_wakeup;

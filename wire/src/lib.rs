@@ -8,7 +8,8 @@
 //! 2. [`services`]: the service names (`navsync/imu/{id}/sample`, …) and their QoS.
 //! 3. [`time`]: host monotonic time, UTC, GPS time, leap seconds.
 //! 4. [`earth`]: the WGS-84 model (radii, normal gravity, earth rate, transport rate).
-//! 5. [`imu_spec`]: the IMU error description shared by the simulator and the estimator.
+//! 5. [`imu_spec`]: the IMU error description shared by the simulator and the estimator;
+//!    [`interpolation`]: a navigation state between two states (the history's and the event poses').
 //! 6. [`reflect`], [`json`], [`cdr`], [`ros2msg`]: the field tables behind the layout contract
 //!    and the codecs driven by them.
 //!
@@ -18,6 +19,7 @@
 pub mod cdr;
 pub mod earth;
 pub mod imu_spec;
+pub mod interpolation;
 pub mod json;
 pub mod reflect;
 pub mod ros2msg;

@@ -8,6 +8,7 @@
 //! | `navsync/gnss/{id}/event` | [`GnssEvent`] | `navsync gnss` (UBX TIM-TM2) |
 //! | `navsync/gnss/{id}/raw` | [`GnssRaw`] | `navsync gnss` (UBX RXM-RAWX) |
 //! | `navsync/gnss/{id}/nav-data` | [`GnssNavData`] | `navsync gnss` (UBX RXM-SFRBX) |
+//! | `navsync/event/{id}/pose` | [`EventPose`] | `navsync estimator` (each event receiver `id` marked, with the pose at its instant once fused) |
 //! | `navsync/gnss/{id}/sky` | [`GnssSky`] | `navsync gnss` (the satellites of an epoch: NMEA GSV with GSA, UBX NAV-SAT or NAV-SVINFO) |
 //! | `navsync/pps/{id}/edge` | [`PpsEdge`] | `navsync pps` (or the simulator) |
 //! | `navsync/imu/{id}/sample` | [`ImuSample`] | `navsync imu` (or the simulator) |
@@ -24,8 +25,8 @@
 
 use crate::reflect::Reflect;
 use crate::samples::{
-    AnySample, EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, Health, ImuSample,
-    NavState, NetworkTime, PpsEdge, SimTruth, TimeState,
+    AnySample, EstimatorSettings, EventPose, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, Health,
+    ImuSample, NavState, NetworkTime, PpsEdge, SimTruth, TimeState,
 };
 
 /// Environment variable with the iceoryx2 resource prefix (default [`DEFAULT_PREFIX`]).
@@ -64,6 +65,11 @@ pub fn gnss_nav_data(id: &str) -> String {
 /// azimuth, C/N0, used in the solution).
 pub fn gnss_sky(id: &str) -> String {
     format!("navsync/gnss/{id}/sky")
+}
+/// `navsync/event/{id}/pose`: the events device `id` marked (a receiver's TIM-TM2), each
+/// with the pose at its instant.
+pub fn event_pose(id: &str) -> String {
+    format!("navsync/event/{id}/pose")
 }
 /// `navsync/pps/{id}/edge`
 pub fn pps_edge(id: &str) -> String {
@@ -123,6 +129,8 @@ pub enum ServiceKind {
     NetworkTime,
     /// [`GnssSky`]
     GnssSky,
+    /// [`EventPose`]
+    EventPose,
 }
 
 impl ServiceKind {
@@ -143,11 +151,12 @@ impl ServiceKind {
             AnySample::Settings(_) => Self::EstimatorSettings,
             AnySample::NetworkTime(_) => Self::NetworkTime,
             AnySample::Sky(_) => Self::GnssSky,
+            AnySample::EventPose(_) => Self::EventPose,
         }
     }
 
     /// All kinds.
-    pub const ALL: [ServiceKind; 14] = [
+    pub const ALL: [ServiceKind; 15] = [
         Self::GnssFix,
         Self::PpsEdge,
         Self::ImuSample,
@@ -162,6 +171,7 @@ impl ServiceKind {
         Self::EstimatorSettings,
         Self::NetworkTime,
         Self::GnssSky,
+        Self::EventPose,
     ];
 
     /// The kind's position in [`ALL`](Self::ALL): its event id on [`WAKE`].
@@ -179,6 +189,7 @@ impl ServiceKind {
             ["navsync", "gnss", id, "raw"] if !id.is_empty() => Some(Self::GnssRaw),
             ["navsync", "gnss", id, "nav-data"] if !id.is_empty() => Some(Self::GnssNavData),
             ["navsync", "gnss", id, "sky"] if !id.is_empty() => Some(Self::GnssSky),
+            ["navsync", "event", id, "pose"] if !id.is_empty() => Some(Self::EventPose),
             ["navsync", "pps", id, "edge"] if !id.is_empty() => Some(Self::PpsEdge),
             ["navsync", "imu", id, "sample"] if !id.is_empty() => Some(Self::ImuSample),
             ["navsync", "time", "state"] => Some(Self::TimeState),
@@ -209,6 +220,7 @@ impl ServiceKind {
             Self::EstimatorSettings => EstimatorSettings::TYPE_NAME,
             Self::NetworkTime => NetworkTime::TYPE_NAME,
             Self::GnssSky => GnssSky::TYPE_NAME,
+            Self::EventPose => EventPose::TYPE_NAME,
         }
     }
 
@@ -228,7 +240,7 @@ impl ServiceKind {
                 history: 1,
                 buffer: 512,
             },
-            Self::GnssFix | Self::PpsEdge | Self::GnssTimePulse | Self::GnssEvent | Self::GnssRaw => {
+            Self::GnssFix | Self::PpsEdge | Self::GnssTimePulse | Self::GnssEvent | Self::GnssRaw | Self::EventPose => {
                 Qos { history: 1, buffer: 64 }
             }
             // Up to ~40 subframes per second over all tracked satellites.
@@ -298,6 +310,7 @@ mod tests {
         assert_eq!(ServiceKind::of(&gnss_fix("0")), Some(ServiceKind::GnssFix));
         assert_eq!(ServiceKind::of(&gnss_hnr("0")), Some(ServiceKind::GnssFix));
         assert_eq!(ServiceKind::of(&gnss_sky("0")), Some(ServiceKind::GnssSky));
+        assert_eq!(ServiceKind::of(&event_pose("0")), Some(ServiceKind::EventPose));
         assert_eq!(ServiceKind::of(&imu_sample("3")), Some(ServiceKind::ImuSample));
         assert_eq!(ServiceKind::of(&health("gps-0")), Some(ServiceKind::Health));
         assert_eq!(ServiceKind::of(NAV_STATE), Some(ServiceKind::NavState));

@@ -120,6 +120,7 @@ pub fn run(args: &EchoArgs) -> Result<(), EchoError> {
         ServiceKind::EstimatorSettings => echo::<EstimatorSettings>(args, |s| (s.host_ns, Some(s.seq))),
         ServiceKind::NetworkTime => echo::<NetworkTime>(args, |s| (s.host_ns, Some(s.seq))),
         ServiceKind::GnssSky => echo::<GnssSky>(args, |s| (s.stamp.host_ns, Some(s.stamp.seq))),
+        ServiceKind::EventPose => echo::<EventPose>(args, |s| (s.host_ns, Some(s.seq))),
     }
 }
 

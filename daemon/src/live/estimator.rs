@@ -14,17 +14,18 @@ use std::time::Duration;
 
 use navsync_shared::health_reporter::HealthReporter;
 use navsync_shared::history;
-use navsync_shared::ipc::{IpcError, IpcNode, Subscriber};
+use navsync_shared::ipc::{IpcError, IpcNode, Publisher, Subscriber};
 use navsync_shared::latency_histogram::LatencyHistogram;
 use navsync_shared::samples::{
-    AnySample, EstimatorSettings, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample, NavState, NavStatus,
-    NetworkTime, PpsEdge, TimeState,
+    AnySample, EstimatorSettings, EventPose, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssTimePulse, ImuSample,
+    NavState, NavStatus, NetworkTime, PpsEdge, TimeState,
 };
 use navsync_shared::services::{self, ServiceKind};
 use navsync_shared::time::{NS_PER_S, monotonic_now_ns};
 use tracing::{info, info_span, warn};
 
 use navsync_estimator::feed::Feed;
+use navsync_estimator::input_order::Input;
 use navsync_estimator::settings::{Coupling, Settings};
 
 use super::liveness::{Change, Liveness, STALE_MARGIN_NS};
@@ -161,6 +162,20 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         .filter(|_| tight)
         .map(|id| node.input(&services::gnss_nav_data(id)))
         .collect::<Result<_, _>>()?;
+    // Each receiver's event marks (TIM-TM2), posed once the delayed filter passes them and
+    // published on `navsync/event/{id}/pose`.
+    let events: Vec<(Subscriber<GnssEvent>, [u8; 8])> = args
+        .inputs
+        .gnss
+        .iter()
+        .map(|id| {
+            Ok::<_, IpcError>((
+                node.input(&services::gnss_event(id))?,
+                navsync_shared::reflect::fixed_str(id),
+            ))
+        })
+        .collect::<Result<_, _>>()?;
+    let mut event_pubs: Vec<([u8; 8], Publisher<EventPose>)> = Vec::new();
     let imus: Vec<Subscriber<ImuSample>> = args
         .inputs
         .imus
@@ -202,13 +217,14 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     // One wake-up for every input: each publisher notifies `navsync/wake` with its kind.
     let wake = node.wake()?;
     wake.set_busy_poll(busy_poll);
-    const INPUT_KINDS: [ServiceKind; 6] = [
+    const INPUT_KINDS: [ServiceKind; 7] = [
         ServiceKind::ImuSample,
         ServiceKind::PpsEdge,
         ServiceKind::GnssFix,
         ServiceKind::GnssTimePulse,
         ServiceKind::GnssRaw,
         ServiceKind::GnssNavData,
+        ServiceKind::GnssEvent,
     ];
 
     let mut feed: Feed = Feed::new(args.pipeline_config());
@@ -221,6 +237,8 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     .inspect_err(|e| warn!("no history of states for state_at queries: {e}"))
     .ok();
     let c_nav = health.counter("nav_states")?;
+    let c_event_poses = health.counter("event_poses")?;
+    let c_events_unposed = health.counter("events_without_pose")?;
     // Never silent: states usable by a subscriber (aligned, with a GNSS time); a warning
     // with the reason every minute while they are missing or far fewer than the states.
     let c_usable = health.counter("nav_usable")?;
@@ -378,6 +396,12 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
                 true
             })?;
         }
+        for (s, id) in &events {
+            s.drain(|e| {
+                feed.push(Input::Event(e, *id), ());
+                true
+            })?;
+        }
         // NavStates say inertial-only at once when every receiver's driver is gone.
         let gnss_gone = !gnss.is_empty() && live.inputs()[n_imu + n_pps..].iter().all(|x| x.is_gone());
         // Without IMUs (or with the reference IMU silent) nothing releases the waiting samples.
@@ -409,6 +433,42 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
             if step.nav.is_some() {
                 health.set(c_usable, feed.check().usable);
             }
+            // The delayed filter's states into the history (they answer queries of the
+            // instants it has passed), and the events it posed.
+            let pipeline = feed.pipeline_mut();
+            if let Some(h) = &mut history {
+                pipeline.drain_fused(&mut |s| {
+                    h.append(s, history::Source::Fused);
+                });
+            } else {
+                pipeline.drain_fused(&mut |_| {});
+            }
+            pipeline.drain_event_poses(&mut |e| {
+                let publisher = match event_pubs.iter().position(|(id, _)| *id == e.device_id) {
+                    Some(i) => Some(&mut event_pubs[i].1),
+                    None => {
+                        let id = navsync_shared::reflect::str_of(&e.device_id).to_string();
+                        match node.publisher::<EventPose>(&services::event_pose(&id)) {
+                            Ok(p) => {
+                                event_pubs.push((e.device_id, p));
+                                event_pubs.last_mut().map(|x| &mut x.1)
+                            }
+                            Err(err) => {
+                                warn!("no service for the event poses of {id}: {err}");
+                                None
+                            }
+                        }
+                    }
+                };
+                if let Some(p) = publisher
+                    && let Err(err) = p.publish(e)
+                {
+                    warn!("publishing an event pose: {err}");
+                }
+            });
+            let ec = feed.pipeline().event_counters();
+            health.set(c_event_poses, ec.posed);
+            health.set(c_events_unposed, ec.without_pose);
         }
         health.set(c_late, feed.order().late());
         let now = monotonic_now_ns();

@@ -170,6 +170,7 @@ fn open_monitor(node: &IpcNode, service: &str, kind: ServiceKind) -> Result<Box<
         ServiceKind::EstimatorSettings => open_typed::<EstimatorSettings>(node, service, AnySample::Settings),
         ServiceKind::NetworkTime => open_typed::<NetworkTime>(node, service, AnySample::NetworkTime),
         ServiceKind::GnssSky => open_typed::<GnssSky>(node, service, AnySample::Sky),
+        ServiceKind::EventPose => open_typed::<EventPose>(node, service, AnySample::EventPose),
     }
 }
 

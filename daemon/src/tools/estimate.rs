@@ -125,7 +125,7 @@ impl RecordedInputs {
                 let error = loop {
                     match reader.next_sample() {
                         Ok(Some(m)) if wanted.contains(m.service) => {
-                            batch.push((Input::from(m.sample), m.log_time));
+                            batch.push((Input::from_service(m.sample, m.service), m.log_time));
                             if batch.len() >= BATCH {
                                 let next = empty_rx.recv().unwrap_or_default();
                                 if full_tx.send(core::mem::replace(&mut batch, next)).is_err() {
@@ -346,6 +346,13 @@ pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary
                 log_time,
                 t.computed_host_ns.max(0) as u64,
             ),
+            Output::Event(e) => rec.write(
+                &services::event_pose(navsync_shared::reflect::str_of(&e.device_id)),
+                &AnySample::EventPose(*e),
+                log_time,
+                e.report_host_ns.max(0) as u64,
+            ),
+            Output::Fused(_) => return,
         };
         if let Err(e) = r {
             write_err = Some(e);

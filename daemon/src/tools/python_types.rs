@@ -65,6 +65,7 @@ fn types() -> Vec<Ty> {
         ty::<NetworkTime>("A reading of the network time service of a host without a receiver (navsync/time/network)."),
         ty::<SkySatellite>("One satellite as the receiver sees it (elevation, azimuth, C/N0, used)."),
         ty::<GnssSky>("The satellites a receiver reported with one epoch (navsync/gnss/{id}/sky)."),
+        ty::<EventPose>("An event a receiver marked, with the pose at its instant (navsync/event/{id}/pose)."),
     ]
 }
 
@@ -185,7 +186,8 @@ def service_type(service):
     if len(p) == 4 and p[0] == "navsync" and p[2]:
         return {("gnss", "fix"): GnssFix, ("gnss", "hnr"): GnssFix, ("pps", "edge"): PpsEdge, ("imu", "sample"): ImuSample,
                 ("gnss", "timepulse"): GnssTimePulse, ("gnss", "event"): GnssEvent, ("gnss", "raw"): GnssRaw,
-                ("gnss", "nav-data"): GnssNavData, ("gnss", "sky"): GnssSky}.get((p[1], p[3]))
+                ("gnss", "nav-data"): GnssNavData, ("gnss", "sky"): GnssSky,
+                ("event", "pose"): EventPose}.get((p[1], p[3]))
     if len(p) == 3 and p[0] == "navsync":
         if p[1] == "health":
             return Health if p[2] else None

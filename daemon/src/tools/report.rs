@@ -174,6 +174,7 @@ fn read(args: &ReportArgs) -> Result<Data, ReportError> {
                 }
             }
             Output::Time(t) => time.push(*t),
+            Output::Fused(_) | Output::Event(_) => {}
         });
         let (reader, read_err) = inputs.finish();
         if let Some(e) = read_err {

@@ -149,6 +149,28 @@ struct CatchUp {
     f: Vector3<f64>,
 }
 
+/// Writes the pose of `pva` (rates `w`, specific force `f`, body FRD), the σ's and the sensor
+/// errors of `filt` into `s`.
+fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, filt: &DelayedFilter) {
+    let q = pva.q_nb.quaternion();
+    s.lat_deg = pva.lat_rad.to_degrees();
+    s.lon_deg = pva.lon_rad.to_degrees();
+    s.height_m = pva.h_m;
+    s.vel_ned_mps = pva.vel_ned_mps.into();
+    s.rpy_rad = pva.rpy_rad().into();
+    s.q_nb = [q.w, q.i, q.j, q.k];
+    s.gyro_body_rps = w.into();
+    s.accel_body_mps2 = f.into();
+    let std3 = |i: usize| [filt.eskf.std(i), filt.eskf.std(i + 1), filt.eskf.std(i + 2)];
+    s.pos_std_ned_m = std3(POS);
+    s.vel_std_ned_mps = std3(VEL);
+    s.att_std_rad = std3(ATT);
+    s.gyro_bias_rps = filt.bias_g.into();
+    s.accel_bias_mps2 = filt.bias_a.into();
+    s.gyro_bias_std_rps = std3(BG);
+    s.accel_bias_std_mps2 = std3(BA);
+}
+
 /// The navigation filter.
 #[derive(Debug, Clone)]
 pub struct Navigator {
@@ -201,6 +223,10 @@ pub struct Navigator {
     /// [`Navigator::reset_delay`] when the time base of the fix stamps changes; the motion
     /// onset may narrow it at alignment).
     delay_prior: (f64, f64),
+    /// The delayed filter's states since [`Navigator::drain_fused`] last took them: each
+    /// instant it stepped over, with every measurement up to it fused (its capacity is kept);
+    /// `None` unless [`Navigator::keep_fused`] asked for them.
+    fused: Option<Vec<NavState>>,
 }
 
 impl Navigator {
@@ -240,6 +266,7 @@ impl Navigator {
             horizon_ns: (cfg.fusion_horizon_s * 1e9) as i64,
             fix_delay_ns: 0,
             delay_prior: (0.0, cfg.delay_prior_std_s),
+            fused: None,
             integrity: IntegrityCounters::default(),
             smoother: None,
             inconsistent: false,
@@ -730,6 +757,7 @@ impl Navigator {
             }
             corrected |= self.filter_step(&r);
             t = r.host_ns;
+            self.push_fused(&r);
         }
         if !self.monitor() {
             return;
@@ -990,18 +1018,7 @@ impl Navigator {
     pub fn fill(&self, s: &mut NavState, now_ns: i64) {
         s.host_ns = now_ns;
         s.status = self.status(now_ns) as u8;
-        s.integrity = 0;
-        if self.filt.is_none() {
-            s.integrity |= INTEGRITY_HEADING_UNKNOWN;
-        }
-        if self.inconsistent {
-            s.integrity |= INTEGRITY_INCONSISTENT;
-        }
-        if self.filt.as_ref().is_some_and(|f| f.t_ns < self.recovering_until_ns)
-            || (self.filt.is_none() && self.integrity.resets > 0)
-        {
-            s.integrity |= INTEGRITY_RECOVERING;
-        }
+        s.integrity = self.integrity_flags();
         s.fixes_used = self.states.gnss.fixes_used as u32;
         s.fixes_rejected = self.states.gnss.fixes_rejected as u32;
         s.last_fix_host_ns = self.states.gnss.last_fused_ns;
@@ -1042,25 +1059,69 @@ impl Navigator {
             s.q_nb = [f64::NAN; 4];
             return;
         }
-        s.lat_deg = pva.lat_rad.to_degrees();
-        s.lon_deg = pva.lon_rad.to_degrees();
-        s.height_m = pva.h_m;
-        s.vel_ned_mps = pva.vel_ned_mps.into();
-        s.rpy_rad = pva.rpy_rad().into();
-        s.q_nb = [q.w, q.i, q.j, q.k];
-        s.gyro_body_rps = self.out_w.into();
-        s.accel_body_mps2 = self.out_f.into();
-        let std3 = |i: usize| [filt.eskf.std(i), filt.eskf.std(i + 1), filt.eskf.std(i + 2)];
-        s.pos_std_ned_m = std3(POS);
-        s.vel_std_ned_mps = std3(VEL);
-        s.att_std_rad = std3(ATT);
-        s.gyro_bias_rps = filt.bias_g.into();
-        s.accel_bias_mps2 = filt.bias_a.into();
-        s.gyro_bias_std_rps = std3(BG);
-        s.accel_bias_std_mps2 = std3(BA);
+        write_pose(s, pva, self.out_w, self.out_f, filt);
         let (d, ds) = self.gnss_delay();
         s.gnss_delay_s = d;
         s.gnss_delay_std_s = ds;
+    }
+
+    /// Keeps the delayed filter's state at the end of record `r` (see [`Self::drain_fused`]).
+    fn push_fused(&mut self, r: &ImuRecord) {
+        let (Some(filt), Some(_)) = (&self.filt, &self.fused) else {
+            return;
+        };
+        let mut s = <NavState as navsync_wire::reflect::Reflect>::zeroed();
+        s.host_ns = r.host_ns;
+        s.status = self.status(r.host_ns) as u8;
+        s.integrity = self.integrity_flags();
+        s.fixes_used = self.states.gnss.fixes_used as u32;
+        s.fixes_rejected = self.states.gnss.fixes_rejected as u32;
+        s.last_fix_host_ns = self.states.gnss.last_fused_ns;
+        let (w, f) = filt.compensate(r);
+        write_pose(&mut s, &filt.pva, w, f, filt);
+        let (d, ds) = self.gnss_delay();
+        s.gnss_delay_s = d;
+        s.gnss_delay_std_s = ds;
+        if let Some(v) = &mut self.fused {
+            v.push(s);
+        }
+    }
+
+    /// Keeps the delayed filter's states for [`Self::drain_fused`] from now on (the caller
+    /// must drain them).
+    pub fn keep_fused(&mut self) {
+        self.fused.get_or_insert_with(|| Vec::with_capacity(64));
+    }
+
+    /// Hands each state the delayed filter made since the last call to `f`, oldest first: the
+    /// state at an instant once every measurement up to it is fused (better than the
+    /// prediction made for that instant, which had only the measurements then received).
+    /// Navigation fields only, as [`Self::fill`]; a state may be non-finite when the filter
+    /// broke down (the monitor resets it after the step).
+    pub fn drain_fused(&mut self, f: &mut dyn FnMut(&NavState)) {
+        for s in self.fused.iter_mut().flatten() {
+            f(s);
+        }
+        if let Some(v) = &mut self.fused {
+            v.clear();
+        }
+    }
+
+    /// The [`NavState::integrity`] flags of the filter now.
+    fn integrity_flags(&self) -> u8 {
+        let mut flags = 0;
+        if self.filt.is_none() {
+            flags |= INTEGRITY_HEADING_UNKNOWN;
+        }
+        if self.inconsistent {
+            flags |= INTEGRITY_INCONSISTENT;
+        }
+        if self.filt.as_ref().is_some_and(|f| f.t_ns < self.recovering_until_ns)
+            || (self.filt.is_none() && self.integrity.resets > 0)
+        {
+            flags |= INTEGRITY_RECOVERING;
+        }
+        flags
     }
 
     /// An empty per-IMU table.

@@ -1,8 +1,8 @@
 //! Any navsync sample, tagged with its type: what a recording holds and a replay publishes.
 
 use super::{
-    EstimatorSettings, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, Health, ImuSample, NavState,
-    NetworkTime, PpsEdge, SimTruth, TimeState,
+    EstimatorSettings, EventPose, GnssEvent, GnssFix, GnssNavData, GnssRaw, GnssSky, GnssTimePulse, Health, ImuSample,
+    NavState, NetworkTime, PpsEdge, SimTruth, TimeState,
 };
 
 /// A sample of any navsync type. Variants differ in size (a `Health` report is ~2.4 kB); the
@@ -38,6 +38,8 @@ pub enum AnySample {
     NetworkTime(NetworkTime),
     /// `navsync/gnss/{id}/sky`
     Sky(GnssSky),
+    /// `navsync/event/{id}/pose`
+    EventPose(EventPose),
 }
 
 impl AnySample {
@@ -58,6 +60,7 @@ impl AnySample {
             Self::Settings(s) => s.host_ns,
             Self::NetworkTime(t) => t.host_ns,
             Self::Sky(s) => s.stamp.host_ns,
+            Self::EventPose(e) => e.host_ns,
         }
     }
 }

@@ -51,6 +51,7 @@ fn all() -> Vec<String> {
         signature::<EstimatorSettings>(),
         signature::<NetworkTime>(),
         signature::<GnssSky>(),
+        signature::<EventPose>(),
     ]
 }
 
@@ -76,6 +77,7 @@ fn field_tables_describe_the_real_layout() {
     check::<EstimatorSettings>();
     check::<NetworkTime>();
     check::<GnssSky>();
+    check::<EventPose>();
 }
 
 #[test]

@@ -12,6 +12,7 @@
 
 mod any_sample;
 mod estimator_settings;
+mod event_pose;
 mod gnss_event;
 mod gnss_fix;
 mod gnss_nav_data;
@@ -31,6 +32,7 @@ mod time_state;
 
 pub use any_sample::AnySample;
 pub use estimator_settings::{EstimatorSettings, SETTINGS_JSON_BYTES};
+pub use event_pose::{EVENT_EDGE_FALLING, EVENT_EDGE_RISING, EventPose};
 pub use gnss_event::GnssEvent;
 pub use gnss_fix::*;
 pub use gnss_nav_data::{GnssNavData, MAX_NAV_WORDS};
