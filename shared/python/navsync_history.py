@@ -7,8 +7,10 @@ library only (``mmap``, ``struct``).
     python3 shared/python/navsync_history.py HOST_NS [HOST_NS ...]   # one JSON line each
 
 The file is ``/dev/shm/<prefix>nav_history`` (``$NAVSYNC_IPC_PREFIX``, default ``navsync_``):
-a header of 16 little-endian 64-bit words, then records of 32 words, each under a sequence
-lock (word 0, odd while the estimator writes it). A record is copied, then its sequence read
+a header of 16 little-endian 64-bit words, then two rings of records of 32 words (the
+predicted states, then the fused ones: the delayed filter's state of each instant it has
+passed), each under a sequence lock (word 0, odd while the estimator writes it). A query
+answers from the fused states where they reach the instant, else from the predicted ones. A record is copied, then its sequence read
 again: equal and even, the copy is consistent, else it is read again. The interpolation is the
 Rust one: cubic Hermite on position in a local NED frame, linear velocity, slerp of the
 attitude, linear σ. Errors: ``TooOld``/``TooNew`` (which side, with the oldest/newest time).
@@ -22,10 +24,14 @@ import struct
 import sys
 
 MAGIC = int.from_bytes(b"NAVSHIST", "little")
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
+#: Header words holding the write index of the predicted and the fused ring.
+WRITE_INDEX_WORDS = (9, 11)
+PREDICTED, FUSED = 0, 1
 TYPE_NAME = b"navsync.NavState.v2"
 HEADER_WORDS = 16
 RECORD_WORDS = 32
+I64_MIN = -(2 ** 63)
 WGS84_A = 6378137.0
 WGS84_E2 = (1.0 / 298.257223563) * (2.0 - 1.0 / 298.257223563)
 RECORD = struct.Struct("<QQqq" + "d" * 22 + "BBBB4x" + "d" * 5)
@@ -93,11 +99,11 @@ class History:
             return False
         return (st.st_dev, st.st_ino) == self._id
 
-    def write_index(self):
-        return struct.unpack_from("<Q", self.map, 9 * 8)[0]
+    def write_index(self, ring=PREDICTED):
+        return struct.unpack_from("<Q", self.map, WRITE_INDEX_WORDS[ring] * 8)[0]
 
-    def record(self, index):
-        off = (HEADER_WORDS + (index % self.capacity) * RECORD_WORDS) * 8
+    def record(self, index, ring=PREDICTED):
+        off = (HEADER_WORDS + (ring * self.capacity + index % self.capacity) * RECORD_WORDS) * 8
         for _ in range(100000):
             s1 = struct.unpack_from("<Q", self.map, off)[0]
             if s1 & 1 == 0:
@@ -111,21 +117,34 @@ class History:
         return self._at(t, "host_ns")
 
     def state_at(self, utc_ns):
-        a, b = self._bracket(utc_ns, "utc_ns")
+        a, b = self._either(utc_ns, "utc_ns")
         f = (utc_ns - a["utc_ns"]) / (b["utc_ns"] - a["utc_ns"]) if b["utc_ns"] != a["utc_ns"] else 0.0
         return interpolate(a, b, a["host_ns"] + round((b["host_ns"] - a["host_ns"]) * f))
 
     def _at(self, t, key):
-        a, b = self._bracket(t, key)
+        a, b = self._either(t, key)
         return interpolate(a, b, t)
 
-    def _bracket(self, t, key):
+    def _either(self, t, key):
+        """The records around t among the fused states, else among the predicted ones."""
+        try:
+            a, b = self._bracket(t, key, FUSED)
+            if key == "host_ns" or (a["utc_ns"] != I64_MIN and b["utc_ns"] != I64_MIN):
+                return a, b
+        except (TooOld, TooNew):
+            pass
+        except HistoryError as e:
+            if "fewer than two" not in str(e):
+                raise
+        return self._bracket(t, key, PREDICTED)
+
+    def _bracket(self, t, key, ring):
         for _ in range(8):
-            n = self.write_index()
+            n = self.write_index(ring)
             if n < 2:
                 raise HistoryError("the history holds fewer than two states yet")
             lo, hi = max(0, n - (self.capacity - 1)), n - 1
-            b, a = self.record(hi), self.record(lo)
+            b, a = self.record(hi, ring), self.record(lo, ring)
             if a is None or b is None:
                 continue
             if t > b[key]:
@@ -135,7 +154,7 @@ class History:
             lapped = False
             while hi - lo > 1:
                 mid = (lo + hi) // 2
-                m = self.record(mid)
+                m = self.record(mid, ring)
                 if m is None:
                     lapped = True
                     break

@@ -103,13 +103,20 @@ fn states_at_any_instant_against_the_truth_and_a_stopped_reader_blocks_nobody() 
     let mut max_h_interp = 0.0f64;
     // Queries whose 3-D error is at most 1.05 × the nearest stored state's own (+ 1 mm).
     let mut within_nearest = 0usize;
+    let mut fused = 0usize;
     for _ in 0..n {
         x = x
             .wrapping_mul(6_364_136_223_846_793_005)
             .wrapping_add(1_442_695_040_888_963_407);
         let t = span.0 + ((x >> 11) % (span.1 - span.0) as u64) as i64;
         let got = h.state_at_host(t).unwrap_or_else(|e| panic!("{t}: {e}"));
-        assert_eq!(got.sources, [Some(Source::Predicted); 2]);
+        // Two states of one ring: the fused ones where they reach, else the predicted ones.
+        assert!(
+            got.sources == [Some(Source::Fused); 2] || got.sources == [Some(Source::Predicted); 2],
+            "{t}: {:?}",
+            got.sources
+        );
+        fused += usize::from(got.sources[0] == Some(Source::Fused));
         let want = truth_at(&truth, t).unwrap();
         let e = error_ned(&want, got.pose.lat_deg, got.pose.lon_deg, got.pose.height_m);
         for i in 0..3 {
@@ -147,6 +154,37 @@ fn states_at_any_instant_against_the_truth_and_a_stopped_reader_blocks_nobody() 
         );
     }
     let pct = |k: usize| 100.0 * k as f64 / n as f64;
+    println!(
+        "{:.1} % of the queries answered from the delayed filter's fused states ({} fused records written)",
+        pct(fused),
+        h.write_index_of(Source::Fused)
+    );
+    // The instants the delayed filter has passed (all but the last fusion horizon, ≤ 1.5 s, of
+    // the 8 s and more) answer from its states.
+    assert!(pct(fused) >= 50.0, "only {:.1} % from fused states", pct(fused));
+    // An instant 0.5 s or more old at a fused state's own time: that state, as the delayed
+    // filter had it.
+    let nf = h.write_index_of(Source::Fused);
+    let newest_fused = h.record_of(Source::Fused, nf - 1).unwrap().unwrap();
+    let mut checked = 0;
+    for i in (nf.saturating_sub(h.capacity() / 2)..nf).step_by(23) {
+        let Some(r) = h.record_of(Source::Fused, i).unwrap() else { continue };
+        if r.host_ns > newest_fused.host_ns - 500_000_000 {
+            continue;
+        }
+        let got = h.state_at_host(r.host_ns).unwrap();
+        assert_eq!(got.sources[0], Some(Source::Fused));
+        assert!(
+            (got.pose.lat_deg - r.pose.lat_deg).abs() < 1e-12
+                && (got.pose.lon_deg - r.pose.lon_deg).abs() < 1e-12
+                && (got.pose.height_m - r.pose.height_m).abs() < 1e-9
+                && got.pose.pos_std_ned_m == r.pose.pos_std_ned_m,
+            "{}: {got:?} against the fused state {r:?}",
+            r.host_ns
+        );
+        checked += 1;
+    }
+    assert!(checked >= 10, "only {checked} fused states checked");
     let (rms_i, rms_n) = ((sq_interp / n as f64).sqrt(), (sq_nearest / n as f64).sqrt());
     println!(
         "{n} queries: |error| ≤ σ north {:.1} %, east {:.1} %, down {:.1} %, horizontal {:.1} % (2σ {:.1} %, 3σ {:.1} %); \
