@@ -168,7 +168,9 @@ fn states_at_any_instant_against_the_truth_and_a_stopped_reader_blocks_nobody() 
     let newest_fused = h.record_of(Source::Fused, nf - 1).unwrap().unwrap();
     let mut checked = 0;
     for i in (nf.saturating_sub(h.capacity() / 2)..nf).step_by(23) {
-        let Some(r) = h.record_of(Source::Fused, i).unwrap() else { continue };
+        let Some(r) = h.record_of(Source::Fused, i).unwrap() else {
+            continue;
+        };
         if r.host_ns > newest_fused.host_ns - 500_000_000 {
             continue;
         }
