@@ -82,6 +82,18 @@ fn foxglove(addr: &str, stop: &AtomicBool, messages: &AtomicU64) -> Result<(), S
     Ok(())
 }
 
+/// The watchers stand for programs on other machines (an operator's browser and Foxglove app,
+/// the fleet's Prometheus): on the measured machine their threads run under `SCHED_IDLE`, so
+/// what the comparison measures is the vehicle's side (the `navsync web` process, itself under
+/// `SCHED_IDLE`, and the loopback traffic), not a browser sharing the vehicle's two cores.
+fn as_remote_watcher() {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: sched_setscheduler on the calling thread with a valid sched_param.
+    if unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) } != 0 {
+        eprintln!("watcher: SCHED_IDLE refused: {}", std::io::Error::last_os_error());
+    }
+}
+
 impl WebLoad {
     /// Connects the watchers to `navsync web` at `http` (page and metrics) and `foxglove`.
     pub fn start(http: &str, foxglove_addr: &str) -> Self {
@@ -91,11 +103,15 @@ impl WebLoad {
         let mut threads = Vec::new();
         {
             let (stop, bytes, addr) = (stop.clone(), http_bytes.clone(), http.to_string());
-            threads.push(std::thread::spawn(move || get(&addr, "/events", &stop, &bytes)));
+            threads.push(std::thread::spawn(move || {
+                as_remote_watcher();
+                get(&addr, "/events", &stop, &bytes)
+            }));
         }
         {
             let (stop, bytes, addr) = (stop.clone(), http_bytes.clone(), http.to_string());
             threads.push(std::thread::spawn(move || {
+                as_remote_watcher();
                 while !stop.load(Ordering::Relaxed) {
                     get(&addr, "/metrics", &AtomicBool::new(false), &bytes);
                     std::thread::sleep(Duration::from_secs(1));
@@ -105,6 +121,7 @@ impl WebLoad {
         {
             let (stop, n, addr) = (stop.clone(), foxglove_messages.clone(), foxglove_addr.to_string());
             threads.push(std::thread::spawn(move || {
+                as_remote_watcher();
                 if let Err(e) = foxglove(&addr, &stop, &n) {
                     eprintln!("foxglove watcher: {e}");
                 }

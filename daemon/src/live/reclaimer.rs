@@ -34,16 +34,8 @@ impl Reclaimer {
         let stop = Arc::new(AtomicBool::new(false));
         let (flag, name) = (stop.clone(), node_name.to_string());
         let handle = std::thread::Builder::new().name(name.clone()).spawn(move || {
-            // Below any policy the process was given (threads inherit it), preempted by any
-            // other wake-up.
-            let param = libc::sched_param { sched_priority: 0 };
-            // SAFETY: sched_setscheduler on the calling thread with a valid sched_param.
-            if unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) } != 0 {
-                warn!(
-                    "dead-node reclaimer: SCHED_IDLE refused ({}); runs at the process's policy",
-                    std::io::Error::last_os_error()
-                );
-            }
+            // Below any policy the process was given, preempted by any other wake-up.
+            super::run_as_observer("dead-node reclaimer");
             let node = match IpcNode::new(&name) {
                 Ok(n) => n,
                 Err(e) => {

@@ -23,7 +23,8 @@
 //! that does not take a write within `--write-timeout` (its socket's send buffer bounded to
 //! [`SEND_BUFFER_BYTES`]) is dropped.
 //!
-//! Threads: the main thread gathers (iceoryx2) and publishes a snapshot once a second; one
+//! Threads, all under `SCHED_IDLE` (they run on what the pipeline leaves of the CPU,
+//! [`super::run_as_observer`]): the main thread gathers (iceoryx2) and publishes a snapshot once a second; one
 //! thread accepts; one thread per connection (so at most `--max-connections`) reads the
 //! request and answers it from the snapshot. No async runtime, no HTTP crate: the bounds sit
 //! on the socket (the cap answered before a byte is parsed, the send buffer, the write
@@ -1328,6 +1329,10 @@ pub fn metrics_text(report: &Value, extra: &Value) -> String {
 /// Runs `navsync web`.
 pub fn run(args: &WebArgs) -> Result<(), WebError> {
     check_listen(args.listen, args.allow_remote)?;
+    // A watcher, not part of the pipeline: every thread of this process (they inherit it)
+    // runs on CPU time the drivers and the estimator leave, so watching costs them nothing
+    // but the subscriptions (`navsync-bench e2e --compare-web`).
+    super::run_as_observer("web");
     if args.max_streams >= args.max_connections {
         return Err(WebError::Streams {
             streams: args.max_streams,
