@@ -15,6 +15,7 @@
 //! | `navsync/time/state` | [`TimeState`] | `navsync estimator` |
 //! | `navsync/time/network` | [`NetworkTime`] | `navsync estimator --time-source chrony\|system` (its readings of the network time service) |
 //! | `navsync/nav/state` | [`NavState`] | `navsync estimator` |
+//! | `navsync/nav/fused` | [`NavState`] | `navsync replay --estimate --out` (the delayed filter's states; live they go into the history) |
 //! | `navsync/health/{process}` | [`Health`] | every process |
 //! | `navsync/estimator/settings` | [`EstimatorSettings`] | `navsync estimator` (its settings in force, about once per second) |
 //! | `navsync/sim/truth` | [`SimTruth`] | `navsync sim` |
@@ -90,6 +91,10 @@ pub const TIME_STATE: &str = "navsync/time/state";
 pub const NETWORK_TIME: &str = "navsync/time/network";
 /// The navigation solution.
 pub const NAV_STATE: &str = "navsync/nav/state";
+/// The delayed filter's states (its state at each instant it stepped over, every measurement
+/// up to it fused): written by `navsync replay --estimate --out`; the live estimator keeps
+/// them in the history of states (`navsync_shared::history`) rather than publishing them.
+pub const NAV_FUSED: &str = "navsync/nav/fused";
 /// The estimator's settings in force.
 pub const ESTIMATOR_SETTINGS: &str = "navsync/estimator/settings";
 /// Simulator ground truth.
@@ -194,7 +199,7 @@ impl ServiceKind {
             ["navsync", "imu", id, "sample"] if !id.is_empty() => Some(Self::ImuSample),
             ["navsync", "time", "state"] => Some(Self::TimeState),
             ["navsync", "time", "network"] => Some(Self::NetworkTime),
-            ["navsync", "nav", "state"] => Some(Self::NavState),
+            ["navsync", "nav", "state" | "fused"] => Some(Self::NavState),
             ["navsync", "health", p] if !p.is_empty() => Some(Self::Health),
             ["navsync", "estimator", "settings"] => Some(Self::EstimatorSettings),
             ["navsync", "sim", "truth"] => Some(Self::SimTruth),
@@ -314,6 +319,7 @@ mod tests {
         assert_eq!(ServiceKind::of(&imu_sample("3")), Some(ServiceKind::ImuSample));
         assert_eq!(ServiceKind::of(&health("gps-0")), Some(ServiceKind::Health));
         assert_eq!(ServiceKind::of(NAV_STATE), Some(ServiceKind::NavState));
+        assert_eq!(ServiceKind::of(NAV_FUSED), Some(ServiceKind::NavState));
         assert_eq!(ServiceKind::of(SIM_PPS), Some(ServiceKind::PpsEdge));
         assert_eq!(ServiceKind::of("navsync/imu//sample"), None);
         assert_eq!(ServiceKind::of("other/thing"), None);

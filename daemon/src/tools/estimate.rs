@@ -27,7 +27,7 @@ use crate::config::{ConfigError, Loaded};
 /// Output format of `--out`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Format {
-    /// NavState and TimeState in an MCAP file.
+    /// The estimator's outputs in an MCAP file (see `--out`).
     Mcap,
     /// KF-GINS's navigation result (11 columns; a directory gets its IMU_ERR and STD files too).
     KfGins,
@@ -36,7 +36,9 @@ pub enum Format {
 /// What `replay --estimate` writes, and the estimator's settings.
 #[derive(clap::Args, Debug, Clone)]
 pub struct EstimateOptions {
-    /// Write the estimator's NavState and TimeState into this file (with --estimate).
+    /// Write the estimator's outputs into this file (with --estimate): mcap: its NavStates
+    /// (`navsync/nav/state`), the delayed filter's states (`navsync/nav/fused`), TimeStates and
+    /// event poses (`navsync/event/{id}/pose`).
     #[arg(long, requires = "estimate")]
     pub out: Option<PathBuf>,
     /// Format of --out: `mcap`, or `kf-gins` (KF-GINS's result layout; a directory gets
@@ -352,7 +354,12 @@ pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary
                 log_time,
                 e.report_host_ns.max(0) as u64,
             ),
-            Output::Fused(_) => return,
+            Output::Fused(n) => rec.write(
+                services::NAV_FUSED,
+                &AnySample::Nav(*n),
+                log_time,
+                n.host_ns.max(0) as u64,
+            ),
         };
         if let Err(e) = r {
             write_err = Some(e);

@@ -6,6 +6,7 @@
 mod gps_sky;
 
 mod external_data;
+mod history_generated;
 mod kf_gins;
 mod lnav_gpsd;
 mod recorded_models;
