@@ -13,10 +13,13 @@
 //! - Outages: no fix (GGA quality 0, RMC status V, empty position fields); time tags and
 //!   dates continue.
 //! - Latency: d = d0 + N(0, jitter) (clamped at 0); a burst never leaves before the previous one.
+//! - UBX: the time marks of the camera on EXTINT0 ([`crate::camera`]) in TIM-TM2 after the
+//!   epoch's NAV-EOE (and TIM-TP), for the edges up to the epoch.
 
 use nalgebra::Vector3;
 use navsync_shared::earth;
 
+use super::camera::{Camera, TimeMarks};
 use super::gps::Sky;
 use super::inverse_mechanization::inertial_state;
 use super::nmea::{self, EpochReport, FixReport};
@@ -71,6 +74,7 @@ pub struct GnssReceiver {
     latency_rng: Rng,
     last_host_ns: i64,
     sky: Option<Sky>,
+    marks: Option<TimeMarks>,
 }
 
 impl GnssReceiver {
@@ -98,7 +102,15 @@ impl GnssReceiver {
             latency_rng: Rng::stream(seed, streams::NMEA_LATENCY),
             last_host_ns: i64::MIN,
             sky: Sky::new(&cfg.sky, seed, start_utc_ns, duration_s),
+            marks: Camera::new(cfg, seed, start_utc_ns, duration_s)
+                .filter(|_| cfg.protocol == OutputProtocol::Ubx)
+                .map(|c| TimeMarks::new(c, cfg.timepulse_quantization_ns)),
         }
+    }
+
+    /// The camera on EXTINT0 (UBX with a camera rate > 0).
+    pub fn camera(&self) -> Option<&Camera> {
+        self.marks.as_ref().map(TimeMarks::camera)
     }
 
     /// The serial baud rate of the receiver's port.
@@ -167,6 +179,9 @@ impl GnssReceiver {
                     ),
                 };
                 ubx::write_epoch(&report, &x, &mut bytes);
+                if let Some(mark) = self.marks.as_mut().and_then(|m| m.report(utc)) {
+                    ubx::frame(0x0D, 0x03, &ubx::tim_tm2(&mark), &mut bytes);
+                }
             }
         }
         let latency_s = (self.cfg.latency_s + self.latency_rng.gaussian(self.cfg.latency_jitter_s)).max(0.0);

@@ -4,7 +4,8 @@
 //! ([`trajectory`], [`scenario`]), its exact IMU increments by inverse mechanization
 //! ([`inverse_mechanization`], [`vibration`], [`quadrature`]), IMU errors ([`imu_errors`],
 //! [`imu_stream`]), a GNSS receiver writing NMEA or UBX ([`gnss_receiver`], [`nmea`], [`ubx`]) with GPS raw
-//! measurements and navigation data from a real almanac ([`gps`]), a drifting host
+//! measurements and navigation data from a real almanac ([`gps`]) and the time marks of a
+//! camera on its EXTINT0 input ([`camera`]), a drifting host
 //! oscillator and its PPS edges ([`oscillator`], [`pps`]) and the truth ([`truth`]), all
 //! advanced together by [`world::World`].
 //!
@@ -16,6 +17,7 @@
 //! The simulator depends on the drivers' encoders and decoders (it writes what a device
 //! writes); the drivers know nothing of it.
 
+pub mod camera;
 pub mod error;
 pub mod gnss_receiver;
 pub mod gps;

@@ -48,9 +48,18 @@ pub struct SimArgs {
     /// GNSS rate, Hz (1 or 10).
     #[arg(long = "gnss-rate")]
     pub gnss_rate_hz: Option<u32>,
-    /// What the simulated receiver writes: nmea, or ubx (NAV-PVT, NAV-EOE, TIM-TP).
+    /// What the simulated receiver writes: nmea, or ubx (NAV-PVT, NAV-EOE, TIM-TP, and TIM-TM2
+    /// time marks of the camera).
     #[arg(long = "gnss-protocol")]
     pub gnss_protocol: Option<crate::scenario::OutputProtocol>,
+    /// Trigger rate of the camera on the receiver's EXTINT0, Hz; 0 = no camera (scenario
+    /// `gnss.camera.rate_hz`; default 1 with ubx, none with nmea).
+    #[arg(long = "camera-rate")]
+    pub camera_rate_hz: Option<f64>,
+    /// Start of the camera's exposure after its trigger, ms (scenario
+    /// `gnss.camera.exposure_offset_s`; default 5).
+    #[arg(long = "camera-offset-ms")]
+    pub camera_offset_ms: Option<f64>,
     /// NMEA output latency after the PPS edge, s.
     #[arg(long = "gnss-latency")]
     pub gnss_latency_s: Option<f64>,
@@ -153,6 +162,12 @@ pub fn load_config(args: &SimArgs) -> Result<SimConfig, SimError> {
     }
     if let Some(r) = args.gnss_rate_hz {
         cfg.set_gnss_rate_hz(r);
+    }
+    if let Some(r) = args.camera_rate_hz {
+        cfg.set_camera_rate_hz(r);
+    }
+    if let Some(ms) = args.camera_offset_ms {
+        cfg.set_camera_exposure_offset_s(ms * 1e-3);
     }
     if let Some(l) = args.gnss_latency_s {
         cfg.set_nmea_latency_s(l);

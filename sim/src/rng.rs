@@ -53,6 +53,8 @@ pub mod streams {
     pub const GPS_CLOCK: u64 = 6;
     /// Broadcast orbit-and-clock errors: `GPS_BROADCAST ^ (prn << 32) ^ iode`.
     pub const GPS_BROADCAST: u64 = 0x300;
+    /// The camera's exposure jitter of trigger k: `CAMERA ^ (k << 16)`.
+    pub const CAMERA: u64 = 0x400;
 }
 
 /// xoshiro256++ with Gaussian deviates (polar method).

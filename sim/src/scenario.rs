@@ -361,7 +361,7 @@ pub struct GnssConfig {
     /// Epoch rate, Hz: 1, 2, 4, 5, 10 or 20 (default 1).
     pub rate_hz: u32,
     /// What the receiver writes: `nmea` (RMC, VTG, GGA, GSA, GST, ZDA) or `ubx` (NAV-PVT,
-    /// NAV-EOE, TIM-TP; `crate::ubx`) (default `nmea`).
+    /// NAV-EOE, TIM-TP, and TIM-TM2 of the camera; `crate::ubx`) (default `nmea`).
     pub protocol: OutputProtocol,
     /// NMEA talker, `GN` or `GP` (default `GN`).
     pub talker: Talker,
@@ -402,6 +402,57 @@ pub struct GnssConfig {
     /// (TOML `[gnss.sky]`; [`crate::gps`]). With an almanac the receiver has no fix while it
     /// sees fewer than four satellites.
     pub sky: crate::gps::SkyConfig,
+    /// A camera whose exposure pulse is wired into the receiver's EXTINT0 input, reported as
+    /// UBX-TIM-TM2 time marks (TOML `[gnss.camera]`; [`crate::camera`]).
+    pub camera: CameraConfig,
+}
+
+impl GnssConfig {
+    /// The camera's trigger rate in force, Hz (0: no camera): `camera.rate_hz`, by default 1
+    /// for a UBX receiver and 0 for NMEA, which has no time-mark message.
+    pub fn camera_rate_hz(&self) -> f64 {
+        self.camera.rate_hz.unwrap_or(match self.protocol {
+            OutputProtocol::Ubx => DEFAULT_CAMERA_RATE_HZ,
+            OutputProtocol::Nmea => 0.0,
+        })
+    }
+}
+
+/// Trigger rate of the camera of a UBX receiver without `gnss.camera.rate_hz`, Hz.
+pub const DEFAULT_CAMERA_RATE_HZ: f64 = 1.0;
+
+/// A camera on the receiver's EXTINT0 input ([`crate::camera`]). It is triggered on a grid of
+/// true time: trigger k at the first whole UTC second of the scenario + k/`rate_hz`. Its
+/// exposure starts `exposure_offset_s` (+ a seeded Gaussian jitter) after the trigger and
+/// lasts `exposure_s`; its exposure-active output, high during the exposure, drives EXTINT0,
+/// so the rising edge is the start of the exposure and the falling edge its end. The receiver
+/// time-stamps both edges on its own clock and reports the latest of each in the TIM-TM2 of
+/// the next navigation epoch (a camera faster than the epoch rate loses marks, as on a real
+/// receiver: `count` still counts every rising edge).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraConfig {
+    /// Trigger rate, Hz, 0 ≤ rate ≤ 100; 0 = no camera (default: 1 with `gnss.protocol =
+    /// "ubx"`, none with `nmea`, where a rate > 0 is an error).
+    pub rate_hz: Option<f64>,
+    /// Start of the exposure after the trigger, s, 0 ≤ offset ≤ 1 (default 0.005).
+    pub exposure_offset_s: f64,
+    /// 1-σ jitter of that offset, s, drawn per trigger from the seed (default 10e-6).
+    pub exposure_jitter_s: f64,
+    /// Exposure time (the pulse's width), s, 1 µs ≤ width ≤ half the trigger period
+    /// (default 0.002).
+    pub exposure_s: f64,
+}
+
+impl Default for CameraConfig {
+    fn default() -> Self {
+        Self {
+            rate_hz: None,
+            exposure_offset_s: 0.005,
+            exposure_jitter_s: 10e-6,
+            exposure_s: 0.002,
+        }
+    }
 }
 
 impl Default for GnssConfig {
@@ -425,6 +476,7 @@ impl Default for GnssConfig {
             vdop: 1.2,
             outages: Vec::new(),
             sky: crate::gps::SkyConfig::default(),
+            camera: CameraConfig::default(),
         }
     }
 }
@@ -677,6 +729,18 @@ impl SimConfig {
         self.mark("gnss.baud");
     }
 
+    /// Sets the camera's trigger rate, Hz (0: no camera).
+    pub fn set_camera_rate_hz(&mut self, rate_hz: f64) {
+        self.gnss.camera.rate_hz = Some(rate_hz);
+        self.mark("gnss.camera.rate_hz");
+    }
+
+    /// Sets the start of the camera's exposure after its trigger, s.
+    pub fn set_camera_exposure_offset_s(&mut self, offset_s: f64) {
+        self.gnss.camera.exposure_offset_s = offset_s;
+        self.mark("gnss.camera.exposure_offset_s");
+    }
+
     /// Sets the host clock's fractional frequency error, ppm.
     pub fn set_clock_ppm(&mut self, ppm: f64) {
         self.clock.freq_error_ppm = ppm;
@@ -721,6 +785,7 @@ impl SimConfig {
         self.gnss.horizontal_rms_m = 0.0;
         self.gnss.vertical_sigma_m = 0.0;
         self.gnss.velocity_sigma_mps = 0.0;
+        self.gnss.camera.exposure_jitter_s = 0.0;
         self.mark("gnss");
     }
 
@@ -1030,7 +1095,41 @@ impl SimConfig {
         for (i, o) in g.outages.iter().enumerate() {
             self.check_window(&format!("gnss.outage[{i}]"), o.start_s, o.duration_s)?;
         }
+        self.validate_camera()?;
         self.validate_sky()
+    }
+
+    fn validate_camera(&self) -> Result<(), SimError> {
+        let (g, c) = (&self.gnss, &self.gnss.camera);
+        let rate = g.camera_rate_hz();
+        self.check_range("gnss.camera.rate_hz", rate, 0.0, MAX_CAMERA_RATE_HZ, "Hz")?;
+        if rate > 0.0 && g.protocol != OutputProtocol::Ubx {
+            return Err(self.invalid(
+                "gnss.camera.rate_hz",
+                format!(
+                    "a {rate} Hz camera: its time marks are written as UBX-TIM-TM2 (NMEA has none), expected gnss.protocol = \"ubx\" or rate_hz = 0"
+                ),
+            ));
+        }
+        self.check_range("gnss.camera.exposure_offset_s", c.exposure_offset_s, 0.0, 1.0, "s")?;
+        if rate == 0.0 {
+            return Ok(());
+        }
+        let period = 1.0 / rate;
+        self.check_range(
+            "gnss.camera.exposure_s",
+            c.exposure_s,
+            1e-6,
+            period / 2.0,
+            "s (half the trigger period)",
+        )?;
+        self.check_range(
+            "gnss.camera.exposure_jitter_s",
+            c.exposure_jitter_s,
+            0.0,
+            (period / 20.0).min(1e-3),
+            "s (a twentieth of the trigger period, at most 1 ms)",
+        )
     }
 
     fn validate_sky(&self) -> Result<(), SimError> {
@@ -1117,6 +1216,8 @@ impl SimConfig {
 
 /// GNSS epoch rates that divide one second into whole nanoseconds and centiseconds, Hz.
 pub const GNSS_RATES_HZ: [u32; 6] = [1, 2, 4, 5, 10, 20];
+/// Fastest camera trigger accepted, Hz.
+pub const MAX_CAMERA_RATE_HZ: f64 = 100.0;
 /// Largest |flight-path angle| accepted, degrees (keeps the Euler angles far from ±90°).
 pub const MAX_PITCH_DEG: f64 = 45.0;
 /// Largest speed accepted, m/s.
@@ -1377,6 +1478,67 @@ mod tests {
         assert_eq!(cfg.imu_unit(4).preset, ImuPreset::Industrial);
         cfg.set_gnss_rate_hz(3);
         assert!(cfg.validate().is_err());
+    }
+
+    #[test]
+    fn camera_settings_defaults_and_errors() {
+        // Default: a 1 Hz camera on a UBX receiver, none on an NMEA one.
+        let mut cfg = SimConfig::from_toml_str(&minimal(""), "c.toml").expect("valid");
+        assert_eq!(cfg.gnss.camera_rate_hz(), 0.0);
+        cfg.set_gnss_protocol(OutputProtocol::Ubx);
+        assert_eq!(cfg.gnss.camera_rate_hz(), DEFAULT_CAMERA_RATE_HZ);
+        let c = &cfg.gnss.camera;
+        assert_eq!(
+            (c.exposure_offset_s, c.exposure_jitter_s, c.exposure_s),
+            (0.005, 10e-6, 0.002)
+        );
+        // The file's table (lines 11-17 after the minimal scenario's ten).
+        let base = minimal(
+            "\n[gnss]\nprotocol = \"ubx\"\n\n[gnss.camera]\nrate_hz = 10.0\nexposure_offset_s = 0.02\nexposure_jitter_s = 1e-4\nexposure_s = 0.004\n",
+        );
+        let cfg = SimConfig::from_toml_str(&base, "c.toml").expect("valid");
+        let c = &cfg.gnss.camera;
+        assert_eq!(cfg.gnss.camera_rate_hz(), 10.0);
+        assert_eq!(
+            (c.exposure_offset_s, c.exposure_jitter_s, c.exposure_s),
+            (0.02, 1e-4, 0.004)
+        );
+        for (from, to, field, line) in [
+            ("rate_hz = 10.0", "rate_hz = 200.0", "rate_hz", 15),
+            ("exposure_s = 0.004", "exposure_s = 0.06", "exposure_s", 18),
+            (
+                "exposure_jitter_s = 1e-4",
+                "exposure_jitter_s = 6e-3",
+                "exposure_jitter_s",
+                17,
+            ),
+            (
+                "exposure_offset_s = 0.02",
+                "exposure_offset_s = -0.1",
+                "exposure_offset_s",
+                16,
+            ),
+            ("protocol = \"ubx\"", "protocol = \"nmea\"", "rate_hz", 15),
+        ] {
+            let msg = SimConfig::from_toml_str(&base.replace(from, to), "c.toml")
+                .expect_err("invalid")
+                .to_string();
+            println!("{msg}");
+            assert!(
+                msg.starts_with(&format!("c.toml:{line}:")) && msg.contains(&format!("gnss.camera.{field}")),
+                "{msg}"
+            );
+        }
+        // Overrides: a camera on an NMEA receiver is named as such; rate 0 switches it off.
+        let mut cfg = SimConfig::default_drive();
+        cfg.set_camera_rate_hz(1.0);
+        let msg = cfg.validate().expect_err("NMEA").to_string();
+        assert!(
+            msg.starts_with("overrides: gnss.camera.rate_hz") && msg.contains("TIM-TM2"),
+            "{msg}"
+        );
+        cfg.set_camera_rate_hz(0.0);
+        cfg.validate().expect("no camera");
     }
 
     #[test]

@@ -1,9 +1,10 @@
 //! u-blox UBX generation for the simulated receiver (`gnss.protocol = "ubx"`): per epoch
-//! NAV-PVT then NAV-EOE, and TIM-TP (the GNSS time of the next time pulse) after each epoch on
-//! a whole second. Written from the u-blox 8 / M8 Receiver Description incl. Protocol
-//! Specification (UBX-13003221), "UBX Frame Structure", "UBX Checksum", UBX-NAV-PVT,
-//! UBX-NAV-EOE and UBX-TIM-TP; independently of navsync's decoders, which the round-trip
-//! tests check against.
+//! NAV-PVT then NAV-EOE, TIM-TP (the GNSS time of the next time pulse) after each epoch on
+//! a whole second, and TIM-TM2 (the time marks of the camera on EXTINT0, [`crate::camera`])
+//! after an epoch that saw a new edge. Written from the u-blox 8 / M8 Receiver Description
+//! incl. Protocol Specification (UBX-13003221), "UBX Frame Structure", "UBX Checksum",
+//! UBX-NAV-PVT, UBX-NAV-EOE, UBX-TIM-TP and UBX-TIM-TM2; independently of navsync's decoders,
+//! which the round-trip tests check against.
 
 use navsync_shared::time::{NS_PER_S, civil_from_utc_ns, gps_ns_from_utc_ns};
 
@@ -71,6 +72,78 @@ fn put_i32(p: &mut [u8], at: usize, v: i64) {
 fn put_u32(p: &mut [u8], at: usize, v: f64) {
     let v = v.round().clamp(0.0, f64::from(u32::MAX)) as u32;
     p[at..at + 4].copy_from_slice(&v.to_le_bytes());
+}
+
+/// What one UBX-TIM-TM2 reports: the latest rising and falling edges on one EXTINT input, in
+/// GPS time (the receiver's time marks run in the GNSS time base).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TimeMark {
+    /// The input (`ch`: 0 = EXTINT0).
+    pub channel: u8,
+    /// Rising edges counted on the input so far (`count`, wraps at 2^16).
+    pub count: u16,
+    /// GPS time of the last rising edge, ns since 1980-01-06 (`None`: none yet).
+    pub rising_gps_ns: Option<i64>,
+    /// The rising edge is new since the last report (`newRisingEdge`).
+    pub new_rising: bool,
+    /// GPS time of the last falling edge, ns (`None`: none yet).
+    pub falling_gps_ns: Option<i64>,
+    /// The falling edge is new since the last report (`newFallingEdge`).
+    pub new_falling: bool,
+    /// Accuracy estimate of the edge times (`accEst`), ns.
+    pub acc_est_ns: u32,
+}
+
+/// TIM-TM2 `flags` bits (UBX-13003221, "UBX-TIM-TM2"): bit 0 `mode` (1 = running: every edge
+/// is measured, not only the first), bit 1 `run` (0 = armed), bit 2 `newFallingEdge`, bits 3–4
+/// `timeBase` (0 receiver time, 1 GNSS time, 2 UTC), bit 5 `utc` (UTC available), bit 6 `time`
+/// (the time is valid), bit 7 `newRisingEdge`.
+pub mod tm2_flags {
+    /// `mode`: running.
+    pub const MODE_RUNNING: u8 = 1 << 0;
+    /// `run`: stopped (clear: armed).
+    pub const RUN_STOPPED: u8 = 1 << 1;
+    /// `newFallingEdge`.
+    pub const NEW_FALLING_EDGE: u8 = 1 << 2;
+    /// `timeBase` = 1: GNSS time.
+    pub const TIME_BASE_GNSS: u8 = 1 << 3;
+    /// `timeBase` = 2: UTC.
+    pub const TIME_BASE_UTC: u8 = 2 << 3;
+    /// `utc`: UTC available.
+    pub const UTC_AVAILABLE: u8 = 1 << 5;
+    /// `time`: the time is valid.
+    pub const TIME_VALID: u8 = 1 << 6;
+    /// `newRisingEdge`.
+    pub const NEW_RISING_EDGE: u8 = 1 << 7;
+}
+
+/// UBX-TIM-TM2 (class 0x0D, id 0x03, 28 bytes) of a time mark: `ch` U1 @0, `flags` X1 @1,
+/// `count` U2 @2, `wnR` U2 @4, `wnF` U2 @6, `towMsR` U4 @8 (ms), `towSubMsR` U4 @12 (the
+/// millisecond fraction, ns), `towMsF` U4 @16, `towSubMsF` U4 @20, `accEst` U4 @24 (ns); an
+/// edge not seen yet is all zeros. Flags: running, armed, GNSS time base, UTC available, time
+/// valid, and the new edges.
+pub fn tim_tm2(m: &TimeMark) -> [u8; 28] {
+    use tm2_flags::*;
+    let mut p = [0u8; 28];
+    p[0] = m.channel;
+    let mut flags = MODE_RUNNING | TIME_BASE_GNSS | UTC_AVAILABLE | TIME_VALID;
+    if m.new_rising && m.rising_gps_ns.is_some() {
+        flags |= NEW_RISING_EDGE;
+    }
+    if m.new_falling && m.falling_gps_ns.is_some() {
+        flags |= NEW_FALLING_EDGE;
+    }
+    p[1] = flags;
+    p[2..4].copy_from_slice(&m.count.to_le_bytes());
+    for (edge, wn_at, tow_at) in [(m.rising_gps_ns, 4, 8), (m.falling_gps_ns, 6, 16)] {
+        let Some(gps) = edge else { continue };
+        let (week, tow) = (gps.div_euclid(WEEK_NS), gps.rem_euclid(WEEK_NS));
+        p[wn_at..wn_at + 2].copy_from_slice(&(week as u16).to_le_bytes());
+        p[tow_at..tow_at + 4].copy_from_slice(&(tow.div_euclid(1_000_000) as u32).to_le_bytes());
+        p[tow_at + 4..tow_at + 8].copy_from_slice(&(tow.rem_euclid(1_000_000) as u32).to_le_bytes());
+    }
+    p[24..28].copy_from_slice(&m.acc_est_ns.to_le_bytes());
+    p
 }
 
 /// UBX-NAV-PVT (class 0x01, id 0x07, 92 bytes) of an epoch.
@@ -248,5 +321,93 @@ mod tests {
             &mut out,
         );
         assert_eq!(out.len(), 100 + 12);
+    }
+
+    /// TIM-TM2 against the layout of UBX-13003221 "UBX-TIM-TM2", byte by byte.
+    #[test]
+    fn tim_tm2_bytes_follow_the_interface_description() {
+        // Week 2412; rising edge at tow 345 600.123 456 789 s, falling 2 ms later.
+        let week = 2412i64;
+        let rising = week * WEEK_NS + 345_600_123_456_789;
+        let m = TimeMark {
+            channel: 0,
+            count: 0x1234,
+            rising_gps_ns: Some(rising),
+            new_rising: true,
+            falling_gps_ns: Some(rising + 2_000_000),
+            new_falling: true,
+            acc_est_ns: 21,
+        };
+        let p = tim_tm2(&m);
+        #[rustfmt::skip]
+        let expected: [u8; 28] = [
+            0x00,                   // ch: EXTINT0
+            // flags: newRisingEdge, time valid, utc, timeBase GNSS (bits 3-4 = 01),
+            // newFallingEdge, armed (run 0), running
+            0b1110_1101,
+            0x34, 0x12,             // count
+            0x6C, 0x09, 0x6C, 0x09, // wnR, wnF: 2412 = 0x096C
+            0x7B, 0x70, 0x99, 0x14, // towMsR: 345 600 123 ms = 0x1499_707B
+            0x55, 0xF8, 0x06, 0x00, // towSubMsR: 456 789 ns = 0x0006_F855
+            0x7D, 0x70, 0x99, 0x14, // towMsF: 345 600 125 ms
+            0x55, 0xF8, 0x06, 0x00, // towSubMsF
+            0x15, 0x00, 0x00, 0x00, // accEst: 21 ns
+        ];
+        assert_eq!(p, expected);
+        let mut out = Vec::new();
+        frame(0x0D, 0x03, &p, &mut out);
+        assert_eq!(&out[..6], &[0xB5, 0x62, 0x0D, 0x03, 28, 0]);
+        assert_eq!(out.len(), 8 + 28);
+        assert!(checksum_ok(&out));
+        // A report without a new falling edge, before any: zeros in its fields, no flag.
+        let first = TimeMark {
+            falling_gps_ns: None,
+            new_falling: false,
+            ..m
+        };
+        let p = tim_tm2(&first);
+        assert_eq!(p[1], 0b1110_1001);
+        assert!(p[6..8].iter().chain(&p[16..24]).all(|&b| b == 0));
+        // An old rising edge reported again with a new falling edge.
+        let p = tim_tm2(&TimeMark { new_rising: false, ..m });
+        assert_eq!(p[1], 0b0110_1101);
+    }
+
+    /// The drivers' decoder reads back what the encoder meant, over edges across the week.
+    #[test]
+    fn tim_tm2_round_trips_through_the_drivers_decoder() {
+        use navsync_drivers::gnss::ubx::messages::{Message, decode};
+        let mut rng = crate::rng::Rng::new(5);
+        for i in 0..500u16 {
+            let rising = 2412 * WEEK_NS + (rng.uniform() * WEEK_NS as f64) as i64;
+            // Some falling edges in the next week.
+            let falling = rising + (rng.uniform() * 0.01e9) as i64 + if i % 50 == 0 { WEEK_NS } else { 0 };
+            let m = TimeMark {
+                channel: (i % 2) as u8,
+                count: i.wrapping_mul(977),
+                rising_gps_ns: Some(rising),
+                new_rising: i % 3 != 0,
+                falling_gps_ns: (i % 7 != 0).then_some(falling),
+                new_falling: i % 5 != 0,
+                acc_est_ns: u32::from(i) * 3 + 1,
+            };
+            let mut out = Vec::new();
+            frame(0x0D, 0x03, &tim_tm2(&m), &mut out);
+            let Ok(Message::TimTm2(d)) = decode(out[2], out[3], &out[6..out.len() - 2]) else {
+                panic!("not a TIM-TM2")
+            };
+            let week_tow = |g: i64| (g.div_euclid(WEEK_NS) as u16, g.rem_euclid(WEEK_NS));
+            assert_eq!((d.ch, d.count, d.acc_est_ns), (m.channel, m.count, m.acc_est_ns));
+            assert_eq!((d.week_rising, d.rising_tow_ns()), week_tow(rising));
+            assert!(d.time_valid() && d.time_base() == 1, "{:#x}", d.flags);
+            assert_eq!(d.flags & 0x80 != 0, m.new_rising);
+            match m.falling_gps_ns {
+                Some(f) => {
+                    assert_eq!((d.week_falling, d.falling_tow_ns()), week_tow(f));
+                    assert_eq!(d.flags & 0x04 != 0, m.new_falling);
+                }
+                None => assert_eq!((d.week_falling, d.falling_tow_ns(), d.flags & 0x04), (0, 0, 0)),
+            }
+        }
     }
 }

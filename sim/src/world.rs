@@ -313,6 +313,13 @@ impl World {
         Some(self.osc.utc_of_tau(imu.sample_time_s(seq)))
     }
 
+    /// The camera on the receiver's EXTINT0 input (UBX with a camera): its exposures are the
+    /// truth of the time marks the receiver reports (TIM-TM2 → `navsync/gnss/0/event`), and
+    /// [`World::truth_at_utc`] of an exposure's instant the pose at it.
+    pub fn camera(&self) -> Option<&crate::camera::Camera> {
+        self.gnss.camera()
+    }
+
     /// IMU `index`'s generator (configuration, mount, drawn errors), for evaluation.
     pub fn imu(&self, index: usize) -> Option<&ImuStream> {
         self.imus.get(index)

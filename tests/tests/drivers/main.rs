@@ -10,4 +10,5 @@ mod gnss_robustness;
 mod imu_iio;
 mod imu_xsens;
 mod receivers;
+mod sim_camera_events;
 mod ubx_pyubx2;

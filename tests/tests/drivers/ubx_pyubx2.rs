@@ -48,6 +48,12 @@
 //! serialise them from seeded random values over each field's range, and that file is
 //! compared like a capture (`pyubx2-built.ubx` in the report).
 //!
+//! **The simulator's receiver.** `sim-written.ubx` is 30 s of what `navsync sim`'s UBX
+//! receiver writes (NAV-PVT, NAV-EOE, TIM-TP, and the TIM-TM2 time marks of its camera; written
+//! from the interface description, not from these decoders, [`sim_receiver_bytes`]), compared
+//! like a capture: pyubx2 must read the simulator's frames as navsync's decoders do, whose
+//! reading the simulator's round-trip tests compare with what it meant to write.
+//!
 //! **Asserts.** Every message type of the list above that occurs in the corpus (on either
 //! side) was compared; ≥ [`MIN_AGREEMENT`] of all compared fields agree; there is no
 //! disagreement (each is listed with capture, both indices, offset, field and both values).
@@ -750,6 +756,33 @@ fn compare(
     (bad, compared)
 }
 
+/// The file name of the simulator's receiver output among the captures.
+const SIM_CAPTURE: &str = "sim-written.ubx";
+
+/// 30 s of the simulated UBX receiver's bytes: 4 Hz epochs (NAV-PVT, NAV-EOE; TIM-TP on whole
+/// seconds, its pulse on a 20.83 ns clock) and a 4 Hz camera on EXTINT0 (TIM-TM2).
+fn sim_receiver_bytes() -> Vec<u8> {
+    use navsync_sim::scenario::{OutputProtocol, SimConfig};
+    use navsync_sim::world::{SimEvent, World};
+    let mut cfg = SimConfig::default_drive();
+    cfg.trajectory.segments.truncate(1);
+    cfg.trajectory.segments[0].duration_s = 30.0;
+    cfg.set_gnss_protocol(OutputProtocol::Ubx);
+    cfg.set_gnss_rate_hz(4);
+    cfg.set_camera_rate_hz(4.0);
+    cfg.set_camera_exposure_offset_s(0.1);
+    cfg.gnss.timepulse_quantization_ns = 20.83;
+    // 2026-12-01 00:00:00.4 UTC.
+    let mut world = World::new(&cfg, 1_000_000_000_000, 1_796_083_200_400_000_000).expect("the simulated world");
+    let mut bytes = Vec::new();
+    while let Some(e) = world.next_event() {
+        if let SimEvent::Nmea { bytes: b, .. } = e {
+            bytes.extend(b);
+        }
+    }
+    bytes
+}
+
 fn run_dump(py: &Path, pythonpath: &Option<PathBuf>, captures: &[PathBuf]) -> Vec<Value> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("python/ubx_pyubx2_dump.py");
     let mut c = Command::new(py);
@@ -806,6 +839,9 @@ fn ubx_decoders_agree_with_pyubx2_on_the_gpsd_captures() {
         String::from_utf8_lossy(&o.stderr)
     );
     captures.push(built);
+    let sim = env.dir.join(SIM_CAPTURE);
+    std::fs::write(&sim, sim_receiver_bytes()).unwrap();
+    captures.push(sim);
     let dump = run_dump(&py, &pythonpath, &captures);
 
     // pyubx2's frames by capture and offset.
@@ -830,6 +866,8 @@ fn ubx_decoders_agree_with_pyubx2_on_the_gpsd_captures() {
     // tightness check below.
     let mut first: BTreeMap<String, (serde_json::Map<String, Value>, Fields)> = BTreeMap::new();
     let mut per_capture = String::new();
+    // TIM-TM2 of the simulator's camera compared.
+    let mut sim_time_marks = 0u64;
 
     for path in &captures {
         let name = path.file_name().unwrap().to_string_lossy().to_string();
@@ -911,6 +949,9 @@ fn ubx_decoders_agree_with_pyubx2_on_the_gpsd_captures() {
                 if converted { e.0 += 1 } else { e.1 += 1 }
             }
             t.messages += 1;
+            if name == SIM_CAPTURE && identity == "TIM-TM2" {
+                sim_time_marks += 1;
+            }
             t.fields += compared;
             t.agree += compared - bad.len() as u64;
             for (field, o, th) in bad {
@@ -1036,6 +1077,9 @@ fn ubx_decoders_agree_with_pyubx2_on_the_gpsd_captures() {
         missing.is_empty(),
         "message types in the corpus never compared: {missing:?}"
     );
+    // The 4 Hz camera from the first whole second (0.6 s into the scenario), its exposures
+    // 0.1 s later, each in the TIM-TM2 of the next epoch up to the last (29.85 s): 117 marks.
+    assert_eq!(sim_time_marks, 117, "the simulator's TIM-TM2 compared");
     assert!(
         loose.is_empty(),
         "a change of one unit of resolution goes unnoticed in: {loose:?}"
