@@ -203,11 +203,21 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
     };
     publish_settings(monotonic_now_ns())?;
     let mut health = HealthReporter::new(&node, "estimator")?;
-    let c_pps = health.counter("pps_used")?;
-    let c_pps_rej = health.counter("pps_rejected")?;
-    let c_pps_rx = health.counter("pps_labelled_by_rx")?;
-    let c_net_used = health.counter("network_time_used")?;
-    let c_net_rej = health.counter("network_time_rejected")?;
+    // The time source's counters: the PPS edges', or the network time readings' (the slots of a
+    // Health report are few: 64, and the other source's would stay 0).
+    let (c_time_used, c_time_rej) = if network.is_some() {
+        (
+            health.counter("network_time_used")?,
+            health.counter("network_time_rejected")?,
+        )
+    } else {
+        (health.counter("pps_used")?, health.counter("pps_rejected")?)
+    };
+    let c_pps_rx = if network.is_some() {
+        None
+    } else {
+        Some(health.counter("pps_labelled_by_rx")?)
+    };
     let c_fixes = health.counter("gnss_fixes")?;
     let c_imu = health.counter("imu_samples")?;
     let c_imu_gap = health.counter("imu_seq_gaps")?;
@@ -278,37 +288,52 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
             c_stale.push(health.counter(&format!("stale_{kind}_{id}"))?);
         }
     }
+    let c_stale_n = health.counter("stale_inputs")?;
+    let c_stale_events = health.counter("stale_events")?;
+    // The groups of counters below fill the report's remaining slots; those that do not fit
+    // (many inputs, tightly coupled) are named in one warning instead of stopping the
+    // estimator.
+    let mut left_out: Vec<&'static str> = Vec::new();
+    let mut group = |names: Vec<&'static str>, health: &mut HealthReporter| -> Vec<Option<_>> {
+        names
+            .into_iter()
+            .map(|name| {
+                let c = health.counter(name).ok();
+                if c.is_none() {
+                    left_out.push(name);
+                }
+                c
+            })
+            .collect()
+    };
     // Each kind of measurement's counters (`zupt_used`, …), whatever kinds there are.
     let mut c_measurements = Vec::new();
     feed.pipeline()
         .nav()
         .measurement_states()
         .each_counter(&mut |name, _| c_measurements.push(name));
-    let c_measurements = c_measurements
-        .into_iter()
-        .map(|name| health.counter(name))
-        .collect::<Result<Vec<_>, _>>()?;
+    let c_measurements = group(c_measurements, &mut health);
     // The integrity monitor's counters (`integrity_resets`, …).
     let mut c_integrity = Vec::new();
     feed.pipeline()
         .nav()
         .integrity()
         .each(&mut |name, _| c_integrity.push(name));
-    let c_integrity = c_integrity
-        .into_iter()
-        .map(|name| health.counter(name))
-        .collect::<Result<Vec<_>, _>>()?;
+    let c_integrity = group(c_integrity, &mut health);
     // Tightly coupled: the raw-measurement path's counters (`raw_no_ephemeris`, …).
     let mut c_raw = Vec::new();
     if tight {
         feed.pipeline().each_raw_counter(&mut |name, _| c_raw.push(name));
     }
-    let c_raw = c_raw
-        .into_iter()
-        .map(|name| health.counter(name))
-        .collect::<Result<Vec<_>, _>>()?;
-    let c_stale_n = health.counter("stale_inputs")?;
-    let c_stale_events = health.counter("stale_events")?;
+    let c_raw = group(c_raw, &mut health);
+    if !left_out.is_empty() {
+        warn!(
+            "the health report has no room for {} counters ({} slots): {} are not reported",
+            left_out.len(),
+            navsync_shared::samples::MAX_COUNTERS,
+            left_out.join(", ")
+        );
+    }
     let (n_imu, n_pps) = (imus.len(), pps.len());
     let mut next_publisher_check_ns = monotonic_now_ns();
     info!(pps = ?args.inputs.pps, gnss = ?args.inputs.gnss, imus = ?args.inputs.imus, "estimator running");
@@ -527,11 +552,16 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
             last_state_ns = now;
         }
         let tc = *feed.pipeline().time().counters();
-        health.set(c_pps, tc.pps_used);
-        health.set(c_pps_rej, tc.rejected());
-        health.set(c_pps_rx, tc.pps_labelled_by_receiver);
-        health.set(c_net_used, tc.network_used);
-        health.set(c_net_rej, tc.network_rejected);
+        if network.is_some() {
+            health.set(c_time_used, tc.network_used);
+            health.set(c_time_rej, tc.network_rejected);
+        } else {
+            health.set(c_time_used, tc.pps_used);
+            health.set(c_time_rej, tc.rejected());
+        }
+        if let Some(c) = c_pps_rx {
+            health.set(c, tc.pps_labelled_by_receiver);
+        }
         health.set(c_holdovers, tc.holdovers);
         health.set(c_relocks, tc.relocks);
         let est = feed.pipeline();
@@ -547,21 +577,21 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         health.set(c_imu_sat, ac.saturated);
         let mut k = 0;
         est.nav().measurement_states().each_counter(&mut |_, v| {
-            if let Some(c) = c_measurements.get(k) {
+            if let Some(Some(c)) = c_measurements.get(k) {
                 health.set(*c, v);
             }
             k += 1;
         });
         let mut k = 0;
         est.nav().integrity().each(&mut |_, v| {
-            if let Some(c) = c_integrity.get(k) {
+            if let Some(Some(c)) = c_integrity.get(k) {
                 health.set(*c, v);
             }
             k += 1;
         });
         let mut k = 0;
         est.each_raw_counter(&mut |_, v| {
-            if let Some(c) = c_raw.get(k) {
+            if let Some(Some(c)) = c_raw.get(k) {
                 health.set(*c, v);
             }
             k += 1;
