@@ -12,7 +12,7 @@ use navsync::live::{
     status, web,
 };
 use navsync::tools::{
-    analyze, check_config, convert, decode, eval, install, kf_gins, ptp_config, python_types, report,
+    analyze, check_config, convert, decode, eval, geotag, install, kf_gins, ptp_config, python_types, report,
 };
 use navsync::{config, logging};
 
@@ -85,6 +85,9 @@ enum Cmd {
     Eval(eval::EvalArgs),
     /// One self-contained HTML page with SVG plots of a recording.
     Report(report::Options),
+    /// Writes the pose of each camera exposure a receiver marked (a recording's event poses)
+    /// into the images' Exif GPS tags, and as a CSV or OpenDroneMap's geo.txt.
+    Geotag(Box<geotag::Options>),
     /// Decodes a receiver capture offline (same code as the live driver): one JSON object per epoch.
     #[command(visible_alias = "nmea")]
     Decode(decode::Options),
@@ -199,6 +202,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Import(c) => kf_gins::main(c),
         Cmd::Eval(o) => eval::run(&o).map(drop).context("eval"),
         Cmd::Report(o) => report::main(o, &cfg),
+        Cmd::Geotag(o) => geotag::run(&o).context("geotag"),
         Cmd::Decode(o) => decode::run(o),
         Cmd::PythonTypes => python_types::run().context("writing stdout"),
         Cmd::CheckConfig | Cmd::ConfigReference => Ok(()),

@@ -6,6 +6,7 @@ pub mod convert;
 pub mod decode;
 pub mod estimate;
 pub mod eval;
+pub mod geotag;
 pub mod install;
 pub mod kf_gins;
 pub mod kf_gins_config;
