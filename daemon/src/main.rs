@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use navsync::live::{
     bridge, demo, echo, estimator, feed, gnss, gpsd_server, imu, nmea_out, ntpshm, pps, pps_out, record, replay, sim,
-    status, web,
+    status, trigger, web,
 };
 use navsync::tools::{
     analyze, check_config, convert, decode, eval, geotag, install, kf_gins, ptp_config, python_types, report,
@@ -44,7 +44,7 @@ enum Cmd {
     /// The estimator: time mapping and navigation filter from the sensor services.
     Estimator(estimator::Options),
     /// The simulated sensor world: IMUs and PPS to their services, NMEA into a pseudo-terminal.
-    Sim(sim::Options),
+    Sim(Box<sim::Options>),
     /// Runs sim, gnss and estimator as child processes with a live status line.
     Demo(demo::DemoArgs),
     /// Prints the samples of any navsync service, one per line.
@@ -70,6 +70,9 @@ enum Cmd {
     /// A pulse at each GNSS second for sensors: a GPIO line, a PTP hardware clock's periodic
     /// output, or a file (tests).
     PpsOut(pps_out::PpsOutArgs),
+    /// A trigger input stamped on the host (a camera's strobe on a GPIO line; simulated), each
+    /// edge an event the estimator gives its pose (`navsync estimator --triggers ID`).
+    Trigger(trigger::TriggerArgs),
     /// Serves the fused state to gpsd clients (gpsd JSON protocol).
     GpsdServer(gpsd_server::GpsdArgs),
     /// The running system in a browser (a live page, Server-Sent Events) and Prometheus
@@ -179,7 +182,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Pps(o) => pps::run(o, &cfg),
         Cmd::Feed(o) => feed::run(o),
         Cmd::Estimator(o) => estimator::main(o, &cfg),
-        Cmd::Sim(o) => sim::run(o, &cfg),
+        Cmd::Sim(o) => sim::run(*o, &cfg),
         Cmd::Demo(o) => demo::run(&o).context("demo"),
         Cmd::Echo(o) => match &o.zenoh {
             Some(ep) => bridge::echo(ep, &o).with_context(|| format!("echo {} through {ep}", o.service)),
@@ -196,6 +199,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Ntpshm(o) => ntpshm::main(o, &cfg),
         Cmd::NmeaOut(o) => nmea_out::run(&o).context("nmea-out"),
         Cmd::PpsOut(o) => pps_out::run(&o).context("pps-out"),
+        Cmd::Trigger(o) => trigger::run(&o).context("trigger"),
         Cmd::GpsdServer(o) => gpsd_server::run(&o).context("gpsd-server"),
         Cmd::Web(o) => web::run(&o).context("web"),
         Cmd::Analyze(c) => analyze::main(c, &cfg),

@@ -36,3 +36,4 @@ pub mod pps;
 pub mod pty;
 pub mod pulse_out;
 pub mod rate_log;
+pub mod trigger;

@@ -1,8 +1,11 @@
 //! Events with their pose: each edge a receiver marked (UBX TIM-TM2, a camera's exposure on
-//! EXTINT) becomes an [`EventPose`] once the delayed filter has fused past its instant, from
+//! EXTINT; at its GPS time) or a trigger input stamped on the host (`navsync trigger`, a GPIO
+//! line's kernel stamp; at its host time) becomes an [`EventPose`] once the delayed filter has
+//! fused past its instant, from
 //! the fused states around it with the interpolation of the history of states
 //! ([`navsync_wire::interpolation`]): the same two states and the same formula as the
-//! history's `state_at` of the event's time, so both answers are equal bit for bit.
+//! history's `state_at` (`state_at_host` for a host-stamped edge) of the event's time, so both
+//! answers are equal bit for bit.
 //!
 //! Pure and deterministic: what comes out depends only on the events and the fused states,
 //! in their order. Bounded: the fused states of the last [`KEEP_NS`], at most
@@ -12,8 +15,8 @@
 
 use std::collections::VecDeque;
 
-use navsync_wire::interpolation::{Record, Source, at_utc, bracket_index};
-use navsync_wire::samples::{EVENT_EDGE_FALLING, EVENT_EDGE_RISING, EventPose, GnssEvent, NavState};
+use navsync_wire::interpolation::{Record, Source, at_utc, bracket_index, interpolate};
+use navsync_wire::samples::{EVENT_EDGE_FALLING, EVENT_EDGE_RISING, EventPose, GnssEvent, NavState, StampSource};
 use navsync_wire::time::utc_ns_from_gps_ns;
 
 /// How long fused states are kept for events that arrive after the filter passed them, ns.
@@ -38,11 +41,20 @@ pub struct EventCounters {
     pub without_pose: u64,
 }
 
+/// The instant of an edge: a receiver's mark in GNSS time (as UTC), or a host-stamped
+/// trigger's host time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Instant {
+    /// UTC, ns since 1970.
+    Utc(i64),
+    /// Host time (`CLOCK_MONOTONIC`), ns.
+    Host(i64),
+}
+
 /// One edge waiting for its pose.
 #[derive(Debug, Clone, Copy)]
 struct Pending {
-    /// UTC of the edge, ns since 1970.
-    utc_ns: i64,
+    at: Instant,
     pose: EventPose,
 }
 
@@ -62,20 +74,28 @@ impl EventPoses {
         self.counters
     }
 
-    /// Takes a receiver's event report from device `device_id`: each new edge waits for its
-    /// pose.
+    /// Takes an event report from device `device_id`: each new edge waits for its pose. A
+    /// receiver's edge (TIM-TM2) is at its GPS time; a host-stamped trigger's (no GPS time) at
+    /// its host time.
     pub fn on_event(&mut self, e: &GnssEvent, device_id: [u8; 8]) {
-        for (gps_ns, edge) in [
-            (e.rising_gps_ns, EVENT_EDGE_RISING),
-            (e.falling_gps_ns, EVENT_EDGE_FALLING),
+        for (gps_ns, host_ns, edge) in [
+            (e.rising_gps_ns, e.rising_host_ns, EVENT_EDGE_RISING),
+            (e.falling_gps_ns, e.falling_host_ns, EVENT_EDGE_FALLING),
         ] {
-            if gps_ns == i64::MIN {
+            let at = if gps_ns != i64::MIN {
+                Instant::Utc(utc_ns_from_gps_ns(gps_ns))
+            } else if host_ns != i64::MIN && e.stamp.source == StampSource::KernelEvent as u8 {
+                Instant::Host(host_ns)
+            } else {
                 continue;
-            }
+            };
             self.counters.edges += 1;
             let mut pose = unposed();
             pose.gps_ns = gps_ns;
-            pose.utc_ns = utc_ns_from_gps_ns(gps_ns);
+            match at {
+                Instant::Utc(u) => pose.utc_ns = u,
+                Instant::Host(h) => pose.host_ns = h,
+            }
             pose.report_host_ns = e.stamp.host_ns;
             pose.time_std_ns = f64::from(e.accuracy_ns);
             pose.device_id = device_id;
@@ -87,10 +107,7 @@ impl EventPoses {
             {
                 self.give_out(old.pose);
             }
-            self.pending.push_back(Pending {
-                utc_ns: pose.utc_ns,
-                pose,
-            });
+            self.pending.push_back(Pending { at, pose });
         }
         self.resolve();
     }
@@ -115,15 +132,26 @@ impl EventPoses {
         while i < self.pending.len() {
             let p = self.pending[i];
             let waited_too_long = newest.host_ns.saturating_sub(p.pose.report_host_ns) > GIVE_UP_NS;
-            if newest.utc_ns != i64::MIN && p.utc_ns <= newest.utc_ns {
+            let reached = match p.at {
+                Instant::Utc(u) => newest.utc_ns != i64::MIN && u <= newest.utc_ns,
+                Instant::Host(h) => h <= newest.host_ns,
+            };
+            if reached {
                 self.pending.remove(i);
                 let fused = &self.fused;
-                let at = bracket_index(fused.len(), |k| fused[k].utc_ns, p.utc_ns);
-                match at {
-                    Some((a, b)) if fused[a].utc_ns != i64::MIN => {
-                        let x = at_utc(&fused[a], &fused[b], p.utc_ns);
+                // As the history's `state_at` and `state_at_host` find and interpolate them.
+                let x = match p.at {
+                    Instant::Utc(u) => bracket_index(fused.len(), |k| fused[k].utc_ns, u)
+                        .filter(|&(a, _)| fused[a].utc_ns != i64::MIN)
+                        .map(|(a, b)| (a, at_utc(&fused[a], &fused[b], u))),
+                    Instant::Host(h) => bracket_index(fused.len(), |k| fused[k].host_ns, h)
+                        .map(|(a, b)| (a, interpolate(&fused[a], &fused[b], h))),
+                };
+                match x {
+                    Some((a, x)) => {
                         let mut pose = p.pose;
                         pose.host_ns = x.host_ns;
+                        pose.utc_ns = x.utc_ns;
                         pose.lat_deg = x.pose.lat_deg;
                         pose.lon_deg = x.pose.lon_deg;
                         pose.height_m = x.pose.height_m;
@@ -140,7 +168,7 @@ impl EventPoses {
                         self.counters.posed += 1;
                         self.push(pose);
                     }
-                    _ => self.give_out(p.pose),
+                    None => self.give_out(p.pose),
                 }
             } else if waited_too_long {
                 self.pending.remove(i);
@@ -278,6 +306,40 @@ mod tests {
                 without_pose: 1
             }
         );
+    }
+
+    #[test]
+    fn a_host_stamped_trigger_is_posed_at_its_host_time() {
+        let mut ev = EventPoses::default();
+        for k in 0..100 {
+            ev.on_fused(&state(1.0 + k as f64 * 0.01));
+        }
+        let mut e = GnssEvent::zeroed();
+        (e.rising_gps_ns, e.falling_gps_ns, e.falling_host_ns) = (i64::MIN, i64::MIN, i64::MIN);
+        e.rising_host_ns = 1_504_000_000;
+        e.stamp.host_ns = e.rising_host_ns;
+        e.stamp.source = StampSource::KernelEvent as u8;
+        ev.on_event(&e, [b'c'; 8]);
+        let mut out = Vec::new();
+        ev.drain(&mut |p| out.push(*p));
+        assert_eq!(out.len(), 1);
+        let recs: Vec<Record> = (0..100)
+            .map(|k| Record::of(&state(1.0 + k as f64 * 0.01), Source::Fused))
+            .collect();
+        let (a, b) = bracket_index(recs.len(), |k| recs[k].host_ns, e.rising_host_ns).unwrap();
+        let want = interpolate(&recs[a], &recs[b], e.rising_host_ns);
+        let p = out[0];
+        assert_eq!(
+            (p.host_ns, p.gps_ns, p.source),
+            (1_504_000_000, i64::MIN, Source::Fused as u8)
+        );
+        assert_eq!((p.lat_deg, p.utc_ns), (want.pose.lat_deg, want.utc_ns));
+        assert_eq!(p.utc_ns, UTC0 + 1_504_000_000 + 250_000_000);
+        // A host time without a kernel stamp (a receiver's report mapped by its driver) is not
+        // taken as the instant.
+        e.stamp.source = StampSource::Receipt as u8;
+        ev.on_event(&e, [b'c'; 8]);
+        assert_eq!(ev.counters().edges, 1);
     }
 
     #[test]

@@ -50,6 +50,9 @@ crate::settings_group! {
         /// IMU ids (`navsync/imu/{id}/sample`), the reference (which paces the output) first
         /// (in the file, every `[imu.*]` in id order when not given).
         pub imus: Vec<String> = vec!["0".into()], file "estimator", flag "imus", check ids(1, 8);
+        /// Trigger input ids (`navsync/trigger/{id}/event`, `navsync trigger`): each edge gets
+        /// its pose on `navsync/event/{id}/pose`, as a receiver's TIM-TM2 marks do.
+        pub triggers: Vec<String> = Vec::new(), file "estimator", flag "triggers", check ids(0, 8);
         /// Where the host clock's GNSS time comes from: gnss (the receivers' PPS and fixes),
         /// chrony (a host without a receiver on a master's time base: chronyd's tracking report,
         /// `chronyc tracking`) or system (the kernel's NTP state of a clock a time
@@ -327,9 +330,11 @@ impl Settings {
             .flat_map(|id| [services::gnss_raw(id), services::gnss_nav_data(id)]);
         // A receiver's event marks (TIM-TM2): each gets its pose ([`crate::events`]).
         let events = self.inputs.gnss.iter().map(|id| services::gnss_event(id));
+        let triggers = self.inputs.triggers.iter().map(|id| services::trigger_event(id));
         pps.chain(gnss)
             .chain(pulses)
             .chain(events)
+            .chain(triggers)
             .chain(imus)
             .chain(raw)
             .collect()

@@ -849,6 +849,71 @@ class GnssSky(ctypes.Structure):
         return "navsync.GnssSky.v1"
 
 
+class EventPose(ctypes.Structure):
+    """An event a receiver marked, with the pose at its instant (navsync/event/{id}/pose)."""
+
+    _fields_ = [
+        # Host time (`CLOCK_MONOTONIC` ns) of the event: of the state interpolated to it.
+        ("host_ns", ctypes.c_int64),
+        # UTC of the event, ns since 1970 (the receiver's mark converted; `i64::MIN` when not known).
+        ("utc_ns", ctypes.c_int64),
+        # GPS time of the event as the receiver marked it, ns since 1980-01-06 (`i64::MIN` for an event stamped on the host).
+        ("gps_ns", ctypes.c_int64),
+        # Host time of the report the event came in (its `GnssEvent`'s stamp), ns.
+        ("report_host_ns", ctypes.c_int64),
+        # Event poses published so far by this estimator.
+        ("seq", ctypes.c_uint64),
+        # Latitude, degrees (NaN when no state covers the instant: `source` 0).
+        ("lat_deg", ctypes.c_double),
+        # Longitude, degrees.
+        ("lon_deg", ctypes.c_double),
+        # Height above the WGS-84 ellipsoid, m.
+        ("height_m", ctypes.c_double),
+        # Velocity, NED, m/s.
+        ("vel_ned_mps", (ctypes.c_double * 3)),
+        # Attitude quaternion body (FRD) → NED, [w, x, y, z].
+        ("q_nb", (ctypes.c_double * 4)),
+        # Roll, pitch, yaw (ZYX) of `q_nb`, rad.
+        ("rpy_rad", (ctypes.c_double * 3)),
+        # 1-σ position, NED, m.
+        ("pos_std_ned_m", (ctypes.c_double * 3)),
+        # 1-σ velocity, NED, m/s.
+        ("vel_std_ned_mps", (ctypes.c_double * 3)),
+        # 1-σ attitude (roll, pitch, yaw error angles), rad.
+        ("att_std_rad", (ctypes.c_double * 3)),
+        # 1-σ of the event's time as the receiver states it (TIM-TM2 `accEst`), ns.
+        ("time_std_ns", ctypes.c_double),
+        # Id of the device that marked the event (the receiver's id), NUL-padded.
+        ("device_id", (ctypes.c_char * 8)),
+        # The device's edge counter (TIM-TM2 `count`).
+        ("count", ctypes.c_uint16),
+        # The device's input channel (u-blox: 0 EXTINT0, 1 EXTINT1).
+        ("channel", ctypes.c_uint8),
+        # Which edge: 0 rising, 1 falling.
+        ("edge", ctypes.c_uint8),
+        # Where the pose comes from, a `history::Source` as `u8`: 2 the delayed filter's fused states, 1 the real-time predictor's, 0 none (no state covers the instant: the event is reported without a pose).
+        ("source", ctypes.c_uint8),
+        # `NavStatus` of the state before the instant, as `u8`.
+        ("status", ctypes.c_uint8),
+        # `TimeStatus` of the state before the instant, as `u8`.
+        ("time_status", ctypes.c_uint8),
+        # Integrity flags of the state before the instant (`INTEGRITY_*`).
+        ("integrity", ctypes.c_uint8),
+    ]
+
+    #: Size in bytes of the Rust type.
+    RUST_SIZE = 240
+    #: Alignment in bytes of the Rust type.
+    RUST_ALIGN = 8
+    #: Byte offset of every field in the Rust type.
+    RUST_OFFSETS = {"host_ns": 0, "utc_ns": 8, "gps_ns": 16, "report_host_ns": 24, "seq": 32, "lat_deg": 40, "lon_deg": 48, "height_m": 56, "vel_ned_mps": 64, "q_nb": 88, "rpy_rad": 120, "pos_std_ned_m": 144, "vel_std_ned_mps": 168, "att_std_rad": 192, "time_std_ns": 216, "device_id": 224, "count": 232, "channel": 234, "edge": 235, "source": 236, "status": 237, "time_status": 238, "integrity": 239}
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name (with the layout version)."""
+        return "navsync.EventPose.v1"
+
+
 #: Publish-subscribe QoS per sample type: history, subscriber buffer.
 QOS = {
     "GnssFix": {"history": 1, "buffer": 64},
@@ -865,6 +930,7 @@ QOS = {
     "EstimatorSettings": {"history": 1, "buffer": 4},
     "NetworkTime": {"history": 1, "buffer": 16},
     "GnssSky": {"history": 1, "buffer": 16},
+    "EventPose": {"history": 1, "buffer": 64},
 }
 
 
@@ -874,7 +940,8 @@ def service_type(service):
     if len(p) == 4 and p[0] == "navsync" and p[2]:
         return {("gnss", "fix"): GnssFix, ("gnss", "hnr"): GnssFix, ("pps", "edge"): PpsEdge, ("imu", "sample"): ImuSample,
                 ("gnss", "timepulse"): GnssTimePulse, ("gnss", "event"): GnssEvent, ("gnss", "raw"): GnssRaw,
-                ("gnss", "nav-data"): GnssNavData, ("gnss", "sky"): GnssSky}.get((p[1], p[3]))
+                ("gnss", "nav-data"): GnssNavData, ("gnss", "sky"): GnssSky,
+                ("event", "pose"): EventPose}.get((p[1], p[3]))
     if len(p) == 3 and p[0] == "navsync":
         if p[1] == "health":
             return Health if p[2] else None

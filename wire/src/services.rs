@@ -8,6 +8,7 @@
 //! | `navsync/gnss/{id}/event` | [`GnssEvent`] | `navsync gnss` (UBX TIM-TM2) |
 //! | `navsync/gnss/{id}/raw` | [`GnssRaw`] | `navsync gnss` (UBX RXM-RAWX) |
 //! | `navsync/gnss/{id}/nav-data` | [`GnssNavData`] | `navsync gnss` (UBX RXM-SFRBX) |
+//! | `navsync/trigger/{id}/event` | [`GnssEvent`] | `navsync trigger` (a host-stamped trigger input's edges: GPIO line events) |
 //! | `navsync/event/{id}/pose` | [`EventPose`] | `navsync estimator` (each event receiver `id` marked, with the pose at its instant once fused) |
 //! | `navsync/gnss/{id}/sky` | [`GnssSky`] | `navsync gnss` (the satellites of an epoch: NMEA GSV with GSA, UBX NAV-SAT or NAV-SVINFO) |
 //! | `navsync/pps/{id}/edge` | [`PpsEdge`] | `navsync pps` (or the simulator) |
@@ -15,7 +16,7 @@
 //! | `navsync/time/state` | [`TimeState`] | `navsync estimator` |
 //! | `navsync/time/network` | [`NetworkTime`] | `navsync estimator --time-source chrony\|system` (its readings of the network time service) |
 //! | `navsync/nav/state` | [`NavState`] | `navsync estimator` |
-//! | `navsync/nav/fused` | [`NavState`] | `navsync replay --estimate --out` (the delayed filter's states; live they go into the history) |
+//! | `navsync/nav/fused` | [`NavState`] | `navsync replay --estimate --fused --out` (the delayed filter's states; live they go into the history) |
 //! | `navsync/health/{process}` | [`Health`] | every process |
 //! | `navsync/estimator/settings` | [`EstimatorSettings`] | `navsync estimator` (its settings in force, about once per second) |
 //! | `navsync/sim/truth` | [`SimTruth`] | `navsync sim` |
@@ -67,6 +68,11 @@ pub fn gnss_nav_data(id: &str) -> String {
 pub fn gnss_sky(id: &str) -> String {
     format!("navsync/gnss/{id}/sky")
 }
+/// `navsync/trigger/{id}/event`: a host-stamped trigger input's edges (`navsync trigger`), as
+/// [`GnssEvent`]s with host times only.
+pub fn trigger_event(id: &str) -> String {
+    format!("navsync/trigger/{id}/event")
+}
 /// `navsync/event/{id}/pose`: the events device `id` marked (a receiver's TIM-TM2), each
 /// with the pose at its instant.
 pub fn event_pose(id: &str) -> String {
@@ -92,7 +98,7 @@ pub const NETWORK_TIME: &str = "navsync/time/network";
 /// The navigation solution.
 pub const NAV_STATE: &str = "navsync/nav/state";
 /// The delayed filter's states (its state at each instant it stepped over, every measurement
-/// up to it fused): written by `navsync replay --estimate --out`; the live estimator keeps
+/// up to it fused): written by `navsync replay --estimate --fused --out`; the live estimator keeps
 /// them in the history of states (`navsync_shared::history`) rather than publishing them.
 pub const NAV_FUSED: &str = "navsync/nav/fused";
 /// The estimator's settings in force.
@@ -195,6 +201,7 @@ impl ServiceKind {
             ["navsync", "gnss", id, "nav-data"] if !id.is_empty() => Some(Self::GnssNavData),
             ["navsync", "gnss", id, "sky"] if !id.is_empty() => Some(Self::GnssSky),
             ["navsync", "event", id, "pose"] if !id.is_empty() => Some(Self::EventPose),
+            ["navsync", "trigger", id, "event"] if !id.is_empty() => Some(Self::GnssEvent),
             ["navsync", "pps", id, "edge"] if !id.is_empty() => Some(Self::PpsEdge),
             ["navsync", "imu", id, "sample"] if !id.is_empty() => Some(Self::ImuSample),
             ["navsync", "time", "state"] => Some(Self::TimeState),
@@ -316,6 +323,7 @@ mod tests {
         assert_eq!(ServiceKind::of(&gnss_hnr("0")), Some(ServiceKind::GnssFix));
         assert_eq!(ServiceKind::of(&gnss_sky("0")), Some(ServiceKind::GnssSky));
         assert_eq!(ServiceKind::of(&event_pose("0")), Some(ServiceKind::EventPose));
+        assert_eq!(ServiceKind::of(&trigger_event("cam0")), Some(ServiceKind::GnssEvent));
         assert_eq!(ServiceKind::of(&imu_sample("3")), Some(ServiceKind::ImuSample));
         assert_eq!(ServiceKind::of(&health("gps-0")), Some(ServiceKind::Health));
         assert_eq!(ServiceKind::of(NAV_STATE), Some(ServiceKind::NavState));

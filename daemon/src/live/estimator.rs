@@ -162,18 +162,14 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         .filter(|_| tight)
         .map(|id| node.input(&services::gnss_nav_data(id)))
         .collect::<Result<_, _>>()?;
-    // Each receiver's event marks (TIM-TM2), posed once the delayed filter passes them and
-    // published on `navsync/event/{id}/pose`.
-    let events: Vec<(Subscriber<GnssEvent>, [u8; 8])> = args
-        .inputs
-        .gnss
+    // Each receiver's event marks (TIM-TM2) and each trigger input's edges, posed once the
+    // delayed filter passes them and published on `navsync/event/{id}/pose`.
+    let event_ids: Vec<(String, &String)> = (args.inputs.gnss.iter().map(|id| (services::gnss_event(id), id)))
+        .chain(args.inputs.triggers.iter().map(|id| (services::trigger_event(id), id)))
+        .collect();
+    let events: Vec<(Subscriber<GnssEvent>, [u8; 8])> = event_ids
         .iter()
-        .map(|id| {
-            Ok::<_, IpcError>((
-                node.input(&services::gnss_event(id))?,
-                navsync_shared::reflect::fixed_str(id),
-            ))
-        })
+        .map(|(service, id)| Ok::<_, IpcError>((node.input(service)?, navsync_shared::reflect::fixed_str(id))))
         .collect::<Result<_, _>>()?;
     let mut event_pubs: Vec<([u8; 8], Publisher<EventPose>)> = Vec::new();
     let imus: Vec<Subscriber<ImuSample>> = args
@@ -472,7 +468,14 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
                 let publisher = match event_pubs.iter().position(|(id, _)| *id == e.device_id) {
                     Some(i) => Some(&mut event_pubs[i].1),
                     None => {
-                        let id = navsync_shared::reflect::str_of(&e.device_id).to_string();
+                        // The id as given (the sample holds its first 8 bytes).
+                        let id = event_ids
+                            .iter()
+                            .find(|(_, id)| navsync_shared::reflect::fixed_str::<8>(id) == e.device_id)
+                            .map_or_else(
+                                || navsync_shared::reflect::str_of(&e.device_id).to_string(),
+                                |(_, id)| (*id).clone(),
+                            );
                         match node.publisher::<EventPose>(&services::event_pose(&id)) {
                             Ok(p) => {
                                 event_pubs.push((e.device_id, p));

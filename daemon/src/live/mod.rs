@@ -22,6 +22,7 @@ pub mod record;
 pub mod replay;
 pub mod sim;
 pub mod status;
+pub mod trigger;
 pub mod web;
 
 /// Puts the calling thread (and the threads it starts afterwards, which inherit it) under

@@ -37,8 +37,7 @@ pub enum Format {
 #[derive(clap::Args, Debug, Clone)]
 pub struct EstimateOptions {
     /// Write the estimator's outputs into this file (with --estimate): mcap: its NavStates
-    /// (`navsync/nav/state`), the delayed filter's states (`navsync/nav/fused`), TimeStates and
-    /// event poses (`navsync/event/{id}/pose`).
+    /// (`navsync/nav/state`), TimeStates and event poses (`navsync/event/{id}/pose`).
     #[arg(long, requires = "estimate")]
     pub out: Option<PathBuf>,
     /// Format of --out: `mcap`, or `kf-gins` (KF-GINS's result layout; a directory gets
@@ -53,6 +52,11 @@ pub struct EstimateOptions {
     /// the summary). Without it every output is the state published live.
     #[arg(long, requires = "estimate")]
     pub smooth: bool,
+    /// With --out (mcap): also the delayed filter's states (`navsync/nav/fused`: the state of
+    /// each instant once every measurement up to it is fused, what the history of states
+    /// answers for an instant the filter has passed).
+    #[arg(long, requires = "out")]
+    pub fused: bool,
     /// Replace an existing recording at --out or --summary-json (never the input itself).
     #[arg(long, requires = "estimate")]
     pub force: bool,
@@ -354,6 +358,7 @@ pub fn run(input: &Path, opts: &EstimateOptions, cfg: &Loaded) -> Result<Summary
                 log_time,
                 e.report_host_ns.max(0) as u64,
             ),
+            Output::Fused(_) if !opts.fused => return,
             Output::Fused(n) => rec.write(
                 services::NAV_FUSED,
                 &AnySample::Nav(*n),

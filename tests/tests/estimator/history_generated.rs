@@ -1,6 +1,6 @@
 //! The pose at any instant on data navsync did not generate (issue 39): a drive of the
 //! independent generator (`tests/python/independent_drive.py`, KF-GINS formats, exact
-//! kinematics) imported and replayed (`navsync replay --estimate --out`), its delayed filter's
+//! kinematics) imported and replayed (`navsync replay --estimate --fused --out`), its delayed filter's
 //! states (`navsync/nav/fused`) and real-time states (`navsync/nav/state`) interpolated at
 //! random instants with the history's own rule and formulas (`navsync_wire::interpolation`, as
 //! `History::state_at` answers), each against the generator's truth at that instant
@@ -108,7 +108,7 @@ fn poses_between_states_on_an_independent_drive_against_its_truth() {
     let o = env
         .command(&["replay"])
         .arg(&rec)
-        .args(["--estimate", "--out"])
+        .args(["--estimate", "--fused", "--out"])
         .arg(&out)
         .output()
         .unwrap();

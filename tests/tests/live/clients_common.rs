@@ -31,13 +31,17 @@ pub fn start_live(env: &mut TestEnv) {
 /// [`start_live`] with the simulated receiver speaking `protocol` (`nmea` or `ubx`: NAV-PVT
 /// epochs and TIM-TP time pulses), read by `navsync gnss --protocol auto`.
 pub fn start_live_speaking(env: &mut TestEnv, protocol: &str) {
+    start_live_with(env, protocol, &[]);
+}
+
+/// [`start_live_speaking`] with more flags for the estimator.
+pub fn start_live_with(env: &mut TestEnv, protocol: &str, estimator_flags: &[&str]) {
     let link = env.dir.join("gnss0");
     let link_s = link.display().to_string();
     let scen = scenario().display().to_string();
-    env.spawn(
-        "estimator",
-        &["estimator", "--gnss", "0", "--pps", "0", "--imus", "0,1"],
-    );
+    let mut args = vec!["estimator", "--gnss", "0", "--pps", "0", "--imus", "0,1"];
+    args.extend_from_slice(estimator_flags);
+    env.spawn("estimator", &args);
     env.spawn("pps", &["pps", "--source", "sim", "--id", "0"]);
     env.spawn(
         "sim",

@@ -18,7 +18,7 @@ use navsync_tests::TestEnv;
 use crate::clients_common::{command_in, repo_root, start_live, wait_ready};
 
 /// A truth sample as a history record (the interpolation's input).
-fn truth_record(t: &SimTruth) -> Record {
+pub(crate) fn truth_record(t: &SimTruth) -> Record {
     let mut s = NavState::zeroed();
     (s.host_ns, s.utc_ns, s.lat_deg, s.lon_deg, s.height_m) = (t.host_ns, t.utc_ns, t.lat_deg, t.lon_deg, t.height_m);
     s.vel_ned_mps = t.vel_ned_mps;
@@ -34,14 +34,14 @@ fn truth_record(t: &SimTruth) -> Record {
 }
 
 /// The truth at `host_ns` (between its 10 Hz samples).
-fn truth_at(truth: &[SimTruth], host_ns: i64) -> Option<history::Interpolated> {
+pub(crate) fn truth_at(truth: &[SimTruth], host_ns: i64) -> Option<history::Interpolated> {
     let k = truth.partition_point(|t| t.host_ns <= host_ns);
     (k > 0 && k < truth.len())
         .then(|| history::interpolate(&truth_record(&truth[k - 1]), &truth_record(&truth[k]), host_ns))
 }
 
 /// NED error of (lat, lon, h) against the truth, m.
-fn error_ned(truth: &history::Interpolated, lat: f64, lon: f64, h: f64) -> [f64; 3] {
+pub(crate) fn error_ned(truth: &history::Interpolated, lat: f64, lon: f64, h: f64) -> [f64; 3] {
     earth::ned_between(
         truth.pose.lat_deg.to_radians(),
         truth.pose.lon_deg.to_radians(),

@@ -7,6 +7,7 @@ mod clients_common;
 
 mod client_api;
 mod demo;
+mod event_poses;
 mod faults_pps_silence_live;
 mod foxglove;
 mod gpsd_server;

@@ -13,7 +13,9 @@ use std::time::{Duration, Instant};
 use navsync_recording::SampleReader;
 use navsync_recording::channels::sample_json;
 use navsync_recording::mcap_reader::ScanEnd;
-use navsync_shared::samples::{AnySample, GNSS_PROTOCOL_UBX, GnssFix, Health, NavState, NavStatus, TimeStatus};
+use navsync_shared::samples::{
+    AnySample, EventPose, GNSS_PROTOCOL_UBX, GnssFix, Health, NavState, NavStatus, TimeStatus,
+};
 use navsync_shared::services;
 use navsync_shared::time::monotonic_now_ns;
 use navsync_tests::TestEnv;
@@ -110,6 +112,8 @@ fn live_run_and_replay(name: &str, protocol: &str) {
             "navsync/pps/0/edge",
             "navsync/gnss/0/fix",
             "navsync/gnss/0/timepulse",
+            "navsync/gnss/0/event",
+            "navsync/event/0/pose",
             "navsync/nav/state",
             "navsync/time/state",
             "navsync/sim/truth",
@@ -298,6 +302,39 @@ fn live_run_and_replay(name: &str, protocol: &str) {
             live_nav.len(),
             n.seq
         );
+    }
+    // The event poses (UBX: the simulated camera's TIM-TM2 marks) as the live estimator
+    // published them, bit for bit in the replay (which also poses those the live run still
+    // held when it stopped).
+    let poses = |v: &[(String, AnySample, u64, u64)]| -> Vec<EventPose> {
+        v.iter()
+            .filter_map(|(_, s, ..)| match s {
+                AnySample::EventPose(p) => Some(*p),
+                _ => None,
+            })
+            .collect()
+    };
+    let (live_poses, replay_poses) = (poses(&live), poses(&replayed));
+    if protocol == "ubx" {
+        let posed = live_poses.iter().filter(|p| p.source != 0).count();
+        assert!(posed >= 10, "{posed} live event poses");
+        for p in &live_poses {
+            let r = replay_poses
+                .iter()
+                .find(|r| r.seq == p.seq)
+                .unwrap_or_else(|| panic!("no replayed event pose {}", p.seq));
+            assert!(
+                bytes_of(p) == bytes_of(r),
+                "event pose {}: live {p:?}, replay {r:?}",
+                p.seq
+            );
+        }
+        println!(
+            "{} live event poses ({posed} posed) equal the replayed ones",
+            live_poses.len()
+        );
+    } else {
+        assert!(live_poses.is_empty() && replay_poses.is_empty());
     }
     // The comparison covers a working filter: aligned, locked, fusing fixes.
     let last = live_nav.last().unwrap();
