@@ -124,6 +124,7 @@ fn generated_python_types_are_current_and_match_the_rust_layouts() {
         rust::<NetworkTime>(),
         rust::<SkySatellite>(),
         rust::<GnssSky>(),
+        rust::<EventPose>(),
     ];
     assert_eq!(report.as_object().unwrap().len(), rust_layouts.len(), "{report}");
     let mut fields = 0;
