@@ -25,10 +25,10 @@
 //! CPU is `utime + stime` from `/proc/PID/stat` over the measured window; memory is each
 //! process's peak RSS (`VmHWM`) at the end.
 //!
-//! `--compare-web` runs each case twice, side by side: as above, then with a watched vehicle's
-//! extra load ([`web_load`]): `navsync web` with its Foxglove server, an open page, a scrape of
-//! `/metrics` every second and a Foxglove client subscribed to every channel. Their cost to
-//! the estimator is the difference of the two rows.
+//! `--compare-web` runs each case three times, side by side: as above, then with a watched
+//! vehicle's extra load ([`web_load`]): `navsync web` with its Foxglove server, an open page, a
+//! scrape of `/metrics` every second and a Foxglove client subscribed to the NavState, then to
+//! every channel. Their cost to the estimator is the difference of the rows.
 
 mod web_load;
 
@@ -94,9 +94,10 @@ pub struct E2eArgs {
     /// A short run (2 IMUs, 3 s warm-up, 5 s measured) for smoke tests.
     #[arg(long)]
     pub quick: bool,
-    /// Run each case twice: without and with `navsync web`, its Foxglove server and their
-    /// clients (an open page, a Prometheus scrape every second, a Foxglove client on every
-    /// channel), to show what watching costs the estimator.
+    /// Run each case three times: without `navsync web`, then with it, its Foxglove server and
+    /// their clients (an open page, a Prometheus scrape every second, a Foxglove client on the
+    /// navigation state), then with the Foxglove client on every channel, to show what
+    /// watching costs the estimator.
     #[arg(long)]
     pub compare_web: bool,
     /// Write the results as JSON to this file.
@@ -139,6 +140,8 @@ pub struct E2eCase {
     pub pin_chain: Option<usize>,
     /// Run with `navsync web`, its Foxglove server and their clients (`--compare-web`).
     pub web: bool,
+    /// The Foxglove client watched every channel (else only `navsync/nav/state`).
+    pub web_all_channels: bool,
     /// Foxglove messages the watching client received in the run (0 without web).
     pub foxglove_messages: u64,
     /// Bytes the page's event stream and the scrapes received (0 without web).
@@ -246,7 +249,7 @@ fn wait_path(env: &mut BenchEnv, p: &std::path::Path) -> Result<(), E2eError> {
 }
 
 /// Runs one IMU count.
-pub fn run_case(args: &E2eArgs, imus: usize, web: bool) -> Result<E2eCase, E2eError> {
+pub fn run_case(args: &E2eArgs, imus: usize, web: Option<web_load::Watch>) -> Result<E2eCase, E2eError> {
     let mut env = BenchEnv::new("e2e")?;
     let scenario = env.dir.join("bench_1khz.toml");
     std::fs::write(&scenario, BENCH_SCENARIO)?;
@@ -342,7 +345,7 @@ pub fn run_case(args: &E2eArgs, imus: usize, web: bool) -> Result<E2eCase, E2eEr
         false,
     )?;
     pids.push(("estimator".into(), pid));
-    let watchers = if web {
+    let watchers = if let Some(watch) = web {
         let port = || {
             std::net::TcpListener::bind("127.0.0.1:0")
                 .and_then(|l| l.local_addr())
@@ -363,7 +366,7 @@ pub fn run_case(args: &E2eArgs, imus: usize, web: bool) -> Result<E2eCase, E2eEr
         pids.push(("web".into(), pid));
         // The web process discovers the services once a second.
         std::thread::sleep(Duration::from_secs(2));
-        Some(web_load::WebLoad::start(&http, &fox))
+        Some(web_load::WebLoad::start(&http, &fox, watch))
     } else {
         None
     };
@@ -444,7 +447,8 @@ pub fn run_case(args: &E2eArgs, imus: usize, web: bool) -> Result<E2eCase, E2eEr
         imu_path: args.imu_path,
         realtime: args.realtime,
         pin_chain: args.pin_chain,
-        web,
+        web: web.is_some(),
+        web_all_channels: web == Some(web_load::Watch::AllChannels),
         foxglove_messages,
         web_http_bytes,
         window_s: v["window_s"].as_f64().unwrap_or(f64::NAN),
@@ -474,7 +478,15 @@ pub fn run(args: &E2eArgs) -> Result<E2eReport, E2eError> {
         cases: Vec::new(),
     };
     let _wakeup = util::wakeup_hold(args.realtime.is_some() || args.idle_polling, &mut report.machine);
-    let web_modes: &[bool] = if args.compare_web { &[false, true] } else { &[false] };
+    let web_modes: &[Option<web_load::Watch>] = if args.compare_web {
+        &[
+            None,
+            Some(web_load::Watch::NavState),
+            Some(web_load::Watch::AllChannels),
+        ]
+    } else {
+        &[None]
+    };
     for &n in &args.imus {
         for &web in web_modes {
             let c = run_case(args, n, web)?;
@@ -519,7 +531,12 @@ fn latency_row(c: &E2eCase) -> String {
             }
             if c.web {
                 label += &format!(
-                    ", watched: web + Foxglove, {} messages, {} kB",
+                    ", watched: web + Foxglove on {}, {} messages, {} kB",
+                    if c.web_all_channels {
+                        "every channel"
+                    } else {
+                        "the NavState"
+                    },
                     c.foxglove_messages,
                     c.web_http_bytes / 1000
                 );

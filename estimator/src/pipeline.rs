@@ -28,7 +28,7 @@ use crate::time::device_timing::{DeviceTiming, DeviceTimingConfig};
 use crate::time::time_sync::{TimeSync, TimeSyncConfig};
 
 /// Fused states kept for a caller that has not taken them ([`Pipeline::drain_fused`]), at most.
-const MAX_UNDRAINED: usize = 8192;
+const MAX_UNDRAINED: usize = 256;
 
 /// Prior of Δ under software sync and its 1-sigma, s: any receiver latency below the fusion
 /// horizon.

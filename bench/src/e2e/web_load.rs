@@ -40,7 +40,16 @@ fn get(addr: &str, path: &str, stop: &AtomicBool, bytes: &AtomicU64) {
     }
 }
 
-fn foxglove(addr: &str, stop: &AtomicBool, messages: &AtomicU64) -> Result<(), String> {
+/// What the Foxglove client subscribes to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Watch {
+    /// `/navsync/nav/state` only (watching the vehicle move).
+    NavState,
+    /// Every channel advertised (the IMUs' samples at 1 kHz each among them).
+    AllChannels,
+}
+
+fn foxglove(addr: &str, stop: &AtomicBool, messages: &AtomicU64, watch: Watch) -> Result<(), String> {
     let stream = TcpStream::connect(addr).map_err(|e| e.to_string())?;
     let mut req = format!("ws://{addr}/")
         .into_client_request()
@@ -60,6 +69,7 @@ fn foxglove(addr: &str, stop: &AtomicBool, messages: &AtomicU64) -> Result<(), S
                         .as_array()
                         .into_iter()
                         .flatten()
+                        .filter(|c| watch == Watch::AllChannels || c["topic"].as_str() == Some("/navsync/nav/state"))
                         .filter_map(|c| c["id"].as_u64())
                         .map(|id| {
                             next_sub += 1;
@@ -96,7 +106,7 @@ fn as_remote_watcher() {
 
 impl WebLoad {
     /// Connects the watchers to `navsync web` at `http` (page and metrics) and `foxglove`.
-    pub fn start(http: &str, foxglove_addr: &str) -> Self {
+    pub fn start(http: &str, foxglove_addr: &str, watch: Watch) -> Self {
         let stop = Arc::new(AtomicBool::new(false));
         let http_bytes = Arc::new(AtomicU64::new(0));
         let foxglove_messages = Arc::new(AtomicU64::new(0));
@@ -122,7 +132,7 @@ impl WebLoad {
             let (stop, n, addr) = (stop.clone(), foxglove_messages.clone(), foxglove_addr.to_string());
             threads.push(std::thread::spawn(move || {
                 as_remote_watcher();
-                if let Err(e) = foxglove(&addr, &stop, &n) {
+                if let Err(e) = foxglove(&addr, &stop, &n, watch) {
                     eprintln!("foxglove watcher: {e}");
                 }
             }));

@@ -8,7 +8,9 @@
 //!   `navsync_msgs/msg/…`, the full `.msg` definition); services that appear later are
 //!   advertised as they appear (discovery once a second).
 //! - A client `subscribe`s to channel ids with its own subscription ids (`unsubscribe` ends
-//!   them); every sample of a subscribed service goes to it as a binary `MessageData` frame:
+//!   them); the server subscribes to a service only while a client does (a channel nobody
+//!   watches costs its publisher nothing), and every sample from then on goes to the
+//!   client as a binary `MessageData` frame:
 //!   opcode 0x01, subscription id (u32 LE), receive time (u64 LE, ns since 1970), the CDR bytes.
 //! - Read-only: client `advertise`/`publish` and other operations are ignored (counted as
 //!   `foxglove_ignored`). Bounded: at most `max_clients` at once (one more is closed after the
@@ -66,6 +68,14 @@ struct Client {
     peer: SocketAddr,
     /// False once a write failed: dropped after this round.
     alive: bool,
+}
+
+/// A channel offered to the clients: a navsync service.
+struct Channel {
+    service: String,
+    kind: ServiceKind,
+    /// Open while a client subscribes to the channel.
+    sub: Option<AnySubscriber>,
 }
 
 /// `MessageData`: opcode, subscription id, receive time, payload.
@@ -272,8 +282,10 @@ fn serve(
     max_clients: usize,
 ) -> Result<(), ipc::IpcError> {
     let node = IpcNode::new("web-foxglove")?;
-    // Channel id = index + 1 in `subs`.
-    let mut subs: Vec<(AnySubscriber, ServiceKind)> = Vec::new();
+    // Channel id = index + 1 in `channels`: each service with its kind and, while a client
+    // subscribes to it, a subscriber (none otherwise: a channel nobody watches costs its
+    // publisher nothing).
+    let mut channels: Vec<Channel> = Vec::new();
     let mut clients: Vec<Client> = Vec::new();
     let mut next_discovery = Instant::now();
     let mut payload = Vec::with_capacity(4096);
@@ -286,16 +298,15 @@ fn serve(
             next_discovery = Instant::now() + Duration::from_secs(1);
             for name in ipc::list_services()? {
                 let Some(kind) = ServiceKind::of(&name) else { continue };
-                if subs.iter().any(|(s, _)| s.service() == name) {
+                if channels.iter().any(|c| c.service == name) {
                     continue;
                 }
-                match AnySubscriber::open(&node, &name) {
-                    Ok(s) => {
-                        subs.push((s, kind));
-                        new_channels.push(channel_json(subs.len() as u32, &name, kind));
-                    }
-                    Err(e) => warn!("foxglove: not offering {name}: {e}"),
-                }
+                channels.push(Channel {
+                    service: name.clone(),
+                    kind,
+                    sub: None,
+                });
+                new_channels.push(channel_json(channels.len() as u32, &name, kind));
             }
         }
         // New clients: serverInfo and every channel.
@@ -310,10 +321,10 @@ fn serve(
             counts.clients.fetch_add(1, Ordering::Relaxed);
             let info = json!({"op": "serverInfo", "name": "navsync", "capabilities": [],
                 "supportedEncodings": [], "metadata": {}, "sessionId": session});
-            let all: Vec<Value> = subs
+            let all: Vec<Value> = channels
                 .iter()
                 .enumerate()
-                .map(|(i, (s, k))| channel_json(i as u32 + 1, s.service(), *k))
+                .map(|(i, c)| channel_json(i as u32 + 1, &c.service, c.kind))
                 .collect();
             let ok = send(&mut c, Message::text(info.to_string()))
                 && send(
@@ -360,13 +371,26 @@ fn serve(
         }
         // Samples to the clients subscribed to their channel.
         let now_ns = navsync_shared::time::realtime_now_ns().max(0) as u64;
-        for (i, (s, _)) in subs.iter().enumerate() {
+        for (i, channel) in channels.iter_mut().enumerate() {
             let ch = i as u32 + 1;
             let wanted = clients.iter().any(|c| c.subs.values().any(|&x| x == ch));
-            let _ = s.drain(|sample| {
-                if !wanted {
-                    return;
+            if !wanted {
+                // Nobody watches it (any more): no subscriber.
+                channel.sub = None;
+                continue;
+            }
+            if channel.sub.is_none() {
+                // The first subscription: samples from now on.
+                match AnySubscriber::open(&node, &channel.service) {
+                    Ok(sub) => channel.sub = Some(sub),
+                    Err(e) => {
+                        warn!("foxglove: cannot subscribe to {}: {e}", channel.service);
+                        continue;
+                    }
                 }
+            }
+            let Some(s) = &channel.sub else { continue };
+            let _ = s.drain(|sample| {
                 Encoding::Cdr.encode(&sample, &mut payload);
                 for c in &mut clients {
                     let ids: Vec<u32> = c.subs.iter().filter(|&(_, &x)| x == ch).map(|(&id, _)| id).collect();
