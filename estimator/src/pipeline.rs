@@ -161,7 +161,7 @@ impl Pipeline {
             catch_up_due: false,
             ephemerides: EphemerisStore::default(),
             range_counts: RangeBuildCounts::default(),
-            fused: Vec::with_capacity(64),
+            fused: Vec::with_capacity(MAX_UNDRAINED + crate::nav::navigator::MAX_FUSED_BATCH),
             last_fused: (i64::MIN, i64::MIN),
             fused_not_finite: 0,
             events: EventPoses::default(),

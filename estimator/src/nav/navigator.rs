@@ -171,6 +171,11 @@ fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, fil
     s.accel_bias_std_mps2 = std3(BA);
 }
 
+/// States the delayed filter makes in one call at most, kept without reallocating: a whole
+/// fusion horizon (1.5 s at most) of a 1 kHz IMU, which it steps over at once when the heading
+/// is decided.
+pub const MAX_FUSED_BATCH: usize = 2048;
+
 /// The navigation filter.
 #[derive(Debug, Clone)]
 pub struct Navigator {
@@ -1090,7 +1095,7 @@ impl Navigator {
     /// Keeps the delayed filter's states for [`Self::drain_fused`] from now on (the caller
     /// must drain them).
     pub fn keep_fused(&mut self) {
-        self.fused.get_or_insert_with(|| Vec::with_capacity(64));
+        self.fused.get_or_insert_with(|| Vec::with_capacity(MAX_FUSED_BATCH));
     }
 
     /// Hands each state the delayed filter made since the last call to `f`, oldest first: the
