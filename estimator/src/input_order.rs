@@ -177,7 +177,8 @@ impl Input {
         }
     }
 
-    /// Its place in the canonical order (the same as [`order_key`] of the sample).
+    /// Its place in the canonical order (the same as [`order_key`] of the sample; an event's
+    /// with the id of the device that marked it, which the sample alone does not hold).
     pub fn key(&self) -> OrderKey {
         match self {
             Self::PpsEdge(e) => OrderKey {
@@ -228,10 +229,12 @@ impl Input {
                 id: [3; 8],
                 seq: t.seq,
             },
-            Self::Event(e, _) => OrderKey {
+            // The device's id orders two devices' events of one instant (their own sequences
+            // may coincide).
+            Self::Event(e, id) => OrderKey {
                 at_ns: e.stamp.host_ns,
                 rank: 7,
-                id: [0; 8],
+                id: *id,
                 seq: e.stamp.seq,
             },
             Self::Other(k) => *k,
