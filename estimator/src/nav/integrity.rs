@@ -124,11 +124,17 @@ pub fn plausible(f: &DelayedFilter, noise: &ProcessNoise, cfg: &IntegrityConfig)
 
 /// The first fault of the filter `f`, if any, given the IMU model `noise` and the running NIS
 /// per component of its GNSS updates (`nis_average`, 1 when consistent).
-pub fn check(f: &DelayedFilter, noise: &ProcessNoise, nis_average: f64, cfg: &IntegrityConfig) -> Option<Fault> {
+pub fn check(
+    f: &DelayedFilter,
+    noise: &ProcessNoise,
+    nis_average: f64,
+    cfg: &IntegrityConfig,
+    memo: &mut PdMemo,
+) -> Option<Fault> {
     if !finite(f) {
         return Some(Fault::NonFinite);
     }
-    if !positive_definite(&f.eskf.p) {
+    if !memo.positive_definite(&f.eskf.p) {
         return Some(Fault::NotPositiveDefinite);
     }
     if !plausible(f, noise, cfg) {
@@ -138,6 +144,30 @@ pub fn check(f: &DelayedFilter, noise: &ProcessNoise, nis_average: f64, cfg: &In
         return Some(Fault::Inconsistent);
     }
     None
+}
+
+/// The last covariance found positive definite: the check runs after every IMU interval, but
+/// the covariance changes only when it is propagated (every `cov_step_s`) or updated, and the
+/// same matrix needs no new factorisation (a comparison instead of a Cholesky factorisation
+/// of N × N; the answer is the same).
+#[derive(Debug, Clone, Default)]
+pub struct PdMemo(Option<Box<StateMat>>);
+
+impl PdMemo {
+    /// Whether `p` is positive definite ([`positive_definite`]), remembered for the same `p`.
+    pub fn positive_definite(&mut self, p: &StateMat) -> bool {
+        if self.0.as_deref() == Some(p) {
+            return true;
+        }
+        let ok = positive_definite(p);
+        if ok {
+            match &mut self.0 {
+                Some(b) => **b = *p,
+                None => self.0 = Some(Box::new(*p)),
+            }
+        }
+        ok
+    }
 }
 
 /// The bias and scale-factor states' indices (a reset of the sensor errors clears them).
@@ -169,16 +199,28 @@ mod tests {
     fn each_kind_of_fault_is_named() {
         let noise = ProcessNoise::from_imu_noise(&ImuPreset::Consumer.noise());
         let cfg = IntegrityConfig::default();
-        assert_eq!(check(&filter(), &noise, 1.0, &cfg), None);
+        assert_eq!(check(&filter(), &noise, 1.0, &cfg, &mut PdMemo::default()), None);
         let mut f = filter();
         f.pva.vel_ned_mps.y = f64::NAN;
-        assert_eq!(check(&f, &noise, 1.0, &cfg), Some(Fault::NonFinite));
+        assert_eq!(
+            check(&f, &noise, 1.0, &cfg, &mut PdMemo::default()),
+            Some(Fault::NonFinite)
+        );
         let mut f = filter();
         f.eskf.p[(3, 3)] = -1.0;
-        assert_eq!(check(&f, &noise, 1.0, &cfg), Some(Fault::NotPositiveDefinite));
+        assert_eq!(
+            check(&f, &noise, 1.0, &cfg, &mut PdMemo::default()),
+            Some(Fault::NotPositiveDefinite)
+        );
         let mut f = filter();
         f.bias_g.z = 1.0; // 57 °/s
-        assert_eq!(check(&f, &noise, 1.0, &cfg), Some(Fault::Implausible));
-        assert_eq!(check(&filter(), &noise, 50.0, &cfg), Some(Fault::Inconsistent));
+        assert_eq!(
+            check(&f, &noise, 1.0, &cfg, &mut PdMemo::default()),
+            Some(Fault::Implausible)
+        );
+        assert_eq!(
+            check(&filter(), &noise, 50.0, &cfg, &mut PdMemo::default()),
+            Some(Fault::Inconsistent)
+        );
     }
 }

@@ -232,6 +232,8 @@ pub struct Navigator {
     /// instant it stepped over, with every measurement up to it fused (its capacity is kept);
     /// `None` unless [`Navigator::keep_fused`] asked for them.
     fused: Option<Vec<NavState>>,
+    /// The last covariance the integrity monitor found positive definite.
+    pd_memo: integrity::PdMemo,
 }
 
 impl Navigator {
@@ -272,6 +274,7 @@ impl Navigator {
             fix_delay_ns: 0,
             delay_prior: (0.0, cfg.delay_prior_std_s),
             fused: None,
+            pd_memo: integrity::PdMemo::default(),
             integrity: IntegrityCounters::default(),
             smoother: None,
             inconsistent: false,
@@ -827,7 +830,7 @@ impl Navigator {
     fn monitor(&mut self) -> bool {
         let Some(f) = &mut self.filt else { return true };
         let nis = self.states.gnss.nis_average;
-        match integrity::check(f, &self.cfg.noise, nis, &self.cfg.integrity) {
+        match integrity::check(f, &self.cfg.noise, nis, &self.cfg.integrity, &mut self.pd_memo) {
             Some(fault @ (Fault::NonFinite | Fault::NotPositiveDefinite)) => {
                 self.integrity.count(fault);
                 self.integrity.resets += 1;
