@@ -241,7 +241,7 @@ impl Client {
 
     /// Refills the request bucket for the time since the last refill.
     fn refill(&mut self, now_ns: i64, limits: &ClientLimits) {
-        let dt_s = (now_ns - self.refilled_ns).max(0) as f64 * 1e-9;
+        let dt_s = now_ns.saturating_sub(self.refilled_ns).max(0) as f64 * 1e-9;
         self.tokens = (self.tokens + dt_s * limits.requests_per_s).min(limits.request_burst);
         self.refilled_ns = now_ns;
     }
@@ -620,7 +620,8 @@ impl Latest {
     /// The receiver's latest fix while it is under [`FRESH_FIX_NS`] old at `now_ns` (host
     /// monotonic).
     fn fresh_fix(&self, now_ns: i64) -> Option<GnssFix> {
-        self.fix.filter(|f| (now_ns - f.stamp.host_ns).abs() < FRESH_FIX_NS)
+        self.fix
+            .filter(|f| now_ns.saturating_sub(f.stamp.host_ns).abs() < FRESH_FIX_NS)
     }
 
     fn activated(&self) -> String {
@@ -664,7 +665,7 @@ fn fix_report(latest: &Latest, now_ns: i64) -> Option<Vec<String>> {
     let fix = latest.fix.as_ref()?;
     let fused = latest
         .nav
-        .filter(|n| navigates(n) && (now_ns - n.host_ns).abs() < FRESH_NAV_NS);
+        .filter(|n| navigates(n) && now_ns.saturating_sub(n.host_ns).abs() < FRESH_NAV_NS);
     let mut lines = match fused {
         Some(n) => vec![
             tpv(&n, Some(fix), latest.time.as_ref()).to_string(),
@@ -682,7 +683,7 @@ fn fix_report(latest: &Latest, now_ns: i64) -> Option<Vec<String>> {
 fn poll_reply(latest: &Latest, now_ns: i64) -> Value {
     let fresh_nav = latest
         .nav
-        .filter(|n| (now_ns - n.host_ns).abs() < FRESH_NAV_NS && n.status != NavStatus::Aligning as u8);
+        .filter(|n| now_ns.saturating_sub(n.host_ns).abs() < FRESH_NAV_NS && n.status != NavStatus::Aligning as u8);
     let fresh_fix = latest.fresh_fix(now_ns);
     let (tpv, active) = match (&fresh_nav, &fresh_fix) {
         (Some(n), fix) => (tpv(n, fix.as_ref().or(latest.fix.as_ref()), latest.time.as_ref()), 1),
@@ -911,7 +912,9 @@ pub fn run(args: &GpsdArgs) -> Result<(), GpsdError> {
         })?;
         let now_ns = monotonic_now_ns();
         // Without a fresh fused state, the period's first fix (by its UTC, else host time).
-        let nav_fresh = latest.nav.is_some_and(|n| (now_ns - n.host_ns).abs() < FRESH_NAV_NS);
+        let nav_fresh = latest
+            .nav
+            .is_some_and(|n| now_ns.saturating_sub(n.host_ns).abs() < FRESH_NAV_NS);
         let due_fix = latest.fix.filter(|f| {
             let t = if f.utc_ns != i64::MIN {
                 f.utc_ns

@@ -126,9 +126,9 @@ pub fn run(args: &NmeaOutArgs) -> Result<(), NmeaOutError> {
                 continue;
             }
         };
-        let fresh_nav = latest_nav
-            .as_ref()
-            .filter(|n| n.status != NavStatus::Aligning as u8 && (monotonic_now_ns() - n.host_ns).abs() < NAV_FRESH_NS);
+        let fresh_nav = latest_nav.as_ref().filter(|n| {
+            n.status != NavStatus::Aligning as u8 && monotonic_now_ns().saturating_sub(n.host_ns).abs() < NAV_FRESH_NS
+        });
         let bytes = sentences(second, fresh_nav);
         match port.write_all(&bytes) {
             Ok(()) => health.add(c_written, 1),

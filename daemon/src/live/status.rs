@@ -381,7 +381,7 @@ impl Status {
         let now_ns = monotonic_now_ns();
         let now = Instant::now();
         let span = now.duration_since(self.interval_start).as_secs_f64().max(1e-3);
-        let age = |h: i64| (now_ns - h) as f64 * 1e-9;
+        let age = |h: i64| now_ns.saturating_sub(h) as f64 * 1e-9;
         let mut services = Vec::new();
         let (mut health, mut time, mut nav) = (Vec::new(), None, None);
         let (mut pulses, mut marks) = (Vec::new(), Vec::new());
@@ -457,7 +457,9 @@ impl Status {
 /// the window.
 pub fn rate_hz(samples: u64, stamps: Option<(i64, i64)>, span_s: f64) -> f64 {
     match stamps {
-        Some((first, last)) if samples >= 2 && last > first => (samples - 1) as f64 / ((last - first) as f64 * 1e-9),
+        Some((first, last)) if samples >= 2 && last > first && first != i64::MIN => {
+            (samples - 1) as f64 / (last.saturating_sub(first) as f64 * 1e-9)
+        }
         _ => samples as f64 / span_s.max(1e-3),
     }
 }
@@ -499,7 +501,7 @@ fn health_json(h: &Health, now_ns: i64) -> Value {
         "pid": h.pid,
         "alive": h.alive == 1,
         "uptime_s": (h.host_ns - h.started_host_ns) as f64 * 1e-9,
-        "report_age_s": (now_ns - h.host_ns) as f64 * 1e-9,
+        "report_age_s": now_ns.saturating_sub(h.host_ns) as f64 * 1e-9,
         "reports": h.seq,
         "counters": counters,
         "rates": rates,
@@ -509,13 +511,13 @@ fn health_json(h: &Health, now_ns: i64) -> Value {
 fn time_json(t: &TimeState, now_ns: i64) -> Value {
     json!({
         "status": t.status().name(),
-        "state_age_s": (now_ns - t.computed_host_ns) as f64 * 1e-9,
+        "state_age_s": now_ns.saturating_sub(t.computed_host_ns) as f64 * 1e-9,
         "utc_now_ns": t.is_valid().then(|| t.utc_ns_at(now_ns)),
         "utc_std_ns": if t.is_valid() { f(t.utc_std_ns_at(now_ns)) } else { Value::Null },
         "offset_std_ns": f(t.offset_std_ns),
         "drift_ppm": f(t.rate_error * 1e6),
         "drift_std_ppm": f(t.rate_std * 1e6),
-        "last_pps_age_s": (t.last_pps_host_ns != 0).then(|| (now_ns - t.last_pps_host_ns) as f64 * 1e-9),
+        "last_pps_age_s": (t.last_pps_host_ns != 0).then(|| now_ns.saturating_sub(t.last_pps_host_ns) as f64 * 1e-9),
         "pps_used": t.pps_used,
         "pps_rejected": t.pps_rejected,
         "receiver_latency_d0_s": {
@@ -540,7 +542,7 @@ fn time_pulse_json(service: &str, t: &GnssTimePulse, now_ns: i64) -> Value {
         "q_err_ns": (t.q_err_ps != i32::MIN).then(|| f64::from(t.q_err_ps) * 1e-3),
         "pulse_utc_ns": (t.pulse_utc_ns != i64::MIN).then_some(t.pulse_utc_ns),
         "time_base": match t.time_base { 0 => "gnss", _ => "utc" },
-        "age_s": (now_ns - t.stamp.host_ns) as f64 * 1e-9,
+        "age_s": now_ns.saturating_sub(t.stamp.host_ns) as f64 * 1e-9,
     })
 }
 
@@ -556,7 +558,7 @@ fn time_mark_json(service: &str, e: &GnssEvent, now_ns: i64) -> Value {
         "rising_host_ns": known(e.rising_host_ns),
         "falling_gps_ns": known(e.falling_gps_ns),
         "falling_host_ns": known(e.falling_host_ns),
-        "age_s": (now_ns - e.stamp.host_ns) as f64 * 1e-9,
+        "age_s": now_ns.saturating_sub(e.stamp.host_ns) as f64 * 1e-9,
     })
 }
 
@@ -564,7 +566,7 @@ fn nav_json(n: &NavState, now_ns: i64) -> Value {
     json!({
         "status": NavStatus::name(n.status),
         "time_status": TimeStatus::from_u8(n.time_status).name(),
-        "state_age_s": (now_ns - n.host_ns) as f64 * 1e-9,
+        "state_age_s": now_ns.saturating_sub(n.host_ns) as f64 * 1e-9,
         "utc_ns": (n.utc_ns != i64::MIN).then_some(n.utc_ns),
         "lat_deg": f(n.lat_deg),
         "lon_deg": f(n.lon_deg),
@@ -574,7 +576,7 @@ fn nav_json(n: &NavState, now_ns: i64) -> Value {
         "pos_std_ned_m": n.pos_std_ned_m.map(f),
         "fixes_used": n.fixes_used,
         "fixes_rejected": n.fixes_rejected,
-        "last_fix_age_s": (n.last_fix_host_ns != 0).then(|| (now_ns - n.last_fix_host_ns) as f64 * 1e-9),
+        "last_fix_age_s": (n.last_fix_host_ns != 0).then(|| now_ns.saturating_sub(n.last_fix_host_ns) as f64 * 1e-9),
         "gnss_delay_s": f(n.gnss_delay_s),
         "gnss_delay_std_s": f(n.gnss_delay_std_s),
         "imu": imu_table(&n.imu[..usize::from(n.imu_count).min(MAX_IMUS)]),
@@ -941,5 +943,8 @@ mod tests {
         // One sample: the count over the window; none: 0.
         assert!((rate_hz(1, Some((7, 7)), 2.0) - 0.5).abs() < 1e-12);
         assert_eq!(rate_hz(0, None, 2.0), 0.0);
+        // A stamp that means "no host time" (an event without a pose) spans nothing.
+        assert!((rate_hz(2, Some((i64::MIN, 1_000)), 2.0) - 1.0).abs() < 1e-12);
+        assert!(rate_hz(2, Some((-5, i64::MAX)), 2.0).is_finite());
     }
 }

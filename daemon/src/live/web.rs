@@ -789,7 +789,7 @@ fn fix_json(service: &str, f: &GnssFix, now_ns: i64) -> Value {
         "h_acc_m": finite(if f.h_acc_m.is_finite() { f.h_acc_m } else { f.std_lat_m.hypot(f.std_lon_m) }),
         "v_acc_m": finite(if f.v_acc_m.is_finite() { f.v_acc_m } else { f.std_alt_m }),
         "utc": (f.utc_ns != i64::MIN).then(|| format_rfc3339_ms(f.utc_ns)),
-        "age_s": (now_ns - f.stamp.host_ns) as f64 * 1e-9,
+        "age_s": now_ns.saturating_sub(f.stamp.host_ns) as f64 * 1e-9,
     })
 }
 
@@ -834,7 +834,7 @@ pub fn sky_json(service: &str, s: &GnssSky, now_ns: i64) -> Value {
         "used": s.used(),
         "dropped": s.dropped,
         "utc": (s.utc_ns != i64::MIN).then(|| format_rfc3339_ms(s.utc_ns)),
-        "age_s": (now_ns - s.stamp.host_ns) as f64 * 1e-9,
+        "age_s": now_ns.saturating_sub(s.stamp.host_ns) as f64 * 1e-9,
         "satellites": sats,
     })
 }

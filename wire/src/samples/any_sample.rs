@@ -43,7 +43,8 @@ pub enum AnySample {
 }
 
 impl AnySample {
-    /// The host time the sample is stamped with, ns (`CLOCK_MONOTONIC`).
+    /// The host time the sample is stamped with, ns (`CLOCK_MONOTONIC`). An event that got
+    /// no pose has no host time of its own (`i64::MIN`): its report's host time stands in.
     pub fn host_ns(&self) -> i64 {
         match self {
             Self::GnssFix(f) => f.stamp.host_ns,
@@ -60,6 +61,7 @@ impl AnySample {
             Self::Settings(s) => s.host_ns,
             Self::NetworkTime(t) => t.host_ns,
             Self::Sky(s) => s.stamp.host_ns,
+            Self::EventPose(e) if e.host_ns == i64::MIN => e.report_host_ns,
             Self::EventPose(e) => e.host_ns,
         }
     }
