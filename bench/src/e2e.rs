@@ -25,10 +25,11 @@
 //! CPU is `utime + stime` from `/proc/PID/stat` over the measured window; memory is each
 //! process's peak RSS (`VmHWM`) at the end.
 //!
-//! `--compare-web` runs each case three times, side by side: as above, then with a watched
-//! vehicle's extra load ([`web_load`]): `navsync web` with its Foxglove server, an open page, a
-//! scrape of `/metrics` every second and a Foxglove client subscribed to the NavState, then to
-//! every channel. Their cost to the estimator is the difference of the rows.
+//! `--compare-web` runs each case five times, side by side: as above, then with a watched
+//! vehicle's extra load ([`web_load`]): `navsync web` with its Foxglove server, an open page and
+//! a scrape of `/metrics` every second, then also a Foxglove client subscribed to the NavState,
+//! then to every channel, and last unwatched again (the run-to-run spread). Their cost to the
+//! estimator is the difference of the rows.
 
 mod web_load;
 
@@ -94,10 +95,9 @@ pub struct E2eArgs {
     /// A short run (2 IMUs, 3 s warm-up, 5 s measured) for smoke tests.
     #[arg(long)]
     pub quick: bool,
-    /// Run each case three times: without `navsync web`, then with it, its Foxglove server and
-    /// their clients (an open page, a Prometheus scrape every second, a Foxglove client on the
-    /// navigation state), then with the Foxglove client on every channel, to show what
-    /// watching costs the estimator.
+    /// Run each case five times: without `navsync web`; with it, an open page and a Prometheus
+    /// scrape every second; also a Foxglove client on the navigation state; on every channel;
+    /// without web again (the run-to-run spread), to show what watching costs the estimator.
     #[arg(long)]
     pub compare_web: bool,
     /// Write the results as JSON to this file.
@@ -140,8 +140,8 @@ pub struct E2eCase {
     pub pin_chain: Option<usize>,
     /// Run with `navsync web`, its Foxglove server and their clients (`--compare-web`).
     pub web: bool,
-    /// The Foxglove client watched every channel (else only `navsync/nav/state`).
-    pub web_all_channels: bool,
+    /// What was watched (empty without web).
+    pub web_watch: String,
     /// Foxglove messages the watching client received in the run (0 without web).
     pub foxglove_messages: u64,
     /// Bytes the page's event stream and the scrapes received (0 without web).
@@ -448,7 +448,7 @@ pub fn run_case(args: &E2eArgs, imus: usize, web: Option<web_load::Watch>) -> Re
         realtime: args.realtime,
         pin_chain: args.pin_chain,
         web: web.is_some(),
-        web_all_channels: web == Some(web_load::Watch::AllChannels),
+        web_watch: web.map_or(String::new(), |w| w.label().to_string()),
         foxglove_messages,
         web_http_bytes,
         window_s: v["window_s"].as_f64().unwrap_or(f64::NAN),
@@ -479,10 +479,13 @@ pub fn run(args: &E2eArgs) -> Result<E2eReport, E2eError> {
     };
     let _wakeup = util::wakeup_hold(args.realtime.is_some() || args.idle_polling, &mut report.machine);
     let web_modes: &[Option<web_load::Watch>] = if args.compare_web {
+        // The unwatched row again at the end: the run-to-run spread the others compare with.
         &[
             None,
+            Some(web_load::Watch::Page),
             Some(web_load::Watch::NavState),
             Some(web_load::Watch::AllChannels),
+            None,
         ]
     } else {
         &[None]
@@ -531,12 +534,8 @@ fn latency_row(c: &E2eCase) -> String {
             }
             if c.web {
                 label += &format!(
-                    ", watched: web + Foxglove on {}, {} messages, {} kB",
-                    if c.web_all_channels {
-                        "every channel"
-                    } else {
-                        "the NavState"
-                    },
+                    ", watched: {}, {} Foxglove messages, {} kB",
+                    c.web_watch,
                     c.foxglove_messages,
                     c.web_http_bytes / 1000
                 );

@@ -43,6 +43,8 @@ fn get(addr: &str, path: &str, stop: &AtomicBool, bytes: &AtomicU64) {
 /// What the Foxglove client subscribes to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Watch {
+    /// The page and the scrapes only: no Foxglove client.
+    Page,
     /// `/navsync/nav/state` only (watching the vehicle move).
     NavState,
     /// Every channel advertised (the IMUs' samples at 1 kHz each among them).
@@ -104,6 +106,17 @@ fn as_remote_watcher() {
     }
 }
 
+impl Watch {
+    /// What the row watches, for the table.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Page => "the page and /metrics, no Foxglove client",
+            Self::NavState => "the page, /metrics, Foxglove on the NavState",
+            Self::AllChannels => "the page, /metrics, Foxglove on every channel",
+        }
+    }
+}
+
 impl WebLoad {
     /// Connects the watchers to `navsync web` at `http` (page and metrics) and `foxglove`.
     pub fn start(http: &str, foxglove_addr: &str, watch: Watch) -> Self {
@@ -128,7 +141,7 @@ impl WebLoad {
                 }
             }));
         }
-        {
+        if watch != Watch::Page {
             let (stop, n, addr) = (stop.clone(), foxglove_messages.clone(), foxglove_addr.to_string());
             threads.push(std::thread::spawn(move || {
                 as_remote_watcher();

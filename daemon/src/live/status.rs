@@ -89,15 +89,51 @@ pub enum StatusError {
 
 /// One observed service, type-erased.
 trait Monitor {
-    /// Drains the subscriber; returns how many samples arrived and the host stamps of the
-    /// first and the last of them.
-    fn poll(&mut self) -> (usize, Option<(i64, i64)>);
+    /// Takes what arrived (the subscriber keeps only the newest sample: a reader that wakes
+    /// once a second costs a 1 kHz publisher nothing per sample) and counts, by the samples'
+    /// sequence numbers, what was published since the previous newest.
+    fn poll(&mut self) -> Arrivals;
     /// (publishers, subscribers) on the service, including this process's subscriber.
     fn ports(&self) -> (usize, usize);
     /// Host stamp of the newest sample ever received.
     fn last_host_ns(&self) -> Option<i64>;
     /// The newest sample.
     fn latest(&self) -> Option<AnySample>;
+}
+
+/// What one poll of a service saw.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Arrivals {
+    /// Samples published since the previous poll, by their sequence numbers (a sample with no
+    /// predecessor seen, or whose publisher restarted, counts 1).
+    published: u64,
+    /// Of those, the ones whose predecessor's host stamp is known: the intervals in `span`.
+    intervals: u64,
+    /// Host stamps (ns) of the newest sample before them and of the newest now.
+    span: Option<(i64, i64)>,
+}
+
+impl Arrivals {
+    /// Counts `seq` at host time `host_ns` after `prev` (sequence number, host ns).
+    fn count(&mut self, prev: Option<(u64, i64)>, seq: u64, host_ns: i64) {
+        match prev {
+            Some((p, p_host)) if seq > p => {
+                self.published += seq - p;
+                self.intervals += seq - p;
+                self.span = Some((self.span.map_or(p_host, |(f, _)| f), host_ns));
+            }
+            _ => self.published += 1,
+        }
+    }
+
+    /// This poll's arrivals after `earlier`'s, as one.
+    fn merge(&mut self, later: Arrivals) {
+        self.published += later.published;
+        self.intervals += later.intervals;
+        if let Some((f, l)) = later.span {
+            self.span = Some((self.span.map_or(f, |(f0, _)| f0), l));
+        }
+    }
 }
 
 struct Typed<T: navsync_shared::ipc::IpcSample> {
@@ -108,17 +144,19 @@ struct Typed<T: navsync_shared::ipc::IpcSample> {
 }
 
 impl<T: navsync_shared::ipc::IpcSample> Monitor for Typed<T> {
-    fn poll(&mut self) -> (usize, Option<(i64, i64)>) {
-        let mut n = 0;
-        let mut stamps: Option<(i64, i64)> = None;
+    fn poll(&mut self) -> Arrivals {
+        let mut a = Arrivals::default();
         while let Ok(Some(s)) = self.sub.receive() {
             let sample = s.payload().0;
-            let h = (self.wrap)(sample).host_ns();
-            stamps = Some(stamps.map_or((h, h), |(first, _)| (first, h)));
+            let any = (self.wrap)(sample);
+            let prev = self.latest.map(|p| {
+                let p = (self.wrap)(p);
+                (p.seq(), p.host_ns())
+            });
+            a.count(prev, any.seq(), any.host_ns());
             self.latest = Some(sample);
-            n += 1;
         }
-        (n, stamps)
+        a
     }
     fn ports(&self) -> (usize, usize) {
         let d = self.factory.dynamic_config();
@@ -145,7 +183,13 @@ fn open_typed<T: navsync_shared::ipc::IpcSample>(
         .publish_subscribe::<Wire<T>>()
         .open()
         .map_err(|e| format!("{e:?}"))?;
-    let sub = factory.subscriber_builder().create().map_err(|e| format!("{e:?}"))?;
+    // Only the newest sample is kept: the publisher overwrites it (safe overflow), so a reader
+    // that polls seldom neither falls behind nor holds the publisher's samples.
+    let sub = factory
+        .subscriber_builder()
+        .buffer_size(1)
+        .create()
+        .map_err(|e| format!("{e:?}"))?;
     Ok(Box::new(Typed {
         factory,
         sub,
@@ -178,10 +222,8 @@ fn open_monitor(node: &IpcNode, service: &str, kind: ServiceKind) -> Result<Box<
 struct Watched {
     kind: ServiceKind,
     monitor: Box<dyn Monitor>,
-    /// Samples since the interval started.
-    interval_samples: u64,
-    /// Host stamps of the first and the last of them.
-    interval_stamps: Option<(i64, i64)>,
+    /// What was published since the interval started.
+    interval: Arrivals,
     total: u64,
     last_arrival: Option<Instant>,
     /// Names of the nodes attached to the service, from discovery.
@@ -346,8 +388,7 @@ impl Status {
                         Watched {
                             kind,
                             monitor,
-                            interval_samples: 0,
-                            interval_stamps: None,
+                            interval: Arrivals::default(),
                             total: 0,
                             last_arrival: None,
                             nodes,
@@ -363,14 +404,10 @@ impl Status {
     /// Takes what arrived on every service watched.
     pub fn poll(&mut self) {
         for w in self.services.values_mut() {
-            let (n, stamps) = w.monitor.poll();
-            let n = n as u64;
-            if let Some((first, last)) = stamps {
-                w.interval_stamps = Some(w.interval_stamps.map_or((first, last), |(f, _)| (f, last)));
-            }
-            if n > 0 {
-                w.interval_samples += n;
-                w.total += n;
+            let a = w.monitor.poll();
+            if a.published > 0 {
+                w.interval.merge(a);
+                w.total += a.published;
                 w.last_arrival = Some(Instant::now());
             }
         }
@@ -393,14 +430,13 @@ impl Status {
                 "publishers": publishers,
                 "subscribers": subscribers.saturating_sub(1),
                 "nodes": w.nodes,
-                "rate_hz": rate_hz(w.interval_samples, w.interval_stamps, span),
-                "samples": w.interval_samples,
+                "rate_hz": rate_hz(w.interval, span),
+                "samples": w.interval.published,
                 "received_total": w.total,
                 "last_sample_age_s": w.monitor.last_host_ns().map(age),
                 "last_received_s": w.last_arrival.map(|t| now.duration_since(t).as_secs_f64()),
             }));
-            w.interval_samples = 0;
-            w.interval_stamps = None;
+            w.interval = Arrivals::default();
             match w.monitor.latest() {
                 Some(AnySample::Health(h)) => health.push(health_json(&h, now_ns)),
                 Some(AnySample::Time(t)) => time = Some(time_json(&t, now_ns)),
@@ -450,17 +486,16 @@ impl Status {
     }
 }
 
-/// The rate of `samples` that arrived in a window of `span_s` seconds, their own host stamps
-/// spanning `stamps` (first, last): the intervals between them over the time they span. A
-/// count over the window would show 1 Hz as 1.5 Hz when 3 samples of a 1 Hz service fall in a
-/// 2 s window. With fewer than two samples (or stamps that do not advance), the count over
-/// the window.
-pub fn rate_hz(samples: u64, stamps: Option<(i64, i64)>, span_s: f64) -> f64 {
-    match stamps {
-        Some((first, last)) if samples >= 2 && last > first && first != i64::MIN => {
-            (samples - 1) as f64 / (last.saturating_sub(first) as f64 * 1e-9)
+/// The rate of what was published in a window of `span_s` seconds: the intervals between
+/// samples over the host time they span (a count over the window would show 1 Hz as 1.5 Hz
+/// when 3 samples of a 1 Hz service fall in a 2 s window). Without an interval (or stamps
+/// that do not advance, or a stamp that means "no host time"), the count over the window.
+fn rate_hz(a: Arrivals, span_s: f64) -> f64 {
+    match a.span {
+        Some((first, last)) if a.intervals >= 1 && last > first && first != i64::MIN => {
+            a.intervals as f64 / (last.saturating_sub(first) as f64 * 1e-9)
         }
-        _ => samples as f64 / span_s.max(1e-3),
+        _ => a.published as f64 / span_s.max(1e-3),
     }
 }
 
@@ -935,16 +970,36 @@ mod tests {
 
     #[test]
     fn the_rate_counts_intervals_between_samples() {
+        let arrivals = |samples: &[(u64, i64)], prev: Option<(u64, i64)>| {
+            let mut a = Arrivals::default();
+            let mut p = prev;
+            for &(seq, h) in samples {
+                a.count(p, seq, h);
+                p = Some((seq, h));
+            }
+            a
+        };
         // 1 Hz: three samples 1 s apart fell in a 2.1 s window (a count said 1.43 Hz).
-        let r = rate_hz(3, Some((0, 2_000_000_000)), 2.1);
-        assert!((r - 1.0).abs() < 1e-12, "{r}");
-        // Two samples 1 s apart in the same window: 1 Hz as well.
-        assert!((rate_hz(2, Some((5, 1_000_000_005)), 2.1) - 1.0).abs() < 1e-12);
-        // One sample: the count over the window; none: 0.
-        assert!((rate_hz(1, Some((7, 7)), 2.0) - 0.5).abs() < 1e-12);
-        assert_eq!(rate_hz(0, None, 2.0), 0.0);
+        let s = 1_000_000_000;
+        let a = arrivals(&[(1, s), (2, 2 * s), (3, 3 * s)], Some((0, 0)));
+        assert_eq!((a.published, a.intervals), (3, 3));
+        assert!((rate_hz(a, 2.1) - 1.0).abs() < 1e-12);
+        // Only the newest seen (a 1 kHz publisher polled once a second): counted by sequence.
+        let a = arrivals(&[(1000, s)], Some((0, 0)));
+        assert_eq!(a.published, 1000);
+        assert!((rate_hz(a, 1.0) - 1000.0).abs() < 1e-9);
+        // The first sample ever, or a restarted publisher: one, the count over the window.
+        let a = arrivals(&[(7, 7)], None);
+        assert!((rate_hz(a, 2.0) - 0.5).abs() < 1e-12);
+        let a = arrivals(&[(0, s)], Some((5000, 0)));
+        assert_eq!(a.published, 1);
+        assert_eq!(rate_hz(Arrivals::default(), 2.0), 0.0);
+        // Merged polls keep the first poll's start.
+        let mut m = arrivals(&[(2, 2 * s)], Some((1, s)));
+        m.merge(arrivals(&[(4, 4 * s)], Some((2, 2 * s))));
+        assert_eq!((m.published, m.intervals, m.span), (3, 3, Some((s, 4 * s))));
         // A stamp that means "no host time" (an event without a pose) spans nothing.
-        assert!((rate_hz(2, Some((i64::MIN, 1_000)), 2.0) - 1.0).abs() < 1e-12);
-        assert!(rate_hz(2, Some((-5, i64::MAX)), 2.0).is_finite());
+        let a = arrivals(&[(2, 1_000)], Some((1, i64::MIN)));
+        assert!((rate_hz(a, 2.0) - 0.5).abs() < 1e-12);
     }
 }

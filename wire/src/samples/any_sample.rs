@@ -43,6 +43,28 @@ pub enum AnySample {
 }
 
 impl AnySample {
+    /// The publisher's sequence number of the sample (consecutive samples of one publisher
+    /// differ by 1; a gap is samples the reader did not see).
+    pub fn seq(&self) -> u64 {
+        match self {
+            Self::GnssFix(f) => f.stamp.seq,
+            Self::PpsEdge(e) => e.stamp.seq,
+            Self::Imu(s) => s.stamp.seq,
+            Self::Time(t) => t.seq,
+            Self::Nav(n) => n.seq,
+            Self::Health(h) => h.seq,
+            Self::Truth(t) => t.seq,
+            Self::TimePulse(t) => t.stamp.seq,
+            Self::Event(e) => e.stamp.seq,
+            Self::Raw(r) => r.stamp.seq,
+            Self::NavData(d) => d.stamp.seq,
+            Self::Settings(s) => s.seq,
+            Self::NetworkTime(t) => t.seq,
+            Self::Sky(s) => s.stamp.seq,
+            Self::EventPose(e) => e.seq,
+        }
+    }
+
     /// The host time the sample is stamped with, ns (`CLOCK_MONOTONIC`). An event that got
     /// no pose has no host time of its own (`i64::MIN`): its report's host time stands in.
     pub fn host_ns(&self) -> i64 {
