@@ -1,7 +1,8 @@
 //! `navsync decode FILE|-` (alias `nmea`): decodes a receiver capture offline with the live
 //! driver's [`Decoder`](navsync_drivers::gnss::Decoder): one JSON object per epoch on stdout,
 //! the decoder's counters on stderr; with `--subframes`, one JSON object per GPS LNAV
-//! subframe of its RXM-SFRBX instead (`navsync_estimator::gnss::lnav`, unscaled fields); with
+//! subframe of its RXM-SFRBX instead (`navsync_estimator::gnss::lnav`, unscaled fields), then
+//! one per Galileo I/NAV and BeiDou D1 ephemeris (`navsync_estimator::gnss::broadcast`); with
 //! `--yuma`, the GPS almanac of those subframes as a YUMA file (what `[gnss.sky] almanac` of a
 //! simulator scenario reads); with `--sky`, each GPS and GLONASS satellite of the receiver's NAV-SAT with
 //! the elevation and azimuth computed from broadcast orbits next to the receiver's own.
@@ -22,7 +23,8 @@ pub struct Options {
     #[arg(long, default_value = "auto")]
     pub protocol: Protocol,
     /// Print the GPS LNAV subframes of the capture's UBX-RXM-SFRBX (ephemerides, almanac,
-    /// ionosphere/UTC; IS-GPS-200 unscaled fields) instead of the epochs.
+    /// ionosphere/UTC; IS-GPS-200 unscaled fields), then each Galileo I/NAV and BeiDou D1
+    /// ephemeris completed from its words (SI units, the system named), instead of the epochs.
     #[arg(long, conflicts_with = "yuma")]
     pub subframes: bool,
     /// Print the GPS almanac of the capture's subframes (subframes 4 and 5; the latest page of
@@ -198,20 +200,27 @@ fn gps_subframes(
     u8,
     Result<navsync_estimator::gnss::lnav::Decoded, navsync_estimator::gnss::lnav::LnavError>,
 )> {
-    use navsync_drivers::gnss::capture::gpsd_header;
-    use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra};
-    use navsync_estimator::gnss::lnav;
-    let (header, _) = gpsd_header(bytes);
-    let mut d = Decoder::new(Protocol::Ubx);
     let mut out = Vec::new();
-    d.push_extras(bytes.get(header..).unwrap_or(&[]), 0, 0, &mut |_| {}, &mut |x| {
-        let GnssExtra::NavData(n) = x else { return };
+    nav_data(bytes, &mut |n| {
         if n.gnss_id == 0 {
             let len = usize::from(n.num_words).min(n.words.len());
-            out.push((n.sv_id, lnav::decode(&n.words[..len])));
+            out.push((n.sv_id, navsync_estimator::gnss::lnav::decode(&n.words[..len])));
         }
     });
     out
+}
+
+/// Every RXM-SFRBX of a capture as the driver publishes it (`GnssNavData`).
+fn nav_data(bytes: &[u8], on: &mut dyn FnMut(&navsync_shared::samples::GnssNavData)) {
+    use navsync_drivers::gnss::capture::gpsd_header;
+    use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra};
+    let (header, _) = gpsd_header(bytes);
+    let mut d = Decoder::new(Protocol::Ubx);
+    d.push_extras(bytes.get(header..).unwrap_or(&[]), 0, 0, &mut |_| {}, &mut |x| {
+        if let GnssExtra::NavData(n) = x {
+            on(n);
+        }
+    });
 }
 
 /// `--yuma`: the capture's almanac as a YUMA file (IS-GPS-200 Table 20-VI scale factors through
@@ -284,8 +293,10 @@ fn yuma(bytes: &[u8], file: &str) -> Result<()> {
     Ok(())
 }
 
-/// `--subframes`: every GPS subframe, decoded or with the reason it was not.
+/// `--subframes`: every GPS subframe, decoded or with the reason it was not, then each
+/// Galileo I/NAV and BeiDou D1 ephemeris completed from the capture's words (SI units).
 fn subframes(bytes: &[u8], file: &str) -> Result<()> {
+    use navsync_estimator::gnss::broadcast::NavCollector;
     let mut out = std::io::stdout().lock();
     let (mut ok, mut bad) = (0u64, 0u64);
     for (sv, d) in gps_subframes(bytes) {
@@ -301,10 +312,28 @@ fn subframes(bytes: &[u8], file: &str) -> Result<()> {
         };
         writeln!(out, "{line}").context("writing stdout")?;
     }
-    eprintln!("{ok} GPS subframes decoded, {bad} rejected");
+    let mut nav = NavCollector::default();
+    let mut lines = Vec::new();
+    nav_data(bytes, &mut |n| {
+        let len = usize::from(n.num_words).min(n.words.len());
+        if let Ok(Some(e)) = nav.on_words(n.gnss_id, n.sv_id, n.sig_id, &n.words[..len]) {
+            lines.push(serde_json::json!({ "ephemeris": e }));
+        }
+    });
+    for line in &lines {
+        writeln!(out, "{line}").context("writing stdout")?;
+    }
+    let c = nav.counts;
+    eprintln!(
+        "{ok} GPS subframes decoded, {bad} rejected; {} Galileo I/NAV words and {} BeiDou D1 subframes decoded, {} rejected: {} Galileo/BeiDou ephemerides",
+        c.galileo_words,
+        c.beidou_subframes,
+        c.rejected,
+        lines.len()
+    );
     anyhow::ensure!(
-        ok > 0 || bytes.is_empty(),
-        "{file}: no GPS LNAV subframe (UBX-RXM-SFRBX) decoded"
+        ok > 0 || !lines.is_empty() || bytes.is_empty(),
+        "{file}: no GPS LNAV subframe nor Galileo/BeiDou ephemeris (UBX-RXM-SFRBX) decoded"
     );
     Ok(())
 }

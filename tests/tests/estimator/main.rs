@@ -5,6 +5,7 @@
 
 mod gps_sky;
 
+mod broadcast_walk;
 mod external_data;
 mod history_generated;
 mod kf_gins;

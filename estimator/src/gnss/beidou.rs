@@ -1,0 +1,545 @@
+//! BeiDou D1 navigation message (MEO/IGSO, on B1I and B3I) after BDS-SIS-ICD-B1I v3.0 (2019):
+//! §5.1.3 (BCH(15,11,1) with g(X) = X⁴ + X + 1: word 1 = 15 bits unencoded + one code word,
+//! words 2–10 = two code words, interleaved on air), §5.2.2 (D1 frame: 5 subframes of 10
+//! words; Figures 5-4 to 5-6 the bit allocation of subframes 1–3), §5.2.4 (parameters and
+//! scale factors: Tables 5-5 to 5-11). The same layout is sent on B3I (BDS-SIS-ICD-B3I v1.0).
+//!
+//! Bytes in: the 10 words u-blox puts in a BeiDou D1 UBX-RXM-SFRBX (u-blox interface
+//! description, "BeiDou"): 30 bits per word right-aligned, the interleaving undone: word 1 =
+//! preamble … the 26 information bits then 4 parity bits; words 2–10 = the two 11-bit
+//! information halves, then the 4 parity bits of the first, then of the second. The parity of
+//! every code word is checked (a subframe with an error is rejected, not corrected).
+//!
+//! Bits are numbered here as the information bits of the subframe, 0..224 (parity left out),
+//! which makes every field contiguous (the ICD's figures split fields at word boundaries).
+//! D2 (GEO) pages are not decoded yet; a GEO ephemeris from elsewhere uses
+//! [`OrbitFrame::BeiDouGeo`](super::orbit::OrbitFrame::BeiDouGeo).
+
+use super::orbit::{GPS_PI, Orbit, OrbitFrame};
+
+/// Why a subframe was not decoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum BdsError {
+    /// Fewer than ten words.
+    #[error("a BeiDou D1 subframe has 10 words, got {0}")]
+    Words(usize),
+    /// A BCH code word failed its check (word index 0..10).
+    #[error("BCH parity error in word {0}")]
+    Parity(usize),
+    /// The preamble is not 11100010010 (0x712).
+    #[error("no preamble (0x{0:03X})")]
+    Preamble(u16),
+    /// FraID is not 1..=5.
+    #[error("subframe id {0} is not 1..=5")]
+    SubframeId(u8),
+}
+
+/// Subframe 1: time, health, clock, group delays, ionosphere (Figure 5-4), SI units.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+pub struct Sub1 {
+    /// SatH1: 0 healthy.
+    pub sat_h1: u8,
+    /// AODC (5 bits).
+    pub aodc: u8,
+    /// URAI (4 bits).
+    pub urai: u8,
+    /// BDT week number (13 bits, weeks since 2006-01-01).
+    pub week: u16,
+    /// t_oc, s of the BDT week.
+    pub toc_s: f64,
+    /// T_GD1 (B1I), s.
+    pub tgd1_s: f64,
+    /// T_GD2 (B2I), s.
+    pub tgd2_s: f64,
+    /// Klobuchar α0–α3 (s, s/π, s/π², s/π³).
+    pub alpha: [f64; 4],
+    /// Klobuchar β0–β3 (s, s/π, s/π², s/π³).
+    pub beta: [f64; 4],
+    /// a0, s.
+    pub a0_s: f64,
+    /// a1, s/s.
+    pub a1: f64,
+    /// a2, s/s².
+    pub a2_per_s: f64,
+    /// AODE (5 bits).
+    pub aode: u8,
+}
+
+/// Subframe 2: ephemeris part 1 (Figure 5-5).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+pub struct Sub2 {
+    /// Δn, rad/s.
+    pub delta_n_rad_s: f64,
+    /// C_uc, rad.
+    pub cuc_rad: f64,
+    /// M0, rad.
+    pub m0_rad: f64,
+    /// Eccentricity.
+    pub e: f64,
+    /// C_us, rad.
+    pub cus_rad: f64,
+    /// C_rc, m.
+    pub crc_m: f64,
+    /// C_rs, m.
+    pub crs_m: f64,
+    /// √A, √m.
+    pub sqrt_a: f64,
+    /// t_oe's 2 most significant bits (of 17).
+    pub toe_msb: u8,
+}
+
+/// Subframe 3: ephemeris part 2 (Figure 5-6).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+pub struct Sub3 {
+    /// t_oe's 15 least significant bits.
+    pub toe_lsb: u16,
+    /// i0, rad.
+    pub i0_rad: f64,
+    /// C_ic, rad.
+    pub cic_rad: f64,
+    /// Ω̇, rad/s.
+    pub omega_dot_rad_s: f64,
+    /// C_is, rad.
+    pub cis_rad: f64,
+    /// IDOT, rad/s.
+    pub idot_rad_s: f64,
+    /// Ω0, rad.
+    pub omega0_rad: f64,
+    /// ω, rad.
+    pub omega_rad: f64,
+}
+
+/// The subframe's contents.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum D1Body {
+    /// Subframe 1.
+    Sub1(Sub1),
+    /// Subframe 2.
+    Sub2(Sub2),
+    /// Subframe 3.
+    Sub3(Sub3),
+    /// Subframes 4 and 5 (almanac, time offsets), not decoded here.
+    Other,
+}
+
+/// A decoded D1 subframe with its time.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct D1Subframe {
+    /// FraID (1..=5).
+    pub id: u8,
+    /// SOW: seconds of the BDT week at the subframe's start.
+    pub sow_s: u32,
+    /// The fields.
+    pub body: D1Body,
+}
+
+/// BCH(15,11) syndrome of a 15-bit code word (MSB first): the remainder modulo
+/// g(X) = X⁴ + X + 1; 0 for a valid code word.
+fn bch_syndrome(cw: u32) -> u32 {
+    let mut r = 0u32;
+    for i in (0..15).rev() {
+        r = (r << 1) | ((cw >> i) & 1);
+        if r & 0x10 != 0 {
+            r ^= 0x13;
+        }
+    }
+    r
+}
+
+/// The 224 information bits of a subframe, parity checked, MSB-first in a u128 pair
+/// (bits 0..128 in `.0`, 128..224 in `.1`'s top).
+fn info_bits(words: &[u32]) -> Result<[u128; 2], BdsError> {
+    if words.len() < 10 {
+        return Err(BdsError::Words(words.len()));
+    }
+    let mut out = [0u128; 2];
+    let mut n = 0u32;
+    let mut push = |v: u32, len: u32| {
+        for k in (0..len).rev() {
+            let b = u128::from((v >> k) & 1);
+            let (i, off) = ((n / 128) as usize, n % 128);
+            out[i] |= b << (127 - off);
+            n += 1;
+        }
+    };
+    for (i, &raw) in words.iter().take(10).enumerate() {
+        let w = raw & 0x3FFF_FFFF;
+        if i == 0 {
+            if bch_syndrome(w & 0x7FFF) != 0 {
+                return Err(BdsError::Parity(0));
+            }
+            push(w >> 4, 26);
+        } else {
+            let (a, b) = ((w >> 19) & 0x7FF, (w >> 8) & 0x7FF);
+            let (pa, pb) = ((w >> 4) & 0xF, w & 0xF);
+            if bch_syndrome((a << 4) | pa) != 0 || bch_syndrome((b << 4) | pb) != 0 {
+                return Err(BdsError::Parity(i));
+            }
+            push(a, 11);
+            push(b, 11);
+        }
+    }
+    Ok(out)
+}
+
+/// Information bits `from..from+n` (n ≤ 64), unsigned.
+fn u(d: &[u128; 2], from: u32, n: u32) -> u64 {
+    let mut v = 0u64;
+    for b in from..from + n {
+        let (i, off) = ((b / 128) as usize, b % 128);
+        v = (v << 1) | ((d[i] >> (127 - off)) & 1) as u64;
+    }
+    v
+}
+
+/// The same, two's complement.
+fn s(d: &[u128; 2], from: u32, n: u32) -> f64 {
+    (((u(d, from, n) << (64 - n)) as i64) >> (64 - n)) as f64
+}
+
+fn p2(n: i32) -> f64 {
+    2f64.powi(n)
+}
+
+/// Decodes one D1 subframe from its ten u-blox words.
+pub fn decode_d1(words: &[u32]) -> Result<D1Subframe, BdsError> {
+    let d = info_bits(words)?;
+    let pre = u(&d, 0, 11) as u16;
+    if pre != 0x712 {
+        return Err(BdsError::Preamble(pre));
+    }
+    let id = u(&d, 15, 3) as u8;
+    let sow_s = u(&d, 18, 20) as u32;
+    let sc = GPS_PI;
+    let uf = |a, n| u(&d, a, n) as f64;
+    let sf = |a, n| s(&d, a, n);
+    let body = match id {
+        1 => D1Body::Sub1(Sub1 {
+            sat_h1: u(&d, 38, 1) as u8,
+            aodc: u(&d, 39, 5) as u8,
+            urai: u(&d, 44, 4) as u8,
+            week: u(&d, 48, 13) as u16,
+            toc_s: uf(61, 17) * 8.0,
+            tgd1_s: sf(78, 10) * 0.1e-9,
+            tgd2_s: sf(88, 10) * 0.1e-9,
+            alpha: [
+                sf(98, 8) * p2(-30),
+                sf(106, 8) * p2(-27),
+                sf(114, 8) * p2(-24),
+                sf(122, 8) * p2(-24),
+            ],
+            beta: [
+                sf(130, 8) * p2(11),
+                sf(138, 8) * p2(14),
+                sf(146, 8) * p2(16),
+                sf(154, 8) * p2(16),
+            ],
+            a2_per_s: sf(162, 11) * p2(-66),
+            a0_s: sf(173, 24) * p2(-33),
+            a1: sf(197, 22) * p2(-50),
+            aode: u(&d, 219, 5) as u8,
+        }),
+        2 => D1Body::Sub2(Sub2 {
+            delta_n_rad_s: sf(38, 16) * p2(-43) * sc,
+            cuc_rad: sf(54, 18) * p2(-31),
+            m0_rad: sf(72, 32) * p2(-31) * sc,
+            e: uf(104, 32) * p2(-33),
+            cus_rad: sf(136, 18) * p2(-31),
+            crc_m: sf(154, 18) * p2(-6),
+            crs_m: sf(172, 18) * p2(-6),
+            sqrt_a: uf(190, 32) * p2(-19),
+            toe_msb: u(&d, 222, 2) as u8,
+        }),
+        3 => D1Body::Sub3(Sub3 {
+            toe_lsb: u(&d, 38, 15) as u16,
+            i0_rad: sf(53, 32) * p2(-31) * sc,
+            cic_rad: sf(85, 18) * p2(-31),
+            omega_dot_rad_s: sf(103, 24) * p2(-43) * sc,
+            cis_rad: sf(127, 18) * p2(-31),
+            idot_rad_s: sf(145, 14) * p2(-43) * sc,
+            omega0_rad: sf(159, 32) * p2(-31) * sc,
+            omega_rad: sf(191, 32) * p2(-31) * sc,
+        }),
+        4 | 5 => D1Body::Other,
+        other => return Err(BdsError::SubframeId(other)),
+    };
+    Ok(D1Subframe { id, sow_s, body })
+}
+
+/// Whether BeiDou PRN `prn` is a GEO satellite (D2 message, GEO orbit formulas):
+/// PRN 1–5 and 59–63 (BDS-SIS-ICD-B1I §3.2, §5.3).
+pub fn is_geo(prn: u8) -> bool {
+    matches!(prn, 1..=5 | 59..=63)
+}
+
+/// A complete BeiDou D1 ephemeris: subframes 1–3 of one broadcast (consecutive SOW, t_oc = t_oe).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct BdsEphemeris {
+    /// PRN.
+    pub sv: u8,
+    /// SOW of subframe 1, s of the BDT week.
+    pub sow_s: u32,
+    /// Subframe 1.
+    pub s1: Sub1,
+    /// Subframe 2.
+    pub s2: Sub2,
+    /// Subframe 3.
+    pub s3: Sub3,
+}
+
+impl BdsEphemeris {
+    /// t_oe, s of the BDT week (17 bits, 2³ s).
+    pub fn toe_s(&self) -> f64 {
+        f64::from((u32::from(self.s2.toe_msb) << 15) | u32::from(self.s3.toe_lsb)) * 8.0
+    }
+
+    /// The orbit and the B1I clock (a0–a2, −T_GD1: BDS-SIS-ICD-B1I §5.2.4.10), s of the BDT
+    /// week. For B3I set `tgd_s` to 0 (its clock parameters refer to B3I), for B2I to T_GD2.
+    pub fn orbit(&self) -> Orbit {
+        Orbit {
+            toe_s: self.toe_s(),
+            sqrt_a: self.s2.sqrt_a,
+            e: self.s2.e,
+            i0_rad: self.s3.i0_rad,
+            idot_rad_s: self.s3.idot_rad_s,
+            omega0_rad: self.s3.omega0_rad,
+            omega_dot_rad_s: self.s3.omega_dot_rad_s,
+            omega_rad: self.s3.omega_rad,
+            m0_rad: self.s2.m0_rad,
+            delta_n_rad_s: self.s2.delta_n_rad_s,
+            cuc: self.s2.cuc_rad,
+            cus: self.s2.cus_rad,
+            crc: self.s2.crc_m,
+            crs: self.s2.crs_m,
+            cic: self.s3.cic_rad,
+            cis: self.s3.cis_rad,
+            toc_s: self.s1.toc_s,
+            af: [self.s1.a0_s, self.s1.a1, self.s1.a2_per_s],
+            tgd_s: self.s1.tgd1_s,
+            frame: if is_geo(self.sv) {
+                OrbitFrame::BeiDouGeo
+            } else {
+                OrbitFrame::BeiDou
+            },
+        }
+    }
+
+    /// Healthy: SatH1 0 and a URAI with an accuracy prediction (URAI 15: none).
+    pub fn healthy(&self) -> bool {
+        self.s1.sat_h1 == 0 && self.s1.urai < 15
+    }
+}
+
+/// One satellite's D1 subframes as they arrive, completed into an ephemeris when subframes
+/// 1, 2, 3 follow each other (SOW + 6 s each) and t_oc = t_oe.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct BdsAssembler {
+    s1: Option<(u32, Sub1)>,
+    s2: Option<(u32, Sub2)>,
+    last: Option<BdsEphemeris>,
+}
+
+impl BdsAssembler {
+    /// Takes one decoded subframe of satellite `sv`; returns the ephemeris when it completed
+    /// one different from the last returned.
+    pub fn on_subframe(&mut self, sv: u8, sf: &D1Subframe) -> Option<BdsEphemeris> {
+        match sf.body {
+            D1Body::Sub1(x) => self.s1 = Some((sf.sow_s, x)),
+            D1Body::Sub2(x) => self.s2 = Some((sf.sow_s, x)),
+            D1Body::Sub3(s3) => {
+                let ((t1, s1), (t2, s2)) = (self.s1?, self.s2?);
+                if t2 != t1 + 6 || sf.sow_s != t2 + 6 {
+                    return None;
+                }
+                let eph = BdsEphemeris {
+                    sv,
+                    sow_s: t1,
+                    s1,
+                    s2,
+                    s3,
+                };
+                if eph.toe_s() != s1.toc_s {
+                    return None;
+                }
+                let same = self.last.is_some_and(|l| BdsEphemeris { sow_s: l.sow_s, ..eph } == l);
+                self.last = Some(eph);
+                return (!same).then_some(eph);
+            }
+            D1Body::Other => {}
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gnss::orbit::rinex_check::{assert_orbit_equals_record, assert_positions, assert_rinex_eq};
+
+    /// C21's D1 subframes 1, 2, 3 (SOW 408630, 408636, 408642) on B3I (sigId 4), as the
+    /// receiver's RXM-SFRBX delivered them in the walk's log
+    /// (`shared/datasets/rtklibexplorer-walk0827/source/gnss_1730.ubx`, u-blox X20,
+    /// 2025-08-28, the RXM-RAWX rcvTow before each: 408650.248, 408656.248, 408662.248 s GPS).
+    const C21: [[u32; 10]; 3] = [
+        [
+            0x38901637, 0x30D810F5, 0x0802C6FE, 0x28885204, 0x05231C80, 0x38CB0F60, 0x3E92AE18, 0x0C004017, 0x3704DF77,
+            0x3C3C61C7,
+        ],
+        [
+            0x38902635, 0x30F0A004, 0x06FFB8E1, 0x1241C71F, 0x375C019A, 0x08EC01EA, 0x037F70F3, 0x3B90FF54, 0x320A510C,
+            0x140CB900,
+        ],
+        [
+            0x3890363A, 0x310A35DD, 0x04502B34, 0x3CF80020, 0x030FFDE9, 0x2E4FFF7F, 0x3202023B, 0x28EA7C72, 0x055813A0,
+            0x1BC11416,
+        ],
+    ];
+
+    fn c21() -> BdsEphemeris {
+        let mut a = BdsAssembler::default();
+        let mut out = None;
+        for (k, w) in C21.iter().enumerate() {
+            let sf = decode_d1(w).unwrap();
+            assert_eq!((sf.id, sf.sow_s), (k as u8 + 1, 408_630 + 6 * k as u32));
+            let eph = a.on_subframe(21, &sf);
+            assert_eq!(eph.is_some(), k == 2);
+            out = out.or(eph);
+        }
+        out.unwrap()
+    }
+
+    /// The fields equal RTKLIB's (rtklibexplorer demo5) decoding of the same words:
+    /// `convbin -r ubx -v 3.04 -n nav.rnx -o obs.rnx gnss_1730.ubx`, record
+    /// `C21 2025 08 28 17 00 00` (BDT). RTKLIB writes toc/720 mod 240 as "AODE" (85), not the
+    /// broadcast AODE, which is therefore not compared.
+    #[test]
+    fn c21_equals_convbin() {
+        let e = c21();
+        let o = e.orbit();
+        assert_orbit_equals_record(
+            &o,
+            [
+                -0.963445054367e-03,
+                -0.684696743747e-11,
+                0.0,
+                -0.350000000000e+01,
+                0.365943814457e-08,
+                0.886304528107e+00,
+                -0.133644789457e-06,
+                0.556349870749e-03,
+                0.667152926326e-05,
+                0.528262655258e+04,
+                0.406800000000e+06,
+                0.451691448689e-07,
+                0.175064384011e+01,
+                -0.521540641785e-07,
+                0.983854657381e+00,
+                0.238250000000e+03,
+                0.596217207868e-01,
+                -0.666063458502e-08,
+                0.367515308488e-09,
+            ],
+        );
+        assert_rinex_eq(&[
+            ("BDT week", f64::from(e.s1.week), 0.102500000000e+04),
+            (
+                "URA m",
+                crate::gnss::ranges::ura_m(e.s1.urai).unwrap_or(f64::NAN),
+                0.200000000000e+01,
+            ),
+            ("SatH1", f64::from(e.s1.sat_h1), 0.0),
+            ("TGD1", e.s1.tgd1_s, 0.133000000000e-07),
+            ("TGD2", e.s1.tgd2_s, 0.133000000000e-07),
+            ("transmission SOW", f64::from(e.sow_s), 0.408630000000e+06),
+            ("AODC", f64::from(e.s1.aodc), 0.100000000000e+01),
+            ("toc (the record's epoch)", o.toc_s, 406_800.0),
+        ]);
+        assert!(e.healthy());
+        assert_eq!(o.frame, OrbitFrame::BeiDou);
+    }
+
+    /// The position from the decoded ephemeris equals the one computed by an independent
+    /// implementation of BDS-SIS-ICD-B1I §5.2.4.12 (Python) from convbin's RINEX values of
+    /// the same record: within 1 mm at toe and toe + 1800 s (BDT).
+    #[test]
+    fn c21_position_equals_the_rinex_record() {
+        assert_positions(
+            &c21().orbit(),
+            &[
+                (406_800.0, [-10_826_353.517_5, -17_483_162.205_1, 18_850_200.130_9]),
+                (408_600.0, [-6_816_768.970_4, -16_326_094.782_7, 21_572_300.591_2]),
+            ],
+        );
+    }
+
+    /// A flipped bit fails its word's BCH check; a subframe out of sequence (SOW) or missing
+    /// does not complete an ephemeris; a wrong preamble is refused.
+    #[test]
+    fn corrupted_subframes_are_rejected() {
+        for k in 0..10 {
+            for bit in [0, 7, 15, 25, 29] {
+                let mut w = C21[0];
+                w[k] ^= 1 << bit;
+                // Bits 15–29 of word 1 are the unencoded preamble, revision and FraID.
+                if k == 0 && bit >= 15 {
+                    continue;
+                }
+                assert_eq!(decode_d1(&w), Err(BdsError::Parity(k)), "word {k} bit {bit}");
+            }
+        }
+        let mut pre = C21[0];
+        pre[0] ^= 1 << 29;
+        assert_eq!(decode_d1(&pre), Err(BdsError::Preamble(0x312)));
+        assert_eq!(decode_d1(&C21[0][..9]), Err(BdsError::Words(9)));
+        // Subframes 1 and 3 without 2, then 2 after 3: no ephemeris.
+        let mut a = BdsAssembler::default();
+        for k in [0, 2, 1] {
+            assert_eq!(a.on_subframe(21, &decode_d1(&C21[k]).unwrap()), None);
+        }
+    }
+
+    /// A GEO orbit (BDS-SIS-ICD-B1I §5.2.4.12): a circular orbit of the geostationary radius
+    /// broadcast with i = 5° and its node on −x at t_oe (Ω0 − Ω̇e·t_oe = π), which R_X(−5°)
+    /// makes equatorial, stays at one ECEF point on the equator over the day; the MEO formulas
+    /// would not.
+    #[test]
+    fn a_geo_orbit_stays_over_one_point() {
+        let a = (crate::gnss::orbit::MU_GAL_BDS_M3_S2 / crate::gnss::orbit::OMEGA_E_BDS_RAD_S.powi(2)).cbrt();
+        let we = crate::gnss::orbit::OMEGA_E_BDS_RAD_S;
+        let toe = 345_600.0;
+        let o = Orbit {
+            toe_s: toe,
+            sqrt_a: a.sqrt(),
+            i0_rad: 5f64.to_radians(),
+            omega0_rad: std::f64::consts::PI + we * toe,
+            m0_rad: 0.0,
+            frame: OrbitFrame::BeiDouGeo,
+            ..Orbit::default()
+        };
+        let p0 = o.position_ecef_m(toe);
+        for dt in [-3600.0, 600.0, 7200.0, 36_000.0] {
+            let p = o.position_ecef_m(toe + dt);
+            let d = ((p[0] - p0[0]).powi(2) + (p[1] - p0[1]).powi(2) + (p[2] - p0[2]).powi(2)).sqrt();
+            assert!(d < 1e-3 && p[2].abs() < 1e-3, "{dt}: {p:?} vs {p0:?}");
+        }
+        let meo = Orbit {
+            frame: OrbitFrame::BeiDou,
+            ..o
+        };
+        assert!(meo.position_ecef_m(toe + 3600.0)[2].abs() > 1e5);
+    }
+
+    #[test]
+    fn bch_accepts_code_words_and_rejects_a_flipped_bit() {
+        // Systematic encoding: parity = X⁴·m(X) mod g(X).
+        for m in [0u32, 1, 0x5A5, 0x7FF] {
+            let cw = (m << 4) | bch_syndrome(m << 4);
+            assert_eq!(bch_syndrome(cw), 0);
+            for k in 0..15 {
+                assert_ne!(bch_syndrome(cw ^ (1 << k)), 0);
+            }
+        }
+        assert!(is_geo(1) && is_geo(62) && !is_geo(6) && !is_geo(58));
+    }
+}

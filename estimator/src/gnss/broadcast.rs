@@ -1,0 +1,151 @@
+//! The navigation data words of every system the decoders read, routed by u-blox `gnssId` and
+//! `sigId` (UBX-RXM-SFRBX, as a [`GnssNavData`](navsync_wire::samples::GnssNavData) carries
+//! them) to their decoders and assembled per satellite into ephemerides: Galileo I/NAV
+//! ([`galileo`](super::galileo): E1-B sigId 1, E5b-I sigId 5) and BeiDou D1 ([`beidou`]:
+//! B1I sigId 0, B2I sigId 2, B3I sigId 4, MEO/IGSO PRNs). GPS LNAV keeps its own path
+//! ([`ranges::EphemerisStore`](super::ranges::EphemerisStore)).
+//!
+//! Every ephemeris yields a [`BroadcastEphemeris`]: the system-neutral part an ephemeris store
+//! keyed by (gnss id, sv id) holds for GPS, Galileo and BeiDou alike: the [`Orbit`] (with its
+//! [`OrbitFrame`](super::orbit::OrbitFrame)), issue, health and accuracy.
+
+use super::beidou::{self, BdsAssembler, BdsEphemeris, BdsError};
+use super::galileo::{self, GalAssembler, GalEphemeris, InavError};
+use super::orbit::Orbit;
+
+/// u-blox `gnssId` of Galileo.
+pub const GNSS_ID_GALILEO: u8 = 2;
+/// u-blox `gnssId` of BeiDou.
+pub const GNSS_ID_BEIDOU: u8 = 3;
+/// Highest Galileo SVID.
+const MAX_GAL: usize = 36;
+/// Highest BeiDou PRN.
+const MAX_BDS: usize = 63;
+
+/// A completed ephemeris of one of the systems decoded here.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(tag = "system", rename_all = "snake_case")]
+pub enum NavEphemeris {
+    /// Galileo I/NAV.
+    Galileo(GalEphemeris),
+    /// BeiDou D1.
+    Beidou(BdsEphemeris),
+}
+
+/// The system-neutral part of a broadcast ephemeris.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BroadcastEphemeris {
+    /// u-blox `gnssId` (0 GPS, 2 Galileo, 3 BeiDou).
+    pub gnss_id: u8,
+    /// Satellite within the system.
+    pub sv_id: u8,
+    /// Orbit and clock, in the system's time (GPST, GST, BDT seconds of week).
+    pub orbit: Orbit,
+    /// Issue of data (GPS IODE, Galileo IODnav, BeiDou AODE).
+    pub iod: u16,
+    /// Usable by the system's health and validity flags.
+    pub healthy: bool,
+    /// Signal-in-space accuracy, m (GPS URA, Galileo SISA, BeiDou URA); ∞ when not predicted.
+    pub accuracy_m: f64,
+}
+
+impl NavEphemeris {
+    /// The system-neutral part.
+    pub fn broadcast(&self) -> BroadcastEphemeris {
+        match self {
+            Self::Galileo(e) => BroadcastEphemeris {
+                gnss_id: GNSS_ID_GALILEO,
+                sv_id: e.sv,
+                orbit: e.orbit(),
+                iod: e.iod_nav(),
+                healthy: e.healthy(),
+                accuracy_m: e.sisa_m().unwrap_or(f64::INFINITY),
+            },
+            Self::Beidou(e) => BroadcastEphemeris {
+                gnss_id: GNSS_ID_BEIDOU,
+                sv_id: e.sv,
+                orbit: e.orbit(),
+                iod: u16::from(e.s1.aode),
+                healthy: e.healthy(),
+                // BDS-SIS-ICD-B1I §5.2.4.5: URA as GPS's URA index (IS-GPS-200).
+                accuracy_m: super::ranges::ura_m(e.s1.urai).unwrap_or(f64::INFINITY),
+            },
+        }
+    }
+}
+
+/// Why a message's words were not decoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum NavWordsError {
+    /// A Galileo I/NAV page pair was rejected.
+    #[error("Galileo I/NAV: {0}")]
+    Galileo(#[from] InavError),
+    /// A BeiDou D1 subframe was rejected.
+    #[error("BeiDou D1: {0}")]
+    Beidou(#[from] BdsError),
+}
+
+/// Counters of a [`NavCollector`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct NavCounts {
+    /// Galileo I/NAV page pairs decoded.
+    pub galileo_words: u64,
+    /// BeiDou D1 subframes decoded.
+    pub beidou_subframes: u64,
+    /// Messages rejected (CRC, parity, preamble, page layout).
+    pub rejected: u64,
+    /// Messages of other systems and signals, or of satellites out of range (GEO D2).
+    pub ignored: u64,
+}
+
+/// Per-satellite assemblers of Galileo and BeiDou ephemerides. Fixed size, no allocation.
+#[derive(Debug, Clone)]
+pub struct NavCollector {
+    gal: [GalAssembler; MAX_GAL],
+    bds: [BdsAssembler; MAX_BDS],
+    /// What came in.
+    pub counts: NavCounts,
+}
+
+impl Default for NavCollector {
+    fn default() -> Self {
+        Self {
+            gal: [GalAssembler::default(); MAX_GAL],
+            bds: [BdsAssembler::default(); MAX_BDS],
+            counts: NavCounts::default(),
+        }
+    }
+}
+
+impl NavCollector {
+    /// Takes one RXM-SFRBX's words (`gnss_id`, `sv_id`, `sig_id` as u-blox numbers them);
+    /// returns the ephemeris they completed, if any. Rejected words are counted and returned
+    /// as the error; messages this collector does not read give `Ok(None)`.
+    pub fn on_words(
+        &mut self,
+        gnss_id: u8,
+        sv_id: u8,
+        sig_id: u8,
+        words: &[u32],
+    ) -> Result<Option<NavEphemeris>, NavWordsError> {
+        let slot = usize::from(sv_id).checked_sub(1);
+        match (gnss_id, sig_id) {
+            (GNSS_ID_GALILEO, 1 | 5) if slot.is_some_and(|i| i < MAX_GAL) => {
+                let w = galileo::decode(words).inspect_err(|_| self.counts.rejected += 1)?;
+                self.counts.galileo_words += 1;
+                let a = &mut self.gal[slot.unwrap_or(0)];
+                Ok(a.on_word(sv_id, &w).map(NavEphemeris::Galileo))
+            }
+            (GNSS_ID_BEIDOU, 0 | 2 | 4) if slot.is_some_and(|i| i < MAX_BDS) && !beidou::is_geo(sv_id) => {
+                let sf = beidou::decode_d1(words).inspect_err(|_| self.counts.rejected += 1)?;
+                self.counts.beidou_subframes += 1;
+                let a = &mut self.bds[slot.unwrap_or(0)];
+                Ok(a.on_subframe(sv_id, &sf).map(NavEphemeris::Beidou))
+            }
+            _ => {
+                self.counts.ignored += 1;
+                Ok(None)
+            }
+        }
+    }
+}
