@@ -155,16 +155,13 @@ impl Aligner {
 
     /// The fix's stamp minus the instant the accelerometer-integrated speed reached the fix's
     /// speed, s: a first estimate of the GNSS delay once the vehicle moves, with its 1-sigma:
-    /// the fix's speed σ over the acceleration there, at least `floor_s` (`None` without a
-    /// static start, before the speed is reached, or without an acceleration).
-    pub fn delay_from_onset(&self, obs: &GnssObservation, floor_s: f64) -> Option<(f64, f64)> {
+    /// the σ of the fix's speed (`speed_std_mps`: its measured velocity's, or that of a
+    /// difference of noisy positions) over the acceleration there, at least `floor_s` (`None`
+    /// without a static start, before the speed is reached, or without an acceleration).
+    pub fn delay_from_onset(&self, obs: &GnssObservation, speed_std_mps: f64, floor_s: f64) -> Option<(f64, f64)> {
         let (t, accel) = self.onset_time_of(obs.speed_mps)?;
         (accel > 0.0).then(|| {
-            let sigma_v = if obs.vel_std_mps.is_finite() {
-                obs.vel_std_mps
-            } else {
-                0.1
-            };
+            let sigma_v = if speed_std_mps.is_nan() { 0.1 } else { speed_std_mps };
             ((obs.stamp_host_ns - t) as f64 * 1e-9, (sigma_v / accel).max(floor_s))
         })
     }
@@ -183,8 +180,9 @@ impl Aligner {
     }
 
     /// The alignment on a fix after a levelling or moving at least `align_min_speed_mps`, or
-    /// `None` (the fix is remembered for the acceleration).
-    pub fn try_align(&mut self, obs: &GnssObservation) -> Option<Alignment> {
+    /// `None` (the fix is remembered for the acceleration); `speed_std_mps` is the σ of the
+    /// fix's speed (for the motion-onset estimate of the delay).
+    pub fn try_align(&mut self, obs: &GnssObservation, speed_std_mps: f64) -> Option<Alignment> {
         // A fix with speed and track but no velocity (a receiver or file without one): the
         // horizontal velocity along the track.
         let mut v = obs.vel_ned_mps;
@@ -236,7 +234,7 @@ impl Aligner {
             } else {
                 Vector3::zeros()
             },
-            delay_from_onset_s: self.delay_from_onset(obs, ONSET_DELAY_FLOOR_S),
+            delay_from_onset_s: self.delay_from_onset(obs, speed_std_mps, ONSET_DELAY_FLOOR_S),
         })
     }
 }

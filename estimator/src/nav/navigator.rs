@@ -385,19 +385,19 @@ impl Navigator {
                     // Started while standing: the motion onset gives the first estimate of Δ.
                     if self.cfg.estimate_delay
                         && obs.speed_mps >= self.cfg.align.align_min_speed_mps
-                        && let Some((d, sd)) =
-                            self.aligner
-                                .delay_from_onset(&obs, ONSET_DELAY_FLOOR_S)
-                                .filter(|(d, sd)| {
-                                    *sd < self.delay_prior.1 && (-0.2..self.cfg.fusion_horizon_s - 0.1).contains(d)
-                                })
+                        && let Some((d, sd)) = self
+                            .aligner
+                            .delay_from_onset(&obs, speed_std, ONSET_DELAY_FLOOR_S)
+                            .filter(|(d, sd)| {
+                                *sd < self.delay_prior.1 && (-0.2..self.cfg.fusion_horizon_s - 0.1).contains(d)
+                            })
                     {
                         self.delay_prior = (d, sd);
                         bank.reset_delay(d, sd);
                     }
                     bank.queue(obs);
                 }
-                None => self.try_align(&obs),
+                None => self.try_align(&obs, speed_std),
             }
             return;
         }
@@ -544,8 +544,10 @@ impl Navigator {
         self.replay();
     }
 
-    fn try_align(&mut self, obs: &GnssObservation) {
-        let Some(a) = self.aligner.try_align(obs) else { return };
+    fn try_align(&mut self, obs: &GnssObservation, speed_std_mps: f64) {
+        let Some(a) = self.aligner.try_align(obs, speed_std_mps) else {
+            return;
+        };
         // A loose delay prior (software sync) is replaced by the motion-onset estimate: the
         // speed noise of a fix (~0.05 m/s) over a drive-off acceleration of ~1 m/s² puts it
         // within ~50 ms.

@@ -15,6 +15,10 @@
 //!   same file with receipt tags (`import --gnss-tags receipt`) as accurate; every output
 //!   labelled with its IMU sample's own time tag (the input's axis).
 //! * Fixes at 10 Hz stamped at x.x99 s (a real u-blox receiver's epochs): labelled and fused.
+//! * A real pedestrian walk (`../shared/datasets/rtklibexplorer-walk0827`, handheld, RTK at
+//!   4 Hz) with the defaults: its README's outage benchmark at or below KF-GINS's best, output
+//!   from the motion's start, cm-level with `--smooth`; and its IMU tags shifted by ±0.255 s:
+//!   Δ follows the shift within its σ.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -95,6 +99,129 @@ fn a_real_car_drive_through_gnss_outages_within_kf_gins_figures() {
     // The data's IMU time tags are ~0.15 s off the GNSS epochs: Δ finds it.
     let delay = f(n, &["gnss_delay_est_s"]);
     assert!((-0.25..=-0.05).contains(&delay), "Δ {delay} s");
+}
+
+/// KF-GINS f39bc2e on the walk (the dataset's README): its best noise set (E) and the initial
+/// state given, outage-end mean and max, m.
+const KF_GINS_WALK: (f64, f64) = (5.76, 6.94);
+
+/// Motion starts on the walk at this GPS second of week (the dataset's README).
+const WALK_MOTION_SOW: f64 = 408_652.0;
+
+#[test]
+fn a_real_walk_with_the_defaults_within_kf_gins_figures_and_smoothed_to_its_fixes() {
+    let env = TestEnv::new("walk0827");
+    let data = shared_material("datasets/rtklibexplorer-walk0827");
+    for smooth in [false, true] {
+        let work = env.dir.join(if smooth { "smooth" } else { "filter" });
+        let mut args = vec![
+            "--data".to_string(),
+            data.display().to_string(),
+            "--work".into(),
+            work.display().to_string(),
+        ];
+        if smooth {
+            args.extend(["--".to_string(), "--smooth".to_string()]);
+        }
+        // The script fails on a NaN in any output row or a scored window without output.
+        let r = bench(&env, "walk0827_bench.py", &args);
+        let n = &r["navsync"];
+        for ph in ["A", "B"] {
+            let s = &n["phases"][ph]["summary"];
+            assert!(s["problem"].is_null(), "phase {ph}: {}", s["problem"]);
+            // Output for the whole walk once it moves: its first row within 3 s of the start.
+            let nav = std::fs::read_to_string(n["phases"][ph]["result"].as_str().unwrap()).unwrap();
+            let first_sow: f64 = nav.split_whitespace().nth(1).unwrap().parse().unwrap();
+            assert!(
+                first_sow <= WALK_MOTION_SOW + 3.0,
+                "phase {ph}: output starts at {first_sow}, motion at {WALK_MOTION_SOW}"
+            );
+        }
+        let (mean, max) = (f(n, &["outage_end_mean_m"]), f(n, &["outage_end_max_m"]));
+        assert!(
+            mean <= KF_GINS_WALK.0 && max <= KF_GINS_WALK.1,
+            "smooth {smooth}: outage-end mean {mean:.2} m, max {max:.2} m vs KF-GINS {KF_GINS_WALK:?}"
+        );
+        if smooth {
+            // With cm-level RTK fixes the best estimate of each instant follows them at cm level.
+            for ph in ["A", "B"] {
+                let rms = f(n, &["with_gnss_rms_m", ph]);
+                assert!(rms <= 0.03, "phase {ph}: smoothed {rms:.3} m RMS against the RTK fixes");
+            }
+        }
+    }
+}
+
+/// Issue 34 item 3: the walk's IMU time tags shifted by a known ±0.255 s. Δ must follow the
+/// shift within its σ: absolutely, within 2σ plus the data's own IMU-to-GNSS timing uncertainty
+/// (±0.03 s, the dataset's README), and relative to the unshifted run, where the shift is the
+/// only difference, within 2σ of the two.
+#[test]
+fn a_walk_with_its_imu_tags_shifted_moves_the_gnss_delay_by_the_shift_within_sigma() {
+    let env = TestEnv::new("walkshift");
+    let data = shared_material("datasets/rtklibexplorer-walk0827");
+    let imu = std::fs::read_to_string(data.join("imu.txt")).unwrap();
+    let mut delays = Vec::new();
+    for shift_s in [0.0, 0.255, -0.255] {
+        let shifted: String = imu
+            .lines()
+            .filter(|l| !l.trim().is_empty())
+            .map(|l| {
+                let (t, rest) = l.trim().split_once(char::is_whitespace).unwrap();
+                format!("{:.5} {rest}\n", t.parse::<f64>().unwrap() + shift_s)
+            })
+            .collect();
+        let imu_path = env.dir.join(format!("imu_{shift_s}.txt"));
+        std::fs::write(&imu_path, shifted).unwrap();
+        let rec = env.dir.join(format!("walk_{shift_s}.mcap"));
+        let summary = env.dir.join(format!("walk_{shift_s}.json"));
+        let run = |args: &[&std::ffi::OsStr]| {
+            let o = Command::new(navsync_bin()).args(args).output().unwrap();
+            assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        };
+        let gnss = data.join("gnss_posvel.txt");
+        run(&[
+            "import".as_ref(),
+            "kf-gins".as_ref(),
+            "--imu".as_ref(),
+            imu_path.as_os_str(),
+            "--gnss".as_ref(),
+            gnss.as_os_str(),
+            "--gnss-layout".as_ref(),
+            "matlab".as_ref(),
+            "--week".as_ref(),
+            "2381".as_ref(),
+            "--out".as_ref(),
+            rec.as_os_str(),
+        ]);
+        run(&[
+            "replay".as_ref(),
+            rec.as_os_str(),
+            "--estimate".as_ref(),
+            "--lever-arm".as_ref(),
+            "0,-0.05,0".as_ref(),
+            "--summary-json".as_ref(),
+            summary.as_os_str(),
+        ]);
+        let s: Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+        let (d, sd) = (f(&s, &["gnss_delay_est_s"]), f(&s, &["gnss_delay_std_s"]));
+        // IMU tags later by s: the fixes come s earlier on the IMU's axis.
+        let truth = -shift_s;
+        println!("IMU tags shifted {shift_s:+.3} s: Δ {d:+.4} ± {sd:.4} s (true {truth:+.3} ± 0.03 s)");
+        assert!(sd > 0.0 && sd < 0.03, "Δ σ {sd} s");
+        assert!((d - truth).abs() <= 2.0 * sd + 0.03, "Δ {d} ± {sd} s for {truth} s");
+        delays.push((shift_s, d, sd));
+    }
+    let (_, d0, s0) = delays[0];
+    for &(shift_s, d, sd) in &delays[1..] {
+        let moved = d - d0;
+        let bound = 2.0 * sd.hypot(s0);
+        assert!(
+            (moved + shift_s).abs() <= bound,
+            "a shift of {shift_s} s moved Δ by {moved:+.4} s (bound ±{bound:.4} s around {:+.3})",
+            -shift_s
+        );
+    }
 }
 
 /// KF-GINS f39bc2e on the generated drive (industrial, seed 1, 660 s, 1 Hz): horizontal and
