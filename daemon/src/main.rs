@@ -12,7 +12,7 @@ use navsync::live::{
     status, trigger, web,
 };
 use navsync::tools::{
-    analyze, check_config, convert, decode, eval, geotag, install, kf_gins, ptp_config, python_types, report,
+    analyze, check_config, convert, decode, eval, geotag, install, kf_gins, ptp_config, python_types, report, spp,
 };
 use navsync::{config, logging};
 
@@ -86,6 +86,9 @@ enum Cmd {
     Import(kf_gins::ImportCommand),
     /// Position, velocity and attitude error statistics of a trajectory against a reference.
     Eval(eval::EvalArgs),
+    /// GPS single-point positioning of a recording's raw data and navigation data, epoch by
+    /// epoch, and its errors against a reference position.
+    Spp(spp::SppArgs),
     /// One self-contained HTML page with SVG plots of a recording.
     Report(report::Options),
     /// Writes the pose of each camera exposure a receiver marked (a recording's event poses)
@@ -205,6 +208,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Analyze(c) => analyze::main(c, &cfg),
         Cmd::Import(c) => kf_gins::main(c),
         Cmd::Eval(o) => eval::run(&o).map(drop).context("eval"),
+        Cmd::Spp(o) => spp::run(&o).context("spp"),
         Cmd::Report(o) => report::main(o, &cfg),
         Cmd::Geotag(o) => geotag::run(&o).context("geotag"),
         Cmd::Decode(o) => decode::run(o),

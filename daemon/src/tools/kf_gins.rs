@@ -340,12 +340,18 @@ impl ResultWriter {
 pub enum ImportCommand {
     /// KF-GINS text files (IMU increments, GNSS positions, optional reference trajectory).
     KfGins(ImportArgs),
+    /// A RINEX observation file and its GPS navigation file (2.10/2.11, 3.0x): a receiver's
+    /// raw measurements and LNAV subframes.
+    Rinex(super::rinex::RinexArgs),
 }
 
 /// Runs `navsync import …` and prints what it wrote.
 pub fn main(cmd: ImportCommand) -> anyhow::Result<()> {
     use anyhow::Context;
-    let ImportCommand::KfGins(args) = cmd;
+    let args = match cmd {
+        ImportCommand::KfGins(args) => args,
+        ImportCommand::Rinex(args) => return super::rinex::main(&args),
+    };
     let stats = import(&args).with_context(|| format!("importing into {}", args.out.display()))?;
     eprintln!(
         "{}: {} IMU samples ({:.1} Hz), {} GNSS fixes, {} PPS edges, {} truth samples (GPS week {})",

@@ -13,4 +13,6 @@ pub mod kf_gins_config;
 pub mod ptp_config;
 pub mod python_types;
 pub mod report;
+pub mod rinex;
 pub mod sim_fast;
+pub mod spp;

@@ -20,6 +20,7 @@ pub mod driver;
 pub mod geoid;
 pub mod nmea;
 pub mod order;
+pub mod rinex;
 pub mod ubx;
 
 use std::str::FromStr;

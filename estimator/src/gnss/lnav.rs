@@ -336,25 +336,115 @@ pub fn decode(words: &[u32]) -> Result<Decoded, LnavError> {
     })
 }
 
+/// Writes `value`'s `n` low bits at bits `from..from+n` (numbered as in [`bits`]).
+fn put(d: &mut [u32; 10], from: u32, n: u32, value: i64) {
+    for k in 0..n {
+        let b = from + k;
+        let (word, pos) = (((b - 1) / 30) as usize, (b - 1) % 30);
+        let bit = ((value >> (n - 1 - k)) & 1) as u32;
+        d[word] = (d[word] & !(1 << (23 - pos))) | (bit << (23 - pos));
+    }
+}
+
+/// Ten 24-bit data words as sent (parity added, data inverted after a word ending in D30 = 1),
+/// with D29*, D30* of the word before in bits 31 and 30 (u-blox, gpsd): the inverse of the
+/// decoder's word handling. The subframe starts after D29* = D30* = 0.
+pub fn words_from_data(data: [u32; 10]) -> [u32; 10] {
+    let mut out = [0u32; 10];
+    let mut prev = 0u32;
+    for (i, &d) in data.iter().enumerate() {
+        let (d29s, d30s) = ((prev >> 1) & 1, prev & 1);
+        let p = parity(d, d29s, d30s);
+        let sent = if d30s == 1 { d ^ 0xFF_FFFF } else { d };
+        out[i] = (d29s << 31) | (d30s << 30) | (sent << 6) | p;
+        prev = out[i];
+    }
+    out
+}
+
+/// Encodes subframes 1–3 and subframe 4 page 18 (the inverse of [`decode`], same bit table):
+/// the words of a subframe whose HOW carries `tow_count`; `None` for the other kinds.
+pub fn encode(tow_count: u32, sf: &Subframe) -> Option<[u32; 10]> {
+    let mut d = [0u32; 10];
+    put(&mut d, 1, 8, 0x8B);
+    put(&mut d, 31, 17, i64::from(tow_count));
+    let mut p = |from, n, v: i64| put(&mut d, from, n, v);
+    match sf {
+        Subframe::Ephem1(e) => {
+            p(50, 3, 1);
+            p(61, 10, e.wn.into());
+            p(71, 2, e.l2.into());
+            p(73, 4, e.ura.into());
+            p(77, 6, e.health.into());
+            p(83, 2, i64::from(e.iodc) >> 8);
+            p(91, 1, e.l2p.into());
+            p(197, 8, e.tgd.into());
+            p(211, 8, i64::from(e.iodc));
+            p(219, 16, e.toc.into());
+            p(241, 8, e.af2.into());
+            p(249, 16, e.af1.into());
+            p(271, 22, e.af0.into());
+        }
+        Subframe::Ephem2(e) => {
+            p(50, 3, 2);
+            p(61, 8, e.iode.into());
+            p(69, 16, e.crs.into());
+            p(91, 16, e.delta_n.into());
+            p(107, 8, i64::from(e.m0) >> 24);
+            p(121, 24, e.m0.into());
+            p(151, 16, e.cuc.into());
+            p(167, 8, i64::from(e.e) >> 24);
+            p(181, 24, e.e.into());
+            p(211, 16, e.cus.into());
+            p(227, 8, i64::from(e.sqrt_a) >> 24);
+            p(241, 24, e.sqrt_a.into());
+            p(271, 16, e.toe.into());
+            p(287, 1, e.fit.into());
+            p(288, 5, e.aodo.into());
+        }
+        Subframe::Ephem3(e) => {
+            p(50, 3, 3);
+            p(61, 16, e.cic.into());
+            p(77, 8, i64::from(e.omega0) >> 24);
+            p(91, 24, e.omega0.into());
+            p(121, 16, e.cis.into());
+            p(137, 8, i64::from(e.i0) >> 24);
+            p(151, 24, e.i0.into());
+            p(181, 16, e.crc.into());
+            p(197, 8, i64::from(e.omega) >> 24);
+            p(211, 24, e.omega.into());
+            p(241, 24, e.omega_dot.into());
+            p(271, 8, e.iode.into());
+            p(279, 14, e.idot.into());
+        }
+        Subframe::IonoUtc(u) => {
+            p(50, 3, 4);
+            p(61, 2, 0b01);
+            p(63, 6, 56);
+            for (k, at) in [69, 77, 91, 99].into_iter().enumerate() {
+                p(at, 8, u.alpha[k].into());
+            }
+            for (k, at) in [107, 121, 129, 137].into_iter().enumerate() {
+                p(at, 8, u.beta[k].into());
+            }
+            p(151, 24, u.a1.into());
+            p(181, 24, i64::from(u.a0) >> 8);
+            p(211, 8, u.a0.into());
+            p(219, 8, u.tot.into());
+            p(227, 8, u.wnt.into());
+            p(241, 8, u.dt_ls.into());
+            p(249, 8, u.wn_lsf.into());
+            p(257, 8, u.dn.into());
+            p(271, 8, u.dt_lsf.into());
+        }
+        Subframe::Almanac(_) | Subframe::OtherPage { .. } => return None,
+    }
+    Some(words_from_data(d))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Encodes 24-bit data words into 30-bit words with parity (and the inversion the
-    /// satellite applies), the inverse of `data_words`.
-    fn encode(data: [u32; 10]) -> [u32; 10] {
-        let mut out = [0u32; 10];
-        let mut prev = 0u32;
-        for (i, &d) in data.iter().enumerate() {
-            let (d29s, d30s) = ((prev >> 1) & 1, prev & 1);
-            let p = parity(d, d29s, d30s);
-            let sent = if d30s == 1 { d ^ 0xFF_FFFF } else { d };
-            // As sent, with D29*, D30* copied into bits 31 and 30 (u-blox, gpsd).
-            out[i] = (d29s << 31) | (d30s << 30) | (sent << 6) | p;
-            prev = out[i];
-        }
-        out
-    }
 
     #[test]
     fn parity_inversion_and_fields_round_trip() {
@@ -364,7 +454,7 @@ mod tests {
         data[1] = (73_768 << 7) | (1 << 2);
         data[2] = 69 << 14;
         data[9] = 0xAB_CDEF & !0x3; // a_f0 bits and the two "t" bits
-        let words = encode(data);
+        let words = words_from_data(data);
         let d = decode(&words).unwrap();
         // Some words were sent inverted (D30* = 1 after a word ending in 1).
         assert!(words.iter().any(|w| (w >> 30) & 1 == 1));
@@ -380,5 +470,70 @@ mod tests {
             assert_eq!(decode(&bad), Err(LnavError::Parity(i)));
         }
         assert_eq!(decode(&words[..9]), Err(LnavError::Words(9)));
+    }
+
+    /// Every field of subframes 1–3 and page 18 survives encode → decode, extremes included.
+    #[test]
+    fn encode_is_the_inverse_of_decode() {
+        let e1 = Ephem1 {
+            wn: 1023,
+            l2: 2,
+            ura: 15,
+            health: 0x21,
+            iodc: 0x3A5,
+            l2p: 1,
+            tgd: -128,
+            toc: 0xFFFF,
+            af2: -3,
+            af1: -32_768,
+            af0: -(1 << 21),
+        };
+        let e2 = Ephem2 {
+            iode: 0xA5,
+            crs: -5,
+            delta_n: 32_767,
+            m0: i32::MIN + 7,
+            cuc: -1,
+            e: u32::MAX - 3,
+            cus: 1234,
+            sqrt_a: 0xA1B2_C3D4,
+            toe: 37_800 / 16,
+            fit: 1,
+            aodo: 31,
+        };
+        let e3 = Ephem3 {
+            cic: -2,
+            omega0: -123_456_789,
+            cis: 77,
+            i0: 654_321_987,
+            crc: -32_768,
+            omega: i32::MAX,
+            omega_dot: -(1 << 23),
+            iode: 0xA5,
+            idot: -(1 << 13),
+        };
+        let page = IonoUtc {
+            alpha: [11, -2, 127, -128],
+            beta: [90, 16, -3, -64],
+            a1: -(1 << 23),
+            a0: i32::MIN + 1,
+            tot: 144,
+            wnt: 255,
+            dt_ls: 13,
+            wn_lsf: 137,
+            dn: 7,
+            dt_lsf: 14,
+        };
+        for (id, sf) in [
+            (1, Subframe::Ephem1(e1)),
+            (2, Subframe::Ephem2(e2)),
+            (3, Subframe::Ephem3(e3)),
+            (4, Subframe::IonoUtc(page)),
+        ] {
+            let words = encode(100_799, &sf).unwrap();
+            let d = decode(&words).unwrap();
+            assert_eq!((d.id, d.tow_count, d.subframe), (id, 100_799, sf));
+        }
+        assert_eq!(encode(1, &Subframe::OtherPage { subframe: 4, sv_id: 57 }), None);
     }
 }

@@ -1,0 +1,408 @@
+//! `navsync import rinex OBS NAV --out REC.mcap`: a RINEX observation file and its GPS
+//! navigation file as a recording of a receiver's raw data (RINEX 2.11 / 3.05; the parser is
+//! `navsync_drivers::gnss::rinex`).
+//!
+//! Each observation epoch is a `GnssRaw` on `navsync/gnss/0/raw` (its GNSS time in `week` and
+//! `rcv_tow_s`). The navigation file reaches the estimator the way a receiver's does, as GPS
+//! LNAV subframes on `navsync/gnss/0/nav-data`: each ephemeris is quantised back into the
+//! integers of subframes 1–3 (IS-GPS-200 Tables 20-I and 20-III: RINEX holds those integers
+//! times their scale factors, so rounding value / scale recovers them) and the header's α/β into
+//! subframe 4 page 18, encoded with parity by `lnav::encode`: one decoder and one ephemeris store
+//! (`gnss::ranges::EphemerisStore`) for live and imported data. An issue is delivered when its
+//! t_oe becomes the nearest to the epoch (RTKLIB's choice among a file's ephemerides; the first
+//! issue of each satellite before the first epoch).
+//!
+//! Host time: GPS time shifted so that the first epoch is at `kf_gins::HOST_BASE_NS`, the same
+//! synthetic axis as `import kf-gins` (declared as `navsync.time_axis` on the raw channel).
+
+use std::path::{Path, PathBuf};
+
+use navsync_drivers::gnss::rinex::{self, GpsEphemeris, NavFile, ObsFile, RinexError};
+use navsync_estimator::gnss::lnav::{self, Ephem1, Ephem2, Ephem3, IonoUtc, Subframe};
+use navsync_estimator::gnss::orbit::GPS_PI;
+use navsync_estimator::settings::TimeAxis;
+use navsync_recording::output::Overwrite;
+use navsync_recording::{RecordingError, RecordingOptions, SampleRecorder, channels};
+use navsync_shared::reflect::Reflect;
+use navsync_shared::samples::{AnySample, GnssNavData, Stamp, StampSource};
+use navsync_shared::services;
+use navsync_shared::time::{NS_PER_S, utc_ns_from_gps_ns};
+
+use super::kf_gins::{HOST_BASE_NS, WEEK_NS};
+
+/// `navsync import rinex`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RinexArgs {
+    /// RINEX observation file (2.10/2.11 or 3.0x).
+    pub obs: PathBuf,
+    /// RINEX GPS navigation file (2.10/2.11 or 3.0x, GPS or mixed).
+    pub nav: PathBuf,
+    /// The output recording (MCAP).
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Receiver id in the recording (`navsync/gnss/ID/raw`, `…/nav-data`).
+    #[arg(long, default_value = "0", value_parser = crate::config::estimator::parse_id)]
+    pub gnss_id: String,
+    /// Replace an existing recording at --out (never one of the inputs).
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Errors of the RINEX import.
+#[derive(Debug, thiserror::Error)]
+pub enum RinexImportError {
+    /// A file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Bad RINEX input (file, line, field).
+    #[error(transparent)]
+    Rinex(#[from] RinexError),
+    /// Writing the recording.
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+}
+
+/// What an import wrote.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RinexStats {
+    /// Observation epochs (`GnssRaw` samples).
+    pub epochs: u64,
+    /// Measurements in them.
+    pub measurements: u64,
+    /// Observations of signals without a u-blox id (not imported).
+    pub unmapped: u64,
+    /// GPS ephemerides (each as subframes 1–3).
+    pub ephemerides: u64,
+    /// Subframes written (including page 18).
+    pub subframes: u64,
+    /// The header's approximate position, ECEF m.
+    pub approx_ecef_m: Option<[f64; 3]>,
+    /// The largest |value / scale − integer| over the quantised fields: near 0 for broadcast
+    /// values (RINEX's 12 significant digits), up to 0.5 for values that were not.
+    pub worst_quantisation: f64,
+}
+
+/// Runs `navsync import rinex` and prints what it wrote.
+pub fn main(args: &RinexArgs) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let s = import(args).with_context(|| format!("importing into {}", args.out.display()))?;
+    eprintln!(
+        "{}: {} epochs, {} measurements ({} observations of signals without a u-blox id left out), \
+         {} GPS ephemerides as {} LNAV subframes (largest rounding {:.1e} LSB)",
+        args.out.display(),
+        s.epochs,
+        s.measurements,
+        s.unmapped,
+        s.ephemerides,
+        s.subframes,
+        s.worst_quantisation
+    );
+    if let Some(p) = s.approx_ecef_m {
+        eprintln!("  header position (ECEF m): {:.4},{:.4},{:.4}", p[0], p[1], p[2]);
+    }
+    anyhow::ensure!(s.epochs > 0, "no observation epoch in {}", args.obs.display());
+    anyhow::ensure!(s.ephemerides > 0, "no GPS ephemeris in {}", args.nav.display());
+    Ok(())
+}
+
+fn read(path: &Path) -> Result<String, RinexImportError> {
+    // RINEX is ASCII; a stray byte is replaced rather than refused (it lands in a field).
+    std::fs::read(path)
+        .map(|b| String::from_utf8_lossy(&b).into_owned())
+        .map_err(|source| RinexImportError::Io {
+            path: path.display().to_string(),
+            source,
+        })
+}
+
+/// Reads and parses both files.
+pub fn parse_files(obs: &Path, nav: &Path) -> Result<(ObsFile, NavFile), RinexImportError> {
+    let o = rinex::parse_obs(&obs.display().to_string(), &read(obs)?)?;
+    let n = rinex::parse_nav(&nav.display().to_string(), &read(nav)?)?;
+    Ok((o, n))
+}
+
+/// Quantises RINEX values to LNAV integers, checking each fits its bits.
+struct Quantiser<'a> {
+    file: &'a str,
+    line: usize,
+    worst: f64,
+}
+
+impl Quantiser<'_> {
+    /// `value / 2^lsb` rounded, as a two's-complement (`signed`) or unsigned field of `bits`.
+    fn q(&mut self, field: &str, value: f64, lsb: i32, bits: u32, signed: bool) -> Result<i64, RinexError> {
+        let x = value / 2f64.powi(lsb);
+        let r = x.round();
+        let (lo, hi) = if signed {
+            (-(1i64 << (bits - 1)), (1i64 << (bits - 1)) - 1)
+        } else {
+            (0, (1i64 << bits) - 1)
+        };
+        if !r.is_finite() || r < lo as f64 || r > hi as f64 {
+            return Err(RinexError {
+                file: self.file.to_string(),
+                line: self.line,
+                field: field.to_string(),
+                problem: format!("{value:e} is outside the LNAV field ({bits} bits of 2^{lsb})"),
+            });
+        }
+        self.worst = self.worst.max((x - r).abs());
+        Ok(r as i64)
+    }
+    /// An angle (rad or rad/s) in semicircles.
+    fn semi(&mut self, field: &str, rad: f64, lsb: i32, bits: u32) -> Result<i64, RinexError> {
+        self.q(field, rad / GPS_PI, lsb, bits, true)
+    }
+}
+
+/// The URA index of an accuracy in m (IS-GPS-200 §20.3.3.3.1.3: the smallest N whose range's
+/// upper bound 2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24, 48, … 6144 m holds it; 15 above).
+pub fn ura_index(accuracy_m: f64) -> u8 {
+    const UPPER: [f64; 7] = [2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0];
+    (0..15u8)
+        .find(|&n| {
+            let upper = UPPER
+                .get(usize::from(n))
+                .copied()
+                .unwrap_or(24.0 * 2f64.powi(i32::from(n) - 6));
+            accuracy_m <= upper
+        })
+        .unwrap_or(15)
+}
+
+/// One ephemeris as LNAV subframes 1–3 (IS-GPS-200 Tables 20-I and 20-III scale factors).
+pub fn subframes_of(e: &GpsEphemeris, file: &str, worst: &mut f64) -> Result<[Subframe; 3], RinexError> {
+    let mut q = Quantiser {
+        file,
+        line: e.line,
+        worst: *worst,
+    };
+    let iodc = q.q("IODC", e.iodc, 0, 10, false)?;
+    let iode = q.q("IODE", e.iode, 0, 8, false)?;
+    let s1 = Ephem1 {
+        wn: (q.q("GPS week", e.week, 0, 16, false)? % 1024) as u16,
+        l2: q.q("L2 codes", e.l2_codes, 0, 2, false)? as u8,
+        ura: ura_index(e.accuracy_m),
+        health: q.q("SV health", e.health, 0, 6, false)? as u8,
+        iodc: iodc as u16,
+        l2p: q.q("L2 P flag", e.l2p, 0, 1, false)? as u8,
+        tgd: q.q("TGD", e.tgd_s, -31, 8, true)? as i8,
+        toc: q.q("toc", e.toc_s, 4, 16, false)? as u16,
+        af2: q.q("af2", e.af[2], -55, 8, true)? as i8,
+        af1: q.q("af1", e.af[1], -43, 16, true)? as i16,
+        af0: q.q("af0", e.af[0], -31, 22, true)? as i32,
+    };
+    let s2 = Ephem2 {
+        iode: iode as u8,
+        crs: q.q("Crs", e.crs, -5, 16, true)? as i16,
+        delta_n: q.semi("Delta n", e.delta_n, -43, 16)? as i16,
+        m0: q.semi("M0", e.m0, -31, 32)? as i32,
+        cuc: q.q("Cuc", e.cuc, -29, 16, true)? as i16,
+        e: q.q("e", e.e, -33, 32, false)? as u32,
+        cus: q.q("Cus", e.cus, -29, 16, true)? as i16,
+        sqrt_a: q.q("sqrt(A)", e.sqrt_a, -19, 32, false)? as u32,
+        toe: q.q("Toe", e.toe_s, 4, 16, false)? as u16,
+        // IS-GPS-200 §20.3.3.4.3.1: 0 for the 4 h curve fit, 1 for longer.
+        fit: u8::from(e.fit_h > 4.0),
+        aodo: 0,
+    };
+    let s3 = Ephem3 {
+        cic: q.q("Cic", e.cic, -29, 16, true)? as i16,
+        omega0: q.semi("OMEGA0", e.omega0, -31, 32)? as i32,
+        cis: q.q("Cis", e.cis, -29, 16, true)? as i16,
+        i0: q.semi("i0", e.i0, -31, 32)? as i32,
+        crc: q.q("Crc", e.crc, -5, 16, true)? as i16,
+        omega: q.semi("omega", e.omega, -31, 32)? as i32,
+        omega_dot: q.semi("OMEGA DOT", e.omega_dot, -43, 24)? as i32,
+        iode: iode as u8,
+        idot: q.semi("IDOT", e.idot, -43, 14)? as i16,
+    };
+    *worst = q.worst;
+    Ok([Subframe::Ephem1(s1), Subframe::Ephem2(s2), Subframe::Ephem3(s3)])
+}
+
+/// The header's α/β as subframe 4 page 18 (Table 20-X scale factors; UTC parameters zero).
+pub fn iono_page(alpha: [f64; 4], beta: [f64; 4], file: &str) -> Result<IonoUtc, RinexError> {
+    let mut q = Quantiser {
+        file,
+        line: 1,
+        worst: 0.0,
+    };
+    let mut page = IonoUtc::default();
+    for (k, lsb) in [-30, -27, -24, -24].into_iter().enumerate() {
+        page.alpha[k] = q.q("ION ALPHA", alpha[k], lsb, 8, true)? as i8;
+    }
+    for (k, lsb) in [11, 14, 16, 16].into_iter().enumerate() {
+        page.beta[k] = q.q("ION BETA", beta[k], lsb, 8, true)? as i8;
+    }
+    Ok(page)
+}
+
+/// A subframe as the sample a receiver's driver publishes (UBX-RXM-SFRBX's content).
+fn nav_sample(prn: u8, sf: &Subframe, tow_s: f64, host_ns: i64, seq: u64) -> Option<GnssNavData> {
+    // The HOW's TOW count: the next subframe's start, 6 s units.
+    let tow_count = ((tow_s / 6.0).floor() as i64 + 1).rem_euclid(100_800) as u32;
+    let words = lnav::encode(tow_count, sf)?;
+    let mut d = GnssNavData::zeroed();
+    d.stamp = Stamp::host(host_ns, seq, StampSource::Simulated);
+    d.words[..10].copy_from_slice(&words);
+    (d.gnss_id, d.sv_id, d.sig_id, d.num_words, d.version) = (0, prn, 0, 10, 2);
+    Some(d)
+}
+
+/// Runs `navsync import rinex`.
+pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
+    let (obs, nav) = parse_files(&args.obs, &args.nav)?;
+    let nav_name = args.nav.display().to_string();
+    let mut stats = RinexStats {
+        approx_ecef_m: obs.approx_ecef_m,
+        unmapped: obs.unmapped,
+        ..RinexStats::default()
+    };
+    // GPS ns of an epoch; the first epoch is the host axis's origin.
+    let gps_ns = |week: i64, tow_s: f64| week * WEEK_NS + (tow_s * 1e9).round() as i64;
+    let t0 = obs.epochs.first().map_or(0, |e| gps_ns(i64::from(e.week), e.rcv_tow_s));
+    let host_of = |g: i64| HOST_BASE_NS + (g - t0);
+    // Each issue's delivery: before the first epoch for a satellite's first issue, else when
+    // its t_oe becomes the nearer one (the midpoint between the two t_oe).
+    let mut ephs: Vec<(i64, GpsEphemeris)> = nav
+        .ephemerides
+        .iter()
+        .map(|e| (gps_ns(e.week as i64, e.toe_s), *e))
+        .collect();
+    ephs.sort_by_key(|(toe, e)| (e.prn, *toe));
+    ephs.dedup_by_key(|(toe, e)| (e.prn, *toe));
+    let mut deliveries: Vec<(i64, GpsEphemeris)> = Vec::with_capacity(ephs.len());
+    for (k, (toe, e)) in ephs.iter().enumerate() {
+        let at = match k.checked_sub(1).map(|j| ephs[j]) {
+            Some((prev, p)) if p.prn == e.prn => (prev + toe) / 2,
+            _ => i64::MIN,
+        };
+        deliveries.push((at.max(t0 - NS_PER_S), *e));
+    }
+    deliveries.sort_by_key(|(at, e)| (*at, e.prn));
+
+    let raw_service = services::gnss_raw(&args.gnss_id);
+    let nav_service = services::gnss_nav_data(&args.gnss_id);
+    let inputs = [args.obs.as_path(), args.nav.as_path()];
+    let mut rec = SampleRecorder::create(
+        &args.out,
+        &Overwrite::new(&inputs, args.force),
+        RecordingOptions::default(),
+    )?;
+    let axis = TimeAxis {
+        host_ns: HOST_BASE_NS,
+        gps_ns: t0,
+    };
+    rec.set_channel_metadata(&raw_service, channels::META_TIME_AXIS, &channels::metadata_value(&axis))?;
+    let log_time = |host: i64| utc_ns_from_gps_ns(t0 + (host - HOST_BASE_NS)).max(0) as u64;
+    let mut nav_seq = 0u64;
+    let mut write_nav =
+        |rec: &mut SampleRecorder<_>, prn: u8, sf: &Subframe, at: i64| -> Result<(), RinexImportError> {
+            let host = host_of(at);
+            let tow = (at.rem_euclid(WEEK_NS)) as f64 / 1e9;
+            if let Some(d) = nav_sample(prn, sf, tow, host, nav_seq) {
+                rec.write(&nav_service, &AnySample::NavData(d), log_time(host), host.max(0) as u64)?;
+                nav_seq += 1;
+            }
+            Ok(())
+        };
+    if let (Some(a), Some(b), Some((_, first))) = (nav.iono_alpha, nav.iono_beta, deliveries.first()) {
+        let page = iono_page(a, b, &nav_name)?;
+        write_nav(&mut rec, first.prn, &Subframe::IonoUtc(page), t0 - NS_PER_S)?;
+        stats.subframes += 1;
+    }
+    let mut next = deliveries.iter().peekable();
+    for (i, raw) in obs.epochs.iter().enumerate() {
+        let g = gps_ns(i64::from(raw.week), raw.rcv_tow_s);
+        while let Some((at, e)) = next.next_if(|(at, _)| *at <= g) {
+            for sf in subframes_of(e, &nav_name, &mut stats.worst_quantisation)? {
+                write_nav(&mut rec, e.prn, &sf, *at)?;
+                stats.subframes += 1;
+            }
+            stats.ephemerides += 1;
+        }
+        let mut r = *raw;
+        let host = host_of(g);
+        r.stamp = Stamp::host(host, i as u64, StampSource::Simulated);
+        rec.write(&raw_service, &AnySample::Raw(r), log_time(host), host.max(0) as u64)?;
+        stats.epochs += 1;
+        stats.measurements += u64::from(r.num_meas);
+    }
+    rec.close()?;
+    Ok(stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ura_index_takes_nominal_values_and_upper_bounds() {
+        for (m, n) in [
+            (1.0, 0),
+            (2.0, 0),
+            (2.4, 0),
+            (2.8, 1),
+            (3.4, 1),
+            (4.0, 2),
+            (24.0, 6),
+            (32.0, 7),
+            (6144.0, 14),
+        ] {
+            assert_eq!(ura_index(m), n, "{m} m");
+        }
+        assert_eq!(ura_index(1e4), 15);
+    }
+
+    /// A RINEX ephemeris made from LNAV integers comes back as those integers, and a value
+    /// outside a field's range is an error at the record's line.
+    #[test]
+    fn ephemeris_values_quantise_back_to_their_integers() {
+        let e = GpsEphemeris {
+            prn: 3,
+            line: 42,
+            toc_s: 7200.0,
+            af: [-1234.0 * 2f64.powi(-31), 17.0 * 2f64.powi(-43), 0.0],
+            iode: 77.0,
+            iodc: 77.0,
+            crs: -52.1875,
+            delta_n: 937.0 * 2f64.powi(-43) * GPS_PI,
+            m0: -1_234_567_890.0 * 2f64.powi(-31) * GPS_PI,
+            e: 51_234_567.0 * 2f64.powi(-33),
+            sqrt_a: 2_702_000_123.0 * 2f64.powi(-19),
+            toe_s: 7200.0,
+            omega_dot: -2000.0 * 2f64.powi(-43) * GPS_PI,
+            idot: -1000.0 * 2f64.powi(-43) * GPS_PI,
+            week: 1316.0,
+            accuracy_m: 2.0,
+            tgd_s: -7.0 * 2f64.powi(-31),
+            ..GpsEphemeris::default()
+        };
+        let mut worst = 0.0;
+        let [Subframe::Ephem1(s1), Subframe::Ephem2(s2), Subframe::Ephem3(s3)] =
+            subframes_of(&e, "x.05n", &mut worst).unwrap()
+        else {
+            panic!("not subframes 1-3")
+        };
+        assert_eq!(
+            (s1.af0, s1.af1, s1.tgd, s1.toc, s1.wn, s1.iodc),
+            (-1234, 17, -7, 450, 292, 77)
+        );
+        assert_eq!(
+            (s2.crs, s2.delta_n, s2.m0, s2.e, s2.sqrt_a, s2.toe),
+            (-1670, 937, -1_234_567_890, 51_234_567, 2_702_000_123, 450)
+        );
+        assert_eq!((s3.omega_dot, s3.idot, s3.iode), (-2000, -1000, 77));
+        assert!(worst < 1e-3, "{worst}");
+        let bad = GpsEphemeris { crs: 2000.0, ..e };
+        let err = subframes_of(&bad, "x.05n", &mut worst).unwrap_err();
+        assert_eq!((err.file.as_str(), err.line, err.field.as_str()), ("x.05n", 42, "Crs"));
+    }
+}

@@ -1,0 +1,249 @@
+//! `navsync spp REC.mcap [--out FILE.csv] [--reference X,Y,Z]`: the GPS L1 C/A single-point
+//! solution of each raw epoch of a recording (the estimator's `gnss::spp`, with the navigation
+//! data collected by `gnss::ranges::EphemerisStore` as the tightly coupled filter does), as a
+//! CSV, and its errors against a reference position (east/north/up, horizontal, vertical and
+//! 3-D RMS, m).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use navsync_estimator::gnss::ranges::{EphemerisStore, RangeBuildCounts};
+use navsync_estimator::gnss::spp::{self, Observation, SppError, SppSettings};
+use navsync_recording::SampleReader;
+use navsync_recording::output::{OutputFile, Overwrite};
+use navsync_shared::earth::geodetic_from_ecef;
+use navsync_shared::samples::AnySample;
+use navsync_shared::services;
+
+/// `navsync spp`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct SppArgs {
+    /// The recording: a receiver's raw data and navigation data (`navsync import rinex`, or
+    /// recorded from a u-blox receiver's RXM-RAWX and RXM-SFRBX).
+    pub recording: PathBuf,
+    /// The receiver's id in the recording.
+    #[arg(long, default_value = "0", value_parser = crate::config::estimator::parse_id)]
+    pub gnss_id: String,
+    /// Per-epoch solutions as CSV (GPS week, seconds of week, ECEF and geodetic position,
+    /// clock bias, satellites, east/north/up error against --reference).
+    #[arg(short, long)]
+    pub out: Option<PathBuf>,
+    /// The reference position the errors are taken against, ECEF m: `X,Y,Z`.
+    #[arg(long, value_parser = parse_xyz, allow_hyphen_values = true)]
+    pub reference: Option<[f64; 3]>,
+    /// Elevation mask, degrees.
+    #[arg(long, default_value_t = 10.0)]
+    pub elevation_mask_deg: f64,
+    /// Pseudorange 1σ at zenith, m (each satellite's broadcast URA when larger); the σ grows
+    /// as 1/sin(elevation).
+    #[arg(long, default_value_t = 3.0)]
+    pub pseudorange_std_m: f64,
+    /// The summary as one JSON object on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Replace an existing file at --out.
+    #[arg(long)]
+    pub force: bool,
+}
+
+fn parse_xyz(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("expected X,Y,Z in metres, got '{s}'"))?;
+    <[f64; 3]>::try_from(v).map_err(|_| format!("expected three numbers X,Y,Z, got '{s}'"))
+}
+
+/// One epoch's solution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EpochSolution {
+    /// GPS week of the epoch.
+    pub week: u16,
+    /// Receiver time of the epoch, s of week.
+    pub tow_s: f64,
+    /// The solution.
+    pub sol: spp::Solution,
+}
+
+/// What [`solve_recording`] found.
+#[derive(Debug, Clone, Default)]
+pub struct SppRun {
+    /// The solved epochs.
+    pub solutions: Vec<EpochSolution>,
+    /// Raw epochs of the receiver.
+    pub epochs: u64,
+    /// Epochs without a solution: fewer than four satellites.
+    pub too_few: u64,
+    /// Epochs without a solution: no convergence.
+    pub no_convergence: u64,
+    /// Measurements left out while building the epochs.
+    pub counts: RangeBuildCounts,
+}
+
+/// Solves every raw epoch of the recording.
+pub fn solve_recording(args: &SppArgs) -> anyhow::Result<SppRun> {
+    let (raw_service, nav_service) = (
+        services::gnss_raw(&args.gnss_id),
+        services::gnss_nav_data(&args.gnss_id),
+    );
+    let settings = SppSettings {
+        elevation_mask_rad: args.elevation_mask_deg.to_radians(),
+        ..SppSettings::default()
+    };
+    let mut reader = SampleReader::open(&args.recording)?;
+    let mut store = EphemerisStore::default();
+    let mut run = SppRun::default();
+    let mut init = [0.0; 3];
+    while let Some(s) = reader.next_sample()? {
+        match s.sample {
+            AnySample::NavData(d) if s.service == nav_service => store.on_nav_data(&d),
+            AnySample::Raw(raw) if s.service == raw_service => {
+                run.epochs += 1;
+                // The satellite clock is in the pseudorange of each `SatRange`.
+                let e = store.range_epoch(&raw, raw.stamp.host_ns, 0.0, &mut run.counts);
+                let obs: Vec<Observation> = e
+                    .sats()
+                    .iter()
+                    .map(|r| Observation {
+                        sv: r.sv,
+                        pseudorange_m: r.pseudorange_m,
+                        sat_ecef_m: r.sat_ecef_m,
+                        sat_clock_s: 0.0,
+                        sigma_zenith_m: args.pseudorange_std_m.max(r.pseudorange_std_m),
+                    })
+                    .collect();
+                match spp::solve(&obs, e.iono.as_ref(), e.tow_s, init, &settings) {
+                    Ok(sol) => {
+                        init = sol.ecef_m;
+                        run.solutions.push(EpochSolution {
+                            week: raw.week,
+                            tow_s: raw.rcv_tow_s,
+                            sol,
+                        });
+                    }
+                    Err(SppError::TooFew(_)) => run.too_few += 1,
+                    Err(SppError::NoConvergence) => run.no_convergence += 1,
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(run)
+}
+
+/// East, north, up of `p − reference`, m.
+pub fn enu_error(p: [f64; 3], reference: [f64; 3]) -> Option<[f64; 3]> {
+    let g = geodetic_from_ecef(reference[0], reference[1], reference[2])?;
+    let c = spp::ned_from_ecef(g.lat_deg.to_radians(), g.lon_deg.to_radians());
+    let d = [p[0] - reference[0], p[1] - reference[1], p[2] - reference[2]];
+    let ned = |row: usize| (0..3).map(|k| c[(row, k)] * d[k]).sum::<f64>();
+    Some([ned(1), ned(0), -ned(2)])
+}
+
+/// Horizontal, vertical and 3-D RMS of east/north/up errors, m.
+pub fn rms(errors: &[[f64; 3]]) -> [f64; 3] {
+    let n = errors.len().max(1) as f64;
+    let h = errors.iter().map(|e| e[0] * e[0] + e[1] * e[1]).sum::<f64>() / n;
+    let v = errors.iter().map(|e| e[2] * e[2]).sum::<f64>() / n;
+    [h.sqrt(), v.sqrt(), (h + v).sqrt()]
+}
+
+/// Runs `navsync spp`.
+pub fn run(args: &SppArgs) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let r = solve_recording(args).with_context(|| format!("reading {}", args.recording.display()))?;
+    let errors: Vec<[f64; 3]> = match args.reference {
+        Some(p) => r
+            .solutions
+            .iter()
+            .map(|s| enu_error(s.sol.ecef_m, p).context("--reference is not a position on the Earth"))
+            .collect::<anyhow::Result<_>>()?,
+        None => Vec::new(),
+    };
+    if let Some(out) = &args.out {
+        let inputs = [args.recording.as_path()];
+        let f = OutputFile::create(out, &Overwrite::new(&inputs, args.force))?;
+        let mut w = std::io::BufWriter::new(f);
+        writeln!(
+            w,
+            "week,tow_s,x_m,y_m,z_m,lat_deg,lon_deg,height_m,clock_bias_m,sats,excluded_prn,east_m,north_m,up_m"
+        )?;
+        for (k, s) in r.solutions.iter().enumerate() {
+            let p = s.sol.ecef_m;
+            let g = geodetic_from_ecef(p[0], p[1], p[2]);
+            let (lat, lon, h) = g.map_or((f64::NAN, f64::NAN, f64::NAN), |g| (g.lat_deg, g.lon_deg, g.height_m));
+            let e = errors.get(k).copied().unwrap_or([f64::NAN; 3]);
+            writeln!(
+                w,
+                "{},{:.3},{:.4},{:.4},{:.4},{:.9},{:.9},{:.4},{:.3},{},{},{:.4},{:.4},{:.4}",
+                s.week,
+                s.tow_s,
+                p[0],
+                p[1],
+                p[2],
+                lat,
+                lon,
+                h,
+                s.sol.clock_bias_m,
+                s.sol.used,
+                s.sol.excluded.map_or(String::new(), |x| x.to_string()),
+                e[0],
+                e[1],
+                e[2]
+            )?;
+        }
+        w.into_inner().map_err(|e| e.into_error())?.commit()?;
+    }
+    let [h, v, d3] = rms(&errors);
+    if args.json {
+        let mut j = serde_json::json!({
+            "epochs": r.epochs,
+            "solved": r.solutions.len(),
+            "too_few_satellites": r.too_few,
+            "no_convergence": r.no_convergence,
+            "no_ephemeris": r.counts.no_ephemeris,
+            "other_signals": r.counts.other_signals,
+        });
+        if args.reference.is_some() {
+            j["horizontal_rms_m"] = h.into();
+            j["vertical_rms_m"] = v.into();
+            j["rms_3d_m"] = d3.into();
+        }
+        println!("{j}");
+    } else {
+        println!(
+            "{} epochs, {} solved ({} with fewer than 4 satellites, {} without convergence)",
+            r.epochs,
+            r.solutions.len(),
+            r.too_few,
+            r.no_convergence
+        );
+        if args.reference.is_some() {
+            println!("against the reference: horizontal RMS {h:.3} m, vertical RMS {v:.3} m, 3-D RMS {d3:.3} m");
+        }
+    }
+    anyhow::ensure!(!r.solutions.is_empty(), "no epoch solved");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn errors_are_east_north_up() {
+        // On the equator at 0° E: ECEF x is up, y east, z north.
+        let r = [6_378_137.0, 0.0, 0.0];
+        let e = enu_error([r[0] + 3.0, 2.0, 1.0], r).unwrap();
+        assert!(
+            (e[0] - 2.0).abs() < 1e-6 && (e[1] - 1.0).abs() < 1e-6 && (e[2] - 3.0).abs() < 1e-6,
+            "{e:?}"
+        );
+        let [h, v, d] = rms(&[[3.0, 4.0, 0.0], [0.0, 0.0, 2.0]]);
+        assert!((h - 12.5f64.sqrt()).abs() < 1e-12 && (v - 2f64.sqrt()).abs() < 1e-12);
+        assert!((d - 14.5f64.sqrt()).abs() < 1e-12);
+        assert_eq!(parse_xyz("-1,2.5,3"), Ok([-1.0, 2.5, 3.0]));
+        assert!(parse_xyz("1,2").is_err() && parse_xyz("a,b,c").is_err());
+    }
+}

@@ -1,0 +1,880 @@
+//! RINEX observation and GPS navigation files, parsed from text (pure: no I/O).
+//!
+//! Formats: RINEX 2.11 (IGS/RTCM-SC104, "RINEX: The Receiver Independent Exchange Format
+//! Version 2.11", 2012 update: Tables A1–A4; 2.10 is the same layout) and RINEX 3.05 (IGS/RTCM
+//! 2020: Tables A1–A7 observation, A8 GPS navigation; 3.00–3.04 share it). Observation epochs
+//! become [`GnssRaw`] samples with u-blox `gnssId`/`sigId` (UBX-RXM-RAWX's convention, GPS L1
+//! C/A first); a GPS navigation record becomes a [`GpsEphemeris`] in RINEX's units (s, m, rad)
+//! and the header's Klobuchar α/β. Errors name the file, the line (1-based) and the field.
+
+use navsync_shared::reflect::Reflect;
+use navsync_shared::samples::{GnssRaw, MAX_RAW_MEASUREMENTS, RawMeasurement};
+use navsync_shared::time::days_from_civil;
+
+/// Seconds in a GPS week.
+const WEEK_S: f64 = 604_800.0;
+
+/// Bad RINEX input: where and what.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{file}:{line}: {field}: {problem}")]
+pub struct RinexError {
+    /// The file's name as given.
+    pub file: String,
+    /// Line, 1-based.
+    pub line: usize,
+    /// The field (header label or record field).
+    pub field: String,
+    /// What is wrong.
+    pub problem: String,
+}
+
+/// A GPS time: full week and seconds of week.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GpsTime {
+    /// Weeks since 1980-01-06.
+    pub week: u32,
+    /// Seconds of week.
+    pub tow_s: f64,
+}
+
+/// An observation file.
+#[derive(Debug, Clone)]
+pub struct ObsFile {
+    /// Format version (2.10, 2.11, 3.05 …).
+    pub version: f64,
+    /// Header `APPROX POSITION XYZ`, ECEF m.
+    pub approx_ecef_m: Option<[f64; 3]>,
+    /// Header `LEAP SECONDS` (GPS − UTC, s).
+    pub leap_s: Option<i16>,
+    /// One sample per epoch (flags 0 and 1), `stamp` zero (the caller stamps).
+    pub epochs: Vec<GnssRaw>,
+    /// Observations without a u-blox signal id (P(Y), L2 semi-codeless …), not kept.
+    pub unmapped: u64,
+}
+
+/// A GPS broadcast ephemeris in RINEX units (RINEX 2.11 Table A4, RINEX 3.05 Table A8).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GpsEphemeris {
+    /// PRN.
+    pub prn: u8,
+    /// Line of the record in the file.
+    pub line: usize,
+    /// t_oc as a GPS time.
+    pub toc_week: u32,
+    /// t_oc, s of week.
+    pub toc_s: f64,
+    /// Clock bias a_f0 (s), drift a_f1 (s/s), drift rate a_f2 (s/s²).
+    pub af: [f64; 3],
+    /// IODE.
+    pub iode: f64,
+    /// C_rs, m.
+    pub crs: f64,
+    /// Δn, rad/s.
+    pub delta_n: f64,
+    /// M_0, rad.
+    pub m0: f64,
+    /// C_uc, rad.
+    pub cuc: f64,
+    /// Eccentricity.
+    pub e: f64,
+    /// C_us, rad.
+    pub cus: f64,
+    /// √A, √m.
+    pub sqrt_a: f64,
+    /// t_oe, s of GPS week.
+    pub toe_s: f64,
+    /// C_ic, rad.
+    pub cic: f64,
+    /// Ω_0, rad.
+    pub omega0: f64,
+    /// C_is, rad.
+    pub cis: f64,
+    /// i_0, rad.
+    pub i0: f64,
+    /// C_rc, m.
+    pub crc: f64,
+    /// ω, rad.
+    pub omega: f64,
+    /// Ω̇, rad/s.
+    pub omega_dot: f64,
+    /// IDOT, rad/s.
+    pub idot: f64,
+    /// Codes on L2.
+    pub l2_codes: f64,
+    /// GPS week of t_oe (continuous, not mod 1024).
+    pub week: f64,
+    /// L2 P data flag.
+    pub l2p: f64,
+    /// SV accuracy (URA), m.
+    pub accuracy_m: f64,
+    /// SV health.
+    pub health: f64,
+    /// T_GD, s.
+    pub tgd_s: f64,
+    /// IODC.
+    pub iodc: f64,
+    /// Transmission time of message, s of week.
+    pub tx_time_s: f64,
+    /// Fit interval, h (0 when not given).
+    pub fit_h: f64,
+}
+
+/// A navigation file's GPS content.
+#[derive(Debug, Clone, Default)]
+pub struct NavFile {
+    /// Format version.
+    pub version: f64,
+    /// Klobuchar α_0..α_3 (s, s/semicircle, s/semicircle², s/semicircle³), if in the header.
+    pub iono_alpha: Option<[f64; 4]>,
+    /// Klobuchar β_0..β_3 (s, s/semicircle, …), if in the header.
+    pub iono_beta: Option<[f64; 4]>,
+    /// GPS ephemerides in file order.
+    pub ephemerides: Vec<GpsEphemeris>,
+    /// Records of other systems (RINEX 3 mixed files), skipped.
+    pub other_systems: u64,
+}
+
+/// Lines of one file with their numbers, for errors.
+struct Lines<'a> {
+    file: &'a str,
+    lines: Vec<&'a str>,
+    next: usize,
+}
+
+impl<'a> Lines<'a> {
+    fn new(file: &'a str, text: &'a str) -> Self {
+        Self {
+            file,
+            lines: text.lines().map(|l| l.trim_end_matches('\r')).collect(),
+            next: 0,
+        }
+    }
+    /// The next line and its number (1-based).
+    fn next(&mut self) -> Option<(usize, &'a str)> {
+        let l = self.lines.get(self.next)?;
+        self.next += 1;
+        Some((self.next, l))
+    }
+    fn err(&self, line: usize, field: &str, problem: impl Into<String>) -> RinexError {
+        RinexError {
+            file: self.file.to_string(),
+            line,
+            field: field.to_string(),
+            problem: problem.into(),
+        }
+    }
+    /// The next line, or an error saying the file ended inside `what`.
+    fn need(&mut self, what: &str) -> Result<(usize, &'a str), RinexError> {
+        let n = self.lines.len();
+        self.next()
+            .ok_or_else(|| self.err(n, what, "the file ends inside the record"))
+    }
+}
+
+/// Columns `a..b` (0-based, clipped to the line).
+fn col(line: &str, a: usize, b: usize) -> &str {
+    let b = b.min(line.len());
+    line.get(a.min(b)..b).unwrap_or("")
+}
+
+/// A Fortran number (`D` exponents allowed); blank is `None`.
+fn number(s: &str) -> Result<Option<f64>, String> {
+    let t = s.trim();
+    if t.is_empty() {
+        return Ok(None);
+    }
+    t.replace(['D', 'd'], "E")
+        .parse::<f64>()
+        .map(Some)
+        .map_err(|_| format!("'{t}' is not a number"))
+}
+
+/// The GPS time of a calendar date and time of day (GPS time scale).
+pub fn gps_time(year: i64, month: u32, day: u32, hour: u32, min: u32, sec: f64) -> GpsTime {
+    let days = days_from_civil(year, month, day) - days_from_civil(1980, 1, 6);
+    let s = days as f64 * 86_400.0 + f64::from(hour * 3600 + min * 60) + sec;
+    let week = (s / WEEK_S).floor();
+    GpsTime {
+        week: week as u32,
+        tow_s: s - week * WEEK_S,
+    }
+}
+
+/// A two-digit RINEX 2 year (80–99: 19xx, else 20xx).
+fn full_year(y: i64) -> i64 {
+    match y {
+        0..=79 => 2000 + y,
+        80..=99 => 1900 + y,
+        _ => y,
+    }
+}
+
+/// Parses a date and time from whitespace-separated fields `y m d h min s`.
+fn epoch_fields(lines: &Lines<'_>, n: usize, field: &str, text: &str) -> Result<GpsTime, RinexError> {
+    let v: Vec<&str> = text.split_whitespace().collect();
+    let bad = || {
+        lines.err(
+            n,
+            field,
+            format!("'{}' is not 'year month day hour minute second'", text.trim()),
+        )
+    };
+    if v.len() != 6 {
+        return Err(bad());
+    }
+    let i = |k: usize| v[k].parse::<i64>().map_err(|_| bad());
+    let (y, mo, d, h, mi) = (i(0)?, i(1)?, i(2)?, i(3)?, i(4)?);
+    let s = v[5].parse::<f64>().map_err(|_| bad())?;
+    let ok = (1980..=2100).contains(&full_year(y))
+        && (1..=12).contains(&mo)
+        && (1..=31).contains(&d)
+        && (0..24).contains(&h)
+        && (0..60).contains(&mi);
+    if !ok || !(0.0..61.0).contains(&s) {
+        return Err(bad());
+    }
+    Ok(gps_time(full_year(y), mo as u32, d as u32, h as u32, mi as u32, s))
+}
+
+/// The header's version and file type (`RINEX VERSION / TYPE`), checked to be `want`.
+fn version_line(lines: &mut Lines<'_>, want: char) -> Result<(f64, char), RinexError> {
+    let Some((n, l)) = lines.next() else {
+        return Err(lines.err(1, "RINEX VERSION / TYPE", "empty file"));
+    };
+    if col(l, 60, 80).trim() != "RINEX VERSION / TYPE" {
+        return Err(lines.err(n, "RINEX VERSION / TYPE", "the first line is not the version line"));
+    }
+    let version = number(col(l, 0, 9))
+        .ok()
+        .flatten()
+        .ok_or_else(|| lines.err(n, "RINEX VERSION / TYPE", "no version number"))?;
+    let kind = col(l, 20, 21).chars().next().unwrap_or(' ');
+    if kind != want {
+        return Err(lines.err(
+            n,
+            "RINEX VERSION / TYPE",
+            format!("file type '{kind}', expected '{want}'"),
+        ));
+    }
+    if !(2.0..4.0).contains(&version) {
+        return Err(lines.err(
+            n,
+            "RINEX VERSION / TYPE",
+            format!("version {version}: 2.xx or 3.xx supported"),
+        ));
+    }
+    // The satellite system (col 41): RINEX 2 nav files have none (GPS), 3.xx 'G', 'M', …
+    let system = col(l, 40, 41).chars().next().unwrap_or(' ');
+    Ok((version, system))
+}
+
+/// The u-blox (gnssId, sigId) of a RINEX 3 signal: system letter, band digit, attribute
+/// (u-blox interface description, "Signal identifiers"); `None` for signals u-blox does not
+/// track (GPS P(Y), semi-codeless …).
+pub fn ublox_signal(system: char, band: char, attribute: char) -> Option<(u8, u8)> {
+    Some(match (system, band, attribute) {
+        ('G', '1', 'C') => (0, 0),
+        ('G', '2', 'L') => (0, 3),
+        ('G', '2', 'S') => (0, 4),
+        ('G', '5', 'I') => (0, 6),
+        ('G', '5', 'Q') => (0, 7),
+        ('S', '1', 'C') => (1, 0),
+        ('E', '1', 'C') => (2, 0),
+        ('E', '1', 'B') => (2, 1),
+        ('E', '5', 'I') => (2, 3),
+        ('E', '5', 'Q') => (2, 4),
+        ('E', '7', 'I') => (2, 5),
+        ('E', '7', 'Q') => (2, 6),
+        ('C', '2' | '1', 'I') => (3, 0),
+        ('C', '7', 'I') => (3, 2),
+        ('J', '1', 'C') => (5, 0),
+        ('J', '2', 'S') => (5, 4),
+        ('J', '2', 'L') => (5, 5),
+        ('R', '1', 'C') => (6, 0),
+        ('R', '2', 'C') => (6, 2),
+        _ => return None,
+    })
+}
+
+/// A RINEX 2 observation type as the RINEX 3 code it means (RINEX 3.05 §5.1 and Table A2 of
+/// 2.11: C1 is C/A code, P1/P2 are P(Y), L1/L2/D1/D2/S1/S2 follow the code tracked: C/A on
+/// L1, P(Y) on L2; C2 is L2C, C5/L5 are L5).
+fn v3_code_of_v2(t: &str) -> Option<[char; 3]> {
+    let mut c = t.chars();
+    let (kind, band) = (c.next()?, c.next()?);
+    let attribute = match (kind, band) {
+        ('P', '1' | '2') => 'W',
+        ('C', '1') => 'C',
+        ('C', '2' | '5' | '7' | '8' | '6') => 'X',
+        (_, '1') => 'C',
+        (_, '2') => 'W',
+        _ => 'X',
+    };
+    let kind = if kind == 'P' { 'C' } else { kind };
+    Some([kind, band, attribute])
+}
+
+/// The observation types of a system: each as its RINEX 3 code and as the header wrote it.
+type ObsTypes = Vec<([char; 3], String)>;
+
+/// Per system letter, its observation types (RINEX 2: one list for all systems).
+#[derive(Default)]
+struct TypeTable {
+    v2: ObsTypes,
+    v3: Vec<(char, ObsTypes)>,
+}
+
+impl TypeTable {
+    fn of(&self, system: char) -> Option<&ObsTypes> {
+        if self.v3.is_empty() {
+            Some(&self.v2)
+        } else {
+            self.v3.iter().find(|(s, _)| *s == system).map(|(_, t)| t)
+        }
+    }
+}
+
+/// Parses an observation file (`file` names it in errors).
+pub fn parse_obs(file: &str, text: &str) -> Result<ObsFile, RinexError> {
+    let mut lines = Lines::new(file, text);
+    let (version, _) = version_line(&mut lines, 'O')?;
+    let mut out = ObsFile {
+        version,
+        approx_ecef_m: None,
+        leap_s: None,
+        epochs: Vec::new(),
+        unmapped: 0,
+    };
+    let mut types = TypeTable::default();
+    let (mut v2_count, mut v3_pending): (usize, Option<(char, usize)>) = (0, None);
+    loop {
+        let Some((n, l)) = lines.next() else {
+            return Err(lines.err(lines.lines.len(), "END OF HEADER", "no end of header"));
+        };
+        let label = col(l, 60, 80).trim();
+        let num = |a, b, field: &str| -> Result<f64, RinexError> {
+            number(col(l, a, b))
+                .map_err(|p| lines.err(n, field, p))?
+                .ok_or_else(|| lines.err(n, field, "blank"))
+        };
+        match label {
+            "END OF HEADER" => break,
+            "APPROX POSITION XYZ" => {
+                out.approx_ecef_m = Some([
+                    num(0, 14, "APPROX POSITION XYZ")?,
+                    num(14, 28, "APPROX POSITION XYZ")?,
+                    num(28, 42, "APPROX POSITION XYZ")?,
+                ]);
+            }
+            "LEAP SECONDS" => out.leap_s = Some(num(0, 6, label)? as i16),
+            "TIME OF FIRST OBS" => {
+                let sys = col(l, 48, 51).trim();
+                if !sys.is_empty() && sys != "GPS" {
+                    return Err(lines.err(n, label, format!("time system {sys}: only GPS time is supported")));
+                }
+            }
+            "# / TYPES OF OBSERV" => {
+                if !col(l, 0, 6).trim().is_empty() {
+                    v2_count = num(0, 6, label)? as usize;
+                }
+                for k in 0..9 {
+                    let t = col(l, 10 + 6 * k, 12 + 6 * k).trim();
+                    if types.v2.len() < v2_count && !t.is_empty() {
+                        let code = v3_code_of_v2(t).ok_or_else(|| lines.err(n, label, format!("type '{t}'")))?;
+                        types.v2.push((code, t.to_string()));
+                    }
+                }
+            }
+            "SYS / # / OBS TYPES" => {
+                let sys = col(l, 0, 1).chars().next().unwrap_or(' ');
+                if sys != ' ' {
+                    let count = num(3, 6, label)? as usize;
+                    types.v3.push((sys, Vec::with_capacity(count)));
+                    v3_pending = Some((sys, count));
+                }
+                let Some((_, count)) = v3_pending else {
+                    return Err(lines.err(n, label, "a continuation line without a system"));
+                };
+                let list = &mut types.v3.last_mut().expect("pushed above").1;
+                for k in 0..13 {
+                    let t: Vec<char> = col(l, 7 + 4 * k, 10 + 4 * k).chars().collect();
+                    if list.len() < count && t.len() == 3 {
+                        list.push(([t[0], t[1], t[2]], t.iter().collect()));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    if types.v2.is_empty() && types.v3.is_empty() {
+        return Err(lines.err(lines.next, "# / TYPES OF OBSERV", "no observation types in the header"));
+    }
+    let v3 = version >= 3.0;
+    while let Some((n, l)) = lines.next() {
+        if l.trim().is_empty() {
+            continue;
+        }
+        let (time_text, flag_col, count_cols, sats_at) = if v3 {
+            if !l.starts_with('>') {
+                return Err(lines.err(n, "EPOCH", "an epoch record starts with '>'"));
+            }
+            (col(l, 1, 29), 31, (32, 35), None)
+        } else {
+            (col(l, 0, 26), 28, (29, 32), Some(32))
+        };
+        let flag = col(l, flag_col, flag_col + 1).trim();
+        let count = col(l, count_cols.0, count_cols.1)
+            .trim()
+            .parse::<usize>()
+            .map_err(|_| {
+                lines.err(
+                    n,
+                    "number of satellites",
+                    format!("'{}'", col(l, count_cols.0, count_cols.1)),
+                )
+            })?;
+        if !matches!(flag, "" | "0" | "1") {
+            // An event (2–5: header records follow) or a cycle-slip record (6): skip `count` lines.
+            for _ in 0..count {
+                lines.need("event record")?;
+            }
+            continue;
+        }
+        let t = epoch_fields(&lines, n, "epoch", time_text)?;
+        // RINEX 2: satellite list on the epoch line (12 per line, continued from column 33).
+        let mut sats: Vec<(char, u8)> = Vec::with_capacity(count);
+        if let Some(at) = sats_at {
+            let mut line = (n, l);
+            for k in 0..count {
+                if k > 0 && k % 12 == 0 {
+                    line = lines.need("satellite list")?;
+                }
+                let s = col(line.1, at + 3 * (k % 12), at + 3 * (k % 12) + 3);
+                sats.push(sat_id(&lines, line.0, s)?);
+            }
+        }
+        let mut raw = GnssRaw::zeroed();
+        raw.rcv_tow_s = t.tow_s;
+        raw.week = t.week as u16;
+        if let Some(leap) = out.leap_s {
+            raw.leap_s = leap;
+            raw.rec_stat |= 1;
+        }
+        let mut meas: Vec<RawMeasurement> = Vec::new();
+        let mut listed = sats.iter();
+        for _ in 0..count {
+            // RINEX 3: one line per satellite, its id first.
+            let (sat, first) = if v3 {
+                let (m, line) = lines.need("observation record")?;
+                (sat_id(&lines, m, col(line, 0, 3))?, Some((m, line)))
+            } else {
+                (*listed.next().expect("count satellites listed"), None)
+            };
+            let Some(list) = types.of(sat.0) else {
+                return Err(lines.err(n, "satellite", format!("system '{}' has no observation types", sat.0)));
+            };
+            // The values, 16 columns each: RINEX 3 after the id on one line, RINEX 2 five per line.
+            let mut values: Vec<(Option<f64>, u8)> = Vec::with_capacity(list.len());
+            let mut current = first;
+            for (j, (_, name)) in list.iter().enumerate() {
+                let (m, line, at) = if let Some((m, line)) = first {
+                    (m, line, 3 + 16 * j)
+                } else {
+                    if j % 5 == 0 {
+                        current = Some(lines.need("observation record")?);
+                    }
+                    let (m, line) = current.expect("set above");
+                    (m, line, 16 * (j % 5))
+                };
+                let v = number(col(line, at, at + 14)).map_err(|p| lines.err(m, name, p))?;
+                let lli = col(line, at + 14, at + 15).trim().parse::<u8>().unwrap_or(0);
+                values.push((v, lli));
+            }
+            signals(sat, list, &values, &mut meas, &mut out.unmapped);
+        }
+        // GPS L1 C/A first, then by system, signal and satellite.
+        meas.sort_by_key(|m| (m.gnss_id != 0 || m.sig_id != 0, m.gnss_id, m.sig_id, m.sv_id));
+        raw.dropped = meas.len().saturating_sub(MAX_RAW_MEASUREMENTS).min(255) as u8;
+        for (slot, m) in raw.meas.iter_mut().zip(&meas) {
+            *slot = *m;
+        }
+        raw.num_meas = meas.len().min(MAX_RAW_MEASUREMENTS) as u8;
+        out.epochs.push(raw);
+    }
+    Ok(out)
+}
+
+/// A satellite id `Gnn` (RINEX 2: a blank system is GPS).
+fn sat_id(lines: &Lines<'_>, n: usize, s: &str) -> Result<(char, u8), RinexError> {
+    let mut c = s.chars();
+    let system = match c.next() {
+        Some(' ') | None => 'G',
+        Some(x) => x,
+    };
+    let prn = c
+        .as_str()
+        .trim()
+        .parse::<u8>()
+        .map_err(|_| lines.err(n, "satellite", format!("'{s}' is not a satellite id")))?;
+    Ok((system, prn))
+}
+
+/// The measurements of one satellite: one per signal (band and attribute) with a u-blox id.
+fn signals(
+    sat: (char, u8),
+    types: &ObsTypes,
+    values: &[(Option<f64>, u8)],
+    out: &mut Vec<RawMeasurement>,
+    unmapped: &mut u64,
+) {
+    let mut seen: Vec<(char, char)> = Vec::new();
+    for ((t, _), (v, _)) in types.iter().zip(values) {
+        if v.is_some() && !seen.contains(&(t[1], t[2])) {
+            seen.push((t[1], t[2]));
+        }
+    }
+    for (band, attribute) in seen {
+        let Some((gnss_id, sig_id)) = ublox_signal(sat.0, band, attribute) else {
+            *unmapped += 1;
+            continue;
+        };
+        let get = |kind: char| {
+            types
+                .iter()
+                .zip(values)
+                .find(|((t, _), _)| t[0] == kind && t[1] == band && t[2] == attribute)
+                .and_then(|(_, (v, lli))| v.map(|v| (v, *lli)))
+        };
+        let mut m = RawMeasurement::zeroed();
+        (m.gnss_id, m.sv_id, m.sig_id) = (gnss_id, sat.1, sig_id);
+        m.pseudorange_m = f64::NAN;
+        m.carrier_phase_cycles = f64::NAN;
+        m.doppler_hz = f32::NAN;
+        if let Some((pr, _)) = get('C').filter(|(pr, _)| *pr > 0.0) {
+            m.pseudorange_m = pr;
+            m.trk_stat |= 1;
+        }
+        if let Some((cp, lli)) = get('L').filter(|(cp, _)| *cp != 0.0) {
+            m.carrier_phase_cycles = cp;
+            // Carrier valid; half cycle resolved unless the LLI's bit 1 says otherwise.
+            m.trk_stat |= if lli & 2 == 0 { 0b110 } else { 0b010 };
+        }
+        if let Some((d, _)) = get('D') {
+            m.doppler_hz = d as f32;
+        }
+        if let Some((s, _)) = get('S') {
+            m.cno_dbhz = s.round().clamp(0.0, 255.0) as u8;
+        }
+        out.push(m);
+    }
+}
+
+/// Parses a navigation file's GPS records and ionosphere (`file` names it in errors).
+pub fn parse_nav(file: &str, text: &str) -> Result<NavFile, RinexError> {
+    let mut lines = Lines::new(file, text);
+    let (version, system) = version_line(&mut lines, 'N')?;
+    let v3 = version >= 3.0;
+    if v3 && !matches!(system, 'G' | 'M') {
+        return Err(lines.err(
+            1,
+            "RINEX VERSION / TYPE",
+            format!("system '{system}': GPS or mixed expected"),
+        ));
+    }
+    let mut out = NavFile {
+        version,
+        ..NavFile::default()
+    };
+    loop {
+        let Some((n, l)) = lines.next() else {
+            return Err(lines.err(lines.lines.len(), "END OF HEADER", "no end of header"));
+        };
+        let label = col(l, 60, 80).trim();
+        let four = |at: usize, field: &str| -> Result<[f64; 4], RinexError> {
+            let mut v = [0.0; 4];
+            for (k, x) in v.iter_mut().enumerate() {
+                *x = number(col(l, at + 12 * k, at + 12 * (k + 1)))
+                    .map_err(|p| lines.err(n, field, p))?
+                    .ok_or_else(|| lines.err(n, field, format!("coefficient {k} blank")))?;
+            }
+            Ok(v)
+        };
+        match label {
+            "END OF HEADER" => break,
+            "ION ALPHA" => out.iono_alpha = Some(four(2, label)?),
+            "ION BETA" => out.iono_beta = Some(four(2, label)?),
+            "IONOSPHERIC CORR" => match col(l, 0, 4) {
+                "GPSA" => out.iono_alpha = Some(four(5, "IONOSPHERIC CORR GPSA")?),
+                "GPSB" => out.iono_beta = Some(four(5, "IONOSPHERIC CORR GPSB")?),
+                _ => {}
+            },
+            _ => {}
+        }
+    }
+    while let Some((n, l)) = lines.next() {
+        if l.trim().is_empty() {
+            continue;
+        }
+        // RINEX 3: 'Gnn yyyy mm dd hh mm ss' then 3 × D19.12 from column 24; other systems'
+        // records have 4 lines (GLONASS, SBAS) or 8. RINEX 2: 'nn yy mm dd hh mm ss.s' to 22.
+        let (prn_text, time_text, first) = if v3 {
+            let sys = col(l, 0, 1);
+            if sys != "G" {
+                let more = if matches!(sys, "R" | "S") { 3 } else { 7 };
+                for _ in 0..more {
+                    lines.need("navigation record")?;
+                }
+                out.other_systems += 1;
+                continue;
+            }
+            (col(l, 1, 3), col(l, 4, 23), 23)
+        } else {
+            (col(l, 0, 2), col(l, 3, 22), 22)
+        };
+        let prn = prn_text
+            .trim()
+            .parse::<u8>()
+            .ok()
+            .filter(|p| (1..=32).contains(p))
+            .ok_or_else(|| lines.err(n, "PRN", format!("'{prn_text}' is not a GPS PRN")))?;
+        let toc = epoch_fields(&lines, n, "toc", time_text)?;
+        // 3 values on the first line, 4 on each of the 7 orbit lines (the last may be short).
+        const NAMES: [&str; 31] = [
+            "af0",
+            "af1",
+            "af2",
+            "IODE",
+            "Crs",
+            "Delta n",
+            "M0",
+            "Cuc",
+            "e",
+            "Cus",
+            "sqrt(A)",
+            "Toe",
+            "Cic",
+            "OMEGA0",
+            "Cis",
+            "i0",
+            "Crc",
+            "omega",
+            "OMEGA DOT",
+            "IDOT",
+            "L2 codes",
+            "GPS week",
+            "L2 P flag",
+            "SV accuracy",
+            "SV health",
+            "TGD",
+            "IODC",
+            "transmission time",
+            "fit interval",
+            "spare",
+            "spare",
+        ];
+        let indent = if v3 { 4 } else { 3 };
+        let mut rows = vec![(n, l, first, 3usize)];
+        for _ in 0..7 {
+            let (m, line) = lines.need("broadcast orbit")?;
+            rows.push((m, line, indent, 4));
+        }
+        let mut v = [0.0f64; 31];
+        let mut from = 0;
+        for (m, line, at, count) in rows {
+            for k in 0..count {
+                let a = at + 19 * k;
+                v[from + k] = number(col(line, a, a + 19))
+                    .map_err(|p| lines.err(m, NAMES[from + k], p))?
+                    .unwrap_or(0.0);
+            }
+            from += count;
+        }
+        let e = GpsEphemeris {
+            prn,
+            line: n,
+            toc_week: toc.week,
+            toc_s: toc.tow_s,
+            af: [v[0], v[1], v[2]],
+            iode: v[3],
+            crs: v[4],
+            delta_n: v[5],
+            m0: v[6],
+            cuc: v[7],
+            e: v[8],
+            cus: v[9],
+            sqrt_a: v[10],
+            toe_s: v[11],
+            cic: v[12],
+            omega0: v[13],
+            cis: v[14],
+            i0: v[15],
+            crc: v[16],
+            omega: v[17],
+            omega_dot: v[18],
+            idot: v[19],
+            l2_codes: v[20],
+            week: v[21],
+            l2p: v[22],
+            accuracy_m: v[23],
+            health: v[24],
+            tgd_s: v[25],
+            iodc: v[26],
+            tx_time_s: v[27],
+            fit_h: v[28],
+        };
+        if e.sqrt_a <= 0.0 || !(0.0..1.0).contains(&e.e) || !(0.0..WEEK_S).contains(&e.toe_s) {
+            return Err(lines.err(n, "broadcast orbit", "sqrt(A), e or Toe out of range"));
+        }
+        if !(0.0..=6000.0).contains(&e.week) {
+            return Err(lines.err(n, "GPS week", format!("{} is not a GPS week", e.week)));
+        }
+        out.ephemerides.push(e);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const OBS2: &str = "     2.10           OBSERVATION DATA    G (GPS)             RINEX VERSION / TYPE
+ -3976219.5082  3382372.5671  3652512.9849                  APPROX POSITION XYZ
+     4    L1    C1    L2    P2                              # / TYPES OF OBSERV
+  2005     4     2     0     0    0.0000000     GPS         TIME OF FIRST OBS
+                                                            END OF HEADER
+ 05  4  2  0  0 30.0000000  0  2G 3G 7
+  55923622.160    24767686.375    43647388.2424   24767684.8224
+   -691177.8982   24361933.475     -537007.1404
+";
+
+    #[test]
+    fn rinex2_observations_become_gps_l1_ca_measurements() {
+        let f = parse_obs("a.05o", OBS2).unwrap();
+        assert_eq!(f.approx_ecef_m, Some([-3976219.5082, 3382372.5671, 3652512.9849]));
+        assert_eq!(f.epochs.len(), 1);
+        let e = &f.epochs[0];
+        // 2005-04-02 is a Saturday of GPS week 1316.
+        assert_eq!((e.week, e.rcv_tow_s), (1316, 6.0 * 86_400.0 + 30.0));
+        assert_eq!(e.num_meas, 2);
+        let (a, b) = (e.meas[0], e.meas[1]);
+        assert_eq!((a.gnss_id, a.sv_id, a.sig_id, a.trk_stat), (0, 3, 0, 0b111));
+        assert_eq!((a.pseudorange_m, a.carrier_phase_cycles), (24767686.375, 55923622.160));
+        // LLI 2: half-cycle ambiguity; no P2 on G07 and L2/P2 (P(Y)) are not u-blox signals.
+        assert_eq!((b.sv_id, b.trk_stat, b.carrier_phase_cycles), (7, 0b011, -691177.898));
+        assert_eq!(f.unmapped, 2);
+    }
+
+    const OBS3: &str = "     3.05           OBSERVATION DATA    M                   RINEX VERSION / TYPE
+G    4 C1C L1C D1C S1C                                      SYS / # / OBS TYPES
+E    2 C1C C5Q                                              SYS / # / OBS TYPES
+    18                                                      LEAP SECONDS
+                                                            END OF HEADER
+> 2020 06 14 12 00  1.5000000  0  2
+G05  21000000.125   110356000.250        -1234.500          45.250
+E11  23000000.500    23000005.000
+";
+
+    #[test]
+    fn rinex3_observations_map_to_ublox_signals() {
+        let f = parse_obs("b.rnx", OBS3).unwrap();
+        let e = &f.epochs[0];
+        assert_eq!((e.leap_s, e.rec_stat & 1, e.num_meas), (18, 1, 3));
+        let g = e.meas[0];
+        assert_eq!((g.gnss_id, g.sv_id, g.sig_id, g.cno_dbhz), (0, 5, 0, 45));
+        assert_eq!((g.pseudorange_m, g.doppler_hz), (21000000.125, -1234.5));
+        // Galileo E1C (sigId 0) and E5a Q (sigId 4).
+        let ids: Vec<_> = e.meas[1..3].iter().map(|m| (m.gnss_id, m.sv_id, m.sig_id)).collect();
+        assert_eq!(ids, [(2, 11, 0), (2, 11, 4)]);
+        let t = gps_time(2020, 6, 14, 12, 0, 1.5);
+        assert_eq!((e.week, e.rcv_tow_s), (t.week as u16, t.tow_s));
+        assert_eq!(t.week, 2110); // 2020-06-14, a Sunday, starts week 2110.
+    }
+
+    const NAV2: &str = "     2.10           N: GPS NAV DATA                         RINEX VERSION / TYPE
+    1.1180D-08  1.4900D-08 -5.9600D-08 -5.9600D-08          ION ALPHA
+    8.8060D+04  1.6380D+04 -1.9660D+05 -1.3110D+05          ION BETA
+                                                            END OF HEADER
+ 1 05  4  2  2  0  0.0 3.966595977540D-04 1.705302565820D-12 0.000000000000D+00
+    1.400000000000D+02-5.218750000000D+01 4.026596389650D-09 2.871534990340D+00
+   -2.676621079440D-06 5.957618006510D-03 4.174187779430D-06 5.153636478420D+03
+    5.256000000000D+05 1.061707735060D-07-2.493184817740D+00-9.313225746150D-08
+    9.833919144490D-01 3.093750000000D+02-1.650496813270D+00-7.889971342930D-09
+   -8.571785642400D-12 1.000000000000D+00 1.316000000000D+03 0.000000000000D+00
+    1.000000000000D+00 0.000000000000D+00-3.259629011150D-09 3.960000000000D+02
+    5.195760000000D+05
+";
+
+    #[test]
+    fn rinex2_navigation_gives_ephemerides_and_klobuchar() {
+        let f = parse_nav("a.05n", NAV2).unwrap();
+        assert_eq!(f.iono_alpha, Some([1.118e-8, 1.49e-8, -5.96e-8, -5.96e-8]));
+        assert_eq!(f.iono_beta.unwrap()[0], 88_060.0);
+        let e = f.ephemerides[0];
+        assert_eq!((e.prn, e.line, e.toc_week, e.toc_s), (1, 5, 1316, 525_600.0));
+        assert_eq!(
+            (e.iode, e.toe_s, e.week, e.iodc, e.fit_h),
+            (140.0, 525_600.0, 1316.0, 396.0, 0.0)
+        );
+        assert_eq!(
+            (e.sqrt_a, e.tgd_s, e.tx_time_s),
+            (5153.63647842, -3.25962901115e-9, 519_576.0)
+        );
+    }
+
+    #[test]
+    fn rinex3_navigation_skips_other_systems() {
+        // Fixed columns: 4X then 4 × D19.12 per orbit line (RINEX 3.05 Table A8).
+        let orbit = |v: [f64; 4]| format!("    {}\n", v.map(|x| format!("{x:19.12E}")).concat());
+        let mut nav3 = String::from(concat!(
+            "     3.05           N: GNSS NAV DATA    M: Mixed            RINEX VERSION / TYPE\n",
+            "GPSA   1.1180D-08  1.4900D-08 -5.9600D-08 -5.9600D-08       IONOSPHERIC CORR\n",
+            "GPSB   8.8060D+04  1.6380D+04 -1.9660D+05 -1.3110D+05       IONOSPHERIC CORR\n",
+            "                                                            END OF HEADER\n",
+            "R05 2020 06 14 12 15 00 1.000000000000D-05 0.000000000000D+00 0.000000000000D+00\n",
+        ));
+        for _ in 0..3 {
+            nav3 += &orbit([1.0, 2.0, 3.0, 4.0]);
+        }
+        nav3 += "G07 2020 06 14 12 00 00 1.000000000000D-05 2.000000000000D-12 0.000000000000D+00\n";
+        for v in [
+            [40.0, 10.0, 4e-9, 1.0],
+            [1e-6, 1e-2, 2e-6, 5153.6],
+            [216_000.0, 1e-7, 1.0, 1e-7],
+            [0.96, 200.0, 0.5, -8e-9],
+            [1e-10, 1.0, 2109.0, 0.0],
+            [2.0, 0.0, 1e-9, 40.0],
+        ] {
+            nav3 += &orbit(v);
+        }
+        nav3 += &format!("    {:19.12E}{:19.12E}\n", 210_000.0, 4.0);
+        let f = parse_nav("b.rnx", &nav3).unwrap();
+        assert_eq!((f.other_systems, f.ephemerides.len()), (1, 1));
+        let e = f.ephemerides[0];
+        assert_eq!(
+            (e.prn, e.line, e.toe_s, e.week, e.iodc, e.fit_h),
+            (7, 9, 216_000.0, 2109.0, 40.0, 4.0)
+        );
+        assert_eq!(f.iono_beta.unwrap()[3], -1.311e5);
+    }
+
+    #[test]
+    fn bad_input_names_file_line_and_field() {
+        let bad = OBS2.replace("24767686.375", "24767x86.375");
+        let e = parse_obs("a.05o", &bad).unwrap_err();
+        assert_eq!((e.file.as_str(), e.line, e.field.as_str()), ("a.05o", 7, "C1"));
+        assert!(e.to_string().starts_with("a.05o:7: C1: "), "{e}");
+        let e = parse_obs("b.rnx", &OBS3.replace("23000005.000", "23000005.0.0")).unwrap_err();
+        assert_eq!((e.line, e.field.as_str()), (8, "C5Q"));
+        let e = parse_obs("b.rnx", &OBS3.replace("G05  2", "G0x  2")).unwrap_err();
+        assert_eq!((e.line, e.field.as_str()), (7, "satellite"));
+        let bad = NAV2.replace("5.153636478420D+03", "5.15363647842XD+0");
+        let e = parse_nav("a.05n", &bad).unwrap_err();
+        assert_eq!((e.line, e.field.as_str()), (7, "sqrt(A)"));
+        let e = parse_nav("a.05n", &NAV2[..NAV2.len() - 60]).unwrap_err();
+        assert_eq!(e.field, "broadcast orbit");
+        let e = parse_obs("a.05o", "garbage\n").unwrap_err();
+        assert_eq!((e.line, e.field.as_str()), (1, "RINEX VERSION / TYPE"));
+        let e = parse_obs("a.05o", &OBS2.replace("  0  2G 3G 7", "  0  xG 3G 7")).unwrap_err();
+        assert_eq!((e.line, e.field.as_str()), (6, "number of satellites"));
+    }
+}
