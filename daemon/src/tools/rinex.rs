@@ -51,8 +51,8 @@ pub struct RinexArgs {
 /// Errors of the RINEX import.
 #[derive(Debug, thiserror::Error)]
 pub enum RinexImportError {
-    /// A file could not be read.
-    #[error("{path}: {source}")]
+    /// A file could not be read (the cause follows in the error's chain).
+    #[error("reading {path}")]
     Io {
         /// File.
         path: String,

@@ -2,7 +2,8 @@
 //! `../shared/datasets/rtklib-geonet-0759-3040/`) imported with `navsync import rinex`, solved
 //! with `navsync spp` against the stations' marker coordinates, and side by side with RTKLIB's
 //! single-point solution (`rnx2rtkp -p 0`, same elevation mask, broadcast ionosphere,
-//! Saastamoinen troposphere) when its binary is there.
+//! Saastamoinen troposphere) when its binary is there; the same station as RINEX 3.05
+//! (RTKLIB's `convbin`) against its RINEX 2.10 files.
 
 use std::path::{Path, PathBuf};
 
@@ -132,20 +133,21 @@ fn geonet_stations_import_and_solve_within_a_metre_horizontally() {
     }
 }
 
-/// RTKLIB's `rnx2rtkp`: `$NAVSYNC_RNX2RTKP`, else the build beside the checkout.
-fn rnx2rtkp() -> Option<PathBuf> {
-    let p = std::env::var_os("NAVSYNC_RNX2RTKP")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../rtklib/app/consapp/rnx2rtkp/gcc/rnx2rtkp")
-        });
-    p.is_file().then_some(p)
+/// An RTKLIB program: `$env_var`, else its build beside the checkout
+/// (`../rtklib/app/consapp/NAME/gcc/NAME`); `None`, saying the test is skipped, without it.
+fn rtklib(name: &str, env_var: &str) -> Option<PathBuf> {
+    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../rtklib/app/consapp/{name}/gcc/{name}"));
+    let p = std::env::var_os(env_var).map_or(built, PathBuf::from);
+    if !p.is_file() {
+        eprintln!("skipped: RTKLIB's {name} not found (set {env_var} or build it in ../rtklib)");
+        return None;
+    }
+    Some(p)
 }
 
 #[test]
 fn geonet_spp_is_no_worse_than_rtklib() {
-    let Some(rtklib) = rnx2rtkp() else {
-        eprintln!("skipped: RTKLIB's rnx2rtkp not found (set NAVSYNC_RNX2RTKP or build it in ../rtklib)");
+    let Some(rnx2rtkp) = rtklib("rnx2rtkp", "NAVSYNC_RNX2RTKP") else {
         return;
     };
     let env = TestEnv::new("rinexrtk");
@@ -154,7 +156,7 @@ fn geonet_spp_is_no_worse_than_rtklib() {
         let pos = env.dir.join(format!("{station}.pos"));
         // Single point (-p 0), ECEF output (-e), GPS only, the same mask; broadcast
         // ionosphere and Saastamoinen troposphere are rnx2rtkp's defaults.
-        let o = std::process::Command::new(&rtklib)
+        let o = std::process::Command::new(&rnx2rtkp)
             .args(["-p", "0", "-e", "-sys", "G", "-m", MASK_DEG, "-o"])
             .arg(&pos)
             .arg(&obs)
@@ -185,4 +187,81 @@ fn geonet_spp_is_no_worse_than_rtklib() {
             "{station}: navsync horizontal RMS {h:.3} m > RTKLIB's {rh:.3} m"
         );
     }
+}
+
+/// A RINEX 2 GPS navigation file rewritten as RINEX 3.05 (Table A8: `Gnn yyyy mm dd hh mm ss`
+/// first lines, orbit lines indented by 4; the header's α/β as `IONOSPHERIC CORR` GPSA/GPSB).
+fn nav_as_rinex3(v2: &str) -> String {
+    let mut out = format!(
+        "{:<20}{:<20}{:<20}RINEX VERSION / TYPE\n",
+        "     3.05", "N: GNSS NAV DATA", "G: GPS"
+    );
+    let (header, body) = v2.split_once("END OF HEADER").unwrap();
+    for l in header.lines() {
+        let label = l.get(60..).unwrap_or("").trim();
+        let which = match label {
+            "ION ALPHA" => "GPSA",
+            "ION BETA" => "GPSB",
+            _ => continue,
+        };
+        out += &format!("{:<60}IONOSPHERIC CORR\n", format!("{which} {}", &l[2..50]));
+    }
+    out += &format!("{:60}END OF HEADER\n", "");
+    for l in body.lines().skip(1).filter(|l| !l.trim().is_empty()) {
+        if l.starts_with("   ") || l.starts_with("    ") {
+            out += &format!(" {l}\n");
+        } else {
+            let prn: u32 = l[0..2].trim().parse().unwrap();
+            let t: Vec<f64> = l[3..22].split_whitespace().map(|x| x.parse().unwrap()).collect();
+            out += &format!(
+                "G{prn:02} {} {:02} {:02} {:02} {:02} {:02}{}\n",
+                2000 + t[0] as u32,
+                t[1],
+                t[2],
+                t[3],
+                t[4],
+                t[5].round(),
+                &l[22..]
+            );
+        }
+    }
+    out
+}
+
+/// The same station as RINEX 3.05 (observations converted by RTKLIB's `convbin`, navigation
+/// rewritten by this test) gives the same solution, epoch by epoch, as its RINEX 2.10 files.
+#[test]
+fn geonet_rinex3_gives_the_rinex2_solutions() {
+    let Some(convbin) = rtklib("convbin", "NAVSYNC_CONVBIN") else {
+        return;
+    };
+    let env = TestEnv::new("rinex3");
+    let (station, reference) = STATIONS[1];
+    let (obs, nav) = files(station);
+    let (obs3, nav3) = (env.dir.join("r3.obs"), env.dir.join("r3.nav"));
+    let o = std::process::Command::new(&convbin)
+        .args(["-r", "rinex", "-v", "3.05", "-o"])
+        .arg(&obs3)
+        .arg(&obs)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success() && obs3.is_file(),
+        "convbin: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(std::fs::read_to_string(&obs3).unwrap().starts_with("     3.05"));
+    std::fs::write(&nav3, nav_as_rinex3(&std::fs::read_to_string(&nav).unwrap())).unwrap();
+    let p = |x: &Path| x.display().to_string();
+    let r = format!("--reference={},{},{}", reference[0], reference[1], reference[2]);
+    let mut csvs = Vec::new();
+    for (name, o, n) in [("v2", &obs, &nav), ("v3", &obs3, &nav3)] {
+        let rec = env.dir.join(format!("{name}.mcap"));
+        let csv = env.dir.join(format!("{name}.csv"));
+        run_ok(&env, &["import", "rinex", &p(o), &p(n), "--out", &p(&rec)]);
+        run_ok(&env, &["spp", &p(&rec), "--out", &p(&csv), &r]);
+        csvs.push(std::fs::read_to_string(&csv).unwrap());
+    }
+    assert!(csvs[0].lines().count() > 100, "{}", csvs[0]);
+    assert_eq!(csvs[0], csvs[1], "RINEX 3 and RINEX 2 solutions differ");
 }
