@@ -2,7 +2,7 @@
 //! driver's [`Decoder`](navsync_drivers::gnss::Decoder): one JSON object per epoch on stdout,
 //! the decoder's counters on stderr; with `--subframes`, one JSON object per GPS LNAV
 //! subframe of its RXM-SFRBX instead (`navsync_estimator::gnss::lnav`, unscaled fields), then
-//! one per Galileo I/NAV and BeiDou D1 ephemeris (`navsync_estimator::gnss::broadcast`); with
+//! one per Galileo I/NAV and BeiDou D1/D2 ephemeris (`navsync_estimator::gnss::broadcast`); with
 //! `--yuma`, the GPS almanac of those subframes as a YUMA file (what `[gnss.sky] almanac` of a
 //! simulator scenario reads); with `--sky`, each GPS and GLONASS satellite of the receiver's NAV-SAT with
 //! the elevation and azimuth computed from broadcast orbits next to the receiver's own.
@@ -23,7 +23,7 @@ pub struct Options {
     #[arg(long, default_value = "auto")]
     pub protocol: Protocol,
     /// Print the GPS LNAV subframes of the capture's UBX-RXM-SFRBX (ephemerides, almanac,
-    /// ionosphere/UTC; IS-GPS-200 unscaled fields), then each Galileo I/NAV and BeiDou D1
+    /// ionosphere/UTC; IS-GPS-200 unscaled fields), then each Galileo I/NAV and BeiDou D1/D2
     /// ephemeris completed from its words (SI units, the system named), instead of the epochs.
     #[arg(long, conflicts_with = "yuma")]
     pub subframes: bool,
@@ -294,7 +294,7 @@ fn yuma(bytes: &[u8], file: &str) -> Result<()> {
 }
 
 /// `--subframes`: every GPS subframe, decoded or with the reason it was not, then each
-/// Galileo I/NAV and BeiDou D1 ephemeris completed from the capture's words (SI units).
+/// Galileo I/NAV and BeiDou D1/D2 ephemeris completed from the capture's words (SI units).
 fn subframes(bytes: &[u8], file: &str) -> Result<()> {
     use navsync_estimator::gnss::broadcast::NavCollector;
     let mut out = std::io::stdout().lock();
@@ -325,7 +325,7 @@ fn subframes(bytes: &[u8], file: &str) -> Result<()> {
     }
     let c = nav.counts;
     eprintln!(
-        "{ok} GPS subframes decoded, {bad} rejected; {} Galileo I/NAV words and {} BeiDou D1 subframes decoded, {} rejected: {} Galileo/BeiDou ephemerides",
+        "{ok} GPS subframes decoded, {bad} rejected; {} Galileo I/NAV words and {} BeiDou subframes decoded, {} rejected: {} Galileo/BeiDou ephemerides",
         c.galileo_words,
         c.beidou_subframes,
         c.rejected,

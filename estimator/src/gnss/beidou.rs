@@ -12,8 +12,11 @@
 //!
 //! Bits are numbered here as the information bits of the subframe, 0..224 (parity left out),
 //! which makes every field contiguous (the ICD's figures split fields at word boundaries).
-//! D2 (GEO) pages are not decoded yet; a GEO ephemeris from elsewhere uses
-//! [`OrbitFrame::BeiDouGeo`](super::orbit::OrbitFrame::BeiDouGeo).
+//! D2 (GEO, §5.3): subframe 1 pages 1 and 3–10 (Figure 5-10, the page number Pnum in
+//! information bits 38–41; the ephemeris and clock spread over the pages, fields split between
+//! consecutive pages) make the same [`BdsEphemeris`] with the GEO orbit
+//! ([`OrbitFrame::BeiDouGeo`](super::orbit::OrbitFrame::BeiDouGeo)); page 2's ionosphere is
+//! not decoded (zero in a D2 ephemeris).
 
 use super::orbit::{GPS_PI, Orbit, OrbitFrame};
 
@@ -32,6 +35,9 @@ pub enum BdsError {
     /// FraID is not 1..=5.
     #[error("subframe id {0} is not 1..=5")]
     SubframeId(u8),
+    /// A D2 subframe 1 page number not 1..=10.
+    #[error("D2 page number {0} is not 1..=10")]
+    Page(u8),
 }
 
 /// Subframe 1: time, health, clock, group delays, ionosphere (Figure 5-4), SI units.
@@ -331,6 +337,138 @@ impl BdsEphemeris {
     }
 }
 
+/// One D2 subframe 1 page (GEO satellites, BDS-SIS-ICD-B1I §5.3.3.1), its information bits
+/// kept until the pages of one cycle make an ephemeris.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct D2Page {
+    /// SOW of the page, s of the BDT week.
+    pub sow_s: u32,
+    /// Pnum, 1..=10.
+    pub page: u8,
+    #[serde(skip)]
+    bits: [u128; 2],
+}
+
+/// Decodes one D2 subframe from its ten u-blox words (parity, preamble checked): the page of
+/// subframe 1, `None` for subframes 2–5 (integrity, almanac: not decoded here).
+pub fn decode_d2(words: &[u32]) -> Result<Option<D2Page>, BdsError> {
+    let d = info_bits(words)?;
+    let pre = u(&d, 0, 11) as u16;
+    if pre != 0x712 {
+        return Err(BdsError::Preamble(pre));
+    }
+    match u(&d, 15, 3) as u8 {
+        1 => {
+            let page = u(&d, 38, 4) as u8;
+            if !(1..=10).contains(&page) {
+                return Err(BdsError::Page(page));
+            }
+            let sow_s = u(&d, 18, 20) as u32;
+            Ok(Some(D2Page { sow_s, page, bits: d }))
+        }
+        2..=5 => Ok(None),
+        other => Err(BdsError::SubframeId(other)),
+    }
+}
+
+/// `hi` (its bits) followed by `lo_n` bits of `lo`, as a two's-complement number of
+/// `hi_n + lo_n` bits.
+fn joined(hi: u64, hi_n: u32, lo: u64, lo_n: u32) -> f64 {
+    let n = hi_n + lo_n;
+    let v = (hi << lo_n) | lo;
+    (((v << (64 - n)) as i64) >> (64 - n)) as f64
+}
+
+/// The ephemeris of a GEO satellite from D2 subframe 1 pages 1 and 3–10 (Figure 5-10; the
+/// same scale factors as D1, Tables 5-5 to 5-11).
+fn d2_ephemeris(sv: u8, p: &[[u128; 2]; 10]) -> BdsEphemeris {
+    let sc = GPS_PI;
+    let pg = |k: usize| &p[k - 1];
+    let uu = |k: usize, a: u32, n: u32| u(pg(k), a, n);
+    let sf = |k: usize, a: u32, n: u32| s(pg(k), a, n);
+    let toe = uu(7, 68, 17) as u32;
+    let s1 = Sub1 {
+        sat_h1: uu(1, 42, 1) as u8,
+        aodc: uu(1, 43, 5) as u8,
+        urai: uu(1, 48, 4) as u8,
+        week: uu(1, 52, 13) as u16,
+        toc_s: uu(1, 65, 17) as f64 * 8.0,
+        tgd1_s: sf(1, 82, 10) * 0.1e-9,
+        tgd2_s: sf(1, 92, 10) * 0.1e-9,
+        alpha: [0.0; 4],
+        beta: [0.0; 4],
+        a0_s: sf(3, 80, 24) * p2(-33),
+        a1: joined(uu(3, 104, 4), 4, uu(4, 42, 18), 18) * p2(-50),
+        a2_per_s: sf(4, 60, 11) * p2(-66),
+        aode: uu(4, 71, 5) as u8,
+    };
+    let s2 = Sub2 {
+        delta_n_rad_s: sf(4, 76, 16) * p2(-43) * sc,
+        cuc_rad: joined(uu(4, 92, 14), 14, uu(5, 42, 4), 4) * p2(-31),
+        m0_rad: sf(5, 46, 32) * p2(-31) * sc,
+        e: ((uu(5, 96, 10) << 22) | uu(6, 42, 22)) as f64 * p2(-33),
+        cus_rad: sf(5, 78, 18) * p2(-31),
+        crc_m: sf(8, 53, 18) * p2(-6),
+        crs_m: sf(8, 71, 18) * p2(-6),
+        sqrt_a: uu(6, 64, 32) as f64 * p2(-19),
+        toe_msb: (toe >> 15) as u8,
+    };
+    let s3 = Sub3 {
+        toe_lsb: (toe & 0x7FFF) as u16,
+        i0_rad: joined(uu(7, 85, 21), 21, uu(8, 42, 11), 11) * p2(-31) * sc,
+        cic_rad: joined(uu(6, 96, 10), 10, uu(7, 42, 8), 8) * p2(-31),
+        omega_dot_rad_s: joined(uu(8, 89, 19), 19, uu(9, 42, 5), 5) * p2(-43) * sc,
+        cis_rad: sf(7, 50, 18) * p2(-31),
+        idot_rad_s: sf(10, 47, 14) * p2(-43) * sc,
+        omega0_rad: sf(9, 47, 32) * p2(-31) * sc,
+        omega_rad: joined(uu(9, 79, 27), 27, uu(10, 42, 5), 5) * p2(-31) * sc,
+    };
+    BdsEphemeris {
+        sv,
+        sow_s: u(pg(1), 18, 20) as u32,
+        s1,
+        s2,
+        s3,
+    }
+}
+
+/// One GEO satellite's D2 subframe 1 pages as they arrive, completed into an ephemeris when
+/// pages 1 and 3–10 of one 30 s cycle are in (page k at SOW of page 1 + 3·(k − 1)) and
+/// t_oc = t_oe.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct D2Assembler {
+    pages: [Option<D2Page>; 10],
+    last: Option<BdsEphemeris>,
+}
+
+impl D2Assembler {
+    /// Takes one page of satellite `sv`; returns the ephemeris when it completed one different
+    /// from the last returned.
+    pub fn on_page(&mut self, sv: u8, page: &D2Page) -> Option<BdsEphemeris> {
+        let slot = self.pages.get_mut(usize::from(page.page).checked_sub(1)?)?;
+        *slot = Some(*page);
+        let sow1 = self.pages[0]?.sow_s;
+        let mut bits = [[0u128; 2]; 10];
+        for (k, p) in self.pages.iter().enumerate() {
+            if k == 1 {
+                continue;
+            }
+            let p = (*p)?;
+            if p.sow_s != sow1 + 3 * k as u32 {
+                return None;
+            }
+            bits[k] = p.bits;
+        }
+        let eph = d2_ephemeris(sv, &bits);
+        if eph.toe_s() != eph.s1.toc_s {
+            return None;
+        }
+        let same = self.last.is_some_and(|l| BdsEphemeris { sow_s: l.sow_s, ..eph } == l);
+        self.last = Some(eph);
+        (!same).then_some(eph)
+    }
+}
+
 /// One satellite's D1 subframes as they arrive, completed into an ephemeris when subframes
 /// 1, 2, 3 follow each other (SOW + 6 s each) and t_oc = t_oe.
 #[derive(Debug, Clone, Copy, Default)]
@@ -528,6 +666,170 @@ mod tests {
             ..o
         };
         assert!(meo.position_ecef_m(toe + 3600.0)[2].abs() > 1e5);
+    }
+
+    /// The GEO formulas against RTKLIB's (rtklibexplorer demo5 `ephemeris.c`, `eph2pos` for a
+    /// BeiDou PRN ≤ 5) on one made-up GEO ephemeris (the walk's log, in Colorado, has no GEO):
+    /// a C program linked against the objects convbin is built from (`/work/rtklib`), the
+    /// same elements, toe 406 800 s BDT of week 1025; its positions within 1 mm.
+    #[test]
+    fn a_geo_orbit_equals_rtklib() {
+        let o = Orbit {
+            toe_s: 406_800.0,
+            sqrt_a: 6493.43,
+            e: 0.000_412,
+            i0_rad: 0.0871,
+            idot_rad_s: 2.2e-10,
+            omega0_rad: -2.9123,
+            omega_dot_rad_s: -5.1e-10,
+            omega_rad: 1.234,
+            m0_rad: 0.567,
+            delta_n_rad_s: 1.1e-9,
+            cuc: 3.1e-6,
+            cus: -4.2e-6,
+            crc: -250.5,
+            crs: 100.25,
+            cic: 5.5e-8,
+            cis: -6.6e-8,
+            frame: OrbitFrame::BeiDouGeo,
+            ..Orbit::default()
+        };
+        assert_positions(
+            &o,
+            &[
+                (406_800.0, [33_647_060.293_8, 24_728_279.264_1, 5_746_621.047_2]),
+                (408_600.0, [33_591_149.415_3, 24_752_635.537_4, 5_973_822.365_3]),
+                (403_200.0, [33_766_445.687_9, 24_724_454.945_0, 5_000_913.745_9]),
+                (414_000.0, [33_481_637.088_5, 24_895_302.416_7, 6_031_471.649_9]),
+            ],
+        );
+    }
+
+    /// Writes `n` bits of `v` at information bits `from..from+n`.
+    fn put(d: &mut [u128; 2], from: u32, n: u32, v: i64) {
+        for k in 0..n {
+            let b = from + k;
+            let bit = ((v >> (n - 1 - k)) & 1) as u128;
+            let (i, off) = ((b / 128) as usize, b % 128);
+            d[i] = (d[i] & !(1 << (127 - off))) | (bit << (127 - off));
+        }
+    }
+
+    /// The ten u-blox words of 224 information bits, BCH parity added (the inverse of
+    /// `info_bits`).
+    fn words_from_info(d: &[u128; 2]) -> [u32; 10] {
+        let mut out = [0u32; 10];
+        let at = |a: u32, n: u32| u(d, a, n) as u32;
+        let w0 = at(0, 26);
+        out[0] = (w0 << 4) | bch_syndrome((w0 & 0x7FF) << 4);
+        for (k, w) in out.iter_mut().enumerate().skip(1) {
+            let from = 26 + 22 * (k as u32 - 1);
+            let (a, b) = (at(from, 11), at(from + 11, 11));
+            *w = (a << 19) | (b << 8) | (bch_syndrome(a << 4) << 4) | bch_syndrome(b << 4);
+        }
+        out
+    }
+
+    /// A GEO's D2 subframe 1 pages 1 and 3–10 written with the bit table of Figure 5-10
+    /// (page 1 at SOW 100 000) decode into the ephemeris with the GEO orbit; fields split
+    /// between pages keep their sign; a page missing, out of its cycle, or with a flipped bit
+    /// makes none. (The walk's log has no GEO: this checks the assembly, not the ICD's table.)
+    #[test]
+    fn d2_pages_make_a_geo_ephemeris() {
+        // The encoder gives back the receiver's own words (C21's D1 subframes).
+        for w in &C21 {
+            assert_eq!(words_from_info(&info_bits(w).unwrap()), *w);
+        }
+        let mut pages = [[0u128; 2]; 10];
+        for (k, d) in pages.iter_mut().enumerate() {
+            put(d, 0, 11, 0x712);
+            put(d, 15, 3, 1);
+            put(d, 18, 20, 100_000 + 3 * k as i64);
+            put(d, 38, 4, k as i64 + 1);
+        }
+        let split =
+            |pages: &mut [[u128; 2]; 10], (p1, a1, n1): (usize, u32, u32), (p2, a2, n2): (usize, u32, u32), v: i64| {
+                put(&mut pages[p1 - 1], a1, n1, v >> n2);
+                put(&mut pages[p2 - 1], a2, n2, v);
+            };
+        put(&mut pages[0], 48, 4, 2); // URAI
+        put(&mut pages[0], 52, 13, 1025); // week
+        put(&mut pages[0], 65, 17, 50_850); // toc / 8
+        put(&mut pages[0], 82, 10, -133); // TGD1
+        put(&mut pages[2], 80, 24, -1_234_567); // a0
+        split(&mut pages, (3, 104, 4), (4, 42, 18), -1_000_001); // a1
+        put(&mut pages[3], 60, 11, -3); // a2
+        put(&mut pages[3], 71, 5, 17); // AODE
+        put(&mut pages[3], 76, 16, -12_345); // Δn
+        split(&mut pages, (4, 92, 14), (5, 42, 4), -54_321); // Cuc
+        put(&mut pages[4], 46, 32, -2_000_000_000); // M0
+        put(&mut pages[4], 78, 18, 77_777); // Cus
+        split(&mut pages, (5, 96, 10), (6, 42, 22), 0x00AB_CDEF); // e
+        put(&mut pages[5], 64, 32, 0xC1D2_E3F4u32 as i64); // √A
+        split(&mut pages, (6, 96, 10), (7, 42, 8), -1_234); // Cic
+        put(&mut pages[6], 50, 18, -4_321); // Cis
+        put(&mut pages[6], 68, 17, 50_850); // toe / 8
+        split(&mut pages, (7, 85, 21), (8, 42, 11), -123_456_789); // i0
+        put(&mut pages[7], 53, 18, -99_999); // Crc
+        put(&mut pages[7], 71, 18, 88_888); // Crs
+        split(&mut pages, (8, 89, 19), (9, 42, 5), -456_789); // Ω̇
+        put(&mut pages[8], 47, 32, 1_500_000_000); // Ω0
+        split(&mut pages, (9, 79, 27), (10, 42, 5), -987_654_321); // ω
+        put(&mut pages[9], 47, 14, -4_321); // IDOT
+        let words: Vec<[u32; 10]> = pages.iter().map(words_from_info).collect();
+        let mut a = D2Assembler::default();
+        let mut eph = None;
+        for (k, w) in words.iter().enumerate() {
+            let p = decode_d2(w).unwrap().unwrap();
+            assert_eq!((p.page, p.sow_s), (k as u8 + 1, 100_000 + 3 * k as u32));
+            if k != 1 {
+                eph = a.on_page(1, &p).or(eph);
+            }
+        }
+        let e = eph.expect("an ephemeris after page 10");
+        let o = e.orbit();
+        let sc = GPS_PI;
+        assert_eq!(o.frame, OrbitFrame::BeiDouGeo);
+        assert_eq!((e.s1.week, e.s1.urai, e.s1.aode, e.sow_s), (1025, 2, 17, 100_000));
+        assert_eq!((o.toe_s, o.toc_s), (406_800.0, 406_800.0));
+        let want = [
+            (e.s1.tgd1_s, -133.0 * 0.1e-9),
+            (o.af[0], -1_234_567.0 * p2(-33)),
+            (o.af[1], -1_000_001.0 * p2(-50)),
+            (o.af[2], -3.0 * p2(-66)),
+            (o.delta_n_rad_s, -12_345.0 * p2(-43) * sc),
+            (o.cuc, -54_321.0 * p2(-31)),
+            (o.m0_rad, -2e9 * p2(-31) * sc),
+            (o.cus, 77_777.0 * p2(-31)),
+            (o.e, f64::from(0x00AB_CDEFu32) * p2(-33)),
+            (o.sqrt_a, f64::from(0xC1D2_E3F4u32) * p2(-19)),
+            (o.cic, -1_234.0 * p2(-31)),
+            (o.cis, -4_321.0 * p2(-31)),
+            (o.i0_rad, -123_456_789.0 * p2(-31) * sc),
+            (o.crc, -99_999.0 * p2(-6)),
+            (o.crs, 88_888.0 * p2(-6)),
+            (o.omega_dot_rad_s, -456_789.0 * p2(-43) * sc),
+            (o.omega0_rad, 1.5e9 * p2(-31) * sc),
+            (o.omega_rad, -987_654_321.0 * p2(-31) * sc),
+            (o.idot_rad_s, -4_321.0 * p2(-43) * sc),
+        ];
+        for (i, (ours, exp)) in want.iter().enumerate() {
+            assert_eq!(ours, exp, "field {i}");
+        }
+        // Page 7 of another cycle: no ephemeris; a flipped bit: rejected.
+        let mut late = decode_d2(&words[6]).unwrap().unwrap();
+        late.sow_s += 30;
+        let mut b = D2Assembler::default();
+        for (k, w) in words.iter().enumerate().filter(|(k, _)| *k != 1 && *k != 6) {
+            assert_eq!(b.on_page(1, &decode_d2(w).unwrap().unwrap()), None, "page {}", k + 1);
+        }
+        assert_eq!(b.on_page(1, &late), None);
+        let mut bad = words[3];
+        bad[4] ^= 1 << 12;
+        assert_eq!(decode_d2(&bad), Err(BdsError::Parity(4)));
+        let mut page0 = pages[0];
+        put(&mut page0, 38, 4, 0);
+        assert_eq!(decode_d2(&words_from_info(&page0)), Err(BdsError::Page(0)));
     }
 
     #[test]

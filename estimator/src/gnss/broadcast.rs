@@ -1,15 +1,16 @@
 //! The navigation data words of every system the decoders read, routed by u-blox `gnssId` and
 //! `sigId` (UBX-RXM-SFRBX, as a [`GnssNavData`](navsync_wire::samples::GnssNavData) carries
 //! them) to their decoders and assembled per satellite into ephemerides: Galileo I/NAV
-//! ([`galileo`](super::galileo): E1-B sigId 1, E5b-I sigId 5) and BeiDou D1 ([`beidou`]:
-//! B1I sigId 0, B2I sigId 2, B3I sigId 4, MEO/IGSO PRNs). GPS LNAV keeps its own path
+//! ([`galileo`](super::galileo): E1-B sigId 1, E5b-I sigId 5) and BeiDou ([`beidou`]: D1 of
+//! the MEO/IGSO PRNs on B1I sigId 0, B2I sigId 2, B3I sigId 4; D2 of the GEO PRNs on sigId 1,
+//! 3, 10). GPS LNAV keeps its own path
 //! ([`ranges::EphemerisStore`](super::ranges::EphemerisStore)).
 //!
 //! Every ephemeris yields a [`BroadcastEphemeris`]: the system-neutral part an ephemeris store
 //! keyed by (gnss id, sv id) holds for GPS, Galileo and BeiDou alike: the [`Orbit`] (with its
 //! [`OrbitFrame`](super::orbit::OrbitFrame)), issue, health and accuracy.
 
-use super::beidou::{self, BdsAssembler, BdsEphemeris, BdsError};
+use super::beidou::{self, BdsAssembler, BdsEphemeris, BdsError, D2Assembler};
 use super::galileo::{self, GalAssembler, GalEphemeris, InavError};
 use super::orbit::Orbit;
 
@@ -28,7 +29,7 @@ const MAX_BDS: usize = 63;
 pub enum NavEphemeris {
     /// Galileo I/NAV.
     Galileo(GalEphemeris),
-    /// BeiDou D1.
+    /// BeiDou D1 (MEO/IGSO) or D2 (GEO).
     Beidou(BdsEphemeris),
 }
 
@@ -80,8 +81,8 @@ pub enum NavWordsError {
     /// A Galileo I/NAV page pair was rejected.
     #[error("Galileo I/NAV: {0}")]
     Galileo(#[from] InavError),
-    /// A BeiDou D1 subframe was rejected.
-    #[error("BeiDou D1: {0}")]
+    /// A BeiDou D1 or D2 subframe was rejected.
+    #[error("BeiDou: {0}")]
     Beidou(#[from] BdsError),
 }
 
@@ -90,11 +91,11 @@ pub enum NavWordsError {
 pub struct NavCounts {
     /// Galileo I/NAV page pairs decoded.
     pub galileo_words: u64,
-    /// BeiDou D1 subframes decoded.
+    /// BeiDou D1 and D2 subframes decoded.
     pub beidou_subframes: u64,
     /// Messages rejected (CRC, parity, preamble, page layout).
     pub rejected: u64,
-    /// Messages of other systems and signals, or of satellites out of range (GEO D2).
+    /// Messages of other systems and signals, or of satellites out of range.
     pub ignored: u64,
 }
 
@@ -103,6 +104,7 @@ pub struct NavCounts {
 pub struct NavCollector {
     gal: [GalAssembler; MAX_GAL],
     bds: [BdsAssembler; MAX_BDS],
+    geo: [D2Assembler; MAX_BDS],
     /// What came in.
     pub counts: NavCounts,
 }
@@ -112,6 +114,7 @@ impl Default for NavCollector {
         Self {
             gal: [GalAssembler::default(); MAX_GAL],
             bds: [BdsAssembler::default(); MAX_BDS],
+            geo: [D2Assembler::default(); MAX_BDS],
             counts: NavCounts::default(),
         }
     }
@@ -142,10 +145,49 @@ impl NavCollector {
                 let a = &mut self.bds[slot.unwrap_or(0)];
                 Ok(a.on_subframe(sv_id, &sf).map(NavEphemeris::Beidou))
             }
+            (GNSS_ID_BEIDOU, 1 | 3 | 10) if slot.is_some_and(|i| i < MAX_BDS) && beidou::is_geo(sv_id) => {
+                let page = beidou::decode_d2(words).inspect_err(|_| self.counts.rejected += 1)?;
+                self.counts.beidou_subframes += 1;
+                let a = &mut self.geo[slot.unwrap_or(0)];
+                Ok(page.and_then(|p| a.on_page(sv_id, &p)).map(NavEphemeris::Beidou))
+            }
             _ => {
                 self.counts.ignored += 1;
                 Ok(None)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Any words, satellite and signal numbers: decoded, rejected or ignored, never a panic.
+    #[test]
+    fn arbitrary_words_never_panic() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let mut c = NavCollector::default();
+        for _ in 0..100_000 {
+            let r = next();
+            let mut words = [0u32; 16];
+            for w in &mut words {
+                *w = next() as u32;
+            }
+            let n = (r % 17) as usize;
+            let gnss = [GNSS_ID_GALILEO, GNSS_ID_BEIDOU][(r >> 8) as usize % 2];
+            let sig = [0u8, 1, 2, 3, 4, 5, 10, 200][(r >> 16) as usize % 8];
+            let sv = (r >> 24) as u8;
+            let _ = c.on_words(gnss, sv, sig, &words[..n]);
+        }
+        let k = c.counts;
+        assert_eq!(k.galileo_words + k.beidou_subframes + k.rejected + k.ignored, 100_000);
+        assert!(k.rejected > 0 && k.ignored > 0);
     }
 }

@@ -4,7 +4,7 @@
 //! ionosphere and a standard troposphere ([`spp`]), and a receiver's raw measurements paired
 //! with the broadcast ephemerides for the filter ([`ranges`]); GLONASS immediate data and
 //! its numerically integrated orbit after the GLONASS ICD ([`glonass`]: geometry only, not
-//! fused yet); Galileo I/NAV ([`galileo`]) and BeiDou D1 ([`beidou`]) ephemerides, assembled
+//! fused yet); Galileo I/NAV ([`galileo`]) and BeiDou D1/D2 ([`beidou`]) ephemerides, assembled
 //! per satellite from the receiver's navigation data words ([`broadcast`]), their orbits
 //! through [`orbit`] with each system's constants (not fused yet).
 
