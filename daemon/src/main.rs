@@ -12,7 +12,8 @@ use navsync::live::{
     status, trigger, web,
 };
 use navsync::tools::{
-    analyze, check_config, convert, decode, eval, geotag, install, kf_gins, ptp_config, python_types, report, spp,
+    analyze, check_config, convert, decode, eval, geotag, install, kf_gins, ptp_config, python_types, report,
+    rinex_export, spp,
 };
 use navsync::{config, logging};
 
@@ -84,6 +85,9 @@ enum Cmd {
     /// Imports another system's data files into a navsync recording.
     #[command(subcommand)]
     Import(kf_gins::ImportCommand),
+    /// Writes a recording's data in another system's file formats.
+    #[command(subcommand)]
+    Export(rinex_export::ExportCommand),
     /// Position, velocity and attitude error statistics of a trajectory against a reference.
     Eval(eval::EvalArgs),
     /// GPS single-point positioning of a recording's raw data and navigation data, epoch by
@@ -207,6 +211,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Web(o) => web::run(&o).context("web"),
         Cmd::Analyze(c) => analyze::main(c, &cfg),
         Cmd::Import(c) => kf_gins::main(c),
+        Cmd::Export(c) => rinex_export::main(c).context("export"),
         Cmd::Eval(o) => eval::run(&o).map(drop).context("eval"),
         Cmd::Spp(o) => spp::run(&o).context("spp"),
         Cmd::Report(o) => report::main(o, &cfg),

@@ -14,5 +14,6 @@ pub mod ptp_config;
 pub mod python_types;
 pub mod report;
 pub mod rinex;
+pub mod rinex_export;
 pub mod sim_fast;
 pub mod spp;

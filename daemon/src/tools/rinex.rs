@@ -30,6 +30,9 @@ use navsync_shared::time::{NS_PER_S, utc_ns_from_gps_ns};
 
 use super::kf_gins::{HOST_BASE_NS, WEEK_NS};
 
+/// Seconds in a GPS week.
+const WEEK_S: f64 = 604_800.0;
+
 /// `navsync import rinex`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct RinexArgs {
@@ -227,6 +230,94 @@ pub fn subframes_of(e: &GpsEphemeris, file: &str, worst: &mut f64) -> Result<[Su
     Ok([Subframe::Ephem1(s1), Subframe::Ephem2(s2), Subframe::Ephem3(s3)])
 }
 
+/// An ephemeris from LNAV subframes 1–3 in RINEX units, the inverse of [`subframes_of`]
+/// (IS-GPS-200 Tables 20-I and 20-III scale factors; RINEX 3.05 Table A8 fields). `near_week`
+/// (a full GPS week, e.g. of the receiver's epochs) resolves the broadcast week number mod
+/// 1024; t_oc's week is t_oe's, or the one next to it when t_oc is half a week away (a
+/// crossing of the week's end). The URA index becomes its nominal accuracy (§20.3.3.3.1.3;
+/// index 15 above 6144 m), the fit interval flag 4 h or, set, the interval its IODC says
+/// (Table 20-XII); the transmission time is subframe 1's start (its HOW's count − 6 s).
+pub fn ephemeris_of(
+    prn: u8,
+    how_tow_count: u32,
+    s1: &Ephem1,
+    s2: &Ephem2,
+    s3: &Ephem3,
+    near_week: u32,
+) -> GpsEphemeris {
+    let p2 = |lsb: i32| 2f64.powi(lsb);
+    let semi = |v: f64, lsb: i32| v * p2(lsb) * GPS_PI;
+    // The full week ≡ wn (mod 1024) nearest to near_week.
+    let wn = i64::from(s1.wn % 1024);
+    let k = ((i64::from(near_week) - wn) as f64 / 1024.0).round() as i64;
+    let week = (wn + 1024 * k).max(0) as u32;
+    let (toc_s, toe_s) = (f64::from(s1.toc) * 16.0, f64::from(s2.toe) * 16.0);
+    let toc_week = match toc_s - toe_s {
+        d if d > WEEK_S / 2.0 => week.saturating_sub(1),
+        d if d < -WEEK_S / 2.0 => week + 1,
+        _ => week,
+    };
+    let accuracy_m = navsync_estimator::gnss::ranges::ura_m(s1.ura).unwrap_or(2.0 * 6144.0);
+    let fit_h = match (s2.fit, s1.iodc) {
+        (0, _) => 4.0,
+        (_, 240..=247) => 8.0,
+        (_, 248..=255 | 496) => 14.0,
+        (_, 497..=503 | 1021..=1023) => 26.0,
+        _ => 6.0,
+    };
+    GpsEphemeris {
+        prn,
+        line: 0,
+        toc_week,
+        toc_s,
+        af: [
+            f64::from(s1.af0) * p2(-31),
+            f64::from(s1.af1) * p2(-43),
+            f64::from(s1.af2) * p2(-55),
+        ],
+        iode: f64::from(s2.iode),
+        crs: f64::from(s2.crs) * p2(-5),
+        delta_n: semi(f64::from(s2.delta_n), -43),
+        m0: semi(f64::from(s2.m0), -31),
+        cuc: f64::from(s2.cuc) * p2(-29),
+        e: f64::from(s2.e) * p2(-33),
+        cus: f64::from(s2.cus) * p2(-29),
+        sqrt_a: f64::from(s2.sqrt_a) * p2(-19),
+        toe_s,
+        cic: f64::from(s3.cic) * p2(-29),
+        omega0: semi(f64::from(s3.omega0), -31),
+        cis: f64::from(s3.cis) * p2(-29),
+        i0: semi(f64::from(s3.i0), -31),
+        crc: f64::from(s3.crc) * p2(-5),
+        omega: semi(f64::from(s3.omega), -31),
+        omega_dot: semi(f64::from(s3.omega_dot), -43),
+        idot: semi(f64::from(s3.idot), -43),
+        l2_codes: f64::from(s1.l2),
+        week: f64::from(week),
+        l2p: f64::from(s1.l2p),
+        accuracy_m,
+        health: f64::from(s1.health),
+        tgd_s: f64::from(s1.tgd) * p2(-31),
+        iodc: f64::from(s1.iodc),
+        tx_time_s: (f64::from(how_tow_count) * 6.0 - 6.0).rem_euclid(WEEK_S),
+        fit_h,
+    }
+}
+
+/// Subframe 4 page 18's Klobuchar α/β in RINEX units (s, s/semicircle, …), the inverse of
+/// [`iono_page`].
+pub fn iono_of_page(page: &IonoUtc) -> ([f64; 4], [f64; 4]) {
+    let mut alpha = [0.0; 4];
+    let mut beta = [0.0; 4];
+    for (k, lsb) in [-30, -27, -24, -24].into_iter().enumerate() {
+        alpha[k] = f64::from(page.alpha[k]) * 2f64.powi(lsb);
+    }
+    for (k, lsb) in [11, 14, 16, 16].into_iter().enumerate() {
+        beta[k] = f64::from(page.beta[k]) * 2f64.powi(lsb);
+    }
+    (alpha, beta)
+}
+
 /// The header's α/β as subframe 4 page 18 (Table 20-X scale factors; UTC parameters zero).
 pub fn iono_page(alpha: [f64; 4], beta: [f64; 4], file: &str) -> Result<IonoUtc, RinexError> {
     let mut q = Quantiser {
@@ -401,6 +492,25 @@ mod tests {
         );
         assert_eq!((s3.omega_dot, s3.idot, s3.iode), (-2000, -1000, 77));
         assert!(worst < 1e-3, "{worst}");
+        // And back: the subframes' ephemeris quantises to the same subframes.
+        let back = ephemeris_of(3, 1201, &s1, &s2, &s3, 1300);
+        assert_eq!((back.week, back.toc_week, back.tx_time_s), (1316.0, 1316, 7200.0));
+        assert_eq!((back.crs, back.delta_n, back.sqrt_a), (e.crs, e.delta_n, e.sqrt_a));
+        let again = subframes_of(&back, "x", &mut worst).unwrap();
+        assert_eq!(
+            again,
+            [Subframe::Ephem1(s1), Subframe::Ephem2(s2), Subframe::Ephem3(s3)]
+        );
+        assert!(worst < 1e-3, "{worst}");
+        let page = iono_page(
+            [1.118e-8, 1.49e-8, -5.96e-8, -5.96e-8],
+            [88_060.0, 16_380.0, -196_600.0, -131_100.0],
+            "x",
+        )
+        .unwrap();
+        let (a, b) = iono_of_page(&page);
+        assert_eq!(iono_page(a, b, "x").unwrap(), page);
+        assert!((a[0] - 1.118e-8).abs() < 2f64.powi(-31) && (b[2] + 196_600.0).abs() <= 2f64.powi(15));
         let bad = GpsEphemeris { crs: 2000.0, ..e };
         let err = subframes_of(&bad, "x.05n", &mut worst).unwrap_err();
         assert_eq!((err.file.as_str(), err.line, err.field.as_str()), ("x.05n", 42, "Crs"));

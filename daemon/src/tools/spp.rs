@@ -12,7 +12,7 @@ use navsync_estimator::gnss::spp::{self, Observation, SppError, SppSettings};
 use navsync_recording::SampleReader;
 use navsync_recording::output::{OutputFile, Overwrite};
 use navsync_shared::earth::geodetic_from_ecef;
-use navsync_shared::samples::AnySample;
+use navsync_shared::samples::{AnySample, GnssRaw};
 use navsync_shared::services;
 
 /// `navsync spp`.
@@ -100,20 +100,7 @@ pub fn solve_recording(args: &SppArgs) -> anyhow::Result<SppRun> {
             AnySample::NavData(d) if s.service == nav_service => store.on_nav_data(&d),
             AnySample::Raw(raw) if s.service == raw_service => {
                 run.epochs += 1;
-                // The satellite clock is in the pseudorange of each `SatRange`.
-                let e = store.range_epoch(&raw, raw.stamp.host_ns, 0.0, &mut run.counts);
-                let obs: Vec<Observation> = e
-                    .sats()
-                    .iter()
-                    .map(|r| Observation {
-                        sv: r.sv,
-                        pseudorange_m: r.pseudorange_m,
-                        sat_ecef_m: r.sat_ecef_m,
-                        sat_clock_s: 0.0,
-                        sigma_zenith_m: args.pseudorange_std_m.max(r.pseudorange_std_m),
-                    })
-                    .collect();
-                match spp::solve(&obs, e.iono.as_ref(), e.tow_s, init, &settings) {
+                match solve_epoch(&store, &raw, init, &settings, args.pseudorange_std_m, &mut run.counts) {
                     Ok(sol) => {
                         init = sol.ecef_m;
                         run.solutions.push(EpochSolution {
@@ -130,6 +117,33 @@ pub fn solve_recording(args: &SppArgs) -> anyhow::Result<SppRun> {
         }
     }
     Ok(run)
+}
+
+/// The single-point solution of one raw epoch with the ephemerides `store` holds, iterated
+/// from `init` (ECEF m); each satellite's σ at zenith is the larger of `pseudorange_std_m` and
+/// its broadcast URA.
+pub fn solve_epoch(
+    store: &EphemerisStore,
+    raw: &GnssRaw,
+    init: [f64; 3],
+    settings: &SppSettings,
+    pseudorange_std_m: f64,
+    counts: &mut RangeBuildCounts,
+) -> Result<spp::Solution, SppError> {
+    // The satellite clock is in the pseudorange of each `SatRange`.
+    let e = store.range_epoch(raw, raw.stamp.host_ns, 0.0, counts);
+    let obs: Vec<Observation> = e
+        .sats()
+        .iter()
+        .map(|r| Observation {
+            sv: r.sv,
+            pseudorange_m: r.pseudorange_m,
+            sat_ecef_m: r.sat_ecef_m,
+            sat_clock_s: 0.0,
+            sigma_zenith_m: pseudorange_std_m.max(r.pseudorange_std_m),
+        })
+        .collect();
+    spp::solve(&obs, e.iono.as_ref(), e.tow_s, init, settings)
 }
 
 /// East, north, up of `p − reference`, m.

@@ -21,6 +21,7 @@ pub mod geoid;
 pub mod nmea;
 pub mod order;
 pub mod rinex;
+pub mod rinex_write;
 pub mod ubx;
 
 use std::str::FromStr;

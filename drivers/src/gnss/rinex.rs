@@ -268,32 +268,50 @@ fn version_line(lines: &mut Lines<'_>, want: char) -> Result<(f64, char), RinexE
     Ok((version, system))
 }
 
+/// RINEX 3 signals (system letter, band digit, attribute; RINEX 3.05 §5.1, Tables 4–10) and
+/// their u-blox (gnssId, sigId) (u-blox interface description, "Signal identifiers"): the one
+/// table both directions use, [`ublox_signal`] (import) and [`rinex_signal`] (export). Where two
+/// RINEX codes name one u-blox signal (BeiDou B1I: C2I since RINEX 3.02, C1I before) the first
+/// is the one written.
+pub const SIGNALS: [(char, char, char, u8, u8); 20] = [
+    ('G', '1', 'C', 0, 0),
+    ('G', '2', 'L', 0, 3),
+    ('G', '2', 'S', 0, 4),
+    ('G', '5', 'I', 0, 6),
+    ('G', '5', 'Q', 0, 7),
+    ('S', '1', 'C', 1, 0),
+    ('E', '1', 'C', 2, 0),
+    ('E', '1', 'B', 2, 1),
+    ('E', '5', 'I', 2, 3),
+    ('E', '5', 'Q', 2, 4),
+    ('E', '7', 'I', 2, 5),
+    ('E', '7', 'Q', 2, 6),
+    ('C', '2', 'I', 3, 0),
+    ('C', '1', 'I', 3, 0),
+    ('C', '7', 'I', 3, 2),
+    ('J', '1', 'C', 5, 0),
+    ('J', '2', 'S', 5, 4),
+    ('J', '2', 'L', 5, 5),
+    ('R', '1', 'C', 6, 0),
+    ('R', '2', 'C', 6, 2),
+];
+
 /// The u-blox (gnssId, sigId) of a RINEX 3 signal: system letter, band digit, attribute
-/// (u-blox interface description, "Signal identifiers"); `None` for signals u-blox does not
-/// track (GPS P(Y), semi-codeless …).
+/// ([`SIGNALS`]); `None` for signals u-blox does not track (GPS P(Y), semi-codeless …).
 pub fn ublox_signal(system: char, band: char, attribute: char) -> Option<(u8, u8)> {
-    Some(match (system, band, attribute) {
-        ('G', '1', 'C') => (0, 0),
-        ('G', '2', 'L') => (0, 3),
-        ('G', '2', 'S') => (0, 4),
-        ('G', '5', 'I') => (0, 6),
-        ('G', '5', 'Q') => (0, 7),
-        ('S', '1', 'C') => (1, 0),
-        ('E', '1', 'C') => (2, 0),
-        ('E', '1', 'B') => (2, 1),
-        ('E', '5', 'I') => (2, 3),
-        ('E', '5', 'Q') => (2, 4),
-        ('E', '7', 'I') => (2, 5),
-        ('E', '7', 'Q') => (2, 6),
-        ('C', '2' | '1', 'I') => (3, 0),
-        ('C', '7', 'I') => (3, 2),
-        ('J', '1', 'C') => (5, 0),
-        ('J', '2', 'S') => (5, 4),
-        ('J', '2', 'L') => (5, 5),
-        ('R', '1', 'C') => (6, 0),
-        ('R', '2', 'C') => (6, 2),
-        _ => return None,
-    })
+    SIGNALS
+        .iter()
+        .find(|s| (s.0, s.1, s.2) == (system, band, attribute))
+        .map(|s| (s.3, s.4))
+}
+
+/// The RINEX 3 signal (system letter, band digit, attribute) of a u-blox (gnssId, sigId)
+/// ([`SIGNALS`], the inverse of [`ublox_signal`]); `None` for one the table does not hold.
+pub fn rinex_signal(gnss_id: u8, sig_id: u8) -> Option<(char, char, char)> {
+    SIGNALS
+        .iter()
+        .find(|s| (s.3, s.4) == (gnss_id, sig_id))
+        .map(|s| (s.0, s.1, s.2))
 }
 
 /// A RINEX 2 observation type as the RINEX 3 code it means (RINEX 3.05 §5.1 and Table A2 of
@@ -855,6 +873,18 @@ E11  23000000.500    23000005.000
             (7, 9, 216_000.0, 2109.0, 40.0, 4.0)
         );
         assert_eq!(f.iono_beta.unwrap()[3], -1.311e5);
+    }
+
+    #[test]
+    fn the_signal_table_maps_both_ways() {
+        for (sys, band, attr, g, sig) in SIGNALS {
+            assert_eq!(ublox_signal(sys, band, attr), Some((g, sig)));
+            let back = rinex_signal(g, sig).unwrap();
+            assert_eq!(ublox_signal(back.0, back.1, back.2), Some((g, sig)));
+        }
+        assert_eq!(rinex_signal(3, 0), Some(('C', '2', 'I')));
+        assert_eq!(rinex_signal(0, 0), Some(('G', '1', 'C')));
+        assert_eq!((rinex_signal(0, 1), ublox_signal('G', '2', 'W')), (None, None));
     }
 
     #[test]

@@ -11,6 +11,7 @@ mod history_generated;
 mod kf_gins;
 mod lnav_gpsd;
 mod recorded_models;
+mod rinex_export;
 mod rinex_spp;
 mod sim_gps;
 mod sim_sky;

@@ -16,14 +16,14 @@ use navsync_tests::{TestEnv, shared_material};
 use serde_json::Value;
 
 /// The stations and their marker positions (GEONET coordinates, the files' headers), ECEF m.
-const STATIONS: [(&str, [f64; 3]); 2] = [
+pub(crate) const STATIONS: [(&str, [f64; 3]); 2] = [
     ("0759", [-3976219.5082, 3382372.5671, 3652512.9849]),
     ("3040", [-3978242.4348, 3382841.1715, 3649902.7667]),
 ];
 /// The elevation mask both solutions use, degrees.
-const MASK_DEG: &str = "10";
+pub(crate) const MASK_DEG: &str = "10";
 
-fn files(station: &str) -> (PathBuf, PathBuf) {
+pub(crate) fn files(station: &str) -> (PathBuf, PathBuf) {
     let d = shared_material("datasets/rtklib-geonet-0759-3040");
     (
         d.join(format!("{station}0920.05o")),
@@ -31,7 +31,7 @@ fn files(station: &str) -> (PathBuf, PathBuf) {
     )
 }
 
-fn run_ok(env: &TestEnv, args: &[&str]) -> String {
+pub(crate) fn run_ok(env: &TestEnv, args: &[&str]) -> String {
     let o = env.command(args).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "navsync {args:?}: {}\n{err}", o.status);
@@ -135,7 +135,7 @@ fn geonet_stations_import_and_solve_within_a_metre_horizontally() {
 
 /// An RTKLIB program: `$env_var`, else its build beside the checkout
 /// (`../rtklib/app/consapp/NAME/gcc/NAME`); `None`, saying the test is skipped, without it.
-fn rtklib(name: &str, env_var: &str) -> Option<PathBuf> {
+pub(crate) fn rtklib(name: &str, env_var: &str) -> Option<PathBuf> {
     let built = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../rtklib/app/consapp/{name}/gcc/{name}"));
     let p = std::env::var_os(env_var).map_or(built, PathBuf::from);
     if !p.is_file() {
@@ -143,6 +143,30 @@ fn rtklib(name: &str, env_var: &str) -> Option<PathBuf> {
         return None;
     }
     Some(p)
+}
+
+/// RTKLIB's single-point solution of an OBS/NAV pair, per epoch (its time as printed, ECEF
+/// m): single point (-p 0), ECEF output (-e), GPS only, the same mask; broadcast ionosphere
+/// and Saastamoinen troposphere are rnx2rtkp's defaults.
+pub(crate) fn rtklib_spp(rnx2rtkp: &Path, obs: &Path, nav: &Path, out: &Path) -> Vec<(String, [f64; 3])> {
+    let o = std::process::Command::new(rnx2rtkp)
+        .args(["-p", "0", "-e", "-sys", "G", "-m", MASK_DEG, "-o"])
+        .arg(out)
+        .arg(obs)
+        .arg(nav)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "rnx2rtkp: {}", String::from_utf8_lossy(&o.stderr));
+    std::fs::read_to_string(out)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('%'))
+        .map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            let x = |k: usize| f[k].parse::<f64>().unwrap();
+            (format!("{} {}", f[0], f[1]), [x(2), x(3), x(4)])
+        })
+        .collect()
 }
 
 #[test]
@@ -154,24 +178,9 @@ fn geonet_spp_is_no_worse_than_rtklib() {
     for (station, reference) in STATIONS {
         let (obs, nav) = files(station);
         let pos = env.dir.join(format!("{station}.pos"));
-        // Single point (-p 0), ECEF output (-e), GPS only, the same mask; broadcast
-        // ionosphere and Saastamoinen troposphere are rnx2rtkp's defaults.
-        let o = std::process::Command::new(&rnx2rtkp)
-            .args(["-p", "0", "-e", "-sys", "G", "-m", MASK_DEG, "-o"])
-            .arg(&pos)
-            .arg(&obs)
-            .arg(&nav)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "rnx2rtkp: {}", String::from_utf8_lossy(&o.stderr));
-        let theirs: Vec<[f64; 3]> = std::fs::read_to_string(&pos)
-            .unwrap()
-            .lines()
-            .filter(|l| !l.starts_with('%'))
-            .map(|l| {
-                let f: Vec<f64> = l.split_whitespace().take(5).map(|x| x.parse().unwrap()).collect();
-                [f[2], f[3], f[4]]
-            })
+        let theirs: Vec<[f64; 3]> = rtklib_spp(&rnx2rtkp, &obs, &nav, &pos)
+            .into_iter()
+            .map(|(_, p)| p)
             .collect();
         assert!(theirs.len() > 100, "{station}: RTKLIB solved {} epochs", theirs.len());
         let (ours, _, _) = navsync_spp(&env, station, reference);

@@ -1,0 +1,256 @@
+//! `navsync export rinex REC.mcap --obs OUT.obs --nav OUT.nav`: a recording's raw
+//! measurements as a RINEX 3.05 observation file and the GPS ephemerides of its navigation
+//! data as a RINEX 3.05 navigation file, the inverse of `navsync import rinex` (the text is
+//! written by `navsync_drivers::gnss::rinex_write`, RINEX 3.05 Tables A2/A3 and A5/A8).
+//!
+//! The raw epochs (`GnssRaw` on `navsync/gnss/{id}/raw`, from `import rinex` or a u-blox
+//! receiver's RXM-RAWX) are written at their receiver time, GPS time. The navigation data
+//! (`GnssNavData` on `…/nav-data`, RXM-SFRBX) are decoded by the estimator's LNAV decoder
+//! (`gnss::lnav`, parity checked); every issue of subframes 1–3 whose IODC and IODEs agree is one
+//! ephemeris (the same issue repeated every 30 s is written once), scaled back to RINEX units by
+//! `rinex::ephemeris_of`, and the last subframe 4 page 18 gives the header's Klobuchar α/β. The
+//! header's `APPROX POSITION XYZ` is the first epoch's single-point solution (`navsync spp`'s),
+//! zeros when no epoch has one.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use navsync_drivers::gnss::rinex::GpsEphemeris;
+use navsync_drivers::gnss::rinex_write::{self, ObsHeader, RinexWriteError};
+use navsync_estimator::gnss::lnav::{self, Ephem1, Ephem2, Ephem3, Subframe};
+use navsync_estimator::gnss::ranges::{EphemerisStore, RangeBuildCounts};
+use navsync_estimator::gnss::spp::SppSettings;
+use navsync_recording::output::{OutputFile, Overwrite};
+use navsync_recording::{RecordingError, SampleReader};
+use navsync_shared::samples::{AnySample, GnssRaw};
+use navsync_shared::services;
+use navsync_shared::time::{civil_from_utc_ns, realtime_now_ns};
+
+use super::rinex::{ephemeris_of, iono_of_page};
+
+/// `navsync export …`.
+#[derive(Debug, Clone, clap::Subcommand)]
+pub enum ExportCommand {
+    /// A recording's raw measurements and GPS navigation data as RINEX 3.05 observation and
+    /// navigation files.
+    Rinex(RinexExportArgs),
+}
+
+/// `navsync export rinex`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RinexExportArgs {
+    /// The recording: a receiver's raw data and navigation data (`navsync import rinex`, or
+    /// recorded from a u-blox receiver's RXM-RAWX and RXM-SFRBX).
+    pub recording: PathBuf,
+    /// The observation file to write (RINEX 3.05).
+    #[arg(long)]
+    pub obs: PathBuf,
+    /// The GPS navigation file to write (RINEX 3.05).
+    #[arg(long)]
+    pub nav: PathBuf,
+    /// The receiver's id in the recording (`navsync/gnss/ID/raw`, `…/nav-data`).
+    #[arg(long, default_value = "0", value_parser = crate::config::estimator::parse_id)]
+    pub gnss_id: String,
+    /// The header's MARKER NAME (default: the recording's file name without its extension).
+    #[arg(long)]
+    pub marker: Option<String>,
+    /// Replace existing files at --obs and --nav.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Errors of the RINEX export.
+#[derive(Debug, thiserror::Error)]
+pub enum RinexExportError {
+    /// Reading the recording or writing a file.
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+    /// The observations could not be written (no epoch …).
+    #[error(transparent)]
+    Write(#[from] RinexWriteError),
+    /// An output exists and --force was not given.
+    #[error("{0} exists: --force replaces it")]
+    Exists(PathBuf),
+    /// --obs and --nav name one file.
+    #[error("--obs and --nav are the same file ({0})")]
+    SameOutput(PathBuf),
+    /// Writing a temporary output.
+    #[error("writing {path}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+}
+
+/// What an export wrote.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ExportStats {
+    /// Observation epochs.
+    pub epochs: u64,
+    /// Measurements in them.
+    pub measurements: u64,
+    /// Measurements without a RINEX code (not written).
+    pub unmapped: u64,
+    /// GPS ephemerides written.
+    pub ephemerides: u64,
+    /// Navigation messages that failed the LNAV parity or preamble check.
+    pub bad_subframes: u64,
+    /// The header's Klobuchar α/β were written (subframe 4 page 18 seen).
+    pub iono: bool,
+    /// The header's approximate position (first single-point solution), if any epoch solved.
+    pub approx_ecef_m: Option<[f64; 3]>,
+}
+
+/// Subframes 1–3 of one satellite as last received, with subframe 1's HOW count.
+#[derive(Default, Clone, Copy)]
+struct Issue {
+    s1: Option<(Ephem1, u32)>,
+    s2: Option<Ephem2>,
+    s3: Option<Ephem3>,
+}
+
+/// Runs `navsync export rinex` and prints what it wrote.
+pub fn main(cmd: ExportCommand) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let ExportCommand::Rinex(args) = cmd;
+    let s = export(&args).with_context(|| format!("exporting {}", args.recording.display()))?;
+    eprintln!(
+        "{}: {} epochs, {} measurements ({} of signals without a RINEX code left out); {}: {} GPS \
+         ephemerides{} ({} navigation messages failed the parity check)",
+        args.obs.display(),
+        s.epochs,
+        s.measurements,
+        s.unmapped,
+        args.nav.display(),
+        s.ephemerides,
+        if s.iono { " and the Klobuchar α/β" } else { "" },
+        s.bad_subframes
+    );
+    match s.approx_ecef_m {
+        Some(p) => eprintln!(
+            "  approximate position (first SPP solution, ECEF m): {:.4},{:.4},{:.4}",
+            p[0], p[1], p[2]
+        ),
+        None => eprintln!("  no epoch solved: approximate position written as zeros"),
+    }
+    anyhow::ensure!(s.ephemerides > 0, "no GPS ephemeris in {}", args.recording.display());
+    Ok(())
+}
+
+/// Runs `navsync export rinex`.
+pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
+    if navsync_recording::output::same_file(&args.obs, &args.nav) || args.obs == args.nav {
+        return Err(RinexExportError::SameOutput(args.obs.clone()));
+    }
+    for p in [&args.obs, &args.nav] {
+        if !args.force && p.exists() {
+            return Err(RinexExportError::Exists(p.clone()));
+        }
+    }
+    let (raw_service, nav_service) = (
+        services::gnss_raw(&args.gnss_id),
+        services::gnss_nav_data(&args.gnss_id),
+    );
+    let mut reader = SampleReader::open(&args.recording)?;
+    let mut stats = ExportStats::default();
+    let mut epochs: Vec<GnssRaw> = Vec::new();
+    // Ephemerides in the order their issues completed, and when (index of the next epoch).
+    let mut issues = [Issue::default(); 32];
+    let mut complete: Vec<(u8, u32, Ephem1, Ephem2, Ephem3)> = Vec::new();
+    let mut iono = None;
+    // The first single-point solution, with the ephemerides received up to its epoch.
+    let mut store = EphemerisStore::default();
+    let settings = SppSettings::default();
+    let mut counts = RangeBuildCounts::default();
+    while let Some(s) = reader.next_sample()? {
+        match s.sample {
+            AnySample::Raw(raw) if s.service == raw_service => {
+                if stats.approx_ecef_m.is_none() {
+                    stats.approx_ecef_m = super::spp::solve_epoch(&store, &raw, [0.0; 3], &settings, 3.0, &mut counts)
+                        .ok()
+                        .map(|sol| sol.ecef_m);
+                }
+                stats.measurements += u64::from(raw.num_meas);
+                epochs.push(raw);
+            }
+            AnySample::NavData(d) if s.service == nav_service => {
+                store.on_nav_data(&d);
+                if d.gnss_id != 0 || d.num_words < 10 {
+                    continue;
+                }
+                let Ok(dec) = lnav::decode(&d.words[..10]) else {
+                    stats.bad_subframes += 1;
+                    continue;
+                };
+                let Some(issue) = usize::from(d.sv_id).checked_sub(1).and_then(|i| issues.get_mut(i)) else {
+                    continue;
+                };
+                match dec.subframe {
+                    Subframe::Ephem1(s1) => issue.s1 = Some((s1, dec.tow_count)),
+                    Subframe::Ephem2(s2) => issue.s2 = Some(s2),
+                    Subframe::Ephem3(s3) => issue.s3 = Some(s3),
+                    Subframe::IonoUtc(page) => iono = Some(iono_of_page(&page)),
+                    _ => continue,
+                }
+                if let (Some((s1, how)), Some(s2), Some(s3)) = (issue.s1, issue.s2, issue.s3) {
+                    let same_issue = (s1.iodc & 0xFF) as u8 == s2.iode && s2.iode == s3.iode;
+                    let seen = complete
+                        .iter()
+                        .any(|(prn, _, a, b, c)| *prn == d.sv_id && (*a, *b, *c) == (s1, s2, s3));
+                    if same_issue && !seen {
+                        complete.push((d.sv_id, how, s1, s2, s3));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    stats.epochs = epochs.len() as u64;
+    let near_week = epochs.first().map_or(0, |e| u32::from(e.week));
+    let ephemerides: Vec<GpsEphemeris> = complete
+        .iter()
+        .map(|(prn, how, s1, s2, s3)| ephemeris_of(*prn, *how, s1, s2, s3, near_week))
+        .collect();
+    stats.ephemerides = ephemerides.len() as u64;
+    stats.iono = iono.is_some();
+
+    let program = format!("navsync {}", env!("CARGO_PKG_VERSION"));
+    let c = civil_from_utc_ns(realtime_now_ns());
+    let date = format!(
+        "{:04}{:02}{:02} {:02}{:02}{:02} UTC",
+        c.year, c.month, c.day, c.hour, c.minute, c.second
+    );
+    let marker = args.marker.clone().unwrap_or_else(|| {
+        args.recording
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+    });
+    let header = ObsHeader {
+        program: program.clone(),
+        date: date.clone(),
+        marker,
+        approx_ecef_m: stats.approx_ecef_m.unwrap_or([0.0; 3]),
+    };
+    let obs = rinex_write::write_obs(&header, &epochs)?;
+    stats.unmapped = obs.unmapped;
+    let nav = rinex_write::write_nav(&program, &date, iono, &ephemerides);
+
+    // Both files complete before either is renamed into place.
+    let inputs = [args.recording.as_path()];
+    let rules = Overwrite::new(&inputs, args.force);
+    let mut files = Vec::new();
+    for (path, text) in [(&args.obs, &obs.text), (&args.nav, &nav)] {
+        let mut f = OutputFile::create(path, &rules)?;
+        f.write_all(text.as_bytes()).map_err(|source| RinexExportError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        files.push(f);
+    }
+    for f in files {
+        f.commit()?;
+    }
+    Ok(stats)
+}
