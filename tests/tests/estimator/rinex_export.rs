@@ -150,3 +150,55 @@ fn rtklib_solves_the_export_as_the_original_files() {
         assert!(worst <= 0.1, "{station}: {worst} m");
     }
 }
+
+/// Bad requests are errors that say what is wrong, with nothing written: a file that is not a
+/// recording, an output that is the input, one file for both outputs, a receiver id without raw
+/// data.
+#[test]
+fn export_refusals_say_why_and_write_nothing() {
+    let env = TestEnv::new("rinexexperr");
+    let (rec, xo, _) = import_and_export(&env, STATIONS[0].0);
+    let (o2, n2) = (env.dir.join("2.obs"), env.dir.join("2.nav"));
+    for (args, says) in [
+        (
+            vec![p(&xo), "--obs".into(), p(&o2), "--nav".into(), p(&n2)],
+            "not an MCAP file",
+        ),
+        (
+            vec![
+                p(&rec),
+                "--obs".into(),
+                p(&rec),
+                "--nav".into(),
+                p(&n2),
+                "--force".into(),
+            ],
+            "same file as the input",
+        ),
+        (
+            vec![p(&rec), "--obs".into(), p(&o2), "--nav".into(), p(&o2)],
+            "the same file",
+        ),
+        (
+            vec![
+                p(&rec),
+                "--obs".into(),
+                p(&o2),
+                "--nav".into(),
+                p(&n2),
+                "--gnss-id".into(),
+                "7".into(),
+            ],
+            "no observation epoch",
+        ),
+    ] {
+        let mut all = vec!["export", "rinex"];
+        all.extend(args.iter().map(String::as_str));
+        let o = env.command(&all).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{all:?}: {err}");
+        assert!(err.contains(says) && !err.contains("panicked"), "{all:?}: {err}");
+        assert!(!o2.exists() && !n2.exists(), "{all:?} wrote a file");
+    }
+    assert!(navsync_recording::output::is_recording(&rec), "the input was kept");
+}
