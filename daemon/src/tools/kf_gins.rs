@@ -343,6 +343,9 @@ pub enum ImportCommand {
     /// A RINEX observation file and its GPS navigation file (2.10/2.11, 3.0x): a receiver's
     /// raw measurements and LNAV subframes.
     Rinex(super::rinex::RinexArgs),
+    /// A u-blox receiver's own log (UBX: NAV-PVT, RXM-RAWX, RXM-SFRBX …), optionally with
+    /// RTKLIB's time-tag file of it, and an IMU file in KF-GINS's format.
+    Ubx(super::ubx_import::UbxArgs),
 }
 
 /// Runs `navsync import …` and prints what it wrote.
@@ -351,6 +354,7 @@ pub fn main(cmd: ImportCommand) -> anyhow::Result<()> {
     let args = match cmd {
         ImportCommand::KfGins(args) => args,
         ImportCommand::Rinex(args) => return super::rinex::main(&args),
+        ImportCommand::Ubx(args) => return super::ubx_import::main(&args),
     };
     let stats = import(&args).with_context(|| format!("importing into {}", args.out.display()))?;
     eprintln!(
@@ -472,28 +476,28 @@ pub struct ImportStats {
 }
 
 /// A sample on its way into the recording, ordered by its delivery (publish) time.
-struct Item {
-    publish_ns: i64,
-    service: String,
-    sample: AnySample,
+pub(crate) struct Item {
+    pub(crate) publish_ns: i64,
+    pub(crate) service: String,
+    pub(crate) sample: AnySample,
 }
 
 /// Maps GPS seconds of week to host and UTC time.
 #[derive(Clone, Copy)]
-struct Timeline {
-    week: i64,
+pub(crate) struct Timeline {
+    pub(crate) week: i64,
     /// Seconds of week of the first record (host time HOST_BASE_NS).
-    sow0: f64,
+    pub(crate) sow0: f64,
 }
 
 impl Timeline {
-    fn host_ns(&self, sow: f64) -> i64 {
+    pub(crate) fn host_ns(&self, sow: f64) -> i64 {
         HOST_BASE_NS + ((sow - self.sow0) * 1e9).round() as i64
     }
-    fn gps_ns(&self, sow: f64) -> i64 {
+    pub(crate) fn gps_ns(&self, sow: f64) -> i64 {
         self.week * WEEK_NS + (sow * 1e9).round() as i64
     }
-    fn utc_ns(&self, sow: f64) -> i64 {
+    pub(crate) fn utc_ns(&self, sow: f64) -> i64 {
         utc_ns_from_gps_ns(self.gps_ns(sow))
     }
 }
@@ -535,7 +539,7 @@ fn median_vel_std(path: &Path) -> Result<Option<f64>, KfGinsError> {
 }
 
 /// Median spacing of the first time tags of an IMU file, s.
-fn median_spacing(path: &Path) -> Result<f64, KfGinsError> {
+pub(crate) fn median_spacing(path: &Path) -> Result<f64, KfGinsError> {
     let mut ts = Vec::new();
     for r in Rows::open(path, &[7, 8])?.take(2001) {
         ts.push(r?.1[0]);
@@ -549,7 +553,7 @@ fn median_spacing(path: &Path) -> Result<f64, KfGinsError> {
     })
 }
 
-fn imu_items(
+pub(crate) fn imu_items(
     rows: impl Iterator<Item = Result<(usize, Vec<f64>), KfGinsError>>,
     tl: Timeline,
     nominal_dt: f64,
@@ -704,10 +708,27 @@ fn truth_items(
     })
 }
 
-/// Takes the earliest of several time-ordered streams.
-type Stream = Peekable<Box<dyn Iterator<Item = Result<Item, KfGinsError>>>>;
+/// `count` PPS edges at the whole GPS seconds of week from `first_sow` on (each delivered 1 ms
+/// after its edge, on `navsync/pps/0/edge`).
+pub(crate) fn pps_items(tl: Timeline, first_sow: i64, count: i64) -> impl Iterator<Item = Result<Item, KfGinsError>> {
+    (first_sow..first_sow + count.max(0)).enumerate().map(move |(i, s)| {
+        let host = tl.host_ns(s as f64);
+        let mut e = PpsEdge::zeroed();
+        e.stamp = Stamp::host(host, i as u64, StampSource::Simulated);
+        e.jitter_ns = 1_000.0;
+        e.assert_edge = 1;
+        Ok(Item {
+            publish_ns: host + 1_000_000,
+            service: services::pps_edge("0"),
+            sample: AnySample::PpsEdge(e),
+        })
+    })
+}
 
-fn pop_earliest(streams: &mut [Stream]) -> Option<Result<Item, KfGinsError>> {
+/// Takes the earliest of several time-ordered streams.
+pub(crate) type Stream = Peekable<Box<dyn Iterator<Item = Result<Item, KfGinsError>>>>;
+
+pub(crate) fn pop_earliest(streams: &mut [Stream]) -> Option<Result<Item, KfGinsError>> {
     let mut best: Option<(usize, i64)> = None;
     for (i, s) in streams.iter_mut().enumerate() {
         match s.peek() {
@@ -796,18 +817,7 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
     let first_edge = (first_imu - dt).ceil() as i64;
     let last_edge = last_imu.floor() as i64;
     let edges = if no_pps { 0 } else { last_edge - first_edge + 1 };
-    let pps = (first_edge..first_edge + edges.max(0)).enumerate().map(move |(i, s)| {
-        let host = tl.host_ns(s as f64);
-        let mut e = PpsEdge::zeroed();
-        e.stamp = Stamp::host(host, i as u64, StampSource::Simulated);
-        e.jitter_ns = 1_000.0;
-        e.assert_edge = 1;
-        Ok(Item {
-            publish_ns: host + 1_000_000,
-            service: services::pps_edge("0"),
-            sample: AnySample::PpsEdge(e),
-        })
-    });
+    let pps = pps_items(tl, first_edge, edges);
     let fix_service = services::gnss_fix("0");
     let fix_items = fixes.into_iter().map(move |f| {
         Ok(Item {
@@ -897,26 +907,38 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         }
         stats.ignored.clone_from(&c.ignored);
     }
-    // Log time: the UTC of the delivery instant (as `navsync sim --fast --record` writes it).
-    let utc_of_host = |h: i64| tl.utc_ns(tl.sow0) + (h - HOST_BASE_NS);
-    while let Some(item) = pop_earliest(&mut streams) {
+    write_streams(rec, &mut streams, tl.gps_ns(tl.sow0), &mut |s| match s {
+        AnySample::Imu(_) => stats.imu += 1,
+        AnySample::GnssFix(_) => stats.fixes += 1,
+        AnySample::PpsEdge(_) => stats.pps += 1,
+        AnySample::Truth(_) => stats.truth += 1,
+        _ => {}
+    })?;
+    Ok(stats)
+}
+
+/// Writes the earliest sample of `streams` until all are empty, each shown to `count` first,
+/// and closes the recording. Log time: the UTC of the delivery instant (as `navsync sim --fast
+/// --record` writes it) on the axis where host time `HOST_BASE_NS` is GPS time `gps0_ns`.
+pub(crate) fn write_streams(
+    mut rec: SampleRecorder<BufWriter<OutputFile>>,
+    streams: &mut [Stream],
+    gps0_ns: i64,
+    count: &mut dyn FnMut(&AnySample),
+) -> Result<(), KfGinsError> {
+    while let Some(item) = pop_earliest(streams) {
         let item = item?;
-        match item.sample {
-            AnySample::Imu(_) => stats.imu += 1,
-            AnySample::GnssFix(_) => stats.fixes += 1,
-            AnySample::PpsEdge(_) => stats.pps += 1,
-            AnySample::Truth(_) => stats.truth += 1,
-            _ => {}
-        }
+        count(&item.sample);
+        let utc = utc_ns_from_gps_ns(gps0_ns + (item.publish_ns - HOST_BASE_NS));
         rec.write(
             &item.service,
             &item.sample,
-            utc_of_host(item.publish_ns).max(0) as u64,
+            utc.max(0) as u64,
             item.publish_ns.max(0) as u64,
         )?;
     }
     rec.close()?;
-    Ok(stats)
+    Ok(())
 }
 
 #[cfg(test)]

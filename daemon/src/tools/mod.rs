@@ -17,3 +17,4 @@ pub mod rinex;
 pub mod rinex_export;
 pub mod sim_fast;
 pub mod spp;
+pub mod ubx_import;

@@ -7,3 +7,4 @@ mod record_replay;
 mod record_replay_data;
 mod record_replay_python;
 mod report;
+mod ubx_import;

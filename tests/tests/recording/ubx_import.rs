@@ -1,0 +1,371 @@
+//! `navsync import ubx` on a real receiver's own log (`../shared/datasets/rtklibexplorer-walk0827`:
+//! a u-blox X20's UBX log of a 134 s walk, RTKLIB's time-tag file of it, the IMU already on GPS
+//! time in KF-GINS's format): the recording holds what the live driver's decoder finds in the
+//! log, every channel's host times increase, the fixes lie on the IMU's axis (at their epoch
+//! plus the nominal latency, or at the logging PC's time of their chunk with `--tag`), and
+//! `replay --estimate` follows the receiver's RTK-fixed epochs, but not when the IMU is 1 s off.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra, Protocol};
+use navsync_recording::SampleReader;
+use navsync_shared::samples::{AnySample, GnssFix};
+use navsync_tests::{TestEnv, shared_material};
+use serde_json::Value;
+
+const WEEK_NS: i64 = 604_800_000_000_000;
+const WEEK: i64 = 2381;
+/// The bound on the horizontal RMS at the RTK-fixed epochs, m (measured 0.043 m; the IMU 1 s
+/// late gives 0.29 m).
+const RMS_BOUND_M: f64 = 0.15;
+
+fn data() -> PathBuf {
+    shared_material("datasets/rtklibexplorer-walk0827")
+}
+
+fn log() -> PathBuf {
+    data().join("source/gnss_1730.ubx")
+}
+
+fn tag() -> PathBuf {
+    data().join("source/gnss_1730.ubx.tag")
+}
+
+fn p(x: &Path) -> String {
+    x.display().to_string()
+}
+
+/// Runs navsync; its stderr.
+fn run_ok(env: &TestEnv, args: &[&str]) -> String {
+    let o = env.command(args).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "navsync {args:?}: {}\n{err}", o.status);
+    err
+}
+
+/// `import ubx` of the walk's log with `imu` and `extra` flags into `name`.mcap; the
+/// recording and the import's stderr.
+fn import(env: &TestEnv, name: &str, imu: &Path, extra: &[&str]) -> (PathBuf, String) {
+    let rec = env.dir.join(format!("{name}.mcap"));
+    let mut args = vec!["import", "ubx"];
+    let (l, i, r) = (p(&log()), p(imu), p(&rec));
+    args.extend([l.as_str(), "--imu", i.as_str(), "--out", r.as_str()]);
+    args.extend(extra);
+    let err = run_ok(env, &args);
+    (rec, err)
+}
+
+/// The GPS seconds of week of the IMU file's rows.
+fn imu_sows(imu: &Path) -> Vec<f64> {
+    std::fs::read_to_string(imu)
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.split_whitespace().next()?.parse().ok())
+        .collect()
+}
+
+/// What a recording holds.
+#[derive(Default)]
+struct Recorded {
+    fixes: Vec<GnssFix>,
+    raw: usize,
+    nav_data: usize,
+    imu_hosts: Vec<i64>,
+    pps_hosts: Vec<i64>,
+    /// `navsync.time_axis`: (host ns, GPS ns).
+    axis: (i64, i64),
+}
+
+impl Recorded {
+    /// GPS ns of a host time on the recording's axis.
+    fn gps_ns(&self, host_ns: i64) -> i64 {
+        self.axis.1 + (host_ns - self.axis.0)
+    }
+    /// Host ns of a GPS time.
+    fn host_ns(&self, gps_ns: i64) -> i64 {
+        self.axis.0 + (gps_ns - self.axis.1)
+    }
+}
+
+/// Reads a recording, checking every channel's stamps strictly increase.
+fn read(rec: &Path) -> Recorded {
+    let mut r = SampleReader::open(rec).unwrap();
+    let axis = r
+        .channel_metadata("navsync/imu/0/sample")
+        .into_iter()
+        .find(|(k, _)| k == "navsync.time_axis")
+        .map(|(_, v)| serde_json::from_str::<Value>(&v).unwrap())
+        .expect("navsync.time_axis on the IMU's channel");
+    let mut out = Recorded {
+        axis: (axis["host_ns"].as_i64().unwrap(), axis["gps_ns"].as_i64().unwrap()),
+        ..Recorded::default()
+    };
+    let mut last: HashMap<String, i64> = HashMap::new();
+    while let Some(s) = r.next_sample().unwrap() {
+        let host = match &s.sample {
+            AnySample::GnssFix(f) => f.stamp.host_ns,
+            AnySample::Raw(x) => x.stamp.host_ns,
+            AnySample::NavData(x) => x.stamp.host_ns,
+            AnySample::Imu(x) => x.stamp.host_ns,
+            AnySample::PpsEdge(x) => x.stamp.host_ns,
+            other => panic!("unexpected sample {other:?} on {}", s.service),
+        };
+        let prev = last.entry(s.service.to_string()).or_insert(i64::MIN);
+        assert!(host > *prev, "{}: host time {host} after {prev}", s.service);
+        *prev = host;
+        match s.sample {
+            AnySample::GnssFix(f) => out.fixes.push(f),
+            AnySample::Raw(_) => out.raw += 1,
+            AnySample::NavData(_) => out.nav_data += 1,
+            AnySample::Imu(_) => out.imu_hosts.push(host),
+            AnySample::PpsEdge(_) => out.pps_hosts.push(host),
+            _ => {}
+        }
+    }
+    out
+}
+
+/// What the live driver's decoder finds in the log: (fixes, raw epochs, navigation data).
+fn decoded_counts() -> (usize, usize, usize) {
+    let bytes = std::fs::read(log()).unwrap();
+    let (mut fixes, mut raw, mut nav) = (0, 0, 0);
+    let mut d = Decoder::new(Protocol::Ubx);
+    for chunk in bytes.chunks(4096) {
+        d.push_extras(chunk, 0, 0, &mut |_| fixes += 1, &mut |x| match x {
+            GnssExtra::Raw(_) => raw += 1,
+            GnssExtra::NavData(_) => nav += 1,
+            _ => {}
+        });
+    }
+    d.flush(&mut |_| fixes += 1);
+    (fixes, raw, nav)
+}
+
+/// Counts as the log's (the decoder's, `navsync decode`'s and the dataset README's figures),
+/// the IMU file's rows, and each IMU sample at its row's GPS time on the recording's axis.
+fn check_counts_and_imu_axis(r: &Recorded, imu: &[f64]) {
+    let (fixes, raw, nav) = decoded_counts();
+    assert_eq!(
+        (fixes, raw, nav),
+        (536, 536, 2328),
+        "the decoder on the log (README: 536, 536, 2328)"
+    );
+    assert_eq!((r.fixes.len(), r.raw, r.nav_data), (fixes, raw, nav));
+    assert_eq!(r.imu_hosts.len(), imu.len());
+    for (h, sow) in r.imu_hosts.iter().zip(imu) {
+        let g = WEEK * WEEK_NS + (sow * 1e9).round() as i64;
+        assert!((r.gps_ns(*h) - g).abs() <= 1_000, "IMU row {sow}: host {h}");
+    }
+    // PPS edges on whole GPS seconds, one a second over the span.
+    assert!(r.pps_hosts.len() >= 134, "{} PPS edges", r.pps_hosts.len());
+    for h in &r.pps_hosts {
+        assert_eq!(r.gps_ns(*h).rem_euclid(1_000_000_000), 0, "PPS edge at host {h}");
+    }
+}
+
+/// Each fix's epoch between the IMU samples around its GPS time (by the IMU file's rows), and
+/// its receipt after the epoch; the receipt latencies, s.
+fn check_fixes_on_the_imu_axis(r: &Recorded, imu: &[f64]) -> Vec<f64> {
+    let mut latencies = Vec::new();
+    let mut bracketed = 0;
+    for f in &r.fixes {
+        let s = (f.gps_ns - WEEK * WEEK_NS) as f64 * 1e-9;
+        let epoch_host = r.host_ns(f.gps_ns);
+        let k = imu.partition_point(|t| *t <= s);
+        if k > 0 && k < imu.len() {
+            assert!(
+                r.imu_hosts[k - 1] <= epoch_host && epoch_host < r.imu_hosts[k],
+                "fix at {s}: epoch host {epoch_host} not between the IMU rows {} and {}",
+                imu[k - 1],
+                imu[k]
+            );
+            bracketed += 1;
+        }
+        let latency = (f.stamp.host_ns - epoch_host) as f64 * 1e-9;
+        assert!(
+            latency > 0.0 && latency < 0.2,
+            "fix at {s} received {latency} s after its epoch"
+        );
+        latencies.push(latency);
+    }
+    assert!(bracketed >= 530, "{bracketed} fixes within the IMU's span");
+    latencies
+}
+
+#[test]
+fn the_walks_ubx_log_imports_with_its_counts_on_the_imus_time_axis() {
+    let env = TestEnv::new("ubximport");
+    let imu_path = data().join("imu.txt");
+    let imu = imu_sows(&imu_path);
+    let decode = run_ok(&env, &["decode", &p(&log())]);
+    assert!(decode.starts_with("536 epochs;"), "navsync decode: {decode}");
+    let (rec, err) = import(&env, "epochs", &imu_path, &[]);
+    assert!(
+        err.contains("536 fixes, 536 raw epochs, 2328 navigation data messages"),
+        "{err}"
+    );
+    let r = read(&rec);
+    check_counts_and_imu_axis(&r, &imu);
+    // Without tags: each fix the nominal 50 ms after its epoch.
+    for l in check_fixes_on_the_imu_axis(&r, &imu) {
+        assert!((l - 0.05).abs() < 1e-6, "latency {l}");
+    }
+}
+
+#[test]
+fn the_walks_ubx_log_with_its_time_tags_lies_at_the_logging_pcs_times() {
+    let env = TestEnv::new("ubxtag");
+    let imu_path = data().join("imu.txt");
+    let imu = imu_sows(&imu_path);
+    let (rec, err) = import(&env, "tags", &imu_path, &["--tag", &p(&tag())]);
+    // The tag file: 76-byte header, 1715 records of 8 bytes, the last at the log's end.
+    assert!(err.contains("1715 time tags, 0 bytes after the last"), "{err}");
+    let r = read(&rec);
+    check_counts_and_imu_axis(&r, &imu);
+    let mut lat = check_fixes_on_the_imu_axis(&r, &imu);
+    lat.sort_by(f64::total_cmp);
+    let (lo, med, hi) = (lat[0], lat[lat.len() / 2], lat[lat.len() - 1]);
+    eprintln!("fixes received {lo:.3} / {med:.3} / {hi:.3} s after their epoch (min / median / max)");
+    assert!(hi - lo > 0.01, "receipt latencies {lo}..{hi} s: not the PC's times");
+    // Read here independently of the import: the open time (GPS seconds since 1970 and a
+    // fraction at bytes 64 and 68); every fix stamped a whole millisecond tick after it.
+    let t = std::fs::read(tag()).unwrap();
+    let secs = i64::from(u32::from_le_bytes(t[64..68].try_into().unwrap()));
+    let frac = f64::from_le_bytes(t[68..76].try_into().unwrap());
+    let open_gps_ns = (secs - 315_964_800) * 1_000_000_000 + (frac * 1e9).round() as i64;
+    assert_eq!(open_gps_ns, WEEK * WEEK_NS + 408_639_657_000_000);
+    for f in &r.fixes {
+        let since_open = r.gps_ns(f.stamp.host_ns) - open_gps_ns;
+        assert_eq!(
+            since_open.rem_euclid(1_000_000),
+            0,
+            "fix stamp {since_open} ns after the open"
+        );
+    }
+}
+
+/// The receiver's RTK-fixed epochs (the dataset's `gnss.pos` where `gnss_q.txt` says Q 1):
+/// (sow, lat, lon).
+fn rtk_fixed() -> Vec<(f64, f64, f64)> {
+    let rows = |f: &str| -> Vec<Vec<f64>> {
+        std::fs::read_to_string(data().join(f))
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+            .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
+            .collect()
+    };
+    let q: HashMap<i64, f64> = rows("gnss_q.txt")
+        .iter()
+        .map(|r| ((r[0] * 1e3).round() as i64, r[1]))
+        .collect();
+    rows("gnss.pos")
+        .iter()
+        .filter(|r| q.get(&((r[0] * 1e3).round() as i64)) == Some(&1.0))
+        .map(|r| (r[0], r[1], r[2]))
+        .collect()
+}
+
+/// `replay --estimate` of a recording: the horizontal RMS and largest error at the antenna
+/// against the RTK-fixed epochs (m, the output interpolated to each), epochs compared, Δ and
+/// its σ (s).
+fn estimate(env: &TestEnv, rec: &Path, name: &str) -> (f64, f64, usize, f64, f64) {
+    let nav = env.dir.join(format!("{name}.nav"));
+    let summary = env.dir.join(format!("{name}.json"));
+    run_ok(
+        env,
+        &[
+            "replay",
+            &p(rec),
+            "--estimate",
+            "--lever-arm",
+            "0,-0.05,0",
+            "--summary-json",
+            &p(&summary),
+            "--out",
+            &p(&nav),
+            "--format",
+            "kf-gins",
+        ],
+    );
+    let s: Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert!(s["problem"].is_null(), "{name}: {}", s["problem"]);
+    let rows: Vec<Vec<f64>> = std::fs::read_to_string(&nav)
+        .unwrap()
+        .lines()
+        .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
+        .collect();
+    let (mut sum, mut max, mut n) = (0.0, 0.0f64, 0usize);
+    const R: f64 = 6_378_137.0;
+    for (sow, lat, lon) in rtk_fixed() {
+        let k = rows.partition_point(|r| r[1] <= sow);
+        if k == 0 || k >= rows.len() {
+            continue;
+        }
+        let (a, b) = (&rows[k - 1], &rows[k]);
+        let w = (sow - a[1]) / (b[1] - a[1]);
+        let (la, lo) = (a[2] + w * (b[2] - a[2]), a[3] + w * (b[3] - a[3]));
+        // The antenna 5 cm left of the IMU (body y = −0.05 m) through the yaw.
+        let yaw = b[10].to_radians();
+        let (dn, de) = (0.05 * yaw.sin(), -0.05 * yaw.cos());
+        let north = (la - lat).to_radians() * R + dn;
+        let east = (lo - lon).to_radians() * R * la.to_radians().cos() + de;
+        let d2 = north * north + east * east;
+        sum += d2;
+        max = max.max(d2.sqrt());
+        n += 1;
+    }
+    let rms = (sum / n.max(1) as f64).sqrt();
+    let (d, sd) = (
+        s["gnss_delay_est_s"].as_f64().unwrap(),
+        s["gnss_delay_std_s"].as_f64().unwrap(),
+    );
+    eprintln!("{name}: {n} RTK-fixed epochs, horizontal RMS {rms:.3} m, max {max:.3} m; Δ {d:+.4} ± {sd:.4} s");
+    (rms, max, n, d, sd)
+}
+
+#[test]
+fn the_walk_imported_from_ubx_is_estimated_within_its_rtk_fixes_and_a_shifted_imu_is_not() {
+    let env = TestEnv::new("ubxestimate");
+    let imu_path = data().join("imu.txt");
+    let tag = p(&tag());
+    for (name, extra) in [
+        ("epochs", vec![]),
+        ("tags", vec!["--tag", tag.as_str()]),
+        ("tags-no-pps", vec!["--tag", tag.as_str(), "--no-pps"]),
+    ] {
+        let (rec, _) = import(&env, name, &imu_path, &extra);
+        let (rms, _, n, d, _) = estimate(&env, &rec, name);
+        // Output from 1.8 s after the motion starts (408652 s): the walk's fixed epochs after it.
+        assert!(n >= 290, "{name}: {n} epochs compared");
+        assert!(rms <= RMS_BOUND_M, "{name}: horizontal RMS {rms:.3} m");
+        if extra.contains(&"--no-pps") {
+            // Software sync: Δ is the receipt delay, the tags' 24–74 ms (median 42 ms).
+            assert!((0.0..0.1).contains(&d), "{name}: Δ {d} s");
+        } else {
+            // Hardware sync: Δ is what is left after the PPS mapping (the README: ±0.03 s).
+            assert!(d.abs() <= 0.05, "{name}: Δ {d} s");
+        }
+    }
+    // The IMU's tags 1 s late (a broken axis): Δ saturates near −0.5 s and the RMS more than
+    // doubles the bound.
+    let shifted: String = std::fs::read_to_string(&imu_path)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let (t, rest) = l.trim().split_once(char::is_whitespace).unwrap();
+            format!("{:.5} {rest}\n", t.parse::<f64>().unwrap() + 1.0)
+        })
+        .collect();
+    let shifted_path = env.dir.join("imu_late.txt");
+    std::fs::write(&shifted_path, shifted).unwrap();
+    let (rec, _) = import(&env, "imu-late", &shifted_path, &[]);
+    let (rms, _, _, d, _) = estimate(&env, &rec, "imu-late");
+    assert!(
+        rms > RMS_BOUND_M,
+        "the IMU 1 s late: horizontal RMS {rms:.3} m within the bound"
+    );
+    assert!(d.abs() > 0.05, "the IMU 1 s late: Δ {d} s");
+}
