@@ -204,8 +204,11 @@ pub struct Navigator {
     counters: NavCounters,
     last_imu_ns: Option<i64>,
     last_fix_rx_ns: Option<i64>,
-    /// A fix has shown the platform moving (speed ≥ the alignment's minimum and 3 σ).
+    /// A fix has shown the platform moving (speed ≥ the alignment's minimum and 5.3 σ).
     motion_seen: bool,
+    /// The epoch (host ns, the fix's stamp less the delay prior) of the first fix that showed
+    /// motion: the heading bank decides only on data past it.
+    motion_epoch_ns: Option<i64>,
     /// Epoch of the previous fix, host ns (for the noise of a speed from positions).
     prev_fix_ns: Option<i64>,
     /// Receipt of the last raw epoch (tightly coupled), host ns.
@@ -268,6 +271,7 @@ impl Navigator {
             last_imu_ns: None,
             last_fix_rx_ns: None,
             motion_seen: false,
+            motion_epoch_ns: None,
             prev_fix_ns: None,
             last_ranges_rx_ns: None,
             horizon_ns: (cfg.fusion_horizon_s * 1e9) as i64,
@@ -378,13 +382,18 @@ impl Navigator {
             // The first fix without a measured velocity: its noise is not known yet.
             _ => f64::INFINITY,
         };
-        self.motion_seen |= obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(MOTION_SIGMAS * speed_std);
+        let moving = obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(MOTION_SIGMAS * speed_std);
+        self.motion_seen |= moving;
+        if moving && self.motion_epoch_ns.is_none() {
+            self.motion_epoch_ns = Some(obs.stamp_host_ns - (self.delay_prior.0 * 1e9) as i64);
+        }
         if self.filt.is_none() {
             match &mut self.bank {
                 Some(bank) => {
-                    // Started while standing: the motion onset gives the first estimate of Δ.
+                    // Started while standing: the motion onset gives the first estimate of Δ,
+                    // once a fix shows the motion above its speed's noise.
                     if self.cfg.estimate_delay
-                        && obs.speed_mps >= self.cfg.align.align_min_speed_mps
+                        && moving
                         && let Some((d, sd)) = self
                             .aligner
                             .delay_from_onset(&obs, speed_std, ONSET_DELAY_FLOOR_S)
@@ -397,7 +406,7 @@ impl Navigator {
                     }
                     bank.queue(obs);
                 }
-                None => self.try_align(&obs, speed_std),
+                None => self.try_align(&obs, speed_std, moving),
             }
             return;
         }
@@ -544,14 +553,18 @@ impl Navigator {
         self.replay();
     }
 
-    fn try_align(&mut self, obs: &GnssObservation, speed_std_mps: f64) {
+    /// Aligns on `obs` when the aligner can (`speed_std_mps`: the σ of its speed; `moving`: it
+    /// shows motion above that noise).
+    fn try_align(&mut self, obs: &GnssObservation, speed_std_mps: f64, moving: bool) {
         let Some(a) = self.aligner.try_align(obs, speed_std_mps) else {
             return;
         };
         // A loose delay prior (software sync) is replaced by the motion-onset estimate: the
         // speed noise of a fix (~0.05 m/s) over a drive-off acceleration of ~1 m/s² puts it
-        // within ~50 ms.
+        // within ~50 ms. Only on a fix that shows motion: a standing fix's speed is its noise,
+        // which the accelerometers' integrated noise reaches at any time.
         if self.cfg.estimate_delay
+            && moving
             && let Some((d, sd)) = a
                 .delay_from_onset_s
                 .filter(|(d, sd)| *sd < self.delay_prior.1 && (-0.2..self.cfg.fusion_horizon_s - 0.1).contains(d))
@@ -628,6 +641,10 @@ impl Navigator {
                     self.counters.heading_banks_failed += 1;
                     return;
                 }
+                // Before any fix showed motion the heading is not observable (a consumer
+                // IMU senses no earth rate): whatever the hypotheses' weights say then comes
+                // from errors that standing still does not expose, and is not decided on.
+                BankStep::Decided { .. } if self.motion_epoch_ns.is_none_or(|t| r.host_ns < t) => {}
                 BankStep::Decided { yaw0, yaw_std } => {
                     if let Some(mut bank) = self.bank.take() {
                         self.fine_align(&mut bank, yaw0, yaw_std);
