@@ -673,6 +673,32 @@ mod tests {
     }
 
     #[test]
+    fn arbitrary_bytes_are_a_tag_file_or_an_error_never_a_panic() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        for len in 0..400usize {
+            let mut b: Vec<u8> = (0..len)
+                .map(|_| {
+                    x ^= x << 13;
+                    x ^= x >> 7;
+                    x ^= x << 17;
+                    x as u8
+                })
+                .collect();
+            if len >= 7 {
+                b[..7].copy_from_slice(b"TIMETAG");
+            }
+            if len >= TimeTags::HEADER_LEN && len % 2 == 0 {
+                // A valid open time, so the records are read.
+                b[68..76].copy_from_slice(&0.5f64.to_le_bytes());
+            }
+            if let Ok(t) = TimeTags::parse("x.tag", &b) {
+                assert!(t.records.windows(2).all(|w| w[0].0 <= w[1].0 && w[0].1 <= w[1].1));
+                let _ = t.gps_ns(t.records.len());
+            }
+        }
+    }
+
+    #[test]
     fn outputs_without_tags_are_received_after_their_epoch() {
         let o = |epoch: Option<i64>| Output {
             service: String::new(),

@@ -369,3 +369,41 @@ fn the_walk_imported_from_ubx_is_estimated_within_its_rtk_fixes_and_a_shifted_im
     );
     assert!(d.abs() > 0.05, "the IMU 1 s late: Δ {d} s");
 }
+
+#[test]
+fn bad_inputs_are_errors_that_name_the_file() {
+    let env = TestEnv::new("ubxbad");
+    let imu = data().join("imu.txt");
+    let fail = |args: &[&str]| -> String {
+        let o = env.command(args).output().unwrap();
+        assert!(!o.status.success(), "navsync {args:?} succeeded");
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(!err.contains("panicked"), "{err}");
+        err
+    };
+    let out = p(&env.dir.join("bad.mcap"));
+    // A log without a UBX epoch.
+    let text = env.dir.join("text.ubx");
+    std::fs::write(&text, "not a receiver's log\n").unwrap();
+    let err = fail(&["import", "ubx", &p(&text), "--imu", &p(&imu), "--out", &out]);
+    assert!(err.contains("text.ubx: no UBX epoch"), "{err}");
+    // A tag file that is not RTKLIB's.
+    let err = fail(&[
+        "import",
+        "ubx",
+        &p(&log()),
+        "--imu",
+        &p(&imu),
+        "--tag",
+        &p(&text),
+        "--out",
+        &out,
+    ]);
+    assert!(err.contains("text.ubx: byte 0: not an RTKLIB time-tag file"), "{err}");
+    // An IMU file with a bad line: its file and line.
+    let bad_imu = env.dir.join("imu_bad.txt");
+    std::fs::write(&bad_imu, "408640.97345 0 0 0 0 0 -0.098\n408640.98339 0 0 0 0 0 x\n").unwrap();
+    let err = fail(&["import", "ubx", &p(&log()), "--imu", &p(&bad_imu), "--out", &out]);
+    assert!(err.contains("imu_bad.txt:2: `x` is not a number"), "{err}");
+    assert!(!env.dir.join("bad.mcap").exists(), "a recording left behind");
+}
