@@ -32,11 +32,12 @@ use nalgebra::{UnitQuaternion, Vector3};
 use navsync_wire::earth;
 
 use super::config::NavConfig;
-use super::error_state::{ATT, BG, DELAY};
+use super::error_state::{ATT, BG, DELAY, POS};
 use super::filter::DelayedFilter;
 use super::imu_buffer::ImuRecord;
 use super::measurements::Measurement;
 use super::measurements::gnss::{GnssObservation, fuse_weighed};
+use super::mechanization::skew;
 
 /// Headings tried, evenly spaced (30° apart).
 pub const HYPOTHESES: usize = 12;
@@ -119,10 +120,17 @@ fn wrap(a: f64) -> f64 {
     }
 }
 
-/// `base` turned to heading `yaw` with heading σ `yaw_std` (rad): the gyro bias of a static
-/// start re-referred to it (the earth rate seen in the body frame turns with the heading), and
-/// the bias σ widened by what a heading off by σ leaves of the earth rate in it.
-pub fn with_heading(base: &DelayedFilter, yaw: f64, yaw_std: f64) -> DelayedFilter {
+/// `base` (its position the GNSS antenna's, as the alignment takes it from a fix) turned to
+/// heading `yaw` with heading σ `yaw_std` (rad), its position moved to the navigation point,
+/// `lever_b` (body FRD, m, antenna − navigation point) behind the antenna at that heading: a
+/// lever arm of a metre is a metre of error against cm-level fixes otherwise, which the
+/// hypotheses' weights would read as evidence about the heading. The position's covariance
+/// takes what the attitude's uncertainty turns the lever arm by (δr = δr_antenna − [l^n×]·φ,
+/// the measurement model of [`super::measurements::gnss::position_terms`] inverted). Also the
+/// gyro bias of a static start re-referred to the heading (the earth rate seen in the body
+/// frame turns with it), and the bias σ widened by what a heading off by σ leaves of the earth
+/// rate in it.
+pub fn with_heading(base: &DelayedFilter, yaw: f64, yaw_std: f64, lever_b: &Vector3<f64>) -> DelayedFilter {
     let mut filt = base.clone();
     let (roll, pitch, _) = base.pva.q_nb.euler_angles();
     let q = UnitQuaternion::from_euler_angles(roll, pitch, yaw);
@@ -134,13 +142,28 @@ pub fn with_heading(base: &DelayedFilter, yaw: f64, yaw_std: f64) -> DelayedFilt
     for i in 0..3 {
         filt.eskf.p[(BG + i, BG + i)] += (w_h * yaw_std).powi(2);
     }
+    let lever_n = q * lever_b;
+    let (rm, rn) = earth::radii(filt.pva.lat_rad);
+    let p = &mut filt.pva;
+    p.lat_rad -= lever_n.x / (rm + p.h_m);
+    p.lon_rad -= lever_n.y / ((rn + p.h_m) * p.lat_rad.cos());
+    p.h_m += lever_n.z;
+    let s = skew(&lever_n);
+    let p_att = filt.eskf.p.fixed_view::<3, 3>(ATT, ATT).into_owned();
+    let p_pos_att = -s * p_att;
+    let pos_add = s * p_att * s.transpose();
+    let cov = &mut filt.eskf.p;
+    let pos_pos = cov.fixed_view::<3, 3>(POS, POS) + pos_add;
+    cov.fixed_view_mut::<3, 3>(POS, POS).copy_from(&pos_pos);
+    cov.fixed_view_mut::<3, 3>(POS, ATT).copy_from(&p_pos_att);
+    cov.fixed_view_mut::<3, 3>(ATT, POS).copy_from(&p_pos_att.transpose());
     filt
 }
 
 impl HeadingBank {
     /// The hypotheses made from `base` (the filter the alignment gives): its heading turned by
     /// k·360°/[`HYPOTHESES`], with a heading σ covering the sector between two hypotheses.
-    pub fn new(base: &DelayedFilter) -> Self {
+    pub fn new(base: &DelayedFilter, lever_b: &Vector3<f64>) -> Self {
         let sector = 2.0 * std::f64::consts::PI / HYPOTHESES as f64;
         // Half the sector is 1.7σ: neighbouring hypotheses overlap.
         let yaw_std = 0.6 * sector;
@@ -149,7 +172,7 @@ impl HeadingBank {
             .map(|k| {
                 let yaw0 = course + k as f64 * sector;
                 Hypothesis {
-                    filt: with_heading(base, yaw0, yaw_std),
+                    filt: with_heading(base, yaw0, yaw_std, lever_b),
                     yaw0,
                     yaw_shift: 0.0,
                     log_lik: 0.0,

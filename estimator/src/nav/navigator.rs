@@ -621,7 +621,7 @@ impl Navigator {
             self.buf.pop();
         }
         let base = DelayedFilter::new(a.pva, t_f, Eskf::new(p), a.gyro_bias, self.delay_prior.0);
-        self.bank = Some(HeadingBank::new(&base));
+        self.bank = Some(HeadingBank::new(&base, &Vector3::from(self.cfg.gnss_lever_arm_m)));
         self.counters.heading_banks += 1;
     }
 
@@ -660,7 +660,7 @@ impl Navigator {
     /// bank went through, with every kind of measurement, and becomes the delayed filter; the
     /// fixes still waiting are queued for it.
     fn fine_align(&mut self, bank: &mut HeadingBank, yaw0: f64, yaw_std: f64) {
-        let start = with_heading(bank.base(), yaw0, yaw_std);
+        let start = with_heading(bank.base(), yaw0, yaw_std, &Vector3::from(self.cfg.gnss_lever_arm_m));
         self.states.gnss.last_fused_ns = start.t_ns;
         if let Some(log) = &mut self.smoother {
             log.start(&start);
