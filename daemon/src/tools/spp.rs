@@ -1,14 +1,15 @@
-//! `navsync spp REC.mcap [--out FILE.csv] [--reference X,Y,Z]`: the GPS L1 C/A single-point
-//! solution of each raw epoch of a recording (the estimator's `gnss::spp`, with the navigation
-//! data collected by `gnss::ranges::EphemerisStore` as the tightly coupled filter does), as a
-//! CSV, and its errors against a reference position (east/north/up, horizontal, vertical and
-//! 3-D RMS, m).
+//! `navsync spp REC.mcap [--out FILE.csv] [--reference X,Y,Z] [--systems G,E,C]`: the
+//! single-point solution of each raw epoch of a recording from GPS L1 C/A, Galileo E1 and
+//! BeiDou B1I/B3I with one receiver clock per system (the estimator's `gnss::spp`, with the
+//! navigation data collected by `gnss::ranges::EphemerisStore` as the tightly coupled filter
+//! does), as a CSV, and its errors against a reference position (east/north/up, horizontal,
+//! vertical and 3-D RMS, m), with the satellites used per system.
 
 use std::io::Write;
 use std::path::PathBuf;
 
 use navsync_estimator::gnss::ranges::{EphemerisStore, RangeBuildCounts};
-use navsync_estimator::gnss::spp::{self, Observation, SppError, SppSettings};
+use navsync_estimator::gnss::spp::{self, MAX_SYSTEMS, SppError, SppSettings};
 use navsync_recording::SampleReader;
 use navsync_recording::output::{OutputFile, Overwrite};
 use navsync_shared::earth::geodetic_from_ecef;
@@ -38,12 +39,40 @@ pub struct SppArgs {
     /// as 1/sin(elevation).
     #[arg(long, default_value_t = 3.0)]
     pub pseudorange_std_m: f64,
+    /// The systems used, by their RINEX letters: G GPS (L1 C/A), E Galileo (E1-C, else E1-B),
+    /// C BeiDou (B1I, else B3I); one receiver clock each.
+    #[arg(long, default_value = "G,E,C", value_parser = parse_systems)]
+    pub systems: Systems,
     /// The summary as one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
     /// Replace an existing file at --out.
     #[arg(long)]
     pub force: bool,
+}
+
+/// The systems of `--systems`: u-blox `gnssId`s.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Systems(pub Vec<u8>);
+
+/// The RINEX letter of each system of [`spp::SYSTEMS`].
+const LETTERS: [char; MAX_SYSTEMS] = ['G', 'E', 'C', 'R'];
+
+fn parse_systems(s: &str) -> Result<Systems, String> {
+    let mut out = Vec::new();
+    for part in s.split(',').map(str::trim) {
+        let g = match part {
+            "G" => 0,
+            "E" => 2,
+            "C" => 3,
+            "R" => return Err("GLONASS (R) is not solved yet: use G, E, C".into()),
+            _ => return Err(format!("unknown system '{part}': G (GPS), E (Galileo), C (BeiDou)")),
+        };
+        if !out.contains(&g) {
+            out.push(g);
+        }
+    }
+    Ok(Systems(out))
 }
 
 fn parse_xyz(s: &str) -> Result<[f64; 3], String> {
@@ -79,6 +108,10 @@ pub struct SppRun {
     pub no_convergence: u64,
     /// Measurements left out while building the epochs.
     pub counts: RangeBuildCounts,
+    /// Epochs solved with at least one satellite of each system of [`spp::SYSTEMS`].
+    pub epochs_with_system: [u64; MAX_SYSTEMS],
+    /// Satellites used, summed over the solved epochs, per system of [`spp::SYSTEMS`].
+    pub used_per_system: [u64; MAX_SYSTEMS],
 }
 
 /// Solves every raw epoch of the recording.
@@ -100,9 +133,14 @@ pub fn solve_recording(args: &SppArgs) -> anyhow::Result<SppRun> {
             AnySample::NavData(d) if s.service == nav_service => store.on_nav_data(&d),
             AnySample::Raw(raw) if s.service == raw_service => {
                 run.epochs += 1;
-                match solve_epoch(&store, &raw, init, &settings, args.pseudorange_std_m, &mut run.counts) {
+                let (std, systems) = (args.pseudorange_std_m, &args.systems.0);
+                match solve_epoch_systems(&store, &raw, systems, init, &settings, std, &mut run.counts) {
                     Ok(sol) => {
                         init = sol.ecef_m;
+                        for (k, &n) in sol.used_per_system.iter().enumerate() {
+                            run.epochs_with_system[k] += u64::from(n > 0);
+                            run.used_per_system[k] += n as u64;
+                        }
                         run.solutions.push(EpochSolution {
                             week: raw.week,
                             tow_s: raw.rcv_tow_s,
@@ -119,9 +157,9 @@ pub fn solve_recording(args: &SppArgs) -> anyhow::Result<SppRun> {
     Ok(run)
 }
 
-/// The single-point solution of one raw epoch with the ephemerides `store` holds, iterated
-/// from `init` (ECEF m); each satellite's σ at zenith is the larger of `pseudorange_std_m` and
-/// its broadcast URA.
+/// The GPS L1 C/A single-point solution of one raw epoch with the ephemerides `store` holds,
+/// iterated from `init` (ECEF m); each satellite's σ at zenith is the larger of
+/// `pseudorange_std_m` and its broadcast URA.
 pub fn solve_epoch(
     store: &EphemerisStore,
     raw: &GnssRaw,
@@ -130,20 +168,35 @@ pub fn solve_epoch(
     pseudorange_std_m: f64,
     counts: &mut RangeBuildCounts,
 ) -> Result<spp::Solution, SppError> {
-    // The satellite clock is in the pseudorange of each `SatRange`.
-    let e = store.range_epoch(raw, raw.stamp.host_ns, 0.0, counts);
-    let obs: Vec<Observation> = e
-        .sats()
+    solve_epoch_systems(store, raw, &[0], init, settings, pseudorange_std_m, counts)
+}
+
+/// [`solve_epoch`] with the systems `systems` (u-blox `gnssId`s), one receiver clock each.
+pub fn solve_epoch_systems(
+    store: &EphemerisStore,
+    raw: &GnssRaw,
+    systems: &[u8],
+    init: [f64; 3],
+    settings: &SppSettings,
+    pseudorange_std_m: f64,
+    counts: &mut RangeBuildCounts,
+) -> Result<spp::Solution, SppError> {
+    let mut obs = store.system_observations(raw, systems, counts);
+    for o in &mut obs {
+        o.obs.sigma_zenith_m = o.obs.sigma_zenith_m.max(pseudorange_std_m);
+    }
+    spp::solve(&obs, store.iono().as_ref(), raw.rcv_tow_s, init, settings)
+}
+
+/// `G:n E:n C:n` of the systems with a count.
+fn per_system(counts: &[u64; MAX_SYSTEMS]) -> String {
+    let parts: Vec<String> = LETTERS
         .iter()
-        .map(|r| Observation {
-            sv: r.sv,
-            pseudorange_m: r.pseudorange_m,
-            sat_ecef_m: r.sat_ecef_m,
-            sat_clock_s: 0.0,
-            sigma_zenith_m: pseudorange_std_m.max(r.pseudorange_std_m),
-        })
+        .zip(counts)
+        .filter(|(_, n)| **n > 0)
+        .map(|(l, n)| format!("{l} {n}"))
         .collect();
-    spp::solve(&obs, e.iono.as_ref(), e.tow_s, init, settings)
+    parts.join(", ")
 }
 
 /// East, north, up of `p − reference`, m.
@@ -181,7 +234,7 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
         let mut w = std::io::BufWriter::new(f);
         writeln!(
             w,
-            "week,tow_s,x_m,y_m,z_m,lat_deg,lon_deg,height_m,clock_bias_m,sats,excluded_prn,east_m,north_m,up_m"
+            "week,tow_s,x_m,y_m,z_m,lat_deg,lon_deg,height_m,clock_bias_m,sats,excluded_prn,east_m,north_m,up_m,gps,galileo,beidou,excluded"
         )?;
         for (k, s) in r.solutions.iter().enumerate() {
             let p = s.sol.ecef_m;
@@ -190,7 +243,7 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
             let e = errors.get(k).copied().unwrap_or([f64::NAN; 3]);
             writeln!(
                 w,
-                "{},{:.3},{:.4},{:.4},{:.4},{:.9},{:.9},{:.4},{:.3},{},{},{:.4},{:.4},{:.4}",
+                "{},{:.3},{:.4},{:.4},{:.4},{:.9},{:.9},{:.4},{:.3},{},{},{:.4},{:.4},{:.4},{},{},{},{}",
                 s.week,
                 s.tow_s,
                 p[0],
@@ -204,7 +257,11 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
                 s.sol.excluded.map_or(String::new(), |x| x.to_string()),
                 e[0],
                 e[1],
-                e[2]
+                e[2],
+                s.sol.used_per_system[0],
+                s.sol.used_per_system[1],
+                s.sol.used_per_system[2],
+                excluded_name(&s.sol),
             )?;
         }
         w.into_inner().map_err(|e| e.into_error())?.commit()?;
@@ -218,6 +275,9 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
             "no_convergence": r.no_convergence,
             "no_ephemeris": r.counts.no_ephemeris,
             "other_signals": r.counts.other_signals,
+            "systems": args.systems.0.iter().filter_map(|g| spp::system_index(*g)).map(|k| LETTERS[k].to_string()).collect::<Vec<_>>(),
+            "epochs_with_system": system_map(&r.epochs_with_system),
+            "satellites_used_per_system": system_map(&r.used_per_system),
         });
         if args.reference.is_some() {
             j["horizontal_rms_m"] = h.into();
@@ -233,12 +293,39 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
             r.too_few,
             r.no_convergence
         );
+        let mean: Vec<String> = LETTERS
+            .iter()
+            .zip(&r.used_per_system)
+            .filter(|(_, n)| **n > 0)
+            .map(|(l, n)| format!("{l} {:.1}", *n as f64 / r.solutions.len().max(1) as f64))
+            .collect();
+        println!(
+            "epochs using each system: {}; satellites used per solved epoch: {}",
+            per_system(&r.epochs_with_system),
+            mean.join(", ")
+        );
         if args.reference.is_some() {
             println!("against the reference: horizontal RMS {h:.3} m, vertical RMS {v:.3} m, 3-D RMS {d3:.3} m");
         }
     }
     anyhow::ensure!(!r.solutions.is_empty(), "no epoch solved");
     Ok(())
+}
+
+/// `{"G": n, "E": n, …}` of every system of [`spp::SYSTEMS`].
+fn system_map(counts: &[u64; MAX_SYSTEMS]) -> serde_json::Value {
+    let m: serde_json::Map<String, serde_json::Value> = LETTERS
+        .iter()
+        .zip(counts)
+        .map(|(l, n)| (l.to_string(), (*n).into()))
+        .collect();
+    m.into()
+}
+
+/// The excluded satellite as RINEX names it (`E11`), empty when none.
+fn excluded_name(s: &spp::Solution) -> String {
+    let letter = spp::system_index(s.excluded_gnss_id).map_or('?', |k| LETTERS[k]);
+    s.excluded.map_or(String::new(), |sv| format!("{letter}{sv:02}"))
 }
 
 #[cfg(test)]
@@ -259,5 +346,7 @@ mod tests {
         assert!((d - 14.5f64.sqrt()).abs() < 1e-12);
         assert_eq!(parse_xyz("-1,2.5,3"), Ok([-1.0, 2.5, 3.0]));
         assert!(parse_xyz("1,2").is_err() && parse_xyz("a,b,c").is_err());
+        assert_eq!(parse_systems("G, E,C,G"), Ok(Systems(vec![0, 2, 3])));
+        assert!(parse_systems("R").is_err() && parse_systems("G,X").is_err());
     }
 }

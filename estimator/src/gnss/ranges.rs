@@ -4,12 +4,17 @@
 //! pseudorange and Doppler paired with its satellite's position, velocity and clock at the
 //! time of transmission. What depends on the receiver's position (the Earth's rotation during
 //! the flight, elevation, ionosphere, troposphere) is left to the filter, which knows it.
+//!
+//! The store also collects Galileo I/NAV and BeiDou D1/D2 ephemerides (through
+//! [`NavCollector`]) keyed by (gnss id, sv id), for single-point positioning with every system
+//! ([`EphemerisStore::system_observations`]); the filter's epochs stay GPS L1 C/A.
 
-use navsync_wire::samples::{GnssNavData, GnssRaw};
+use navsync_wire::samples::{GnssNavData, GnssRaw, RawMeasurement};
 
+use super::broadcast::{BroadcastEphemeris, GNSS_ID_BEIDOU, GNSS_ID_GALILEO, NavCollector, NavEphemeris};
 use super::lnav::{self, Ephem1, Ephem2, Ephem3, Subframe};
 use super::orbit::Orbit;
-use super::spp::{C_M_S, Klobuchar};
+use super::spp::{C_M_S, Klobuchar, Observation, SystemObservation};
 
 /// Satellites one [`RangeEpoch`] holds (the strongest first when a receiver tracks more).
 pub const MAX_RANGE_SATS: usize = 16;
@@ -19,6 +24,28 @@ pub const L1_HZ: f64 = 1_575.42e6;
 pub const GNSS_ID_GPS: u8 = 0;
 /// Highest GPS PRN.
 const MAX_PRN: usize = 32;
+/// Highest Galileo SVID.
+const MAX_GAL: usize = 36;
+/// Highest BeiDou PRN.
+const MAX_BDS: usize = 63;
+/// BeiDou time is GPS time less this, s (BDS-SIS-ICD-B1I §4.2: BDT began 2006-01-01 00:00:00
+/// UTC, when GPS time was 14 s ahead of UTC).
+pub const BDT_MINUS_GPST_S: f64 = -14.0;
+
+/// The signals single-point positioning uses, in order of preference per satellite: (u-blox
+/// `gnssId`, `sigId`, carrier frequency in Hz, whether the broadcast group delay applies).
+/// GPS L1 C/A; Galileo E1-C, E1-B (BGD(E1,E5b) of I/NAV); BeiDou B1I D1, D2 (T_GD1), B3I
+/// D1, D2 (no group delay: B3I is the reference of BeiDou's clock parameters,
+/// BDS-SIS-ICD-B1I §5.2.4.10).
+pub const SPP_SIGNALS: [(u8, u8, f64, bool); 7] = [
+    (GNSS_ID_GPS, 0, L1_HZ, true),
+    (GNSS_ID_GALILEO, 0, L1_HZ, true),
+    (GNSS_ID_GALILEO, 1, L1_HZ, true),
+    (GNSS_ID_BEIDOU, 0, 1_561.098e6, true),
+    (GNSS_ID_BEIDOU, 1, 1_561.098e6, true),
+    (GNSS_ID_BEIDOU, 4, 1_268.52e6, false),
+    (GNSS_ID_BEIDOU, 10, 1_268.52e6, false),
+];
 /// An ephemeris is used up to this far from its t_oe, s (the 4 h curve fit of IS-GPS-200
 /// §20.3.4.4 is ±2 h; an hour of margin for a receiver that did not get the next issue yet).
 pub const EPHEMERIS_VALID_S: f64 = 3.0 * 3600.0;
@@ -117,6 +144,24 @@ pub struct EphemerisStore {
     pub bad_subframes: u64,
     /// Ephemerides completed (a new issue of subframes 1–3).
     pub ephemerides: u64,
+    /// Galileo and BeiDou (on the heap: ~130 kB, allocated once with the store).
+    others: Box<OtherSystems>,
+    /// Galileo and BeiDou ephemerides completed.
+    pub other_ephemerides: u64,
+}
+
+/// The Galileo and BeiDou part of an [`EphemerisStore`].
+#[derive(Debug, Clone)]
+struct OtherSystems {
+    /// Navigation data assembled per satellite.
+    collector: NavCollector,
+    /// The latest Galileo ephemeris of each SVID.
+    gal: [Option<BroadcastEphemeris>; MAX_GAL],
+    /// The latest BeiDou ephemeris of each PRN.
+    bds: [Option<BroadcastEphemeris>; MAX_BDS],
+    /// BeiDou's broadcast Klobuchar coefficients (D1/D2 subframe 1), the ionosphere when no
+    /// GPS page 18 came.
+    bds_iono: Option<Klobuchar>,
 }
 
 impl Default for EphemerisStore {
@@ -126,6 +171,13 @@ impl Default for EphemerisStore {
             iono: None,
             bad_subframes: 0,
             ephemerides: 0,
+            others: Box::new(OtherSystems {
+                collector: NavCollector::default(),
+                gal: [None; MAX_GAL],
+                bds: [None; MAX_BDS],
+                bds_iono: None,
+            }),
+            other_ephemerides: 0,
         }
     }
 }
@@ -133,9 +185,21 @@ impl Default for EphemerisStore {
 impl EphemerisStore {
     /// Takes one navigation-data message: GPS LNAV subframes are decoded (parity checked) and
     /// subframes 1–3 of one issue make an ephemeris (IODC's 8 LSBs = IODE of subframes 2 and
-    /// 3); subframe 4 page 18 sets the ionosphere. Others are ignored.
+    /// 3); subframe 4 page 18 sets the ionosphere. Galileo and BeiDou words go to the
+    /// [`NavCollector`], whose ephemerides are kept per satellite. Others are ignored.
     pub fn on_nav_data(&mut self, d: &GnssNavData) {
-        if d.gnss_id != GNSS_ID_GPS || usize::from(d.num_words) < 10 {
+        if d.gnss_id != GNSS_ID_GPS {
+            let n = usize::from(d.num_words).min(d.words.len());
+            if let Ok(Some(e)) = self
+                .others
+                .collector
+                .on_words(d.gnss_id, d.sv_id, d.sig_id, &d.words[..n])
+            {
+                self.on_broadcast(&e);
+            }
+            return;
+        }
+        if usize::from(d.num_words) < 10 {
             return;
         }
         match lnav::decode(&d.words[..10]) {
@@ -173,6 +237,131 @@ impl EphemerisStore {
             e.healthy = s1.health & 0x20 == 0 && ura.is_some();
             e.ura_m = ura.unwrap_or(f64::INFINITY);
         }
+    }
+
+    /// Keeps a Galileo or BeiDou ephemeris (the latest of its satellite), and BeiDou's
+    /// ionosphere coefficients.
+    pub fn on_broadcast(&mut self, e: &NavEphemeris) {
+        if let NavEphemeris::Beidou(d) = e
+            && d.s1.alpha.iter().any(|a| *a != 0.0)
+        {
+            self.others.bds_iono = Some(Klobuchar {
+                alpha: d.s1.alpha,
+                beta: d.s1.beta,
+            });
+        }
+        self.insert_broadcast(e.broadcast());
+    }
+
+    /// Keeps a Galileo or BeiDou ephemeris as the latest of its satellite (others are ignored).
+    pub fn insert_broadcast(&mut self, b: BroadcastEphemeris) {
+        let slot = usize::from(b.sv_id).checked_sub(1).and_then(|i| match b.gnss_id {
+            GNSS_ID_GALILEO => self.others.gal.get_mut(i),
+            GNSS_ID_BEIDOU => self.others.bds.get_mut(i),
+            _ => None,
+        });
+        if let Some(s) = slot {
+            if s.map(|o| o.orbit) != Some(b.orbit) {
+                self.other_ephemerides += 1;
+            }
+            *s = Some(b);
+        }
+    }
+
+    /// The broadcast ionosphere: GPS's (subframe 4 page 18), else BeiDou's coefficients.
+    pub fn iono(&self) -> Option<Klobuchar> {
+        self.iono.or(self.others.bds_iono)
+    }
+
+    /// The usable ephemeris of satellite `sv_id` of system `gnss_id` at `t_s` (s of week in the
+    /// system's own time): its orbit and accuracy, m.
+    fn usable_any(&self, gnss_id: u8, sv_id: u8, t_s: f64) -> Option<(Orbit, f64)> {
+        if gnss_id == GNSS_ID_GPS {
+            return self.usable_ephemeris(sv_id, t_s).map(|(o, a)| (*o, a));
+        }
+        let i = usize::from(sv_id).checked_sub(1)?;
+        let e = match gnss_id {
+            GNSS_ID_GALILEO => self.others.gal.get(i),
+            GNSS_ID_BEIDOU => self.others.bds.get(i),
+            _ => None,
+        }?
+        .as_ref()
+        .filter(|e| e.healthy && e.accuracy_m.is_finite())?;
+        let mut dt = t_s - e.orbit.toe_s;
+        dt -= (dt / 604_800.0).round() * 604_800.0;
+        (dt.abs() <= EPHEMERIS_VALID_S).then_some((e.orbit, e.accuracy_m))
+    }
+
+    /// The pseudoranges of `raw` for single-point positioning with the systems `systems`
+    /// (u-blox `gnssId`s): per satellite the first signal of [`SPP_SIGNALS`] the receiver
+    /// tracked with a valid pseudorange, with its satellite's position at transmission (in the
+    /// ECEF of that instant) and its clock offset including the signal's group delay, the
+    /// ionosphere scale (f_L1/f)² of its carrier, and a σ at zenith of the larger of the
+    /// receiver's σ and the broadcast accuracy. Transmission time as in
+    /// [`range_epoch`](Self::range_epoch), in the system's own time (BeiDou: BDT = GPST − 14 s;
+    /// Galileo: GST taken as GPST, the GGTO of a few ns left in Galileo's receiver clock).
+    pub fn system_observations(
+        &self,
+        raw: &GnssRaw,
+        systems: &[u8],
+        counts: &mut RangeBuildCounts,
+    ) -> Vec<SystemObservation> {
+        let n = usize::from(raw.num_meas).min(raw.meas.len());
+        let meas = &raw.meas[..n];
+        let rank = |g: u8, s: u8| SPP_SIGNALS.iter().position(|&(sg, ss, _, _)| sg == g && ss == s);
+        let mut out = Vec::new();
+        for (k, m) in meas.iter().enumerate() {
+            let Some(r) = rank(m.gnss_id, m.sig_id).filter(|_| systems.contains(&m.gnss_id)) else {
+                counts.other_signals += 1;
+                continue;
+            };
+            let valid =
+                |m: &RawMeasurement| m.trk_stat & 1 != 0 && m.pseudorange_m.is_finite() && m.pseudorange_m > 0.0;
+            if !valid(m) {
+                counts.invalid += 1;
+                continue;
+            }
+            // A more preferred valid signal of the same satellite wins.
+            let better = meas.iter().enumerate().any(|(j, o)| {
+                j != k
+                    && o.gnss_id == m.gnss_id
+                    && o.sv_id == m.sv_id
+                    && valid(o)
+                    && rank(o.gnss_id, o.sig_id).is_some_and(|ro| ro < r || (ro == r && j < k))
+            });
+            if better {
+                counts.other_signals += 1;
+                continue;
+            }
+            let (_, _, freq_hz, group_delay) = SPP_SIGNALS[r];
+            let offset = if m.gnss_id == GNSS_ID_BEIDOU {
+                BDT_MINUS_GPST_S
+            } else {
+                0.0
+            };
+            let t0 = raw.rcv_tow_s + offset - m.pseudorange_m / C_M_S;
+            let Some((mut orbit, accuracy)) = self.usable_any(m.gnss_id, m.sv_id, t0) else {
+                counts.no_ephemeris += 1;
+                continue;
+            };
+            if !group_delay {
+                orbit.tgd_s = 0.0;
+            }
+            let dt_sv = orbit.clock_offset_s(t0);
+            let t_tx = t0 - dt_sv;
+            out.push(SystemObservation {
+                obs: Observation {
+                    sv: m.sv_id,
+                    pseudorange_m: m.pseudorange_m,
+                    sat_ecef_m: orbit.position_ecef_m(t_tx),
+                    sat_clock_s: dt_sv,
+                    sigma_zenith_m: f64::from(m.pseudorange_std_m).max(accuracy),
+                },
+                gnss_id: m.gnss_id,
+                iono_scale: (L1_HZ / freq_hz).powi(2),
+            });
+        }
+        out
     }
 
     /// Sets satellite `prn`'s orbit directly (an ephemeris from elsewhere, or a simulation's).
@@ -325,5 +514,82 @@ mod tests {
                 assert_eq!(st.usable_ephemeris(5, 0.0).unwrap().1, ura_m(ura).unwrap());
             }
         }
+    }
+
+    /// Per satellite the preferred signal (E1-C before E1-B whatever the order), only the
+    /// systems asked for, BeiDou's clock at BDT = GPST − 14 s without a group delay on B3I,
+    /// Galileo's with its BGD, the ionosphere scale of each carrier; unhealthy satellites and
+    /// signals not in the table left out and counted.
+    #[test]
+    fn system_observations_pick_the_signal_and_its_clock() {
+        use crate::gnss::orbit::OrbitFrame;
+        use navsync_wire::reflect::Reflect;
+        let t_rx = 300_000.0;
+        let orbit = |frame, af: [f64; 3], tgd_s, toc_s| Orbit {
+            sqrt_a: 5_300.0,
+            i0_rad: 0.95,
+            toe_s: t_rx,
+            toc_s,
+            af,
+            tgd_s,
+            frame,
+            ..Orbit::default()
+        };
+        let broadcast = |gnss_id, sv_id, orbit, healthy| BroadcastEphemeris {
+            gnss_id,
+            sv_id,
+            orbit,
+            iod: 1,
+            healthy,
+            accuracy_m: 2.0,
+        };
+        let mut st = EphemerisStore::default();
+        st.insert_orbit(3, orbit(OrbitFrame::Gps, [1e-4, 0.0, 0.0], 5e-9, t_rx));
+        let gal = orbit(OrbitFrame::Galileo, [1e-3, 0.0, 0.0], 1e-8, t_rx);
+        st.insert_broadcast(broadcast(GNSS_ID_GALILEO, 5, gal, true));
+        // BeiDou's clock reference 14 s before the GPS time of the epoch: with a drift of
+        // 1e-6 the offset is af0 + 1e-6·(−ρ/c) in BDT, 14e-6 s more if read in GPS time.
+        let bds = orbit(OrbitFrame::BeiDou, [2e-3, 1e-6, 0.0], 5e-9, t_rx - 14.0);
+        st.insert_broadcast(broadcast(GNSS_ID_BEIDOU, 20, bds, true));
+        st.insert_broadcast(broadcast(GNSS_ID_BEIDOU, 21, bds, false));
+        let meas = |gnss_id, sv_id, sig_id, pr| {
+            let mut m = RawMeasurement::zeroed();
+            (m.gnss_id, m.sv_id, m.sig_id, m.pseudorange_m, m.trk_stat) = (gnss_id, sv_id, sig_id, pr, 1);
+            m
+        };
+        let list = [
+            meas(GNSS_ID_GALILEO, 5, 1, 2.4e7 + 5.0), // E1-B
+            meas(GNSS_ID_GPS, 3, 0, 2.1e7),
+            meas(GNSS_ID_GALILEO, 5, 0, 2.4e7), // E1-C: preferred
+            meas(GNSS_ID_GALILEO, 5, 4, 2.4e7), // E5a: not used
+            meas(GNSS_ID_BEIDOU, 20, 4, 2.2e7), // B3I
+            meas(GNSS_ID_BEIDOU, 21, 4, 2.2e7), // unhealthy
+            meas(6, 1, 0, 2.0e7),               // GLONASS: not solved
+        ];
+        let mut raw = GnssRaw::zeroed();
+        raw.rcv_tow_s = t_rx;
+        raw.meas[..list.len()].copy_from_slice(&list);
+        raw.num_meas = list.len() as u8;
+        let mut counts = RangeBuildCounts::default();
+        let obs = st.system_observations(&raw, &[0, 2, 3], &mut counts);
+        assert_eq!(obs.len(), 3, "{obs:?}");
+        assert_eq!((counts.other_signals, counts.no_ephemeris, counts.invalid), (3, 1, 0));
+        let find = |g: u8| obs.iter().find(|o| o.gnss_id == g).unwrap();
+        let (g, e, c) = (find(GNSS_ID_GPS), find(GNSS_ID_GALILEO), find(GNSS_ID_BEIDOU));
+        assert_eq!(e.obs.pseudorange_m, 2.4e7);
+        assert!((g.obs.sat_clock_s - (1e-4 - 5e-9)).abs() < 1e-15);
+        assert!((e.obs.sat_clock_s - (1e-3 - 1e-8)).abs() < 1e-15);
+        let want = 2e-3 + 1e-6 * (-2.2e7 / C_M_S);
+        assert!(
+            (c.obs.sat_clock_s - want).abs() < 1e-12,
+            "{} vs {want}",
+            c.obs.sat_clock_s
+        );
+        assert_eq!((g.iono_scale, e.iono_scale), (1.0, 1.0));
+        assert!((c.iono_scale - (1575.42f64 / 1268.52).powi(2)).abs() < 1e-12);
+        assert_eq!(e.obs.sigma_zenith_m, 2.0);
+        // Galileo only.
+        let only = st.system_observations(&raw, &[GNSS_ID_GALILEO], &mut counts);
+        assert_eq!((only.len(), only[0].gnss_id), (1, GNSS_ID_GALILEO));
     }
 }

@@ -1,12 +1,15 @@
-//! Single-point positioning from GPS L1 C/A pseudoranges: geometry (elevation, azimuth, the
-//! Earth's rotation during the signal's flight), the broadcast Klobuchar ionosphere
-//! (IS-GPS-200N §20.3.3.5.2.5), a standard-atmosphere Saastamoinen troposphere, and a
-//! weighted least-squares solution of ECEF position and receiver clock bias (Gauss-Newton on
-//! the normal equations, statically sized) with a chi-square residual check that excludes the
-//! worst satellite once (RAIM-style fault detection and exclusion); velocity and clock drift
-//! from Doppler by weighted least squares at a known position.
+//! Single-point positioning from pseudoranges of GPS, Galileo, BeiDou and GLONASS: geometry
+//! (elevation, azimuth, the Earth's rotation during the signal's flight), the broadcast
+//! Klobuchar ionosphere (IS-GPS-200N §20.3.3.5.2.5) scaled by (f_L1/f)² to each signal's
+//! carrier (§20.3.3.3.3.2), a standard-atmosphere Saastamoinen troposphere, and a weighted
+//! least-squares solution of ECEF position and one receiver clock bias per system (the
+//! inter-system time offsets and biases go into those clocks, as RTKLIB's `pntpos` does;
+//! Gauss-Newton on the normal equations, statically sized) with a chi-square residual check
+//! on `used − unknowns` degrees of freedom that excludes the worst satellite once (RAIM-style
+//! fault detection and exclusion); velocity and clock drift from Doppler by weighted least
+//! squares at a known position.
 
-use nalgebra::{Matrix3, Matrix4, Vector4};
+use nalgebra::{Matrix3, Matrix4, SMatrix, SVector, Vector4};
 
 use super::lnav::IonoUtc;
 use super::orbit::{GPS_PI, OMEGA_E_RAD_S};
@@ -124,28 +127,108 @@ pub struct Observation {
     pub sigma_zenith_m: f64,
 }
 
+/// The systems [`solve`] keeps a receiver clock for, in this order (u-blox `gnssId`):
+/// GPS, Galileo, BeiDou, GLONASS.
+pub const SYSTEMS: [u8; 4] = [0, 2, 3, 6];
+/// Systems, hence receiver clocks, of one solution at most.
+pub const MAX_SYSTEMS: usize = SYSTEMS.len();
+/// Unknowns at most: position and one clock per system.
+const NX: usize = 3 + MAX_SYSTEMS;
+type MatX = SMatrix<f64, NX, NX>;
+type VecX = SVector<f64, NX>;
+
+/// The index of system `gnss_id` (u-blox numbering) in [`SYSTEMS`].
+pub fn system_index(gnss_id: u8) -> Option<usize> {
+    SYSTEMS.iter().position(|&g| g == gnss_id)
+}
+
+/// One satellite's measurement of any system, for [`solve`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SystemObservation {
+    /// The measurement (satellite clock and group delay of the signal used included).
+    pub obs: Observation,
+    /// The system, u-blox `gnssId` (one of [`SYSTEMS`]).
+    pub gnss_id: u8,
+    /// (f_L1 / f)² of the signal's carrier: the L1 ionospheric delay times this is the
+    /// signal's (IS-GPS-200 §20.3.3.3.3.2).
+    pub iono_scale: f64,
+}
+
+/// What [`solve`] needs of a measurement: [`Observation`] is GPS L1 C/A.
+pub trait Measured {
+    /// The measurement.
+    fn observation(&self) -> &Observation;
+    /// Its system's index in [`SYSTEMS`] (≥ [`MAX_SYSTEMS`]: not solved for).
+    fn system(&self) -> usize;
+    /// (f_L1 / f)² of its carrier.
+    fn iono_scale(&self) -> f64;
+}
+
+impl Measured for Observation {
+    fn observation(&self) -> &Observation {
+        self
+    }
+    fn system(&self) -> usize {
+        0
+    }
+    fn iono_scale(&self) -> f64 {
+        1.0
+    }
+}
+
+impl Measured for SystemObservation {
+    fn observation(&self) -> &Observation {
+        &self.obs
+    }
+    fn system(&self) -> usize {
+        system_index(self.gnss_id).unwrap_or(MAX_SYSTEMS)
+    }
+    fn iono_scale(&self) -> f64 {
+        self.iono_scale
+    }
+}
+
 /// A position and clock solution.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Solution {
     /// Receiver position, ECEF, m.
     pub ecef_m: [f64; 3],
-    /// Receiver clock bias, m (c·δt).
+    /// Receiver clock bias, m (c·δt): of the first system used in the order of [`SYSTEMS`]
+    /// (GPS time when GPS is used).
     pub clock_bias_m: f64,
-    /// Covariance of (x, y, z, c·δt), m².
+    /// Covariance of (x, y, z, c·δt), m² (the clock of `clock_bias_m`).
     pub cov: Matrix4<f64>,
     /// Satellites used.
     pub used: usize,
-    /// Weighted sum of squared residuals (χ² with `used − 4` degrees of freedom).
+    /// Weighted sum of squared residuals (χ² with `used − 3 − systems` degrees of freedom).
     pub chi2: f64,
     /// The satellite excluded by the residual check, if any.
     pub excluded: Option<u8>,
+    /// The system of the excluded satellite (u-blox `gnssId`; 0 when none was excluded).
+    pub excluded_gnss_id: u8,
+    /// Receiver clock bias of each system of [`SYSTEMS`], m (0 for a system not used).
+    pub clock_biases_m: [f64; MAX_SYSTEMS],
+    /// Satellites used of each system of [`SYSTEMS`].
+    pub used_per_system: [usize; MAX_SYSTEMS],
+}
+
+impl Solution {
+    /// Receiver clocks estimated (systems with a satellite used).
+    pub fn systems(&self) -> usize {
+        self.used_per_system.iter().filter(|&&n| n > 0).count()
+    }
+
+    /// Degrees of freedom of [`chi2`](Self::chi2): satellites used less the unknowns.
+    pub fn dof(&self) -> usize {
+        self.used.saturating_sub(3 + self.systems())
+    }
 }
 
 /// Why no solution.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum SppError {
-    /// Fewer than four usable satellites.
-    #[error("{0} satellites above the mask: 4 needed")]
+    /// Fewer usable satellites than unknowns (position and one clock per system).
+    #[error("{0} satellites above the mask: 3 + one per system needed")]
     TooFew(usize),
     /// The normal equations were singular (degenerate geometry) or did not converge.
     #[error("no convergence (geometry or outliers)")]
@@ -186,22 +269,24 @@ fn chi2_quantile(dof: usize, p: f64) -> f64 {
     k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)
 }
 
-/// Solves position and clock from `obs` at GPS reception time `t_rx_s` (s of week), starting
-/// at `init` (ECEF, m; the Earth's centre converges too). `iono`: the broadcast model, if
-/// known.
-pub fn solve(
-    obs: &[Observation],
+/// Solves position and one receiver clock per system from `obs` at GPS reception time
+/// `t_rx_s` (s of week), starting at `init` (ECEF, m; the Earth's centre converges too):
+/// [`Observation`]s are GPS L1 C/A (one clock), [`SystemObservation`]s of any of [`SYSTEMS`]
+/// (others are ignored). `iono`: the broadcast model (L1 delays), if known, scaled by each
+/// observation's `iono_scale`.
+pub fn solve<O: Measured>(
+    obs: &[O],
     iono: Option<&Klobuchar>,
     t_rx_s: f64,
     init: [f64; 3],
     settings: &SppSettings,
 ) -> Result<Solution, SppError> {
     let first = solve_excluding(obs, iono, t_rx_s, init, settings, None)?;
-    if first.used >= 6 && first.chi2 > chi2_quantile(first.used - 4, settings.p_false_alarm) {
+    let unknowns = 3 + first.systems();
+    if first.used >= unknowns + 2 && first.chi2 > chi2_quantile(first.dof(), settings.p_false_alarm) {
         // Exclude the satellite whose removal lowers χ² the most.
-        let best = obs
-            .iter()
-            .filter_map(|o| solve_excluding(obs, iono, t_rx_s, first.ecef_m, settings, Some(o.sv)).ok())
+        let best = (0..obs.len())
+            .filter_map(|k| solve_excluding(obs, iono, t_rx_s, first.ecef_m, settings, Some(k)).ok())
             .min_by(|a, b| a.chi2.total_cmp(&b.chi2));
         if let Some(s) = best {
             return Ok(s);
@@ -210,26 +295,32 @@ pub fn solve(
     Ok(first)
 }
 
-fn solve_excluding(
-    obs: &[Observation],
+fn solve_excluding<O: Measured>(
+    obs: &[O],
     iono: Option<&Klobuchar>,
     t_rx_s: f64,
     init: [f64; 3],
     settings: &SppSettings,
-    exclude: Option<u8>,
+    exclude: Option<usize>,
 ) -> Result<Solution, SppError> {
-    let mut x = Vector4::new(init[0], init[1], init[2], 0.0);
+    let mut x = VecX::zeros();
+    x.fixed_rows_mut::<3>(0).copy_from_slice(&init);
     for iter in 0..15 {
         let rx = [x[0], x[1], x[2]];
         let geo = geodetic_from_ecef(rx[0], rx[1], rx[2]);
-        let (mut n, mut b, mut used, mut chi2) = (Matrix4::zeros(), Vector4::zeros(), 0usize, 0.0);
-        for o in obs.iter().filter(|o| Some(o.sv) != exclude) {
+        let (mut n, mut b, mut used, mut chi2) = (MatX::zeros(), VecX::zeros(), 0usize, 0.0);
+        let mut per_system = [0usize; MAX_SYSTEMS];
+        for (k, m) in obs.iter().enumerate() {
+            let (o, sys) = (m.observation(), m.system());
+            if Some(k) == exclude || sys >= MAX_SYSTEMS {
+                continue;
+            }
             let r0 = dist(o.sat_ecef_m, rx);
             let sat = rotate_for_flight(o.sat_ecef_m, r0 / C_M_S);
             let r = dist(sat, rx);
             // Away from the solution (first iterations from the Earth's centre) every
             // satellite counts, without atmosphere or mask.
-            let (mut model, mut sin_el) = (r + x[3] - C_M_S * o.sat_clock_s, 1.0);
+            let (mut model, mut sin_el) = (r + x[3 + sys] - C_M_S * o.sat_clock_s, 1.0);
             if let Some(g) = geo.filter(|g| g.height_m > -1e4 && iter > 0) {
                 let (el, az) = elevation_azimuth(rx, sat);
                 if el < settings.elevation_mask_rad {
@@ -238,20 +329,31 @@ fn solve_excluding(
                 sin_el = el.sin();
                 let (lat, lon) = (g.lat_deg.to_radians(), g.lon_deg.to_radians());
                 if let Some(k) = iono {
-                    model += C_M_S * k.delay_s(lat, lon, el, az, t_rx_s);
+                    model += C_M_S * k.delay_s(lat, lon, el, az, t_rx_s) * m.iono_scale();
                 }
                 model += troposphere_delay_m(lat, g.height_m, el);
             }
             let w = (sin_el / o.sigma_zenith_m).powi(2);
-            let h = Vector4::new((rx[0] - sat[0]) / r, (rx[1] - sat[1]) / r, (rx[2] - sat[2]) / r, 1.0);
+            let mut h = VecX::zeros();
+            h[0] = (rx[0] - sat[0]) / r;
+            h[1] = (rx[1] - sat[1]) / r;
+            h[2] = (rx[2] - sat[2]) / r;
+            h[3 + sys] = 1.0;
             let v = o.pseudorange_m - model;
             n += h * h.transpose() * w;
             b += h * (w * v);
             chi2 += w * v * v;
             used += 1;
+            per_system[sys] += 1;
         }
-        if used < 4 {
+        let systems = per_system.iter().filter(|&&c| c > 0).count();
+        if used < 3 + systems.max(1) {
             return Err(SppError::TooFew(used));
+        }
+        // A system without a satellite keeps its clock (a unit pseudo-observation of no
+        // change, as RTKLIB's `pntpos` constrains it), which leaves the others' solution as is.
+        for (s, _) in per_system.iter().enumerate().filter(|(_, c)| **c == 0) {
+            n[(3 + s, 3 + s)] = 1.0;
         }
         let Some(cov) = n.try_inverse() else {
             return Err(SppError::NoConvergence);
@@ -259,14 +361,25 @@ fn solve_excluding(
         let dx = cov * b;
         x += dx;
         if dx.norm() < 1e-4 && iter > 0 {
+            let reference = per_system.iter().position(|&c| c > 0).unwrap_or(0);
+            let keep = [0, 1, 2, 3 + reference];
+            let cov4 = Matrix4::from_fn(|i, j| cov[(keep[i], keep[j])]);
+            let mut clock_biases_m = [0.0; MAX_SYSTEMS];
+            for (s, c) in clock_biases_m.iter_mut().enumerate() {
+                *c = if per_system[s] > 0 { x[3 + s] } else { 0.0 };
+            }
+            let excluded = exclude.and_then(|k| obs.get(k));
             return Ok(Solution {
                 ecef_m: [x[0], x[1], x[2]],
-                clock_bias_m: x[3],
-                cov,
+                clock_bias_m: x[3 + reference],
+                cov: cov4,
                 used,
                 // The residuals after this last (tiny) step equal those before it.
                 chi2,
-                excluded: exclude,
+                excluded: excluded.map(|m| m.observation().sv),
+                excluded_gnss_id: excluded.map_or(0, |m| SYSTEMS.get(m.system()).copied().unwrap_or(0)),
+                clock_biases_m,
+                used_per_system: per_system,
             });
         }
     }
@@ -368,5 +481,133 @@ mod tests {
         assert!((night - 5e-9 * (1.0 + 16.0 * 0.03f64.powi(3))).abs() < 1e-15, "{night}");
         assert!(k.delay_s(0.0, 0.0, std::f64::consts::FRAC_PI_2, 0.0, 50_400.0) > 1e-8);
         assert!((chi2_quantile(4, 1e-3) - 18.47).abs() < 0.3);
+    }
+
+    /// A receiver 1 km up at 40° N 105° W seeing `n` satellites spread in azimuth and
+    /// elevation, each of system `systems[k % len]`, with exact pseudoranges for receiver
+    /// clocks `clocks_m` (by [`SYSTEMS`] index) and the troposphere the solver models.
+    fn synthetic(n: usize, systems: &[u8], clocks_m: [f64; MAX_SYSTEMS]) -> ([f64; 3], Vec<SystemObservation>) {
+        let rx = navsync_wire::earth::geodetic_to_ecef(40f64.to_radians(), (-105f64).to_radians(), 1000.0);
+        let c_en = ned_from_ecef(40f64.to_radians(), (-105f64).to_radians());
+        let g = geodetic_from_ecef(rx[0], rx[1], rx[2]).unwrap();
+        let obs = (0..n)
+            .map(|k| {
+                let az = (k as f64 * 137.5f64).to_radians();
+                let el = (15.0 + (k as f64 * 29.0) % 70.0).to_radians();
+                let ned = [el.cos() * az.cos(), el.cos() * az.sin(), -el.sin()];
+                // ECEF direction = C_e^nᵀ · NED.
+                let d: Vec<f64> = (0..3).map(|j| (0..3).map(|i| c_en[(i, j)] * ned[i]).sum()).collect();
+                let sat = [rx[0] + 2.2e7 * d[0], rx[1] + 2.2e7 * d[1], rx[2] + 2.2e7 * d[2]];
+                let gnss_id = systems[k % systems.len()];
+                let rot = rotate_for_flight(sat, dist(sat, rx) / C_M_S);
+                let (e, _) = elevation_azimuth(rx, rot);
+                let pr = dist(rot, rx)
+                    + clocks_m[system_index(gnss_id).unwrap()]
+                    + troposphere_delay_m(g.lat_deg.to_radians(), g.height_m, e);
+                SystemObservation {
+                    obs: Observation {
+                        sv: k as u8 + 1,
+                        pseudorange_m: pr,
+                        sat_ecef_m: sat,
+                        sat_clock_s: 0.0,
+                        sigma_zenith_m: 1.0,
+                    },
+                    gnss_id,
+                    iono_scale: 1.0,
+                }
+            })
+            .collect();
+        (rx, obs)
+    }
+
+    /// One receiver clock per system: GPS, Galileo and BeiDou clocks kilometres apart are each
+    /// recovered, the position exactly, χ² ≈ 0 on `used − 3 − 3` degrees of freedom; the
+    /// same satellites as one system (one clock) cannot fit them.
+    #[test]
+    fn each_system_has_its_own_receiver_clock() {
+        let clocks = [150.0, -2_500.0, 7_000.0, 0.0];
+        let (rx, obs) = synthetic(10, &[0, 2, 3], clocks);
+        let s = solve(&obs, None, 0.0, [0.0; 3], &SppSettings::default()).unwrap();
+        assert!(dist(s.ecef_m, rx) < 1e-3, "{:?} vs {rx:?}", s.ecef_m);
+        for (est, truth) in s.clock_biases_m.iter().zip(&clocks).take(3) {
+            assert!((est - truth).abs() < 1e-3, "{:?}", s.clock_biases_m);
+        }
+        assert_eq!(
+            (s.used, s.systems(), s.dof(), s.used_per_system),
+            (10, 3, 4, [4, 3, 3, 0])
+        );
+        assert_eq!(s.clock_bias_m, s.clock_biases_m[0]);
+        assert!(s.chi2 < 1e-6 && s.excluded.is_none(), "χ² {}", s.chi2);
+        // Without GPS the reported clock is Galileo's.
+        let no_gps: Vec<_> = obs.iter().copied().filter(|o| o.gnss_id != 0).collect();
+        let s = solve(&no_gps, None, 0.0, [0.0; 3], &SppSettings::default()).unwrap();
+        assert!((s.clock_bias_m - clocks[1]).abs() < 1e-3 && dist(s.ecef_m, rx) < 1e-3);
+        assert_eq!((s.used, s.dof()), (6, 1));
+        // Five satellites of two systems: 3 + 2 unknowns, solved with 0 degrees of freedom.
+        let two: Vec<_> = obs.iter().copied().filter(|o| o.gnss_id != 3).collect();
+        let s = solve(&two[..5], None, 0.0, [0.0; 3], &SppSettings::default()).unwrap();
+        assert!(dist(s.ecef_m, rx) < 1e-3 && s.dof() == 0);
+        // Four satellites of two systems are too few.
+        let r = solve(&two[..4], None, 0.0, [0.0; 3], &SppSettings::default());
+        assert!(matches!(r, Err(SppError::TooFew(4))), "{r:?}");
+        // Labelled as one system the clocks disagree: the fit is kilometres off.
+        let one: Vec<_> = obs.iter().map(|o| SystemObservation { gnss_id: 0, ..*o }).collect();
+        let s = solve(&one, None, 0.0, [0.0; 3], &SppSettings::default());
+        assert!(s.is_err() || s.unwrap().chi2 > 1e4);
+    }
+
+    /// The residual check's threshold has the degrees of freedom of the unknowns: a 40 m
+    /// fault on one satellite of three systems is found and excluded, the position
+    /// recovered; GPS satellites as `Observation`s or as `SystemObservation`s give the same solution.
+    #[test]
+    fn the_residual_check_excludes_a_faulty_satellite_of_any_system() {
+        let clocks = [150.0, -2_500.0, 7_000.0, 0.0];
+        let (rx, mut obs) = synthetic(12, &[0, 2, 3], clocks);
+        obs[7].obs.pseudorange_m += 40.0;
+        let s = solve(&obs, None, 0.0, [0.0; 3], &SppSettings::default()).unwrap();
+        assert_eq!((s.excluded, s.excluded_gnss_id), (Some(8), obs[7].gnss_id));
+        assert!(dist(s.ecef_m, rx) < 1e-3 && s.chi2 < 1e-6 && s.used == 11);
+        // 7 satellites of 3 systems: 6 unknowns, one degree of freedom: detection needs 2.
+        let (_, mut few) = synthetic(7, &[0, 2, 3], clocks);
+        few[1].obs.pseudorange_m += 40.0;
+        let s = solve(&few, None, 0.0, [0.0; 3], &SppSettings::default()).unwrap();
+        assert!(s.excluded.is_none() && s.dof() == 1 && s.chi2 > 1.0);
+        let (_, gps) = synthetic(8, &[0], clocks);
+        let plain: Vec<Observation> = gps.iter().map(|o| o.obs).collect();
+        let a = solve(&plain, None, 0.0, [0.0; 3], &SppSettings::default()).unwrap();
+        let b = solve(&gps, None, 0.0, [0.0; 3], &SppSettings::default()).unwrap();
+        assert_eq!(a, b);
+    }
+
+    /// The ionosphere of a signal off L1 is the L1 delay times (f_L1/f)²: B3I's pseudorange
+    /// carrying 1.54 × the L1 delay solves exactly when its scale says so.
+    #[test]
+    fn ionosphere_is_scaled_to_the_carrier() {
+        let k = Klobuchar {
+            alpha: [2e-8, 0.0, 0.0, 0.0],
+            beta: [1e5, 0.0, 0.0, 0.0],
+        };
+        let (rx, mut obs) = synthetic(10, &[0, 3], [0.0, 0.0, 300.0, 0.0]);
+        let g = geodetic_from_ecef(rx[0], rx[1], rx[2]).unwrap();
+        let t = 50_400.0 + 105.0 / 180.0 * 43_200.0; // local afternoon at the IPP
+        for o in &mut obs {
+            let scale = if o.gnss_id == 3 {
+                (1575.42f64 / 1268.52).powi(2)
+            } else {
+                1.0
+            };
+            let rot = rotate_for_flight(o.obs.sat_ecef_m, dist(o.obs.sat_ecef_m, rx) / C_M_S);
+            let (el, az) = elevation_azimuth(rx, rot);
+            let d = k.delay_s(g.lat_deg.to_radians(), g.lon_deg.to_radians(), el, az, t) * C_M_S;
+            o.obs.pseudorange_m += scale * d;
+            o.iono_scale = scale;
+        }
+        let s = solve(&obs, Some(&k), t, [0.0; 3], &SppSettings::default()).unwrap();
+        assert!(dist(s.ecef_m, rx) < 1e-3, "{} m", dist(s.ecef_m, rx));
+        for o in &mut obs {
+            o.iono_scale = 1.0;
+        }
+        let s = solve(&obs, Some(&k), t, [0.0; 3], &SppSettings::default()).unwrap();
+        assert!(dist(s.ecef_m, rx) > 0.05, "{} m", dist(s.ecef_m, rx));
     }
 }

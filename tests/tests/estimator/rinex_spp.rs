@@ -149,8 +149,19 @@ pub(crate) fn rtklib(name: &str, env_var: &str) -> Option<PathBuf> {
 /// m): single point (-p 0), ECEF output (-e), GPS only, the same mask; broadcast ionosphere
 /// and Saastamoinen troposphere are rnx2rtkp's defaults.
 pub(crate) fn rtklib_spp(rnx2rtkp: &Path, obs: &Path, nav: &Path, out: &Path) -> Vec<(String, [f64; 3])> {
+    rtklib_spp_systems(rnx2rtkp, obs, nav, out, "G")
+}
+
+/// [`rtklib_spp`] with the systems `systems` (rnx2rtkp's `-sys`, e.g. `G,E,C`).
+pub(crate) fn rtklib_spp_systems(
+    rnx2rtkp: &Path,
+    obs: &Path,
+    nav: &Path,
+    out: &Path,
+    systems: &str,
+) -> Vec<(String, [f64; 3])> {
     let o = std::process::Command::new(rnx2rtkp)
-        .args(["-p", "0", "-e", "-sys", "G", "-m", MASK_DEG, "-o"])
+        .args(["-p", "0", "-e", "-sys", systems, "-m", MASK_DEG, "-o"])
         .arg(out)
         .arg(obs)
         .arg(nav)

@@ -1,0 +1,201 @@
+//! Single-point positioning with every constellation of a real receiver
+//! (`../shared/datasets/rtklibexplorer-walk0827`: a u-blox X20's own log of a 134 s walk; GPS
+//! L1 C/A with 4 complete ephemerides in the log, Galileo E1-C, BeiDou B3I): `navsync import
+//! ubx` then `navsync spp` with GPS, Galileo and BeiDou, scored horizontally at the receiver's
+//! RTK-fixed epochs (its NAV-PVT, the antenna), and side by side with RTKLIB's single-point
+//! solution of the same log (`convbin` to RINEX 3.04, `rnx2rtkp -p 0 -sys G,E,C -m 10`:
+//! broadcast ionosphere and Saastamoinen troposphere are its defaults) when its binaries are
+//! there.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use navsync_estimator::gnss::spp::ned_from_ecef;
+use navsync_shared::earth::geodetic_to_ecef;
+use navsync_tests::{TestEnv, shared_material};
+use serde_json::Value;
+
+use super::rinex_spp::{rtklib, rtklib_spp_systems, run_ok};
+
+/// The bound on navsync's horizontal RMS at the RTK-fixed epochs, m (measured 7.61 m on 262
+/// epochs; GPS alone has no solution there: 4 ephemerides, the last one late in the walk).
+const RMS_BOUND_M: f64 = 8.5;
+
+fn data() -> PathBuf {
+    shared_material("datasets/rtklibexplorer-walk0827")
+}
+
+fn p(x: &Path) -> String {
+    x.display().to_string()
+}
+
+/// The receiver's RTK-fixed positions (`gnss_q.txt` Q = 1, `gnss.pos`), ECEF m, by GPS
+/// seconds of week in ms.
+fn rtk_fixed() -> HashMap<i64, [f64; 3]> {
+    let read = |name: &str| std::fs::read_to_string(data().join(name)).unwrap();
+    let fixed: Vec<i64> = read("gnss_q.txt")
+        .lines()
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            (f.get(1) == Some(&"1")).then(|| ms(f[0].parse().ok()?))?
+        })
+        .collect();
+    read("gnss.pos")
+        .lines()
+        .filter_map(|l| {
+            let f: Vec<f64> = l.split_whitespace().filter_map(|x| x.parse().ok()).collect();
+            let t = ms(*f.first()?)?;
+            (f.len() >= 4 && fixed.contains(&t))
+                .then(|| (t, geodetic_to_ecef(f[1].to_radians(), f[2].to_radians(), f[3])))
+        })
+        .collect()
+}
+
+/// Seconds of week as ms, to the nearest 10 ms (the receiver's epochs fall within a few ms
+/// of its quarter seconds, the walker moves < 1 cm in that time).
+fn ms(sow: f64) -> Option<i64> {
+    sow.is_finite().then(|| (sow * 1e2).round() as i64 * 10)
+}
+
+/// Horizontal error of `p` against `reference` (ECEF m), m.
+fn horizontal(p: [f64; 3], reference: [f64; 3]) -> f64 {
+    let g = navsync_shared::earth::geodetic_from_ecef(reference[0], reference[1], reference[2]).unwrap();
+    let c = ned_from_ecef(g.lat_deg.to_radians(), g.lon_deg.to_radians());
+    let ned = c * nalgebra::Vector3::new(p[0] - reference[0], p[1] - reference[1], p[2] - reference[2]);
+    ned.x.hypot(ned.y)
+}
+
+/// Horizontal RMS of the solutions at the RTK-fixed epochs of `only` (all when `None`), and
+/// their number.
+fn score(solutions: &HashMap<i64, [f64; 3]>, fixed: &HashMap<i64, [f64; 3]>, only: Option<&[i64]>) -> (f64, usize) {
+    let errors: Vec<f64> = solutions
+        .iter()
+        .filter(|(t, _)| only.is_none_or(|o| o.contains(t)))
+        .filter_map(|(t, p)| Some(horizontal(*p, *fixed.get(t)?)))
+        .collect();
+    let n = errors.len();
+    ((errors.iter().map(|e| e * e).sum::<f64>() / n.max(1) as f64).sqrt(), n)
+}
+
+/// navsync's solutions of the walk with `systems`: positions (ECEF m by time in ms), the
+/// satellites used per epoch (GPS, Galileo, BeiDou), the JSON summary.
+fn navsync(env: &TestEnv, systems: &str) -> (HashMap<i64, [f64; 3]>, Vec<[usize; 3]>, Value) {
+    let rec = env.dir.join("walk.mcap");
+    if !rec.exists() {
+        let (log, imu, r) = (
+            p(&data().join("source/gnss_1730.ubx")),
+            p(&data().join("imu.txt")),
+            p(&rec),
+        );
+        run_ok(env, &["import", "ubx", &log, "--imu", &imu, "--out", &r]);
+    }
+    let csv = env.dir.join(format!("walk-{}.csv", systems.replace(',', "")));
+    let (r, c) = (p(&rec), p(&csv));
+    let out = run_ok(env, &["spp", &r, "--systems", systems, "--out", &c, "--json"]);
+    let summary: Value = serde_json::from_str(out.trim()).unwrap();
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (t, x, gps, gal, bds) = (col("tow_s"), col("x_m"), col("gps"), col("galileo"), col("beidou"));
+    let (mut pos, mut used) = (HashMap::new(), Vec::new());
+    for l in lines {
+        let f: Vec<&str> = l.split(',').collect();
+        let v = |k: usize| f[k].parse::<f64>().unwrap();
+        pos.insert(ms(v(t)).unwrap(), [v(x), v(x + 1), v(x + 2)]);
+        let n = |k: usize| f[k].parse::<usize>().unwrap();
+        used.push([n(gps), n(gal), n(bds)]);
+    }
+    (pos, used, summary)
+}
+
+/// GPS, Galileo and BeiDou together: every system used, the horizontal RMS at the RTK-fixed
+/// epochs within the measured bound; each system alone counts only its own satellites.
+#[test]
+fn walk_spp_uses_every_system() {
+    let env = TestEnv::new("sppwalk");
+    let fixed = rtk_fixed();
+    assert!(fixed.len() > 300, "{} RTK-fixed epochs", fixed.len());
+    let (pos, used, summary) = navsync(&env, "G,E,C");
+    let (h, n) = score(&pos, &fixed, None);
+    eprintln!(
+        "walk G,E,C: {} epochs solved, horizontal RMS {h:.3} m at {n} RTK-fixed epochs; {summary}",
+        pos.len()
+    );
+    assert!(pos.len() >= 400, "{} epochs solved", pos.len());
+    assert!(n >= 250, "{n} RTK-fixed epochs solved");
+    assert!(h <= RMS_BOUND_M, "horizontal RMS {h:.3} m > {RMS_BOUND_M} m");
+    for (k, name) in ["G", "E", "C"].iter().enumerate() {
+        let epochs = used.iter().filter(|u| u[k] > 0).count();
+        assert!(
+            epochs * 4 >= pos.len() * 3,
+            "{name} used in {epochs} of {} epochs",
+            pos.len()
+        );
+        assert_eq!(
+            summary["epochs_with_system"][name].as_u64(),
+            Some(epochs as u64),
+            "{name}"
+        );
+    }
+    // Every solution has as many satellites as unknowns (3 + one clock per system) or more.
+    for u in &used {
+        let systems = u.iter().filter(|n| **n > 0).count();
+        assert!(u.iter().sum::<usize>() >= 3 + systems, "{u:?}");
+    }
+    // Galileo alone: only Galileo counted.
+    let (_, used_e, summary_e) = navsync(&env, "E");
+    assert!(!used_e.is_empty() && used_e.iter().all(|u| u[0] == 0 && u[2] == 0 && u[1] >= 4));
+    assert_eq!(summary_e["epochs_with_system"]["C"].as_u64(), Some(0));
+}
+
+/// RTKLIB's single-point solution of `obs`/`nav` with `systems` (`-sys`), ECEF m by time in
+/// ms of GPS week.
+fn rtklib_spp(rnx2rtkp: &Path, obs: &Path, nav: &Path, out: &Path, systems: &str) -> HashMap<i64, [f64; 3]> {
+    rtklib_spp_systems(rnx2rtkp, obs, nav, out, systems)
+        .into_iter()
+        .filter_map(|(t, p)| Some((ms(t.split_whitespace().nth(1)?.parse().ok()?)?, p)))
+        .collect()
+}
+
+/// navsync's horizontal RMS at the RTK-fixed epochs at most RTKLIB's on the same log, over
+/// each one's own solutions and over the epochs both solved.
+#[test]
+fn walk_spp_is_no_worse_than_rtklib() {
+    let (Some(convbin), Some(rnx2rtkp)) = (
+        rtklib("convbin", "NAVSYNC_CONVBIN"),
+        rtklib("rnx2rtkp", "NAVSYNC_RNX2RTKP"),
+    ) else {
+        return;
+    };
+    let env = TestEnv::new("sppwalkrtk");
+    let (obs, nav) = (env.dir.join("walk.obs"), env.dir.join("walk.nav"));
+    let o = std::process::Command::new(convbin)
+        .args(["-r", "ubx", "-v", "3.04", "-o"])
+        .arg(&obs)
+        .arg("-n")
+        .arg(&nav)
+        .arg(data().join("source/gnss_1730.ubx"))
+        .output()
+        .unwrap();
+    assert!(o.status.success() && obs.is_file() && nav.is_file(), "convbin failed");
+    let fixed = rtk_fixed();
+    let theirs = rtklib_spp(&rnx2rtkp, &obs, &nav, &env.dir.join("rtk.pos"), "G,E,C");
+    let (ours, _, _) = navsync(&env, "G,E,C");
+    let (h, n) = score(&ours, &fixed, None);
+    let (rh, rn) = score(&theirs, &fixed, None);
+    let both: Vec<i64> = ours.keys().filter(|t| theirs.contains_key(t)).copied().collect();
+    let ((hb, nb), (rhb, _)) = (score(&ours, &fixed, Some(&both)), score(&theirs, &fixed, Some(&both)));
+    let gps = rtklib_spp(&rnx2rtkp, &obs, &nav, &env.dir.join("rtk-g.pos"), "G");
+    let (gh, gn) = score(&gps, &fixed, None);
+    eprintln!(
+        "walk horizontal RMS at the RTK-fixed epochs: navsync G,E,C {h:.3} m ({n}), RTKLIB -sys G,E,C {rh:.3} m ({rn}); \
+         at the {nb} both solved: {hb:.3} vs {rhb:.3} m; RTKLIB -sys G {gh:.3} m ({gn})"
+    );
+    assert!(rn > 300 && nb >= 250, "RTKLIB {rn}, both {nb} epochs");
+    assert!(h <= rh, "navsync {h:.3} m > RTKLIB's {rh:.3} m");
+    assert!(
+        hb <= rhb,
+        "at the common epochs navsync {hb:.3} m > RTKLIB's {rhb:.3} m"
+    );
+}
