@@ -123,6 +123,11 @@ pub struct NavCounters {
 
 pub use super::measurements::gnss::RESET_AFTER_REJECTS;
 
+/// Fixes remembered for the motion test on positions ([`Navigator::displaced`]).
+const RECENT_FIXES: usize = 16;
+/// The longest baseline of that test, s.
+const MOTION_BASELINE_S: f64 = 3.0;
+
 /// The receiver clock as the tightly coupled filter knows it ([`Navigator::receiver_clock`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ReceiverClock {
@@ -204,13 +209,18 @@ pub struct Navigator {
     counters: NavCounters,
     last_imu_ns: Option<i64>,
     last_fix_rx_ns: Option<i64>,
-    /// A fix has shown the platform moving (speed ≥ the alignment's minimum and 5.3 σ).
+    /// A fix has shown the platform moving (speed ≥ the alignment's minimum and 5.3 σ, or a
+    /// displacement that large over a few seconds: [`Navigator::displaced`]).
     motion_seen: bool,
     /// The epoch (host ns, the fix's stamp less the delay prior) of the first fix that showed
     /// motion: the heading bank decides only on data past it.
     motion_epoch_ns: Option<i64>,
     /// Epoch of the previous fix, host ns (for the noise of a speed from positions).
     prev_fix_ns: Option<i64>,
+    /// The latest fixes' stamps (host ns), positions (rad) and horizontal σ (m): motion shown
+    /// by a displacement over a few seconds where the fixes carry no velocity.
+    recent_fixes: [(i64, f64, f64, f64); RECENT_FIXES],
+    recent_len: usize,
     /// Receipt of the last raw epoch (tightly coupled), host ns.
     last_ranges_rx_ns: Option<i64>,
     /// The fusion horizon in force, ns.
@@ -273,6 +283,8 @@ impl Navigator {
             motion_seen: false,
             motion_epoch_ns: None,
             prev_fix_ns: None,
+            recent_fixes: [(0, 0.0, 0.0, 0.0); RECENT_FIXES],
+            recent_len: 0,
             last_ranges_rx_ns: None,
             horizon_ns: (cfg.fusion_horizon_s * 1e9) as i64,
             fix_delay_ns: 0,
@@ -316,8 +328,8 @@ impl Navigator {
     }
 
     /// True once a fix has shown the platform moving (speed ≥ the alignment's minimum and 5.3 σ
-    /// of the speed): before
-    /// that, a heading may not be observable at all.
+    /// of the speed, or a displacement over a few seconds that large: [`Self::displaced`]):
+    /// before that, a heading may not be observable at all.
     pub fn motion_seen(&self) -> bool {
         self.motion_seen
     }
@@ -382,7 +394,8 @@ impl Navigator {
             // The first fix without a measured velocity: its noise is not known yet.
             _ => f64::INFINITY,
         };
-        let moving = obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(MOTION_SIGMAS * speed_std);
+        let displaced = !measured && self.displaced(&obs, MOTION_SIGMAS);
+        let moving = displaced || obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(MOTION_SIGMAS * speed_std);
         self.motion_seen |= moving;
         if moving && self.motion_epoch_ns.is_none() {
             self.motion_epoch_ns = Some(obs.stamp_host_ns - (self.delay_prior.0 * 1e9) as i64);
@@ -551,6 +564,33 @@ impl Navigator {
         self.filt = Some(f);
         self.states.gnss.last_fused_ns = host_ns;
         self.replay();
+    }
+
+    /// Whether `obs` lies farther from one of the fixes of the last [`MOTION_BASELINE_S`] than
+    /// `k` σ of the difference of their horizontal positions, and as far as the alignment's
+    /// minimum speed covers in that time: motion shown by positions alone, where a speed from
+    /// two neighbouring fixes is too noisy (metre-level fixes at 4 Hz: a difference σ of 5 m/s,
+    /// a car never reaches 5.3 σ of it). Remembers `obs`.
+    fn displaced(&mut self, obs: &GnssObservation, k: f64) -> bool {
+        let (rm, rn) = navsync_wire::earth::radii(obs.lat_rad);
+        let sigma_h = obs.pos_std_m.x.max(obs.pos_std_m.y);
+        let shown = self.recent_fixes[..self.recent_len].iter().any(|&(t, lat, lon, s)| {
+            let dt_s = (obs.stamp_host_ns - t) as f64 * 1e-9;
+            let north_m = (obs.lat_rad - lat) * (rm + obs.h_m);
+            let east_m = (obs.lon_rad - lon) * (rn + obs.h_m) * obs.lat_rad.cos();
+            let d = north_m.hypot(east_m);
+            dt_s > 0.0
+                && dt_s <= MOTION_BASELINE_S
+                && d >= k * sigma_h.hypot(s)
+                && d >= self.cfg.align.align_min_speed_mps * dt_s
+        });
+        if self.recent_len == RECENT_FIXES {
+            self.recent_fixes.copy_within(1.., 0);
+            self.recent_len -= 1;
+        }
+        self.recent_fixes[self.recent_len] = (obs.stamp_host_ns, obs.lat_rad, obs.lon_rad, sigma_h);
+        self.recent_len += 1;
+        shown
     }
 
     /// Aligns on `obs` when the aligner can (`speed_std_mps`: the σ of its speed; `moving`: it
