@@ -14,7 +14,7 @@ mod recorded_models;
 mod rinex_export;
 mod rinex_spp;
 mod sim_gps;
-mod spp_walk;
 mod sim_sky;
+mod spp_walk;
 mod tight_coupling;
 mod tight_coupling_live;
