@@ -14,10 +14,7 @@
 //! after at least [`MIN_FIXES`] fixes, and the best one knows its heading to
 //! [`MAX_DECIDED_STD_RAD`]. While the heading is not observable (no horizontal
 //! acceleration: standing, or moving straight at constant speed) the weights stay even and
-//! nothing is decided: no heading is claimed that the data do not show. Standing still, the
-//! weights can still drift apart on errors the standing does not expose (the lever arm, the
-//! accelerometer biases, a free GNSS delay): the navigator takes no decision on data before the
-//! first fix that showed motion above its speed's noise.
+//! nothing is decided: no heading is claimed that the data do not show.
 //!
 //! A hypothesis that started tens of degrees off is linearised far from the truth: its states
 //! carry what that cost, and a filter with little process noise never forgets it. So the bank

@@ -212,9 +212,6 @@ pub struct Navigator {
     /// A fix has shown the platform moving (speed ≥ the alignment's minimum and 5.3 σ, or a
     /// displacement that large over a few seconds: [`Navigator::displaced`]).
     motion_seen: bool,
-    /// The epoch (host ns, the fix's stamp less the delay prior) of the first fix that showed
-    /// motion: the heading bank decides only on data past it.
-    motion_epoch_ns: Option<i64>,
     /// Epoch of the previous fix, host ns (for the noise of a speed from positions).
     prev_fix_ns: Option<i64>,
     /// The latest fixes' stamps (host ns), positions (rad) and horizontal σ (m): motion shown
@@ -281,7 +278,6 @@ impl Navigator {
             last_imu_ns: None,
             last_fix_rx_ns: None,
             motion_seen: false,
-            motion_epoch_ns: None,
             prev_fix_ns: None,
             recent_fixes: [(0, 0.0, 0.0, 0.0); RECENT_FIXES],
             recent_len: 0,
@@ -397,9 +393,6 @@ impl Navigator {
         let displaced = !measured && self.displaced(&obs, MOTION_SIGMAS);
         let moving = displaced || obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(MOTION_SIGMAS * speed_std);
         self.motion_seen |= moving;
-        if moving && self.motion_epoch_ns.is_none() {
-            self.motion_epoch_ns = Some(obs.stamp_host_ns - (self.delay_prior.0 * 1e9) as i64);
-        }
         if self.filt.is_none() {
             match &mut self.bank {
                 Some(bank) => {
@@ -681,10 +674,6 @@ impl Navigator {
                     self.counters.heading_banks_failed += 1;
                     return;
                 }
-                // Before any fix showed motion the heading is not observable (a consumer
-                // IMU senses no earth rate): whatever the hypotheses' weights say then comes
-                // from errors that standing still does not expose, and is not decided on.
-                BankStep::Decided { .. } if self.motion_epoch_ns.is_none_or(|t| r.host_ns < t) => {}
                 BankStep::Decided { yaw0, yaw_std } => {
                     if let Some(mut bank) = self.bank.take() {
                         self.fine_align(&mut bank, yaw0, yaw_std);
