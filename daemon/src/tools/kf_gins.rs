@@ -502,6 +502,30 @@ impl Timeline {
     }
 }
 
+/// A new recording at `out` for an import of `inputs` (refused if it is one of them; an existing
+/// recording replaced only with `force`) whose time axis (host `HOST_BASE_NS` at GPS time
+/// `gps0_ns`, ns) is declared on `axis_service`: every import's one start. Also the axis's
+/// metadata value, for a report of what was written.
+pub fn imported_recording(
+    out: &Path,
+    inputs: &[&Path],
+    force: bool,
+    axis_service: &str,
+    gps0_ns: i64,
+) -> Result<(SampleRecorder<BufWriter<OutputFile>>, String), RecordingError> {
+    let mut rec = SampleRecorder::create(
+        out,
+        &Overwrite::new(inputs, force),
+        navsync_recording::RecordingOptions::default(),
+    )?;
+    let axis = channels::metadata_value(&TimeAxis {
+        host_ns: HOST_BASE_NS,
+        gps_ns: gps0_ns,
+    });
+    rec.set_channel_metadata(axis_service, channels::META_TIME_AXIS, &axis)?;
+    Ok((rec, axis))
+}
+
 /// Seconds of week as integer milliseconds (to match epochs of two files).
 fn ms_of(sow: f64) -> i64 {
     (sow * 1e3).round() as i64
@@ -852,16 +876,16 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         ])
         .flatten()
         .collect();
-    let mut rec = SampleRecorder::create(
-        &args.out,
-        &Overwrite::new(&inputs, args.force),
-        navsync_recording::RecordingOptions::default(),
-    )?;
+    // The files' time axis: the host clock of every sample is GPS time shifted; outputs keep it.
+    let (mut rec, axis) = imported_recording(&args.out, &inputs, args.force, &imu_service, tl.gps_ns(tl.sow0))?;
     let mut stats = ImportStats {
         week,
         imu_rate_hz: 1.0 / dt,
         ..Default::default()
     };
+    stats
+        .metadata
+        .push(format!("{imu_service} {} = {axis}", channels::META_TIME_AXIS));
     // What the data were made with, for `replay --estimate`.
     let mut meta = |service: &str, key: &str, value: String| -> Result<(), KfGinsError> {
         rec.set_channel_metadata(service, key, &value)?;
@@ -869,12 +893,6 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         Ok(())
     };
     let fix_channel = services::gnss_fix("0");
-    // The files' time axis: the host clock of every sample is GPS time shifted; outputs keep it.
-    let axis = TimeAxis {
-        host_ns: HOST_BASE_NS,
-        gps_ns: tl.gps_ns(tl.sow0),
-    };
-    meta(&imu_service, channels::META_TIME_AXIS, channels::metadata_value(&axis))?;
     if let Some(v) = vel_std {
         meta(&fix_channel, channels::META_GNSS_VEL_STD, format!("{v}"))?;
     }

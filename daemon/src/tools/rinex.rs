@@ -20,9 +20,7 @@ use std::path::{Path, PathBuf};
 use navsync_drivers::gnss::rinex::{self, GpsEphemeris, NavFile, ObsFile, RinexError};
 use navsync_estimator::gnss::lnav::{self, Ephem1, Ephem2, Ephem3, IonoUtc, Subframe};
 use navsync_estimator::gnss::orbit::GPS_PI;
-use navsync_estimator::settings::TimeAxis;
-use navsync_recording::output::Overwrite;
-use navsync_recording::{RecordingError, RecordingOptions, SampleRecorder, channels};
+use navsync_recording::{RecordingError, SampleRecorder};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{AnySample, GnssNavData, Stamp, StampSource};
 use navsync_shared::services;
@@ -382,16 +380,7 @@ pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
     let raw_service = services::gnss_raw(&args.gnss_id);
     let nav_service = services::gnss_nav_data(&args.gnss_id);
     let inputs = [args.obs.as_path(), args.nav.as_path()];
-    let mut rec = SampleRecorder::create(
-        &args.out,
-        &Overwrite::new(&inputs, args.force),
-        RecordingOptions::default(),
-    )?;
-    let axis = TimeAxis {
-        host_ns: HOST_BASE_NS,
-        gps_ns: t0,
-    };
-    rec.set_channel_metadata(&raw_service, channels::META_TIME_AXIS, &channels::metadata_value(&axis))?;
+    let (mut rec, _) = super::kf_gins::imported_recording(&args.out, &inputs, args.force, &raw_service, t0)?;
     let log_time = |host: i64| utc_ns_from_gps_ns(t0 + (host - HOST_BASE_NS)).max(0) as u64;
     let mut nav_seq = 0u64;
     let mut write_nav =

@@ -33,9 +33,7 @@
 use std::path::{Path, PathBuf};
 
 use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra, Protocol};
-use navsync_estimator::settings::TimeAxis;
-use navsync_recording::output::Overwrite;
-use navsync_recording::{RecordingError, RecordingOptions, SampleRecorder, channels};
+use navsync_recording::RecordingError;
 use navsync_shared::reflect::fixed_str;
 use navsync_shared::samples::AnySample;
 use navsync_shared::services;
@@ -591,16 +589,7 @@ pub fn import(args: &UbxArgs) -> Result<UbxStats, UbxImportError> {
         .into_iter()
         .flatten()
         .collect();
-    let mut rec = SampleRecorder::create(
-        &args.out,
-        &Overwrite::new(&inputs, args.force),
-        RecordingOptions::default(),
-    )?;
-    let axis = TimeAxis {
-        host_ns: HOST_BASE_NS,
-        gps_ns: gps0,
-    };
-    rec.set_channel_metadata(&imu_service, channels::META_TIME_AXIS, &channels::metadata_value(&axis))?;
+    let (rec, _) = kf_gins::imported_recording(&args.out, &inputs, args.force, &imu_service, gps0)?;
     kf_gins::write_streams(rec, &mut streams, gps0, &mut |s| match s {
         AnySample::Imu(_) => stats.imu += 1,
         AnySample::PpsEdge(_) => stats.pps += 1,
