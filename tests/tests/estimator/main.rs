@@ -18,3 +18,4 @@ mod sim_sky;
 mod spp_walk;
 mod tight_coupling;
 mod tight_coupling_live;
+mod tight_walk;
