@@ -169,6 +169,10 @@ fn apply_smoothed(n: &mut NavState, s: &Smoothed) {
     n.q_nb = [q.w, q.i, q.j, q.k];
     let std3 = |i: usize| [s.std[i], s.std[i + 1], s.std[i + 2]];
     n.pos_std_ned_m = std3(POS);
+    let floor = s.state.pos_floor_std_ned_m;
+    for (sd, fl) in n.pos_std_ned_m.iter_mut().zip(floor.iter()) {
+        *sd = sd.max(*fl);
+    }
     n.vel_std_ned_mps = std3(VEL);
     n.att_std_rad = std3(ATT);
     n.gyro_bias_rps = s.state.bias_g.into();

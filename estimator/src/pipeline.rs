@@ -22,6 +22,7 @@ use crate::nav::measurements::MeasurementConfig;
 use crate::nav::measurements::ranges::RangingConfig;
 
 use crate::array::imu_array::{ArrayConfig, ImuArray};
+use crate::nav::config::Coupling;
 use crate::nav::measurements::gnss::{self, GnssAccuracy};
 use crate::nav::navigator::{NavConfig, Navigator};
 use crate::time::device_timing::{DeviceTiming, DeviceTimingConfig};
@@ -88,6 +89,9 @@ pub struct PipelineCounters {
     pub fixes: u64,
     /// Fixes (and raw epochs) held back while the PPS clock was acquiring.
     pub fixes_waiting_for_time: u64,
+    /// Receiver fixes not fused because navsync's own solution of the raw epochs stands in
+    /// for them ([`Coupling::LooseSpp`]).
+    pub fixes_unused: u64,
     /// Raw measurement epochs (UBX RXM-RAWX) that reached the estimator.
     pub raw_epochs: u64,
     /// Raw epochs not used: loosely coupled, or before alignment without a single-point
@@ -363,6 +367,11 @@ impl Pipeline {
             // instant are not used.
             return changed;
         }
+        if self.cfg.nav.coupling == Coupling::LooseSpp {
+            // navsync's own solution of the raw epochs stands in for the receiver's.
+            self.counters.fixes_unused += 1;
+            return changed;
+        }
         if let Some(obs) = gnss::observation(fix, stamp, &self.cfg.gnss) {
             self.nav.on_gnss(obs, fix.stamp.host_ns);
         }
@@ -407,13 +416,13 @@ impl Pipeline {
     }
 
     /// Feeds a receiver's raw measurements of one epoch (UBX RXM-RAWX). Tightly coupled, each
-    /// GPS satellite with an ephemeris is fused at the epoch; before alignment, a single-point
-    /// solution from them (≥ 4 satellites) aligns the filter as a fix would. Loosely coupled
-    /// they are counted and not used.
+    /// satellite with an ephemeris is fused at the epoch; before alignment, a single-point
+    /// solution from them aligns the filter as a fix would. With [`Coupling::LooseSpp`] that
+    /// solution is fused as a fix at every epoch. Loosely coupled they are counted and not used.
     pub fn on_raw(&mut self, raw: &GnssRaw) {
         self.catch_up();
         self.counters.raw_epochs += 1;
-        if !self.nav.is_tight() {
+        if !self.cfg.nav.coupling.uses_raw() {
             self.counters.raw_unused += 1;
             return;
         }
@@ -437,11 +446,15 @@ impl Pipeline {
         } else {
             stamp
         };
-        let epoch = self.ephemerides.range_epoch(raw, stamp, bias_m, &mut self.range_counts);
-        if self.nav.is_aligned() {
+        let mut epoch = self.ephemerides.range_epoch(raw, stamp, bias_m, &mut self.range_counts);
+        let solution = single_point_observation(&epoch, &self.cfg.measurements.ranges);
+        if self.nav.is_aligned() && self.nav.is_tight() {
+            if let Some(obs) = &solution {
+                epoch.pos_floor_std_ned_m = obs.pos_floor_std_m.into();
+            }
             self.nav.on_ranges(epoch, raw.stamp.host_ns);
-        } else if self.cfg.nav.initial_state.is_none()
-            && let Some(obs) = single_point_observation(&epoch, &self.cfg.measurements.ranges)
+        } else if (self.cfg.nav.initial_state.is_none() || self.nav.is_aligned())
+            && let Some(obs) = solution
         {
             self.nav.on_gnss(obs, raw.stamp.host_ns);
         } else {
@@ -468,6 +481,7 @@ impl Pipeline {
         out("raw_epochs", c.raw_epochs);
         out("raw_invalid", c.raw_invalid);
         out("raw_unused", c.raw_unused);
+        out("fixes_unused", c.fixes_unused);
         out("nav_data", c.nav_data);
         out("nav_data_bad", e.bad_subframes);
         out("ephemerides", e.ephemerides);
@@ -658,19 +672,24 @@ impl Pipeline {
 
 /// A fix from a raw epoch's single-point solution (position, clock, then Doppler velocity),
 /// for the alignment of a tightly coupled filter: its σ from the least-squares covariance
-/// rotated into NED. `None` with fewer than four satellites or without convergence.
+/// rotated into NED, one receiver clock per system. `None` with fewer than 3 + the systems' count
+/// of satellites or without convergence.
 fn single_point_observation(e: &RangeEpoch, rc: &RangingConfig) -> Option<gnss::GnssObservation> {
     let (pr_std_m, rate_std_mps) = (rc.pseudorange_std_m, rc.range_rate_std_mps);
     let settings = SppSettings {
         elevation_mask_rad: rc.elevation_mask_rad,
         ..SppSettings::default()
     };
-    let mut obs = [spp::Observation {
-        sv: 0,
-        pseudorange_m: 0.0,
-        sat_ecef_m: [0.0; 3],
-        sat_clock_s: 0.0,
-        sigma_zenith_m: pr_std_m,
+    let mut obs = [spp::SystemObservation {
+        obs: spp::Observation {
+            sv: 0,
+            pseudorange_m: 0.0,
+            sat_ecef_m: [0.0; 3],
+            sat_clock_s: 0.0,
+            sigma_zenith_m: pr_std_m,
+        },
+        gnss_id: 0,
+        iono_scale: 1.0,
     }; crate::gnss::ranges::MAX_RANGE_SATS];
     let mut rates = [spp::RangeRate {
         sv: 0,
@@ -683,10 +702,12 @@ fn single_point_observation(e: &RangeEpoch, rc: &RangingConfig) -> Option<gnss::
     let (mut n, mut m) = (0, 0);
     for s in e.sats() {
         // The satellite clock is already in the measurements (`SatRange`).
-        obs[n].sv = s.sv;
-        obs[n].pseudorange_m = s.pseudorange_m;
-        obs[n].sat_ecef_m = s.sat_ecef_m;
-        obs[n].sigma_zenith_m = pr_std_m.max(s.pseudorange_std_m);
+        (obs[n].gnss_id, obs[n].iono_scale) = (s.gnss_id, s.iono_scale);
+        let o = &mut obs[n].obs;
+        o.sv = s.sv;
+        o.pseudorange_m = s.pseudorange_m;
+        o.sat_ecef_m = s.sat_ecef_m;
+        o.sigma_zenith_m = pr_std_m.max(s.pseudorange_std_m);
         n += 1;
         if s.range_rate_mps.is_finite() {
             rates[m].sv = s.sv;
@@ -723,6 +744,7 @@ fn single_point_observation(e: &RangeEpoch, rc: &RangingConfig) -> Option<gnss::
         pos_std_m: ned_std(&sol.cov),
         vel_std_mps: vel_std,
         speed_mps: vel_ned.x.hypot(vel_ned.y),
+        pos_floor_std_m: ned_std(&sol.cov),
         track_rad: vel_ned.y.atan2(vel_ned.x).rem_euclid(2.0 * std::f64::consts::PI),
     })
 }

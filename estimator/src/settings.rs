@@ -321,7 +321,7 @@ impl Settings {
         let gnss = self.inputs.gnss.iter().map(|id| services::gnss_fix(id));
         let pulses = self.inputs.gnss.iter().map(|id| services::gnss_time_pulse(id));
         let imus = self.inputs.imus.iter().map(|id| services::imu_sample(id));
-        let tight = self.nav.coupling == Coupling::Tight;
+        let tight = self.nav.coupling.uses_raw();
         let raw = self
             .inputs
             .gnss

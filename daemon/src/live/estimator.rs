@@ -26,7 +26,7 @@ use tracing::{info, info_span, warn};
 
 use navsync_estimator::feed::Feed;
 use navsync_estimator::input_order::Input;
-use navsync_estimator::settings::{Coupling, Settings};
+use navsync_estimator::settings::Settings;
 
 use super::liveness::{Change, Liveness, STALE_MARGIN_NS};
 use crate::config::Loaded;
@@ -147,7 +147,7 @@ pub fn run(args: &Settings, busy_poll: bool) -> Result<(), EstimatorError> {
         .collect::<Result<_, _>>()?;
     // Tightly coupled: the receivers' raw measurements (UBX RXM-RAWX) and navigation data
     // (RXM-SFRBX).
-    let tight = args.nav.coupling == Coupling::Tight;
+    let tight = args.nav.coupling.uses_raw();
     let raws: Vec<Subscriber<GnssRaw>> = args
         .inputs
         .gnss

@@ -1,13 +1,12 @@
 //! A receiver's raw measurements of one epoch made ready for tightly coupled fusion: the
 //! broadcast ephemerides collected from the navigation data (GPS LNAV subframes 1–3 of one
-//! issue, IS-GPS-200N §20.3.4.4 for IODE/IODC; the ionosphere page), and each GPS L1 C/A
-//! pseudorange and Doppler paired with its satellite's position, velocity and clock at the
-//! time of transmission. What depends on the receiver's position (the Earth's rotation during
-//! the flight, elevation, ionosphere, troposphere) is left to the filter, which knows it.
-//!
-//! The store also collects Galileo I/NAV and BeiDou D1/D2 ephemerides (through
-//! [`NavCollector`]) keyed by (gnss id, sv id), for single-point positioning with every system
-//! ([`EphemerisStore::system_observations`]); the filter's epochs stay GPS L1 C/A.
+//! issue, IS-GPS-200N §20.3.4.4 for IODE/IODC; the ionosphere page; Galileo I/NAV and BeiDou
+//! D1/D2 through [`NavCollector`], keyed by (gnss id, sv id)), and per satellite the preferred
+//! signal's pseudorange and Doppler ([`SPP_SIGNALS`]: GPS L1 C/A, Galileo E1, BeiDou B1I/B3I)
+//! paired with its satellite's position, velocity and clock at the time of transmission. What
+//! depends on the receiver's position (the Earth's rotation during the flight, elevation,
+//! ionosphere, troposphere) is left to the filter, which knows it. The same signal choice
+//! serves single-point positioning ([`EphemerisStore::system_observations`]).
 
 use navsync_wire::samples::{GnssNavData, GnssRaw, RawMeasurement};
 
@@ -16,8 +15,8 @@ use super::lnav::{self, Ephem1, Ephem2, Ephem3, Subframe};
 use super::orbit::Orbit;
 use super::spp::{C_M_S, Klobuchar, Observation, SystemObservation};
 
-/// Satellites one [`RangeEpoch`] holds (the strongest first when a receiver tracks more).
-pub const MAX_RANGE_SATS: usize = 16;
+/// Satellites one [`RangeEpoch`] holds (the weakest are dropped when a receiver tracks more).
+pub const MAX_RANGE_SATS: usize = 32;
 /// GPS L1 carrier frequency, Hz (IS-GPS-200 §3.3.1.1).
 pub const L1_HZ: f64 = 1_575.42e6;
 /// u-blox `gnssId` of GPS.
@@ -53,14 +52,20 @@ pub const EPHEMERIS_VALID_S: f64 = 3.0 * 3600.0;
 /// One satellite's measurements with its broadcast state at transmission.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SatRange {
-    /// PRN.
+    /// System, u-blox `gnssId` (GPS 0, Galileo 2, BeiDou 3).
+    pub gnss_id: u8,
+    /// Satellite number in its system (GPS PRN, Galileo SVID, BeiDou PRN).
     pub sv: u8,
+    /// (f_L1 / f)² of the signal's carrier: the L1 ionospheric delay times this is the
+    /// signal's (IS-GPS-200 §20.3.3.3.3.2).
+    pub iono_scale: f64,
     /// Carrier-to-noise density, dB-Hz.
     pub cno_dbhz: u8,
     /// Pseudorange corrected for the satellite clock, ρ + c·δt_sv, m: it models
     /// r + c·δt_r + I + T (geometric range, receiver clock, ionosphere, troposphere).
     pub pseudorange_m: f64,
-    /// Range rate corrected for the satellite clock drift, −λ_L1·D + c·δṫ_sv, m/s: it models
+    /// Range rate corrected for the satellite clock drift, −λ·D + c·δṫ_sv (λ of the signal's
+    /// carrier), m/s: it models
     /// the geometric range rate plus c·δṫ_r. NaN without a Doppler.
     pub range_rate_mps: f64,
     /// Satellite position at transmission, ECEF of that instant, m.
@@ -74,7 +79,7 @@ pub struct SatRange {
     pub range_rate_std_mps: f64,
 }
 
-/// The GPS measurements of one receiver epoch, ready for the filter.
+/// The measurements of one receiver epoch, ready for the filter.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RangeEpoch {
     /// Host time of the epoch before the Δ correction, ns (as a fix's stamp: the epoch mapped
@@ -85,6 +90,10 @@ pub struct RangeEpoch {
     pub tow_s: f64,
     /// The broadcast ionosphere, when its page was received.
     pub iono: Option<Klobuchar>,
+    /// 1σ N, E, D of the epoch's own single-point solution, m (zero: none, fewer satellites
+    /// than unknowns): the floor of the published position σ
+    /// ([`crate::nav::filter::DelayedFilter::pos_floor_std_ned_m`]).
+    pub pos_floor_std_ned_m: [f64; 3],
     /// Satellites in `sats`.
     pub count: u8,
     /// The satellites, `count` of them.
@@ -98,14 +107,26 @@ impl RangeEpoch {
     }
 }
 
+/// The signal [`EphemerisStore::each_signal`] chose for a satellite, with its ephemeris.
+struct Signal {
+    orbit: Orbit,
+    accuracy_m: f64,
+    freq_hz: f64,
+    t0_s: f64,
+}
+
+/// The systems the tightly coupled filter fuses (u-blox `gnssId`s): GPS, Galileo, BeiDou.
+pub const RANGE_SYSTEMS: [u8; 3] = [GNSS_ID_GPS, GNSS_ID_GALILEO, GNSS_ID_BEIDOU];
+
 /// What [`EphemerisStore::range_epoch`] left out of an epoch, by reason.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct RangeBuildCounts {
-    /// Signals other than GPS L1 C/A (other constellations are not modelled yet).
+    /// Signals not in [`SPP_SIGNALS`] (GLONASS, L2/L5/E5…), of systems not asked for, or
+    /// with a preferred signal of the same satellite in the epoch.
     pub other_signals: u64,
-    /// GPS signals whose pseudorange the receiver marks invalid.
+    /// Signals whose pseudorange the receiver marks invalid.
     pub invalid: u64,
-    /// GPS satellites without a complete, healthy, current ephemeris (URA index 15, no
+    /// Satellites without a complete, healthy, current ephemeris (GPS URA index 15, no
     /// accuracy prediction, counts as unhealthy).
     pub no_ephemeris: u64,
     /// Satellites beyond [`MAX_RANGE_SATS`] (the weakest are dropped).
@@ -292,24 +313,23 @@ impl EphemerisStore {
         (dt.abs() <= EPHEMERIS_VALID_S).then_some((e.orbit, e.accuracy_m))
     }
 
-    /// The pseudoranges of `raw` for single-point positioning with the systems `systems`
-    /// (u-blox `gnssId`s): per satellite the first signal of [`SPP_SIGNALS`] the receiver
-    /// tracked with a valid pseudorange, with its satellite's position at transmission (in the
-    /// ECEF of that instant) and its clock offset including the signal's group delay, the
-    /// ionosphere scale (f_L1/f)² of its carrier, and a σ at zenith of the larger of the
-    /// receiver's σ and the broadcast accuracy. Transmission time as in
-    /// [`range_epoch`](Self::range_epoch), in the system's own time (BeiDou: BDT = GPST − 14 s;
-    /// Galileo: GST taken as GPST, the GGTO of a few ns left in Galileo's receiver clock).
-    pub fn system_observations(
+    /// Per satellite of the systems `systems` (u-blox `gnssId`s) the first signal of
+    /// [`SPP_SIGNALS`] the receiver tracked with a valid pseudorange, given to `each` with its
+    /// satellite's ephemeris: the orbit (its group delay zeroed for a signal that is the
+    /// clock's reference), the broadcast accuracy, m, the carrier frequency, Hz, and the
+    /// reception time less the flight time, t_rx − ρ/c, in the system's own time, s of week
+    /// (BeiDou: BDT = GPST − 14 s; Galileo: GST taken as GPST, the GGTO of a few ns left in the
+    /// receiver's Galileo clock). What is left out is counted in `counts`.
+    fn each_signal(
         &self,
         raw: &GnssRaw,
         systems: &[u8],
         counts: &mut RangeBuildCounts,
-    ) -> Vec<SystemObservation> {
+        mut each: impl FnMut(&RawMeasurement, Signal),
+    ) {
         let n = usize::from(raw.num_meas).min(raw.meas.len());
         let meas = &raw.meas[..n];
         let rank = |g: u8, s: u8| SPP_SIGNALS.iter().position(|&(sg, ss, _, _)| sg == g && ss == s);
-        let mut out = Vec::new();
         for (k, m) in meas.iter().enumerate() {
             let Some(r) = rank(m.gnss_id, m.sig_id).filter(|_| systems.contains(&m.gnss_id)) else {
                 counts.other_signals += 1;
@@ -339,28 +359,54 @@ impl EphemerisStore {
             } else {
                 0.0
             };
-            let t0 = raw.rcv_tow_s + offset - m.pseudorange_m / C_M_S;
-            let Some((mut orbit, accuracy)) = self.usable_any(m.gnss_id, m.sv_id, t0) else {
+            let t0_s = raw.rcv_tow_s + offset - m.pseudorange_m / C_M_S;
+            let Some((mut orbit, accuracy_m)) = self.usable_any(m.gnss_id, m.sv_id, t0_s) else {
                 counts.no_ephemeris += 1;
                 continue;
             };
             if !group_delay {
                 orbit.tgd_s = 0.0;
             }
-            let dt_sv = orbit.clock_offset_s(t0);
-            let t_tx = t0 - dt_sv;
+            each(
+                m,
+                Signal {
+                    orbit,
+                    accuracy_m,
+                    freq_hz,
+                    t0_s,
+                },
+            );
+        }
+    }
+
+    /// The pseudoranges of `raw` for single-point positioning with the systems `systems`
+    /// (u-blox `gnssId`s), the signal of each satellite chosen as for the filter
+    /// ([`each_signal`](Self::each_signal)): its satellite's position at transmission (in the
+    /// ECEF of that instant), its clock offset including the signal's group delay, the
+    /// ionosphere scale (f_L1/f)² of its carrier, and a σ at zenith of the larger of the
+    /// receiver's σ and the broadcast accuracy.
+    pub fn system_observations(
+        &self,
+        raw: &GnssRaw,
+        systems: &[u8],
+        counts: &mut RangeBuildCounts,
+    ) -> Vec<SystemObservation> {
+        let mut out = Vec::new();
+        self.each_signal(raw, systems, counts, |m, sig| {
+            let dt_sv = sig.orbit.clock_offset_s(sig.t0_s);
+            let t_tx = sig.t0_s - dt_sv;
             out.push(SystemObservation {
                 obs: Observation {
                     sv: m.sv_id,
                     pseudorange_m: m.pseudorange_m,
-                    sat_ecef_m: orbit.position_ecef_m(t_tx),
+                    sat_ecef_m: sig.orbit.position_ecef_m(t_tx),
                     sat_clock_s: dt_sv,
-                    sigma_zenith_m: f64::from(m.pseudorange_std_m).max(accuracy),
+                    sigma_zenith_m: f64::from(m.pseudorange_std_m).max(sig.accuracy_m),
                 },
                 gnss_id: m.gnss_id,
-                iono_scale: (L1_HZ / freq_hz).powi(2),
+                iono_scale: (L1_HZ / sig.freq_hz).powi(2),
             });
-        }
+        });
         out
     }
 
@@ -398,11 +444,12 @@ impl EphemerisStore {
         (1..=MAX_PRN as u8).filter(|p| self.orbit(*p, tow_s).is_some()).count()
     }
 
-    /// The GPS L1 C/A measurements of `raw` with their satellites' states (IS-GPS-200
-    /// §20.3.3.3.3.1: transmission time t = t_rx − ρ/c − δt_sv, whichever the receiver's clock
-    /// error, since the pseudorange carries the same error), stamped `stamp_host_ns`;
-    /// `rx_clock_bias_m` (c·δt_r, the filter's estimate, 0 when none) turns the receiver's time
-    /// into GPS time. The strongest [`MAX_RANGE_SATS`] are kept.
+    /// The measurements of `raw` of every system of [`RANGE_SYSTEMS`] (per satellite the
+    /// signal [`each_signal`](Self::each_signal) chooses) with their satellites' states
+    /// (IS-GPS-200 §20.3.3.3.3.1: transmission time t = t_rx − ρ/c − δt_sv, whichever the
+    /// receiver's clock error, since the pseudorange carries the same error), stamped
+    /// `stamp_host_ns`; `rx_clock_bias_m` (c·δt_r, the filter's estimate, 0 when none) turns
+    /// the receiver's time into GPS time. The strongest [`MAX_RANGE_SATS`] are kept.
     pub fn range_epoch(
         &self,
         raw: &GnssRaw,
@@ -413,58 +460,49 @@ impl EphemerisStore {
         let mut out = RangeEpoch {
             stamp_host_ns,
             tow_s: raw.rcv_tow_s - rx_clock_bias_m / C_M_S,
-            iono: self.iono,
+            iono: self.iono(),
+            pos_floor_std_ned_m: [0.0; 3],
             count: 0,
             sats: [SatRange::default(); MAX_RANGE_SATS],
         };
-        let lambda = C_M_S / L1_HZ;
-        let n = usize::from(raw.num_meas).min(raw.meas.len());
-        for m in &raw.meas[..n] {
-            if m.gnss_id != GNSS_ID_GPS || m.sig_id != 0 {
-                counts.other_signals += 1;
-                continue;
-            }
-            if m.trk_stat & 1 == 0 || !m.pseudorange_m.is_finite() || m.pseudorange_m <= 0.0 {
-                counts.invalid += 1;
-                continue;
-            }
-            let t0 = raw.rcv_tow_s - m.pseudorange_m / C_M_S;
-            let Some((orbit, ura)) = self.usable_ephemeris(m.sv_id, t0) else {
-                counts.no_ephemeris += 1;
-                continue;
-            };
-            let dt_sv = orbit.clock_offset_s(t0);
-            let t_tx = t0 - dt_sv;
+        let mut over = 0;
+        self.each_signal(raw, &RANGE_SYSTEMS, counts, |m, sig| {
+            let lambda = C_M_S / sig.freq_hz;
+            let dt_sv = sig.orbit.clock_offset_s(sig.t0_s);
+            let t_tx = sig.t0_s - dt_sv;
             let doppler = f64::from(m.doppler_hz);
             let sat = SatRange {
+                gnss_id: m.gnss_id,
                 sv: m.sv_id,
+                iono_scale: (L1_HZ / sig.freq_hz).powi(2),
                 cno_dbhz: m.cno_dbhz,
                 pseudorange_m: m.pseudorange_m + C_M_S * dt_sv,
                 range_rate_mps: if doppler.is_finite() {
-                    -lambda * doppler + C_M_S * orbit.clock_drift(t_tx)
+                    -lambda * doppler + C_M_S * sig.orbit.clock_drift(t_tx)
                 } else {
                     f64::NAN
                 },
-                sat_ecef_m: orbit.position_ecef_m(t_tx),
-                sat_vel_mps: orbit.velocity_ecef_mps(t_tx),
-                // The receiver's σ, at least the broadcast user range accuracy.
-                pseudorange_std_m: f64::from(m.pseudorange_std_m).max(ura),
+                sat_ecef_m: sig.orbit.position_ecef_m(t_tx),
+                sat_vel_mps: sig.orbit.velocity_ecef_mps(t_tx),
+                // The receiver's σ, at least the broadcast accuracy.
+                pseudorange_std_m: f64::from(m.pseudorange_std_m).max(sig.accuracy_m),
                 range_rate_std_mps: (f64::from(m.doppler_std_hz) * lambda).max(0.0),
             };
             let count = usize::from(out.count);
             if count < MAX_RANGE_SATS {
                 out.sats[count] = sat;
                 out.count += 1;
-                continue;
+                return;
             }
-            counts.over_capacity += 1;
+            over += 1;
             // Full: replace the weakest if this one is stronger.
             if let Some(weakest) = out.sats.iter_mut().min_by_key(|s| s.cno_dbhz)
                 && weakest.cno_dbhz < sat.cno_dbhz
             {
                 *weakest = sat;
             }
-        }
+        });
+        counts.over_capacity += over;
         out
     }
 }

@@ -112,6 +112,17 @@ pub fn troposphere_delay_m(lat_rad: f64, h_m: f64, el_rad: f64) -> f64 {
     (zenith_h + zenith_w) * mapping
 }
 
+/// Variance of what the atmosphere models leave in a pseudorange, m²: half the broadcast
+/// ionosphere's delay `iono_m` (the Klobuchar model corrects about half of the delay,
+/// IS-GPS-200 §20.3.3.5.2.5) and 0.3 m of the troposphere's at zenith, mapped with
+/// 1/(sin el + 0.1) — RTKLIB's `ERR_BRDCI` and `ERR_SAAS` (T. Takasu, RTKLIB 2.4.2 manual,
+/// Appendix E.6; `pntpos.c`). Both change over minutes and across the sky, not per epoch.
+pub fn atmosphere_var_m2(iono_m: f64, el_rad: f64) -> f64 {
+    const IONO_RESIDUAL: f64 = 0.5;
+    const TROPO_ZENITH_M: f64 = 0.3;
+    (IONO_RESIDUAL * iono_m).powi(2) + (TROPO_ZENITH_M / (el_rad.sin() + 0.1)).powi(2)
+}
+
 /// One satellite's measurement for [`solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Observation {
@@ -321,6 +332,7 @@ fn solve_excluding<O: Measured>(
             // Away from the solution (first iterations from the Earth's centre) every
             // satellite counts, without atmosphere or mask.
             let (mut model, mut sin_el) = (r + x[3 + sys] - C_M_S * o.sat_clock_s, 1.0);
+            let mut atmosphere_var = 0.0;
             if let Some(g) = geo.filter(|g| g.height_m > -1e4 && iter > 0) {
                 let (el, az) = elevation_azimuth(rx, sat);
                 if el < settings.elevation_mask_rad {
@@ -328,12 +340,11 @@ fn solve_excluding<O: Measured>(
                 }
                 sin_el = el.sin();
                 let (lat, lon) = (g.lat_deg.to_radians(), g.lon_deg.to_radians());
-                if let Some(k) = iono {
-                    model += C_M_S * k.delay_s(lat, lon, el, az, t_rx_s) * m.iono_scale();
-                }
-                model += troposphere_delay_m(lat, g.height_m, el);
+                let iono_m = iono.map_or(0.0, |k| C_M_S * k.delay_s(lat, lon, el, az, t_rx_s) * m.iono_scale());
+                model += iono_m + troposphere_delay_m(lat, g.height_m, el);
+                atmosphere_var = atmosphere_var_m2(iono_m, el);
             }
-            let w = (sin_el / o.sigma_zenith_m).powi(2);
+            let w = 1.0 / ((o.sigma_zenith_m / sin_el).powi(2) + atmosphere_var);
             let mut h = VecX::zeros();
             h[0] = (rx[0] - sat[0]) / r;
             h[1] = (rx[1] - sat[1]) / r;

@@ -17,7 +17,7 @@ use crate::time::clock_model::OscillatorNoise;
 
 /// How GNSS aids the filter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
+#[serde(rename_all = "kebab-case")]
 pub enum Coupling {
     /// The receiver's position and velocity fixes (the default).
     #[default]
@@ -26,6 +26,18 @@ pub enum Coupling {
     /// RXM-SFRBX), with the receiver's clock bias and drift as filter states
     /// ([`super::measurements::ranges`]).
     Tight,
+    /// navsync's own single-point solution of each raw epoch (the satellites and signals the
+    /// tightly coupled filter would use, one receiver clock per system; velocity from the
+    /// Doppler) fused as a fix; the receiver's fixes are not used. Loose coupling on the same
+    /// measurements as tight, for comparison, or where the receiver's own fix is not wanted.
+    LooseSpp,
+}
+
+impl Coupling {
+    /// True when the estimator takes the receivers' raw measurements and navigation data.
+    pub fn uses_raw(self) -> bool {
+        matches!(self, Self::Tight | Self::LooseSpp)
+    }
 }
 
 impl std::str::FromStr for Coupling {
@@ -34,7 +46,8 @@ impl std::str::FromStr for Coupling {
         match s.to_ascii_lowercase().as_str() {
             "loose" => Ok(Self::Loose),
             "tight" => Ok(Self::Tight),
-            _ => Err(format!("unknown coupling `{s}`, expected loose or tight")),
+            "loose-spp" => Ok(Self::LooseSpp),
+            _ => Err(format!("unknown coupling `{s}`, expected loose, tight or loose-spp")),
         }
     }
 }
@@ -153,9 +166,10 @@ crate::settings_group! {
         /// 1-sigma of the prior of Δ under hardware sync (the IMU-to-GNSS time offset left after
         /// the PPS mapping), s (IMU time tags from another clock than the PPS's may need 0.2).
         pub delay_prior_std_s: f64 = 0.02, file "estimator", flag "delay-prior-std", check positive;
-        /// How GNSS aids the filter: loose (the receiver's fixes) or tight (each satellite's
+        /// How GNSS aids the filter: loose (the receiver's fixes), tight (each satellite's
         /// pseudorange and Doppler from UBX RXM-RAWX/RXM-SFRBX, the receiver clock in the
-        /// filter).
+        /// filter) or loose-spp (navsync's single-point solution of the same raw measurements
+        /// as fixes).
         pub coupling: Coupling = Coupling::Loose, file "estimator", flag "coupling";
         /// The receiver's oscillator for the clock states when tightly coupled: tcxo or crystal.
         pub receiver_oscillator: ReceiverOscillator = ReceiverOscillator::Tcxo, file "estimator", flag "receiver-oscillator";

@@ -4,7 +4,7 @@
 //! Inertial Navigation*, ch. 2): position and velocity errors are *computed − true* (NED, m and
 //! m/s); the attitude error φ is the phi angle with C_b^n(true) = exp([φ×]) C_b^n(computed); the
 //! sensor errors (biases, scale factors) and the GNSS delay are *true − estimated*, fed back by
-//! addition. Error state (N = 24):
+//! addition. Error state (N = 26):
 //!
 //! | index | state | unit |
 //! |---|---|---|
@@ -18,9 +18,16 @@
 //! | 21 | GNSS time-synchronisation error Δ | s |
 //! | 22 | receiver clock bias c·δt_r (tightly coupled only) | m |
 //! | 23 | receiver clock drift c·δṫ_r (tightly coupled only) | m/s |
+//! | 24 | inter-system bias Galileo − GPS of the receiver's clock (tightly coupled only) | m |
+//! | 25 | inter-system bias BeiDou − GPS (tightly coupled only) | m |
 //!
 //! The clock states are frozen (zero covariance, no process noise) unless the filter is
 //! tightly coupled ([`ProcessNoise::clock`]); loosely coupled, the receiver solved its clock.
+//! One oscillator drives every system's clock: each system's bias is the GPS one plus its
+//! inter-system bias (the receiver's signal delays of that system and the offset between the
+//! systems' time scales, GGTO of Galileo OS SIS ICD §5.1.5; BDT − GPST beyond its 14 s is
+//! kept to < 100 ns, BDS-SIS-ICD-B1I §5.2.4.19), nearly constant: a random walk of
+//! [`ISB_RW_M_SQRT_S`] (RTKLIB instead keeps one free clock per system).
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use navsync_wire::earth::{self, OMEGA_IE};
@@ -31,7 +38,7 @@ use crate::time::clock_model::OscillatorNoise;
 use super::mechanization::{Pva, skew};
 
 /// Error-state dimension.
-pub const N: usize = 24;
+pub const N: usize = 26;
 /// Position error.
 pub const POS: usize = 0;
 /// Velocity error.
@@ -52,6 +59,13 @@ pub const DELAY: usize = 21;
 pub const CLK_BIAS: usize = 22;
 /// Receiver clock drift, m/s.
 pub const CLK_DRIFT: usize = 23;
+/// Inter-system biases of the receiver clock, m: Galileo's, then BeiDou's, minus GPS's.
+pub const ISB: usize = 24;
+/// Systems with an inter-system bias state.
+pub const ISB_SYSTEMS: usize = 2;
+/// Random walk of an inter-system bias, m/√s (1 cm/√s: 0.6 m in an hour, ample for a
+/// hardware delay drifting with temperature and for GGTO's few ns a day).
+pub const ISB_RW_M_SQRT_S: f64 = 0.01;
 
 /// Error-state vector.
 pub type StateVec = SVector<f64, N>;
@@ -229,6 +243,7 @@ pub fn system_matrix(pva: &Pva, f_b: &Vector3<f64>, w_b: &Vector3<f64>, noise: &
     if noise.clock.is_some() {
         f[(CLK_BIAS, CLK_DRIFT)] = 1.0;
     }
+    // The inter-system biases are random walks (F = 0).
     f
 }
 
@@ -260,6 +275,9 @@ pub fn process_noise(noise: &ProcessNoise, c_bn: &Matrix3<f64>, dt: f64, imu_sca
     if let Some(osc) = noise.clock {
         q.fixed_view_mut::<2, 2>(CLK_BIAS, CLK_BIAS)
             .copy_from(&osc.process_noise_m(dt));
+        for i in ISB..ISB + ISB_SYSTEMS {
+            q[(i, i)] = ISB_RW_M_SQRT_S * ISB_RW_M_SQRT_S * dt;
+        }
     }
     q
 }

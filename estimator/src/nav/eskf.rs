@@ -15,7 +15,9 @@ pub fn gate_of<const M: usize>(gate_scale: f64) -> f64 {
     CHI2_999[(M - 1).min(CHI2_999.len() - 1)] * gate_scale
 }
 
-/// Outcome of a measurement update.
+/// Outcome of a measurement update (the error state inline: boxing it would allocate per
+/// update).
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Update {
     /// Fused.

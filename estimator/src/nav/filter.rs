@@ -5,7 +5,9 @@ use nalgebra::{UnitQuaternion, Vector3};
 use navsync_wire::earth;
 
 use super::config::NavConfig;
-use super::error_state::{self, ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, POS, SA, SG, StateMat, StateVec, VEL};
+use super::error_state::{
+    self, ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, ISB, ISB_SYSTEMS, POS, SA, SG, StateMat, StateVec, VEL,
+};
 use super::eskf::Eskf;
 use super::imu_buffer::ImuRecord;
 use super::mechanization::{ImuIncrement, Pva, propagate};
@@ -40,6 +42,19 @@ pub struct DelayedFilter {
     pub clock_drift_mps: f64,
     /// The clock states hold an estimate (set by the first tightly coupled measurement).
     pub clock_valid: bool,
+    /// Inter-system bias estimates of the receiver clock (Galileo, BeiDou) minus GPS's, m
+    /// ([`error_state::ISB`]).
+    pub isb_m: [f64; ISB_SYSTEMS],
+    /// Which inter-system biases hold an estimate (set by their system's first measurement).
+    pub isb_valid: [bool; ISB_SYSTEMS],
+    /// The published position σ's floor N, E, D, m: the σ of the last single-point solution
+    /// from the satellites the filter fuses (tightly coupled, or loosely on navsync's own
+    /// solution), zero on a receiver's fixes. Errors that persist across epochs (broadcast
+    /// orbit and clock, the atmosphere the models leave, multipath) are fused as if
+    /// independent, so the covariance P shrinks below what they allow; the floor is their
+    /// consider covariance (Schmidt 1966) taken as one epoch's snapshot. P itself is not
+    /// changed (the gates and gains stay the filter's).
+    pub pos_floor_std_ned_m: Vector3<f64>,
     /// NED acceleration over the last step, m/s².
     pub acc_ned: Vector3<f64>,
     /// Compensated angular rate of the last step (body FRD), rad/s.
@@ -73,6 +88,9 @@ impl DelayedFilter {
             clock_bias_m: 0.0,
             clock_drift_mps: 0.0,
             clock_valid: false,
+            isb_m: [0.0; ISB_SYSTEMS],
+            isb_valid: [false; ISB_SYSTEMS],
+            pos_floor_std_ned_m: Vector3::zeros(),
             acc_ned: Vector3::zeros(),
             last_w: Vector3::zeros(),
             q_scale: 1.0,
@@ -150,5 +168,8 @@ impl DelayedFilter {
         self.delay_s = (self.delay_s + dx[DELAY]).clamp(-0.5, horizon_s - 0.05);
         self.clock_bias_m += dx[CLK_BIAS];
         self.clock_drift_mps += dx[CLK_DRIFT];
+        for (k, b) in self.isb_m.iter_mut().enumerate() {
+            *b += dx[ISB + k];
+        }
     }
 }

@@ -167,7 +167,11 @@ fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, fil
     s.gyro_body_rps = w.into();
     s.accel_body_mps2 = f.into();
     let std3 = |i: usize| [filt.eskf.std(i), filt.eskf.std(i + 1), filt.eskf.std(i + 2)];
+    let floor = filt.pos_floor_std_ned_m;
     s.pos_std_ned_m = std3(POS);
+    for (sd, fl) in s.pos_std_ned_m.iter_mut().zip(floor.iter()) {
+        *sd = sd.max(*fl);
+    }
     s.vel_std_ned_mps = std3(VEL);
     s.att_std_rad = std3(ATT);
     s.gyro_bias_rps = filt.bias_g.into();

@@ -21,7 +21,9 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use navsync_wire::earth;
 
-use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, SA, SG, StateMat, StateVec, VEL};
+use super::error_state::{
+    ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, ISB, ISB_SYSTEMS, N, POS, SA, SG, StateMat, StateVec, VEL,
+};
 use super::filter::DelayedFilter;
 use super::mechanization::Pva;
 
@@ -47,6 +49,10 @@ pub struct Nominal {
     pub delay_s: f64,
     /// Receiver clock bias, m, and drift, m/s.
     pub clock: (f64, f64),
+    /// Inter-system biases (Galileo, BeiDou) minus GPS, m.
+    pub isb_m: [f64; ISB_SYSTEMS],
+    /// The published position σ's floor, m ([`DelayedFilter::pos_floor_std_ned_m`]).
+    pub pos_floor_std_ned_m: Vector3<f64>,
 }
 
 impl Nominal {
@@ -61,6 +67,8 @@ impl Nominal {
             scale_a: f.scale_a,
             delay_s: f.delay_s,
             clock: (f.clock_bias_m, f.clock_drift_mps),
+            isb_m: f.isb_m,
+            pos_floor_std_ned_m: f.pos_floor_std_ned_m,
         }
     }
 
@@ -81,6 +89,9 @@ impl Nominal {
         s.delay_s += dx[DELAY];
         s.clock.0 += dx[CLK_BIAS];
         s.clock.1 += dx[CLK_DRIFT];
+        for (k, b) in s.isb_m.iter_mut().enumerate() {
+            *b += dx[ISB + k];
+        }
         s
     }
 
@@ -102,6 +113,9 @@ impl Nominal {
         dx[DELAY] = self.delay_s - before.delay_s;
         dx[CLK_BIAS] = self.clock.0 - before.clock.0;
         dx[CLK_DRIFT] = self.clock.1 - before.clock.1;
+        for k in 0..ISB_SYSTEMS {
+            dx[ISB + k] = self.isb_m[k] - before.isb_m[k];
+        }
         dx
     }
 }
@@ -317,6 +331,8 @@ mod tests {
             scale_a: Vector3::zeros(),
             delay_s: 0.1,
             clock: (0.0, 0.0),
+            isb_m: [1.5, -2.0],
+            pos_floor_std_ned_m: Vector3::zeros(),
         };
         let dx = StateVec::from_fn(|i, _| 1e-3 * (i as f64 + 1.0) * if i % 2 == 0 { 1.0 } else { -1.0 });
         let back = s.corrected(&dx).correction_from(&s);

@@ -20,12 +20,12 @@ use navsync_wire::earth;
 use navsync_wire::samples::{FIX_FLAG_INVALID_LLH, FIX_FLAG_NOT_GNSS, FIX_FLAG_RECEIVER_INVALID, GnssFix};
 
 use super::Measurement;
+use crate::declare::checks::{non_negative, positive};
+use crate::nav::config::NavConfig;
 use crate::nav::error_state::{ATT, BA, BG, DELAY, N, POS, VEL};
 use crate::nav::eskf::Update;
 use crate::nav::filter::DelayedFilter;
 use crate::nav::mechanization::{Pva, skew};
-use crate::declare::checks::{non_negative, positive};
-use crate::nav::config::NavConfig;
 
 /// A fix reduced to what the filter fuses.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,6 +48,12 @@ pub struct GnssObservation {
     pub speed_mps: f64,
     /// Track over ground, rad (NaN when unknown).
     pub track_rad: f64,
+    /// 1-sigma N, E, D of the part of the fix's error that persists across epochs, m (zero:
+    /// not known). A single-point solution's errors (broadcast orbit and clock, atmosphere,
+    /// multipath) change over minutes, not from one epoch to the next; the filter, which fuses
+    /// each epoch as independent, would average them away. The published position σ is never
+    /// below it ([`DelayedFilter::pos_floor_std_ned_m`]).
+    pub pos_floor_std_m: Vector3<f64>,
 }
 
 crate::settings_group! {
@@ -120,6 +126,8 @@ pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Opt
         vel_std_mps,
         speed_mps: fix.speed_mps,
         track_rad: fix.track_deg.to_radians(),
+        // A receiver's fix: how much of its error persists is the receiver's to say.
+        pos_floor_std_m: Vector3::zeros(),
     })
 }
 
@@ -248,7 +256,6 @@ crate::settings_group! {
     }
 }
 
-
 /// A single update's NIS per component counts at most this much in the average (one outlier
 /// must not move it by itself).
 const NIS_AVERAGE_CAP: f64 = 10.0;
@@ -344,6 +351,9 @@ impl Measurement for GnssObservation {
         state: &mut GnssState,
     ) -> bool {
         let obs = self;
+        if obs.pos_floor_std_m != Vector3::zeros() {
+            f.pos_floor_std_ned_m = obs.pos_floor_std_m;
+        }
         let t_f = self.epoch_ns(f.delay_s);
         let (dz, h, r) = position_terms(&f.pva, &Vector3::from(cfg.gnss_lever_arm_m), obs, eps);
         let mut outcome = f.eskf.update(&dz, &h, &r, cfg.gate_scale);
@@ -391,7 +401,7 @@ impl Measurement for GnssObservation {
                 // Persistently rejected: did the GNSS position jump, or has the filter lost
                 // consistency? The fix's velocity against the filter's tells.
                 let vel_agrees = obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() && {
-                    let (dz, h, r) = velocity_terms(&f.pva, &Vector3::from(cfg.gnss_lever_arm_m), &f.last_w, &f.acc_ned, obs, eps);
+                    let (dz, h, r) = velocity_terms_of(f, cfg, obs, eps);
                     f.eskf.gate(&dz, &h, &r, cfg.gate_scale).0
                 };
                 state.gnss_resets += 1;
@@ -416,8 +426,24 @@ impl Measurement for GnssObservation {
 
     fn counters(state: &GnssState, out: &mut dyn FnMut(&'static str, u64)) {
         out("gnss_inflations", state.inflations);
-
     }
+}
+
+/// [`velocity_terms`] of filter `f` at its last rates, with the configured lever arm.
+fn velocity_terms_of(
+    f: &DelayedFilter,
+    cfg: &NavConfig,
+    obs: &GnssObservation,
+    eps: f64,
+) -> (SVector<f64, 2>, SMatrix<f64, 2, N>, nalgebra::Matrix2<f64>) {
+    velocity_terms(
+        &f.pva,
+        &Vector3::from(cfg.gnss_lever_arm_m),
+        &f.last_w,
+        &f.acc_ned,
+        obs,
+        eps,
+    )
 }
 
 /// Fuses the fix's horizontal velocity, gated (when it has one); true when it was fused.
@@ -433,7 +459,7 @@ fn fuse_velocity(
     if !(obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite()) {
         return false;
     }
-    let (dz, h, r) = velocity_terms(&f.pva, &Vector3::from(cfg.gnss_lever_arm_m), &f.last_w, &f.acc_ned, obs, eps);
+    let (dz, h, r) = velocity_terms_of(f, cfg, obs, eps);
     let outcome = f.eskf.update(&dz, &h, &r, cfg.gate_scale);
     if !coasted {
         let nis = match outcome {
@@ -529,7 +555,6 @@ fn reset_to(f: &mut DelayedFilter, obs: &GnssObservation, cfg: &NavConfig, eps: 
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -568,7 +593,10 @@ mod tests {
         assert!((o.pos_std_m.x - 0.014 / std::f64::consts::SQRT_2).abs() < 1e-12 && o.pos_std_m.z == 0.010);
         assert!((o.vel_std_mps - 0.028 / std::f64::consts::SQRT_2).abs() < 1e-12);
         f.fix_flags = FIX_FLAG_RECEIVER_INVALID;
-        assert!(observation(&f, 0, &acc).is_none(), "the receiver's own validity (gnssFixOK)");
+        assert!(
+            observation(&f, 0, &acc).is_none(),
+            "the receiver's own validity (gnssFixOK)"
+        );
         f.fix_flags = FIX_FLAG_INVALID_LLH;
         assert!(observation(&f, 0, &acc).is_none(), "invalidLlh");
         f.fix_flags = FIX_FLAG_NOT_GNSS;

@@ -1,6 +1,8 @@
 //! Tightly coupled GNSS aiding: every satellite's pseudorange and Doppler fused one by one
 //! (scalar updates, each gated on its own), with the receiver clock bias and drift as filter
-//! states ([`crate::nav::error_state::CLK_BIAS`], `CLK_DRIFT`); one [`Measurement`] kind of
+//! states ([`crate::nav::error_state::CLK_BIAS`], `CLK_DRIFT`) and, for Galileo and BeiDou,
+//! the inter-system bias of their clock ([`crate::nav::error_state::ISB`]); one
+//! [`Measurement`] kind of
 //! the navigator's queue, active when the filter estimates the clock
 //! ([`crate::nav::error_state::ProcessNoise::clock`]). One satellite helps: with 1–3 in view
 //! the filter still bounds the inertial drift along their lines of sight, where a loosely
@@ -10,24 +12,27 @@
 //! state). With u the unit line of sight from the antenna to the satellite (the satellite at
 //! transmission rotated into the reception's ECEF frame, IS-GPS-200 §20.3.3.4.3.3.2) and the
 //! antenna at the epoch t_f = t_stamp − Δ̂:
-//!   ρ̂ = |r_sat − r_ant| + c·δt̂_r + I + T     (Klobuchar I, Saastamoinen T, from `gnss::spp`)
-//!   ρ̇̂ = (v_sat − v_ant)·u + c·δṫ̂_r
+//!   ρ̂ = |r_sat − r_ant| + c·δt̂_r + b̂_sys + k·I + T   (Klobuchar I at L1 scaled by
+//!        k = (f_L1/f)² of the signal's carrier, Saastamoinen T, from `gnss::spp`; b_sys the
+//!        inter-system bias, 0 for GPS)
+//!   ρ̇̂ = (v_sat − v_ant)·u + c·δṫ̂_r                 (one oscillator: one drift)
 //! measured against the receiver's ρ + c·δt_sv and −λ·D + c·δṫ_sv ([`SatRange`]). Since
 //! ∂ρ/∂r_ant = −uᵀ, the Jacobians are −u_nᵀ times the loosely coupled ones of
 //! [`super::gnss`] (lever arm, attitude, gyro bias and Δ columns included) and −1 on the clock
-//! state; innovation dz = computed − measured (KF-GINS sign).
+//! state and the system's inter-system bias; innovation dz = computed − measured (KF-GINS sign).
 
 use nalgebra::{Matrix1, Matrix3, SMatrix, Vector1, Vector3};
 use navsync_wire::earth;
 
 use super::Measurement;
-use crate::gnss::ranges::{MAX_RANGE_SATS, RangeEpoch, SatRange};
-use crate::gnss::spp::{C_M_S, ned_from_ecef, rotate_for_flight, troposphere_delay_m};
-use crate::nav::error_state::{ATT, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, VEL};
+use crate::gnss::broadcast::{GNSS_ID_BEIDOU, GNSS_ID_GALILEO};
+use crate::gnss::ranges::{GNSS_ID_GPS, MAX_RANGE_SATS, RangeEpoch, SatRange};
+use crate::gnss::spp::{C_M_S, atmosphere_var_m2, ned_from_ecef, rotate_for_flight, troposphere_delay_m};
+use crate::nav::config::NavConfig;
+use crate::nav::error_state::{ATT, BG, CLK_BIAS, CLK_DRIFT, DELAY, ISB, N, POS, VEL};
 use crate::nav::eskf::Update;
 use crate::nav::filter::DelayedFilter;
 use crate::nav::mechanization::skew;
-use crate::nav::config::NavConfig;
 
 /// 1σ of the L1 ionospheric delay at zenith when the broadcast model is not known yet, m.
 const UNMODELLED_IONO_ZENITH_M: f64 = 10.0;
@@ -87,6 +92,8 @@ pub struct RangingState {
     pub epochs_not_tight: u64,
     /// Pseudoranges fused.
     pub ranges_used: u64,
+    /// Pseudoranges fused per system: GPS, Galileo, BeiDou.
+    pub ranges_used_by_system: [u64; 3],
     /// Pseudoranges that failed the innovation gate.
     pub ranges_rejected: u64,
     /// Range rates fused.
@@ -101,6 +108,8 @@ pub struct RangingState {
     pub clock_inits: u64,
     /// Clock bias re-initialisations after a jump of the receiver's clock.
     pub clock_resets: u64,
+    /// Inter-system bias initialisations from the residuals (a system's first satellites).
+    pub isb_inits: u64,
     /// Fixes fused loosely while tightly coupled because no raw epoch came
     /// ([`crate::nav::navigator::Navigator::on_gnss`]).
     pub fallback_fixes: u64,
@@ -165,7 +174,8 @@ struct Sight {
     el_rad: f64,
     /// Ionosphere plus troposphere, m.
     atmosphere_m: f64,
-    /// Variance of the ionosphere when no model corrects it, m².
+    /// Variance of what the atmosphere models leave ([`atmosphere_var_m2`]), or of the whole
+    /// ionosphere when no model corrects it, m².
     atmosphere_var_m2: f64,
 }
 
@@ -179,9 +189,9 @@ fn sight(a: &Antenna, s: &SatRange, e: &RangeEpoch) -> Sight {
     let u_ned = a.c_ne.transpose() * u_ecef;
     let el_rad = (-u_ned.z).clamp(-1.0, 1.0).asin();
     let az_rad = u_ned.y.atan2(u_ned.x).rem_euclid(2.0 * std::f64::consts::PI);
-    let iono = e
-        .iono
-        .map_or(0.0, |k| C_M_S * k.delay_s(a.lat_rad, a.lon_rad, el_rad, az_rad, e.tow_s));
+    let iono = e.iono.map_or(0.0, |k| {
+        s.iono_scale * C_M_S * k.delay_s(a.lat_rad, a.lon_rad, el_rad, az_rad, e.tow_s)
+    });
     let tropo = if el_rad > 0.0 {
         troposphere_delay_m(a.lat_rad, a.h_m, el_rad)
     } else {
@@ -191,8 +201,9 @@ fn sight(a: &Antenna, s: &SatRange, e: &RangeEpoch) -> Sight {
     let iono_unmodelled = if e.iono.is_some() {
         0.0
     } else {
-        UNMODELLED_IONO_ZENITH_M / el_rad.sin().max(0.1)
+        s.iono_scale * UNMODELLED_IONO_ZENITH_M / el_rad.sin().max(0.1)
     };
+    let atmosphere_var_m2 = atmosphere_var_m2(iono, el_rad.max(0.0)) + iono_unmodelled * iono_unmodelled;
     Sight {
         range_m,
         u_ecef,
@@ -200,7 +211,7 @@ fn sight(a: &Antenna, s: &SatRange, e: &RangeEpoch) -> Sight {
         sat_vel: Vector3::from(rotate_for_flight(s.sat_vel_mps, tau)),
         el_rad,
         atmosphere_m: iono + tropo,
-        atmosphere_var_m2: iono_unmodelled * iono_unmodelled,
+        atmosphere_var_m2,
     }
 }
 
@@ -232,8 +243,10 @@ impl RangeEpoch {
     }
 
     /// Sets the clock from the median residuals of the satellites in view (≥ 1) the first
-    /// time, or re-anchors the bias after a jump. Returns false while the clock has never been
-    /// anchored (no usable satellite yet).
+    /// time (GPS's when any is in view, else the first system's), re-anchors the bias after a
+    /// jump, and sets each system's inter-system bias from its satellites' median residual the
+    /// first time it is seen. Returns false while the clock has never been anchored (no usable
+    /// satellite yet).
     fn anchor_clock(
         &self,
         f: &mut DelayedFilter,
@@ -243,47 +256,88 @@ impl RangeEpoch {
         st: &mut RangingState,
     ) -> bool {
         let a = Antenna::of(f, &Vector3::from(cfg.gnss_lever_arm_m), eps);
-        let (mut res, mut rates) = ([0.0; MAX_RANGE_SATS], [0.0; MAX_RANGE_SATS]);
-        let (mut n, mut m) = (0, 0);
+        // Residuals without any receiver clock, by system (0 GPS, 1 Galileo, 2 BeiDou).
+        let mut res = [[0.0; MAX_RANGE_SATS]; 3];
+        let mut n = [0usize; 3];
+        let mut rates = [0.0; MAX_RANGE_SATS];
+        let mut m = 0;
         for s in self.sats() {
+            let Some(k) = system_slot(s.gnss_id) else { continue };
             let Some(g) = self.usable(&a, s, rc) else { continue };
-            res[n] = s.pseudorange_m - g.range_m - g.atmosphere_m;
-            n += 1;
+            res[k][n[k]] = s.pseudorange_m - g.range_m - g.atmosphere_m;
+            n[k] += 1;
             if s.range_rate_mps.is_finite() {
                 rates[m] = s.range_rate_mps - (g.sat_vel - a.vel_ecef_mps).dot(&g.u_ecef);
                 m += 1;
             }
         }
-        if n == 0 {
+        if n.iter().all(|&c| c == 0) {
             return f.clock_valid;
         }
-        let bias = median(&mut res, n);
-        let bias_now = f.clock_bias_m - f.clock_drift_mps * eps;
-        if f.clock_valid && (bias - bias_now).abs() <= rc.clock_reset_m {
-            return true;
-        }
-        let reset_drift = !f.clock_valid;
-        if reset_drift {
-            f.clock_drift_mps = if m > 0 { median(&mut rates, m) } else { 0.0 };
-            st.clock_inits += 1;
-        } else {
-            st.clock_resets += 1;
-        }
-        f.clock_bias_m = bias + f.clock_drift_mps * eps;
-        let reopened: &[usize] = if reset_drift { &[CLK_BIAS, CLK_DRIFT] } else { &[CLK_BIAS] };
-        for &i in reopened {
-            for j in 0..N {
-                f.eskf.p[(i, j)] = 0.0;
-                f.eskf.p[(j, i)] = 0.0;
-            }
-        }
         let pos_var: f64 = (0..3).map(|i| f.eskf.p[(POS + i, POS + i)]).sum();
-        f.eskf.p[(CLK_BIAS, CLK_BIAS)] = rc.clock_init_std_m.powi(2) + pos_var;
-        if reset_drift {
-            f.eskf.p[(CLK_DRIFT, CLK_DRIFT)] = rc.drift_init_std_mps.powi(2);
+        let isb_now = |f: &DelayedFilter, k: usize| if k == 0 { 0.0 } else { f.isb_m[k - 1] };
+        let anchored = |f: &DelayedFilter, k: usize| k == 0 || f.isb_valid[k - 1];
+        if f.clock_valid {
+            // A jump of the receiver's clock shows in every anchored system's residuals.
+            let mut all = [0.0; MAX_RANGE_SATS];
+            let mut c = 0;
+            for k in (0..3).filter(|&k| anchored(f, k)) {
+                for r in &res[k][..n[k]] {
+                    all[c] = r - isb_now(f, k);
+                    c += 1;
+                }
+            }
+            let bias_now = f.clock_bias_m - f.clock_drift_mps * eps;
+            if c > 0 && (median(&mut all, c) - bias_now).abs() > rc.clock_reset_m {
+                f.clock_bias_m = median(&mut all, c) + f.clock_drift_mps * eps;
+                reopen(f, &[CLK_BIAS], rc.clock_init_std_m.powi(2) + pos_var);
+                st.clock_resets += 1;
+            }
+        } else {
+            let k = (0..3).find(|&k| n[k] > 0).unwrap_or(0);
+            f.clock_drift_mps = if m > 0 { median(&mut rates, m) } else { 0.0 };
+            f.clock_bias_m = median(&mut res[k], n[k]) + f.clock_drift_mps * eps;
+            reopen(f, &[CLK_BIAS], rc.clock_init_std_m.powi(2) + pos_var);
+            reopen(f, &[CLK_DRIFT], rc.drift_init_std_mps.powi(2));
+            f.clock_valid = true;
+            st.clock_inits += 1;
         }
-        f.clock_valid = true;
+        for k in 1..3 {
+            if n[k] == 0 || f.isb_valid[k - 1] {
+                continue;
+            }
+            // Relative to the clock just used: its doubt and the system's median both count.
+            let bias_now = f.clock_bias_m - f.clock_drift_mps * eps;
+            f.isb_m[k - 1] = median(&mut res[k], n[k]) - bias_now;
+            let var = rc.clock_init_std_m.powi(2) + f.eskf.p[(CLK_BIAS, CLK_BIAS)];
+            reopen(f, &[ISB + k - 1], var);
+            f.isb_valid[k - 1] = true;
+            st.isb_inits += 1;
+        }
         true
+    }
+}
+
+/// The slot of system `gnss_id` among the filter's clocks: 0 GPS, 1 Galileo, 2 BeiDou
+/// (1 + the index of its inter-system bias state); `None` for systems not fused.
+fn system_slot(gnss_id: u8) -> Option<usize> {
+    match gnss_id {
+        GNSS_ID_GPS => Some(0),
+        GNSS_ID_GALILEO => Some(1),
+        GNSS_ID_BEIDOU => Some(2),
+        _ => None,
+    }
+}
+
+/// Forgets what the filter knew of states `idx`: their covariance rows and columns zeroed,
+/// their variance set to `var`.
+fn reopen(f: &mut DelayedFilter, idx: &[usize], var: f64) {
+    for &i in idx {
+        for j in 0..N {
+            f.eskf.p[(i, j)] = 0.0;
+            f.eskf.p[(j, i)] = 0.0;
+        }
+        f.eskf.p[(i, i)] = var;
     }
 }
 
@@ -310,9 +364,15 @@ impl Measurement for RangeEpoch {
         if !self.anchor_clock(f, cfg, rc, eps, st) {
             return false;
         }
+        if self.pos_floor_std_ned_m != [0.0; 3] {
+            f.pos_floor_std_ned_m = Vector3::from(self.pos_floor_std_ned_m);
+        }
         let lever_b = Vector3::from(cfg.gnss_lever_arm_m);
         let mut used = 0u64;
         for s in self.sats() {
+            let Some(slot) = system_slot(s.gnss_id).filter(|&k| k == 0 || f.isb_valid[k - 1]) else {
+                continue;
+            };
             let a = Antenna::of(f, &lever_b, eps);
             let Some(g) = self.usable(&a, s, rc) else {
                 if sight(&a, s, self).el_rad < rc.elevation_mask_rad {
@@ -331,7 +391,11 @@ impl Measurement for RangeEpoch {
             h.fixed_view_mut::<1, 3>(0, ATT).copy_from(&(-un * skew(&a.lever_n)));
             h[(0, DELAY)] = -g.u_ned.dot(&f.pva.vel_ned_mps);
             h[(0, CLK_BIAS)] = -1.0;
-            let bias = f.clock_bias_m - f.clock_drift_mps * eps;
+            let mut bias = f.clock_bias_m - f.clock_drift_mps * eps;
+            if slot > 0 {
+                h[(0, ISB + slot - 1)] = -1.0;
+                bias += f.isb_m[slot - 1];
+            }
             let dz = Vector1::new(g.range_m + bias + g.atmosphere_m - s.pseudorange_m);
             let sd = sigma(rc.pseudorange_std_m, s.pseudorange_std_m, g.el_rad, cno, rc);
             let var = sd * sd + g.atmosphere_var_m2;
@@ -339,6 +403,7 @@ impl Measurement for RangeEpoch {
                 Update::Accepted { dx, .. } => {
                     f.feedback(&dx, cfg.fusion_horizon_s);
                     st.ranges_used += 1;
+                    st.ranges_used_by_system[slot] += 1;
                     used += 1;
                 }
                 Update::Rejected { .. } => st.ranges_rejected += 1,
@@ -353,7 +418,8 @@ impl Measurement for RangeEpoch {
             let un = g.u_ned.transpose();
             let mut h = SMatrix::<f64, 1, N>::zeros();
             h.fixed_view_mut::<1, 3>(0, VEL).copy_from(&(-un));
-            h.fixed_view_mut::<1, 3>(0, ATT).copy_from(&(-un * skew(&a.lever_vel_n)));
+            h.fixed_view_mut::<1, 3>(0, ATT)
+                .copy_from(&(-un * skew(&a.lever_vel_n)));
             h.fixed_view_mut::<1, 3>(0, BG)
                 .copy_from(&(un * a.c_bn * skew(&lever_b)));
             h[(0, DELAY)] = -g.u_ned.dot(&f.acc_ned);
@@ -381,6 +447,9 @@ impl Measurement for RangeEpoch {
         out("ranges_epochs_used", st.epochs_used);
         out("ranges_epochs_not_tight", st.epochs_not_tight);
         out("ranges_used", st.ranges_used);
+        out("ranges_used_gps", st.ranges_used_by_system[0]);
+        out("ranges_used_galileo", st.ranges_used_by_system[1]);
+        out("ranges_used_beidou", st.ranges_used_by_system[2]);
         out("ranges_rejected", st.ranges_rejected);
         out("range_rates_used", st.rates_used);
         out("range_rates_rejected", st.rates_rejected);
@@ -388,6 +457,7 @@ impl Measurement for RangeEpoch {
         out("ranges_weak_signal", st.weak_signal);
         out("clock_inits", st.clock_inits);
         out("clock_resets", st.clock_resets);
+        out("isb_inits", st.isb_inits);
         out("ranges_fallback_fixes", st.fallback_fixes);
     }
 }
