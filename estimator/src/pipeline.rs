@@ -449,12 +449,13 @@ impl Pipeline {
         let mut epoch = self.ephemerides.range_epoch(raw, stamp, bias_m, &mut self.range_counts);
         let solution = single_point_observation(&epoch, &self.cfg.measurements.ranges);
         if self.nav.is_aligned() && self.nav.is_tight() {
-            if let Some(obs) = &solution {
+            if let Some((obs, clock_std_m)) = &solution {
                 epoch.pos_floor_std_ned_m = obs.pos_floor_std_m.into();
+                epoch.clock_floor_std_m = *clock_std_m;
             }
             self.nav.on_ranges(epoch, raw.stamp.host_ns);
         } else if (self.cfg.nav.initial_state.is_none() || self.nav.is_aligned())
-            && let Some(obs) = solution
+            && let Some((obs, _)) = solution
         {
             self.nav.on_gnss(obs, raw.stamp.host_ns);
         } else {
@@ -672,9 +673,9 @@ impl Pipeline {
 
 /// A fix from a raw epoch's single-point solution (position, clock, then Doppler velocity),
 /// for the alignment of a tightly coupled filter: its σ from the least-squares covariance
-/// rotated into NED, one receiver clock per system. `None` with fewer than 3 + the systems' count
+/// rotated into NED, one receiver clock per system; and the σ of its (first system's) clock, m. `None` with fewer than 3 + the systems' count
 /// of satellites or without convergence.
-fn single_point_observation(e: &RangeEpoch, rc: &RangingConfig) -> Option<gnss::GnssObservation> {
+fn single_point_observation(e: &RangeEpoch, rc: &RangingConfig) -> Option<(gnss::GnssObservation, f64)> {
     let (pr_std_m, rate_std_mps) = (rc.pseudorange_std_m, rc.range_rate_std_mps);
     let settings = SppSettings {
         elevation_mask_rad: rc.elevation_mask_rad,
@@ -735,7 +736,7 @@ fn single_point_observation(e: &RangeEpoch, rc: &RangingConfig) -> Option<gnss::
         }
         None => (nalgebra::Vector3::repeat(f64::NAN), f64::NAN),
     };
-    Some(gnss::GnssObservation {
+    let obs = gnss::GnssObservation {
         stamp_host_ns: e.stamp_host_ns,
         lat_rad: lat,
         lon_rad: lon,
@@ -746,5 +747,6 @@ fn single_point_observation(e: &RangeEpoch, rc: &RangingConfig) -> Option<gnss::
         speed_mps: vel_ned.x.hypot(vel_ned.y),
         pos_floor_std_m: ned_std(&sol.cov),
         track_rad: vel_ned.y.atan2(vel_ned.x).rem_euclid(2.0 * std::f64::consts::PI),
-    })
+    };
+    Some((obs, sol.cov[(3, 3)].max(0.0).sqrt()))
 }

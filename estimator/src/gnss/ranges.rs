@@ -94,6 +94,9 @@ pub struct RangeEpoch {
     /// than unknowns): the floor of the published position σ
     /// ([`crate::nav::filter::DelayedFilter::pos_floor_std_ned_m`]).
     pub pos_floor_std_ned_m: [f64; 3],
+    /// 1σ of that solution's receiver clock, m (zero: none): the floor of the published
+    /// clock σ.
+    pub clock_floor_std_m: f64,
     /// Satellites in `sats`.
     pub count: u8,
     /// The satellites, `count` of them.
@@ -462,6 +465,7 @@ impl EphemerisStore {
             tow_s: raw.rcv_tow_s - rx_clock_bias_m / C_M_S,
             iono: self.iono(),
             pos_floor_std_ned_m: [0.0; 3],
+            clock_floor_std_m: 0.0,
             count: 0,
             sats: [SatRange::default(); MAX_RANGE_SATS],
         };

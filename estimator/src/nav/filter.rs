@@ -55,6 +55,9 @@ pub struct DelayedFilter {
     /// consider covariance (Schmidt 1966) taken as one epoch's snapshot. P itself is not
     /// changed (the gates and gains stay the filter's).
     pub pos_floor_std_ned_m: Vector3<f64>,
+    /// The published receiver-clock σ's floor, m: the σ of the same solution's clock, for
+    /// the same reason.
+    pub clock_floor_std_m: f64,
     /// NED acceleration over the last step, m/s².
     pub acc_ned: Vector3<f64>,
     /// Compensated angular rate of the last step (body FRD), rad/s.
@@ -91,6 +94,7 @@ impl DelayedFilter {
             isb_m: [0.0; ISB_SYSTEMS],
             isb_valid: [false; ISB_SYSTEMS],
             pos_floor_std_ned_m: Vector3::zeros(),
+            clock_floor_std_m: 0.0,
             acc_ned: Vector3::zeros(),
             last_w: Vector3::zeros(),
             q_scale: 1.0,

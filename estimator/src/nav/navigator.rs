@@ -486,7 +486,8 @@ impl Navigator {
 
     /// The receiver clock at host time `now_ns` from the tightly coupled filter: the delayed
     /// filter's bias extrapolated with its drift, σ grown by the covariance over the interval
-    /// and the oscillator's process noise (holdover while no satellite is fused). `None` when
+    /// and the oscillator's process noise (holdover while no satellite is fused), never below
+    /// the last single-point solution's clock σ ([`DelayedFilter::clock_floor_std_m`]). `None` when
     /// loosely coupled or before the clock was anchored.
     pub fn receiver_clock(&self, now_ns: i64) -> Option<ReceiverClock> {
         let (f, osc) = (self.filt.as_ref()?, self.cfg.noise.clock?);
@@ -504,7 +505,7 @@ impl Navigator {
         Some(ReceiverClock {
             bias_m: f.clock_bias_m + f.clock_drift_mps * dt,
             drift_mps: f.clock_drift_mps,
-            bias_std_m: var_b.max(0.0).sqrt(),
+            bias_std_m: var_b.max(0.0).sqrt().max(f.clock_floor_std_m),
             drift_std_mps: var_d.max(0.0).sqrt(),
             last_fused_ns: self.states.ranges.last_fused_ns,
         })

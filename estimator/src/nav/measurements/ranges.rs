@@ -366,6 +366,7 @@ impl Measurement for RangeEpoch {
         }
         if self.pos_floor_std_ned_m != [0.0; 3] {
             f.pos_floor_std_ned_m = Vector3::from(self.pos_floor_std_ned_m);
+            f.clock_floor_std_m = self.clock_floor_std_m;
         }
         let lever_b = Vector3::from(cfg.gnss_lever_arm_m);
         let mut used = 0u64;
