@@ -34,6 +34,9 @@ const MAX_UNDRAINED: usize = 256;
 /// Prior of Δ under software sync and its 1-sigma, s: any receiver latency below the fusion
 /// horizon.
 const SOFTWARE_DELAY_PRIOR_S: (f64, f64) = (0.5, 0.5);
+/// Under software sync, the most an IMU sample's receipt may lag its measurement, s: Δ (the
+/// fixes' receipt lag less the IMU's) is at least minus this.
+const SOFTWARE_IMU_LATENCY_MAX_S: f64 = 0.1;
 
 /// Mechanization steps of the output catch-up after a correction done per `NavState`
 /// ([`Pipeline::catch_up`]): a 1.5 s horizon at 1 kHz (1500 steps) reaches the output 8
@@ -398,6 +401,12 @@ impl Pipeline {
                 FixStamping::Receipt => SOFTWARE_DELAY_PRIOR_S,
             };
             self.nav.reset_delay(prior, std);
+            self.nav.set_delay_floor(match stamping {
+                FixStamping::Epoch => f64::NEG_INFINITY,
+                // A fix is received after its epoch; the IMU samples' own receipt latency
+                // (tens of ms at most) is the only way Δ may fall below zero.
+                FixStamping::Receipt => -SOFTWARE_IMU_LATENCY_MAX_S,
+            });
             self.stamping = Some(stamping);
         }
         match stamping {

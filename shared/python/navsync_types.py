@@ -457,7 +457,7 @@ class Health(ctypes.Structure):
         # Report sequence number.
         ("seq", ctypes.c_uint64),
         # Error and event counters.
-        ("counters", (Counter * 64)),
+        ("counters", (Counter * 96)),
         # Rates.
         ("rates", (RateEntry * 8)),
         # Process name, e.g. "gps-0" (NUL-padded ASCII).
@@ -471,16 +471,16 @@ class Health(ctypes.Structure):
     ]
 
     #: Size in bytes of the Rust type.
-    RUST_SIZE = 2368
+    RUST_SIZE = 3392
     #: Alignment in bytes of the Rust type.
     RUST_ALIGN = 8
     #: Byte offset of every field in the Rust type.
-    RUST_OFFSETS = {"host_ns": 0, "started_host_ns": 8, "seq": 16, "counters": 24, "rates": 2072, "process": 2328, "pid": 2360, "alive": 2364, "reserved": 2365}
+    RUST_OFFSETS = {"host_ns": 0, "started_host_ns": 8, "seq": 16, "counters": 24, "rates": 3096, "process": 3352, "pid": 3384, "alive": 3388, "reserved": 3389}
 
     @staticmethod
     def type_name():
         """The iceoryx2 type name (with the layout version)."""
-        return "navsync.Health.v2"
+        return "navsync.Health.v3"
 
 
 class SimTruth(ctypes.Structure):

@@ -12,6 +12,10 @@ use super::eskf::Eskf;
 use super::imu_buffer::ImuRecord;
 use super::mechanization::{ImuIncrement, Pva, propagate};
 
+/// A horizontal speed estimate this many σ above zero makes the GNSS delay observable
+/// ([`DelayedFilter::delay_observable`]).
+pub const DELAY_SPEED_SIGMAS: f64 = 3.0;
+
 /// The delayed filter: the navigation state at the delayed time (the fusion horizon behind
 /// the present), its error covariance and the sensor-error and GNSS-delay estimates. The
 /// measurements ([`super::measurements`]) fuse into it at their epochs.
@@ -156,6 +160,18 @@ impl DelayedFilter {
         self.cov_w = Vector3::zeros();
     }
 
+    /// Whether a GNSS measurement tells anything of the delay Δ: Δ enters it only as v·Δ (a
+    /// position) or a·Δ (a velocity), so only while the horizontal speed estimate stands out of
+    /// its own uncertainty (more than [`DELAY_SPEED_SIGMAS`] σ). Below, the Jacobian would be
+    /// made of the velocity estimate's noise, and the filter would read information on Δ into
+    /// a standing vehicle's fixes (the EKF's spurious observability: Huang, Mourikis &
+    /// Roumeliotis 2010) and move Δ on it with a shrinking σ.
+    pub fn delay_observable(&self) -> bool {
+        let v = self.pva.vel_ned_mps;
+        let var_h = self.eskf.p[(VEL, VEL)] + self.eskf.p[(VEL + 1, VEL + 1)];
+        v.x * v.x + v.y * v.y > DELAY_SPEED_SIGMAS * DELAY_SPEED_SIGMAS * var_h
+    }
+
     /// Closed-loop feedback of an error-state estimate (KF-GINS `stateFeedback`).
     pub fn feedback(&mut self, dx: &StateVec, horizon_s: f64) {
         let (rm, rn) = earth::radii(self.pva.lat_rad);
@@ -169,11 +185,45 @@ impl DelayedFilter {
         self.bias_a += dx.fixed_rows::<3>(BA);
         self.scale_g += dx.fixed_rows::<3>(SG);
         self.scale_a += dx.fixed_rows::<3>(SA);
-        self.delay_s = (self.delay_s + dx[DELAY]).clamp(-0.5, horizon_s - 0.05);
+        self.delay_s = (self.delay_s + dx[DELAY]).clamp(
+            super::navigator::MIN_DELAY_S,
+            horizon_s - super::navigator::DELAY_HORIZON_MARGIN_S,
+        );
         self.clock_bias_m += dx[CLK_BIAS];
         self.clock_drift_mps += dx[CLK_DRIFT];
         for (k, b) in self.isb_m.iter_mut().enumerate() {
             *b += dx[ISB + k];
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::UnitQuaternion;
+
+    fn filter(speed_mps: f64, vel_std_mps: f64) -> DelayedFilter {
+        let pva = Pva {
+            lat_rad: 0.8,
+            lon_rad: 0.2,
+            h_m: 100.0,
+            vel_ned_mps: Vector3::new(speed_mps, 0.0, 0.0),
+            q_nb: UnitQuaternion::identity(),
+        };
+        let mut p = StateMat::identity() * 1e-4;
+        for i in VEL..VEL + 3 {
+            p[(i, i)] = vel_std_mps * vel_std_mps;
+        }
+        DelayedFilter::new(pva, 0, Eskf::new(p), Vector3::zeros(), 0.5)
+    }
+
+    /// A standing vehicle's velocity estimate is its own noise: no Δ column from it; a moving
+    /// one's speed well out of its σ makes Δ observable.
+    #[test]
+    fn the_delay_is_observable_only_when_the_speed_stands_out_of_its_sigma() {
+        assert!(!filter(0.02, 0.03).delay_observable());
+        assert!(!filter(0.1, 0.03).delay_observable());
+        assert!(filter(0.2, 0.03).delay_observable());
+        assert!(filter(1.2, 0.05).delay_observable());
     }
 }

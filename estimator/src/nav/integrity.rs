@@ -55,6 +55,9 @@ pub struct IntegrityCounters {
     pub inconsistent: u64,
     /// Resets of the filter (it aligned again).
     pub resets: u64,
+    /// Resets of the GNSS delay Δ to its prior: its estimate left what is physical (a fix
+    /// received before its epoch) or reached the filter's bound ([`super::navigator::Navigator`]).
+    pub delay_resets: u64,
 }
 
 impl IntegrityCounters {
@@ -75,6 +78,7 @@ impl IntegrityCounters {
         out("integrity_implausible", self.implausible);
         out("integrity_inconsistent", self.inconsistent);
         out("integrity_resets", self.resets);
+        out("integrity_delay_resets", self.delay_resets);
     }
 }
 

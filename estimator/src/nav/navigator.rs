@@ -143,6 +143,22 @@ pub struct ReceiverClock {
     pub last_fused_ns: i64,
 }
 
+/// The least GNSS delay Δ the filter holds, s (its lower clamp, [`DelayedFilter::feedback`]).
+pub const MIN_DELAY_S: f64 = -0.5;
+/// Δ stays this far below the fusion horizon, s (its upper clamp).
+pub const DELAY_HORIZON_MARGIN_S: f64 = 0.05;
+
+/// Sets filter `f`'s Δ to `prior_s` with 1σ `prior_std_s` (0 when Δ is not `live`), its
+/// correlations with the other states forgotten.
+fn reopen_delay(f: &mut DelayedFilter, prior_s: f64, prior_std_s: f64, live: bool) {
+    f.delay_s = prior_s;
+    for i in 0..N {
+        f.eskf.p[(i, DELAY)] = 0.0;
+        f.eskf.p[(DELAY, i)] = 0.0;
+    }
+    f.eskf.p[(DELAY, DELAY)] = if live { prior_std_s * prior_std_s } else { 0.0 };
+}
+
 /// Output re-propagation after a correction: the state, last increment, host time (ns) and
 /// last compensated rates of the records integrated so far.
 #[derive(Debug, Clone, Copy)]
@@ -155,8 +171,9 @@ struct CatchUp {
 }
 
 /// Writes the pose of `pva` (rates `w`, specific force `f`, body FRD), the σ's and the sensor
-/// errors of `filt` into `s`.
-fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, filt: &DelayedFilter) {
+/// errors of `filt` into `s`; the position, velocity and attitude σ times `sigma_scale`
+/// ([`Navigator::sigma_scale`]).
+fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, filt: &DelayedFilter, sigma_scale: f64) {
     let q = pva.q_nb.quaternion();
     s.lat_deg = pva.lat_rad.to_degrees();
     s.lon_deg = pva.lon_rad.to_degrees();
@@ -167,13 +184,14 @@ fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, fil
     s.gyro_body_rps = w.into();
     s.accel_body_mps2 = f.into();
     let std3 = |i: usize| [filt.eskf.std(i), filt.eskf.std(i + 1), filt.eskf.std(i + 2)];
+    let scaled = |i: usize| std3(i).map(|x| x * sigma_scale);
     let floor = filt.pos_floor_std_ned_m;
-    s.pos_std_ned_m = std3(POS);
+    s.pos_std_ned_m = scaled(POS);
     for (sd, fl) in s.pos_std_ned_m.iter_mut().zip(floor.iter()) {
         *sd = sd.max(*fl);
     }
-    s.vel_std_ned_mps = std3(VEL);
-    s.att_std_rad = std3(ATT);
+    s.vel_std_ned_mps = scaled(VEL);
+    s.att_std_rad = scaled(ATT);
     s.gyro_bias_rps = filt.bias_g.into();
     s.accel_bias_mps2 = filt.bias_a.into();
     s.gyro_bias_std_rps = std3(BG);
@@ -242,6 +260,9 @@ pub struct Navigator {
     /// [`Navigator::reset_delay`] when the time base of the fix stamps changes; the motion
     /// onset may narrow it at alignment).
     delay_prior: (f64, f64),
+    /// The prior of Δ of the time base in force (as set by [`Navigator::reset_delay`], before
+    /// any narrowing) and the least Δ that is physical, s ([`Navigator::set_delay_floor`]).
+    delay_base: (f64, f64, f64),
     /// The delayed filter's states since [`Navigator::drain_fused`] last took them: each
     /// instant it stepped over, with every measurement up to it fused (its capacity is kept);
     /// `None` unless [`Navigator::keep_fused`] asked for them.
@@ -289,6 +310,7 @@ impl Navigator {
             horizon_ns: (cfg.fusion_horizon_s * 1e9) as i64,
             fix_delay_ns: 0,
             delay_prior: (0.0, cfg.delay_prior_std_s),
+            delay_base: (0.0, cfg.delay_prior_std_s, MIN_DELAY_S),
             fused: None,
             pd_memo: integrity::PdMemo::default(),
             integrity: IntegrityCounters::default(),
@@ -350,18 +372,20 @@ impl Navigator {
     /// Forgets the delay estimate (the time base of the fix stamps changed).
     pub fn reset_delay(&mut self, prior_s: f64, prior_std_s: f64) {
         self.delay_prior = (prior_s, prior_std_s);
+        self.delay_base.0 = prior_s;
+        self.delay_base.1 = prior_std_s;
         if let Some(f) = &mut self.filt {
-            f.delay_s = prior_s;
-            for i in 0..N {
-                f.eskf.p[(i, DELAY)] = 0.0;
-                f.eskf.p[(DELAY, i)] = 0.0;
-            }
-            f.eskf.p[(DELAY, DELAY)] = if self.cfg.estimate_delay {
-                prior_std_s * prior_std_s
-            } else {
-                0.0
-            };
+            reopen_delay(f, prior_s, prior_std_s, self.cfg.estimate_delay);
         }
+    }
+
+    /// The least GNSS delay Δ that is physical for the fix stamps in force, s: under software
+    /// sync a fix cannot be received before its epoch, so Δ (the receipt's lag behind the
+    /// epoch, less the IMU samples' own) is at least minus the IMU's receipt latency; under
+    /// hardware sync the filter's bound [`MIN_DELAY_S`]. An estimate below it, or at a bound of
+    /// the filter, is reset to the prior ([`Self::monitor`]).
+    pub fn set_delay_floor(&mut self, floor_s: f64) {
+        self.delay_base.2 = floor_s.max(MIN_DELAY_S);
     }
 
     /// The present output state, if aligned.
@@ -476,6 +500,16 @@ impl Navigator {
         let max = (self.cfg.fusion_horizon_s * 1e9) as i64;
         let min = (MIN_HORIZON_S * 1e9) as i64;
         self.horizon_ns = (self.fix_delay_ns + (HORIZON_MARGIN_S * 1e9) as i64).clamp(min, max);
+    }
+
+    /// The factor on the published position, velocity and attitude σ: √ of the running NIS per
+    /// component of the GNSS updates when above 1. Innovations k² times larger than the filter
+    /// predicts show its covariance k times too small (the innovation-based consistency test,
+    /// Bar-Shalom, Li & Kirubarajan 2001, §5.4; Mehra 1972's covariance matching): what the data
+    /// say of the σ is published even where the filter's gains keep the model (the model's own
+    /// adaptation, `GnssFusion::adapt_process_noise`, is off by default).
+    pub fn sigma_scale(&self) -> f64 {
+        self.states.gnss.nis_average.max(1.0).sqrt()
     }
 
     /// True when the filter estimates the receiver clock and fuses satellites' measurements
@@ -882,6 +916,19 @@ impl Navigator {
     /// Returns false when the filter was reset.
     fn monitor(&mut self) -> bool {
         let Some(f) = &mut self.filt else { return true };
+        let (prior_s, prior_std_s, floor_s) = self.delay_base;
+        let max_delay_s = self.cfg.fusion_horizon_s - DELAY_HORIZON_MARGIN_S;
+        if self.cfg.estimate_delay && (f.delay_s < floor_s || f.delay_s <= MIN_DELAY_S || f.delay_s >= max_delay_s) {
+            // Not an estimate: what the filter wants lies outside what is physical or beyond
+            // its bound, and its σ says nothing of that. Δ starts again from the time base's
+            // prior, the states flagged as recovering.
+            self.integrity.delay_resets += 1;
+            self.recovering_until_ns = f.t_ns + (self.cfg.integrity.recovering_s * 1e9) as i64;
+            self.delay_prior = (prior_s, prior_std_s);
+            reopen_delay(f, prior_s, prior_std_s, true);
+            self.start_catch_up();
+            return true;
+        }
         let nis = self.states.gnss.nis_average;
         match integrity::check(f, &self.cfg.noise, nis, &self.cfg.integrity, &mut self.pd_memo) {
             Some(fault @ (Fault::NonFinite | Fault::NotPositiveDefinite)) => {
@@ -1120,7 +1167,7 @@ impl Navigator {
             s.q_nb = [f64::NAN; 4];
             return;
         }
-        write_pose(s, pva, self.out_w, self.out_f, filt);
+        write_pose(s, pva, self.out_w, self.out_f, filt, self.sigma_scale());
         let (d, ds) = self.gnss_delay();
         s.gnss_delay_s = d;
         s.gnss_delay_std_s = ds;
@@ -1139,7 +1186,7 @@ impl Navigator {
         s.fixes_rejected = self.states.gnss.fixes_rejected as u32;
         s.last_fix_host_ns = self.states.gnss.last_fused_ns;
         let (w, f) = filt.compensate(r);
-        write_pose(&mut s, &filt.pva, w, f, filt);
+        write_pose(&mut s, &filt.pva, w, f, filt, self.sigma_scale());
         let (d, ds) = self.gnss_delay();
         s.gnss_delay_s = d;
         s.gnss_delay_std_s = ds;
@@ -1188,5 +1235,57 @@ impl Navigator {
     /// An empty per-IMU table.
     pub fn empty_imu_table() -> [ImuSync; MAX_IMUS] {
         [<ImuSync as navsync_wire::reflect::Reflect>::zeroed(); MAX_IMUS]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nav::config::InitialState;
+
+    fn aligned() -> Navigator {
+        let mut nav = Navigator::new(NavConfig::default());
+        let init = InitialState {
+            utc_ns: 0,
+            lat_deg: 45.0,
+            lon_deg: 7.0,
+            height_m: 300.0,
+            vel_ned_mps: [1.0, 0.0, 0.0],
+            rpy_deg: [0.0, 0.0, 0.0],
+            gyro_bias_deg_per_h: [0.0; 3],
+            accel_bias_mgal: [0.0; 3],
+            pos_std_m: [0.1; 3],
+            vel_std_mps: [0.05; 3],
+            att_std_deg: [0.5, 0.5, 2.0],
+        };
+        nav.initialize(&init, 1_000_000_000);
+        nav
+    }
+
+    /// Under software sync a Δ below what is physical (a fix received before its epoch) is
+    /// not an estimate: it starts again from the prior, counted, the states recovering; the
+    /// same Δ under hardware sync is left to the filter.
+    #[test]
+    fn a_delay_beyond_what_is_physical_starts_again_from_its_prior() {
+        let mut nav = aligned();
+        nav.reset_delay(0.5, 0.5);
+        nav.set_delay_floor(-0.1);
+        nav.filt.as_mut().unwrap().delay_s = -0.3;
+        nav.monitor();
+        let (d, sd) = nav.gnss_delay();
+        assert_eq!((d, sd), (0.5, 0.5));
+        assert_eq!(nav.integrity().delay_resets, 1);
+        assert!(nav.recovering_until_ns > 1_000_000_000);
+        let mut nav = aligned();
+        nav.reset_delay(0.0, 0.02);
+        nav.set_delay_floor(f64::NEG_INFINITY);
+        nav.filt.as_mut().unwrap().delay_s = -0.3;
+        nav.monitor();
+        assert_eq!(nav.gnss_delay().0, -0.3);
+        assert_eq!(nav.integrity().delay_resets, 0);
+        // At the filter's bound, whatever the sync: reset.
+        nav.filt.as_mut().unwrap().delay_s = MIN_DELAY_S;
+        nav.monitor();
+        assert_eq!(nav.integrity().delay_resets, 1);
     }
 }

@@ -100,15 +100,18 @@ fn a_simulator_recording_carries_its_imu_model_and_a_wrong_one_does_not_diverge(
     // Where the model's turn-on bias σ is too small (the named industrial model: 7× smaller
     // gyro bias; every term 10× too small) the consumer IMU's biases leave its 6 σ and the
     // integrity monitor widens the model; the error made before that is what these runs cost:
-    // measured 0.88° and 3.06° yaw RMS against the matched 0.21° (bounded here at 16×: no
-    // divergence; a tighter detection is open work of issue 34). Where only the noise
-    // densities are wrong: within 2× (2.5× adapted, measured 0.48°).
+    // measured 0.88° and 5.54° yaw RMS against the matched 0.21° (bounded here at 16× and 30×:
+    // no divergence; a tighter detection is open work of issue 34). The second is a 100 s coast
+    // of a filter whose every noise term is 10× too small: its heading drifts with the gyro bias
+    // it learnt before, 3.06° RMS before the GNSS delay stopped learning from a standing
+    // vehicle's velocity noise, 5.54° after (its yaw error within 2σ of the published σ, 15° there).
+    // Where only the noise densities are wrong: within 2× (2.5× adapted, measured 0.48°).
     for (name, flags, h_factor, y_factor) in [
         ("--imu-model industrial", &industrial, 2.0, 16.0),
         ("all process noise 10x too large", &large, 2.0, 2.0),
         ("ARW and VRW 10x too small", &small_rw, 2.0, 2.0),
         ("all process noise 10x too small, adapted", &small_adapt, 2.0, 2.5),
-        ("all process noise 10x too small", &small, 3.0, 16.0),
+        ("all process noise 10x too small", &small, 3.0, 30.0),
     ] {
         let flags: Vec<&str> = flags.iter().map(String::as_str).collect();
         let (h, y, _) = estimate(&env, &rec, name, &flags);

@@ -21,13 +21,13 @@ crate::sample_struct! {
 }
 
 /// Counter slots in [`Health`].
-pub const MAX_COUNTERS: usize = 64;
+pub const MAX_COUNTERS: usize = 96;
 /// Rate slots in [`Health`].
 pub const MAX_RATES: usize = 8;
 
 crate::sample_struct! {
     /// Heartbeat of one process, published about once per second on `navsync/health/{process}`.
-    pub struct Health = "navsync.Health.v2" {
+    pub struct Health = "navsync.Health.v3" {
         /// Host time of this report, ns (`CLOCK_MONOTONIC`).
         pub host_ns: i64,
         /// Host time the process started, ns.

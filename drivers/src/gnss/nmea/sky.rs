@@ -84,7 +84,7 @@ pub struct SkyCounters {
 impl SkyCounters {
     /// The counters a `Health` report carries: only what went wrong (the GSV sentences and the
     /// skies themselves show in the sentence count and the sky service's rate; a receiver's
-    /// report has room for 64 counters in all, `DRIVER_COUNTERS` of them the driver's).
+    /// report has room for `MAX_COUNTERS` (96) counters in all, `DRIVER_COUNTERS` of them the driver's).
     pub fn named(&self) -> [(&'static str, u64); 1] {
         [("nmea_gsv_bad", self.gsv_bad)]
     }

@@ -132,12 +132,14 @@ pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Opt
 }
 
 /// Position update terms at the filter state `pva`, fused `eps_s` after the observation's
-/// (Δ-corrected) time: the GNSS position is extrapolated by v·ε.
+/// (Δ-corrected) time: the GNSS position is extrapolated by v·ε. The Δ column only when
+/// `delay_observable` ([`DelayedFilter::delay_observable`]).
 pub fn position_terms(
     pva: &Pva,
     lever_b: &Vector3<f64>,
     obs: &GnssObservation,
     eps_s: f64,
+    delay_observable: bool,
 ) -> (SVector<f64, 3>, SMatrix<f64, 3, N>, Matrix3<f64>) {
     let c_bn = pva.q_nb.to_rotation_matrix().into_inner();
     let (rm, rn) = earth::radii(pva.lat_rad);
@@ -153,13 +155,16 @@ pub fn position_terms(
     let mut h = SMatrix::<f64, 3, N>::zeros();
     h.fixed_view_mut::<3, 3>(0, POS).copy_from(&Matrix3::identity());
     h.fixed_view_mut::<3, 3>(0, ATT).copy_from(&skew(&lever_n));
-    h.fixed_view_mut::<3, 1>(0, DELAY).copy_from(&v);
+    if delay_observable {
+        h.fixed_view_mut::<3, 1>(0, DELAY).copy_from(&v);
+    }
     let r = Matrix3::from_diagonal(&obs.pos_std_m.component_mul(&obs.pos_std_m));
     (dz, h, r)
 }
 
 /// Horizontal velocity update terms (NMEA has no vertical velocity), with body rate `w_b`
-/// (rad/s, bias compensated) and NED acceleration `acc_ned` for the Δ column.
+/// (rad/s, bias compensated) and NED acceleration `acc_ned` for the Δ column (only when
+/// `delay_observable`).
 pub fn velocity_terms(
     pva: &Pva,
     lever_b: &Vector3<f64>,
@@ -167,6 +172,7 @@ pub fn velocity_terms(
     acc_ned: &Vector3<f64>,
     obs: &GnssObservation,
     eps_s: f64,
+    delay_observable: bool,
 ) -> (SVector<f64, 2>, SMatrix<f64, 2, N>, nalgebra::Matrix2<f64>) {
     let c_bn = pva.q_nb.to_rotation_matrix().into_inner();
     let rot = c_bn * w_b.cross(lever_b);
@@ -176,7 +182,9 @@ pub fn velocity_terms(
     h3.fixed_view_mut::<3, 3>(0, VEL).copy_from(&Matrix3::identity());
     h3.fixed_view_mut::<3, 3>(0, ATT).copy_from(&skew(&rot));
     h3.fixed_view_mut::<3, 3>(0, BG).copy_from(&(-c_bn * skew(lever_b)));
-    h3.fixed_view_mut::<3, 1>(0, DELAY).copy_from(acc_ned);
+    if delay_observable {
+        h3.fixed_view_mut::<3, 1>(0, DELAY).copy_from(acc_ned);
+    }
     let dz = SVector::<f64, 2>::new(dz3.x, dz3.y);
     let h = h3.fixed_rows::<2>(0).into_owned();
     let r = nalgebra::Matrix2::identity() * (obs.vel_std_mps * obs.vel_std_mps);
@@ -190,12 +198,12 @@ pub fn velocity_terms(
 /// hypothesis is then dropped).
 pub fn fuse_weighed(obs: &GnssObservation, f: &mut DelayedFilter, eps: f64, cfg: &NavConfig) -> Option<(f64, f64)> {
     let lever = Vector3::from(cfg.gnss_lever_arm_m);
-    let (dz, h, r) = position_terms(&f.pva, &lever, obs, eps);
+    let (dz, h, r) = position_terms(&f.pva, &lever, obs, eps, f.delay_observable());
     let (dx, mut ll) = f.eskf.update_with_likelihood(&dz, &h, &r)?;
     f.feedback(&dx, cfg.fusion_horizon_s);
     let mut dyaw = dx[ATT + 2];
     if obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() {
-        let (dz, h, r) = velocity_terms(&f.pva, &lever, &f.last_w, &f.acc_ned, obs, eps);
+        let (dz, h, r) = velocity_terms(&f.pva, &lever, &f.last_w, &f.acc_ned, obs, eps, f.delay_observable());
         let (dx, l) = f.eskf.update_with_likelihood(&dz, &h, &r)?;
         f.feedback(&dx, cfg.fusion_horizon_s);
         ll += l;
@@ -355,7 +363,13 @@ impl Measurement for GnssObservation {
             f.pos_floor_std_ned_m = obs.pos_floor_std_m;
         }
         let t_f = self.epoch_ns(f.delay_s);
-        let (dz, h, r) = position_terms(&f.pva, &Vector3::from(cfg.gnss_lever_arm_m), obs, eps);
+        let (dz, h, r) = position_terms(
+            &f.pva,
+            &Vector3::from(cfg.gnss_lever_arm_m),
+            obs,
+            eps,
+            f.delay_observable(),
+        );
         let mut outcome = f.eskf.update(&dz, &h, &r, cfg.gate_scale);
         let since = |t: i64| (t_f - t) as f64 * 1e-9;
         let coasted = state.last_fused_ns == 0 || since(state.last_fused_ns) >= fusion.coast_s;
@@ -443,6 +457,7 @@ fn velocity_terms_of(
         &f.acc_ned,
         obs,
         eps,
+        f.delay_observable(),
     )
 }
 

@@ -390,7 +390,9 @@ impl Measurement for RangeEpoch {
             let mut h = SMatrix::<f64, 1, N>::zeros();
             h.fixed_view_mut::<1, 3>(0, POS).copy_from(&(-un));
             h.fixed_view_mut::<1, 3>(0, ATT).copy_from(&(-un * skew(&a.lever_n)));
-            h[(0, DELAY)] = -g.u_ned.dot(&f.pva.vel_ned_mps);
+            if f.delay_observable() {
+                h[(0, DELAY)] = -g.u_ned.dot(&f.pva.vel_ned_mps);
+            }
             h[(0, CLK_BIAS)] = -1.0;
             let mut bias = f.clock_bias_m - f.clock_drift_mps * eps;
             if slot > 0 {
@@ -423,7 +425,9 @@ impl Measurement for RangeEpoch {
                 .copy_from(&(-un * skew(&a.lever_vel_n)));
             h.fixed_view_mut::<1, 3>(0, BG)
                 .copy_from(&(un * a.c_bn * skew(&lever_b)));
-            h[(0, DELAY)] = -g.u_ned.dot(&f.acc_ned);
+            if f.delay_observable() {
+                h[(0, DELAY)] = -g.u_ned.dot(&f.acc_ned);
+            }
             h[(0, CLK_DRIFT)] = -1.0;
             let rate = (g.sat_vel - a.vel_ecef_mps).dot(&g.u_ecef) + f.clock_drift_mps;
             let dz = Vector1::new(rate - s.range_rate_mps);
