@@ -127,6 +127,14 @@ impl Eskf {
         Some((dx, ll))
     }
 
+    /// Forgets what the filter knew of state `i`: its covariance row and column zeroed (no
+    /// correlation with the others), its variance set to `var`.
+    pub fn reopen(&mut self, i: usize, var: f64) {
+        self.p.row_mut(i).fill(0.0);
+        self.p.column_mut(i).fill(0.0);
+        self.p[(i, i)] = var;
+    }
+
     /// 1-sigma of state `i`.
     pub fn std(&self, i: usize) -> f64 {
         self.p[(i, i)].max(0.0).sqrt()

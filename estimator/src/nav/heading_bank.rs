@@ -203,12 +203,7 @@ impl HeadingBank {
     pub fn reset_delay(&mut self, delay_s: f64, std_s: f64) {
         for f in self.hyps.iter_mut().map(|h| &mut h.filt).chain([&mut self.base]) {
             f.delay_s = delay_s;
-            let p = &mut f.eskf.p;
-            for i in 0..p.nrows() {
-                p[(i, DELAY)] = 0.0;
-                p[(DELAY, i)] = 0.0;
-            }
-            p[(DELAY, DELAY)] = std_s * std_s;
+            f.eskf.reopen(DELAY, std_s * std_s);
         }
     }
 

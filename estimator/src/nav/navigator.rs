@@ -20,7 +20,7 @@ use navsync_wire::samples::{ImuSync, MAX_IMUS, NavState, NavStatus};
 use super::alignment::{Aligner, ONSET_DELAY_FLOOR_S};
 pub use super::config::NavConfig;
 use super::config::{Coupling, InitialState};
-use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, N, POS, ProcessNoise, SA, SG, StateMat, VEL};
+use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, POS, ProcessNoise, SA, SG, StateMat, VEL};
 use super::eskf::Eskf;
 use super::filter::DelayedFilter;
 use super::heading_bank::{BankStep, HeadingBank, with_heading};
@@ -57,19 +57,12 @@ fn reset_sensor_errors(f: &mut DelayedFilter, noise: &ProcessNoise) {
     f.bias_a = Vector3::zeros();
     f.scale_g = Vector3::zeros();
     f.scale_a = Vector3::zeros();
-    for i in BG..BG + 12 {
-        for j in 0..N {
-            f.eskf.p[(i, j)] = 0.0;
-            f.eskf.p[(j, i)] = 0.0;
-        }
-    }
+    let scale = |std: f64| if noise.estimate_scale { std * std } else { 0.0 };
     for i in 0..3 {
-        f.eskf.p[(BG + i, BG + i)] = noise.gyro_bias_init_std[i].powi(2);
-        f.eskf.p[(BA + i, BA + i)] = noise.accel_bias_init_std[i].powi(2);
-        if noise.estimate_scale {
-            f.eskf.p[(SG + i, SG + i)] = noise.gyro_scale_init_std[i].powi(2);
-            f.eskf.p[(SA + i, SA + i)] = noise.accel_scale_init_std[i].powi(2);
-        }
+        f.eskf.reopen(BG + i, noise.gyro_bias_init_std[i].powi(2));
+        f.eskf.reopen(BA + i, noise.accel_bias_init_std[i].powi(2));
+        f.eskf.reopen(SG + i, scale(noise.gyro_scale_init_std[i]));
+        f.eskf.reopen(SA + i, scale(noise.accel_scale_init_std[i]));
     }
 }
 
@@ -152,11 +145,7 @@ pub const DELAY_HORIZON_MARGIN_S: f64 = 0.05;
 /// correlations with the other states forgotten.
 fn reopen_delay(f: &mut DelayedFilter, prior_s: f64, prior_std_s: f64, live: bool) {
     f.delay_s = prior_s;
-    for i in 0..N {
-        f.eskf.p[(i, DELAY)] = 0.0;
-        f.eskf.p[(DELAY, i)] = 0.0;
-    }
-    f.eskf.p[(DELAY, DELAY)] = if live { prior_std_s * prior_std_s } else { 0.0 };
+    f.eskf.reopen(DELAY, if live { prior_std_s * prior_std_s } else { 0.0 });
 }
 
 /// Output re-propagation after a correction: the state, last increment, host time (ns) and

@@ -288,17 +288,18 @@ impl RangeEpoch {
                 }
             }
             let bias_now = f.clock_bias_m - f.clock_drift_mps * eps;
-            if c > 0 && (median(&mut all, c) - bias_now).abs() > rc.clock_reset_m {
-                f.clock_bias_m = median(&mut all, c) + f.clock_drift_mps * eps;
-                reopen(f, &[CLK_BIAS], rc.clock_init_std_m.powi(2) + pos_var);
+            let bias = if c > 0 { median(&mut all, c) } else { bias_now };
+            if (bias - bias_now).abs() > rc.clock_reset_m {
+                f.clock_bias_m = bias + f.clock_drift_mps * eps;
+                f.eskf.reopen(CLK_BIAS, rc.clock_init_std_m.powi(2) + pos_var);
                 st.clock_resets += 1;
             }
         } else {
             let k = (0..3).find(|&k| n[k] > 0).unwrap_or(0);
             f.clock_drift_mps = if m > 0 { median(&mut rates, m) } else { 0.0 };
             f.clock_bias_m = median(&mut res[k], n[k]) + f.clock_drift_mps * eps;
-            reopen(f, &[CLK_BIAS], rc.clock_init_std_m.powi(2) + pos_var);
-            reopen(f, &[CLK_DRIFT], rc.drift_init_std_mps.powi(2));
+            f.eskf.reopen(CLK_BIAS, rc.clock_init_std_m.powi(2) + pos_var);
+            f.eskf.reopen(CLK_DRIFT, rc.drift_init_std_mps.powi(2));
             f.clock_valid = true;
             st.clock_inits += 1;
         }
@@ -310,7 +311,7 @@ impl RangeEpoch {
             let bias_now = f.clock_bias_m - f.clock_drift_mps * eps;
             f.isb_m[k - 1] = median(&mut res[k], n[k]) - bias_now;
             let var = rc.clock_init_std_m.powi(2) + f.eskf.p[(CLK_BIAS, CLK_BIAS)];
-            reopen(f, &[ISB + k - 1], var);
+            f.eskf.reopen(ISB + k - 1, var);
             f.isb_valid[k - 1] = true;
             st.isb_inits += 1;
         }
@@ -326,18 +327,6 @@ fn system_slot(gnss_id: u8) -> Option<usize> {
         GNSS_ID_GALILEO => Some(1),
         GNSS_ID_BEIDOU => Some(2),
         _ => None,
-    }
-}
-
-/// Forgets what the filter knew of states `idx`: their covariance rows and columns zeroed,
-/// their variance set to `var`.
-fn reopen(f: &mut DelayedFilter, idx: &[usize], var: f64) {
-    for &i in idx {
-        for j in 0..N {
-            f.eskf.p[(i, j)] = 0.0;
-            f.eskf.p[(j, i)] = 0.0;
-        }
-        f.eskf.p[(i, i)] = var;
     }
 }
 
