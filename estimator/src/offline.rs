@@ -156,8 +156,9 @@ pub fn estimate_smoothed<T: Clone, S: Into<Input>, I: IntoIterator<Item = (S, T)
     }
 }
 
-/// Writes a smoothed state into a navigation state: position, velocity, attitude, their σ, the
-/// sensor errors and Δ.
+/// Writes a smoothed state into a navigation state: position, velocity, attitude, their σ (times
+/// the filter's [`crate::nav::filter::DelayedFilter::sigma_scale`] at that instant, the
+/// position's at least its floor), the sensor errors and Δ.
 fn apply_smoothed(n: &mut NavState, s: &Smoothed) {
     let p = &s.state.pva;
     n.lat_deg = p.lat_rad.to_degrees();
@@ -168,13 +169,14 @@ fn apply_smoothed(n: &mut NavState, s: &Smoothed) {
     let q = p.q_nb.quaternion();
     n.q_nb = [q.w, q.i, q.j, q.k];
     let std3 = |i: usize| [s.std[i], s.std[i + 1], s.std[i + 2]];
-    n.pos_std_ned_m = std3(POS);
+    let scaled = |i: usize| std3(i).map(|x| x * s.state.sigma_scale);
+    n.pos_std_ned_m = scaled(POS);
     let floor = s.state.pos_floor_std_ned_m;
     for (sd, fl) in n.pos_std_ned_m.iter_mut().zip(floor.iter()) {
         *sd = sd.max(*fl);
     }
-    n.vel_std_ned_mps = std3(VEL);
-    n.att_std_rad = std3(ATT);
+    n.vel_std_ned_mps = scaled(VEL);
+    n.att_std_rad = scaled(ATT);
     n.gyro_bias_rps = s.state.bias_g.into();
     n.accel_bias_mps2 = s.state.bias_a.into();
     n.gyro_bias_std_rps = std3(BG);

@@ -62,6 +62,14 @@ pub struct DelayedFilter {
     /// The published receiver-clock σ's floor, m: the σ of the same solution's clock, for
     /// the same reason.
     pub clock_floor_std_m: f64,
+    /// The factor on the published position, velocity and attitude σ, ≥ 1: √ of the running
+    /// NIS per component of the GNSS updates when above 1 (set by the navigator's monitor).
+    /// Innovations k² times larger than the filter predicts show its covariance k times too
+    /// small (the innovation-based consistency test, Bar-Shalom, Li & Kirubarajan 2001, §5.4;
+    /// Mehra 1972's covariance matching): what the data say of the σ is published even where
+    /// the filter's gains keep the model (its own adaptation, `GnssFusion::adapt_process_noise`,
+    /// is off by default). Kept with the state, so the smoothed output gets it too.
+    pub sigma_scale: f64,
     /// NED acceleration over the last step, m/s².
     pub acc_ned: Vector3<f64>,
     /// Compensated angular rate of the last step (body FRD), rad/s.
@@ -99,6 +107,7 @@ impl DelayedFilter {
             isb_valid: [false; ISB_SYSTEMS],
             pos_floor_std_ned_m: Vector3::zeros(),
             clock_floor_std_m: 0.0,
+            sigma_scale: 1.0,
             acc_ned: Vector3::zeros(),
             last_w: Vector3::zeros(),
             q_scale: 1.0,

@@ -160,9 +160,10 @@ struct CatchUp {
 }
 
 /// Writes the pose of `pva` (rates `w`, specific force `f`, body FRD), the σ's and the sensor
-/// errors of `filt` into `s`; the position, velocity and attitude σ times `sigma_scale`
-/// ([`Navigator::sigma_scale`]).
-fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, filt: &DelayedFilter, sigma_scale: f64) {
+/// errors of `filt` into `s`; the position, velocity and attitude σ times
+/// [`DelayedFilter::sigma_scale`], the position's at least [`DelayedFilter::pos_floor_std_ned_m`].
+fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, filt: &DelayedFilter) {
+    let sigma_scale = filt.sigma_scale;
     let q = pva.q_nb.quaternion();
     s.lat_deg = pva.lat_rad.to_degrees();
     s.lon_deg = pva.lon_rad.to_degrees();
@@ -489,16 +490,6 @@ impl Navigator {
         let max = (self.cfg.fusion_horizon_s * 1e9) as i64;
         let min = (MIN_HORIZON_S * 1e9) as i64;
         self.horizon_ns = (self.fix_delay_ns + (HORIZON_MARGIN_S * 1e9) as i64).clamp(min, max);
-    }
-
-    /// The factor on the published position, velocity and attitude σ: √ of the running NIS per
-    /// component of the GNSS updates when above 1. Innovations k² times larger than the filter
-    /// predicts show its covariance k times too small (the innovation-based consistency test,
-    /// Bar-Shalom, Li & Kirubarajan 2001, §5.4; Mehra 1972's covariance matching): what the data
-    /// say of the σ is published even where the filter's gains keep the model (the model's own
-    /// adaptation, `GnssFusion::adapt_process_noise`, is off by default).
-    pub fn sigma_scale(&self) -> f64 {
-        self.states.gnss.nis_average.max(1.0).sqrt()
     }
 
     /// True when the filter estimates the receiver clock and fuses satellites' measurements
@@ -905,6 +896,7 @@ impl Navigator {
     /// Returns false when the filter was reset.
     fn monitor(&mut self) -> bool {
         let Some(f) = &mut self.filt else { return true };
+        f.sigma_scale = self.states.gnss.nis_average.max(1.0).sqrt();
         let (prior_s, prior_std_s, floor_s) = self.delay_base;
         let max_delay_s = self.cfg.fusion_horizon_s - DELAY_HORIZON_MARGIN_S;
         if self.cfg.estimate_delay && (f.delay_s < floor_s || f.delay_s <= MIN_DELAY_S || f.delay_s >= max_delay_s) {
@@ -1156,7 +1148,7 @@ impl Navigator {
             s.q_nb = [f64::NAN; 4];
             return;
         }
-        write_pose(s, pva, self.out_w, self.out_f, filt, self.sigma_scale());
+        write_pose(s, pva, self.out_w, self.out_f, filt);
         let (d, ds) = self.gnss_delay();
         s.gnss_delay_s = d;
         s.gnss_delay_std_s = ds;
@@ -1175,7 +1167,7 @@ impl Navigator {
         s.fixes_rejected = self.states.gnss.fixes_rejected as u32;
         s.last_fix_host_ns = self.states.gnss.last_fused_ns;
         let (w, f) = filt.compensate(r);
-        write_pose(&mut s, &filt.pva, w, f, filt, self.sigma_scale());
+        write_pose(&mut s, &filt.pva, w, f, filt);
         let (d, ds) = self.gnss_delay();
         s.gnss_delay_s = d;
         s.gnss_delay_std_s = ds;

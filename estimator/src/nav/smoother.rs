@@ -53,6 +53,8 @@ pub struct Nominal {
     pub isb_m: [f64; ISB_SYSTEMS],
     /// The published position σ's floor, m ([`DelayedFilter::pos_floor_std_ned_m`]).
     pub pos_floor_std_ned_m: Vector3<f64>,
+    /// The factor on the published σ ([`DelayedFilter::sigma_scale`]).
+    pub sigma_scale: f64,
 }
 
 impl Nominal {
@@ -69,6 +71,7 @@ impl Nominal {
             clock: (f.clock_bias_m, f.clock_drift_mps),
             isb_m: f.isb_m,
             pos_floor_std_ned_m: f.pos_floor_std_ned_m,
+            sigma_scale: f.sigma_scale,
         }
     }
 
@@ -333,6 +336,7 @@ mod tests {
             clock: (0.0, 0.0),
             isb_m: [1.5, -2.0],
             pos_floor_std_ned_m: Vector3::zeros(),
+            sigma_scale: 1.0,
         };
         let dx = StateVec::from_fn(|i, _| 1e-3 * (i as f64 + 1.0) * if i % 2 == 0 { 1.0 } else { -1.0 });
         let back = s.corrected(&dx).correction_from(&s);
