@@ -64,6 +64,29 @@ fn built(rel: &Path, what: &str) -> PathBuf {
     bin
 }
 
+/// The rtklibexplorer walk's reference positions (`datasets/rtklibexplorer-walk0827`: its
+/// `gnss.pos` epochs with the `gnss_q.txt` quality of each, 1 RTK fixed, 2 float):
+/// (GPS s of week, lat°, lon°, Q).
+pub fn walk0827_reference() -> Vec<(f64, f64, f64, f64)> {
+    let data = shared_material("datasets/rtklibexplorer-walk0827");
+    let rows = |f: &str| -> Vec<Vec<f64>> {
+        std::fs::read_to_string(data.join(f))
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+            .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
+            .collect()
+    };
+    let q: HashMap<i64, f64> = rows("gnss_q.txt")
+        .iter()
+        .map(|r| ((r[0] * 1e3).round() as i64, r[1]))
+        .collect();
+    rows("gnss.pos")
+        .iter()
+        .filter_map(|r| Some((r[0], r[1], r[2], *q.get(&((r[0] * 1e3).round() as i64))?)))
+        .collect()
+}
+
 /// Material provided beside the checkout (`../shared/<rel>`: corpora, datasets), else under
 /// `$NAVSYNC_SHARED_DIR` (set by `.ci/run` for clones elsewhere); panics saying where it was
 /// looked for.

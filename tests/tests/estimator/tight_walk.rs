@@ -66,7 +66,7 @@ use navsync_recording::ros_std::META_ORIGIN;
 use navsync_recording::{RecordingOptions, SampleReader, SampleRecorder};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{AnySample, GnssRaw, RawMeasurement};
-use navsync_tests::{TestEnv, shared_material};
+use navsync_tests::{TestEnv, shared_material, walk0827_reference};
 use serde_json::Value;
 
 const WEEK_NS: i64 = 604_800_000_000_000;
@@ -378,27 +378,6 @@ fn write_variant(rec: &Recording, input: &Path, out: &Path, windows: &[(f64, Vec
     (thinned, dropped)
 }
 
-/// The dataset's `gnss.pos` epochs with their `gnss_q.txt` quality (1 RTK fixed, 2 float):
-/// (sow, lat, lon, Q).
-fn reference() -> Vec<(f64, f64, f64, f64)> {
-    let rows = |f: &str| -> Vec<Vec<f64>> {
-        std::fs::read_to_string(data().join(f))
-            .unwrap()
-            .lines()
-            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-            .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
-            .collect()
-    };
-    let q: HashMap<i64, f64> = rows("gnss_q.txt")
-        .iter()
-        .map(|r| ((r[0] * 1e3).round() as i64, r[1]))
-        .collect();
-    rows("gnss.pos")
-        .iter()
-        .filter_map(|r| Some((r[0], r[1], r[2], *q.get(&((r[0] * 1e3).round() as i64))?)))
-        .collect()
-}
-
 /// `replay --estimate` of `rec` with `coupling`, as a command; the output directory (KF-GINS's
 /// result files) and the summary's path.
 fn replay_command(env: &TestEnv, rec: &Path, name: &str, coupling: &str) -> (Command, PathBuf, PathBuf) {
@@ -450,7 +429,7 @@ impl Replay {
         assert!(!rows.is_empty(), "{name}: no output");
         const R: f64 = 6_378_137.0;
         let mut errors = Vec::new();
-        for (sow, lat, lon, q) in reference() {
+        for (sow, lat, lon, q) in walk0827_reference() {
             let k = rows.partition_point(|r| r[1] <= sow);
             if k == 0 || k >= rows.len() {
                 continue;

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra, Protocol};
 use navsync_recording::SampleReader;
 use navsync_shared::samples::{AnySample, GnssFix};
-use navsync_tests::{TestEnv, shared_material};
+use navsync_tests::{TestEnv, shared_material, walk0827_reference};
 use serde_json::Value;
 
 const WEEK_NS: i64 = 604_800_000_000_000;
@@ -245,25 +245,12 @@ fn the_walks_ubx_log_with_its_time_tags_lies_at_the_logging_pcs_times() {
     }
 }
 
-/// The receiver's RTK-fixed epochs (the dataset's `gnss.pos` where `gnss_q.txt` says Q 1):
-/// (sow, lat, lon).
+/// The receiver's RTK-fixed epochs: (sow, lat, lon).
 fn rtk_fixed() -> Vec<(f64, f64, f64)> {
-    let rows = |f: &str| -> Vec<Vec<f64>> {
-        std::fs::read_to_string(data().join(f))
-            .unwrap()
-            .lines()
-            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-            .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
-            .collect()
-    };
-    let q: HashMap<i64, f64> = rows("gnss_q.txt")
-        .iter()
-        .map(|r| ((r[0] * 1e3).round() as i64, r[1]))
-        .collect();
-    rows("gnss.pos")
-        .iter()
-        .filter(|r| q.get(&((r[0] * 1e3).round() as i64)) == Some(&1.0))
-        .map(|r| (r[0], r[1], r[2]))
+    walk0827_reference()
+        .into_iter()
+        .filter(|r| r.3 == 1.0)
+        .map(|r| (r.0, r.1, r.2))
         .collect()
 }
 
