@@ -77,6 +77,22 @@ pub struct SatRange {
     pub pseudorange_std_m: f64,
     /// 1σ of the range rate the receiver reports (0 when it reports none), m/s.
     pub range_rate_std_mps: f64,
+    /// Signal, u-blox `sigId` (a carrier phase is differenced with the same signal's only).
+    pub sig_id: u8,
+    /// Carrier phase in metres corrected for the satellite clock, λ·φ + c·δt_sv (u-blox
+    /// `cpMes` has the pseudorange's sign, its ambiguity set near it): it models
+    /// r + c·δt_r − k·I + T + λ·N with N constant while the receiver keeps lock. NaN when the
+    /// receiver marks it invalid (`trkStat` bit 1) or reports none.
+    pub carrier_m: f64,
+    /// 1σ of the carrier phase the receiver reports, m.
+    pub carrier_std_m: f64,
+    /// How long the receiver has kept lock on the carrier, ms (u-blox `locktime`, at most
+    /// 64 500): a count that fell or that is shorter than the time since the previous epoch
+    /// marks a cycle slip between them.
+    pub lock_time_ms: u16,
+    /// u-blox `trkStat`: bit 3 (half a cycle subtracted from the phase) must not change
+    /// between two epochs whose phases are differenced.
+    pub trk_stat: u8,
 }
 
 /// The measurements of one receiver epoch, ready for the filter.
@@ -491,6 +507,16 @@ impl EphemerisStore {
                 // The receiver's σ, at least the broadcast accuracy.
                 pseudorange_std_m: f64::from(m.pseudorange_std_m).max(sig.accuracy_m),
                 range_rate_std_mps: (f64::from(m.doppler_std_hz) * lambda).max(0.0),
+                sig_id: m.sig_id,
+                carrier_m: if m.trk_stat & 2 != 0 && m.carrier_phase_cycles.is_finite() && m.carrier_phase_cycles != 0.0
+                {
+                    lambda * m.carrier_phase_cycles + C_M_S * dt_sv
+                } else {
+                    f64::NAN
+                },
+                carrier_std_m: lambda * f64::from(m.carrier_phase_std_cycles).max(0.0),
+                lock_time_ms: m.lock_time_ms,
+                trk_stat: m.trk_stat,
             };
             let count = usize::from(out.count);
             if count < MAX_RANGE_SATS {

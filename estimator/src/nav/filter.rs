@@ -70,6 +70,9 @@ pub struct DelayedFilter {
     /// the filter's gains keep the model (its own adaptation, `GnssFusion::adapt_process_noise`,
     /// is off by default). Kept with the state, so the smoothed output gets it too.
     pub sigma_scale: f64,
+    /// Sum of the position corrections fed back so far, NED, m (the change of the position
+    /// estimate that is not motion: time-differenced carrier phases take it out).
+    pub pos_corrections_ned_m: Vector3<f64>,
     /// NED acceleration over the last step, m/s².
     pub acc_ned: Vector3<f64>,
     /// Compensated angular rate of the last step (body FRD), rad/s.
@@ -108,6 +111,7 @@ impl DelayedFilter {
             pos_floor_std_ned_m: Vector3::zeros(),
             clock_floor_std_m: 0.0,
             sigma_scale: 1.0,
+            pos_corrections_ned_m: Vector3::zeros(),
             acc_ned: Vector3::zeros(),
             last_w: Vector3::zeros(),
             q_scale: 1.0,
@@ -187,6 +191,7 @@ impl DelayedFilter {
         self.pva.lat_rad -= dx[POS] / (rm + self.pva.h_m);
         self.pva.lon_rad -= dx[POS + 1] / ((rn + self.pva.h_m) * self.pva.lat_rad.cos());
         self.pva.h_m += dx[POS + 2];
+        self.pos_corrections_ned_m -= dx.fixed_rows::<3>(POS);
         self.pva.vel_ned_mps -= dx.fixed_rows::<3>(VEL);
         let q_pn = UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(ATT).into_owned());
         self.pva.q_nb = UnitQuaternion::new_normalize((q_pn * self.pva.q_nb).into_inner());

@@ -513,7 +513,7 @@ impl Replay {
                 };
                 match x {
                     Value::Object(_) => walk(x, &path, out),
-                    _ if k.contains("range") => out.push((path, x.clone())),
+                    _ if k.contains("range") || k.contains("carrier") => out.push((path, x.clone())),
                     _ => {}
                 }
             }

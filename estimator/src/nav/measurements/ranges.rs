@@ -20,6 +20,17 @@
 //! ∂ρ/∂r_ant = −uᵀ, the Jacobians are −u_nᵀ times the loosely coupled ones of
 //! [`super::gnss`] (lever arm, attitude, gyro bias and Δ columns included) and −1 on the clock
 //! state and the system's inter-system bias; innovation dz = computed − measured (KF-GINS sign).
+//!
+//! Time-differenced carrier phase (TDCP; Wendel, Meister, Schlaile & Trommer 2006; Groves
+//! 2013, §9.2.7): of a satellite whose carrier the receiver kept locked since the previous
+//! epoch, λ·(φ_k − φ_{k−1}) = r_k − r_{k−1} + c·(δt_r,k − δt_r,k−1) + mm-level noise, the
+//! ambiguity gone. It is predicted from the previous epoch's corrected antenna and clock and
+//! the present ones, so the strapdown's integrated motion over the interval is what is
+//! measured; its error is, to first order, the velocity error times the interval:
+//! H = Δt × the range rate's rows (the position errors common to both epochs cancel, as do the
+//! corrections other measurements made in between, which are taken out of the prediction).
+//! The epoch's differences are fused before its code and Doppler, sequentially with the
+//! residuals kept linear (dz_j − H_j·Σdx), so that each is relative to the same prior.
 
 use nalgebra::{Matrix1, Matrix3, SMatrix, Vector1, Vector3};
 use navsync_wire::earth;
@@ -29,13 +40,24 @@ use crate::gnss::broadcast::{GNSS_ID_BEIDOU, GNSS_ID_GALILEO};
 use crate::gnss::ranges::{GNSS_ID_GPS, MAX_RANGE_SATS, RangeEpoch, SatRange};
 use crate::gnss::spp::{C_M_S, atmosphere_var_m2, ned_from_ecef, rotate_for_flight, troposphere_delay_m};
 use crate::nav::config::NavConfig;
-use crate::nav::error_state::{ATT, BG, CLK_BIAS, CLK_DRIFT, DELAY, ISB, N, POS, VEL};
+use crate::nav::error_state::{ATT, BG, CLK_BIAS, CLK_DRIFT, DELAY, ISB, N, POS, StateVec, VEL};
 use crate::nav::eskf::Update;
 use crate::nav::filter::DelayedFilter;
 use crate::nav::mechanization::skew;
 
 /// 1σ of the L1 ionospheric delay at zenith when the broadcast model is not known yet, m.
 const UNMODELLED_IONO_ZENITH_M: f64 = 10.0;
+/// 1σ at zenith of a time-differenced carrier phase, m: the phase noise of both epochs
+/// (u-blox reports 0.004–0.06 cycles, ≤ 1 cm at L1; the receiver's own σ·√2 when larger),
+/// the change of multipath, and what the first-order model leaves over the interval (half the
+/// acceleration error times Δt², a few mm for Δt = 0.25 s and 0.1 m/s²). Scaled with elevation
+/// and C/N0 as the code.
+const CARRIER_DELTA_STD_M: f64 = 0.01;
+/// Carrier phases further apart than this are not differenced, s: the first-order model
+/// (velocity error × Δt) holds over a receiver's measurement interval, not over gaps.
+const CARRIER_DELTA_MAX_S: f64 = 1.5;
+/// u-blox `locktime` saturates here, ms.
+const LOCK_TIME_MAX_MS: u16 = 64_500;
 
 /// Settings of the pseudorange and Doppler updates.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,6 +80,18 @@ pub struct RangingConfig {
     /// 30–35 dB-Hz at 5–15° elevation, which the elevation model already carries; a signal
     /// weaker than that, under foliage or diffracted in a canyon, is weighted down more).
     pub reference_cno_dbhz: f64,
+    /// Correlation time of the pseudorange errors that time averaging reduces, s (default 5):
+    /// a moving antenna's code multipath and the code tracking error decorrelate over seconds
+    /// (the broadcast orbit and clock errors and what the atmosphere models leave persist for
+    /// hours and are not reduced by time at all: the published σ's floor carries them,
+    /// [`crate::nav::filter::DelayedFilter::pos_floor_std_ned_m`]). As a first-order
+    /// Gauss–Markov process of correlation time τ, samples Δt apart carry the information of
+    /// independent ones 2τ apart (the variance of a mean over T ≫ τ is 2τσ²/T), so each
+    /// pseudorange is fused with its variance × max(1, 2τ/Δt), Δt since the satellite's previous
+    /// one (its first, or one after a gap of 2τ, at full weight; the gate keeps one sample's
+    /// variance). Fused as if white, 4 Hz code pulled the walk0827 solution along the
+    /// satellites' slowly varying errors.
+    pub code_correlation_s: f64,
     /// 1σ given to the clock bias when it is (re)initialised from the residuals, m (default 30).
     pub clock_init_std_m: f64,
     /// 1σ given to the clock drift when it is initialised, m/s (default 2).
@@ -76,6 +110,7 @@ impl Default for RangingConfig {
             pseudorange_std_m: 3.0,
             range_rate_std_mps: 0.1,
             reference_cno_dbhz: 30.0,
+            code_correlation_s: 5.0,
             clock_init_std_m: 30.0,
             drift_init_std_mps: 2.0,
             clock_reset_m: 1000.0,
@@ -83,8 +118,69 @@ impl Default for RangingConfig {
     }
 }
 
+/// One satellite's carrier phase at the previous epoch, with what the filter then predicted
+/// of it.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct CarrierTrack {
+    gnss_id: u8,
+    sv: u8,
+    sig_id: u8,
+    trk_stat: u8,
+    lock_time_ms: u16,
+    /// [`SatRange::carrier_m`], m.
+    carrier_m: f64,
+    /// Geometric range from the corrected antenna, m.
+    range_m: f64,
+    /// The receiver clock bias of the satellite's system, corrected, m.
+    clock_m: f64,
+}
+
+/// The previous epoch's carrier phases ([`CarrierTrack`]), for the time differences.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CarrierMemory {
+    /// GPS time of the epoch, s of week.
+    tow_s: f64,
+    /// The position corrections fed back up to then ([`DelayedFilter::pos_corrections_ned_m`]).
+    corrections_ned_m: Vector3<f64>,
+    count: usize,
+    sats: [CarrierTrack; MAX_RANGE_SATS],
+}
+
+/// When each satellite's pseudorange was last fused, for [`RangingConfig::code_correlation_s`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CodeMemory {
+    /// GPS time of week, s, by system slot ([`system_slot`]) and satellite number; NaN: never.
+    last_tow_s: [[f64; 64]; 3],
+}
+
+impl Default for CodeMemory {
+    fn default() -> Self {
+        Self {
+            last_tow_s: [[f64::NAN; 64]; 3],
+        }
+    }
+}
+
+impl CodeMemory {
+    /// The variance factor of satellite `s`'s pseudorange at `tow_s`: max(1, 2τ/Δt) with Δt
+    /// since its previous one (1 for its first); remembers `tow_s`.
+    fn inflation(&mut self, s: &SatRange, tow_s: f64, tau_s: f64) -> f64 {
+        let Some(last) = system_slot(s.gnss_id).and_then(|k| self.last_tow_s[k].get_mut(usize::from(s.sv))) else {
+            return 1.0;
+        };
+        let mut dt = tow_s - *last;
+        dt -= (dt / 604_800.0).round() * 604_800.0;
+        *last = tow_s;
+        if dt.is_finite() && dt > 0.0 {
+            (2.0 * tau_s / dt).max(1.0)
+        } else {
+            1.0
+        }
+    }
+}
+
 /// What the ranging updates count.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RangingState {
     /// Epochs fused (at least one satellite accepted).
     pub epochs_used: u64,
@@ -100,6 +196,17 @@ pub struct RangingState {
     pub rates_used: u64,
     /// Range rates that failed the innovation gate.
     pub rates_rejected: u64,
+    /// Time-differenced carrier phases fused.
+    pub carrier_deltas_used: u64,
+    /// Time-differenced carrier phases that failed the innovation gate (an undetected slip).
+    pub carrier_deltas_rejected: u64,
+    /// Carrier phases not differenced for a cycle slip the receiver reported (lock time or
+    /// half-cycle flag).
+    pub carrier_slips: u64,
+    /// The previous epoch's carrier phases.
+    pub carrier: CarrierMemory,
+    /// When each satellite's pseudorange was last fused.
+    pub code_memory: CodeMemory,
     /// Satellites below the elevation mask.
     pub below_mask: u64,
     /// Satellites below the C/N0 mask.
@@ -319,6 +426,122 @@ impl RangeEpoch {
     }
 }
 
+impl RangeEpoch {
+    /// The receiver clock bias of system `slot` at the epoch, m.
+    fn clock_m(f: &DelayedFilter, slot: usize, eps: f64) -> f64 {
+        let bias = f.clock_bias_m - f.clock_drift_mps * eps;
+        if slot > 0 { bias + f.isb_m[slot - 1] } else { bias }
+    }
+
+    /// Fuses the time differences of the carrier phases against the previous epoch's
+    /// ([`CarrierMemory`]; the model in the module header).
+    fn fuse_carrier_deltas(
+        &self,
+        f: &mut DelayedFilter,
+        eps: f64,
+        cfg: &NavConfig,
+        rc: &RangingConfig,
+        st: &mut RangingState,
+    ) {
+        let prev = st.carrier;
+        let mut dt = self.tow_s - prev.tow_s;
+        dt -= (dt / 604_800.0).round() * 604_800.0;
+        if prev.count == 0 || !(dt > 0.0 && dt <= CARRIER_DELTA_MAX_S) {
+            return;
+        }
+        let lever_b = Vector3::from(cfg.gnss_lever_arm_m);
+        let a = Antenna::of(f, &lever_b, eps);
+        // The corrections other measurements fed back since: not motion.
+        let moved_by_corrections = f.pos_corrections_ned_m - prev.corrections_ned_m;
+        let mut rows = [(0.0, SMatrix::<f64, 1, N>::zeros(), 0.0); MAX_RANGE_SATS];
+        let mut n = 0;
+        for s in self.sats().iter().filter(|s| s.carrier_m.is_finite()) {
+            let Some(slot) = system_slot(s.gnss_id).filter(|&k| k == 0 || f.isb_valid[k - 1]) else {
+                continue;
+            };
+            let Some(e) = prev.sats[..prev.count]
+                .iter()
+                .find(|e| (e.gnss_id, e.sv, e.sig_id) == (s.gnss_id, s.sv, s.sig_id))
+            else {
+                continue;
+            };
+            let kept_lock = (s.lock_time_ms >= e.lock_time_ms.min(LOCK_TIME_MAX_MS - 1))
+                && f64::from(s.lock_time_ms) >= 500.0 * dt
+                && (s.trk_stat ^ e.trk_stat) & 8 == 0;
+            if !kept_lock {
+                st.carrier_slips += 1;
+                continue;
+            }
+            let Some(g) = self.usable(&a, s, rc) else { continue };
+            let un = g.u_ned.transpose();
+            let mut h = SMatrix::<f64, 1, N>::zeros();
+            h.fixed_view_mut::<1, 3>(0, VEL).copy_from(&(-un * dt));
+            h.fixed_view_mut::<1, 3>(0, ATT)
+                .copy_from(&(-un * skew(&a.lever_vel_n) * dt));
+            h.fixed_view_mut::<1, 3>(0, BG)
+                .copy_from(&(un * a.c_bn * skew(&lever_b) * dt));
+            if f.delay_observable() {
+                h[(0, DELAY)] = -g.u_ned.dot(&f.acc_ned) * dt;
+            }
+            h[(0, CLK_DRIFT)] = -dt;
+            let predicted = g.range_m + g.u_ned.dot(&moved_by_corrections) - e.range_m
+                + Self::clock_m(f, slot, eps)
+                - e.clock_m;
+            let reported = std::f64::consts::SQRT_2 * s.carrier_std_m.max(0.0);
+            let sd = sigma(CARRIER_DELTA_STD_M, reported, g.el_rad, f64::from(s.cno_dbhz), rc);
+            rows[n] = (predicted - (s.carrier_m - e.carrier_m), h, sd * sd);
+            n += 1;
+        }
+        // Sequentially, each residual moved by what the epoch's earlier ones corrected.
+        let mut applied = StateVec::zeros();
+        for (dz0, h, var) in &rows[..n] {
+            let dz = Vector1::new(dz0 - (h * applied)[0]);
+            match f.eskf.update(&dz, h, &Matrix1::new(*var), cfg.gate_scale) {
+                Update::Accepted { dx, .. } => {
+                    f.feedback(&dx, cfg.fusion_horizon_s);
+                    applied += dx;
+                    st.carrier_deltas_used += 1;
+                }
+                Update::Rejected { .. } => st.carrier_deltas_rejected += 1,
+            }
+        }
+    }
+
+    /// Keeps this epoch's carrier phases with the corrected antenna's ranges and clock, for
+    /// the next epoch's differences.
+    fn remember_carriers(
+        &self,
+        f: &DelayedFilter,
+        eps: f64,
+        cfg: &NavConfig,
+        rc: &RangingConfig,
+        st: &mut RangingState,
+    ) {
+        let a = Antenna::of(f, &Vector3::from(cfg.gnss_lever_arm_m), eps);
+        let m = &mut st.carrier;
+        m.tow_s = self.tow_s;
+        m.corrections_ned_m = f.pos_corrections_ned_m;
+        m.count = 0;
+        for s in self.sats().iter().filter(|s| s.carrier_m.is_finite()) {
+            let Some(slot) = system_slot(s.gnss_id).filter(|&k| k == 0 || f.isb_valid[k - 1]) else {
+                continue;
+            };
+            let Some(g) = self.usable(&a, s, rc) else { continue };
+            m.sats[m.count] = CarrierTrack {
+                gnss_id: s.gnss_id,
+                sv: s.sv,
+                sig_id: s.sig_id,
+                trk_stat: s.trk_stat,
+                lock_time_ms: s.lock_time_ms,
+                carrier_m: s.carrier_m,
+                range_m: g.range_m,
+                clock_m: Self::clock_m(f, slot, eps),
+            };
+            m.count += 1;
+        }
+    }
+}
+
 /// The slot of system `gnss_id` among the filter's clocks: 0 GPS, 1 Galileo, 2 BeiDou
 /// (1 + the index of its inter-system bias state); `None` for systems not fused.
 fn system_slot(gnss_id: u8) -> Option<usize> {
@@ -350,14 +573,20 @@ impl Measurement for RangeEpoch {
             st.epochs_not_tight += 1;
             return false;
         }
+        let clock_events = (st.clock_inits, st.clock_resets);
         if !self.anchor_clock(f, cfg, rc, eps, st) {
             return false;
+        }
+        if (st.clock_inits, st.clock_resets) != clock_events {
+            // A clock (re)set: nothing to difference against.
+            st.carrier.count = 0;
         }
         if self.pos_floor_std_ned_m != [0.0; 3] {
             f.pos_floor_std_ned_m = Vector3::from(self.pos_floor_std_ned_m);
             f.clock_floor_std_m = self.clock_floor_std_m;
         }
         let lever_b = Vector3::from(cfg.gnss_lever_arm_m);
+        self.fuse_carrier_deltas(f, eps, cfg, rc, st);
         let mut used = 0u64;
         for s in self.sats() {
             let Some(slot) = system_slot(s.gnss_id).filter(|&k| k == 0 || f.isb_valid[k - 1]) else {
@@ -383,15 +612,21 @@ impl Measurement for RangeEpoch {
                 h[(0, DELAY)] = -g.u_ned.dot(&f.pva.vel_ned_mps);
             }
             h[(0, CLK_BIAS)] = -1.0;
-            let mut bias = f.clock_bias_m - f.clock_drift_mps * eps;
             if slot > 0 {
                 h[(0, ISB + slot - 1)] = -1.0;
-                bias += f.isb_m[slot - 1];
             }
+            let bias = Self::clock_m(f, slot, eps);
             let dz = Vector1::new(g.range_m + bias + g.atmosphere_m - s.pseudorange_m);
             let sd = sigma(rc.pseudorange_std_m, s.pseudorange_std_m, g.el_rad, cno, rc);
+            // Gated on one sample's variance (an outlier stands out of that), fused with the
+            // correlated error's.
             let var = sd * sd + g.atmosphere_var_m2;
-            match f.eskf.update(&dz, &h, &Matrix1::new(var), cfg.gate_scale) {
+            let inflation = st.code_memory.inflation(s, self.tow_s, rc.code_correlation_s);
+            let update = match f.eskf.gate(&dz, &h, &Matrix1::new(var), cfg.gate_scale) {
+                (true, _) => f.eskf.update(&dz, &h, &Matrix1::new(var * inflation), f64::INFINITY),
+                (false, nis) => Update::Rejected { nis },
+            };
+            match update {
                 Update::Accepted { dx, .. } => {
                     f.feedback(&dx, cfg.fusion_horizon_s);
                     st.ranges_used += 1;
@@ -429,6 +664,7 @@ impl Measurement for RangeEpoch {
                 Update::Rejected { .. } => st.rates_rejected += 1,
             }
         }
+        self.remember_carriers(f, eps, cfg, rc, st);
         st.last_sats = used;
         if used > 0 {
             st.epochs_used += 1;
@@ -447,11 +683,157 @@ impl Measurement for RangeEpoch {
         out("ranges_rejected", st.ranges_rejected);
         out("range_rates_used", st.rates_used);
         out("range_rates_rejected", st.rates_rejected);
+        out("carrier_deltas_used", st.carrier_deltas_used);
+        out("carrier_deltas_rejected", st.carrier_deltas_rejected);
+        out("carrier_slips", st.carrier_slips);
         out("ranges_below_mask", st.below_mask);
         out("ranges_weak_signal", st.weak_signal);
         out("clock_inits", st.clock_inits);
         out("clock_resets", st.clock_resets);
         out("isb_inits", st.isb_inits);
         out("ranges_fallback_fixes", st.fallback_fixes);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::UnitQuaternion;
+
+    use super::*;
+    use crate::nav::config::ReceiverOscillator;
+    use crate::nav::error_state::StateMat;
+    use crate::nav::eskf::Eskf;
+    use crate::nav::mechanization::Pva;
+
+    /// (azimuth, elevation) of the test's satellites, deg.
+    const SKY: [(f64, f64); 6] = [(0.0, 60.0), (70.0, 35.0), (140.0, 50.0), (200.0, 25.0), (260.0, 40.0), (320.0, 70.0)];
+    const CLOCK_M: f64 = 100.0;
+    const DT_S: f64 = 0.25;
+
+    fn cfg() -> NavConfig {
+        let mut c = NavConfig::default();
+        c.noise.clock = Some(ReceiverOscillator::Tcxo.noise());
+        c
+    }
+
+    /// A filter at rest at 34° N 137° E moving north at `v_n` m/s, its clock anchored.
+    fn filter(v_n: f64) -> DelayedFilter {
+        let pva = Pva {
+            lat_rad: 34f64.to_radians(),
+            lon_rad: 137f64.to_radians(),
+            h_m: 50.0,
+            vel_ned_mps: Vector3::new(v_n, 0.0, 0.0),
+            q_nb: UnitQuaternion::identity(),
+        };
+        let mut p = StateMat::identity() * 1e-8;
+        for i in 0..3 {
+            p[(POS + i, POS + i)] = 0.01;
+            p[(VEL + i, VEL + i)] = 0.25;
+        }
+        (p[(CLK_BIAS, CLK_BIAS)], p[(CLK_DRIFT, CLK_DRIFT)]) = (1.0, 1e-4);
+        let mut f = DelayedFilter::new(pva, 0, Eskf::new(p), Vector3::zeros(), 0.0);
+        (f.clock_bias_m, f.clock_valid) = (CLOCK_M, true);
+        f
+    }
+
+    /// Moves a filter north by `d_m` as its strapdown would.
+    fn move_north(f: &mut DelayedFilter, d_m: f64) {
+        f.pva.lat_rad += d_m / earth::radii(f.pva.lat_rad).0;
+    }
+
+    /// The epoch `truth` would measure at `tow_s`: the satellites of [`SKY`] (seen from
+    /// `origin`, fixed in ECEF), code and carrier exact, carrier ambiguities of k cycles.
+    fn epoch(truth: &DelayedFilter, origin: &DelayedFilter, tow_s: f64) -> RangeEpoch {
+        let lever = Vector3::zeros();
+        let (a0, a) = (Antenna::of(origin, &lever, 0.0), Antenna::of(truth, &lever, 0.0));
+        let mut e = RangeEpoch {
+            stamp_host_ns: (tow_s * 1e9) as i64,
+            tow_s,
+            iono: None,
+            pos_floor_std_ned_m: [0.0; 3],
+            clock_floor_std_m: 0.0,
+            count: SKY.len() as u8,
+            sats: [SatRange::default(); MAX_RANGE_SATS],
+        };
+        for (k, &(az, el)) in SKY.iter().enumerate() {
+            let (az, el) = (az.to_radians(), el.to_radians());
+            let u = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), -el.sin());
+            let sat = Vector3::from(a0.ecef_m) + a0.c_ne * u * 2.2e7;
+            e.sats[k] = SatRange {
+                gnss_id: GNSS_ID_GPS,
+                sv: k as u8 + 1,
+                iono_scale: 1.0,
+                cno_dbhz: 45,
+                sat_ecef_m: sat.into(),
+                range_rate_mps: f64::NAN,
+                carrier_std_m: 0.001,
+                lock_time_ms: (tow_s * 1000.0) as u16,
+                trk_stat: 0b0111,
+                ..SatRange::default()
+            };
+            let g = sight(&a, &e.sats[k], &e);
+            e.sats[k].pseudorange_m = g.range_m + g.atmosphere_m + CLOCK_M;
+            e.sats[k].carrier_m = g.range_m + g.atmosphere_m + CLOCK_M + 0.19 * (1000 + k) as f64;
+        }
+        e
+    }
+
+    /// The carrier's change over an epoch corrects a velocity 0.3 m/s off; a slip the receiver
+    /// reports (lock time restarted, half-cycle flag changed) is not differenced, one it does not
+    /// report (a cycle) fails the gate.
+    #[test]
+    fn the_carrier_phase_difference_measures_the_motion_and_slips_are_not_fused() {
+        let (cfg, rc) = (cfg(), RangingConfig::default());
+        let origin = filter(1.0);
+        let (mut truth, mut f) = (filter(1.0), filter(1.3));
+        let mut st = RangingState::default();
+        let mut tow = 100.0;
+        assert!(epoch(&truth, &origin, tow).fuse(&mut f, 0.0, &cfg, &rc, &mut st));
+        assert_eq!(st.carrier_deltas_used, 0, "nothing to difference yet");
+        let step = |truth: &mut DelayedFilter, f: &mut DelayedFilter, tow: &mut f64| {
+            move_north(truth, 1.0 * DT_S);
+            let v = f.pva.vel_ned_mps.x;
+            move_north(f, v * DT_S);
+            *tow += DT_S;
+        };
+        step(&mut truth, &mut f, &mut tow);
+        epoch(&truth, &origin, tow).fuse(&mut f, 0.0, &cfg, &rc, &mut st);
+        assert_eq!((st.carrier_deltas_used, st.carrier_deltas_rejected), (6, 0));
+        let v = f.pva.vel_ned_mps;
+        assert!((v.x - 1.0).abs() < 0.03 && v.y.abs() < 0.03, "velocity {v:?}");
+        // The receiver restarts satellite 1's lock and flips satellite 2's half-cycle flag.
+        step(&mut truth, &mut f, &mut tow);
+        let mut e = epoch(&truth, &origin, tow);
+        e.sats[0].lock_time_ms = 20;
+        e.sats[1].trk_stat |= 8;
+        e.fuse(&mut f, 0.0, &cfg, &rc, &mut st);
+        assert_eq!((st.carrier_deltas_used, st.carrier_slips), (10, 2));
+        // Satellite 3 slips a cycle unannounced.
+        step(&mut truth, &mut f, &mut tow);
+        let mut e = epoch(&truth, &origin, tow);
+        e.sats[1].trk_stat |= 8;
+        e.sats[2].carrier_m += 0.19;
+        e.fuse(&mut f, 0.0, &cfg, &rc, &mut st);
+        assert_eq!((st.carrier_deltas_used, st.carrier_deltas_rejected), (15, 1));
+        assert!((f.pva.vel_ned_mps.x - 1.0).abs() < 0.03);
+    }
+
+    /// A satellite's pseudoranges Δt apart count as one per 2τ: the first at full weight, the
+    /// next ones with their variance × 2τ/Δt, and again in full after a gap of 2τ.
+    #[test]
+    fn repeated_pseudoranges_of_a_satellite_are_weighted_by_their_correlation() {
+        let mut m = CodeMemory::default();
+        let s = SatRange {
+            gnss_id: GNSS_ID_GPS,
+            sv: 5,
+            ..SatRange::default()
+        };
+        assert_eq!(m.inflation(&s, 10.0, 5.0), 1.0);
+        assert_eq!(m.inflation(&s, 10.25, 5.0), 40.0);
+        assert_eq!(m.inflation(&s, 11.25, 5.0), 10.0);
+        assert_eq!(m.inflation(&s, 31.25, 5.0), 1.0);
+        // Another satellite has its own history; a system not fused is not weighted.
+        assert_eq!(m.inflation(&SatRange { sv: 6, ..s }, 31.5, 5.0), 1.0);
+        assert_eq!(m.inflation(&SatRange { gnss_id: 6, ..s }, 31.5, 5.0), 1.0);
     }
 }
