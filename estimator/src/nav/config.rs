@@ -167,8 +167,8 @@ crate::settings_group! {
         /// the PPS mapping), s (IMU time tags from another clock than the PPS's may need 0.2).
         pub delay_prior_std_s: f64 = 0.02, file "estimator", flag "delay-prior-std", check positive;
         /// How GNSS aids the filter: loose (the receiver's fixes), tight (each satellite's
-        /// pseudorange and Doppler from UBX RXM-RAWX/RXM-SFRBX, the receiver clock in the
-        /// filter) or loose-spp (navsync's single-point solution of the same raw measurements
+        /// pseudorange, Doppler and carrier-phase change from UBX RXM-RAWX/RXM-SFRBX, the
+        /// receiver clock in the filter) or loose-spp (navsync's single-point solution of the same raw measurements
         /// as fixes).
         pub coupling: Coupling = Coupling::Loose, file "estimator", flag "coupling";
         /// The receiver's oscillator for the clock states when tightly coupled: tcxo or crystal.
