@@ -8,7 +8,7 @@
 //! and the header's Klobuchar α/β. Errors name the file, the line (1-based) and the field.
 
 use navsync_shared::reflect::Reflect;
-use navsync_shared::samples::{GnssRaw, MAX_RAW_MEASUREMENTS, RawMeasurement};
+use navsync_shared::samples::{GnssRaw, LOCK_TIME_MAX_MS, MAX_RAW_MEASUREMENTS, RawMeasurement};
 use navsync_shared::time::days_from_civil;
 
 /// Seconds in a GPS week.
@@ -428,6 +428,7 @@ pub fn parse_obs(file: &str, text: &str) -> Result<ObsFile, RinexError> {
         return Err(lines.err(lines.next, "# / TYPES OF OBSERV", "no observation types in the header"));
     }
     let v3 = version >= 3.0;
+    let mut locks = LockTimes::new();
     while let Some((n, l)) = lines.next() {
         if l.trim().is_empty() {
             continue;
@@ -508,7 +509,8 @@ pub fn parse_obs(file: &str, text: &str) -> Result<ObsFile, RinexError> {
                 let lli = col(line, at + 14, at + 15).trim().parse::<u8>().unwrap_or(0);
                 values.push((v, lli));
             }
-            signals(sat, list, &values, &mut meas, &mut out.unmapped);
+            let now_s = f64::from(t.week) * 604_800.0 + t.tow_s;
+            signals(sat, list, &values, (now_s, &mut locks), &mut meas, &mut out.unmapped);
         }
         // GPS L1 C/A first, then by system, signal and satellite.
         meas.sort_by_key(|m| (m.gnss_id != 0 || m.sig_id != 0, m.gnss_id, m.sig_id, m.sv_id));
@@ -537,14 +539,24 @@ fn sat_id(lines: &Lines<'_>, n: usize, s: &str) -> Result<(char, u8), RinexError
     Ok((system, prn))
 }
 
+/// Per signal (u-blox gnss, sv, sig): the time of its last carrier phase (GPS weeks × 604 800
+/// + seconds of week, s) and its lock time then, ms.
+pub(crate) type LockTimes = std::collections::HashMap<(u8, u8, u8), (f64, u16)>;
+
 /// The measurements of one satellite: one per signal (band and attribute) with a u-blox id.
+/// A carrier phase's lock time (u-blox `locktime`, which RINEX does not carry) is the time
+/// since the signal's first phase or the last one whose loss-of-lock indicator had bit 0 set
+/// (RINEX 3.05 §5.7: lost lock since the previous observation, a cycle slip possible); `now`
+/// is the epoch's time and the signals' lock history.
 fn signals(
     sat: (char, u8),
     types: &ObsTypes,
     values: &[(Option<f64>, u8)],
+    now: (f64, &mut LockTimes),
     out: &mut Vec<RawMeasurement>,
     unmapped: &mut u64,
 ) {
+    let (now_s, locks) = now;
     let mut seen: Vec<(char, char)> = Vec::new();
     for ((t, _), (v, _)) in types.iter().zip(values) {
         if v.is_some() && !seen.contains(&(t[1], t[2])) {
@@ -576,6 +588,15 @@ fn signals(
             m.carrier_phase_cycles = cp;
             // Carrier valid; half cycle resolved unless the LLI's bit 1 says otherwise.
             m.trk_stat |= if lli & 2 == 0 { 0b110 } else { 0b010 };
+            let key = (gnss_id, sat.1, sig_id);
+            let lock_ms = match locks.get(&key) {
+                Some(&(then_s, lock)) if lli & 1 == 0 && now_s > then_s => {
+                    (f64::from(lock) + 1000.0 * (now_s - then_s)).min(f64::from(LOCK_TIME_MAX_MS))
+                }
+                _ => 0.0,
+            };
+            m.lock_time_ms = lock_ms as u16;
+            locks.insert(key, (now_s, m.lock_time_ms));
         }
         if let Some((d, _)) = get('D') {
             m.doppler_hz = d as f32;
@@ -806,6 +827,25 @@ E11  23000000.500    23000005.000
         let t = gps_time(2020, 6, 14, 12, 0, 1.5);
         assert_eq!((e.week, e.rcv_tow_s), (t.week as u16, t.tow_s));
         assert_eq!(t.week, 2110); // 2020-06-14, a Sunday, starts week 2110.
+    }
+
+    /// RINEX has no lock time: it counts from a signal's first phase and restarts where the
+    /// loss-of-lock indicator's bit 0 is set (RINEX 3.05 §5.7); a phase differenced across such
+    /// an epoch would span a cycle slip.
+    #[test]
+    fn the_lock_time_restarts_at_a_loss_of_lock() {
+        let mut text =
+            String::from("     3.05           OBSERVATION DATA    M                   RINEX VERSION / TYPE\n");
+        text += &format!("{:<60}SYS / # / OBS TYPES\n", "G    2 C1C L1C");
+        text += &format!("{:<60}END OF HEADER\n", "");
+        for (sec, lli) in [(1.0, ' '), (2.0, ' '), (2.5, ' '), (3.5, '1'), (4.5, ' ')] {
+            text += &format!("> 2020 06 14 12 00 {sec:10.7}  0  1\n");
+            text += &format!("G05{:14.3}  {:14.3}{lli}\n", 21_000_000.125, 110_356_000.25 + sec);
+        }
+        let f = parse_obs("c.rnx", &text).unwrap();
+        let locks: Vec<u16> = f.epochs.iter().map(|e| e.meas[0].lock_time_ms).collect();
+        assert_eq!(locks, [0, 1000, 1500, 0, 1000]);
+        assert!(f.epochs.iter().all(|e| e.meas[0].trk_stat & 2 != 0));
     }
 
     const NAV2: &str = "     2.10           N: GPS NAV DATA                         RINEX VERSION / TYPE

@@ -123,7 +123,8 @@ pub fn fortran_e(x: f64, w: usize, d: usize) -> String {
 /// (`week`, `rcv_tow_s`, GPS time). Per system present, its `SYS / # / OBS TYPES` lists every
 /// signal observed, each with the kinds (C, L, D, S) it has a value of anywhere in the file.
 /// Values are F14.3; the phase's loss-of-lock indicator (LLI) has bit 0 set when the signal's
-/// lock time went down since its previous epoch (a possible cycle slip) and bit 1 when the
+/// lock time says it was not kept since its previous epoch ([`RawMeasurement::kept_lock`]: a
+/// possible cycle slip) and bit 1 when the
 /// half-cycle ambiguity is not resolved (§5.4; u-blox `trkStat` bit 2 clear); every value's
 /// signal strength indicator (SSI) is C/N0 in 6 dB-Hz steps, 1–9 (§5.7, Table 12).
 pub fn write_obs(h: &ObsHeader, epochs: &[GnssRaw]) -> Result<ObsText, RinexWriteError> {
@@ -268,7 +269,7 @@ pub fn write_obs(h: &ObsHeader, epochs: &[GnssRaw]) -> Result<ObsText, RinexWrit
     header(&mut out, "", "END OF HEADER");
 
     // Records (Table A3): the epoch line, then one line per satellite.
-    let mut lock: Vec<((u8, u8, u8), u16)> = Vec::new();
+    let mut lock = super::rinex::LockTimes::new();
     for e in epochs {
         let meas = &e.meas[..usize::from(e.num_meas).min(e.meas.len())];
         let mut sats: Vec<(usize, u8, u8)> = Vec::new(); // (system index, RINEX prn, svId)
@@ -310,15 +311,13 @@ pub fn write_obs(h: &ObsHeader, epochs: &[GnssRaw]) -> Result<ObsText, RinexWrit
                 let mut lli = 0u8;
                 if *kind == 1 {
                     let key = (m.gnss_id, m.sv_id, m.sig_id);
-                    match lock.iter_mut().find(|(k, _)| *k == key) {
-                        Some((_, prev)) => {
-                            if m.lock_time_ms < *prev {
-                                lli |= 1;
-                            }
-                            *prev = m.lock_time_ms;
-                        }
-                        None => lock.push((key, m.lock_time_ms)),
+                    let now_s = f64::from(e.week) * 604_800.0 + e.rcv_tow_s;
+                    if let Some(&(then_s, prev)) = lock.get(&key)
+                        && !RawMeasurement::kept_lock(prev, m.lock_time_ms, now_s - then_s)
+                    {
+                        lli |= 1;
                     }
+                    lock.insert(key, (now_s, m.lock_time_ms));
                     if m.trk_stat & 4 == 0 {
                         lli |= 2;
                     }

@@ -62,3 +62,16 @@ crate::sample_struct! {
         pub meas: [RawMeasurement; MAX_RAW_MEASUREMENTS],
     }
 }
+
+/// u-blox `locktime` saturates here, ms (the u-blox interface description, UBX-RXM-RAWX).
+pub const LOCK_TIME_MAX_MS: u16 = 64_500;
+
+impl RawMeasurement {
+    /// Whether the receiver kept lock on a carrier between a measurement with lock time
+    /// `prev_ms` and this one `dt_s` later with `lock_time_ms`: the count did not fall (unless
+    /// both saturated) and covers at least half the interval (a count shorter than that
+    /// restarted in between). Phases across a `false` may differ by a cycle slip.
+    pub fn kept_lock(prev_ms: u16, lock_ms: u16, dt_s: f64) -> bool {
+        lock_ms >= prev_ms.min(LOCK_TIME_MAX_MS - 1) && f64::from(lock_ms) >= 500.0 * dt_s
+    }
+}

@@ -34,6 +34,7 @@
 
 use nalgebra::{Matrix1, Matrix3, SMatrix, Vector1, Vector3};
 use navsync_wire::earth;
+use navsync_wire::samples::RawMeasurement;
 
 use super::Measurement;
 use crate::gnss::broadcast::{GNSS_ID_BEIDOU, GNSS_ID_GALILEO};
@@ -56,8 +57,6 @@ const CARRIER_DELTA_STD_M: f64 = 0.01;
 /// Carrier phases further apart than this are not differenced, s: the first-order model
 /// (velocity error × Δt) holds over a receiver's measurement interval, not over gaps.
 const CARRIER_DELTA_MAX_S: f64 = 1.5;
-/// u-blox `locktime` saturates here, ms.
-const LOCK_TIME_MAX_MS: u16 = 64_500;
 
 /// Settings of the pseudorange and Doppler updates.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -465,8 +464,7 @@ impl RangeEpoch {
             else {
                 continue;
             };
-            let kept_lock = (s.lock_time_ms >= e.lock_time_ms.min(LOCK_TIME_MAX_MS - 1))
-                && f64::from(s.lock_time_ms) >= 500.0 * dt
+            let kept_lock = RawMeasurement::kept_lock(e.lock_time_ms, s.lock_time_ms, dt)
                 && (s.trk_stat ^ e.trk_stat) & 8 == 0;
             if !kept_lock {
                 st.carrier_slips += 1;
