@@ -746,13 +746,13 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
             costs.push(c);
         }
     }
-    // The bound for 2 satellites: loose's drift over the window along the direction they
-    // leave unmeasured, put back into the horizontal plane. The tightly coupled filter's IMU,
-    // calibrated by code and carrier ranges, drifts along that direction at least as the
-    // loosely coupled one's calibrated by cm-level RTK fixes: this is a floor of its cost,
-    // against the bar of a third of loose's.
+    // Why a third of loose's cost is out of reach with 2 satellites: loose's inertial drift over
+    // the window along the direction they leave unmeasured, put back into the horizontal plane.
+    // Along it the tightly coupled filter coasts on its IMU (calibrated by code and carrier
+    // ranges, not by cm-level RTK fixes as loose's was): an IMU drifting as loose's does leaves
+    // this much there alone.
     eprintln!(
-        "\n2 satellites: the direction they leave unmeasured (u1 x u2, NED) and loose's drift along it, horizontal (a floor of tight's cost) vs a third of loose's cost"
+        "\n2 satellites: the direction they leave unmeasured (u1 x u2, NED) and loose's drift along it, horizontal, vs a third of loose's cost"
     );
     let two = variants
         .iter()
