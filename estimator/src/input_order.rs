@@ -36,7 +36,7 @@
 //! samples.
 //!
 //! What it costs: fixes reach the filter [`FIX_HOLD_NS`] later (they are fused at their epoch
-//! in the delayed filter, which runs `horizon_s` = 1.5 s behind, so fusion itself is
+//! in the delayed filter, which runs `horizon_s` (at most 2 s by default) behind, so fusion itself is
 //! unchanged as long as the receiver latency plus the hold stays below the horizon: d0 up to
 //! ~1.25 s); alignment and status changes happen that much later; PPS edges update the time
 //! mapping [`PPS_HOLD_NS`] later. `NavState`s are not delayed at all.

@@ -140,9 +140,10 @@ crate::settings_group! {
         /// first receiver's `[gnss.ID] lever_arm_m`; else the recording's).
         pub gnss_lever_arm_m: [f64; 3] = [0.0; 3], flag "lever-arm", check finite3;
         /// Fusion horizon, s: how far the delayed filter runs behind the present to fuse late
-        /// measurements at their epoch (≥ the largest receiver latency + 0.25 s); with
+        /// measurements at their epoch (≥ the largest receiver latency + 0.25 s, the input
+        /// order's hold and Δ's doubt included: 2 s takes a receipt latency of 1.5 s); with
         /// `adaptive_horizon` its largest value.
-        pub fusion_horizon_s: f64 = 1.5, file "estimator", flag "horizon", check within(0.3, 10.0);
+        pub fusion_horizon_s: f64 = 2.0, file "estimator", flag "horizon", check within(0.3, 10.0);
         /// Shorten the horizon to what the fixes need (their delay from epoch to release, with
         /// Δ̂ + 3σ_Δ and a 20 ms margin, the largest of the recent ones), at least
         /// [`super::navigator::MIN_HORIZON_S`]: the output then carries less dead reckoning

@@ -60,8 +60,9 @@ pub const MIN_REFINED_STD_RAD: f64 = 0.017_453_292_519_943_295;
 pub const MAX_LOGGED_RECORDS: usize = 60_000;
 /// Fixes the bank keeps for the fine alignment.
 pub const MAX_LOGGED_FIXES: usize = 8_192;
-/// Fixes waiting for the bank to reach their epochs.
-const PENDING: usize = 16;
+/// Fixes waiting for the bank to reach their epochs: the default 2 s horizon and the input
+/// order's 0.2 s hold of a 20 Hz receiver (more are dropped, the oldest first).
+const PENDING: usize = 48;
 
 /// One heading hypothesis.
 #[derive(Debug, Clone)]

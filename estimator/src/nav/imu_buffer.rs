@@ -17,8 +17,8 @@ pub struct ImuRecord {
     pub accel_mps2: Vector3<f64>,
 }
 
-/// Capacity: 2 s at 2 kHz.
-pub const CAPACITY: usize = 4096;
+/// Capacity: 4 s at 2 kHz (the default 2 s horizon and the input order's hold, with room).
+pub const CAPACITY: usize = 8192;
 
 /// Ring buffer of [`ImuRecord`]s in time order.
 #[derive(Debug, Clone)]

@@ -2,7 +2,7 @@
 //! predictor (the structure of PX4's EKF2).
 //!
 //! - Every IMU interval enters the [`ImuBuffer`]. The *delayed* filter consumes intervals once
-//!   they are older than the horizon (default 1.5 s): strapdown mechanization at the IMU rate,
+//!   they are older than the horizon (default 2 s, adaptive): strapdown mechanization at the IMU rate,
 //!   covariance propagation every ~20 ms. Measurements wait in one queue
 //!   ([`super::measurements`]) until the delayed filter reaches their epoch, and are fused
 //!   *there*: a GNSS fix at t_f = t_stamp − Δ̂, its measurement time, so neither the receiver's
@@ -189,9 +189,9 @@ fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, fil
 }
 
 /// States the delayed filter makes in one call at most, kept without reallocating: a whole
-/// fusion horizon (1.5 s at most) of a 1 kHz IMU, which it steps over at once when the heading
-/// is decided.
-pub const MAX_FUSED_BATCH: usize = 2048;
+/// fusion horizon (2 s by default, with the input order's hold) of a 1 kHz IMU, which it steps
+/// over at once when the heading is decided.
+pub const MAX_FUSED_BATCH: usize = 4096;
 
 /// The navigation filter.
 #[derive(Debug, Clone)]

@@ -158,7 +158,7 @@ measurement_kinds! {
 }
 
 /// Measurements waiting for the delayed filter to reach their epochs. Fixed capacity, no
-/// allocation: 32 slots hold a 1.5 s horizon of 10 Hz fixes (or raw epochs) and the
+/// allocation: 32 slots hold a 2 s horizon of 10 Hz fixes (or raw epochs) and the
 /// standstill updates.
 #[derive(Debug, Clone, Default)]
 pub struct MeasurementQueue {
