@@ -87,6 +87,27 @@ pub fn walk0827_reference() -> Vec<(f64, f64, f64, f64)> {
         .collect()
 }
 
+/// The north and east error (m) of a KF-GINS-format output (`rows`: week, s of week, lat°,
+/// lon°, …, yaw° in column 10) against the walk's reference position (`lat`°, `lon`°) at
+/// `sow`: the output interpolated there, the antenna 5 cm left of the IMU (the walk's lever arm,
+/// body y = −0.05 m) through the yaw. `None` outside the output.
+pub fn walk0827_antenna_error(rows: &[Vec<f64>], sow: f64, lat: f64, lon: f64) -> Option<(f64, f64)> {
+    const R: f64 = 6_378_137.0;
+    let k = rows.partition_point(|r| r[1] <= sow);
+    if k == 0 || k >= rows.len() {
+        return None;
+    }
+    let (a, b) = (&rows[k - 1], &rows[k]);
+    let w = (sow - a[1]) / (b[1] - a[1]);
+    let (la, lo) = (a[2] + w * (b[2] - a[2]), a[3] + w * (b[3] - a[3]));
+    let yaw = b[10].to_radians();
+    let (dn, de) = (0.05 * yaw.sin(), -0.05 * yaw.cos());
+    Some((
+        (la - lat).to_radians() * R + dn,
+        (lo - lon).to_radians() * R * la.to_radians().cos() + de,
+    ))
+}
+
 /// Material provided beside the checkout (`../shared/<rel>`: corpora, datasets), else under
 /// `$NAVSYNC_SHARED_DIR` (set by `.ci/run` for clones elsewhere); panics saying where it was
 /// looked for.

@@ -412,6 +412,7 @@ impl Navigator {
         let moving = displaced || obs.speed_mps >= self.cfg.align.align_min_speed_mps.max(MOTION_SIGMAS * speed_std);
         self.motion_seen |= moving;
         if self.filt.is_none() {
+            self.adapt_horizon(obs.stamp_host_ns);
             match &mut self.bank {
                 Some(bank) => {
                     // Started while standing: the motion onset gives the first estimate of Δ,
@@ -475,15 +476,23 @@ impl Navigator {
     }
 
     /// The adaptive horizon after a GNSS epoch stamped `stamp_host_ns` (before Δ) arrived.
+    /// Before the alignment (the heading bank) the time base's prior of Δ stands for the
+    /// filter's estimate under hardware sync (0 ± 0.02 s: the horizon shrinks to what the
+    /// fixes need, and the output starts that much earlier); under software sync (0.5 ± 0.5 s)
+    /// the horizon is left at its largest until the filter estimates Δ.
     fn adapt_horizon(&mut self, stamp_host_ns: i64) {
-        let (Some(f), Some(now)) = (&self.filt, self.last_imu_ns) else {
+        let Some(now) = self.last_imu_ns else {
             return;
         };
         if !self.cfg.adaptive_horizon {
             return;
         }
         // The delay this epoch needed from its epoch (with Δ's doubt) to its release now.
-        let (d, sd) = (f.delay_s, f.eskf.std(DELAY));
+        let (d, sd) = match &self.filt {
+            Some(f) => (f.delay_s, f.eskf.std(DELAY)),
+            None if self.delay_base.1 <= self.cfg.delay_prior_std_s => (self.delay_base.0, self.delay_base.1),
+            None => return,
+        };
         let doubt = if self.cfg.estimate_delay { d + 3.0 * sd } else { d };
         let needed = now - stamp_host_ns + (doubt.max(0.0) * 1e9) as i64;
         self.fix_delay_ns = needed.max(self.fix_delay_ns - (HORIZON_DECAY_S * 1e9) as i64);

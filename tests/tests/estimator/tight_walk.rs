@@ -68,7 +68,7 @@ use navsync_recording::ros_std::META_ORIGIN;
 use navsync_recording::{RecordingOptions, SampleReader, SampleRecorder};
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{AnySample, GnssRaw, RawMeasurement};
-use navsync_tests::{TestEnv, shared_material, walk0827_reference};
+use navsync_tests::{TestEnv, shared_material, walk0827_antenna_error, walk0827_reference};
 use serde_json::Value;
 
 const WEEK_NS: i64 = 604_800_000_000_000;
@@ -479,21 +479,11 @@ impl Replay {
         // KF_GINS_STD.txt: sow, then the position σ N, E, D, m.
         let std = table(&std::fs::read_to_string(dir.join("KF_GINS_STD.txt")).unwrap());
         assert!(!rows.is_empty(), "{name}: no output");
-        const R: f64 = 6_378_137.0;
         let mut errors = Vec::new();
         for (sow, lat, lon, q) in walk0827_reference() {
-            let k = rows.partition_point(|r| r[1] <= sow);
-            if k == 0 || k >= rows.len() {
+            let Some((north, east)) = walk0827_antenna_error(&rows, sow, lat, lon) else {
                 continue;
-            }
-            let (a, b) = (&rows[k - 1], &rows[k]);
-            let w = (sow - a[1]) / (b[1] - a[1]);
-            let (la, lo) = (a[2] + w * (b[2] - a[2]), a[3] + w * (b[3] - a[3]));
-            // The antenna 5 cm left of the IMU (body y = −0.05 m) through the yaw.
-            let yaw = b[10].to_radians();
-            let (dn, de) = (0.05 * yaw.sin(), -0.05 * yaw.cos());
-            let north = (la - lat).to_radians() * R + dn;
-            let east = (lo - lon).to_radians() * R * la.to_radians().cos() + de;
+            };
             let s = &std[std.partition_point(|r| r[0] < sow).min(std.len() - 1)];
             let within = north.abs() <= 2.0 * s[1] && east.abs() <= 2.0 * s[2];
             errors.push((sow, q, north.hypot(east), within));

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use navsync_drivers::gnss::{Decoder, GnssDecoder, GnssExtra, Protocol};
 use navsync_recording::SampleReader;
 use navsync_shared::samples::{AnySample, GnssFix};
-use navsync_tests::{TestEnv, shared_material, walk0827_reference};
+use navsync_tests::{TestEnv, shared_material, walk0827_antenna_error, walk0827_reference};
 use serde_json::Value;
 
 const WEEK_NS: i64 = 604_800_000_000_000;
@@ -284,20 +284,10 @@ fn estimate(env: &TestEnv, rec: &Path, name: &str) -> (f64, f64, usize, f64, f64
         .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
         .collect();
     let (mut sum, mut max, mut n) = (0.0, 0.0f64, 0usize);
-    const R: f64 = 6_378_137.0;
     for (sow, lat, lon) in rtk_fixed() {
-        let k = rows.partition_point(|r| r[1] <= sow);
-        if k == 0 || k >= rows.len() {
+        let Some((north, east)) = walk0827_antenna_error(&rows, sow, lat, lon) else {
             continue;
-        }
-        let (a, b) = (&rows[k - 1], &rows[k]);
-        let w = (sow - a[1]) / (b[1] - a[1]);
-        let (la, lo) = (a[2] + w * (b[2] - a[2]), a[3] + w * (b[3] - a[3]));
-        // The antenna 5 cm left of the IMU (body y = −0.05 m) through the yaw.
-        let yaw = b[10].to_radians();
-        let (dn, de) = (0.05 * yaw.sin(), -0.05 * yaw.cos());
-        let north = (la - lat).to_radians() * R + dn;
-        let east = (lo - lon).to_radians() * R * la.to_radians().cos() + de;
+        };
         let d2 = north * north + east * east;
         sum += d2;
         max = max.max(d2.sqrt());
