@@ -455,7 +455,7 @@ impl RangeEpoch {
         let mut rows = [(0.0, SMatrix::<f64, 1, N>::zeros(), 0.0); MAX_RANGE_SATS];
         let mut n = 0;
         for s in self.sats().iter().filter(|s| s.carrier_m.is_finite()) {
-            let Some(slot) = system_slot(s.gnss_id).filter(|&k| k == 0 || f.isb_valid[k - 1]) else {
+            let Some(slot) = fused_slot(f, s.gnss_id) else {
                 continue;
             };
             let Some(e) = prev.sats[..prev.count]
@@ -471,17 +471,7 @@ impl RangeEpoch {
                 continue;
             }
             let Some(g) = self.usable(&a, s, rc) else { continue };
-            let un = g.u_ned.transpose();
-            let mut h = SMatrix::<f64, 1, N>::zeros();
-            h.fixed_view_mut::<1, 3>(0, VEL).copy_from(&(-un * dt));
-            h.fixed_view_mut::<1, 3>(0, ATT)
-                .copy_from(&(-un * skew(&a.lever_vel_n) * dt));
-            h.fixed_view_mut::<1, 3>(0, BG)
-                .copy_from(&(un * a.c_bn * skew(&lever_b) * dt));
-            if f.delay_observable() {
-                h[(0, DELAY)] = -g.u_ned.dot(&f.acc_ned) * dt;
-            }
-            h[(0, CLK_DRIFT)] = -dt;
+            let h = range_rate_row(f, &a, &g, &lever_b) * dt;
             let predicted = g.range_m + g.u_ned.dot(&moved_by_corrections) - e.range_m
                 + Self::clock_m(f, slot, eps)
                 - e.clock_m;
@@ -521,7 +511,7 @@ impl RangeEpoch {
         m.corrections_ned_m = f.pos_corrections_ned_m;
         m.count = 0;
         for s in self.sats().iter().filter(|s| s.carrier_m.is_finite()) {
-            let Some(slot) = system_slot(s.gnss_id).filter(|&k| k == 0 || f.isb_valid[k - 1]) else {
+            let Some(slot) = fused_slot(f, s.gnss_id) else {
                 continue;
             };
             let Some(g) = self.usable(&a, s, rc) else { continue };
@@ -538,6 +528,30 @@ impl RangeEpoch {
             m.count += 1;
         }
     }
+}
+
+/// [`system_slot`] of a system whose clock the filter holds (GPS, or an anchored inter-system
+/// bias); `None` otherwise.
+fn fused_slot(f: &DelayedFilter, gnss_id: u8) -> Option<usize> {
+    system_slot(gnss_id).filter(|&k| k == 0 || f.isb_valid[k - 1])
+}
+
+/// The Jacobian row of a range rate along `g`'s line of sight (the module header's model):
+/// velocity, the lever arm's rotation through attitude and gyro bias, Δ (when observable)
+/// and the clock drift. Times Δt it is a carrier-phase difference's.
+fn range_rate_row(f: &DelayedFilter, a: &Antenna, g: &Sight, lever_b: &Vector3<f64>) -> SMatrix<f64, 1, N> {
+    let un = g.u_ned.transpose();
+    let mut h = SMatrix::<f64, 1, N>::zeros();
+    h.fixed_view_mut::<1, 3>(0, VEL).copy_from(&(-un));
+    h.fixed_view_mut::<1, 3>(0, ATT)
+        .copy_from(&(-un * skew(&a.lever_vel_n)));
+    h.fixed_view_mut::<1, 3>(0, BG)
+        .copy_from(&(un * a.c_bn * skew(lever_b)));
+    if f.delay_observable() {
+        h[(0, DELAY)] = -g.u_ned.dot(&f.acc_ned);
+    }
+    h[(0, CLK_DRIFT)] = -1.0;
+    h
 }
 
 /// The slot of system `gnss_id` among the filter's clocks: 0 GPS, 1 Galileo, 2 BeiDou
@@ -587,7 +601,7 @@ impl Measurement for RangeEpoch {
         self.fuse_carrier_deltas(f, eps, cfg, rc, st);
         let mut used = 0u64;
         for s in self.sats() {
-            let Some(slot) = system_slot(s.gnss_id).filter(|&k| k == 0 || f.isb_valid[k - 1]) else {
+            let Some(slot) = fused_slot(f, s.gnss_id) else {
                 continue;
             };
             let a = Antenna::of(f, &lever_b, eps);
@@ -640,17 +654,7 @@ impl Measurement for RangeEpoch {
             }
             let a = Antenna::of(f, &lever_b, eps);
             let g = sight(&a, s, self);
-            let un = g.u_ned.transpose();
-            let mut h = SMatrix::<f64, 1, N>::zeros();
-            h.fixed_view_mut::<1, 3>(0, VEL).copy_from(&(-un));
-            h.fixed_view_mut::<1, 3>(0, ATT)
-                .copy_from(&(-un * skew(&a.lever_vel_n)));
-            h.fixed_view_mut::<1, 3>(0, BG)
-                .copy_from(&(un * a.c_bn * skew(&lever_b)));
-            if f.delay_observable() {
-                h[(0, DELAY)] = -g.u_ned.dot(&f.acc_ned);
-            }
-            h[(0, CLK_DRIFT)] = -1.0;
+            let h = range_rate_row(f, &a, &g, &lever_b);
             let rate = (g.sat_vel - a.vel_ecef_mps).dot(&g.u_ecef) + f.clock_drift_mps;
             let dz = Vector1::new(rate - s.range_rate_mps);
             let sd = sigma(rc.range_rate_std_mps, s.range_rate_std_mps, g.el_rad, cno, rc);
