@@ -12,6 +12,7 @@ use std::io::{Read, Write};
 use anyhow::{Context, Result};
 use navsync_drivers::gnss::Protocol;
 use navsync_drivers::gnss::capture::{Seen, decode_capture, epoch_json};
+use navsync_estimator::gnss::broadcast::carries_lnav;
 
 /// `navsync decode`: a capture file (gpsd log: `#` comments skipped) or `-` for stdin.
 #[derive(clap::Args, Debug)]
@@ -23,8 +24,9 @@ pub struct Options {
     #[arg(long, default_value = "auto")]
     pub protocol: Protocol,
     /// Print the GPS LNAV subframes of the capture's UBX-RXM-SFRBX (ephemerides, almanac,
-    /// ionosphere/UTC; IS-GPS-200 unscaled fields), then each Galileo I/NAV and BeiDou D1/D2
-    /// ephemeris completed from its words (SI units, the system named), instead of the epochs.
+    /// ionosphere/UTC; IS-GPS-200 unscaled fields), then each Galileo I/NAV, BeiDou D1/D2 and
+    /// GPS CNAV (L2C, L5) ephemeris completed from its words (SI units, the system named),
+    /// instead of the epochs.
     #[arg(long, conflicts_with = "yuma")]
     pub subframes: bool,
     /// Print the GPS almanac of the capture's subframes (subframes 4 and 5; the latest page of
@@ -90,7 +92,7 @@ fn sky(bytes: &[u8], file: &str, almanac: Option<&str>) -> Result<()> {
                 }
             }
             Ok(Message::RxmSfrbx(x)) if x.gnss_id == 6 => glo.on_words(x.sv_id, x.data_words()),
-            Ok(Message::RxmSfrbx(x)) if x.gnss_id == 0 => {
+            Ok(Message::RxmSfrbx(x)) if carries_lnav(x.gnss_id, x.sig_id) => {
                 if let Ok(d) = lnav::decode(x.data_words()) {
                     match d.subframe {
                         Subframe::Almanac(a) if a.sqrt_a > 0 => {
@@ -202,7 +204,7 @@ fn gps_subframes(
 )> {
     let mut out = Vec::new();
     nav_data(bytes, &mut |n| {
-        if n.gnss_id == 0 {
+        if carries_lnav(n.gnss_id, n.sig_id) {
             let len = usize::from(n.num_words).min(n.words.len());
             out.push((n.sv_id, navsync_estimator::gnss::lnav::decode(&n.words[..len])));
         }
@@ -293,8 +295,9 @@ fn yuma(bytes: &[u8], file: &str) -> Result<()> {
     Ok(())
 }
 
-/// `--subframes`: every GPS subframe, decoded or with the reason it was not, then each
-/// Galileo I/NAV and BeiDou D1/D2 ephemeris completed from the capture's words (SI units).
+/// `--subframes`: every GPS LNAV subframe, decoded or with the reason it was not, then each
+/// Galileo I/NAV, BeiDou D1/D2 and GPS CNAV ephemeris completed from the capture's words (SI
+/// units).
 fn subframes(bytes: &[u8], file: &str) -> Result<()> {
     use navsync_estimator::gnss::broadcast::NavCollector;
     let mut out = std::io::stdout().lock();
@@ -325,15 +328,16 @@ fn subframes(bytes: &[u8], file: &str) -> Result<()> {
     }
     let c = nav.counts;
     eprintln!(
-        "{ok} GPS subframes decoded, {bad} rejected; {} Galileo I/NAV words and {} BeiDou subframes decoded, {} rejected: {} Galileo/BeiDou ephemerides",
+        "{ok} GPS LNAV subframes decoded, {bad} rejected; {} Galileo I/NAV words, {} BeiDou subframes and {} GPS CNAV messages decoded, {} rejected: {} Galileo/BeiDou/GPS CNAV ephemerides",
         c.galileo_words,
         c.beidou_subframes,
+        c.gps_cnav_messages,
         c.rejected,
         lines.len()
     );
     anyhow::ensure!(
         ok > 0 || !lines.is_empty() || bytes.is_empty(),
-        "{file}: no GPS LNAV subframe nor Galileo/BeiDou ephemeris (UBX-RXM-SFRBX) decoded"
+        "{file}: no GPS LNAV subframe nor Galileo/BeiDou/GPS CNAV ephemeris (UBX-RXM-SFRBX) decoded"
     );
     Ok(())
 }

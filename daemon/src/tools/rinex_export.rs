@@ -17,6 +17,7 @@ use std::path::PathBuf;
 
 use navsync_drivers::gnss::rinex::GpsEphemeris;
 use navsync_drivers::gnss::rinex_write::{self, ObsHeader, RinexWriteError};
+use navsync_estimator::gnss::broadcast::carries_lnav;
 use navsync_estimator::gnss::lnav::{self, Ephem1, Ephem2, Ephem3, Subframe};
 use navsync_estimator::gnss::ranges::{EphemerisStore, RangeBuildCounts};
 use navsync_estimator::gnss::spp::SppSettings;
@@ -177,7 +178,7 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
             }
             AnySample::NavData(d) if s.service == nav_service => {
                 store.on_nav_data(&d);
-                if d.gnss_id != 0 || d.num_words < 10 {
+                if !carries_lnav(d.gnss_id, d.sig_id) || d.num_words < 10 {
                     continue;
                 }
                 let Ok(dec) = lnav::decode(&d.words[..10]) else {

@@ -314,6 +314,8 @@ impl BdsEphemeris {
             omega_rad: self.s3.omega_rad,
             m0_rad: self.s2.m0_rad,
             delta_n_rad_s: self.s2.delta_n_rad_s,
+            a_dot_m_s: 0.0,
+            delta_n_dot_rad_s2: 0.0,
             cuc: self.s2.cuc_rad,
             cus: self.s2.cus_rad,
             crc: self.s2.crc_m,

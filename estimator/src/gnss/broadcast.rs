@@ -1,9 +1,10 @@
 //! The navigation data words of every system the decoders read, routed by u-blox `gnssId` and
 //! `sigId` (UBX-RXM-SFRBX, as a [`GnssNavData`](navsync_wire::samples::GnssNavData) carries
 //! them) to their decoders and assembled per satellite into ephemerides: Galileo I/NAV
-//! ([`galileo`](super::galileo): E1-B sigId 1, E5b-I sigId 5) and BeiDou ([`beidou`]: D1 of
+//! ([`galileo`](super::galileo): E1-B sigId 1, E5b-I sigId 5), BeiDou ([`beidou`]: D1 of
 //! the MEO/IGSO PRNs on B1I sigId 0, B2I sigId 2, B3I sigId 4; D2 of the GEO PRNs on sigId 1,
-//! 3, 10). GPS LNAV keeps its own path
+//! 3, 10) and GPS CNAV ([`cnav`](super::cnav): L2 CL/CM sigId 3, 4, L5 I/Q sigId 6, 7). GPS
+//! LNAV (L1 C/A, sigId 0: [`carries_lnav`]) keeps its own path
 //! ([`ranges::EphemerisStore`](super::ranges::EphemerisStore)).
 //!
 //! Every ephemeris yields a [`BroadcastEphemeris`]: the system-neutral part an ephemeris store
@@ -11,9 +12,12 @@
 //! [`OrbitFrame`](super::orbit::OrbitFrame)), issue, health and accuracy.
 
 use super::beidou::{self, BdsAssembler, BdsEphemeris, BdsError, D2Assembler};
+use super::cnav::{self, CnavAssembler, CnavEphemeris, CnavError};
 use super::galileo::{self, GalAssembler, GalEphemeris, InavError};
 use super::orbit::Orbit;
 
+/// u-blox `gnssId` of GPS.
+pub const GNSS_ID_GPS: u8 = 0;
 /// u-blox `gnssId` of Galileo.
 pub const GNSS_ID_GALILEO: u8 = 2;
 /// u-blox `gnssId` of BeiDou.
@@ -22,6 +26,15 @@ pub const GNSS_ID_BEIDOU: u8 = 3;
 const MAX_GAL: usize = 36;
 /// Highest BeiDou PRN.
 const MAX_BDS: usize = 63;
+/// Highest GPS PRN.
+const MAX_GPS: usize = 32;
+
+/// Whether a message of system `gnss_id` on signal `sig_id` (u-blox numbers) carries GPS
+/// LNAV subframes: GPS L1 C/A (sigId 0; a receiver before u-blox protocol 27 leaves the byte
+/// reserved, 0). L2C and L5 carry CNAV ([`cnav`]).
+pub fn carries_lnav(gnss_id: u8, sig_id: u8) -> bool {
+    gnss_id == GNSS_ID_GPS && sig_id == 0
+}
 
 /// A completed ephemeris of one of the systems decoded here.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -31,6 +44,8 @@ pub enum NavEphemeris {
     Galileo(GalEphemeris),
     /// BeiDou D1 (MEO/IGSO) or D2 (GEO).
     Beidou(BdsEphemeris),
+    /// GPS CNAV (L2C or L5).
+    GpsCnav(CnavEphemeris),
 }
 
 /// The system-neutral part of a broadcast ephemeris.
@@ -42,7 +57,8 @@ pub struct BroadcastEphemeris {
     pub sv_id: u8,
     /// Orbit and clock, in the system's time (GPST, GST, BDT seconds of week).
     pub orbit: Orbit,
-    /// Issue of data (GPS IODE, Galileo IODnav, BeiDou AODE).
+    /// Issue of data (GPS IODE, Galileo IODnav, BeiDou AODE; GPS CNAV, which has none:
+    /// t_oe / 300 s).
     pub iod: u16,
     /// Usable by the system's health and validity flags.
     pub healthy: bool,
@@ -71,6 +87,14 @@ impl NavEphemeris {
                 // BDS-SIS-ICD-B1I §5.2.4.5: URA as GPS's URA index (IS-GPS-200).
                 accuracy_m: super::ranges::ura_m(e.s1.urai).unwrap_or(f64::INFINITY),
             },
+            Self::GpsCnav(e) => BroadcastEphemeris {
+                gnss_id: GNSS_ID_GPS,
+                sv_id: e.sv,
+                orbit: e.orbit(),
+                iod: (e.e10.toe_s / 300.0) as u16,
+                healthy: e.healthy(),
+                accuracy_m: e.accuracy_m().unwrap_or(f64::INFINITY),
+            },
         }
     }
 }
@@ -84,6 +108,9 @@ pub enum NavWordsError {
     /// A BeiDou D1 or D2 subframe was rejected.
     #[error("BeiDou: {0}")]
     Beidou(#[from] BdsError),
+    /// A GPS CNAV message was rejected.
+    #[error("GPS CNAV: {0}")]
+    GpsCnav(#[from] CnavError),
 }
 
 /// Counters of a [`NavCollector`].
@@ -93,16 +120,22 @@ pub struct NavCounts {
     pub galileo_words: u64,
     /// BeiDou D1 and D2 subframes decoded.
     pub beidou_subframes: u64,
+    /// GPS CNAV messages decoded.
+    pub gps_cnav_messages: u64,
     /// Messages rejected (CRC, parity, preamble, page layout).
     pub rejected: u64,
     /// Messages of other systems and signals, or of satellites out of range.
     pub ignored: u64,
 }
 
-/// Per-satellite assemblers of Galileo and BeiDou ephemerides. Fixed size, no allocation.
+/// Per-satellite assemblers of Galileo, BeiDou and GPS CNAV ephemerides. Fixed size, no
+/// allocation.
 #[derive(Debug, Clone)]
 pub struct NavCollector {
     gal: [GalAssembler; MAX_GAL],
+    gps: [CnavAssembler; MAX_GPS],
+    /// GPS CNAV's ionosphere (message type 30's Klobuchar α/β), the latest.
+    pub gps_cnav_iono: Option<([f64; 4], [f64; 4])>,
     bds: [BdsAssembler; MAX_BDS],
     geo: [D2Assembler; MAX_BDS],
     /// What came in.
@@ -113,6 +146,8 @@ impl Default for NavCollector {
     fn default() -> Self {
         Self {
             gal: [GalAssembler::default(); MAX_GAL],
+            gps: [CnavAssembler::default(); MAX_GPS],
+            gps_cnav_iono: None,
             bds: [BdsAssembler::default(); MAX_BDS],
             geo: [D2Assembler::default(); MAX_BDS],
             counts: NavCounts::default(),
@@ -151,6 +186,15 @@ impl NavCollector {
                 let a = &mut self.geo[slot.unwrap_or(0)];
                 Ok(page.and_then(|p| a.on_page(sv_id, &p)).map(NavEphemeris::Beidou))
             }
+            (GNSS_ID_GPS, 3 | 4 | 6 | 7) if slot.is_some_and(|i| i < MAX_GPS) => {
+                let m = cnav::decode(words).inspect_err(|_| self.counts.rejected += 1)?;
+                self.counts.gps_cnav_messages += 1;
+                if let cnav::CnavMessage::Clock { delays: Some(d), .. } = m.message {
+                    self.gps_cnav_iono = Some((d.alpha, d.beta));
+                }
+                let a = &mut self.gps[slot.unwrap_or(0)];
+                Ok(a.on_message(sv_id, &m.message).map(NavEphemeris::GpsCnav))
+            }
             _ => {
                 self.counts.ignored += 1;
                 Ok(None)
@@ -181,13 +225,14 @@ mod tests {
                 *w = next() as u32;
             }
             let n = (r % 17) as usize;
-            let gnss = [GNSS_ID_GALILEO, GNSS_ID_BEIDOU][(r >> 8) as usize % 2];
-            let sig = [0u8, 1, 2, 3, 4, 5, 10, 200][(r >> 16) as usize % 8];
+            let gnss = [GNSS_ID_GALILEO, GNSS_ID_BEIDOU, GNSS_ID_GPS][(r >> 8) as usize % 3];
+            let sig = [0u8, 1, 2, 3, 4, 5, 6, 7, 10, 200][(r >> 16) as usize % 10];
             let sv = (r >> 24) as u8;
             let _ = c.on_words(gnss, sv, sig, &words[..n]);
         }
         let k = c.counts;
-        assert_eq!(k.galileo_words + k.beidou_subframes + k.rejected + k.ignored, 100_000);
+        let decoded = k.galileo_words + k.beidou_subframes + k.gps_cnav_messages;
+        assert_eq!(decoded + k.rejected + k.ignored, 100_000);
         assert!(k.rejected > 0 && k.ignored > 0);
     }
 }

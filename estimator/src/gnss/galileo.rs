@@ -316,6 +316,8 @@ impl GalEphemeris {
             omega_rad: self.w2.omega_rad,
             m0_rad: self.w1.m0_rad,
             delta_n_rad_s: self.w3.delta_n_rad_s,
+            a_dot_m_s: 0.0,
+            delta_n_dot_rad_s2: 0.0,
             cuc: self.w3.cuc_rad,
             cus: self.w3.cus_rad,
             crc: self.w3.crc_m,

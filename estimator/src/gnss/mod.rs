@@ -4,12 +4,13 @@
 //! ionosphere and a standard troposphere ([`spp`]), and a receiver's raw measurements paired
 //! with the broadcast ephemerides for the filter ([`ranges`]); GLONASS immediate data and
 //! its numerically integrated orbit after the GLONASS ICD ([`glonass`]: geometry only, not
-//! fused yet); Galileo I/NAV ([`galileo`]) and BeiDou D1/D2 ([`beidou`]) ephemerides, assembled
-//! per satellite from the receiver's navigation data words ([`broadcast`]), their orbits
-//! through [`orbit`] with each system's constants (not fused yet).
+//! fused yet); Galileo I/NAV ([`galileo`]), BeiDou D1/D2 ([`beidou`]) and GPS CNAV ([`cnav`],
+//! L2C and L5) ephemerides, assembled per satellite from the receiver's navigation data words
+//! ([`broadcast`]), their orbits through [`orbit`] with each system's constants.
 
 pub mod beidou;
 pub mod broadcast;
+pub mod cnav;
 pub mod galileo;
 pub mod glonass;
 pub mod lnav;

@@ -95,6 +95,12 @@ pub struct Orbit {
     pub m0_rad: f64,
     /// Mean motion correction, rad/s.
     pub delta_n_rad_s: f64,
+    /// Rate of the semi-major axis, m/s (GPS CNAV's Ȧ, IS-GPS-200 Table 30-II: A_k = A_0 +
+    /// Ȧ·t_k, with A_0 = `sqrt_a`²; 0 for the other ephemerides).
+    pub a_dot_m_s: f64,
+    /// Rate of the mean motion correction, rad/s² (GPS CNAV's Δṅ_0: Δn_A = Δn_0 + ½Δṅ_0·t_k;
+    /// 0 for the other ephemerides).
+    pub delta_n_dot_rad_s2: f64,
     /// Harmonic corrections: C_uc, C_us (rad), C_rc, C_rs (m), C_ic, C_is (rad).
     pub cuc: f64,
     /// See `cuc`.
@@ -138,6 +144,8 @@ impl Orbit {
             omega_rad: f64::from(s3.omega) * p2(-31) * sc,
             m0_rad: f64::from(s2.m0) * p2(-31) * sc,
             delta_n_rad_s: f64::from(s2.delta_n) * p2(-43) * sc,
+            a_dot_m_s: 0.0,
+            delta_n_dot_rad_s2: 0.0,
             cuc: f64::from(s2.cuc) * p2(-29),
             cus: f64::from(s2.cus) * p2(-29),
             crc: f64::from(s3.crc) * p2(-5),
@@ -183,7 +191,8 @@ impl Orbit {
 
     fn eccentric_anomaly_tk(&self, tk: f64) -> (f64, f64) {
         let a = self.sqrt_a * self.sqrt_a;
-        let n = (self.frame.mu_m3_s2() / (a * a * a)).sqrt() + self.delta_n_rad_s;
+        let delta_n = self.delta_n_rad_s + 0.5 * self.delta_n_dot_rad_s2 * tk;
+        let n = (self.frame.mu_m3_s2() / (a * a * a)).sqrt() + delta_n;
         let m = self.m0_rad + n * tk;
         let mut e_anom = m;
         for _ in 0..30 {
@@ -207,7 +216,7 @@ impl Orbit {
     /// reference time, not wrapped to a week (an almanac used weeks away from its t_oa).
     pub fn position_ecef_m_tk(&self, tk_s: f64) -> [f64; 3] {
         let (ek, tk) = self.eccentric_anomaly_tk(tk_s);
-        let a = self.sqrt_a * self.sqrt_a;
+        let a = self.sqrt_a * self.sqrt_a + self.a_dot_m_s * tk;
         let nu = ((1.0 - self.e * self.e).sqrt() * ek.sin()).atan2(ek.cos() - self.e);
         let phi = nu + self.omega_rad;
         let (s2, c2) = (2.0 * phi).sin_cos();

@@ -10,7 +10,7 @@
 
 use navsync_wire::samples::{GnssNavData, GnssRaw, RawMeasurement};
 
-use super::broadcast::{BroadcastEphemeris, GNSS_ID_BEIDOU, GNSS_ID_GALILEO, NavCollector, NavEphemeris};
+use super::broadcast::{BroadcastEphemeris, GNSS_ID_BEIDOU, GNSS_ID_GALILEO, NavCollector, NavEphemeris, carries_lnav};
 use super::lnav::{self, Ephem1, Ephem2, Ephem3, Subframe};
 use super::orbit::Orbit;
 use super::spp::{C_M_S, Klobuchar, Observation, SystemObservation};
@@ -19,8 +19,7 @@ use super::spp::{C_M_S, Klobuchar, Observation, SystemObservation};
 pub const MAX_RANGE_SATS: usize = 32;
 /// GPS L1 carrier frequency, Hz (IS-GPS-200 §3.3.1.1).
 pub const L1_HZ: f64 = 1_575.42e6;
-/// u-blox `gnssId` of GPS.
-pub const GNSS_ID_GPS: u8 = 0;
+pub use super::broadcast::GNSS_ID_GPS;
 /// Highest GPS PRN.
 const MAX_PRN: usize = 32;
 /// Highest Galileo SVID.
@@ -164,6 +163,25 @@ struct SatEphemeris {
     ura_m: f64,
 }
 
+impl SatEphemeris {
+    /// Takes a completed GPS ephemeris (LNAV or CNAV) unless the one held has a later t_oe
+    /// (the two navigation messages of one satellite are uploaded separately: the newer
+    /// reference time wins, a tie goes to the newest arrival); returns whether the orbit
+    /// changed.
+    fn keep(&mut self, orbit: Orbit, healthy: bool, ura_m: f64) -> bool {
+        if let Some(o) = self.orbit {
+            let mut dt = o.toe_s - orbit.toe_s;
+            dt -= (dt / 604_800.0).round() * 604_800.0;
+            if dt > 0.0 {
+                return false;
+            }
+        }
+        let changed = self.orbit != Some(orbit);
+        (self.orbit, self.healthy, self.ura_m) = (Some(orbit), healthy, ura_m);
+        changed
+    }
+}
+
 /// The nominal user range accuracy of URA index `n`, m (IS-GPS-200 §20.3.3.3.1.3:
 /// X = 2^(1 + N/2) for N ≤ 6, 2^(N − 2) for 6 < N < 15); `None` for N = 15, "no accuracy
 /// prediction available", which the store treats as an unusable satellite.
@@ -225,10 +243,10 @@ impl Default for EphemerisStore {
 impl EphemerisStore {
     /// Takes one navigation-data message: GPS LNAV subframes are decoded (parity checked) and
     /// subframes 1–3 of one issue make an ephemeris (IODC's 8 LSBs = IODE of subframes 2 and
-    /// 3); subframe 4 page 18 sets the ionosphere. Galileo and BeiDou words go to the
-    /// [`NavCollector`], whose ephemerides are kept per satellite. Others are ignored.
+    /// 3); subframe 4 page 18 sets the ionosphere. GPS CNAV, Galileo and BeiDou words go to
+    /// the [`NavCollector`], whose ephemerides are kept per satellite. Others are ignored.
     pub fn on_nav_data(&mut self, d: &GnssNavData) {
-        if d.gnss_id != GNSS_ID_GPS {
+        if !carries_lnav(d.gnss_id, d.sig_id) {
             let n = usize::from(d.num_words).min(d.words.len());
             if let Ok(Some(e)) = self
                 .others
@@ -268,19 +286,20 @@ impl EphemerisStore {
             && s2.iode == s3.iode
         {
             let orbit = Orbit::from_ephemeris(&s1, &s2, &s3);
-            if e.orbit != Some(orbit) {
-                self.ephemerides += 1;
-            }
-            e.orbit = Some(orbit);
             // IS-GPS-200 §20.3.3.3.1.4: the six-bit health's MSB summarises the navigation data.
             let ura = ura_m(s1.ura);
-            e.healthy = s1.health & 0x20 == 0 && ura.is_some();
-            e.ura_m = ura.unwrap_or(f64::INFINITY);
+            if e.keep(
+                orbit,
+                s1.health & 0x20 == 0 && ura.is_some(),
+                ura.unwrap_or(f64::INFINITY),
+            ) {
+                self.ephemerides += 1;
+            }
         }
     }
 
-    /// Keeps a Galileo or BeiDou ephemeris (the latest of its satellite), and BeiDou's
-    /// ionosphere coefficients.
+    /// Keeps a Galileo, BeiDou or GPS CNAV ephemeris (the latest of its satellite), and
+    /// BeiDou's ionosphere coefficients.
     pub fn on_broadcast(&mut self, e: &NavEphemeris) {
         if let NavEphemeris::Beidou(d) = e
             && d.s1.alpha.iter().any(|a| *a != 0.0)
@@ -293,8 +312,18 @@ impl EphemerisStore {
         self.insert_broadcast(e.broadcast());
     }
 
-    /// Keeps a Galileo or BeiDou ephemeris as the latest of its satellite (others are ignored).
+    /// Keeps a Galileo or BeiDou ephemeris as the latest of its satellite, a GPS one (CNAV)
+    /// beside LNAV's by [`SatEphemeris::keep`]'s rule (others are ignored).
     pub fn insert_broadcast(&mut self, b: BroadcastEphemeris) {
+        if b.gnss_id == GNSS_ID_GPS {
+            let slot = usize::from(b.sv_id).checked_sub(1).and_then(|i| self.sats.get_mut(i));
+            if let Some(e) = slot
+                && e.keep(b.orbit, b.healthy, b.accuracy_m)
+            {
+                self.ephemerides += 1;
+            }
+            return;
+        }
         let slot = usize::from(b.sv_id).checked_sub(1).and_then(|i| match b.gnss_id {
             GNSS_ID_GALILEO => self.others.gal.get_mut(i),
             GNSS_ID_BEIDOU => self.others.bds.get_mut(i),
@@ -308,9 +337,15 @@ impl EphemerisStore {
         }
     }
 
-    /// The broadcast ionosphere: GPS's (subframe 4 page 18), else BeiDou's coefficients.
+    /// The broadcast ionosphere: GPS's (LNAV subframe 4 page 18, else CNAV message type 30),
+    /// else BeiDou's coefficients.
     pub fn iono(&self) -> Option<Klobuchar> {
-        self.iono.or(self.others.bds_iono)
+        let cnav = self
+            .others
+            .collector
+            .gps_cnav_iono
+            .map(|(alpha, beta)| Klobuchar { alpha, beta });
+        self.iono.or(cnav).or(self.others.bds_iono)
     }
 
     /// The usable ephemeris of satellite `sv_id` of system `gnss_id` at `t_s` (s of week in the
@@ -582,6 +617,67 @@ mod tests {
                 assert_eq!(st.usable_ephemeris(5, 0.0).unwrap().1, ura_m(ura).unwrap());
             }
         }
+    }
+
+    /// A GPS satellite's LNAV and CNAV ephemerides share its slot: the later t_oe is kept
+    /// whichever arrives last, a tie goes to the newest arrival.
+    #[test]
+    fn lnav_and_cnav_of_a_satellite_keep_the_later_reference_time() {
+        let orbit = |toe_s: f64, e: f64| Orbit {
+            toe_s,
+            e,
+            sqrt_a: 5153.7,
+            ..Orbit::default()
+        };
+        let cnav = |toe_s, e| BroadcastEphemeris {
+            gnss_id: GNSS_ID_GPS,
+            sv_id: 10,
+            orbit: orbit(toe_s, e),
+            iod: 0,
+            healthy: true,
+            accuracy_m: 1.4,
+        };
+        let mut st = EphemerisStore::default();
+        st.insert_broadcast(cnav(408_600.0, 0.01));
+        assert_eq!(
+            st.usable_ephemeris(10, 408_700.0).map(|(o, a)| (o.e, a)),
+            Some((0.01, 1.4))
+        );
+        // An LNAV issue with a later t_oe (LNAV's t_oe leads its transmission) replaces it.
+        let lnav = |toe16: u16, iode: u8| {
+            [
+                Subframe::Ephem1(Ephem1 {
+                    iodc: u16::from(iode),
+                    ..Ephem1::default()
+                }),
+                Subframe::Ephem2(Ephem2 {
+                    iode,
+                    toe: toe16,
+                    sqrt_a: (5153.7f64 * 2f64.powi(19)) as u32,
+                    ..Ephem2::default()
+                }),
+                Subframe::Ephem3(Ephem3 {
+                    iode,
+                    ..Ephem3::default()
+                }),
+            ]
+        };
+        for sf in &lnav((410_400 / 16) as u16, 3) {
+            st.on_subframe(10, sf);
+        }
+        let toe = |st: &EphemerisStore| st.orbit(10, 409_000.0).map(|o| o.toe_s);
+        assert_eq!(toe(&st), Some(410_400.0));
+        // A CNAV of an earlier t_oe does not; one of the same t_oe does (the newest arrival).
+        st.insert_broadcast(cnav(409_500.0, 0.02));
+        assert_eq!(toe(&st), Some(410_400.0));
+        st.insert_broadcast(cnav(410_400.0, 0.03));
+        assert_eq!(st.orbit(10, 409_000.0).map(|o| o.e), Some(0.03));
+        // An LNAV of an earlier t_oe after it: kept out.
+        for sf in &lnav((403_200 / 16) as u16, 4) {
+            st.on_subframe(10, sf);
+        }
+        assert_eq!(st.orbit(10, 409_000.0).map(|o| o.e), Some(0.03));
+        assert_eq!(st.ephemerides, 3);
     }
 
     /// Per satellite the preferred signal (E1-C before E1-B whatever the order), only the

@@ -1,4 +1,4 @@
-//! Galileo I/NAV and BeiDou D1 ephemerides of a real receiver's log (u-blox X20, the
+//! Galileo I/NAV, BeiDou D1 and GPS CNAV ephemerides of a real receiver's log (u-blox X20, the
 //! rtklibexplorer walk of 2025-08-28: `datasets/rtklibexplorer-walk0827/source/gnss_1730.ubx`)
 //! decoded through the path the driver takes (the UBX decoder's `GnssNavData` per
 //! RXM-SFRBX, as published on `…/nav-data`) into `navsync_estimator::gnss::broadcast`.
@@ -10,22 +10,44 @@
 //! I/NAV ephemeris only when word type 5 arrives after words 1–4 and 6 (the GST-UTC word),
 //! and those two satellites' word 6 came after their last word 5 or not at all. Their orbits
 //! equal convbin's F/NAV records of the same IODnav.
+//!
+//! GPS CNAV (L2C sigId 4, L5 sigId 6; convbin does not decode it): the ephemerides of G08,
+//! G10, G18, G23, G24, G27, G32, the satellites cssrlib 1.2.1's `RawNav.decode_gps_cnav`
+//! completes from the same messages (its fields are compared in `gnss::cnav`'s unit tests);
+//! where the satellite also sent a complete LNAV ephemeris, the two uploads put it within a few
+//! metres of each other.
 
 use std::collections::BTreeSet;
 
 use crate::gps_sky::nav_data;
-use navsync_estimator::gnss::broadcast::{NavCollector, NavEphemeris};
+use navsync_estimator::gnss::broadcast::{NavCollector, NavEphemeris, carries_lnav};
+use navsync_estimator::gnss::lnav::{self, Subframe};
+use navsync_estimator::gnss::orbit::Orbit;
 use navsync_tests::shared_material;
 
 #[test]
-fn walk_log_galileo_and_beidou_ephemerides() {
+fn walk_log_galileo_beidou_and_gps_cnav_ephemerides() {
     let path = shared_material("datasets/rtklibexplorer-walk0827/source/gnss_1730.ubx");
     let bytes = std::fs::read(&path).expect("the walk's UBX log");
     let mut nav = NavCollector::default();
-    let (mut gal, mut bds) = (BTreeSet::new(), BTreeSet::new());
+    let (mut gal, mut bds, mut gps) = (BTreeSet::new(), BTreeSet::new(), BTreeSet::new());
     let mut usable = 0;
+    // LNAV subframes 1–3 per PRN, and the CNAV orbits, to compare the two.
+    let mut lnav_sf = std::collections::BTreeMap::<u8, [Option<Subframe>; 3]>::new();
+    let mut cnav_orbits = Vec::new();
     for n in nav_data(&bytes) {
         let len = usize::from(n.num_words).min(n.words.len());
+        if carries_lnav(n.gnss_id, n.sig_id) {
+            let sf = lnav::decode(&n.words[..len]).expect("every L1 C/A subframe passes its parity");
+            let k = match sf.subframe {
+                Subframe::Ephem1(_) => 0,
+                Subframe::Ephem2(_) => 1,
+                Subframe::Ephem3(_) => 2,
+                _ => continue,
+            };
+            lnav_sf.entry(n.sv_id).or_default()[k] = Some(sf.subframe);
+            continue;
+        }
         let Ok(Some(e)) = nav.on_words(n.gnss_id, n.sv_id, n.sig_id, &n.words[..len]) else {
             continue;
         };
@@ -33,6 +55,10 @@ fn walk_log_galileo_and_beidou_ephemerides() {
         match e {
             NavEphemeris::Galileo(g) => gal.insert((g.sv, g.iod_nav())),
             NavEphemeris::Beidou(c) => bds.insert((c.sv, b.iod)),
+            NavEphemeris::GpsCnav(g) => {
+                cnav_orbits.push((g.sv, b.orbit));
+                gps.insert((g.sv, b.iod))
+            }
         };
         // Every ephemeris's satellite at t_oe is at a MEO/IGSO radius (20–45 Mm).
         let p = b.orbit.position_ecef_m(b.orbit.toe_s);
@@ -41,10 +67,11 @@ fn walk_log_galileo_and_beidou_ephemerides() {
         usable += usize::from(b.healthy && b.accuracy_m.is_finite());
     }
     let c = nav.counts;
-    // Every I/NAV page pair (396) and every D1 subframe (153) of the log passes its CRC/BCH.
+    // Every I/NAV page pair (396), every D1 subframe (153) and every CNAV message (148) of the
+    // log passes its CRC/BCH.
     assert_eq!(
-        (c.galileo_words, c.beidou_subframes, c.rejected),
-        (396, 153, 0),
+        (c.galileo_words, c.beidou_subframes, c.gps_cnav_messages, c.rejected),
+        (396, 153, 148, 0),
         "{c:?}"
     );
     let sats = |s: &BTreeSet<(u8, u16)>| s.iter().map(|x| x.0).collect::<BTreeSet<u8>>();
@@ -54,13 +81,45 @@ fn walk_log_galileo_and_beidou_ephemerides() {
     assert_eq!(sats(&gal).len(), 7, "Galileo {gal:?}");
     assert_eq!(sats(&bds), convbin_bds, "BeiDou {bds:?}");
     assert_eq!((gal.len(), bds.len()), (7, 8));
+    assert_eq!(
+        sats(&gps),
+        BTreeSet::from([8, 10, 18, 23, 24, 27, 32]),
+        "GPS CNAV {gps:?}"
+    );
     // C50 broadcasts SatH1 = 1 (as in convbin's record) and E14 (in its eccentric orbit)
-    // E1-B signal health 1, out of service: the other 13 are usable.
-    assert_eq!(usable, 13);
+    // E1-B signal health 1, out of service: the other 13, and the 7 GPS, are usable.
+    assert_eq!(usable, 13 + 7);
+    // LNAV and CNAV of one satellite: separate uploads of one orbit, a few metres apart.
+    let mut compared = 0;
+    for (prn, sf) in &lnav_sf {
+        let [
+            Some(Subframe::Ephem1(s1)),
+            Some(Subframe::Ephem2(s2)),
+            Some(Subframe::Ephem3(s3)),
+        ] = sf
+        else {
+            continue;
+        };
+        let lnav = Orbit::from_ephemeris(s1, s2, s3);
+        for (_, cnav) in cnav_orbits.iter().filter(|(sv, _)| sv == prn) {
+            let t = cnav.toe_s + 120.0;
+            let (a, b) = (lnav.position_ecef_m(t), cnav.position_ecef_m(t));
+            let d = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+            let dclk = (lnav.clock_offset_s(t) - cnav.clock_offset_s(t)) * 299_792_458.0;
+            println!(
+                "G{prn:02}: LNAV t_oe {} vs CNAV t_oe {}: {d:.2} m, clock {dclk:.2} m",
+                lnav.toe_s, cnav.toe_s
+            );
+            assert!(d < 5.0 && dclk.abs() < 5.0, "G{prn:02}: {d} m, clock {dclk} m");
+            compared += 1;
+        }
+    }
+    assert!(compared >= 3, "{compared} satellites with both LNAV and CNAV");
 }
 
-/// `navsync decode --subframes` prints, after the GPS subframes, one JSON object per Galileo
-/// and BeiDou ephemeris with its system named (7 and 8 on the walk's log), SI units.
+/// `navsync decode --subframes` prints, after the GPS subframes, one JSON object per Galileo,
+/// BeiDou and GPS CNAV ephemeris with its system named (7, 8 and 7 on the walk's log), SI
+/// units.
 #[test]
 fn navsync_decode_prints_galileo_and_beidou_ephemerides() {
     let path = shared_material("datasets/rtklibexplorer-walk0827/source/gnss_1730.ubx");
@@ -76,7 +135,10 @@ fn navsync_decode_prints_galileo_and_beidou_ephemerides() {
         .filter_map(|l| l.get("ephemeris").cloned())
         .collect();
     let count = |s: &str| eph.iter().filter(|e| e["system"] == s).count();
-    assert_eq!((count("galileo"), count("beidou"), eph.len()), (7, 8, 15));
+    assert_eq!(
+        (count("galileo"), count("beidou"), count("gps_cnav"), eph.len()),
+        (7, 8, 7, 22)
+    );
     let e07 = eph
         .iter()
         .find(|e| e["system"] == "galileo" && e["sv"] == 7)
