@@ -24,8 +24,8 @@ pub struct Options {
     #[arg(long, default_value = "auto")]
     pub protocol: Protocol,
     /// Print the GPS LNAV subframes of the capture's UBX-RXM-SFRBX (ephemerides, almanac,
-    /// ionosphere/UTC; IS-GPS-200 unscaled fields), then each Galileo I/NAV, BeiDou D1/D2 and
-    /// GPS CNAV (L2C, L5) ephemeris completed from its words (SI units, the system named),
+    /// ionosphere/UTC; IS-GPS-200 unscaled fields), then each Galileo I/NAV and F/NAV, BeiDou
+    /// D1/D2 and GPS CNAV (L2C, L5) ephemeris completed from its words (SI units, the system named),
     /// instead of the epochs.
     #[arg(long, conflicts_with = "yuma")]
     pub subframes: bool,
@@ -296,7 +296,7 @@ fn yuma(bytes: &[u8], file: &str) -> Result<()> {
 }
 
 /// `--subframes`: every GPS LNAV subframe, decoded or with the reason it was not, then each
-/// Galileo I/NAV, BeiDou D1/D2 and GPS CNAV ephemeris completed from the capture's words (SI
+/// Galileo I/NAV and F/NAV, BeiDou D1/D2 and GPS CNAV ephemeris completed from the capture's words (SI
 /// units).
 fn subframes(bytes: &[u8], file: &str) -> Result<()> {
     use navsync_estimator::gnss::broadcast::NavCollector;
@@ -328,8 +328,9 @@ fn subframes(bytes: &[u8], file: &str) -> Result<()> {
     }
     let c = nav.counts;
     eprintln!(
-        "{ok} GPS LNAV subframes decoded, {bad} rejected; {} Galileo I/NAV words, {} BeiDou subframes and {} GPS CNAV messages decoded, {} rejected: {} Galileo/BeiDou/GPS CNAV ephemerides",
+        "{ok} GPS LNAV subframes decoded, {bad} rejected; {} Galileo I/NAV words, {} Galileo F/NAV pages, {} BeiDou subframes and {} GPS CNAV messages decoded, {} rejected: {} Galileo/BeiDou/GPS CNAV ephemerides",
         c.galileo_words,
+        c.galileo_fnav_pages,
         c.beidou_subframes,
         c.gps_cnav_messages,
         c.rejected,

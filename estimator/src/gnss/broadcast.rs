@@ -1,7 +1,8 @@
 //! The navigation data words of every system the decoders read, routed by u-blox `gnssId` and
 //! `sigId` (UBX-RXM-SFRBX, as a [`GnssNavData`](navsync_wire::samples::GnssNavData) carries
 //! them) to their decoders and assembled per satellite into ephemerides: Galileo I/NAV
-//! ([`galileo`](super::galileo): E1-B sigId 1, E5b-I sigId 5), BeiDou ([`beidou`]: D1 of
+//! ([`galileo`](super::galileo): E1-B sigId 1, E5b-I sigId 5; F/NAV [`fnav`](super::fnav):
+//! E5a-I sigId 3), BeiDou ([`beidou`]: D1 of
 //! the MEO/IGSO PRNs on B1I sigId 0, B2I sigId 2, B3I sigId 4; D2 of the GEO PRNs on sigId 1,
 //! 3, 10) and GPS CNAV ([`cnav`](super::cnav): L2 CL/CM sigId 3, 4, L5 I/Q sigId 6, 7). GPS
 //! LNAV (L1 C/A, sigId 0: [`carries_lnav`]) keeps its own path
@@ -13,6 +14,7 @@
 
 use super::beidou::{self, BdsAssembler, BdsEphemeris, BdsError, D2Assembler};
 use super::cnav::{self, CnavAssembler, CnavEphemeris, CnavError};
+use super::fnav::{self, FnavAssembler, FnavEphemeris, FnavError};
 use super::galileo::{self, GalAssembler, GalEphemeris, InavError};
 use super::orbit::Orbit;
 
@@ -42,6 +44,8 @@ pub fn carries_lnav(gnss_id: u8, sig_id: u8) -> bool {
 pub enum NavEphemeris {
     /// Galileo I/NAV.
     Galileo(GalEphemeris),
+    /// Galileo F/NAV.
+    GalileoFnav(FnavEphemeris),
     /// BeiDou D1 (MEO/IGSO) or D2 (GEO).
     Beidou(BdsEphemeris),
     /// GPS CNAV (L2C or L5).
@@ -78,6 +82,14 @@ impl NavEphemeris {
                 healthy: e.healthy(),
                 accuracy_m: e.sisa_m().unwrap_or(f64::INFINITY),
             },
+            Self::GalileoFnav(e) => BroadcastEphemeris {
+                gnss_id: GNSS_ID_GALILEO,
+                sv_id: e.sv,
+                orbit: e.orbit(),
+                iod: e.p1.iod_nav,
+                healthy: e.healthy(),
+                accuracy_m: e.sisa_m().unwrap_or(f64::INFINITY),
+            },
             Self::Beidou(e) => BroadcastEphemeris {
                 gnss_id: GNSS_ID_BEIDOU,
                 sv_id: e.sv,
@@ -105,6 +117,9 @@ pub enum NavWordsError {
     /// A Galileo I/NAV page pair was rejected.
     #[error("Galileo I/NAV: {0}")]
     Galileo(#[from] InavError),
+    /// A Galileo F/NAV page was rejected.
+    #[error("Galileo F/NAV: {0}")]
+    GalileoFnav(#[from] FnavError),
     /// A BeiDou D1 or D2 subframe was rejected.
     #[error("BeiDou: {0}")]
     Beidou(#[from] BdsError),
@@ -118,6 +133,8 @@ pub enum NavWordsError {
 pub struct NavCounts {
     /// Galileo I/NAV page pairs decoded.
     pub galileo_words: u64,
+    /// Galileo F/NAV pages decoded.
+    pub galileo_fnav_pages: u64,
     /// BeiDou D1 and D2 subframes decoded.
     pub beidou_subframes: u64,
     /// GPS CNAV messages decoded.
@@ -133,6 +150,7 @@ pub struct NavCounts {
 #[derive(Debug, Clone)]
 pub struct NavCollector {
     gal: [GalAssembler; MAX_GAL],
+    fnav: [FnavAssembler; MAX_GAL],
     gps: [CnavAssembler; MAX_GPS],
     /// GPS CNAV's ionosphere (message type 30's Klobuchar α/β), the latest.
     pub gps_cnav_iono: Option<([f64; 4], [f64; 4])>,
@@ -146,6 +164,7 @@ impl Default for NavCollector {
     fn default() -> Self {
         Self {
             gal: [GalAssembler::default(); MAX_GAL],
+            fnav: [FnavAssembler::default(); MAX_GAL],
             gps: [CnavAssembler::default(); MAX_GPS],
             gps_cnav_iono: None,
             bds: [BdsAssembler::default(); MAX_BDS],
@@ -173,6 +192,12 @@ impl NavCollector {
                 self.counts.galileo_words += 1;
                 let a = &mut self.gal[slot.unwrap_or(0)];
                 Ok(a.on_word(sv_id, &w).map(NavEphemeris::Galileo))
+            }
+            (GNSS_ID_GALILEO, 3) if slot.is_some_and(|i| i < MAX_GAL) => {
+                let p = fnav::decode(words).inspect_err(|_| self.counts.rejected += 1)?;
+                self.counts.galileo_fnav_pages += 1;
+                let a = &mut self.fnav[slot.unwrap_or(0)];
+                Ok(a.on_page(sv_id, &p).map(NavEphemeris::GalileoFnav))
             }
             (GNSS_ID_BEIDOU, 0 | 2 | 4) if slot.is_some_and(|i| i < MAX_BDS) && !beidou::is_geo(sv_id) => {
                 let sf = beidou::decode_d1(words).inspect_err(|_| self.counts.rejected += 1)?;
@@ -231,7 +256,7 @@ mod tests {
             let _ = c.on_words(gnss, sv, sig, &words[..n]);
         }
         let k = c.counts;
-        let decoded = k.galileo_words + k.beidou_subframes + k.gps_cnav_messages;
+        let decoded = k.galileo_words + k.galileo_fnav_pages + k.beidou_subframes + k.gps_cnav_messages;
         assert_eq!(decoded + k.rejected + k.ignored, 100_000);
         assert!(k.rejected > 0 && k.ignored > 0);
     }

@@ -10,6 +10,7 @@
 //! description, "GPS L2C/L5 CNAV": the message's 300 bits from word 0's most significant bit,
 //! 20 bits of padding).
 
+use super::bits::Bits;
 use super::orbit::{GPS_PI, Orbit, OrbitFrame};
 
 /// The 8-bit preamble 10001011 (IS-GPS-200 §30.3.3).
@@ -156,25 +157,6 @@ pub struct CnavDecoded {
     pub message: CnavMessage,
 }
 
-/// The 300 message bits of 10 u-blox words, MSB first.
-struct Bits<'a>(&'a [u32]);
-
-impl Bits<'_> {
-    fn bit(&self, i: u32) -> u64 {
-        u64::from((self.0[(i / 32) as usize] >> (31 - i % 32)) & 1)
-    }
-
-    /// Bits `from..from+n` (0 = the preamble's MSB), unsigned; n ≤ 64.
-    fn u(&self, from: u32, n: u32) -> u64 {
-        (from..from + n).fold(0, |a, i| (a << 1) | self.bit(i))
-    }
-
-    /// The same, two's complement.
-    fn s(&self, from: u32, n: u32) -> i64 {
-        ((self.u(from, n) << (64 - n)) as i64) >> (64 - n)
-    }
-}
-
 fn p2(n: i32) -> f64 {
     2f64.powi(n)
 }
@@ -188,8 +170,7 @@ pub fn decode(words: &[u32]) -> Result<CnavDecoded, CnavError> {
     if b.u(0, 8) != PREAMBLE {
         return Err(CnavError::Preamble);
     }
-    let crc = super::galileo::crc24q(276, |i| b.bit(i) as u32);
-    if u64::from(crc) != b.u(276, 24) {
+    if !b.crc24q_ok(276) {
         return Err(CnavError::Crc);
     }
     let sc = GPS_PI;

@@ -336,17 +336,22 @@ impl GalEphemeris {
         self.w5.e1b_hs == 0 && self.w5.e1b_dvs == 0 && self.w3.sisa != 255
     }
 
-    /// The signal-in-space accuracy of the SISA index, m (OS SIS ICD Table 76: 0–49 in 1 cm
-    /// steps, 50–74 2 cm, 75–99 4 cm, 100–125 16 cm); `None` for spare values and 255 (NAPA).
+    /// The signal-in-space accuracy of the SISA index, m ([`sisa_m`]).
     pub fn sisa_m(&self) -> Option<f64> {
-        let n = f64::from(self.w3.sisa);
-        match self.w3.sisa {
-            0..=49 => Some(n * 0.01),
-            50..=74 => Some(0.5 + (n - 50.0) * 0.02),
-            75..=99 => Some(1.0 + (n - 75.0) * 0.04),
-            100..=125 => Some(2.0 + (n - 100.0) * 0.16),
-            _ => None,
-        }
+        sisa_m(self.w3.sisa)
+    }
+}
+
+/// The signal-in-space accuracy of SISA index `sisa`, m (OS SIS ICD Table 76: 0–49 in 1 cm
+/// steps, 50–74 2 cm, 75–99 4 cm, 100–125 16 cm); `None` for spare values and 255 (NAPA).
+pub fn sisa_m(sisa: u8) -> Option<f64> {
+    let n = f64::from(sisa);
+    match sisa {
+        0..=49 => Some(n * 0.01),
+        50..=74 => Some(0.5 + (n - 50.0) * 0.02),
+        75..=99 => Some(1.0 + (n - 75.0) * 0.04),
+        100..=125 => Some(2.0 + (n - 100.0) * 0.16),
+        _ => None,
     }
 }
 

@@ -4,13 +4,15 @@
 //! ionosphere and a standard troposphere ([`spp`]), and a receiver's raw measurements paired
 //! with the broadcast ephemerides for the filter ([`ranges`]); GLONASS immediate data and
 //! its numerically integrated orbit after the GLONASS ICD ([`glonass`]: geometry only, not
-//! fused yet); Galileo I/NAV ([`galileo`]), BeiDou D1/D2 ([`beidou`]) and GPS CNAV ([`cnav`],
+//! fused yet); Galileo I/NAV ([`galileo`]) and F/NAV ([`fnav`]), BeiDou D1/D2 ([`beidou`]) and GPS CNAV ([`cnav`],
 //! L2C and L5) ephemerides, assembled per satellite from the receiver's navigation data words
 //! ([`broadcast`]), their orbits through [`orbit`] with each system's constants.
 
 pub mod beidou;
+mod bits;
 pub mod broadcast;
 pub mod cnav;
+pub mod fnav;
 pub mod galileo;
 pub mod glonass;
 pub mod lnav;

@@ -163,18 +163,24 @@ struct SatEphemeris {
     ura_m: f64,
 }
 
+/// Whether a newly completed ephemeris replaces the one a satellite holds: unless the held one
+/// has a later reference time. A satellite's navigation messages (GPS LNAV and CNAV, Galileo
+/// I/NAV and F/NAV) are decoded separately and may carry different issues: the newer t_oe
+/// wins, a tie goes to the newest arrival.
+fn replaces(held: Option<&Orbit>, new: &Orbit) -> bool {
+    held.is_none_or(|o| {
+        let mut dt = o.toe_s - new.toe_s;
+        dt -= (dt / 604_800.0).round() * 604_800.0;
+        dt <= 0.0
+    })
+}
+
 impl SatEphemeris {
-    /// Takes a completed GPS ephemeris (LNAV or CNAV) unless the one held has a later t_oe
-    /// (the two navigation messages of one satellite are uploaded separately: the newer
-    /// reference time wins, a tie goes to the newest arrival); returns whether the orbit
-    /// changed.
+    /// Takes a completed GPS ephemeris (LNAV or CNAV) when it [`replaces`] the held one;
+    /// returns whether the orbit changed.
     fn keep(&mut self, orbit: Orbit, healthy: bool, ura_m: f64) -> bool {
-        if let Some(o) = self.orbit {
-            let mut dt = o.toe_s - orbit.toe_s;
-            dt -= (dt / 604_800.0).round() * 604_800.0;
-            if dt > 0.0 {
-                return false;
-            }
+        if !replaces(self.orbit.as_ref(), &orbit) {
+            return false;
         }
         let changed = self.orbit != Some(orbit);
         (self.orbit, self.healthy, self.ura_m) = (Some(orbit), healthy, ura_m);
@@ -298,8 +304,10 @@ impl EphemerisStore {
         }
     }
 
-    /// Keeps a Galileo, BeiDou or GPS CNAV ephemeris (the latest of its satellite), and
+    /// Keeps a Galileo (I/NAV, F/NAV), BeiDou or GPS CNAV ephemeris ([`insert_broadcast`]), and
     /// BeiDou's ionosphere coefficients.
+    ///
+    /// [`insert_broadcast`]: Self::insert_broadcast
     pub fn on_broadcast(&mut self, e: &NavEphemeris) {
         if let NavEphemeris::Beidou(d) = e
             && d.s1.alpha.iter().any(|a| *a != 0.0)
@@ -312,8 +320,8 @@ impl EphemerisStore {
         self.insert_broadcast(e.broadcast());
     }
 
-    /// Keeps a Galileo or BeiDou ephemeris as the latest of its satellite, a GPS one (CNAV)
-    /// beside LNAV's by [`SatEphemeris::keep`]'s rule (others are ignored).
+    /// Keeps a Galileo, BeiDou or GPS (CNAV, beside LNAV's) ephemeris for its satellite when it
+    /// [`replaces`] the one held (others are ignored).
     pub fn insert_broadcast(&mut self, b: BroadcastEphemeris) {
         if b.gnss_id == GNSS_ID_GPS {
             let slot = usize::from(b.sv_id).checked_sub(1).and_then(|i| self.sats.get_mut(i));
@@ -329,7 +337,9 @@ impl EphemerisStore {
             GNSS_ID_BEIDOU => self.others.bds.get_mut(i),
             _ => None,
         });
-        if let Some(s) = slot {
+        if let Some(s) = slot
+            && replaces(s.as_ref().map(|o| &o.orbit), &b.orbit)
+        {
             if s.map(|o| o.orbit) != Some(b.orbit) {
                 self.other_ephemerides += 1;
             }

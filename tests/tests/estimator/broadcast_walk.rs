@@ -1,4 +1,4 @@
-//! Galileo I/NAV, BeiDou D1 and GPS CNAV ephemerides of a real receiver's log (u-blox X20, the
+//! Galileo I/NAV and F/NAV, BeiDou D1 and GPS CNAV ephemerides of a real receiver's log (u-blox X20, the
 //! rtklibexplorer walk of 2025-08-28: `datasets/rtklibexplorer-walk0827/source/gnss_1730.ubx`)
 //! decoded through the path the driver takes (the UBX decoder's `GnssNavData` per
 //! RXM-SFRBX, as published on `…/nav-data`) into `navsync_estimator::gnss::broadcast`.
@@ -9,7 +9,8 @@
 //! completes those and two more I/NAV ones (E08 and E14, IODnav 45): RTKLIB completes an
 //! I/NAV ephemeris only when word type 5 arrives after words 1–4 and 6 (the GST-UTC word),
 //! and those two satellites' word 6 came after their last word 5 or not at all. Their orbits
-//! equal convbin's F/NAV records of the same IODnav.
+//! equal convbin's F/NAV records of the same IODnav. F/NAV (E5a-I, sigId 3): the 11
+//! ephemerides of convbin's records with data source 258, the same satellites and t0e.
 //!
 //! GPS CNAV (L2C sigId 4, L5 sigId 6; convbin does not decode it): the ephemerides of G08,
 //! G10, G18, G23, G24, G27, G32, the satellites cssrlib 1.2.1's `RawNav.decode_gps_cnav`
@@ -31,6 +32,7 @@ fn walk_log_galileo_beidou_and_gps_cnav_ephemerides() {
     let bytes = std::fs::read(&path).expect("the walk's UBX log");
     let mut nav = NavCollector::default();
     let (mut gal, mut bds, mut gps) = (BTreeSet::new(), BTreeSet::new(), BTreeSet::new());
+    let mut fnav = BTreeSet::new();
     let mut usable = 0;
     // LNAV subframes 1–3 per PRN, and the CNAV orbits, to compare the two.
     let mut lnav_sf = std::collections::BTreeMap::<u8, [Option<Subframe>; 3]>::new();
@@ -54,6 +56,7 @@ fn walk_log_galileo_beidou_and_gps_cnav_ephemerides() {
         let b = e.broadcast();
         match e {
             NavEphemeris::Galileo(g) => gal.insert((g.sv, g.iod_nav())),
+            NavEphemeris::GalileoFnav(g) => fnav.insert((g.sv, b.orbit.toe_s as u32)),
             NavEphemeris::Beidou(c) => bds.insert((c.sv, b.iod)),
             NavEphemeris::GpsCnav(g) => {
                 cnav_orbits.push((g.sv, b.orbit));
@@ -67,13 +70,34 @@ fn walk_log_galileo_beidou_and_gps_cnav_ephemerides() {
         usable += usize::from(b.healthy && b.accuracy_m.is_finite());
     }
     let c = nav.counts;
-    // Every I/NAV page pair (396), every D1 subframe (153) and every CNAV message (148) of the
-    // log passes its CRC/BCH.
+    // Every I/NAV page pair (396), F/NAV page (98), D1 subframe (153) and CNAV message (148)
+    // of the log passes its CRC/BCH.
     assert_eq!(
-        (c.galileo_words, c.beidou_subframes, c.gps_cnav_messages, c.rejected),
-        (396, 153, 148, 0),
+        (
+            c.galileo_words,
+            c.galileo_fnav_pages,
+            c.beidou_subframes,
+            c.gps_cnav_messages,
+            c.rejected
+        ),
+        (396, 98, 153, 148, 0),
         "{c:?}"
     );
+    // convbin's F/NAV records (data source 258): satellite and t0e (17:10 = 407400 s, …).
+    let convbin_fnav = BTreeSet::from([
+        (7, 407_400),
+        (8, 407_400),
+        (8, 408_000),
+        (13, 406_800),
+        (14, 407_400),
+        (14, 408_000),
+        (26, 407_400),
+        (26, 408_000),
+        (29, 405_000),
+        (33, 407_400),
+        (33, 408_000),
+    ]);
+    assert_eq!(fnav, convbin_fnav, "Galileo F/NAV");
     let sats = |s: &BTreeSet<(u8, u16)>| s.iter().map(|x| x.0).collect::<BTreeSet<u8>>();
     let convbin_gal = BTreeSet::from([7, 13, 26, 29, 33]);
     let convbin_bds = BTreeSet::from([11, 21, 22, 34, 42, 43, 44, 50]);
@@ -87,8 +111,9 @@ fn walk_log_galileo_beidou_and_gps_cnav_ephemerides() {
         "GPS CNAV {gps:?}"
     );
     // C50 broadcasts SatH1 = 1 (as in convbin's record) and E14 (in its eccentric orbit)
-    // E1-B signal health 1, out of service: the other 13, and the 7 GPS, are usable.
-    assert_eq!(usable, 13 + 7);
+    // E1-B and E5a signal health 1, out of service: the other 13 I/NAV and D1, 9 F/NAV and the
+    // 7 GPS are usable.
+    assert_eq!(usable, 13 + 9 + 7);
     // LNAV and CNAV of one satellite: separate uploads of one orbit, a few metres apart.
     let mut compared = 0;
     for (prn, sf) in &lnav_sf {
@@ -117,9 +142,9 @@ fn walk_log_galileo_beidou_and_gps_cnav_ephemerides() {
     assert!(compared >= 3, "{compared} satellites with both LNAV and CNAV");
 }
 
-/// `navsync decode --subframes` prints, after the GPS subframes, one JSON object per Galileo,
-/// BeiDou and GPS CNAV ephemeris with its system named (7, 8 and 7 on the walk's log), SI
-/// units.
+/// `navsync decode --subframes` prints, after the GPS subframes, one JSON object per Galileo
+/// I/NAV and F/NAV, BeiDou and GPS CNAV ephemeris with its system named (7, 11, 8 and 7 on the
+/// walk's log), SI units.
 #[test]
 fn navsync_decode_prints_galileo_and_beidou_ephemerides() {
     let path = shared_material("datasets/rtklibexplorer-walk0827/source/gnss_1730.ubx");
@@ -136,8 +161,14 @@ fn navsync_decode_prints_galileo_and_beidou_ephemerides() {
         .collect();
     let count = |s: &str| eph.iter().filter(|e| e["system"] == s).count();
     assert_eq!(
-        (count("galileo"), count("beidou"), count("gps_cnav"), eph.len()),
-        (7, 8, 7, 22)
+        (
+            count("galileo"),
+            count("galileo_fnav"),
+            count("beidou"),
+            count("gps_cnav"),
+            eph.len()
+        ),
+        (7, 11, 8, 7, 33)
     );
     let e07 = eph
         .iter()
