@@ -11,10 +11,17 @@
 //! alignment of Groves 2013 §14.4.4). Hypotheses whose weight falls below [`PRUNE_WEIGHT`] of
 //! the best are dropped. The heading is decided when the hypotheses that agree with the best
 //! one (their headings within [`AGREE_SIGMAS`] of its σ) hold [`DECIDE_WEIGHT`] of the weight,
-//! after at least [`MIN_FIXES`] fixes, and the best one knows its heading to
-//! [`MAX_DECIDED_STD_RAD`]. While the heading is not observable (no horizontal
-//! acceleration: standing, or moving straight at constant speed) the weights stay even and
-//! nothing is decided: no heading is claimed that the data do not show.
+//! after at least [`MIN_FIXES`] fixes, and the heading is known to [`MAX_DECIDED_STD_RAD`]: by
+//! the best filter's σ and by the weights themselves. For consistent components a hypothesis δ
+//! from the best is less likely by ½(δ/σ)² in log-likelihood once the data know the heading to
+//! σ; one only `dll` less likely says they know it no better than δ/√(−2·dll), whatever σ the
+//! linearised filters claim (far from the truth they all shrink alike: a pedestrian's 1.8 m
+//! fixes left hypotheses 30° apart within a few log-units of each other while each claimed
+//! 1°: 99 % of the weight is no decision there). A live hypothesis 30° away implies at
+//! least 30°/√(−2 ln PRUNE_WEIGHT) = 5.7°: in effect the heading is decided once every
+//! hypothesis outside the agreeing ones has been dropped. While the heading is not observable
+//! (no horizontal acceleration: standing, or moving straight at constant speed) the weights
+//! stay even and nothing is decided: no heading is claimed that the data do not show.
 //!
 //! A hypothesis that started tens of degrees off is linearised far from the truth: its states
 //! carry what that cost, and a filter with little process noise never forgets it. So the bank
@@ -268,23 +275,37 @@ impl HeadingBank {
             return BankStep::Failed;
         };
         let top = self.hyps[best].log_lik;
+        let yaw_best = self.hyps[best].filt.pva.q_nb.euler_angles().2;
         for h in &mut self.hyps {
             // NaN compares false: such a hypothesis is dropped too.
             let keep = h.log_lik - top >= PRUNE_WEIGHT.ln();
             h.alive &= keep;
         }
         let b = &self.hyps[best];
-        let yaw_best = b.filt.pva.q_nb.euler_angles().2;
         let yaw_std = b.filt.eskf.std(ATT + 2);
         let reach = AGREE_SIGMAS * yaw_std;
         let (mut agree, mut all) = (0.0, 0.0);
+        // The heading σ the weights themselves imply: for consistent components a hypothesis
+        // δ from the best is less likely by ½(δ/σ)² in log-likelihood, so one that is only
+        // `dll` less likely says the data know the heading no better than δ/√(−2·dll),
+        // whatever σ the linearised filters claim (they all shrink alike, wrong ones too).
+        let mut implied_std: f64 = 0.0;
         for h in self.hyps.iter().filter(|h| h.alive) {
             let w = (h.log_lik - top).exp();
             all += w;
-            if wrap(h.filt.pva.q_nb.euler_angles().2 - yaw_best).abs() <= reach {
+            let delta = wrap(h.filt.pva.q_nb.euler_angles().2 - yaw_best).abs();
+            if delta <= reach {
                 agree += w;
+            } else {
+                let dll = (h.log_lik - top).min(0.0);
+                implied_std = implied_std.max(if dll < 0.0 {
+                    delta / (-2.0 * dll).sqrt()
+                } else {
+                    f64::INFINITY
+                });
             }
         }
+        let yaw_std = yaw_std.max(implied_std);
         if self.fixes >= MIN_FIXES && agree >= DECIDE_WEIGHT * all && yaw_std <= MAX_DECIDED_STD_RAD {
             return BankStep::Decided {
                 yaw0: wrap(b.yaw0 + b.yaw_shift),
