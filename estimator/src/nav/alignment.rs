@@ -29,6 +29,12 @@ pub struct Alignment {
     /// NED acceleration at the fix, from the velocities of the last two fixes, m/s² (zero
     /// when unknown); it couples the initial velocity error to the GNSS delay.
     pub acc_ned: Vector3<f64>,
+    /// 1-sigma of the velocity as the fix gave it, m/s (∞ when unknown): a velocity
+    /// differenced from noisy positions carries their noise.
+    pub vel_std_mps: f64,
+    /// Started standing after a levelling (the IMU static): the velocity is zero to within the
+    /// configured initial σ, which the fix's velocity refines by its own σ.
+    pub standing: bool,
     /// The fix's stamp minus the instant the accelerometer-integrated speed reached the fix's
     /// speed, and its 1-sigma, s: a first estimate of the GNSS delay (None without a static
     /// start; see [`Aligner::delay_from_onset`]).
@@ -179,10 +185,11 @@ impl Aligner {
         })
     }
 
-    /// The alignment on a fix after a levelling or moving at least `align_min_speed_mps`, or
+    /// The alignment on a fix after a levelling or while `moving` (the caller's test: the fix's
+    /// speed at least `align_min_speed_mps` and clear of its noise, or a displacement), or
     /// `None` (the fix is remembered for the acceleration); `speed_std_mps` is the σ of the
-    /// fix's speed (for the motion-onset estimate of the delay).
-    pub fn try_align(&mut self, obs: &GnssObservation, speed_std_mps: f64) -> Option<Alignment> {
+    /// fix's speed (its velocity's σ, and for the motion-onset estimate of the delay).
+    pub fn try_align(&mut self, obs: &GnssObservation, speed_std_mps: f64, moving: bool) -> Option<Alignment> {
         // A fix with speed and track but no velocity (a receiver or file without one): the
         // horizontal velocity along the track.
         let mut v = obs.vel_ned_mps;
@@ -200,11 +207,16 @@ impl Aligner {
         // Moving: the heading hypotheses start on the course. Standing after a levelling: they
         // start now (their heading is decided once the motion shows it), so the static
         // period already estimates the sensor errors.
-        let moving = obs.speed_mps >= self.cfg.align_min_speed_mps && obs.track_rad.is_finite();
-        let standing = self.in_static && self.level().is_some() && obs.speed_mps < self.cfg.align_min_speed_mps;
+        let moving = moving && obs.track_rad.is_finite();
+        let standing = self.in_static && self.level().is_some() && !moving;
         if !((moving || standing) && v.x.is_finite() && v.y.is_finite()) {
             return None;
         }
+        let vel_std_mps = if speed_std_mps.is_nan() {
+            f64::INFINITY
+        } else {
+            speed_std_mps
+        };
         let (roll, pitch, levelled) = match self.level() {
             Some((r, p)) => (r, p, true),
             None => (0.0, 0.0, false),
@@ -234,6 +246,8 @@ impl Aligner {
             } else {
                 Vector3::zeros()
             },
+            vel_std_mps,
+            standing: !moving,
             delay_from_onset_s: self.delay_from_onset(obs, speed_std_mps, ONSET_DELAY_FLOOR_S),
         })
     }
@@ -260,5 +274,40 @@ mod tests {
         }
         let (r, p) = a.level().unwrap();
         assert!((r - roll).abs() < 1e-9 && (p - pitch).abs() < 1e-9, "{r} {p}");
+    }
+
+    /// After a levelling, a fix the caller does not find moving starts standing (its speed and
+    /// σ handed on for the navigator's static prior), one it finds moving on its course.
+    #[test]
+    fn a_standing_start_and_a_moving_one() {
+        let g = earth::normal_gravity(0.78, 0.0);
+        let mut a = Aligner::new(AlignConfig::default());
+        for k in 0..1000 {
+            a.on_imu(&ImuRecord {
+                host_ns: k * 5_000_000,
+                dt_s: 0.005,
+                gyro_rps: Vector3::zeros(),
+                accel_mps2: Vector3::new(0.0, 0.0, -g),
+            });
+        }
+        let obs = GnssObservation {
+            stamp_host_ns: 5_000_000_000,
+            lat_rad: 0.78,
+            lon_rad: 0.1,
+            h_m: 50.0,
+            vel_ned_mps: Vector3::repeat(f64::NAN),
+            pos_std_m: Vector3::new(1.8, 1.8, 3.6),
+            vel_std_mps: f64::NAN,
+            speed_mps: 17.9,
+            track_rad: 1.0,
+            pos_floor_std_m: Vector3::zeros(),
+        };
+        let standing = a.try_align(&obs, 25.0, false).expect("a levelled start");
+        assert!(standing.standing && standing.vel_std_mps == 25.0);
+        assert_eq!(standing.pva.q_nb.euler_angles().2, 0.0);
+        let moving = a.try_align(&obs, 0.05, true).expect("a moving start");
+        assert!(!moving.standing && moving.vel_std_mps == 0.05);
+        assert!((moving.pva.vel_ned_mps.xy().norm() - 17.9).abs() < 1e-9);
+        assert!((moving.pva.q_nb.euler_angles().2 - 1.0).abs() < 1e-9);
     }
 }

@@ -15,9 +15,9 @@
 //! the best filter's σ and by the weights themselves. For consistent components a hypothesis δ
 //! from the best is less likely by ½(δ/σ)² in log-likelihood once the data know the heading to
 //! σ; one only `dll` less likely says they know it no better than δ/√(−2·dll), whatever σ the
-//! linearised filters claim (far from the truth they all shrink alike: a pedestrian's 1.8 m
-//! fixes left hypotheses 30° apart within a few log-units of each other while each claimed
-//! 1°: 99 % of the weight is no decision there). A live hypothesis 30° away implies at
+//! linearised filters claim (far from the truth they all shrink alike: hypotheses 30° apart were
+//! seen within a few log-units of each other while each claimed 1°: 99 % of the weight is no
+//! decision there). A live hypothesis 30° away implies at
 //! least 30°/√(−2 ln PRUNE_WEIGHT) = 5.7°: in effect the heading is decided once every
 //! hypothesis outside the agreeing ones has been dropped. While the heading is not observable
 //! (no horizontal acceleration: standing, or moving straight at constant speed) the weights

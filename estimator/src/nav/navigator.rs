@@ -617,8 +617,28 @@ impl Navigator {
     /// Aligns on `obs` when the aligner can (`speed_std_mps`: the σ of its speed; `moving`: it
     /// shows motion above that noise).
     fn try_align(&mut self, obs: &GnssObservation, speed_std_mps: f64, moving: bool) {
-        let Some(a) = self.aligner.try_align(obs, speed_std_mps) else {
+        let Some(mut a) = self.aligner.try_align(obs, speed_std_mps, moving) else {
             return;
+        };
+        // The initial velocity. Standing (the IMU static after its levelling): zero to within
+        // the configured σ0, refined by the fix's velocity with its own σ (the product of the
+        // two Gaussians: a Doppler velocity of 0.1 m/s counts, a speed differenced from 1.8 m
+        // positions 0.1 s apart, 25 m/s of noise, does not). Moving: the fix's velocity, with
+        // at least its own σ.
+        let sigma0 = self.cfg.init_vel_std_mps;
+        let vel_std = if a.standing {
+            let k = if a.vel_std_mps.is_finite() {
+                sigma0 * sigma0 / (sigma0 * sigma0 + a.vel_std_mps * a.vel_std_mps)
+            } else {
+                0.0
+            };
+            a.pva.vel_ned_mps *= k;
+            a.acc_ned *= k;
+            sigma0 * (1.0 - k).sqrt()
+        } else if a.vel_std_mps.is_finite() {
+            sigma0.max(a.vel_std_mps)
+        } else {
+            sigma0
         };
         // A loose delay prior (software sync) is replaced by the motion-onset estimate: the
         // speed noise of a fix (~0.05 m/s) over a drive-off acceleration of ~1 m/s² puts it
@@ -636,7 +656,7 @@ impl Navigator {
         let mut p = StateMat::zeros();
         for i in 0..3 {
             p[(POS + i, POS + i)] = obs.pos_std_m[i].powi(2);
-            p[(VEL + i, VEL + i)] = cfg.init_vel_std_mps.powi(2);
+            p[(VEL + i, VEL + i)] = vel_std.powi(2);
             p[(BG + i, BG + i)] = if a.levelled {
                 // Static average: white noise over the static time plus the bias instability.
                 cfg.noise.arw[i] * cfg.noise.arw[i] / a.static_s.max(1.0) + cfg.noise.gyro_bias_std[i].powi(2)
