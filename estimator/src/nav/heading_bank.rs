@@ -17,9 +17,9 @@
 //! σ; one only `dll` less likely says they know it no better than δ/√(−2·dll), whatever σ the
 //! linearised filters claim (far from the truth they all shrink alike: hypotheses 30° apart were
 //! seen within a few log-units of each other while each claimed 1°: 99 % of the weight is no
-//! decision there). A live hypothesis 30° away implies at
-//! least 30°/√(−2 ln PRUNE_WEIGHT) = 5.7°: in effect the heading is decided once every
-//! hypothesis outside the agreeing ones has been dropped. While the heading is not observable
+//! decision there). A live hypothesis 30° away implies at least 30°/√(−2 ln PRUNE_WEIGHT) =
+//! 5.7°: in effect the heading is decided once every hypothesis outside the agreeing ones has
+//! been dropped. While the heading is not observable
 //! (no horizontal acceleration: standing, or moving straight at constant speed) the weights
 //! stay even and nothing is decided: no heading is claimed that the data do not show.
 //!

@@ -627,7 +627,8 @@ impl Navigator {
         // at least its own σ.
         let sigma0 = self.cfg.init_vel_std_mps;
         let vel_std = if a.standing {
-            let k = if a.vel_std_mps.is_finite() {
+            // A σ of zero is a velocity's σ not given (no receiver knows its velocity exactly).
+            let k = if a.vel_std_mps.is_finite() && a.vel_std_mps > 0.0 {
                 sigma0 * sigma0 / (sigma0 * sigma0 + a.vel_std_mps * a.vel_std_mps)
             } else {
                 0.0
