@@ -190,7 +190,7 @@ fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, fil
 
 /// States the delayed filter makes in one call at most, kept without reallocating: a whole
 /// fusion horizon (2 s by default, with the input order's hold) of a 1 kHz IMU, which it steps
-/// over at once when the heading is decided.
+/// over at once when the heading is decided, with the fine alignment's last half batch.
 pub const MAX_FUSED_BATCH: usize = 4096;
 
 /// The navigation filter.
@@ -751,8 +751,12 @@ impl Navigator {
         }
         self.filt = Some(start);
         let (records, fused, pending) = bank.log();
+        // The states of the re-run are fused states like any later one (events marked while
+        // the bank decided get their pose from them): the last half batch of them, so the
+        // batch keeps its capacity (10 s at 200 Hz; the events waiting reach back ~9 s).
+        let emit_from = records.len().saturating_sub(MAX_FUSED_BATCH / 2);
         let mut next = 0;
-        for r in records {
+        for (k, r) in records.iter().enumerate() {
             while let (Some(obs), Some(f)) = (fused.get(next), &self.filt)
                 && obs.epoch_ns(f.delay_s) <= r.host_ns
             {
@@ -760,6 +764,9 @@ impl Navigator {
                 next += 1;
             }
             self.filter_step(r);
+            if k >= emit_from {
+                self.push_fused(r);
+            }
         }
         for obs in fused[next..].iter().copied().chain(pending) {
             self.enqueue(obs);
@@ -1334,6 +1341,68 @@ mod tests {
         for (d, sd) in delays {
             assert!((d - 0.5).abs() < 0.05 && sd > 0.45, "Δ {d} ± {sd} from standing fixes");
         }
+    }
+
+    /// The fine alignment's re-run over the bank's data makes fused states like any later
+    /// step (the last half batch of them): the instants the bank spent deciding get the delayed
+    /// filter's state, not only those after the decision (events marked there get a pose).
+    #[test]
+    fn the_fine_alignment_hands_on_its_states() {
+        let mut nav = Navigator::new(NavConfig::default());
+        nav.reset_delay(0.0, 0.02);
+        nav.keep_fused();
+        let (lat0, lon0, h0) = (0.75_f64, 0.2_f64, 100.0);
+        let g = earth::normal_gravity(lat0, h0);
+        let (rm, rn) = earth::radii(lat0);
+        let yaw = 30f64.to_radians();
+        // Standing 3 s, then 1 m/s² forward along 30°, level; 200 Hz IMU, exact fixes at 10 Hz.
+        let (t0, t_go) = (1_000_000_000_000_i64, 3.0);
+        let mut decided_ns = None;
+        let mut first_fused_ns = None;
+        for k in 1..=5000 {
+            let t_s = k as f64 * 0.005;
+            let t_ns = t0 + k * 5_000_000;
+            let a = if t_s > t_go { 1.0 } else { 0.0 };
+            nav.on_imu(t_ns, 0.005, Vector3::zeros(), Vector3::new(a, 0.0, -g));
+            if k % 20 == 0 {
+                let tm = (t_s - t_go).max(0.0);
+                let (d, v) = (0.5 * tm * tm, tm);
+                let obs = GnssObservation {
+                    stamp_host_ns: t_ns,
+                    lat_rad: lat0 + d * yaw.cos() / (rm + h0),
+                    lon_rad: lon0 + d * yaw.sin() / ((rn + h0) * lat0.cos()),
+                    h_m: h0,
+                    vel_ned_mps: Vector3::new(v * yaw.cos(), v * yaw.sin(), 0.0),
+                    pos_std_m: Vector3::new(0.05, 0.05, 0.1),
+                    vel_std_mps: 0.05,
+                    speed_mps: v,
+                    track_rad: yaw,
+                    pos_floor_std_m: Vector3::zeros(),
+                };
+                nav.on_gnss(obs, t_ns);
+            }
+            if nav.is_aligned() && decided_ns.is_none() {
+                decided_ns = Some(t_ns);
+            }
+            nav.drain_fused(&mut |s| {
+                first_fused_ns.get_or_insert(s.host_ns);
+            });
+        }
+        let decided_ns = decided_ns.expect("the heading decided");
+        let first = first_fused_ns.expect("fused states");
+        let horizon_ns = (nav.horizon_s() * 1e9) as i64;
+        assert!(
+            first < decided_ns - horizon_ns - 1_000_000_000,
+            "the first fused state {} s before the decision, the horizon {} s",
+            (decided_ns - first) as f64 * 1e-9,
+            nav.horizon_s()
+        );
+        let yaw_est = nav.output().unwrap().q_nb.euler_angles().2;
+        assert!(
+            (yaw_est - yaw).abs() < 2f64.to_radians(),
+            "yaw {}",
+            yaw_est.to_degrees()
+        );
     }
 
     /// Under software sync a Δ below what is physical (a fix received before its epoch) is
