@@ -215,16 +215,6 @@ impl HeadingBank {
         }
     }
 
-    /// The GNSS delay and its 1-sigma of each live hypothesis, s.
-    #[cfg(test)]
-    pub fn delays(&self) -> Vec<(f64, f64)> {
-        self.hyps
-            .iter()
-            .filter(|h| h.alive)
-            .map(|h| (h.filt.delay_s, h.filt.eskf.std(DELAY)))
-            .collect()
-    }
-
     /// Live hypotheses.
     pub fn alive(&self) -> usize {
         self.hyps.iter().filter(|h| h.alive).count()

@@ -22,7 +22,7 @@ pub use super::config::NavConfig;
 use super::config::{Coupling, InitialState};
 use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, POS, ProcessNoise, SA, SG, StateMat, VEL};
 use super::eskf::Eskf;
-use super::filter::{DELAY_SPEED_SIGMAS, DelayedFilter};
+use super::filter::DelayedFilter;
 use super::heading_bank::{BankStep, HeadingBank, with_heading};
 use super::imu_buffer::{ImuBuffer, ImuRecord};
 use super::integrity::{
@@ -681,21 +681,15 @@ impl Navigator {
         if cfg.estimate_delay {
             // The initial position and velocity come from a fix whose epoch is only known to
             // σ_Δ: δr = −v·δΔ and δv = −a·δΔ (see measurements::gnss), so they share that uncertainty.
-            // Correlated only while the start velocity stands out of its σ (the rule of
-            // `DelayedFilter::delay_observable`): a standing start's velocity is its fix's noise
-            // (0.14 ± 0.15 m/s from 1 cm fixes 0.1 s apart), and a correlation made of it reads
-            // Δ into the first standing fixes (−0.99: a 5 cm residual moved Δ by 0.4 s).
             let var_d = self.delay_prior.1.powi(2);
             let v = a.pva.vel_ned_mps;
             let acc = a.acc_ned;
-            let coupled = v.x * v.x + v.y * v.y > DELAY_SPEED_SIGMAS * DELAY_SPEED_SIGMAS * 2.0 * vel_std * vel_std;
-            let c = if coupled { var_d } else { 0.0 };
             p[(DELAY, DELAY)] = var_d;
             for i in 0..3 {
-                p[(POS + i, DELAY)] = -v[i] * c;
-                p[(DELAY, POS + i)] = -v[i] * c;
-                p[(VEL + i, DELAY)] = -acc[i] * c;
-                p[(DELAY, VEL + i)] = -acc[i] * c;
+                p[(POS + i, DELAY)] = -v[i] * var_d;
+                p[(DELAY, POS + i)] = -v[i] * var_d;
+                p[(VEL + i, DELAY)] = -acc[i] * var_d;
+                p[(DELAY, VEL + i)] = -acc[i] * var_d;
                 for j in 0..3 {
                     p[(POS + i, POS + j)] += v[i] * v[j] * var_d;
                     p[(VEL + i, VEL + j)] += acc[i] * acc[j] * var_d;
@@ -1285,62 +1279,6 @@ mod tests {
         };
         nav.initialize(&init, 1_000_000_000);
         nav
-    }
-
-    /// A standing start on cm-level fixes without a velocity (their speed differenced from
-    /// positions 0.1 s apart: 0.1–0.2 m/s of noise), under software sync: while standing the
-    /// fixes say nothing about Δ, and no heading is decided. The start velocity's noise once
-    /// made a correlation of −0.99 between position and Δ: the fourth fix moved Δ by 0.5 s,
-    /// then 1.9 s with a σ of 1 ms, and the bank decided a heading 149° off with σ 1°.
-    #[test]
-    fn a_standing_start_reads_no_delay_and_no_heading_into_its_fixes() {
-        let mut nav = Navigator::new(NavConfig {
-            gnss_lever_arm_m: [-0.01, 0.774, -0.8],
-            ..Default::default()
-        });
-        nav.reset_delay(0.5, 0.5);
-        let g = earth::normal_gravity(0.75, 300.0);
-        let (lat0, lon0) = (0.75_f64, 2.16_f64);
-        let (rm, rn) = earth::radii(lat0);
-        // A fixed antenna, 1 cm of noise per axis (a deterministic sequence), received 0.17 s
-        // after its epoch.
-        let mut seed: u64 = 7;
-        let mut noise = move || {
-            seed = seed
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.035
-        };
-        let mut prev: Option<(f64, f64)> = None;
-        for k in 1..=1000 {
-            let t_ns = 1_000_000_000_000 + k * 5_000_000;
-            nav.on_imu(t_ns, 0.005, Vector3::zeros(), Vector3::new(0.0, 0.0, -g));
-            if k % 20 == 14 {
-                let (n, e) = (noise(), noise());
-                let (dn, de) = prev.map_or((0.0, 0.0), |(pn, pe)| (n - pn, e - pe));
-                prev = Some((n, e));
-                let obs = GnssObservation {
-                    stamp_host_ns: t_ns,
-                    lat_rad: lat0 + n / (rm + 300.0),
-                    lon_rad: lon0 + e / ((rn + 300.0) * lat0.cos()),
-                    h_m: 300.0,
-                    vel_ned_mps: Vector3::repeat(f64::NAN),
-                    pos_std_m: Vector3::new(0.011, 0.011, 0.022),
-                    vel_std_mps: f64::NAN,
-                    speed_mps: dn.hypot(de) / 0.1,
-                    track_rad: de.atan2(dn),
-                    pos_floor_std_m: Vector3::zeros(),
-                };
-                nav.on_gnss(obs, t_ns);
-            }
-        }
-        assert!(!nav.motion_seen());
-        assert!(!nav.is_aligned(), "a heading decided while standing");
-        let delays = nav.bank.as_ref().expect("a standing start").delays();
-        assert!(!delays.is_empty());
-        for (d, sd) in delays {
-            assert!((d - 0.5).abs() < 0.05 && sd > 0.45, "Δ {d} ± {sd} from standing fixes");
-        }
     }
 
     /// The fine alignment's re-run over the bank's data makes fused states like any later
