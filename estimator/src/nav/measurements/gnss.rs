@@ -136,9 +136,8 @@ pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Opt
 /// is extrapolated by v_ant·ε. The Δ column only when `delay_observable`
 /// ([`DelayedFilter::delay_observable`]). Both use the antenna's velocity
 /// v_ant = v + C_b^n (ω × l): the antenna at the epoch t − Δ is r(t − Δ) + C_b^n(t − Δ)·l, whose
-/// derivative in Δ is −v_ant (a slow robot turning 60° in 8 s with its antenna 0.5 m off the
-/// IMU: a lever-arm velocity of 0.07 m/s beside 0.5 m/s, which the IMU's velocity alone
-/// read into Δ as 0.4 s).
+/// derivative in Δ is −v_ant (a slow robot turning 60° in 8 s with its antenna 0.47 m off the
+/// IMU: a lever-arm velocity of 0.06 m/s beside 0.5 m/s).
 pub fn position_terms(
     pva: &Pva,
     lever_b: &Vector3<f64>,
