@@ -19,9 +19,9 @@
 //! seen within a few log-units of each other while each claimed 1°: 99 % of the weight is no
 //! decision there). A live hypothesis 30° away implies at least 30°/√(−2 ln PRUNE_WEIGHT) =
 //! 5.7°: in effect the heading is decided once every hypothesis outside the agreeing ones has
-//! been dropped. While the heading is not observable
-//! (no horizontal acceleration: standing, or moving straight at constant speed) the weights
-//! stay even and nothing is decided: no heading is claimed that the data do not show.
+//! been dropped. While the heading is not observable (no horizontal acceleration: standing, or
+//! moving straight at constant speed) the weights stay even and nothing is decided: no heading
+//! is claimed that the data do not show.
 //!
 //! A hypothesis that started tens of degrees off is linearised far from the truth: its states
 //! carry what that cost, and a filter with little process noise never forgets it. So the bank
