@@ -39,12 +39,27 @@ pub enum Update {
 pub struct Eskf {
     /// Error-state covariance P.
     pub p: StateMat,
+    /// A state held as a consider parameter (Schmidt 1966): the updates leave its estimate and
+    /// its variance as they are (its row of the gain is zero) and keep its correlations with
+    /// the others consistent (the Joseph form holds for any gain). For a state the
+    /// measurements cannot tell apart from the others at the moment, whose information would
+    /// otherwise come only through the linearisation's noise.
+    pub held: Option<usize>,
 }
 
 impl Eskf {
     /// A filter with initial covariance `p0`.
     pub fn new(p0: StateMat) -> Self {
-        Self { p: p0 }
+        Self { p: p0, held: None }
+    }
+
+    /// The gain P Hᵀ S⁻¹ with the [`held`](Self::held) state's row zeroed.
+    fn gain<const M: usize>(&self, pht: &SMatrix<f64, N, M>, s_inv: &SMatrix<f64, M, M>) -> SMatrix<f64, N, M> {
+        let mut k = pht * s_inv;
+        if let Some(i) = self.held {
+            k.row_mut(i).fill(0.0);
+        }
+        k
     }
 
     /// P ← Φ P Φᵀ + Q_d (Brown & Hwang eq. 5.2.10), symmetrised.
@@ -73,7 +88,7 @@ impl Eskf {
         if !nis.is_finite() || nis > gate {
             return Update::Rejected { nis };
         }
-        let k = pht * s_inv;
+        let k = self.gain(&pht, &s_inv);
         let dx = k * dz;
         let i_kh = StateMat::identity() - k * h;
         let p = i_kh * self.p * i_kh.transpose() + k * r * k.transpose();
@@ -118,7 +133,7 @@ impl Eskf {
         if !(nis.is_finite() && ln_det.is_finite()) {
             return None;
         }
-        let k = pht * s_inv;
+        let k = self.gain(&pht, &s_inv);
         let dx = k * dz;
         let i_kh = StateMat::identity() - k * h;
         let p = i_kh * self.p * i_kh.transpose() + k * r * k.transpose();
@@ -163,5 +178,32 @@ mod tests {
             f.update(&Vector1::new(10.0), &h, &Matrix1::new(1.0), 1.0),
             Update::Rejected { .. }
         ));
+    }
+
+    #[test]
+    fn a_held_state_keeps_its_estimate_and_variance_and_stays_consistent() {
+        // States 0 and 1 correlated at 0.9; state 0 measured. Free, state 1 moves by
+        // P10/(P00+R)·dz and its variance shrinks; held, it does neither, and its covariance
+        // with state 0 is what the Joseph form gives for that gain: (1 − K0)·P01.
+        let mut p = StateMat::identity();
+        p[(0, 1)] = 0.9;
+        p[(1, 0)] = 0.9;
+        let mut h = SMatrix::<f64, 1, N>::zeros();
+        h[(0, 0)] = 1.0;
+        let (dz, r) = (Vector1::new(1.0), Matrix1::new(1.0));
+        let mut free = Eskf::new(p);
+        let Update::Accepted { dx, .. } = free.update(&dz, &h, &r, 1.0) else {
+            panic!("gated")
+        };
+        assert!((dx[1] - 0.45).abs() < 1e-12 && free.p[(1, 1)] < 0.6);
+        let mut held = Eskf::new(p);
+        held.held = Some(1);
+        let Update::Accepted { dx, .. } = held.update(&dz, &h, &r, 1.0) else {
+            panic!("gated")
+        };
+        assert!((dx[0] - 0.5).abs() < 1e-12 && dx[1] == 0.0);
+        assert!((held.p[(1, 1)] - 1.0).abs() < 1e-12 && (held.p[(0, 0)] - 0.5).abs() < 1e-12);
+        assert!((held.p[(0, 1)] - 0.45).abs() < 1e-12);
+        assert!(held.p.cholesky().is_some());
     }
 }

@@ -215,6 +215,14 @@ impl HeadingBank {
         }
     }
 
+    /// The GNSS delay Δ and its 1-sigma of each live hypothesis, s.
+    pub fn delays(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.hyps
+            .iter()
+            .filter(|h| h.alive)
+            .map(|h| (h.filt.delay_s, h.filt.eskf.std(DELAY)))
+    }
+
     /// Live hypotheses.
     pub fn alive(&self) -> usize {
         self.hyps.iter().filter(|h| h.alive).count()

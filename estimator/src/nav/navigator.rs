@@ -1343,6 +1343,74 @@ mod tests {
         );
     }
 
+    /// A car standing with 1 cm fixes at 10 Hz and no velocity (speed and track differenced
+    /// from the positions, as an import without velocities has them), software sync (Δ's prior
+    /// 0.5 ± 0.5 s): the alignment correlates position with Δ through the standing velocity,
+    /// which is the fixes' noise. Δ is held while not observable, so the standing fixes leave
+    /// it and its σ alone, and the heading bank, which cannot see a heading in them, decides
+    /// none (the sweep's seed 15 run 3: Δ went 0.5 → 1.95 s with σ 1 ms while standing, and a
+    /// heading 149° off was decided with σ 1°).
+    #[test]
+    fn a_standing_start_learns_neither_delay_nor_heading_from_the_noise() {
+        let mut nav = Navigator::new(NavConfig {
+            gnss_lever_arm_m: [-0.01, 0.774, -0.8],
+            ..NavConfig::default()
+        });
+        nav.reset_delay(0.5, 0.5);
+        let (lat0, lon0, h0) = (0.746_f64, 2.162_f64, 300.0);
+        let g = earth::normal_gravity(lat0, h0);
+        let (rm, rn) = earth::radii(lat0);
+        let yaw = 221f64.to_radians();
+        let lever_n = nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, yaw) * Vector3::new(-0.01, 0.774, -0.8);
+        // Gaussian noise, σ 1 cm (xorshift64 and Box–Muller: deterministic).
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut gauss = move || {
+            let mut u = || {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let (u1, u2) = (u().max(1e-300), u());
+            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+        };
+        let fixes: Vec<(f64, f64)> = (0..=301).map(|_| (0.01 * gauss(), 0.01 * gauss())).collect();
+        let t0 = 1_000_000_000_000_i64;
+        let mut moved = 0.0_f64;
+        for k in 1..=6000 {
+            let t_ns = t0 + k * 5_000_000;
+            nav.on_imu(t_ns, 0.005, Vector3::zeros(), Vector3::new(0.0, 0.0, -g));
+            if k % 20 == 0 && k / 20 < 300 {
+                let i = (k / 20) as usize;
+                let (n, e) = (lever_n.x + fixes[i].0, lever_n.y + fixes[i].1);
+                let v = Vector3::new(fixes[i + 1].0 - fixes[i - 1].0, fixes[i + 1].1 - fixes[i - 1].1, 0.0) / 0.2;
+                let obs = GnssObservation {
+                    stamp_host_ns: t_ns,
+                    lat_rad: lat0 + n / (rm + h0),
+                    lon_rad: lon0 + e / ((rn + h0) * lat0.cos()),
+                    h_m: h0 - lever_n.z,
+                    vel_ned_mps: Vector3::new(f64::NAN, f64::NAN, f64::NAN),
+                    pos_std_m: Vector3::new(0.011, 0.011, 0.02),
+                    vel_std_mps: f64::NAN,
+                    speed_mps: v.norm(),
+                    track_rad: v.y.atan2(v.x),
+                    pos_floor_std_m: Vector3::zeros(),
+                };
+                nav.on_gnss(obs, t_ns);
+            }
+            for (d, sd) in nav.bank.iter().flat_map(|b| b.delays()) {
+                moved = moved.max((d - 0.5).abs()).max((sd - 0.5).abs());
+            }
+        }
+        assert!(
+            !nav.is_aligned(),
+            "a heading decided while standing: {:?}",
+            nav.output()
+        );
+        assert!(nav.bank.is_some(), "the heading bank waits");
+        assert!(moved < 1e-3, "Δ or its σ moved by {moved} s");
+    }
+
     /// Under software sync a Δ below what is physical (a fix received before its epoch) is
     /// not an estimate: it starts again from the prior, counted, the states recovering; the
     /// same Δ under hardware sync is left to the filter.
