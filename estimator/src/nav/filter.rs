@@ -185,14 +185,19 @@ impl DelayedFilter {
         v.x * v.x + v.y * v.y > DELAY_SPEED_SIGMAS * DELAY_SPEED_SIGMAS * var_h
     }
 
-    /// Holds Δ as a consider state ([`Eskf::held`]) for the next updates while it is not
-    /// [`delay_observable`](Self::delay_observable): a standing start's position and velocity
-    /// are correlated with Δ through a velocity that is the fixes' noise, and each standing fix
-    /// or zero-velocity update would otherwise move Δ through that correlation and shrink its σ
-    /// (a car standing 30 s with 1 cm fixes at 10 Hz: Δ from 0.5 to 1.95 s with σ 1 ms, and the
-    /// heading bank, linearised there, decided a heading 149° off with σ 1°).
-    pub fn hold_unobservable_delay(&mut self) {
+    /// Runs `update` (one measurement's updates) with Δ held as a consider state
+    /// ([`Eskf::held`]) while it is not [`delay_observable`](Self::delay_observable): a
+    /// standing start's position and velocity are correlated with Δ through a velocity that is
+    /// the fixes' noise, and each standing fix would otherwise move Δ through that correlation
+    /// and shrink its σ (a car standing 30 s with 1 cm fixes at 10 Hz: Δ from 0.5 to 1.95 s
+    /// with σ 1 ms, and the heading bank, linearised there, decided a heading 149° off with σ
+    /// 1°). For the fixes only: a zero-velocity update informs Δ through those correlations
+    /// rightly (the instant a vehicle stops is the IMU's, and the fixes see it Δ later).
+    pub fn with_unobservable_delay_held<T>(&mut self, update: impl FnOnce(&mut Self) -> T) -> T {
         self.eskf.held = (!self.delay_observable()).then_some(DELAY);
+        let out = update(self);
+        self.eskf.held = None;
+        out
     }
 
     /// Closed-loop feedback of an error-state estimate (KF-GINS `stateFeedback`).

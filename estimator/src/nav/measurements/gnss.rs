@@ -203,9 +203,8 @@ pub fn velocity_terms(
 /// hypothesis is then dropped).
 pub fn fuse_weighed(obs: &GnssObservation, f: &mut DelayedFilter, eps: f64, cfg: &NavConfig) -> Option<(f64, f64)> {
     let lever = Vector3::from(cfg.gnss_lever_arm_m);
-    f.hold_unobservable_delay();
-    let (dz, h, r) = position_terms(&f.pva, &lever, &f.last_w, obs, eps, f.delay_observable());
-    let fused = (|| {
+    f.with_unobservable_delay_held(|f| {
+        let (dz, h, r) = position_terms(&f.pva, &lever, &f.last_w, obs, eps, f.delay_observable());
         let (dx, mut ll) = f.eskf.update_with_likelihood(&dz, &h, &r)?;
         f.feedback(&dx, cfg.fusion_horizon_s);
         let mut dyaw = dx[ATT + 2];
@@ -217,9 +216,7 @@ pub fn fuse_weighed(obs: &GnssObservation, f: &mut DelayedFilter, eps: f64, cfg:
             dyaw += dx[ATT + 2];
         }
         Some((ll, dyaw))
-    })();
-    f.eskf.held = None;
-    fused
+    })
 }
 
 /// Consecutive rejected fixes after which the filter resets to GNSS (a GNSS jump, or a filter
@@ -360,7 +357,7 @@ impl Measurement for GnssObservation {
     }
 
     /// Position (gated; five rejections in a row reset to the fix), then horizontal velocity;
-    /// Δ held while not observable ([`DelayedFilter::hold_unobservable_delay`]).
+    /// Δ held while not observable ([`DelayedFilter::with_unobservable_delay_held`]).
     fn fuse(
         &self,
         f: &mut DelayedFilter,
@@ -369,10 +366,87 @@ impl Measurement for GnssObservation {
         fusion: &GnssFusion,
         state: &mut GnssState,
     ) -> bool {
-        f.hold_unobservable_delay();
-        let fused = fuse_fix(self, f, eps, cfg, fusion, state);
-        f.eskf.held = None;
-        fused
+        let obs = self;
+        f.with_unobservable_delay_held(|f| {
+            if obs.pos_floor_std_m != Vector3::zeros() {
+                f.pos_floor_std_ned_m = obs.pos_floor_std_m;
+            }
+            let t_f = obs.epoch_ns(f.delay_s);
+            let (dz, h, r) = position_terms(
+                &f.pva,
+                &Vector3::from(cfg.gnss_lever_arm_m),
+                &f.last_w,
+                obs,
+                eps,
+                f.delay_observable(),
+            );
+            let mut outcome = f.eskf.update(&dz, &h, &r, cfg.gate_scale);
+            let since = |t: i64| (t_f - t) as f64 * 1e-9;
+            let coasted = state.last_fused_ns == 0 || since(state.last_fused_ns) >= fusion.coast_s;
+            if !coasted {
+                let nis = match outcome {
+                    Update::Accepted { nis, .. } | Update::Rejected { nis } => nis,
+                };
+                adapt_process_noise(f, fusion, state, nis, 3);
+            }
+            if let Update::Rejected { nis } = outcome {
+                let gate = crate::nav::eskf::gate_of::<3>(cfg.gate_scale);
+                let recovering = state.inflations > 0 && since(state.last_inflated_ns) < fusion.coast_s
+                    || state.nis_average > fusion.inflate_above_nis;
+                if (coasted || recovering || state.consecutive_rejects > 0) && nis <= gate * fusion.max_inflation {
+                    f.eskf.p *= nis / gate;
+                    state.inflations += 1;
+                    state.last_inflated_ns = t_f;
+                    // Now within the gate up to R's share: fused without gating again.
+                    outcome = f.eskf.update(&dz, &h, &r, f64::INFINITY);
+                }
+            }
+            match outcome {
+                Update::Accepted { dx, .. } => {
+                    f.feedback(&dx, cfg.fusion_horizon_s);
+                    state.fixes_used += 1;
+                    state.consecutive_rejects = 0;
+                    state.last_fused_ns = t_f;
+                }
+                Update::Rejected { .. } => {
+                    state.fixes_rejected += 1;
+                    if state.consecutive_rejects == 0 {
+                        state.rejected_dz_sum_m = Vector3::zeros();
+                        state.rejected_var_sum_m2 = Vector3::zeros();
+                    }
+                    state.consecutive_rejects += 1;
+                    state.rejected_dz_sum_m += dz;
+                    state.rejected_var_sum_m2 += obs.pos_std_m.component_mul(&obs.pos_std_m);
+                    if state.consecutive_rejects < RESET_AFTER_REJECTS {
+                        // A position that jumped leaves the Doppler velocity valid: it is fused on
+                        // its own gate, so the dead reckoning until the reset keeps its velocity.
+                        return fuse_velocity(f, obs, eps, cfg, fusion, state, coasted);
+                    }
+                    // Persistently rejected: did the GNSS position jump, or has the filter lost
+                    // consistency? The fix's velocity against the filter's tells.
+                    let vel_agrees = obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() && {
+                        let (dz, h, r) = velocity_terms_of(f, cfg, obs, eps);
+                        f.eskf.gate(&dz, &h, &r, cfg.gate_scale).0
+                    };
+                    state.gnss_resets += 1;
+                    let k = f64::from(state.consecutive_rejects);
+                    let (mean_dz, mean_var) = (state.rejected_dz_sum_m / k, state.rejected_var_sum_m2 / k);
+                    state.consecutive_rejects = 0;
+                    state.last_fused_ns = t_f;
+                    if !vel_agrees {
+                        reset_to(f, obs, cfg, eps);
+                        state.gnss_resets_full += 1;
+                        return true;
+                    }
+                    // The fixes rejected in a row agree on one jump (their velocities were fused, so
+                    // the filter kept its velocity meanwhile): the position moves by their mean
+                    // offset, known to their σ over √K.
+                    shift_position(f, &mean_dz, &(mean_var / k));
+                }
+            }
+            fuse_velocity(f, obs, eps, cfg, fusion, state, coasted);
+            true
+        })
     }
 
     fn counters(state: &GnssState, out: &mut dyn FnMut(&'static str, u64)) {
@@ -380,94 +454,6 @@ impl Measurement for GnssObservation {
     }
 }
 
-/// [`GnssObservation`]'s fusion ([`Measurement::fuse`]).
-fn fuse_fix(
-    obs: &GnssObservation,
-    f: &mut DelayedFilter,
-    eps: f64,
-    cfg: &NavConfig,
-    fusion: &GnssFusion,
-    state: &mut GnssState,
-) -> bool {
-    if obs.pos_floor_std_m != Vector3::zeros() {
-        f.pos_floor_std_ned_m = obs.pos_floor_std_m;
-    }
-    let t_f = obs.epoch_ns(f.delay_s);
-    let (dz, h, r) = position_terms(
-        &f.pva,
-        &Vector3::from(cfg.gnss_lever_arm_m),
-        &f.last_w,
-        obs,
-        eps,
-        f.delay_observable(),
-    );
-    let mut outcome = f.eskf.update(&dz, &h, &r, cfg.gate_scale);
-    let since = |t: i64| (t_f - t) as f64 * 1e-9;
-    let coasted = state.last_fused_ns == 0 || since(state.last_fused_ns) >= fusion.coast_s;
-    if !coasted {
-        let nis = match outcome {
-            Update::Accepted { nis, .. } | Update::Rejected { nis } => nis,
-        };
-        adapt_process_noise(f, fusion, state, nis, 3);
-    }
-    if let Update::Rejected { nis } = outcome {
-        let gate = crate::nav::eskf::gate_of::<3>(cfg.gate_scale);
-        let recovering = state.inflations > 0 && since(state.last_inflated_ns) < fusion.coast_s
-            || state.nis_average > fusion.inflate_above_nis;
-        if (coasted || recovering || state.consecutive_rejects > 0) && nis <= gate * fusion.max_inflation {
-            f.eskf.p *= nis / gate;
-            state.inflations += 1;
-            state.last_inflated_ns = t_f;
-            // Now within the gate up to R's share: fused without gating again.
-            outcome = f.eskf.update(&dz, &h, &r, f64::INFINITY);
-        }
-    }
-    match outcome {
-        Update::Accepted { dx, .. } => {
-            f.feedback(&dx, cfg.fusion_horizon_s);
-            state.fixes_used += 1;
-            state.consecutive_rejects = 0;
-            state.last_fused_ns = t_f;
-        }
-        Update::Rejected { .. } => {
-            state.fixes_rejected += 1;
-            if state.consecutive_rejects == 0 {
-                state.rejected_dz_sum_m = Vector3::zeros();
-                state.rejected_var_sum_m2 = Vector3::zeros();
-            }
-            state.consecutive_rejects += 1;
-            state.rejected_dz_sum_m += dz;
-            state.rejected_var_sum_m2 += obs.pos_std_m.component_mul(&obs.pos_std_m);
-            if state.consecutive_rejects < RESET_AFTER_REJECTS {
-                // A position that jumped leaves the Doppler velocity valid: it is fused on
-                // its own gate, so the dead reckoning until the reset keeps its velocity.
-                return fuse_velocity(f, obs, eps, cfg, fusion, state, coasted);
-            }
-            // Persistently rejected: did the GNSS position jump, or has the filter lost
-            // consistency? The fix's velocity against the filter's tells.
-            let vel_agrees = obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite() && {
-                let (dz, h, r) = velocity_terms_of(f, cfg, obs, eps);
-                f.eskf.gate(&dz, &h, &r, cfg.gate_scale).0
-            };
-            state.gnss_resets += 1;
-            let k = f64::from(state.consecutive_rejects);
-            let (mean_dz, mean_var) = (state.rejected_dz_sum_m / k, state.rejected_var_sum_m2 / k);
-            state.consecutive_rejects = 0;
-            state.last_fused_ns = t_f;
-            if !vel_agrees {
-                reset_to(f, obs, cfg, eps);
-                state.gnss_resets_full += 1;
-                return true;
-            }
-            // The fixes rejected in a row agree on one jump (their velocities were fused, so
-            // the filter kept its velocity meanwhile): the position moves by their mean
-            // offset, known to their σ over √K.
-            shift_position(f, &mean_dz, &(mean_var / k));
-        }
-    }
-    fuse_velocity(f, obs, eps, cfg, fusion, state, coasted);
-    true
-}
 
 /// [`velocity_terms`] of filter `f` at its last rates, with the configured lever arm.
 fn velocity_terms_of(
