@@ -38,8 +38,17 @@ Sensor errors (seeded, numpy default_rng(seed)), per axis, KF-GINS's model:
   first-order Gauss-Markov process (sigma, correlation time tau), exact discretisation, started
   in its stationary distribution. KF-GINS compensates exactly this form ((meas - b dt)/(1 + s)).
 
-Outputs in OUTDIR: imu.txt, gnss.pos, truth.nav, kf-gins.yaml (+ empty kf-gins-out/ for its
-results), meta.json. See tests/python/README.md.
+Vibration (--vibration V, default none): per body axis, three tones of 8-40 Hz as exact rate and
+acceleration terms of a small rotation and displacement (the excursions themselves, <= 0.03 V deg
+and 0.09 V mm, are left out of the truth): what makes an IMU array's time offsets observable.
+
+IMU array (--array-offsets TD1 TD2 ...): IMU i (1, 2, ...) sits with IMU 0 (no lever arm, same
+axes), has its own draw of the same error model (default_rng([seed, i])) and its samples are
+stamped TD_i late: its row tagged t_k holds the increments over (t_{k-1} - TD_i, t_k - TD_i]
+(navsync's convention for an IMU offset Td, estimator/src/array/imu_offset.rs).
+
+Outputs in OUTDIR: imu.txt (imu1.txt ... for an array), gnss.pos, truth.nav, kf-gins.yaml (+
+empty kf-gins-out/ for its results), meta.json. See tests/python/README.md.
 """
 
 import argparse
@@ -179,6 +188,14 @@ class Drive:
         self.init = {"speed": 0.0, "heading": args.heading0 * D2R,
                      "grade": args.grade0 * D2R, "bank": args.bank0 * D2R}
         self.events = {q: [] for q in self.init}
+        # Vibration (--vibration V): per body axis three tones of 8-40 Hz, a rotation of
+        # V * 0.01 deg and a displacement of V * 0.03 mm each, random phases (own seed).
+        vr = np.random.default_rng([int(getattr(args, "seed", 1)), 1000])
+        v = float(getattr(args, "vibration", 0.0))
+        self.vibration = [] if v <= 0.0 else [
+            (kind, axis, amp, 2.0 * math.pi * vr.uniform(8.0, 40.0), vr.uniform(0.0, 2.0 * math.pi))
+            for kind, amp in (("rotation", v * 0.01 * D2R), ("displacement", v * 0.03e-3))
+            for axis in range(3) for _ in range(3)]
         rep = 0
         while self.static + rep * PATTERN_LENGTH < self.duration:
             off = self.static + rep * PATTERN_LENGTH
@@ -261,6 +278,13 @@ def sensor_truth(drive, t, lat, h):
     fn = m["an"] + np.cross(2.0 * w_ie + w_en, vn) - g
     f_b = np.einsum("nij,nj->ni", cnb, fn)
     w_ib = m["w_nb"] + np.einsum("nij,nj->ni", cnb, w_ie + w_en)
+    # Vibration: a rotation A sin(wt + p) about a body axis adds its rate A w cos(wt + p); a
+    # displacement D sin(wt + p) along it adds its acceleration -D w^2 sin(wt + p).
+    for kind, axis, amp, w, ph in drive.vibration:
+        if kind == "rotation":
+            w_ib[:, axis] += amp * w * np.cos(w * t + ph)
+        else:
+            f_b[:, axis] -= amp * w * w * np.sin(w * t + ph)
     return w_ib, f_b
 
 
@@ -557,6 +581,12 @@ def parse_args(argv):
                              "m/s/sqrt(h), gyro bias deg/h, accel bias mGal, scale ppm, "
                              "corr time h")
     ap.add_argument("--no-imu-errors", action="store_true", help="write the true increments")
+    ap.add_argument("--vibration", type=float, default=0.0,
+                    help="scale of a vehicle's vibration in the IMU data (1: ~0.8 m/s^2 and "
+                         "~2 deg/s RMS per axis); the truth leaves out its <= 3 V * 0.01 deg, "
+                         "3 V * 0.03 mm excursions")
+    ap.add_argument("--array-offsets", type=float, nargs="+", default=[], metavar="TD",
+                    help="s: one more IMU per value (imu1.txt ...) stamped TD late")
     ap.add_argument("--init-pos-std", type=float, nargs=3, default=[0.05, 0.05, 0.1])
     ap.add_argument("--init-vel-std", type=float, nargs=3, default=[0.02, 0.02, 0.02])
     ap.add_argument("--init-att-std", type=float, nargs=3, default=[0.05, 0.05, 0.2],
@@ -629,6 +659,17 @@ def main(argv=None):
     out = args.outdir
     np.savetxt(os.path.join(out, "imu.txt"), np.column_stack([sow, mth, mvl]),
                fmt=["%.9f"] + ["%.15e"] * 6)
+    array = []
+    for i, td in enumerate(args.array_offsets, start=1):
+        # The same grid shifted TD earlier: row k integrates (tau_{k-1} - TD, tau_k - TD].
+        tr = Track(drive, args.lat0 * D2R, args.lon0 * D2R, args.h0, -dt - td, dt, n_rows,
+                   gl=tuple(args.gl))
+        ath, avl = increments(drive, tr, tuple(args.gl))
+        ath, avl, real_i = add_sensor_errors(np.random.default_rng([args.seed, i]), ath, avl, dt, p,
+                                             not args.no_imu_errors)
+        np.savetxt(os.path.join(out, f"imu{i}.txt"), np.column_stack([sow, ath, avl]),
+                   fmt=["%.9f"] + ["%.15e"] * 6)
+        array.append({"file": f"imu{i}.txt", "offset_s": td, "imu_error_realised": real_i})
     np.savetxt(os.path.join(out, "gnss.pos"), gnss,
                fmt=["%.6f", "%.12f", "%.12f", "%.6f", "%.4f", "%.4f", "%.4f"])
     np.savetxt(os.path.join(out, "truth.nav"), truth,
@@ -688,6 +729,7 @@ antlever: {vec(args.lever_arm)}
         "args": vars(args),
         "imu_error_parameters": p,
         "imu_error_realised": realised,
+        "array": array,
         "earth_model": {"ellipsoid": "WGS-84", "a": WGS84_A, "e2": WGS84_E2,
                         "omega_ie": OMEGA_IE,
                         "gravity": "GRS80 Somigliana series + height terms (Torge & Mueller "

@@ -25,6 +25,12 @@ KF-GINS reads each fix at its epoch; where the drive has a receipt latency navsy
 second time with that same information (the fixes at their epochs, as under PPS) and the
 ratio is taken on that run (the software-sync run's RMS, which pays for estimating the delay,
 is kept beside it).
+
+IMU arrays (unless --no-array): each run's drive is made a second time with a vehicle's
+vibration (scale 0.3 to 3) and two more IMUs stamped late by -20 to +20 ms each (drawn from
+the run's own seed, so the runs above do not change), imported as an array and replayed with
+`--imus 0,1,2`: the final offset of each IMU within 2 sigma of its own sigma, and whether it
+converged (sigma < 1 ms).
 Exits non-zero when a step of the sweep itself fails. Needs numpy.
 """
 
@@ -102,6 +108,61 @@ def coverage(nav_path, std_path, truth_path):
     return ok, nan
 
 
+def import_cmd(a, d, drive, rec):
+    """`navsync import kf-gins` of a drive (fixes at their epochs, PPS)."""
+    return [a.navsync, "import", "kf-gins", "--imu", os.path.join(drive, "imu.txt"),
+            "--gnss", os.path.join(drive, "gnss.pos"), "--truth", os.path.join(drive, "truth.nav"),
+            "--out", rec, "--force"]
+
+
+def replay(a, d, rec, work, extra=()):
+    """`navsync replay --estimate` as a user runs it: (exit status, summary, output folder)."""
+    out = os.path.join(work, "out")
+    summary = os.path.join(work, "summary.json")
+    rep = [a.navsync, "replay", rec, "--estimate", *extra, "--lever-arm", ",".join(map(str, d["lever_arm"])),
+           "--format", "kf-gins", "--out", out + "/", "--summary-json", summary, "--force"]
+    if d["latency_s"] is not None:
+        rep.append("--software-sync")
+    rc = run(rep, os.path.join(work, "replay.log"))
+    s = {}
+    if os.path.exists(summary):
+        with open(summary) as f:
+            s = json.load(f)
+    return rc, s, out
+
+
+def array_run(a, d, gen, work):
+    """The drive again with vibration and an IMU array; the offsets against the truth."""
+    rng = random.Random(d["seed"])
+    offsets = [round(rng.uniform(-0.02, 0.02), 4) for _ in range(2)]
+    vib = round(rng.uniform(0.3, 3.0), 2)
+    os.makedirs(work, exist_ok=True)
+    drive = os.path.join(work, "drive")
+    gen = [drive if x == gen[2] else x for x in gen]
+    if run(gen + ["--vibration", str(vib), "--array-offsets", *map(str, offsets)],
+           os.path.join(work, "generate.log")) != 0:
+        raise SystemExit(f"run {d['index']}: the array generator failed (see {work}/generate.log)")
+    rec = os.path.join(work, "rec.mcap")
+    imp = import_cmd(a, d, drive, rec)
+    imp += [x for i in range(len(offsets)) for x in ("--array-imu", f"{i + 1}={drive}/imu{i + 1}.txt")]
+    if d["latency_s"] is not None:
+        imp += ["--no-pps", "--gnss-latency", str(d["latency_s"])]
+    if run(imp, os.path.join(work, "import.log")) != 0:
+        raise SystemExit(f"run {d['index']}: the array import failed (see {work}/import.log)")
+    rc, s, out = replay(a, d, rec, work, ["--imus", "0,1,2"])
+    _, nan = coverage(os.path.join(out, "KF_GINS_Navresult.nav"), os.path.join(out, "KF_GINS_STD.txt"),
+                      os.path.join(drive, "truth.nav"))
+    usable = s.get("usable_states") or 0
+    r = {"vibration": vib, "offsets_true_s": offsets, "exit": rc, "problem": s.get("problem"), "nan": nan,
+         "silent": (rc == 0 and (usable == 0 or s.get("problem") is not None)) or (rc != 0 and not s.get("problem"))}
+    est, sd = s.get("imu_offset_est_s", {}), s.get("imu_offset_std_s", {})
+    r["offsets"] = [[est.get(str(i + 1)), sd.get(str(i + 1)), t] for i, t in enumerate(offsets)]
+    r["offsets_within_2sigma"] = [e is not None and s_ is not None and abs(e - t) <= 2 * s_
+                                  for e, s_, t in r["offsets"]]
+    r["offsets_converged"] = [s_ is not None and s_ < 1e-3 for _, s_, _ in r["offsets"]]
+    return r
+
+
 def one(a, d, work):
     os.makedirs(work, exist_ok=True)
     drive = os.path.join(work, "drive")
@@ -114,9 +175,7 @@ def one(a, d, work):
     if run(gen, os.path.join(work, "generate.log")) != 0:
         raise SystemExit(f"run {d['index']}: the generator failed (see {work}/generate.log)")
     rec = os.path.join(work, "rec.mcap")
-    imp = [a.navsync, "import", "kf-gins", "--imu", os.path.join(drive, "imu.txt"),
-           "--gnss", os.path.join(drive, "gnss.pos"), "--truth", os.path.join(drive, "truth.nav"),
-           "--out", rec, "--force"]
+    imp = import_cmd(a, d, drive, rec)
     if a.kf_gins:
         imp += ["--kf-gins-config", os.path.join(drive, "kf-gins.yaml")]
     imp_epochs = list(imp)  # fixes at their epochs (PPS)
@@ -124,17 +183,7 @@ def one(a, d, work):
         imp += ["--no-pps", "--gnss-latency", str(d["latency_s"])]
     if run(imp, os.path.join(work, "import.log")) != 0:
         raise SystemExit(f"run {d['index']}: the import failed (see {work}/import.log)")
-    out = os.path.join(work, "out")
-    summary = os.path.join(work, "summary.json")
-    rep = [a.navsync, "replay", rec, "--estimate", "--lever-arm", ",".join(map(str, d["lever_arm"])),
-           "--format", "kf-gins", "--out", out + "/", "--summary-json", summary, "--force"]
-    if d["latency_s"] is not None:
-        rep.append("--software-sync")
-    rc = run(rep, os.path.join(work, "replay.log"))
-    s = {}
-    if os.path.exists(summary):
-        with open(summary) as f:
-            s = json.load(f)
+    rc, s, out = replay(a, d, rec, work)
     usable = s.get("usable_states") or 0
     ok, nan = coverage(os.path.join(out, "KF_GINS_Navresult.nav"), os.path.join(out, "KF_GINS_STD.txt"),
                        os.path.join(drive, "truth.nav"))
@@ -158,14 +207,13 @@ def one(a, d, work):
         rec2 = os.path.join(same, "rec.mcap")
         imp2 = list(imp_epochs)
         imp2[imp2.index("--out") + 1] = rec2
-        rep2 = [a.navsync, "replay", rec2, "--estimate", "--lever-arm", ",".join(map(str, d["lever_arm"])),
-                "--format", "kf-gins", "--out", same + "/out/", "--summary-json",
-                os.path.join(same, "summary.json"), "--force"]
         if (run(imp2, os.path.join(same, "import.log")) == 0
-                and run(rep2, os.path.join(same, "replay.log")) == 0):
+                and replay(a, dict(d, latency_s=None), rec2, same)[0] == 0):
             r["horizontal_rms_same_info_m"] = score_truth.score(
                 score_truth.load_nav(os.path.join(same, "out", "KF_GINS_Navresult.nav")),
                 score_truth.load_nav(os.path.join(drive, "truth.nav")))["horizontal_rms_m"]
+    if a.array:
+        r["array"] = array_run(a, d, gen, os.path.join(work, "array"))
     if a.kf_gins:
         run([a.kf_gins, os.path.join(drive, "kf-gins.yaml")], os.path.join(work, "kf-gins.log"))
         kf = os.path.join(drive, "kf-gins-out", "KF_GINS_Navresult.nav")
@@ -184,6 +232,8 @@ def main():
     ap.add_argument("--work", help="working directory (default: a temporary one)")
     ap.add_argument("--kf-gins", help="KF-GINS binary: compare on the same files")
     ap.add_argument("--json", help="write the results here")
+    ap.add_argument("--no-array", dest="array", action="store_false",
+                    help="leave out the IMU-array runs (offset coverage)")
     a = ap.parse_args()
     a.work = a.work or tempfile.mkdtemp(prefix="navsync-sweep-")
     rng = random.Random(a.seed)
@@ -199,20 +249,31 @@ def main():
               f"2sigma {[round(c / max(r.get('epochs', 1), 1), 3) for c in cov] if cov else '-'} "
               f"delay {'ok' if r.get('delay_within_2sigma') else r.get('delay')}"
               + (f" rms {r.get('horizontal_rms_same_info_m', r.get('horizontal_rms_m', math.nan)):.3f} m"
-                 f" KF-GINS {r['kf_gins_horizontal_rms_m']:.3f} m" if "kf_gins_horizontal_rms_m" in r else ""),
+                 f" KF-GINS {r['kf_gins_horizontal_rms_m']:.3f} m" if "kf_gins_horizontal_rms_m" in r else "")
+              + (f" | array vib {r['array']['vibration']} exit {r['array']['exit']} offsets "
+                 + " ".join(f"{1e3 * t:+.1f}:{'-' if e is None else f'{1e3 * e:+.2f}+-{1e3 * s_:.2f}'}"
+                            for e, s_, t in r["array"]["offsets"]) + " ms" if "array" in r else ""),
               flush=True)
     epochs = sum(r.get("epochs", 0) for r in runs)
     within = [sum(r.get("within_2sigma", [0, 0, 0])[k] for r in runs) for k in range(3)]
     delays = [r["delay_within_2sigma"] for r in runs if "delay_within_2sigma" in r]
+    arrays = [r["array"] for r in runs if "array" in r]
+    offs = [w for x in arrays for w in x["offsets_within_2sigma"]]
+    conv = [c for x in arrays for c in x["offsets_converged"]]
     res = {
         "runs": len(runs),
-        "nan_runs": sum(r["nan"] for r in runs),
-        "silent_failures": sum(r["silent"] for r in runs),
+        "nan_runs": sum(r["nan"] for r in runs) + sum(x["nan"] for x in arrays),
+        "silent_failures": sum(r["silent"] for r in runs) + sum(x["silent"] for x in arrays),
+        "array_runs": len(arrays),
+        "array_failed_runs": sum(x["exit"] != 0 for x in arrays),
         "failed_runs": sum(r["exit"] != 0 for r in runs),
         "epochs": epochs,
         "coverage_2sigma": {"north": within[0] / max(epochs, 1), "east": within[1] / max(epochs, 1),
                             "yaw": within[2] / max(epochs, 1),
-                            "delay": sum(delays) / max(len(delays), 1)},
+                            "delay": sum(delays) / max(len(delays), 1),
+                            "imu_offset": sum(offs) / max(len(offs), 1)},
+        "imu_offsets": len(offs),
+        "imu_offsets_converged": sum(conv),
         "work": a.work,
         "detail": runs,
     }
@@ -225,6 +286,7 @@ def main():
     print(f"{len(runs)} runs: {res['nan_runs']} with NaN, {res['silent_failures']} silent failures, "
           f"{res['failed_runs']} failed (saying why); within 2 sigma: north {c['north']:.3f}, east {c['east']:.3f}, "
           f"yaw {c['yaw']:.3f} over {epochs} epochs, delay {c['delay']:.3f} of {len(delays)} runs"
+          + (f", IMU offsets {c['imu_offset']:.3f} of {len(offs)} ({sum(conv)} converged to < 1 ms)" if offs else "")
           + (f"; navsync <= 1.1 x KF-GINS on {res['navsync_within_1p1_kf_gins']:.2f} of {len(pairs)} drives"
              if pairs else ""))
     if a.json:

@@ -399,6 +399,11 @@ pub struct ImportArgs {
     /// IMU id in the recording.
     #[arg(long, default_value = "0", value_parser = crate::config::estimator::parse_id)]
     pub imu_id: String,
+    /// One more IMU of an array, `ID=FILE` (repeatable): a file in `--imu`'s format and rate on
+    /// the same time tags, recorded as IMU `ID` (`replay --estimate --imus 0,ID,…` estimates its
+    /// time offset and fuses the array).
+    #[arg(long = "array-imu", value_name = "ID=FILE", value_parser = parse_array_imu)]
+    pub array_imu: Vec<(String, PathBuf)>,
     /// KF-GINS's YAML configuration: its IMU noise, antenna lever arm, initial state and
     /// start/end time go into the recording (channel metadata), so `replay --estimate` uses them.
     /// (`--config` is navsync's own configuration file.)
@@ -432,6 +437,17 @@ pub struct ImportArgs {
     /// Replace an existing recording at --out (never one of the inputs).
     #[arg(long)]
     pub force: bool,
+}
+
+/// `ID=FILE` of `--array-imu`.
+fn parse_array_imu(s: &str) -> Result<(String, PathBuf), String> {
+    let (id, path) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}`: expected ID=FILE (e.g. 1=imu1.txt)"))?;
+    if path.is_empty() {
+        return Err(format!("`{s}`: no file after `=`"));
+    }
+    Ok((crate::config::estimator::parse_id(id)?, PathBuf::from(path)))
 }
 
 /// What the time tags of a GNSS file are.
@@ -780,6 +796,13 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         r.as_ref().map_or(true, |(_, row)| row[0] >= span.0 && row[0] <= span.1)
     };
     let imu_rows = || -> Result<_, KfGinsError> { Ok(Rows::open(&args.imu, &[7, 8])?.filter(in_span)) };
+    if let Some((id, _)) = args.array_imu.iter().find(|(id, _)| *id == args.imu_id) {
+        return Err(KfGinsError::Format {
+            path: "--array-imu".into(),
+            line: 0,
+            problem: format!("IMU id `{id}` is --imu-id's: each IMU of the array needs its own id"),
+        });
+    }
     let dt = match args.imu_rate_hz {
         Some(r) if r > 0.0 => 1.0 / r,
         _ => median_spacing(&args.imu)?,
@@ -855,6 +878,11 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
         (Box::new(pps) as Box<dyn Iterator<Item = _>>).peekable(),
         (Box::new(fix_items) as Box<dyn Iterator<Item = _>>).peekable(),
     ];
+    for (array_id, path) in &args.array_imu {
+        let rows = Rows::open(path, &[7, 8])?.filter(in_span);
+        let items = imu_items(rows, tl, dt, services::imu_sample(array_id), fixed_str::<8>(array_id));
+        streams.push((Box::new(items) as Box<dyn Iterator<Item = _>>).peekable());
+    }
     if let Some(p) = &args.truth {
         // Truth rows: week, seconds of week, …
         let rows = Rows::open(p, &[11])?
@@ -875,6 +903,7 @@ pub fn import(args: &ImportArgs) -> Result<ImportStats, KfGinsError> {
             args.gnss_vel.as_deref(),
         ])
         .flatten()
+        .chain(args.array_imu.iter().map(|(_, p)| p.as_path()))
         .collect();
     // The files' time axis: the host clock of every sample is GPS time shifted; outputs keep it.
     let (mut rec, axis) = imported_recording(&args.out, &inputs, args.force, &imu_service, tl.gps_ns(tl.sow0))?;

@@ -13,6 +13,20 @@
 //!    has the reference IMU's biases, position and time grid and less noise (σ/√n for n equal
 //!    IMUs).
 //!
+//! Acquisition. The offset filter linearises x_0(τ − δ) ≈ x_0(τ) − ẋ_0(τ)·δ, which holds only
+//! for δ well inside a quarter period of the fastest motion (6 ms for a 40 Hz vibration), while
+//! Td's prior spans ±0.3 s: started outside that range the filter can lock onto a wrong lobe with
+//! a tight σ. So Td is frozen until an acquisition, as a GNSS receiver acquires a code phase
+//! before it tracks it: over the last [`ACQ_WINDOW`] reference samples, the cost
+//! J(L) = Σ_c Σ_n (d_nc − d̄_c)²/σ_c² of the de-meaned differences d = x_i(τ + L·T) − x_0(τ)
+//! (gyro and accelerometer, σ_c both IMUs' sample noise) is computed for every lag L within
+//! 3σ of the prior; the smallest J gives Td = (L + parabolic refinement)·T. It is taken only
+//! when unambiguous: every lag two or more samples away costs at least [`ACQ_MARGIN`] more (a
+//! likelihood ratio of e^(margin/2)) and twice as much (the best lag explains most of the
+//! difference, whatever the residual model leaves). The filter then tracks from there with
+//! 1-sigma max(T/2, √(2/J''))·T. An IMU that comes to disagree is acquired again, and moved
+//! when the acquisition disagrees with its filter by more than 3σ.
+//!
 //! Stamps are smoothed per IMU by an α–β tracker of stamp = t₀ + k·T (sample counter k), which
 //! removes the stamp jitter without assuming the nominal rate. An IMU whose samples stop (stale),
 //! saturate, are invalid, disagree or whose offset has not converged is out of the array, with
@@ -39,10 +53,20 @@ use navsync_wire::reflect::{fixed_str, str_of};
 use navsync_wire::samples::{IMU_FLAG_SATURATED, ImuSample, ImuSync, ImuSyncReason, MAX_IMUS};
 
 use super::fractional_delay::{MAX_ORDER, lagrange_coefficients};
-use super::imu_offset::{OffsetConfig, OffsetFilter, OffsetUpdate};
+use super::imu_offset::{InterpolationError, OffsetConfig, OffsetFilter, OffsetUpdate};
 
 /// Samples kept per IMU (1.28 s at 200 Hz): more than the largest offset plus the filter span.
 pub const RING: usize = 256;
+
+/// Reference samples an acquisition compares (0.5 s at 200 Hz).
+pub const ACQ_WINDOW: usize = 100;
+
+/// The largest lag an acquisition searches, reference samples (±0.32 s at 200 Hz): with the
+/// window and the interpolation span it fits the ring.
+pub const ACQ_MAX_LAG: usize = 64;
+
+/// How much more (χ²) every other lag must cost than the acquired one.
+pub const ACQ_MARGIN: f64 = 50.0;
 
 /// One IMU of the array as configured.
 #[derive(Debug, Clone, PartialEq)]
@@ -174,6 +198,10 @@ struct Unit {
     agree_run: u32,
     sigma_gyro: f64,
     sigma_accel: f64,
+    /// Td acquired (see the module docs): the filter tracks it.
+    acquired: bool,
+    /// Push count at which the next acquisition is tried.
+    next_acquisition: u64,
 }
 
 impl Unit {
@@ -206,6 +234,16 @@ impl Unit {
     /// Lagrange interpolation of gyro and accel at centre time `t` (ns since epoch); `None`
     /// when the span is not available or not contiguous (a gap of dropped or rejected samples).
     fn interpolate(&self, order: usize, t: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        self.interpolate_with_error(order, t).map(|(g, a, _)| (g, a))
+    }
+
+    /// [`interpolate`](Self::interpolate) and its error per component (gyro, then
+    /// accelerometer): the next term of Newton's series, Δ^(N+1) x / (N+1)! · Π_{i=0..N}(d − i)
+    /// (the Lagrange remainder with the (N+1)-th derivative taken from the samples' own
+    /// (N+1)-th difference), and its variance without the sample noise's share of that
+    /// difference, C(2N+2, N+1)·σ² (what is left is the motion's); zero where no further
+    /// contiguous sample is available.
+    fn interpolate_with_error(&self, order: usize, t: f64) -> Option<(Vector3<f64>, Vector3<f64>, InterpolationError)> {
         if self.len < order + 1 || self.grid.period <= 0.0 {
             return None;
         }
@@ -240,7 +278,43 @@ impl Unit {
             g += e.gyro * *hn;
             a += e.accel * *hn;
         }
-        Some((g, a))
+        // The (N+1)-th difference over N + 2 contiguous samples: the span and the next one,
+        // else the one before.
+        let m = order + 1;
+        let start = if i0 + m < self.len && self.entry(i0 + m).seq == first_seq + m as u64 {
+            Some(i0)
+        } else if i0 >= 1 && self.entry(i0 - 1).seq + 1 == first_seq {
+            Some(i0 - 1)
+        } else {
+            None
+        };
+        let mut err = InterpolationError::default();
+        if let Some(s0) = start {
+            let (mut binom, mut fact, mut poly) = (1.0, 1.0, 1.0);
+            for i in 0..=order {
+                fact *= (i + 1) as f64;
+                poly *= d - i as f64;
+            }
+            for k in 0..=m {
+                // (−1)^(m−k) C(m, k)
+                let c = if (m - k).is_multiple_of(2) { binom } else { -binom };
+                let e = self.entry(s0 + k);
+                for c3 in 0..3 {
+                    err.value[c3] += c * e.gyro[c3];
+                    err.value[c3 + 3] += c * e.accel[c3];
+                }
+                binom = binom * (m - k) as f64 / (k + 1) as f64;
+            }
+            // C(2m, m): the variance of the m-th difference of white noise, in σ².
+            let noise: f64 = (1..=m).map(|i| (m + i) as f64 / i as f64).product();
+            let scale = poly / fact;
+            for c in 0..6 {
+                let sigma = if c < 3 { self.sigma_gyro } else { self.sigma_accel };
+                err.variance[c] = (err.value[c].powi(2) - noise * sigma * sigma).max(0.0) * scale * scale;
+                err.value[c] *= scale;
+            }
+        }
+        Some((g, a, err))
     }
 
     /// Newest centre time, ns since epoch.
@@ -281,28 +355,47 @@ fn slope_variance(sigma: f64, t: f64, k: usize) -> f64 {
 }
 
 /// The reference's rate derivatives at ring index `j` and their noise variances per component,
-/// per sensor triad from the fast differentiator when its output stands well above its noise
-/// (vibration, sharp manoeuvres: more information), else from the low-noise one.
+/// per sensor triad: from the fast differentiator when its output stands well above its noise
+/// (vibration, sharp manoeuvres: more information), else from the low-noise one; and from the
+/// central difference (K = 1) when that stands above its own noise and holds more than four
+/// times the chosen one's power (the chosen one sees less than half the motion's amplitude:
+/// the motion is faster than its band). A narrow
+/// differentiator is blind to fast motion: the K = 3 slope of a 37 Hz vibration sampled at
+/// 200 Hz is 8.5 % of its derivative (Σ m·sin(mωT) / (ωT·Σ m²)), the central difference's 79 %
+/// (sin ωT / ωT), and a regressor that small makes the offset filter's Td wrong by
+/// milliseconds, not only less certain.
 fn choose_derivative(u: &Unit, j: usize, k: usize, k_fast: usize) -> (Vector3<f64>, Vector3<f64>, f64, f64) {
-    let t = u.entry(j).dt_s;
-    let (wl, fl) = savitzky_golay_slope(u, j, k);
-    let (ws, fs) = savitzky_golay_slope(u, j, k_fast.min(k));
-    let (vgl, val) = (slope_variance(u.sigma_gyro, t, k), slope_variance(u.sigma_accel, t, k));
-    let (vgs, vas) = (
-        slope_variance(u.sigma_gyro, t, k_fast.min(k)),
-        slope_variance(u.sigma_accel, t, k_fast.min(k)),
-    );
     const SNR: f64 = 25.0;
-    let (w_dot, wd_var) = if ws.norm_squared() >= SNR * 3.0 * vgs {
-        (ws, vgs)
-    } else {
-        (wl, vgl)
+    let t = u.entry(j).dt_s;
+    let pick = |(narrow, v_narrow): (Vector3<f64>, f64),
+                (fast, v_fast): (Vector3<f64>, f64),
+                (wide, v_wide): (Vector3<f64>, f64)| {
+        let chosen = if fast.norm_squared() >= SNR * 3.0 * v_fast {
+            (fast, v_fast)
+        } else {
+            (narrow, v_narrow)
+        };
+        if wide.norm_squared() >= SNR * 3.0 * v_wide && wide.norm_squared() > 4.0 * chosen.0.norm_squared() {
+            (wide, v_wide)
+        } else {
+            chosen
+        }
     };
-    let (f_dot, fd_var) = if fs.norm_squared() >= SNR * 3.0 * vas {
-        (fs, vas)
-    } else {
-        (fl, val)
-    };
+    let kf = k_fast.min(k);
+    let (wl, fl) = savitzky_golay_slope(u, j, k);
+    let (ws, fs) = savitzky_golay_slope(u, j, kf);
+    let (w1, f1) = savitzky_golay_slope(u, j, 1);
+    let var = |sigma: f64, kk: usize| slope_variance(sigma, t, kk);
+    let (w_dot, wd_var) = pick(
+        (wl, var(u.sigma_gyro, k)),
+        (ws, var(u.sigma_gyro, kf)),
+        (w1, var(u.sigma_gyro, 1)),
+    );
+    let (f_dot, fd_var) = pick(
+        (fl, var(u.sigma_accel, k)),
+        (fs, var(u.sigma_accel, kf)),
+        (f1, var(u.sigma_accel, 1)),
+    );
     (w_dot, f_dot, wd_var, fd_var)
 }
 
@@ -327,6 +420,11 @@ pub struct ArrayCounters {
     pub disagreements: u64,
     /// Times the reference moved to another IMU because it went stale.
     pub handovers: u64,
+    /// Offsets acquired (see the module docs).
+    pub acquisitions: u64,
+    /// Of those, the ones that set an offset filter's Td: the first of each IMU, and any that
+    /// disagreed with the filter by more than 3σ.
+    pub reacquisitions: u64,
 }
 
 /// The IMU array.
@@ -380,6 +478,8 @@ impl ImuArray {
                 agree_run: 0,
                 sigma_gyro: 0.0,
                 sigma_accel: 0.0,
+                acquired: false,
+                next_acquisition: 0,
             })
             .collect();
         Self {
@@ -562,8 +662,11 @@ impl ImuArray {
         new.reason = ImuSyncReason::InArray;
         new.in_array = true;
         (new.disagree_run, new.agree_run) = (0, 0);
+        // The replaced reference's offset is known as well as the promoted one's was.
+        let acquired = new.acquired;
         let old = &mut self.units[r];
         old.filter = Some(frozen.for_replaced_reference(old.filter.as_ref()));
+        old.acquired = acquired;
         (old.disagree_run, old.agree_run) = (0, 0);
         self.cfg.reference = n;
         self.next_ref_index = None;
@@ -574,6 +677,32 @@ impl ImuArray {
     /// `out` with each virtual sample (single IMU: its newest sample, once).
     pub fn emit(&mut self, out: &mut impl FnMut(&VirtualSample)) {
         let r = self.cfg.reference;
+        for i in 0..self.units.len() {
+            let u = &self.units[i];
+            if i == r
+                || u.filter.is_none()
+                || (u.acquired && u.reason != ImuSyncReason::Disagrees)
+                || u.pushed < u.next_acquisition
+            {
+                continue;
+            }
+            let found = self.acquire(i);
+            let u = &mut self.units[i];
+            u.next_acquisition = u.pushed + (ACQ_WINDOW / 2) as u64;
+            let (Some((td, sd)), Some(f)) = (found, u.filter.as_mut()) else {
+                continue;
+            };
+            self.counters.acquisitions += 1;
+            // The first acquisition starts the tracking; a later one moves it only when the two
+            // disagree.
+            let first = !u.acquired;
+            u.acquired = true;
+            if first || (td - f.td_s()).abs() > 3.0 * (sd.powi(2) + f.td_std_s().powi(2)).sqrt() {
+                f.reacquire(td, sd);
+                u.disagree_run = 0;
+                self.counters.reacquisitions += 1;
+            }
+        }
         if self.units.len() == 1 {
             let u = &self.units[r];
             if u.len == 0 || u.entry(u.len - 1).end_host_ns <= self.last_virtual_ns {
@@ -639,6 +768,72 @@ impl ImuArray {
         }
     }
 
+    /// Acquisition of IMU `i`'s offset (see the module docs): Td and its 1-sigma, s, or `None`
+    /// when the rings do not yet hold the span or the best lag is not unambiguous.
+    fn acquire(&self, i: usize) -> Option<(f64, f64)> {
+        let (rf, u) = (&self.units[self.cfg.reference], &self.units[i]);
+        let period = rf.grid.period;
+        if period <= 0.0 || u.grid.period <= 0.0 || rf.len < ACQ_WINDOW || u.len < RING / 2 {
+            return None;
+        }
+        let max_lag = ((3.0 * self.cfg.offset.td_prior_std_s * 1e9 / period).ceil() as usize).clamp(2, ACQ_MAX_LAG);
+        let span = (max_lag as f64 + self.cfg.order as f64 + 2.0) * u.grid.period.max(period);
+        let (u_first, u_last) = (u.entry(0).center, u.entry(u.len - 1).center);
+        // The newest ACQ_WINDOW reference samples whose every lag lies inside IMU i's ring.
+        let end = (0..rf.len).rev().find(|&j| rf.entry(j).center + span <= u_last)?;
+        let start = (end + 1).checked_sub(ACQ_WINDOW)?;
+        if rf.entry(start).center - span < u_first {
+            return None;
+        }
+        let var = [
+            u.sigma_gyro.powi(2) + rf.sigma_gyro.powi(2),
+            u.sigma_accel.powi(2) + rf.sigma_accel.powi(2),
+        ];
+        if !(var[0] > 0.0 && var[1] > 0.0) {
+            return None;
+        }
+        let mut cost = [0.0; 2 * ACQ_MAX_LAG + 1];
+        let lags = 2 * max_lag + 1;
+        for (l, c) in cost.iter_mut().enumerate().take(lags) {
+            let lag_ns = (l as f64 - max_lag as f64) * period;
+            let (mut sum, mut sum2) = ([0.0; 6], [0.0; 6]);
+            for j in start..=end {
+                let e = rf.entry(j);
+                let (g, a) = u.interpolate(self.cfg.order, e.center + lag_ns)?;
+                for k in 0..3 {
+                    for (m, d) in [(k, g[k] - e.gyro[k]), (k + 3, a[k] - e.accel[k])] {
+                        sum[m] += d;
+                        sum2[m] += d * d;
+                    }
+                }
+            }
+            let n = ACQ_WINDOW as f64;
+            *c = (0..6).map(|m| (sum2[m] - sum[m] * sum[m] / n) / var[m / 3]).sum();
+        }
+        let cost = &cost[..lags];
+        let best = (0..lags).min_by(|&a, &b| cost[a].total_cmp(&cost[b]))?;
+        if best == 0 || best + 1 == lags {
+            return None; // at the edge of the search: the minimum may lie beyond it
+        }
+        let second = (0..lags)
+            .filter(|&l| l.abs_diff(best) >= 2)
+            .map(|l| cost[l])
+            .fold(f64::INFINITY, f64::min);
+        let jb = cost[best];
+        if !(second - jb >= ACQ_MARGIN && second >= 2.0 * jb) {
+            return None;
+        }
+        let (jm, jp) = (cost[best - 1], cost[best + 1]);
+        let curvature = jm - 2.0 * jb + jp;
+        if curvature.is_nan() || curvature <= 0.0 {
+            return None;
+        }
+        let frac = (0.5 * (jm - jp) / curvature).clamp(-0.5, 0.5);
+        let td = (best as f64 - max_lag as f64 + frac) * period * 1e-9;
+        let sd = (2.0 / curvature).sqrt().max(0.5) * period * 1e-9;
+        Some((td, sd))
+    }
+
     fn fuse_instant(
         &mut self,
         cur: &Entry,
@@ -680,7 +875,7 @@ impl ImuArray {
             let Some(td) = u.filter.as_ref().map(OffsetFilter::td_s) else {
                 continue;
             };
-            let Some((g_u, a_u)) = u.interpolate(order, cur.center + td * 1e9) else {
+            let Some((g_u, a_u, interp_err)) = u.interpolate_with_error(order, cur.center + td * 1e9) else {
                 u.in_array = false;
                 continue;
             };
@@ -702,6 +897,8 @@ impl ImuArray {
                 sa,
                 wd_var,
                 fd_var,
+                &interp_err,
+                u.acquired,
             ) {
                 OffsetUpdate::Accepted(_) => {
                     u.disagree_run = 0;

@@ -58,6 +58,17 @@ pub struct OffsetConfig {
     pub min_information_ratio: f64,
 }
 
+/// The estimated error of the fractional-delay interpolation of one comparison, per component
+/// (gyro, then accelerometer): its value (with the sample noise in it) and its variance without
+/// the noise's share.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct InterpolationError {
+    /// The error's estimate (rad/s, m/s²).
+    pub value: SVector<f64, 6>,
+    /// Its square without the sample noise's share.
+    pub variance: SVector<f64, 6>,
+}
+
 /// Outcome of one comparison.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum OffsetUpdate {
@@ -79,6 +90,9 @@ pub struct OffsetFilter {
     info_ema: f64,
     noise_info: f64,
     updates: u64,
+    /// Smoothed Σ(e·ẋ/σ²) of the interpolation error and Σ(ẋ/σ)² of the regressor (Td's bias).
+    interp_num_ema: f64,
+    interp_den_ema: f64,
 }
 
 impl OffsetFilter {
@@ -101,6 +115,8 @@ impl OffsetFilter {
             info_ema: 0.0,
             noise_info: f64::INFINITY,
             updates: 0,
+            interp_num_ema: 0.0,
+            interp_den_ema: 0.0,
         }
     }
 
@@ -122,14 +138,34 @@ impl OffsetFilter {
         }
     }
 
+    /// Puts Td at an acquisition's value with its 1-sigma (inside the linearisation's capture
+    /// range, see [`ImuArray`](super::imu_array::ImuArray)); Td's correlations with the other
+    /// states are dropped, which leaves P positive definite.
+    pub fn reacquire(&mut self, td_s: f64, td_std_s: f64) {
+        self.x[0] = td_s;
+        for k in 1..M {
+            self.p[(0, k)] = 0.0;
+            self.p[(k, 0)] = 0.0;
+        }
+        self.p[(0, 0)] = td_std_s * td_std_s;
+        self.interp_num_ema = 0.0;
+        self.interp_den_ema = 0.0;
+    }
+
     /// Estimated offset Td, s.
     pub fn td_s(&self) -> f64 {
         self.x[0]
     }
 
-    /// 1-sigma of Td, s.
+    /// 1-sigma of Td, s: the filter's, with the interpolation's delay error (see
+    /// [`update`](Self::update)) as a floor.
     pub fn td_std_s(&self) -> f64 {
-        self.p[(0, 0)].max(0.0).sqrt()
+        let bias = if self.interp_den_ema > 0.0 {
+            self.interp_num_ema / self.interp_den_ema
+        } else {
+            0.0
+        };
+        (self.p[(0, 0)].max(0.0) + bias * bias).sqrt()
     }
 
     /// Estimated relative gyro bias (IMU − reference), body axes, rad/s.
@@ -203,8 +239,16 @@ impl OffsetFilter {
     /// Fuses one comparison at a reference instant: gyro and accelerometer residuals
     /// r = x_i(τ + T̂d) − x_0(τ) (body axes), the reference's rates x_0(τ) (`w`, `f`) and their
     /// derivatives ẋ_0(τ), the
-    /// 1-sigma of one residual component (both IMUs' sample noise), and the variances of one
-    /// component of the derivative estimates (their noise).
+    /// 1-sigma of one residual component (both IMUs' sample noise), the variances of one
+    /// component of the derivative estimates (their noise), and whether Td has been acquired
+    /// (before, Td is frozen: it learns nothing from a linearisation that may not hold).
+    ///
+    /// `interp_err` is the fractional-delay interpolation's error. Its variance is added to R;
+    /// and where it is systematic (a phase error of the interpolator at the frequency of a
+    /// narrow-band vibration, which does not average out) it biases Td by its projection on
+    /// the regressor, b = Σ(e·ẋ/σ²) / Σ(ẋ²/σ²), smoothed, whose square is added to Td's
+    /// reported variance (a consider term, as for an unestimated bias; sample noise in e does
+    /// not correlate with the reference's ẋ and averages out).
     ///
     /// The derivatives are measured, not known: a noisy regressor −ẋ would make the filter
     /// count noise as information. Their noise enters the residual multiplied by the offset
@@ -223,12 +267,15 @@ impl OffsetFilter {
         sigma_accel: f64,
         w_dot_var: f64,
         f_dot_var: f64,
+        interp_err: &InterpolationError,
+        acquired: bool,
     ) -> OffsetUpdate {
         // Smoothed information rate over ~0.5 s (EMA at the sample rate, α = 0.01).
         let info = w_dot.norm_squared() / sigma_gyro.powi(2) + f_dot.norm_squared() / sigma_accel.powi(2);
         self.info_ema += 0.01 * (info - self.info_ema);
         self.noise_info = 3.0 * (w_dot_var / sigma_gyro.powi(2) + f_dot_var / sigma_accel.powi(2));
-        let use_td = self.observable();
+        // Before an acquisition the linearisation may be outside its capture range.
+        let use_td = acquired && self.observable();
         let mut h = SMatrix::<f64, 6, M>::zeros();
         for k in 0..3 {
             if use_td {
@@ -251,8 +298,19 @@ impl OffsetFilter {
         let mut rn = SMatrix::<f64, 6, 6>::zeros();
         let p_td = if use_td { self.p[(0, 0)] } else { 0.0 };
         for k in 0..3 {
-            rn[(k, k)] = sigma_gyro.powi(2) + p_td * w_dot_var;
-            rn[(k + 3, k + 3)] = sigma_accel.powi(2) + p_td * f_dot_var;
+            rn[(k, k)] = sigma_gyro.powi(2) + p_td * w_dot_var + interp_err.variance[k];
+            rn[(k + 3, k + 3)] = sigma_accel.powi(2) + p_td * f_dot_var + interp_err.variance[k + 3];
+        }
+        if use_td {
+            let num: f64 = (0..3)
+                .map(|k| {
+                    interp_err.value[k] * w_dot[k] / sigma_gyro.powi(2)
+                        + interp_err.value[k + 3] * f_dot[k] / sigma_accel.powi(2)
+                })
+                .sum();
+            let den = (w_dot / sigma_gyro).norm_squared() + (f_dot / sigma_accel).norm_squared();
+            self.interp_num_ema += 0.01 * (num - self.interp_num_ema);
+            self.interp_den_ema += 0.01 * (den - self.interp_den_ema);
         }
         let pht = self.p * h.transpose();
         let s = h * pht + rn;
