@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """The randomized sweep (issue 34): many independent drives, navsync with its defaults on each.
 
-  sweep.py [--navsync BIN] [--runs N] [--seed S] [--duration S] [--work DIR] [--json OUT]
-           [--kf-gins BIN]
+  sweep.py [--navsync BIN] [--runs N] [--seed S] [--duration S] [--work DIR [--keep]]
+           [--json OUT] [--kf-gins BIN] [--no-array]
 
 Each run draws (from --seed and its index) a drive of `independent_drive.py` (exact
 kinematics, shares no code with navsync): a profile (car, pedestrian, slow robot: the speed
@@ -39,6 +39,7 @@ import json
 import math
 import os
 import random
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -230,17 +231,22 @@ def main():
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--duration", type=float, default=150.0)
     ap.add_argument("--work", help="working directory (default: a temporary one)")
+    ap.add_argument("--keep", action="store_true",
+                    help="keep each run's files (~60 MB a run) in the working directory")
     ap.add_argument("--kf-gins", help="KF-GINS binary: compare on the same files")
     ap.add_argument("--json", help="write the results here")
     ap.add_argument("--no-array", dest="array", action="store_false",
                     help="leave out the IMU-array runs (offset coverage)")
     a = ap.parse_args()
+    temporary = a.work is None
     a.work = a.work or tempfile.mkdtemp(prefix="navsync-sweep-")
     rng = random.Random(a.seed)
     runs = []
     for i in range(a.runs):
         d = draw(rng, i, a.duration)
         r = one(a, d, os.path.join(a.work, f"run{i:03d}"))
+        if not a.keep:
+            shutil.rmtree(os.path.join(a.work, f"run{i:03d}"), ignore_errors=True)
         runs.append(r)
         cov = r.get("within_2sigma")
         print(f"{i:3d} {r['profile']:10s} {r['preset']:10s} sigma {r['gnss_sigma']:6.3f} m {r['gnss_rate']:2d} Hz "
@@ -292,6 +298,8 @@ def main():
     if a.json:
         with open(a.json, "w") as f:
             json.dump(res, f, indent=1)
+    if temporary and not a.keep:
+        shutil.rmtree(a.work, ignore_errors=True)
 
 
 if __name__ == "__main__":

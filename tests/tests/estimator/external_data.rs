@@ -428,8 +428,10 @@ fn a_parked_vehicle_publishes_no_heading_and_says_why() {
 /// fixed seed: car, pedestrian or robot, any heading and place, IMU grade, GNSS σ and rate,
 /// lever arm, PPS or a receipt latency; navsync with its defaults. No output row is NaN and no
 /// run fails silently: a run that exits 0 has usable output and no problem, one that fails
-/// says why. (The 2σ coverage the sweep also reports is not yet within 90–99 % for yaw and on
-/// slow drives: docs/benchmarks/sweep.md.)
+/// says why. Each drive is also run with vibration and an array of three IMUs (two stamped
+/// −20 to +20 ms late): every final IMU offset lies within 2σ of its own σ (before the offsets
+/// were acquired, half of them were confidently wrong by up to 140 ms). (The 2σ coverage the
+/// sweep also reports is not yet within 90–99 % on slow drives: docs/benchmarks/sweep.md.)
 #[test]
 fn a_randomized_sweep_never_gives_nan_nor_fails_silently() {
     let env = TestEnv::new("sweep");
@@ -451,6 +453,12 @@ fn a_randomized_sweep_never_gives_nan_nor_fails_silently() {
     assert_eq!(f(&r, &["runs"]), 6.0);
     assert_eq!(f(&r, &["nan_runs"]), 0.0, "runs with NaN: {r}");
     assert_eq!(f(&r, &["silent_failures"]), 0.0, "silent failures: {r}");
+    assert_eq!(f(&r, &["array_runs"]), 6.0);
+    assert_eq!(
+        f(&r, &["coverage_2sigma", "imu_offset"]),
+        1.0,
+        "IMU offsets outside 2σ: {r}"
+    );
     let detail = r["detail"].as_array().unwrap();
     for d in detail {
         let exit = d["exit"].as_i64().unwrap();
