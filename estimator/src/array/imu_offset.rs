@@ -309,8 +309,8 @@ impl OffsetFilter {
                 })
                 .sum();
             let den = (w_dot / sigma_gyro).norm_squared() + (f_dot / sigma_accel).norm_squared();
-            self.interp_num_ema += 0.01 * (num - self.interp_num_ema);
-            self.interp_den_ema += 0.01 * (den - self.interp_den_ema);
+            self.interp_num_ema += 0.001 * (num - self.interp_num_ema);
+            self.interp_den_ema += 0.001 * (den - self.interp_den_ema);
         }
         let pht = self.p * h.transpose();
         let s = h * pht + rn;
