@@ -157,8 +157,8 @@ impl OffsetFilter {
         self.x[0]
     }
 
-    /// 1-sigma of Td, s: the filter's, with the interpolation's delay error (see
-    /// [`update`](Self::update)) as a floor.
+    /// 1-sigma of Td, s: the filter's, with the bias the interpolation's error can put on Td
+    /// (see [`update`](Self::update)) added in quadrature.
     pub fn td_std_s(&self) -> f64 {
         let bias = if self.interp_den_ema > 0.0 {
             self.interp_num_ema / self.interp_den_ema
