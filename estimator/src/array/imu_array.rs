@@ -136,6 +136,17 @@ struct Entry {
     accel: Vector3<f64>,
 }
 
+/// The samples of one interpolation (see `Unit::span`).
+#[derive(Debug, Clone, Copy)]
+struct Span {
+    /// Ring index of the first sample.
+    i0: usize,
+    /// Its sequence number.
+    first_seq: u64,
+    /// The interpolation instant's position from the first sample, in samples.
+    d: f64,
+}
+
 /// α–β tracker of stamp = t₀ + k·T.
 #[derive(Debug, Clone, Copy, Default)]
 struct Grid {
@@ -231,19 +242,11 @@ impl Unit {
         self.pushed += 1;
     }
 
-    /// Lagrange interpolation of gyro and accel at centre time `t` (ns since epoch); `None`
-    /// when the span is not available or not contiguous (a gap of dropped or rejected samples).
-    fn interpolate(&self, order: usize, t: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
-        self.interpolate_with_error(order, t).map(|(g, a, _)| (g, a))
-    }
-
-    /// [`interpolate`](Self::interpolate) and its error per component (gyro, then
-    /// accelerometer): the next term of Newton's series, Δ^(N+1) x / (N+1)! · Π_{i=0..N}(d − i)
-    /// (the Lagrange remainder with the (N+1)-th derivative taken from the samples' own
-    /// (N+1)-th difference), and its variance without the sample noise's share of that
-    /// difference, C(2N+2, N+1)·σ² (what is left is the motion's); zero where no further
-    /// contiguous sample is available.
-    fn interpolate_with_error(&self, order: usize, t: f64) -> Option<(Vector3<f64>, Vector3<f64>, InterpolationError)> {
+    /// The samples an order-`order` interpolation at centre time `t` (ns since epoch) uses:
+    /// ring index and sequence number of the first, and t's position within them, in samples;
+    /// `None` when the span is not available or not contiguous (a gap of dropped or rejected
+    /// samples).
+    fn span(&self, order: usize, t: f64) -> Option<Span> {
         if self.len < order + 1 || self.grid.period <= 0.0 {
             return None;
         }
@@ -269,52 +272,75 @@ impl Unit {
         if local <= 0.0 {
             return None;
         }
-        let d = (t - e0.center) / local;
+        Some(Span {
+            i0,
+            first_seq,
+            d: (t - e0.center) / local,
+        })
+    }
+
+    /// Lagrange interpolation of gyro and accel at centre time `t` (ns since epoch); `None`
+    /// when the span is not available or not contiguous (a gap of dropped or rejected samples).
+    fn interpolate(&self, order: usize, t: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        Some(self.interpolate_span(order, &self.span(order, t)?))
+    }
+
+    /// Lagrange interpolation of gyro and accel over `span`.
+    fn interpolate_span(&self, order: usize, span: &Span) -> (Vector3<f64>, Vector3<f64>) {
         let mut h = [0.0; MAX_ORDER + 1];
-        lagrange_coefficients(order, d, &mut h);
+        lagrange_coefficients(order, span.d, &mut h);
         let (mut g, mut a) = (Vector3::zeros(), Vector3::zeros());
         for (n, hn) in h.iter().enumerate().take(order + 1) {
-            let e = self.entry(i0 + n);
+            let e = self.entry(span.i0 + n);
             g += e.gyro * *hn;
             a += e.accel * *hn;
         }
+        (g, a)
+    }
+
+    /// The error of [`interpolate_span`](Self::interpolate_span) per component (gyro, then
+    /// accelerometer): the next term of Newton's series, Δ^(N+1) x / (N+1)! · Π_{i=0..N}(d − i)
+    /// (the Lagrange remainder with the (N+1)-th derivative taken from the samples' own
+    /// (N+1)-th difference), and its variance without the sample noise's share of that
+    /// difference, C(2N+2, N+1)·σ² (what is left is the motion's); zero where no further
+    /// contiguous sample is available.
+    fn interpolation_error(&self, order: usize, span: &Span) -> InterpolationError {
+        let mut err = InterpolationError::default();
+        let Span { i0, first_seq, d } = *span;
         // The (N+1)-th difference over N + 2 contiguous samples: the span and the next one,
         // else the one before.
         let m = order + 1;
         let start = if i0 + m < self.len && self.entry(i0 + m).seq == first_seq + m as u64 {
-            Some(i0)
+            i0
         } else if i0 >= 1 && self.entry(i0 - 1).seq + 1 == first_seq {
-            Some(i0 - 1)
+            i0 - 1
         } else {
-            None
+            return err;
         };
-        let mut err = InterpolationError::default();
-        if let Some(s0) = start {
-            let (mut binom, mut fact, mut poly) = (1.0, 1.0, 1.0);
-            for i in 0..=order {
-                fact *= (i + 1) as f64;
-                poly *= d - i as f64;
-            }
-            for k in 0..=m {
-                // (−1)^(m−k) C(m, k)
-                let c = if (m - k).is_multiple_of(2) { binom } else { -binom };
-                let e = self.entry(s0 + k);
-                for c3 in 0..3 {
-                    err.value[c3] += c * e.gyro[c3];
-                    err.value[c3 + 3] += c * e.accel[c3];
-                }
-                binom = binom * (m - k) as f64 / (k + 1) as f64;
-            }
-            // C(2m, m): the variance of the m-th difference of white noise, in σ².
-            let noise: f64 = (1..=m).map(|i| (m + i) as f64 / i as f64).product();
-            let scale = poly / fact;
-            for c in 0..6 {
-                let sigma = if c < 3 { self.sigma_gyro } else { self.sigma_accel };
-                err.variance[c] = (err.value[c].powi(2) - noise * sigma * sigma).max(0.0) * scale * scale;
-                err.value[c] *= scale;
-            }
+        let (mut binom, mut fact, mut poly) = (1.0, 1.0, 1.0);
+        for i in 0..=order {
+            fact *= (i + 1) as f64;
+            poly *= d - i as f64;
         }
-        Some((g, a, err))
+        for k in 0..=m {
+            // (−1)^(m−k) C(m, k)
+            let c = if (m - k).is_multiple_of(2) { binom } else { -binom };
+            let e = self.entry(start + k);
+            for c3 in 0..3 {
+                err.value[c3] += c * e.gyro[c3];
+                err.value[c3 + 3] += c * e.accel[c3];
+            }
+            binom = binom * (m - k) as f64 / (k + 1) as f64;
+        }
+        // C(2m, m): the variance of the m-th difference of white noise, in σ².
+        let noise: f64 = (1..=m).map(|i| (m + i) as f64 / i as f64).product();
+        let scale = poly / fact;
+        for c in 0..6 {
+            let sigma = if c < 3 { self.sigma_gyro } else { self.sigma_accel };
+            err.variance[c] = (err.value[c].powi(2) - noise * sigma * sigma).max(0.0) * scale * scale;
+            err.value[c] *= scale;
+        }
+        err
     }
 
     /// Newest centre time, ns since epoch.
@@ -875,10 +901,12 @@ impl ImuArray {
             let Some(td) = u.filter.as_ref().map(OffsetFilter::td_s) else {
                 continue;
             };
-            let Some((g_u, a_u, interp_err)) = u.interpolate_with_error(order, cur.center + td * 1e9) else {
+            let Some(span) = u.span(order, cur.center + td * 1e9) else {
                 u.in_array = false;
                 continue;
             };
+            let (g_u, a_u) = u.interpolate_span(order, &span);
+            let interp_err = u.interpolation_error(order, &span);
             let Some(f) = u.filter.as_mut() else { continue };
             // Rigid body: remove the lever-arm specific force, ω̇ × ρ + ω × (ω × ρ), ρ = r_i − r_0.
             let rho = u.cfg.lever_b_m - ref_lever;
