@@ -94,7 +94,22 @@ fn finite(f: &DelayedFilter) -> bool {
         .chain(f.scale_g.iter())
         .chain(f.scale_a.iter())
         .all(|x| x.is_finite())
-        && f.eskf.p.iter().all(|x| x.is_finite())
+        && all_finite(f.eskf.p.as_slice())
+}
+
+/// Whether every entry is finite (its exponent bits not all set), with no early exit: the
+/// check runs after every IMU interval, and the loop over the covariance's N² entries
+/// vectorises.
+fn all_finite(xs: &[f64]) -> bool {
+    const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
+    !xs.iter()
+        .fold(false, |bad, x| bad | (x.to_bits() & EXPONENT == EXPONENT))
+}
+
+/// Whether `a` and `b` hold the same bits (the memo's key: the same matrix gives the same
+/// answer), with no early exit, so the comparison vectorises.
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u64, |d, (x, y)| d | (x.to_bits() ^ y.to_bits())) == 0
 }
 
 /// Whether `p` is symmetric (to rounding) and positive definite on the states that are live
@@ -160,7 +175,7 @@ pub struct PdMemo(Option<Box<StateMat>>);
 impl PdMemo {
     /// Whether `p` is positive definite ([`positive_definite`]), remembered for the same `p`.
     pub fn positive_definite(&mut self, p: &StateMat) -> bool {
-        if self.0.as_deref() == Some(p) {
+        if self.0.as_deref().is_some_and(|m| same_bits(m.as_slice(), p.as_slice())) {
             return true;
         }
         let ok = positive_definite(p);
