@@ -64,9 +64,9 @@ impl Eskf {
 
     /// P ← Φ P Φᵀ + Q_d (Brown & Hwang eq. 5.2.10), symmetrised.
     ///
-    /// Φ = I + F·Δt is sparse (about a fifth of its N² entries): both products run over its
-    /// non-zero entries only ([`sparse_sandwich`]), the same sums in the same order as the
-    /// dense product, so the same numbers, at a fifth of the cost.
+    /// Φ = I + F·Δt is sparse (82 non-zeros of 676, 100 with the scale factors): both products
+    /// run over its non-zero entries only ([`sparse_sandwich`]), the same sums in the same
+    /// order as the dense product, so the same numbers.
     pub fn predict(&mut self, phi: &StateMat, qd: &StateMat) {
         let p = sparse_sandwich(phi, &self.p) + qd;
         self.p = (p + p.transpose()) * 0.5;
