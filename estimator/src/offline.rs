@@ -16,6 +16,7 @@ use crate::evaluation::{DelayTruth, Evaluator, Summary};
 use crate::feed::Feed;
 use crate::input_order::Input;
 use crate::nav::error_state::{ATT, BA, BG, DELAY, POS, VEL};
+use crate::nav::filter::{DelayDoubt, published_pos_std_ned_m};
 use crate::nav::smoother::Smoothed;
 use crate::pipeline::Pipeline;
 use crate::settings::Settings;
@@ -170,20 +171,17 @@ fn apply_smoothed(n: &mut NavState, s: &Smoothed) {
     n.q_nb = [q.w, q.i, q.j, q.k];
     let std3 = |i: usize| [s.std[i], s.std[i + 1], s.std[i + 2]];
     let scaled = |i: usize| std3(i).map(|x| x * s.state.sigma_scale);
-    n.pos_std_ned_m = scaled(POS);
-    let floor = s.state.pos_floor_std_ned_m;
-    for (sd, fl) in n.pos_std_ned_m.iter_mut().zip(floor.iter()) {
-        *sd = sd.max(*fl);
-    }
-    n.vel_std_ned_mps = scaled(VEL);
-    n.att_std_rad = scaled(ATT);
+    let doubt = &s.state.delay_doubt;
+    n.pos_std_ned_m = published_pos_std_ned_m(std3(POS), s.state.sigma_scale, &s.state.pos_floor_std_ned_m, doubt);
+    n.vel_std_ned_mps = DelayDoubt::widen(scaled(VEL), &doubt.vel_m2ps2);
+    n.att_std_rad = DelayDoubt::widen(scaled(ATT), &doubt.att_rad2);
     n.gyro_bias_rps = s.state.bias_g.into();
     n.accel_bias_mps2 = s.state.bias_a.into();
     n.gyro_bias_std_rps = std3(BG);
     n.accel_bias_std_mps2 = std3(BA);
     if n.gnss_delay_s.is_finite() {
         n.gnss_delay_s = s.state.delay_s;
-        n.gnss_delay_std_s = s.std[DELAY];
+        n.gnss_delay_std_s = s.state.delay_doubt.delay_std_s(s.std[DELAY]);
     }
 }
 

@@ -16,6 +16,62 @@ use super::mechanization::{ImuIncrement, Pva, propagate};
 /// ([`DelayedFilter::delay_observable`]).
 pub const DELAY_SPEED_SIGMAS: f64 = 3.0;
 
+/// What the doubt on Δ adds to the published variances (the covariance P itself unchanged):
+/// Δ's own, and each state's share through P's regression on Δ, (P_iΔ / P_ΔΔ)² · doubt (a Δ
+/// off by δΔ leaves position, velocity and attitude off by their regression on it: for the
+/// position −v·δΔ, a fix taken for an instant δΔ away, [`super::measurements::gnss`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct DelayDoubt {
+    /// Added to Δ's variance, s².
+    pub delay_s2: f64,
+    /// Added to the position's variance N, E, D, m².
+    pub pos_m2: Vector3<f64>,
+    /// Added to the velocity's variance N, E, D, (m/s)².
+    pub vel_m2ps2: Vector3<f64>,
+    /// Added to the attitude error's variance (NED axes), rad².
+    pub att_rad2: Vector3<f64>,
+}
+
+impl DelayDoubt {
+    /// The doubt `delay_s2` (s²) on Δ carried to the states by covariance `p`.
+    pub fn from_covariance(p: &StateMat, delay_s2: f64) -> Self {
+        let p_dd = p[(DELAY, DELAY)];
+        if !(delay_s2 > 0.0 && p_dd > 0.0) {
+            return Self::default();
+        }
+        let share = |i: usize| Vector3::from_fn(|k, _| (p[(i + k, DELAY)] / p_dd).powi(2) * delay_s2);
+        Self {
+            delay_s2,
+            pos_m2: share(POS),
+            vel_m2ps2: share(VEL),
+            att_rad2: share(ATT),
+        }
+    }
+
+    /// σ's `std` with `add` (variances) added.
+    pub fn widen(std: [f64; 3], add: &Vector3<f64>) -> [f64; 3] {
+        std::array::from_fn(|i| (std[i] * std[i] + add[i]).sqrt())
+    }
+
+    /// Δ's σ `std_s` with the doubt added, s.
+    pub fn delay_std_s(&self, std_s: f64) -> f64 {
+        (std_s * std_s + self.delay_s2).sqrt()
+    }
+}
+
+/// The published position σ per axis (NED, m) of a state whose covariance gives `std_m`: times
+/// the filter's [`DelayedFilter::sigma_scale`], with Δ's doubt, and at least the floor
+/// ([`DelayedFilter::pos_floor_std_ned_m`]).
+pub fn published_pos_std_ned_m(
+    std_m: [f64; 3],
+    sigma_scale: f64,
+    floor_m: &Vector3<f64>,
+    doubt: &DelayDoubt,
+) -> [f64; 3] {
+    let widened = DelayDoubt::widen(std_m.map(|s| s * sigma_scale), &doubt.pos_m2);
+    std::array::from_fn(|i| widened[i].max(floor_m[i]))
+}
+
 /// The delayed filter: the navigation state at the delayed time (the fusion horizon behind
 /// the present), its error covariance and the sensor-error and GNSS-delay estimates. The
 /// measurements ([`super::measurements`]) fuse into it at their epochs.
@@ -70,6 +126,10 @@ pub struct DelayedFilter {
     /// the filter's gains keep the model (its own adaptation, `GnssFusion::adapt_process_noise`,
     /// is off by default). Kept with the state, so the smoothed output gets it too.
     pub sigma_scale: f64,
+    /// What the published σ's add for the doubt on Δ: what the estimate's dependence on its
+    /// prior shows P_ΔΔ to claim beyond the data (the navigator's prior-shifted shadow,
+    /// [`super::navigator::SHADOW_MIN_PRIOR_STD_S`]). P itself is not changed.
+    pub delay_doubt: DelayDoubt,
     /// Sum of the position corrections fed back so far, NED, m (the change of the position
     /// estimate that is not motion: time-differenced carrier phases take it out).
     pub pos_corrections_ned_m: Vector3<f64>,
@@ -111,6 +171,7 @@ impl DelayedFilter {
             pos_floor_std_ned_m: Vector3::zeros(),
             clock_floor_std_m: 0.0,
             sigma_scale: 1.0,
+            delay_doubt: DelayDoubt::default(),
             pos_corrections_ned_m: Vector3::zeros(),
             acc_ned: Vector3::zeros(),
             last_w: Vector3::zeros(),

@@ -22,7 +22,7 @@ pub use super::config::NavConfig;
 use super::config::{Coupling, InitialState};
 use super::error_state::{ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, POS, ProcessNoise, SA, SG, StateMat, VEL};
 use super::eskf::Eskf;
-use super::filter::DelayedFilter;
+use super::filter::{DelayDoubt, DelayedFilter, published_pos_std_ned_m};
 use super::heading_bank::{BankStep, HeadingBank, with_heading};
 use super::imu_buffer::{ImuBuffer, ImuRecord};
 use super::integrity::{
@@ -140,6 +140,9 @@ pub struct ReceiverClock {
 pub const MIN_DELAY_S: f64 = -0.5;
 /// Δ stays this far below the fusion horizon, s (its upper clamp).
 pub const DELAY_HORIZON_MARGIN_S: f64 = 0.05;
+/// A prior of Δ at least this loose (s, 1σ) runs a shadow navigator ([`Navigator::reset_delay`]):
+/// software sync's (0.5 s), not hardware sync's (0.02 s by default).
+pub const SHADOW_MIN_PRIOR_STD_S: f64 = 0.1;
 
 /// Sets filter `f`'s Δ to `prior_s` with 1σ `prior_std_s` (0 when Δ is not `live`), its
 /// correlations with the other states forgotten.
@@ -161,7 +164,8 @@ struct CatchUp {
 
 /// Writes the pose of `pva` (rates `w`, specific force `f`, body FRD), the σ's and the sensor
 /// errors of `filt` into `s`; the position, velocity and attitude σ times
-/// [`DelayedFilter::sigma_scale`], the position's at least [`DelayedFilter::pos_floor_std_ned_m`].
+/// [`DelayedFilter::sigma_scale`], the position's with Δ's doubt and at least its floor
+/// ([`published_pos_std_ned_m`]).
 fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, filt: &DelayedFilter) {
     let sigma_scale = filt.sigma_scale;
     let q = pva.q_nb.quaternion();
@@ -175,13 +179,10 @@ fn write_pose(s: &mut NavState, pva: &Pva, w: Vector3<f64>, f: Vector3<f64>, fil
     s.accel_body_mps2 = f.into();
     let std3 = |i: usize| [filt.eskf.std(i), filt.eskf.std(i + 1), filt.eskf.std(i + 2)];
     let scaled = |i: usize| std3(i).map(|x| x * sigma_scale);
-    let floor = filt.pos_floor_std_ned_m;
-    s.pos_std_ned_m = scaled(POS);
-    for (sd, fl) in s.pos_std_ned_m.iter_mut().zip(floor.iter()) {
-        *sd = sd.max(*fl);
-    }
-    s.vel_std_ned_mps = scaled(VEL);
-    s.att_std_rad = scaled(ATT);
+    let doubt = &filt.delay_doubt;
+    s.pos_std_ned_m = published_pos_std_ned_m(std3(POS), sigma_scale, &filt.pos_floor_std_ned_m, doubt);
+    s.vel_std_ned_mps = DelayDoubt::widen(scaled(VEL), &doubt.vel_m2ps2);
+    s.att_std_rad = DelayDoubt::widen(scaled(ATT), &doubt.att_rad2);
     s.gyro_bias_rps = filt.bias_g.into();
     s.accel_bias_mps2 = filt.bias_a.into();
     s.gyro_bias_std_rps = std3(BG);
@@ -246,6 +247,13 @@ pub struct Navigator {
     widened: bool,
     /// Host time until which states are flagged as recovering from a reset, ns.
     recovering_until_ns: i64,
+    /// The same navigator with Δ's prior shifted by one σ, fed the same inputs, while that
+    /// prior is loose ([`SHADOW_MIN_PRIOR_STD_S`]): how far its Δ estimate stays from this
+    /// one's is the information the data really hold on Δ ([`Self::update_delay_doubt`]).
+    shadow: Option<Box<Navigator>>,
+    /// This navigator's shift of every prior of Δ it is given, in σ of that prior: 0, or ±1
+    /// for a shadow.
+    prior_shift_sigmas: f64,
     /// The prior of the GNSS delay Δ in force and its 1-sigma, s (set by
     /// [`Navigator::reset_delay`] when the time base of the fix stamps changes; the motion
     /// onset may narrow it at alignment).
@@ -308,6 +316,8 @@ impl Navigator {
             inconsistent: false,
             widened: false,
             recovering_until_ns: i64::MIN,
+            shadow: None,
+            prior_shift_sigmas: 0.0,
         }
     }
 
@@ -351,22 +361,72 @@ impl Navigator {
         self.filt.is_some()
     }
 
-    /// Estimated GNSS delay Δ and its 1-sigma, s (NaN before alignment or when switched off).
+    /// Estimated GNSS delay Δ and its published 1-sigma (with its doubt,
+    /// [`DelayedFilter::delay_doubt`]), s (NaN before alignment or when switched off).
     pub fn gnss_delay(&self) -> (f64, f64) {
         match &self.filt {
-            Some(f) if self.cfg.estimate_delay => (f.delay_s, f.eskf.std(DELAY)),
+            Some(f) if self.cfg.estimate_delay => (f.delay_s, f.delay_doubt.delay_std_s(f.eskf.std(DELAY))),
             _ => (f64::NAN, f64::NAN),
         }
     }
 
     /// Forgets the delay estimate (the time base of the fix stamps changed).
     pub fn reset_delay(&mut self, prior_s: f64, prior_std_s: f64) {
-        self.delay_prior = (prior_s, prior_std_s);
-        self.delay_base.0 = prior_s;
+        let shifted_s = prior_s + self.prior_shift_sigmas * prior_std_s;
+        self.delay_prior = (shifted_s, prior_std_s);
+        self.delay_base.0 = shifted_s;
         self.delay_base.1 = prior_std_s;
         if let Some(f) = &mut self.filt {
-            reopen_delay(f, prior_s, prior_std_s, self.cfg.estimate_delay);
+            reopen_delay(f, shifted_s, prior_std_s, self.cfg.estimate_delay);
         }
+        self.reset_shadow(prior_s, prior_std_s);
+    }
+
+    /// Starts, re-primes or ends the shadow for a new prior of Δ (`prior_s` ± `prior_std_s`):
+    /// one while the prior is loose (software sync's receipt latency), Δ a state and the
+    /// coupling loose; its prior one σ above (below, where the horizon leaves no room).
+    fn reset_shadow(&mut self, prior_s: f64, prior_std_s: f64) {
+        if self.prior_shift_sigmas != 0.0 {
+            return;
+        }
+        if !(self.cfg.estimate_delay && !self.is_tight() && prior_std_s >= SHADOW_MIN_PRIOR_STD_S) {
+            self.shadow = None;
+            return;
+        }
+        let room_s = self.cfg.fusion_horizon_s - DELAY_HORIZON_MARGIN_S - (prior_s + prior_std_s);
+        let shift = if room_s >= prior_std_s { 1.0 } else { -1.0 };
+        if self.shadow.is_none() {
+            let mut sh = Box::new(self.clone());
+            sh.fused = None;
+            sh.smoother = None;
+            self.shadow = Some(sh);
+        }
+        let Some(sh) = &mut self.shadow else { return };
+        sh.prior_shift_sigmas = shift;
+        sh.reset_delay(prior_s, prior_std_s);
+    }
+
+    /// Sets the doubt on Δ ([`DelayedFilter::delay_doubt`]) from the shadow. In a
+    /// linear Gaussian filter the posterior mean depends on the prior mean through
+    /// ∂Δ̂/∂Δ̂₀ = P_ΔΔ / P₀ (the information form: x̂ = P (P₀⁻¹ x̂₀ + Hᵀ R⁻¹ z)), so a prior
+    /// shifted by σ₀ moves the estimate by P_ΔΔ/σ₀. The shadow's estimate, |δΔ̂| away, shows
+    /// P_eff = |δΔ̂|·σ₀ to be what the data leave of the prior; where that exceeds the filter's
+    /// P_ΔΔ (a slow mover's Δ read from the noise of its velocity: the EKF's spurious
+    /// information, Huang, Mourikis & Roumeliotis 2010), the difference is the doubt, at most
+    /// the prior's variance (and all of it while the shadow is not aligned yet).
+    fn update_delay_doubt(&mut self) {
+        let Some(f) = &mut self.filt else { return };
+        let Some(sh) = &self.shadow else {
+            f.delay_doubt = DelayDoubt::default();
+            return;
+        };
+        let sigma0 = self.delay_prior.1;
+        let prior_var = sigma0 * sigma0;
+        let p_eff = match &sh.filt {
+            Some(g) => ((g.delay_s - f.delay_s).abs() * sigma0).min(prior_var),
+            None => prior_var,
+        };
+        f.delay_doubt = DelayDoubt::from_covariance(&f.eskf.p, (p_eff - f.eskf.p[(DELAY, DELAY)]).max(0.0));
     }
 
     /// The least GNSS delay Δ that is physical for the fix stamps in force, s: under software
@@ -376,6 +436,9 @@ impl Navigator {
     /// the filter, is reset to the prior ([`Self::monitor`]).
     pub fn set_delay_floor(&mut self, floor_s: f64) {
         self.delay_base.2 = floor_s.max(MIN_DELAY_S);
+        if let Some(sh) = &mut self.shadow {
+            sh.set_delay_floor(floor_s);
+        }
     }
 
     /// The present output state, if aligned.
@@ -389,6 +452,9 @@ impl Navigator {
     /// not send its raw measurements: counted as `ranges_fallback_fixes`); otherwise the
     /// satellites' own measurements ([`Self::on_ranges`]) carry the same information.
     pub fn on_gnss(&mut self, obs: GnssObservation, rx_ns: i64) {
+        if let Some(sh) = &mut self.shadow {
+            sh.on_gnss(obs, rx_ns);
+        }
         self.last_fix_rx_ns = Some(rx_ns);
         // Moving: faster than the alignment's minimum and than the speed's own noise. Without
         // a measured velocity the speed is a difference of positions (σ_h each, dt apart):
@@ -426,6 +492,7 @@ impl Navigator {
                                 *sd < self.delay_prior.1 && (-0.2..self.cfg.fusion_horizon_s - 0.1).contains(d)
                             })
                     {
+                        let d = d + self.prior_shift_sigmas * sd;
                         self.delay_prior = (d, sd);
                         bank.reset_delay(d, sd);
                     }
@@ -539,6 +606,9 @@ impl Navigator {
     /// and the state's 1-sigma as given; the other sensor errors start at zero with their
     /// turn-on σ. Does nothing once the filter runs.
     pub fn initialize(&mut self, init: &InitialState, host_ns: i64) {
+        if let Some(sh) = &mut self.shadow {
+            sh.initialize(init, host_ns);
+        }
         if self.filt.is_some() {
             return;
         }
@@ -651,7 +721,7 @@ impl Navigator {
                 .delay_from_onset_s
                 .filter(|(d, sd)| *sd < self.delay_prior.1 && (-0.2..self.cfg.fusion_horizon_s - 0.1).contains(d))
         {
-            self.delay_prior = (d, sd);
+            self.delay_prior = (d + self.prior_shift_sigmas * sd, sd);
         }
         let cfg = &self.cfg;
         let mut p = StateMat::zeros();
@@ -822,11 +892,30 @@ impl Navigator {
     /// IMU that defines the navigation point changed (array reference handover).
     pub fn set_lever_arm(&mut self, lever_arm_b_m: Vector3<f64>) {
         self.cfg.gnss_lever_arm_m = lever_arm_b_m.into();
+        if let Some(sh) = &mut self.shadow {
+            sh.set_lever_arm(lever_arm_b_m);
+        }
     }
 
     /// Feeds one interval of the filter stream (the fused virtual IMU, or the single IMU): it
-    /// enters the fusion horizon and the delayed filter consumes what is older than the horizon.
+    /// enters the fusion horizon and the delayed filter consumes what is older than the horizon
+    /// (the shadow's too, and Δ's doubt follows).
     pub fn on_filter_imu(&mut self, host_ns: i64, nominal_dt_s: f64, gyro_rps: Vector3<f64>, accel_mps2: Vector3<f64>) {
+        if let Some(sh) = &mut self.shadow {
+            sh.on_filter_imu(host_ns, nominal_dt_s, gyro_rps, accel_mps2);
+        }
+        self.step_filter_stream(host_ns, nominal_dt_s, gyro_rps, accel_mps2);
+        self.update_delay_doubt();
+    }
+
+    /// [`Self::on_filter_imu`] for this navigator alone.
+    fn step_filter_stream(
+        &mut self,
+        host_ns: i64,
+        nominal_dt_s: f64,
+        gyro_rps: Vector3<f64>,
+        accel_mps2: Vector3<f64>,
+    ) {
         let Some(rec) = Self::record(
             &mut self.last_imu_ns,
             &mut self.counters,
@@ -1193,7 +1282,11 @@ impl Navigator {
 
     /// Keeps the delayed filter's state at the end of record `r` (see [`Self::drain_fused`]).
     fn push_fused(&mut self, r: &ImuRecord) {
-        let (Some(filt), Some(_)) = (&self.filt, &self.fused) else {
+        if self.fused.is_none() {
+            return;
+        }
+        self.update_delay_doubt();
+        let Some(filt) = &self.filt else {
             return;
         };
         let mut s = <NavState as navsync_wire::reflect::Reflect>::zeroed();
@@ -1279,6 +1372,79 @@ mod tests {
         };
         nav.initialize(&init, 1_000_000_000);
         nav
+    }
+
+    /// A loose prior of Δ (software sync) runs a shadow with the prior one σ above, fed the
+    /// same inputs; a tight one (hardware sync) none.
+    #[test]
+    fn a_loose_delay_prior_runs_a_shadow_one_sigma_above() {
+        let mut nav = aligned();
+        nav.reset_delay(0.0, 0.02);
+        assert!(nav.shadow.is_none());
+        nav.reset_delay(0.5, 0.5);
+        let sh = nav.shadow.as_ref().expect("a shadow");
+        assert_eq!(sh.delay_prior, (1.0, 0.5));
+        assert_eq!(sh.filt.as_ref().map(|f| f.delay_s), Some(1.0));
+        assert_eq!(nav.filt.as_ref().map(|f| f.delay_s), Some(0.5));
+        let g = earth::normal_gravity(45f64.to_radians(), 300.0);
+        for k in 1..=1000 {
+            nav.on_imu(
+                1_000_000_000 + k * 5_000_000,
+                0.005,
+                Vector3::zeros(),
+                Vector3::new(0.0, 0.0, -g),
+            );
+        }
+        let (main_t, shadow_t) = (
+            nav.filt.as_ref().map(|f| f.t_ns),
+            nav.shadow.as_ref().and_then(|s| s.filt.as_ref().map(|f| f.t_ns)),
+        );
+        assert!(main_t.is_some() && main_t == shadow_t, "{main_t:?} {shadow_t:?}");
+        // A prior near the horizon: the shadow's goes one σ below.
+        nav.reset_delay(1.6, 0.3);
+        assert_eq!(nav.shadow.as_ref().map(|s| s.delay_prior), Some((1.3, 0.3)));
+        nav.reset_delay(0.0, 0.02);
+        assert!(nav.shadow.is_none());
+    }
+
+    /// The shadow's estimate |δΔ̂| from the filter's shows P_eff = |δΔ̂|·σ₀ (the linear filter's
+    /// ∂Δ̂/∂Δ̂₀ = P_ΔΔ/P₀): a P_ΔΔ below it is published widened to it, and so are the states
+    /// through their regression on Δ (the position by −v·δΔ); a P_ΔΔ at or above it unchanged.
+    #[test]
+    fn the_published_delay_sigma_is_what_the_shadow_shows_the_data_to_hold() {
+        let mut nav = aligned();
+        nav.reset_delay(0.5, 0.5);
+        let v = 2.0;
+        {
+            let f = nav.filt.as_mut().unwrap();
+            f.eskf.p[(DELAY, DELAY)] = 0.01;
+            f.eskf.p[(POS, DELAY)] = -v * 0.01;
+            f.eskf.p[(DELAY, POS)] = -v * 0.01;
+            f.eskf.p[(POS, POS)] = v * v * 0.01 + 1e-4;
+            nav.shadow.as_mut().unwrap().filt.as_mut().unwrap().delay_s = 0.9;
+        }
+        nav.update_delay_doubt();
+        let (d, sd) = nav.gnss_delay();
+        assert_eq!(d, 0.5);
+        // P_eff = 0.4 · 0.5 = 0.2 s².
+        assert!((sd - 0.2_f64.sqrt()).abs() < 1e-12, "{sd}");
+        let mut s = <NavState as navsync_wire::reflect::Reflect>::zeroed();
+        nav.fill(&mut s, 1_000_000_000);
+        let expected = (v * v * 0.01 + 1e-4 + v * v * 0.19_f64).sqrt();
+        assert!(
+            (s.pos_std_ned_m[0] - expected).abs() < 1e-9,
+            "{:?} vs {expected}",
+            s.pos_std_ned_m
+        );
+        // A filter that already claims no more than that: nothing added.
+        nav.filt.as_mut().unwrap().eskf.p[(DELAY, DELAY)] = 0.25;
+        nav.update_delay_doubt();
+        assert_eq!(nav.gnss_delay().1, 0.5);
+        // A shadow not aligned yet: no more than the prior is claimed.
+        nav.filt.as_mut().unwrap().eskf.p[(DELAY, DELAY)] = 0.01;
+        nav.shadow.as_mut().unwrap().filt = None;
+        nav.update_delay_doubt();
+        assert!((nav.gnss_delay().1 - 0.5).abs() < 1e-12);
     }
 
     /// The fine alignment's re-run over the bank's data makes fused states like any later

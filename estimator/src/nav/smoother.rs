@@ -24,7 +24,7 @@ use navsync_wire::earth;
 use super::error_state::{
     ATT, BA, BG, CLK_BIAS, CLK_DRIFT, DELAY, ISB, ISB_SYSTEMS, N, POS, SA, SG, StateMat, StateVec, VEL,
 };
-use super::filter::DelayedFilter;
+use super::filter::{DelayDoubt, DelayedFilter};
 use super::mechanization::Pva;
 
 /// Longest propagation between two nodes, ns (10 Hz).
@@ -55,6 +55,8 @@ pub struct Nominal {
     pub pos_floor_std_ned_m: Vector3<f64>,
     /// The factor on the published σ ([`DelayedFilter::sigma_scale`]).
     pub sigma_scale: f64,
+    /// What the published σ's add for the doubt on Δ ([`DelayedFilter::delay_doubt`]).
+    pub delay_doubt: DelayDoubt,
 }
 
 impl Nominal {
@@ -72,6 +74,7 @@ impl Nominal {
             isb_m: f.isb_m,
             pos_floor_std_ned_m: f.pos_floor_std_ned_m,
             sigma_scale: f.sigma_scale,
+            delay_doubt: f.delay_doubt,
         }
     }
 
@@ -337,6 +340,7 @@ mod tests {
             isb_m: [1.5, -2.0],
             pos_floor_std_ned_m: Vector3::zeros(),
             sigma_scale: 1.0,
+            delay_doubt: DelayDoubt::default(),
         };
         let dx = StateVec::from_fn(|i, _| 1e-3 * (i as f64 + 1.0) * if i % 2 == 0 { 1.0 } else { -1.0 });
         let back = s.corrected(&dx).correction_from(&s);
