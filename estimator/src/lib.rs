@@ -40,3 +40,6 @@ pub mod output_check;
 pub mod pipeline;
 pub mod settings;
 pub mod time;
+
+#[cfg(test)]
+pub(crate) mod test_noise;

@@ -2,7 +2,7 @@
 """The randomized sweep (issue 34): many independent drives, navsync with its defaults on each.
 
   sweep.py [--navsync BIN] [--runs N] [--seed S] [--duration S] [--work DIR [--keep]]
-           [--json OUT] [--kf-gins BIN] [--no-array]
+           [--json OUT] [--kf-gins BIN] [--no-array] [--imu-model default|matched]
 
 Each run draws (from --seed and its index) a drive of `independent_drive.py` (exact
 kinematics, shares no code with navsync): a profile (car, pedestrian, slow robot: the speed
@@ -11,7 +11,8 @@ hemispheres, both sides of Greenwich, up to 75 deg latitude), an IMU grade (indu
 consumer), a GNSS sigma (1 cm to 3 m, log-uniform) and rate (1, 2, 4, 5, 10 Hz), a lever arm
 (up to 1 m per axis), and the time synchronisation: PPS (fixes at their epoch) or software sync
 with a receipt latency of 0 to 1.5 s. navsync gets what a user would give: the files, the lever
-arm and, in software sync, `--software-sync`; no IMU model, no initial state.
+arm and, in software sync, `--software-sync`; no IMU model, no initial state (with
+`--imu-model matched` also the drive's IMU grade, as `--imu-model`).
 
 Per run: the exit status and the summary's problem (a run that exits 0 must have usable
 output; one that fails must say why), NaN in any output row, and per output epoch whether the
@@ -124,6 +125,8 @@ def replay(a, d, rec, work, extra=()):
            "--format", "kf-gins", "--out", out + "/", "--summary-json", summary, "--force"]
     if d["latency_s"] is not None:
         rep.append("--software-sync")
+    if getattr(a, "imu_model", "default") == "matched":
+        rep += ["--imu-model", d["preset"]]
     rc = run(rep, os.path.join(work, "replay.log"))
     s = {}
     if os.path.exists(summary):
@@ -235,6 +238,9 @@ def main():
                     help="keep each run's files (~60 MB a run) in the working directory")
     ap.add_argument("--kf-gins", help="KF-GINS binary: compare on the same files")
     ap.add_argument("--json", help="write the results here")
+    ap.add_argument("--imu-model", choices=["default", "matched"], default="default",
+                    help="default: navsync's own (generic, an IMU of unknown class); matched: each drive's "
+                         "IMU grade given as --imu-model (the filter's consistency when it knows its IMU)")
     ap.add_argument("--no-array", dest="array", action="store_false",
                     help="leave out the IMU-array runs (offset coverage)")
     a = ap.parse_args()

@@ -136,6 +136,12 @@ crate::settings_group! {
     pub struct NavConfig {
         /// IMU and state process noise (from the IMU model: `imu_model`, `imu_noise`).
         pub noise: ProcessNoise = ProcessNoise::from_imu_noise(&ImuPreset::Generic.noise());
+        /// With the generic IMU model (an IMU of unknown class): its process noise scaled down to
+        /// what the IMU's own signal shows, each white noise at most the density its 20 ms
+        /// second differences hold over the last 10 s, the bias instabilities by the largest
+        /// such ratio seen since the start, never above the generic model (off: the generic
+        /// model as it is).
+        pub imu_noise_from_signal: bool = true, file "estimator", switch "no-imu-noise-from-signal" => false;
         /// GNSS antenna in the body frame (FRD) from the IMU, m, `x,y,z` (in the file: the
         /// first receiver's `[gnss.ID] lever_arm_m`; else the recording's).
         pub gnss_lever_arm_m: [f64; 3] = [0.0; 3], flag "lever-arm", check finite3;

@@ -5,6 +5,7 @@
 //!   and the Kalman filter engine with chi-square gating.
 //! - [`config`]: the filter's settings (a leaf: one declaration per setting).
 //! - [`alignment`]: levelling and GNSS-course heading.
+//! - [`noise_meter`]: the white noise an IMU of unknown class can have, from its own signal.
 //! - [`imu_buffer`], [`filter`], [`navigator`]: the fusion horizon (delayed filter + output
 //!   predictor).
 //! - [`measurements`]: the one measurement queue and its kinds (GNSS position/velocity with
@@ -21,4 +22,5 @@ pub mod integrity;
 pub mod measurements;
 pub mod mechanization;
 pub mod navigator;
+pub mod noise_meter;
 pub mod smoother;

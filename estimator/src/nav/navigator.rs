@@ -15,6 +15,7 @@
 //! Pure and deterministic: the output depends only on the samples and their order.
 
 use nalgebra::Vector3;
+use navsync_wire::imu_spec::ImuPreset;
 use navsync_wire::samples::{ImuSync, MAX_IMUS, NavState, NavStatus};
 
 use super::alignment::{Aligner, ONSET_DELAY_FLOOR_S};
@@ -31,6 +32,7 @@ use super::integrity::{
 use super::measurements::gnss::GnssObservation;
 use super::measurements::{Measurement, MeasurementConfig, MeasurementQueue, MeasurementStates};
 use super::mechanization::{ImuIncrement, Pva, propagate};
+use super::noise_meter::{MeasuredNoise, NoiseMeter};
 use super::smoother::SmootherLog;
 use crate::gnss::ranges::RangeEpoch;
 
@@ -66,10 +68,40 @@ fn reset_sensor_errors(f: &mut DelayedFilter, noise: &ProcessNoise) {
     }
 }
 
+/// Below this fraction of the generic model's no measured white noise is taken (ARW
+/// 0.02 °/√h: beyond a navigation-grade IMU's; keeps the process noise positive).
+const MIN_NOISE_SCALE: f64 = 0.01;
+
+/// `generic` (the model of an IMU of unknown class) scaled to what the IMU's signal shows
+/// ([`super::noise_meter`]): each white noise at most its measured bound (vibration comes and
+/// goes), never above the generic model; the bias instabilities, a property of the IMU in use
+/// rather than of the moment, by `k_bias` (the largest of the white-noise ratios the signal has
+/// shown so far: an IMU's Allan curve moves as a whole from class to class, and the generic
+/// model's ARW and instabilities are those of one IMU in use); the turn-on errors and the
+/// states' switches as in `current`. Returns the noise and the ratio the instabilities took.
+fn noise_from_signal(
+    generic: &ProcessNoise,
+    m: &MeasuredNoise,
+    k_bias: f64,
+    current: &ProcessNoise,
+) -> (ProcessNoise, f64) {
+    let kg = (m.arw_rad_sqrt_s / generic.arw.mean()).clamp(MIN_NOISE_SCALE, 1.0);
+    let ka = (m.vrw_mps_sqrt_s / generic.vrw.mean()).clamp(MIN_NOISE_SCALE, 1.0);
+    let k = kg.max(ka).max(k_bias);
+    let noise = ProcessNoise {
+        arw: generic.arw * kg,
+        vrw: generic.vrw * ka,
+        gyro_bias_std: generic.gyro_bias_std * k,
+        accel_bias_std: generic.accel_bias_std * k,
+        ..*current
+    };
+    (noise, k)
+}
+
 /// `noise` with every term at least that of an IMU of unknown class (the generic preset): what
 /// the filter assumes once the data have contradicted the configured model.
 fn widened(noise: &ProcessNoise) -> ProcessNoise {
-    let g = ProcessNoise::from_imu_noise(&navsync_wire::imu_spec::ImuPreset::Generic.noise());
+    let g = ProcessNoise::from_imu_noise(&ImuPreset::Generic.noise());
     let max = |a: Vector3<f64>, b: Vector3<f64>| a.zip_map(&b, f64::max);
     ProcessNoise {
         arw: max(noise.arw, g.arw),
@@ -245,6 +277,10 @@ pub struct Navigator {
     inconsistent: bool,
     /// The IMU model was widened after an inconsistency ([`widened`]).
     widened: bool,
+    /// An IMU of unknown class: the generic model its process noise is scaled from, the meter
+    /// of its signal and the largest ratio to the generic model it has shown
+    /// ([`NavConfig::imu_noise_from_signal`]); `None` for a model given.
+    noise_from_signal: Option<(ProcessNoise, Option<NoiseMeter>, f64)>,
     /// Host time until which states are flagged as recovering from a reset, ns.
     recovering_until_ns: i64,
     /// The same navigator with Δ's prior shifted by one σ, fed the same inputs, while that
@@ -279,6 +315,8 @@ impl Navigator {
     /// A filter that waits for alignment, with `kinds` the settings of each kind of
     /// measurement.
     pub fn with_measurements(mut cfg: NavConfig, kinds: MeasurementConfig) -> Self {
+        let generic = ProcessNoise::from_imu_noise(&ImuPreset::Generic.noise());
+        let noise_from_signal = (cfg.imu_noise_from_signal && cfg.noise == generic).then_some((generic, None, 0.0));
         // The states the settings make live: Δ, and the receiver clock when tightly coupled.
         cfg.noise.delay_state = cfg.estimate_delay;
         cfg.noise.clock = (cfg.coupling == Coupling::Tight).then(|| cfg.receiver_oscillator.noise());
@@ -315,6 +353,7 @@ impl Navigator {
             smoother: None,
             inconsistent: false,
             widened: false,
+            noise_from_signal,
             recovering_until_ns: i64::MIN,
             shadow: None,
             prior_shift_sigmas: 0.0,
@@ -908,6 +947,21 @@ impl Navigator {
         self.update_delay_doubt();
     }
 
+    /// An IMU of unknown class: its signal's white-noise bound, and at the end of each block
+    /// the process noise scaled to it (until the data contradicted the model: [`widened`]).
+    fn measure_noise(&mut self, nominal_dt_s: f64, gyro_rps: &Vector3<f64>, accel_mps2: &Vector3<f64>) {
+        let Some((generic, meter, k_bias)) = &mut self.noise_from_signal else {
+            return;
+        };
+        if self.widened {
+            return;
+        }
+        let meter = meter.get_or_insert_with(|| NoiseMeter::new(nominal_dt_s));
+        if let Some(m) = meter.push(nominal_dt_s, gyro_rps, accel_mps2) {
+            (self.cfg.noise, *k_bias) = noise_from_signal(generic, &m, *k_bias, &self.cfg.noise);
+        }
+    }
+
     /// [`Self::on_filter_imu`] for this navigator alone.
     fn step_filter_stream(
         &mut self,
@@ -926,6 +980,7 @@ impl Navigator {
         ) else {
             return;
         };
+        self.measure_noise(nominal_dt_s, &gyro_rps, &accel_mps2);
         if self.filt.is_none() {
             self.aligner.on_imu(&rec);
         }
@@ -1372,6 +1427,59 @@ mod tests {
         };
         nav.initialize(&init, 1_000_000_000);
         nav
+    }
+
+    /// An IMU of unknown class (the generic model) gets the process noise its signal shows: a
+    /// quiet one's white noise and instabilities scaled down, a vibrating one's never above the
+    /// generic model; a model given, or the switch off, stays as configured.
+    #[test]
+    fn an_unknown_imus_noise_follows_its_signal_and_a_given_model_stays() {
+        use crate::test_noise::gauss;
+        let g = earth::normal_gravity(45f64.to_radians(), 300.0);
+        let generic = ProcessNoise::from_imu_noise(&ImuPreset::Generic.noise());
+        let consumer = ProcessNoise::from_imu_noise(&ImuPreset::Consumer.noise());
+        let mut navs = [
+            Navigator::new(NavConfig::default()),
+            Navigator::new(NavConfig::with_noise(consumer)),
+            Navigator::new(NavConfig {
+                imu_noise_from_signal: false,
+                ..NavConfig::default()
+            }),
+        ];
+        let dt: f64 = 0.005;
+        let mut rng = 11u64;
+        // 15 s each: beyond the meter's first window.
+        let mut feed = |navs: &mut [Navigator; 3], from: i64, scale_g: f64, scale_a: f64| {
+            for k in from..from + 3000 {
+                let w = Vector3::from_fn(|_, _| gauss(&mut rng)) * (scale_g * generic.arw.mean() / dt.sqrt());
+                let a = Vector3::from_fn(|_, _| gauss(&mut rng)) * (scale_a * generic.vrw.mean() / dt.sqrt());
+                for nav in navs.iter_mut() {
+                    nav.on_imu(1_000_000_000 + k * 5_000_000, dt, w, a + Vector3::new(0.0, 0.0, -g));
+                }
+            }
+        };
+        // Quiet: a tenth of the generic gyro noise, a fifth of its accelerometer's.
+        feed(&mut navs, 0, 0.1, 0.2);
+        let n = navs[0].config().noise;
+        let ratio = |x: &Vector3<f64>, y: &Vector3<f64>| x.mean() / y.mean();
+        assert!((0.09..0.13).contains(&ratio(&n.arw, &generic.arw)), "{:?}", n.arw);
+        assert!((0.18..0.26).contains(&ratio(&n.vrw, &generic.vrw)), "{:?}", n.vrw);
+        let k = ratio(&n.vrw, &generic.vrw);
+        assert!((ratio(&n.gyro_bias_std, &generic.gyro_bias_std) - k).abs() < 1e-12);
+        assert!((ratio(&n.accel_bias_std, &generic.accel_bias_std) - k).abs() < 1e-12);
+        assert_eq!(n.gyro_bias_init_std, generic.gyro_bias_init_std);
+        assert_eq!(navs[1].config().noise.arw, consumer.arw);
+        assert_eq!(navs[2].config().noise.arw, generic.arw);
+        // Vibrating: five times the generic model's noise; it keeps the generic model.
+        feed(&mut navs, 3000, 5.0, 5.0);
+        assert_eq!(navs[0].config().noise.arw, generic.arw);
+        assert_eq!(navs[0].config().noise.accel_bias_std, generic.accel_bias_std);
+        assert_eq!(navs[1].config().noise.vrw, consumer.vrw);
+        // Quiet again (a vehicle stopped): the white noise follows, the instabilities stay.
+        feed(&mut navs, 6000, 0.1, 0.2);
+        let n = navs[0].config().noise;
+        assert!(ratio(&n.arw, &generic.arw) < 0.13, "{:?}", n.arw);
+        assert_eq!(n.gyro_bias_std, generic.gyro_bias_std);
     }
 
     /// A loose prior of Δ (software sync) runs a shadow with the prior one σ above, fed the

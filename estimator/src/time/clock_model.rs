@@ -231,6 +231,7 @@ impl ClockModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_noise::gauss;
 
     #[test]
     fn receiver_oscillator_presets_match_their_allan_coefficients() {
@@ -249,19 +250,6 @@ mod tests {
         let want = 299_792_458.0 * (tcxo.q_rate_per_s * 60.0).sqrt();
         assert!((q[(1, 1)].sqrt() / want - 1.0).abs() < 1e-12);
         assert!(q.determinant() > 0.0);
-    }
-
-    /// Deterministic noise for tests (splitmix64 → uniform → sum of 12 ≈ Gaussian).
-    fn gauss(state: &mut u64) -> f64 {
-        let mut s = 0.0;
-        for _ in 0..12 {
-            *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = *state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            s += (z ^ (z >> 31)) as f64 / u64::MAX as f64;
-        }
-        s - 6.0
     }
 
     #[test]

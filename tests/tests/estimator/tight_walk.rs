@@ -50,8 +50,9 @@
 //! **Measured, not asserted** (issue 36's bars, which this walk does not allow everywhere):
 //! tight ≤ loose on the receiver's RTK fixes cannot hold, those fixes being the reference. A
 //! third of loose's window cost (loose on RTK coasts 1.2–4.3 m, a pedestrian's 15 s of dead
-//! reckoning after cm-level aiding): with 3 satellites met in 3 of the 4 windows (tight
-//! 1.06 / 0.72 / 1.59 / 0.48 m against loose's 4.34 / 2.47 / 1.16 / 4.31 m on 2026-12-05); with
+//! reckoning after cm-level aiding): with 3 satellites met in 2 of the 4 windows (tight
+//! 1.50 / 0.69 / 1.48 / 0.37 m against loose's 4.34 / 2.47 / 1.16 / 4.31 m with GPS CNAV's
+//! ephemerides; 3 of 4 with LNAV's alone, whose windows kept other satellites); with
 //! 2 the carrier and the Doppler measure the velocity along their two lines of sight only, and
 //! loose's own drift along the direction they leave (printed) is already more than a third of
 //! its cost in every window.
