@@ -50,9 +50,9 @@
 //! **Measured, not asserted** (issue 36's bars, which this walk does not allow everywhere):
 //! tight ≤ loose on the receiver's RTK fixes cannot hold, those fixes being the reference. A
 //! third of loose's window cost (loose on RTK coasts 1.2–4.3 m, a pedestrian's 15 s of dead
-//! reckoning after cm-level aiding): with 3 satellites met in 2 of the 4 windows (tight
-//! 1.50 / 0.69 / 1.48 / 0.37 m against loose's 4.34 / 2.47 / 1.16 / 4.31 m with GPS CNAV's
-//! ephemerides; 3 of 4 with LNAV's alone, whose windows kept other satellites); with
+//! reckoning after cm-level aiding): with 3 satellites met in 3 of the 4 windows (tight
+//! 1.26 / 0.72 / 1.47 / 0.38 m against loose's 4.31 / 2.41 / 1.22 / 4.26 m on 2026-12-06; the
+//! direction they leave to the receiver clock, printed, is near the vertical); with
 //! 2 the carrier and the Doppler measure the velocity along their two lines of sight only, and
 //! loose's own drift along the direction they leave (printed) is already more than a third of
 //! its cost in every window.
@@ -318,16 +318,19 @@ fn code_errors(rec: &Recording, t0: f64, sats: &[Sat], position: &dyn Fn(f64) ->
     sums.into_iter().map(|(sat, (sum, n))| (sat, sum / n as f64)).collect()
 }
 
-/// The direction (NED unit vector) no line of sight of the two satellites `sats` measures at
-/// the window's last raw epoch, seen from `position` (u₁ × u₂): with two satellites the carrier
-/// and the Doppler give the velocity along u₁ and u₂ only, so along this one the tightly coupled
-/// filter coasts on its IMU as loose coupling does everywhere.
+/// The direction (NED unit vector) the satellites `sats` leave unmeasured at the window's last
+/// raw epoch, seen from `position`, and for three satellites the clock's share of it. Two: u₁ ×
+/// u₂, along which neither range changes (the carrier and the Doppler give the velocity along
+/// u₁ and u₂ only). Three: w = U⁻¹·1 (U's rows the lines of sight), along which every range
+/// changes alike: a move β·w/|w| is a receiver clock change of β/|w| (the returned |w|), so only
+/// the clock's stability tells it from the clock. Along it the tightly coupled filter coasts
+/// on its IMU (and its clock model) as loose coupling does everywhere.
 fn unobserved_direction(
     rec: &Recording,
     t0: f64,
     sats: &[Sat],
     position: &dyn Fn(f64) -> Option<[f64; 3]>,
-) -> Option<[f64; 3]> {
+) -> Option<([f64; 3], Option<f64>)> {
     use navsync_estimator::gnss::ranges::{EphemerisStore, RangeBuildCounts};
     use navsync_estimator::gnss::spp::{C_M_S, elevation_azimuth, rotate_for_flight};
     use navsync_shared::earth::geodetic_to_ecef;
@@ -349,14 +352,26 @@ fn unobserved_direction(
                         [el.cos() * az.cos(), el.cos() * az.sin(), -el.sin()]
                     })
                     .collect();
-                if let [a, b] = u[..] {
-                    let c = [
-                        a[1] * b[2] - a[2] * b[1],
-                        a[2] * b[0] - a[0] * b[2],
-                        a[0] * b[1] - a[1] * b[0],
-                    ];
-                    let n = dist(c, [0.0; 3]);
-                    last = Some(c.map(|x| x / n));
+                match u[..] {
+                    [a, b] => {
+                        let c = [
+                            a[1] * b[2] - a[2] * b[1],
+                            a[2] * b[0] - a[0] * b[2],
+                            a[0] * b[1] - a[1] * b[0],
+                        ];
+                        let n = dist(c, [0.0; 3]);
+                        last = Some((c.map(|x| x / n), None));
+                    }
+                    [a, b, c] => {
+                        let m = nalgebra::Matrix3::from_rows(
+                            &[a.into(), b.into(), c.into()].map(|r: nalgebra::Vector3<f64>| r.transpose()),
+                        );
+                        if let Some(w) = m.try_inverse().map(|i| i * nalgebra::Vector3::repeat(1.0)) {
+                            let n = w.norm();
+                            last = Some(([w[0] / n, w[1] / n, w[2] / n], Some(n)));
+                        }
+                    }
+                    _ => {}
                 }
             }
             _ => {}
@@ -737,38 +752,49 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
             costs.push(c);
         }
     }
-    // Why a third of loose's cost is out of reach with 2 satellites: loose's inertial drift over
-    // the window along the direction they leave unmeasured, put back into the horizontal plane.
-    // Along it the tightly coupled filter coasts on its IMU (calibrated by code and carrier
-    // ranges, not by cm-level RTK fixes as loose's was): an IMU drifting as loose's does leaves
-    // this much there alone.
-    eprintln!(
-        "\n2 satellites: the direction they leave unmeasured (u1 x u2, NED) and loose's drift along it, horizontal, vs a third of loose's cost"
-    );
-    let two = variants
-        .iter()
-        .position(|v| v.0 == "2 satellites")
-        .expect("the 2-satellite variant");
-    for (w, (t0, chosen)) in variants[two].2.iter().enumerate() {
-        let sats: Vec<Sat> = chosen.iter().map(|x| x.0).collect();
-        let full_sky_tight = |sow: f64| runs[2].at(sow);
-        let Some(d) = unobserved_direction(&rec, *t0, &sats, &full_sky_tight) else {
-            eprintln!("  window {}: the satellites' directions not found", w + 1);
-            continue;
-        };
-        let c = runs[nc * two].window_offset(&runs[0], *t0);
-        let along = c[0] * d[0] + c[1] * d[1] + c[2] * d[2];
-        let floor = along.abs() * d[0].hypot(d[1]);
-        let loose = c[0].hypot(c[1]);
+    // Why a third of loose's cost is out of reach: loose's inertial drift over the window along
+    // the direction the satellites leave unmeasured, put back into the horizontal plane. Along
+    // it the tightly coupled filter coasts on its IMU (calibrated by code and carrier ranges,
+    // not by cm-level RTK fixes as loose's was): an IMU drifting as loose's does leaves this
+    // much there alone. With 3 satellites it is the clock's direction: the receiver's clock
+    // would have to hold to (a third of loose's cost) / |w| over the window to tell a move
+    // along it, where the filter's oscillator model (a TCXO's Allan deviations) lets it wander
+    // by σ_b.
+    let tcxo = navsync_estimator::nav::config::ReceiverOscillator::Tcxo.noise();
+    let sigma_b = tcxo.process_noise_m(WINDOW_S)[(0, 0)].sqrt();
+    for k in KS {
+        let name = format!("{k} satellites");
         eprintln!(
-            "  window {}: d = ({:+.2}, {:+.2}, {:+.2}), loose's drift along d {along:+.2} m, horizontal {floor:.2} m {} a third of loose's cost {:.2} m",
-            w + 1,
-            d[0],
-            d[1],
-            d[2],
-            if floor > loose / 3.0 { ">" } else { "<=" },
-            loose / 3.0
+            "\n{name}: the direction they leave unmeasured (NED; 2: u1 x u2, 3: w = U^-1 1, a clock change of 1/|w| per metre) and loose's drift along it, horizontal, vs a third of loose's cost"
         );
+        let v = variants.iter().position(|x| x.0 == name).expect("the variant");
+        for (w, (t0, chosen)) in variants[v].2.iter().enumerate() {
+            let sats: Vec<Sat> = chosen.iter().map(|x| x.0).collect();
+            let full_sky_tight = |sow: f64| runs[2].at(sow);
+            let Some((d, scale)) = unobserved_direction(&rec, *t0, &sats, &full_sky_tight) else {
+                eprintln!("  window {}: the satellites' directions not found", w + 1);
+                continue;
+            };
+            let c = runs[nc * v].window_offset(&runs[0], *t0);
+            let along = c[0] * d[0] + c[1] * d[1] + c[2] * d[2];
+            let floor = along.abs() * d[0].hypot(d[1]);
+            let loose = c[0].hypot(c[1]);
+            let clock = scale.map_or(String::new(), |n| {
+                format!(
+                    "; |w| {n:.2}: the clock would have to hold to {:.2} m over the window, the TCXO model lets it wander {sigma_b:.1} m",
+                    loose / 3.0 / n
+                )
+            });
+            eprintln!(
+                "  window {}: d = ({:+.2}, {:+.2}, {:+.2}), loose's drift along d {along:+.2} m, horizontal {floor:.2} m {} a third of loose's cost {:.2} m{clock}",
+                w + 1,
+                d[0],
+                d[1],
+                d[2],
+                if floor > loose / 3.0 { ">" } else { "<=" },
+                loose / 3.0
+            );
+        }
     }
     eprintln!("\ntightly coupled summaries' range counters:");
     for (i, (name, _, _)) in variants.iter().enumerate() {
