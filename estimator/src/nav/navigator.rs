@@ -79,7 +79,7 @@ const MIN_NOISE_SCALE: f64 = 0.01;
 /// shown so far: an IMU's Allan curve moves as a whole from class to class, and the generic
 /// model's ARW and instabilities are those of one IMU in use); the turn-on errors and the
 /// states' switches as in `current`. Returns the noise and the ratio the instabilities took.
-fn noise_from_signal(
+fn scaled_to_signal(
     generic: &ProcessNoise,
     m: &MeasuredNoise,
     k_bias: f64,
@@ -958,7 +958,7 @@ impl Navigator {
         }
         let meter = meter.get_or_insert_with(|| NoiseMeter::new(nominal_dt_s));
         if let Some(m) = meter.push(nominal_dt_s, gyro_rps, accel_mps2) {
-            (self.cfg.noise, *k_bias) = noise_from_signal(generic, &m, *k_bias, &self.cfg.noise);
+            (self.cfg.noise, *k_bias) = scaled_to_signal(generic, &m, *k_bias, &self.cfg.noise);
         }
     }
 

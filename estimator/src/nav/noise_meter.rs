@@ -13,9 +13,10 @@
 //! [`WINDOW_S`] (vibration returns at once, leaves only after the window), from the first full
 //! window on.
 //!
-//! Measured (2 s windows, °/√h and m/s/√h, median in motion): the walk 2.6 and 0.31, drive0708
-//! 8.0 and 0.95 (both at or above the generic model's 2 and 0.75, which they keep), the
-//! simulated consumer IMU of the sweep 0.30 and 0.20, its industrial one 0.10 and 0.10.
+//! Measured at 20 ms (2 s windows, °/√h and m/s/√h, median in motion): the walk 12 and 1.4,
+//! drive0708 12 and 1.8 (both above the generic model's 2 and 0.75, which they keep while they
+//! move), the simulated consumer IMU of the sweep 0.30 and 0.20, its industrial one 0.10 and
+//! 0.10 (docs/benchmarks/sweep.md).
 
 use nalgebra::Vector3;
 
