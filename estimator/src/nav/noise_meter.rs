@@ -125,7 +125,8 @@ impl NoiseMeter {
         if self.filled < WINDOW_BLOCKS {
             return None;
         }
-        let (g, a) = self.ring[..self.filled]
+        let (g, a) = self
+            .ring
             .iter()
             .fold((0.0f64, 0.0f64), |m, b| (m.0.max(b.0), m.1.max(b.1)));
         Some(MeasuredNoise {
