@@ -10,9 +10,14 @@ changes scaled 1, 0.08, 0.04; the stops and turns kept), a start heading (any), 
 hemispheres, both sides of Greenwich, up to 75 deg latitude), an IMU grade (industrial,
 consumer), a GNSS sigma (1 cm to 3 m, log-uniform) and rate (1, 2, 4, 5, 10 Hz), a lever arm
 (up to 1 m per axis), and the time synchronisation: PPS (fixes at their epoch) or software sync
-with a receipt latency of 0 to 1.5 s. navsync gets what a user would give: the files, the lever
-arm and, in software sync, `--software-sync`; no IMU model, no initial state (with
-`--imu-model matched` also the drive's IMU grade, as `--imu-model`).
+with a receipt latency of 0 to 1.5 s. Under PPS the fixes carry what is left between the IMU's
+and the receiver's time after the PPS mapping (an IMU's filter group delay and data-ready
+latency): the IMU's tags are moved early by a delay drawn from N(0, 0.02 s) (the fixes and the
+truth keep the GNSS axis), the prior navsync states for it (`delay_prior_std_s`), so that the delay's coverage is a calibration check (a consistent
+estimator covers ~95 % of draws from its own prior: Talts et al. 2018, "Validating Bayesian
+inference algorithms with simulation-based calibration"). navsync gets what a user would give:
+the files, the lever arm and, in software sync, `--software-sync`; no IMU model, no initial
+state (with `--imu-model matched` also the drive's IMU grade, as `--imu-model`).
 
 Per run: the exit status and the summary's problem (a run that exits 0 must have usable
 output; one that fails must say why), NaN in any output row, and per output epoch whether the
@@ -22,10 +27,9 @@ of epochs within 2 sigma (a consistent filter: ~95 %).
 
 With --kf-gins: KF-GINS on the same files with its exact noise set and initial state, and
 navsync given the same (`import --kf-gins-config`); the ratio of horizontal RMS per drive.
-KF-GINS reads each fix at its epoch; where the drive has a receipt latency navsync is run a
-second time with that same information (the fixes at their epochs, as under PPS) and the
-ratio is taken on that run (the software-sync run's RMS, which pays for estimating the delay,
-is kept beside it).
+KF-GINS reads each fix at its epoch; navsync is run a second time with that same information
+(the fixes at their epochs, under PPS, without the drawn delay) and the ratio is taken on that
+run (the first run's RMS, which pays for estimating the delay, is kept beside it).
 
 IMU arrays (unless --no-array): each run's drive is made a second time with a vehicle's
 vibration (scale 0.3 to 3) and two more IMUs stamped late by -20 to +20 ms each (drawn from
@@ -53,12 +57,14 @@ import score_truth  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(HERE))
 PROFILES = {"car": 1.0, "pedestrian": 0.08, "robot": 0.04}
+# The IMU-to-GNSS delay left under PPS, s (1 sigma): navsync's own prior (`delay_prior_std_s`).
+PPS_DELAY_STD_S = 0.02
 
 
 def draw(rng, i, duration):
     profile = rng.choice(sorted(PROFILES))
     software = rng.random() < 0.5
-    return {
+    d = {
         "index": i,
         "profile": profile,
         "preset": rng.choice(["industrial", "consumer"]),
@@ -72,6 +78,9 @@ def draw(rng, i, duration):
         "seed": rng.randrange(1, 1 << 30),
         "duration": duration,
     }
+    # Drawn from the run's own seed, so that the runs above do not change.
+    d["pps_delay_s"] = None if software else round(random.Random(d["seed"] ^ 0x5EED).gauss(0.0, PPS_DELAY_STD_S), 4)
+    return d
 
 
 def run(cmd, log):
@@ -115,6 +124,17 @@ def import_cmd(a, d, drive, rec):
     return [a.navsync, "import", "kf-gins", "--imu", os.path.join(drive, "imu.txt"),
             "--gnss", os.path.join(drive, "gnss.pos"), "--truth", os.path.join(drive, "truth.nav"),
             "--out", rec, "--force"]
+
+
+def delayed_imu(drive, delay_s):
+    """imu.txt with its tags `delay_s` early (on the GNSS axis, where gnss.pos and truth.nav
+    stay, the fixes come that much late): its file name."""
+    with open(os.path.join(drive, "imu.txt")) as f, open(os.path.join(drive, "imu_delayed.txt"), "w") as g:
+        for line in f:
+            t, _, rest = line.strip().partition(" ")
+            if t:
+                g.write(f"{float(t) - delay_s:.9f} {rest}\n")
+    return "imu_delayed.txt"
 
 
 def replay(a, d, rec, work, extra=()):
@@ -185,6 +205,8 @@ def one(a, d, work):
     imp_epochs = list(imp)  # fixes at their epochs (PPS)
     if d["latency_s"] is not None:
         imp += ["--no-pps", "--gnss-latency", str(d["latency_s"])]
+    elif d.get("pps_delay_s"):
+        imp[imp.index("--imu") + 1] = os.path.join(drive, delayed_imu(drive, d["pps_delay_s"]))
     if run(imp, os.path.join(work, "import.log")) != 0:
         raise SystemExit(f"run {d['index']}: the import failed (see {work}/import.log)")
     rc, s, out = replay(a, d, rec, work)
@@ -197,6 +219,8 @@ def one(a, d, work):
         r["epochs"] = int(len(ok))
         r["within_2sigma"] = [int(x) for x in ok.sum(0)]
     est, sd, true = s.get("gnss_delay_est_s"), s.get("gnss_delay_std_s"), s.get("gnss_delay_true_s")
+    if d["latency_s"] is None and true is not None:
+        true = d.get("pps_delay_s") or 0.0  # the summary knows the import's epochs, not the draw
     if None not in (est, sd, true):
         r["delay"] = [est, sd, true]
         r["delay_within_2sigma"] = abs(est - true) <= 2 * sd
@@ -204,7 +228,7 @@ def one(a, d, work):
         sc = score_truth.score(score_truth.load_nav(os.path.join(out, "KF_GINS_Navresult.nav")),
                                score_truth.load_nav(os.path.join(drive, "truth.nav")))
         r["horizontal_rms_m"] = sc["horizontal_rms_m"]
-    if a.kf_gins and d["latency_s"] is not None:
+    if a.kf_gins and (d["latency_s"] is not None or d.get("pps_delay_s")):
         # The information KF-GINS has: each fix at its epoch.
         same = os.path.join(work, "same-info")
         os.makedirs(same, exist_ok=True)
@@ -256,7 +280,7 @@ def main():
         runs.append(r)
         cov = r.get("within_2sigma")
         print(f"{i:3d} {r['profile']:10s} {r['preset']:10s} sigma {r['gnss_sigma']:6.3f} m {r['gnss_rate']:2d} Hz "
-              f"lat {r['lat0']:7.2f} {'latency %.2f s' % r['latency_s'] if r['latency_s'] is not None else 'PPS':14s} "
+              f"lat {r['lat0']:7.2f} {'latency %.2f s' % r['latency_s'] if r['latency_s'] is not None else 'PPS %+.3f s' % (r.get('pps_delay_s') or 0):14s} "
               f"exit {r['exit']} usable {r['usable_states']:6d} nan {r['nan']} silent {r['silent']} "
               f"2sigma {[round(c / max(r.get('epochs', 1), 1), 3) for c in cov] if cov else '-'} "
               f"delay {'ok' if r.get('delay_within_2sigma') else r.get('delay')}"

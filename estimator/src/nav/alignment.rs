@@ -177,6 +177,11 @@ impl Aligner {
         self.time_s
     }
 
+    /// Forgets the previous fix (its stamp is on a time base no longer in force).
+    pub fn forget_fixes(&mut self) {
+        self.prev_fix = None;
+    }
+
     /// Roll and pitch from the static average, rad, if there is one.
     pub fn level(&self) -> Option<(f64, f64)> {
         (self.time_s > 0.5).then(|| {

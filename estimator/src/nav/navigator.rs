@@ -259,6 +259,9 @@ pub struct Navigator {
     motion_seen: bool,
     /// Epoch of the previous fix, host ns (for the noise of a speed from positions).
     prev_fix_ns: Option<i64>,
+    /// The shortest interval between two fixes seen, ns: the receiver's own rate, over which
+    /// a speed from positions is differenced whatever fixes this navigator missed.
+    fix_interval_ns: Option<i64>,
     /// The latest fixes' stamps (host ns), positions (rad) and horizontal σ (m): motion shown
     /// by a displacement over a few seconds where the fixes carry no velocity.
     recent_fixes: [(i64, f64, f64, f64); RECENT_FIXES],
@@ -340,6 +343,7 @@ impl Navigator {
             last_fix_rx_ns: None,
             motion_seen: false,
             prev_fix_ns: None,
+            fix_interval_ns: None,
             recent_fixes: [(0, 0.0, 0.0, 0.0); RECENT_FIXES],
             recent_len: 0,
             last_ranges_rx_ns: None,
@@ -409,8 +413,16 @@ impl Navigator {
         }
     }
 
-    /// Forgets the delay estimate (the time base of the fix stamps changed).
+    /// Forgets the delay estimate (the time base of the fix stamps changed), and what was
+    /// learnt from fixes stamped on the old base: their stamps ([`Self::displaced`], the
+    /// speed's noise, the aligner's accelerations) and a heading bank still deciding (its
+    /// hypotheses carry the old prior, its fixes the old stamps: the sweep's seed 21 run 5, a
+    /// PPS acquired while it decided, left Δ at 0.33 ± 0.11 s for −0.008 s). The alignment
+    /// starts again from the next fix.
     pub fn reset_delay(&mut self, prior_s: f64, prior_std_s: f64) {
+        self.prev_fix_ns = None;
+        self.recent_len = 0;
+        self.aligner.forget_fixes();
         let shifted_s = prior_s + self.prior_shift_sigmas * prior_std_s;
         self.delay_prior = (shifted_s, prior_std_s);
         self.delay_base.0 = shifted_s;
@@ -418,6 +430,7 @@ impl Navigator {
         if let Some(f) = &mut self.filt {
             reopen_delay(f, shifted_s, prior_std_s, self.cfg.estimate_delay);
         }
+        self.bank = None;
         self.reset_shadow(prior_s, prior_std_s);
     }
 
@@ -503,10 +516,18 @@ impl Navigator {
         const MOTION_SIGMAS: f64 = 5.3;
         let measured = obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite();
         let prev = self.prev_fix_ns.replace(obs.stamp_host_ns);
+        if let Some(prev) = prev.filter(|&p| obs.stamp_host_ns > p) {
+            let dt = obs.stamp_host_ns - prev;
+            self.fix_interval_ns = Some(self.fix_interval_ns.map_or(dt, |i| i.min(dt)));
+        }
         let speed_std = match prev {
             _ if measured => obs.vel_std_mps,
+            // Over the receiver's interval, not over a gap of fixes missed here (the sweep's
+            // seed 21 run 5: 1.85 s of fixes waiting for the PPS made 1.8 m/s of a standing
+            // robot's 2.8 m/s speed noise look like motion at 12 σ, and a heading 12° off
+            // was decided with σ 1.6°).
             Some(prev) if obs.stamp_host_ns > prev => {
-                let dt_s = (obs.stamp_host_ns - prev) as f64 * 1e-9;
+                let dt_s = self.fix_interval_ns.unwrap_or(obs.stamp_host_ns - prev) as f64 * 1e-9;
                 let sigma_h = obs.pos_std_m.x.max(obs.pos_std_m.y);
                 obs.vel_std_mps.max(std::f64::consts::SQRT_2 * sigma_h / dt_s)
             }
@@ -1683,6 +1704,43 @@ mod tests {
         );
         assert!(nav.bank.is_some(), "the heading bank waits");
         assert!(moved < 1e-3, "Δ or its σ moved by {moved} s");
+        // The fixes' time base changes (PPS acquired) while it waits: it starts again.
+        nav.reset_delay(0.0, 0.02);
+        assert!(nav.bank.is_none(), "a bank on the old prior and stamps kept");
+        assert_eq!(nav.delay_prior, (0.0, 0.02));
+        assert_eq!(
+            (nav.prev_fix_ns, nav.recent_len),
+            (None, 0),
+            "fixes on the old stamps kept"
+        );
+    }
+
+    /// A speed differenced from positions has the noise of the receiver's interval, not of a
+    /// gap between the fixes the navigator got: standing fixes at 10 Hz (σ 0.2 m, a speed noise
+    /// of 2.8 m/s) with 2 s missed never show motion.
+    #[test]
+    fn a_gap_in_the_fixes_does_not_make_speed_noise_motion() {
+        let mut nav = Navigator::new(NavConfig::default());
+        let fix = |t_ns: i64| GnssObservation {
+            stamp_host_ns: t_ns,
+            lat_rad: 0.7,
+            lon_rad: 0.1,
+            h_m: 100.0,
+            vel_ned_mps: Vector3::new(f64::NAN, f64::NAN, f64::NAN),
+            pos_std_m: Vector3::new(0.2, 0.2, 0.4),
+            vel_std_mps: f64::NAN,
+            speed_mps: 1.8,
+            track_rad: 0.3,
+            pos_floor_std_m: Vector3::zeros(),
+        };
+        for t_ns in [0, 100_000_000, 200_000_000, 2_200_000_000] {
+            nav.on_gnss(fix(t_ns), t_ns);
+        }
+        assert!(
+            !nav.motion_seen,
+            "1.8 m/s of 2.8 m/s noise taken for motion after a gap"
+        );
+        assert_eq!(nav.fix_interval_ns, Some(100_000_000));
     }
 
     /// Under software sync a Δ below what is physical (a fix received before its epoch) is

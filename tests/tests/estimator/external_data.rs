@@ -426,7 +426,8 @@ fn a_parked_vehicle_publishes_no_heading_and_says_why() {
 
 /// The randomized sweep (`tests/python/sweep.py`, issue 34), a few short drives drawn from a
 /// fixed seed: car, pedestrian or robot, any heading and place, IMU grade, GNSS σ and rate,
-/// lever arm, PPS or a receipt latency; navsync with its defaults. No output row is NaN and no
+/// lever arm, PPS (the IMU's tags a drawn few ms off the receiver's) or a receipt latency;
+/// navsync with its defaults. No output row is NaN and no
 /// run fails silently: a run that exits 0 has usable output and no problem, one that fails
 /// says why. Each drive is also run with vibration and an array of three IMUs (two stamped
 /// −20 to +20 ms late): every final IMU offset lies within 2σ of its own σ (before the offsets
