@@ -176,6 +176,9 @@ pub const DELAY_HORIZON_MARGIN_S: f64 = 0.05;
 /// software sync's (0.5 s), not hardware sync's (0.02 s by default).
 pub const SHADOW_MIN_PRIOR_STD_S: f64 = 0.1;
 
+/// Intervals between fixes kept for the receiver's own ([`Navigator::fix_interval_ns`]).
+const FIX_INTERVALS: usize = 9;
+
 /// Sets filter `f`'s Δ to `prior_s` with 1σ `prior_std_s` (0 when Δ is not `live`), its
 /// correlations with the other states forgotten.
 fn reopen_delay(f: &mut DelayedFilter, prior_s: f64, prior_std_s: f64, live: bool) {
@@ -259,9 +262,9 @@ pub struct Navigator {
     motion_seen: bool,
     /// Epoch of the previous fix, host ns (for the noise of a speed from positions).
     prev_fix_ns: Option<i64>,
-    /// The shortest interval between two fixes seen, ns: the receiver's own rate, over which
-    /// a speed from positions is differenced whatever fixes this navigator missed.
-    fix_interval_ns: Option<i64>,
+    /// The last intervals between two fixes, ns (0: none yet), whose median is the receiver's
+    /// own interval ([`Navigator::fix_interval_ns`]).
+    fix_intervals_ns: [i64; FIX_INTERVALS],
     /// The latest fixes' stamps (host ns), positions (rad) and horizontal σ (m): motion shown
     /// by a displacement over a few seconds where the fixes carry no velocity.
     recent_fixes: [(i64, f64, f64, f64); RECENT_FIXES],
@@ -343,7 +346,7 @@ impl Navigator {
             last_fix_rx_ns: None,
             motion_seen: false,
             prev_fix_ns: None,
-            fix_interval_ns: None,
+            fix_intervals_ns: [0; FIX_INTERVALS],
             recent_fixes: [(0, 0.0, 0.0, 0.0); RECENT_FIXES],
             recent_len: 0,
             last_ranges_rx_ns: None,
@@ -516,9 +519,10 @@ impl Navigator {
         const MOTION_SIGMAS: f64 = 5.3;
         let measured = obs.vel_ned_mps.x.is_finite() && obs.vel_ned_mps.y.is_finite();
         let prev = self.prev_fix_ns.replace(obs.stamp_host_ns);
+        let interval_ns = self.fix_interval_ns();
         if let Some(prev) = prev.filter(|&p| obs.stamp_host_ns > p) {
-            let dt = obs.stamp_host_ns - prev;
-            self.fix_interval_ns = Some(self.fix_interval_ns.map_or(dt, |i| i.min(dt)));
+            self.fix_intervals_ns.copy_within(1.., 0);
+            self.fix_intervals_ns[FIX_INTERVALS - 1] = obs.stamp_host_ns - prev;
         }
         let speed_std = match prev {
             _ if measured => obs.vel_std_mps,
@@ -527,7 +531,7 @@ impl Navigator {
             // robot's 2.8 m/s speed noise look like motion at 12 σ, and a heading 12° off
             // was decided with σ 1.6°).
             Some(prev) if obs.stamp_host_ns > prev => {
-                let dt_s = self.fix_interval_ns.unwrap_or(obs.stamp_host_ns - prev) as f64 * 1e-9;
+                let dt_s = interval_ns.unwrap_or(obs.stamp_host_ns - prev) as f64 * 1e-9;
                 let sigma_h = obs.pos_std_m.x.max(obs.pos_std_m.y);
                 obs.vel_std_mps.max(std::f64::consts::SQRT_2 * sigma_h / dt_s)
             }
@@ -573,6 +577,19 @@ impl Navigator {
         }
         self.adapt_horizon(obs.stamp_host_ns);
         self.enqueue(obs);
+    }
+
+    /// The receiver's interval between fixes, ns: the median of the last [`FIX_INTERVALS`]
+    /// (a gap of missed fixes or a receipt's jitter moves it little); `None` before any.
+    fn fix_interval_ns(&self) -> Option<i64> {
+        let mut seen = [0i64; FIX_INTERVALS];
+        let mut n = 0;
+        for &i in self.fix_intervals_ns.iter().filter(|&&i| i > 0) {
+            seen[n] = i;
+            n += 1;
+        }
+        seen[..n].sort_unstable();
+        (n > 0).then(|| seen[n / 2])
     }
 
     /// Queues a GNSS measurement, unless its epoch is behind the delayed filter by more than
@@ -1733,14 +1750,22 @@ mod tests {
             track_rad: 0.3,
             pos_floor_std_m: Vector3::zeros(),
         };
-        for t_ns in [0, 100_000_000, 200_000_000, 2_200_000_000] {
+        for t_ns in [0, 100_000_000, 2_100_000_000] {
             nav.on_gnss(fix(t_ns), t_ns);
         }
         assert!(
             !nav.motion_seen,
             "1.8 m/s of 2.8 m/s noise taken for motion after a gap"
         );
-        assert_eq!(nav.fix_interval_ns, Some(100_000_000));
+        assert_eq!(nav.fix_interval_ns(), Some(2_000_000_000), "two intervals: the later");
+        for t_ns in [2_200_000_000, 2_300_000_000] {
+            nav.on_gnss(fix(t_ns), t_ns);
+        }
+        assert_eq!(
+            nav.fix_interval_ns(),
+            Some(100_000_000),
+            "the median of 0.1, 2, 0.1, 0.1 s"
+        );
     }
 
     /// Under software sync a Δ below what is physical (a fix received before its epoch) is
