@@ -152,6 +152,16 @@ def score(args):
         "fixed_epochs_not_covered": int((fixed & ~covered).sum()),
         "per_window": per,
     }
+    # The result's own sigma (KF_GINS_STD.txt beside it: time, north, east sigma in m), at the
+    # same epochs: the share of north and east errors within 2 sigma (the fix's own ~1 cm is
+    # part of the error).
+    std_path = os.path.join(os.path.dirname(args.result), "KF_GINS_STD.txt")
+    if gm.any() and os.path.exists(std_path):
+        sd = np.loadtxt(std_path, ndmin=2)
+        sd = sd[np.argsort(sd[:, 0], kind="stable")]
+        sn, se = (np.interp(t[gm], sd[:, 0], sd[:, k]) for k in (1, 2))
+        rep["with_gnss_within_2sigma"] = [float(np.mean(np.abs(dn[gm]) <= 2 * sn)),
+                                          float(np.mean(np.abs(de[gm]) <= 2 * se))]
     return rep
 
 

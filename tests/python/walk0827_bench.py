@@ -14,7 +14,8 @@ static start, computed here as the README describes it.
 
 Scored (score_outages.score): the horizontal antenna error at the end of each window against
 the withheld RTK-fixed epochs; windows A1, A2, B1 end in fixed data (A3 and B2 lie in the
-float part: not scored). Also the with-GNSS RMS over the fixed epochs given.
+float part: not scored). Also the with-GNSS RMS over the fixed epochs given, and the share of
+them whose north and east errors lie within 2 sigma of the result's own (KF_GINS_STD.txt).
 Exits non-zero when a step fails, a window has no output, or any output row is NaN.
 Needs numpy.
 """
@@ -146,6 +147,7 @@ def combine(reps):
         "outage_end_mean_m": float(np.mean(ends)) if len(ends) == len(SCORED) else None,
         "outage_end_max_m": float(np.max(ends)) if len(ends) == len(SCORED) else None,
         "with_gnss_rms_m": {ph: reps[ph]["with_gnss_rms_m"] for ph in reps},
+        "with_gnss_within_2sigma": {ph: reps[ph].get("with_gnss_within_2sigma") for ph in reps},
         "phases": reps,
     }
 
@@ -213,6 +215,11 @@ def main():
         print(f"{name:10} " + " ".join(f"{fmt(e):>7}" for e in r["window_ends_m"])
               + f" {fmt(r['outage_end_mean_m']):>8} {fmt(r['outage_end_max_m']):>8} "
               f"{fmt(a, 3):>11}, {fmt(b, 3):<11}")
+    for name, r in results.items():
+        cov = r["with_gnss_within_2sigma"]
+        if all(cov.values()):
+            print(f"{name:10} with GNSS, north / east within 2 sigma: "
+                  + ", ".join(f"{ph} {c[0]:.3f} / {c[1]:.3f}" for ph, c in cov.items()))
     if results["navsync"]["outage_end_mean_m"] is None:
         sys.exit("navsync: a scored window has no output")
 
