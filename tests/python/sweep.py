@@ -12,10 +12,11 @@ consumer), a GNSS sigma (1 cm to 3 m, log-uniform) and rate (1, 2, 4, 5, 10 Hz),
 (up to 1 m per axis), and the time synchronisation: PPS (fixes at their epoch) or software sync
 with a receipt latency of 0 to 1.5 s. Under PPS the fixes carry what is left between the IMU's
 and the receiver's time after the PPS mapping (an IMU's filter group delay and data-ready
-latency): the IMU's tags are moved early by a delay drawn from N(0, 0.02 s) (the fixes and the
-truth keep the GNSS axis), the prior navsync states for it (`delay_prior_std_s`), so that the delay's coverage is a calibration check (a consistent
-estimator covers ~95 % of draws from its own prior: Talts et al. 2018, "Validating Bayesian
-inference algorithms with simulation-based calibration"). navsync gets what a user would give:
+latency): the IMU's tags are moved early by a delay drawn from N(0, 0.02 s), the prior navsync
+states for it (`delay_prior_std_s`); the fixes and the truth keep the GNSS axis. The delay's
+coverage is then a calibration check (a consistent estimator covers ~95 % of draws from its
+own prior: Talts et al. 2018, "Validating Bayesian inference algorithms with simulation-based
+calibration"). navsync gets what a user would give:
 the files, the lever arm and, in software sync, `--software-sync`; no IMU model, no initial
 state (with `--imu-model matched` also the drive's IMU grade, as `--imu-model`).
 

@@ -582,14 +582,10 @@ impl Navigator {
     /// The receiver's interval between fixes, ns: the median of the last [`FIX_INTERVALS`]
     /// (a gap of missed fixes or a receipt's jitter moves it little); `None` before any.
     fn fix_interval_ns(&self) -> Option<i64> {
-        let mut seen = [0i64; FIX_INTERVALS];
-        let mut n = 0;
-        for &i in self.fix_intervals_ns.iter().filter(|&&i| i > 0) {
-            seen[n] = i;
-            n += 1;
-        }
-        seen[..n].sort_unstable();
-        (n > 0).then(|| seen[n / 2])
+        let mut sorted = self.fix_intervals_ns;
+        sorted.sort_unstable();
+        let seen = &sorted[sorted.partition_point(|&i| i == 0)..];
+        (!seen.is_empty()).then(|| seen[seen.len() / 2])
     }
 
     /// Queues a GNSS measurement, unless its epoch is behind the delayed filter by more than
