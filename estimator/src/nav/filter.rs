@@ -140,6 +140,10 @@ pub struct DelayedFilter {
     /// Factor on the IMU's process noise, ≥ 1: raised when the GNSS innovations show the
     /// configured model too optimistic ([`super::measurements::gnss::GnssFusion`]).
     pub q_scale: f64,
+    /// Factor on the receiver oscillator's random-walk FM, ≥ 1: raised when the clock drift
+    /// the ranges show changes more than the oscillator model allows
+    /// ([`super::measurements::ranges::ClockWatch`]).
+    pub clock_q_scale: f64,
     /// Covariance propagations so far.
     pub propagations: u64,
     /// The transition Φ of the last propagation (for the offline smoother).
@@ -176,6 +180,7 @@ impl DelayedFilter {
             acc_ned: Vector3::zeros(),
             last_w: Vector3::zeros(),
             q_scale: 1.0,
+            clock_q_scale: 1.0,
             propagations: 0,
             last_phi: StateMat::identity(),
             cov_dt: 0.0,
@@ -225,7 +230,9 @@ impl DelayedFilter {
         let f = error_state::system_matrix(&self.pva, &f_b, &w_b, &cfg.noise);
         let phi = StateMat::identity() + f * self.cov_dt;
         let c_bn = self.pva.q_nb.to_rotation_matrix().into_inner();
-        let q = error_state::process_noise(&cfg.noise, &c_bn, self.cov_dt, self.q_scale);
+        let mut noise = cfg.noise;
+        noise.clock = noise.clock.map(|o| o.with_random_walk_fm_scaled(self.clock_q_scale));
+        let q = error_state::process_noise(&noise, &c_bn, self.cov_dt, self.q_scale);
         self.eskf.predict(&phi, &q);
         self.propagations += 1;
         self.last_phi = phi;

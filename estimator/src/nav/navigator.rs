@@ -659,7 +659,7 @@ impl Navigator {
         }
         let dt = ((now_ns - f.t_ns) as f64 * 1e-9).max(0.0);
         let p = &f.eskf.p;
-        let q = osc.process_noise_m(dt);
+        let q = osc.with_random_walk_fm_scaled(f.clock_q_scale).process_noise_m(dt);
         let var_b = p[(CLK_BIAS, CLK_BIAS)]
             + 2.0 * dt * p[(CLK_BIAS, CLK_DRIFT)]
             + dt * dt * p[(CLK_DRIFT, CLK_DRIFT)]

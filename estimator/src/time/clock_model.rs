@@ -53,6 +53,15 @@ impl OscillatorNoise {
         Self::from_allan(1.0e-9, 3.6e-9)
     }
 
+    /// The same oscillator with its random-walk FM intensity times `scale` (a clock that
+    /// proved less stable than its model: [`crate::nav::measurements::ranges::ClockWatch`]).
+    pub fn with_random_walk_fm_scaled(self, scale: f64) -> Self {
+        Self {
+            q_rate_per_s: self.q_rate_per_s * scale,
+            ..self
+        }
+    }
+
     /// Allan deviation of the model at averaging time `tau_s`:
     /// σ_y²(τ) = q_φ/τ + q_f·τ/3.
     pub fn allan_deviation(&self, tau_s: f64) -> f64 {

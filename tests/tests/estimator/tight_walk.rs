@@ -17,7 +17,11 @@
 //! `navsync_estimator::gnss::broadcast::NavCollector` assembles them, healthy with a finite
 //! accuracy; completion timed by the raw epoch before the navigation data message), the K with
 //! the highest mean C/N0 over all their measurements in the window (ties by system, then
-//! satellite id). K = 2 and K = 3 are two recordings. In a window every `GnssRaw` keeps only
+//! satellite id). Each K (2, 3) and window is a recording of its own, the rest of the walk
+//! under the full sky: a window then starts from the same full-sky state for both couplings,
+//! and its cost is its own (with the four windows in one recording, 10 s apart, the tightly
+//! coupled filter carried 0.4–0.8 m of one window into the next, and loose coupling's
+//! coasting depended on the canyon before). In a window every `GnssRaw` keeps only
 //! the measurements (all signals) of those K satellites, and every `GnssFix` is dropped: a
 //! receiver with 2–3 satellites has no fix, so the loosely coupled filter coasts. Navigation
 //! data, PPS edges and the IMU are kept unchanged, and every channel's metadata (the IMU's
@@ -44,18 +48,18 @@
 //! tightly coupled filter fuses GPS, Galileo and BeiDou ranges and time-differenced carrier
 //! phases, and both solutions from the raw measurements keep their north and east errors within
 //! 2σ at ≥ 90 % of the RTK-fixed epochs (never confidently wrong, canyons included); with 3
-//! satellites tight's window cost is below loose's in at least 3 of the 4 windows; no replay
-//! reports a problem.
+//! satellites tight's window cost is at most a third of loose's in every window (issue 36's
+//! bar: tight 1.01 / 0.15 / 0.50 / 0.28 m against loose's 4.31 / 3.25 / 3.71 / 6.24 m on
+//! 2026-12-06); no replay reports a problem.
 //!
 //! **Measured, not asserted** (issue 36's bars, which this walk does not allow everywhere):
-//! tight ≤ loose on the receiver's RTK fixes cannot hold, those fixes being the reference. A
-//! third of loose's window cost (loose on RTK coasts 1.2–4.3 m, a pedestrian's 15 s of dead
-//! reckoning after cm-level aiding): with 3 satellites met in 3 of the 4 windows (tight
-//! 1.26 / 0.72 / 1.47 / 0.38 m against loose's 4.31 / 2.41 / 1.22 / 4.26 m on 2026-12-06; the
-//! direction they leave to the receiver clock, printed, is near the vertical); with
-//! 2 the carrier and the Doppler measure the velocity along their two lines of sight only, and
-//! loose's own drift along the direction they leave (printed) is already more than a third of
-//! its cost in every window.
+//! tight ≤ loose on the receiver's RTK fixes cannot hold, those fixes being the reference.
+//! With 2 satellites a third of loose's cost is met in windows 2 and 4 (tight 3.61 / 0.75 /
+//! 2.74 / 0.76 m): the carrier and the Doppler measure the velocity along their two lines of
+//! sight only, and along the direction they leave (u₁ × u₂, printed, near the horizontal) the
+//! tightly coupled filter coasts on its IMU. Loose's own drift along it, printed, is more
+//! than a third of loose's cost in windows 1, 3 and 4, yet tight met the bar in window 4:
+//! that drift is one IMU's coasting, not a bound on another's.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
@@ -396,6 +400,11 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
     })
 }
 
+/// A canyon variant's name: `k` satellites in window `w` (from 0).
+fn variant_name(k: usize, w: usize) -> String {
+    format!("{k} satellites, W{}", w + 1)
+}
+
 /// Writes `rec` to `out` with, in each window (start, satellites kept), only the kept
 /// satellites' measurements and no fixes; everything else, times and metadata as read. The
 /// raw epochs thinned and the fixes dropped.
@@ -611,23 +620,30 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
     let eph = ephemerides_complete(&rec);
     let starts = windows(&rec);
 
-    // The variants: the unmodified copy (full sky), then one per K.
+    // The variants: the unmodified copy (full sky), then one per K and window.
     let mut variants: Vec<(String, PathBuf, Vec<Kept>)> = Vec::new();
     let copy = env.dir.join("full.mcap");
     assert_eq!(write_variant(&rec, &original, &copy, &[]), (0, 0));
     variants.push(("full sky".into(), copy, Vec::new()));
     for k in KS {
-        let chosen: Vec<Kept> = starts.iter().map(|t0| (*t0, kept(&rec, &eph, *t0, k))).collect();
-        let sats: Vec<(f64, Vec<Sat>)> = chosen
-            .iter()
-            .map(|(t0, c)| (*t0, c.iter().map(|x| x.0).collect()))
-            .collect();
-        let path = env.dir.join(format!("k{k}.mcap"));
-        // Every window's 61 epochs (4 Hz, both ends) thinned, and their fixes dropped.
-        let n = 61 * WINDOWS;
-        assert_eq!(write_variant(&rec, &original, &path, &sats), (n, n));
-        variants.push((format!("{k} satellites"), path, chosen));
+        for (w, t0) in starts.iter().enumerate() {
+            let chosen = vec![(*t0, kept(&rec, &eph, *t0, k))];
+            let sats: Vec<(f64, Vec<Sat>)> = chosen
+                .iter()
+                .map(|(t0, c)| (*t0, c.iter().map(|x| x.0).collect()))
+                .collect();
+            let path = env.dir.join(format!("k{k}w{}.mcap", w + 1));
+            // The window's 61 epochs (4 Hz, both ends) thinned, and their fixes dropped.
+            assert_eq!(write_variant(&rec, &original, &path, &sats), (61, 61));
+            variants.push((variant_name(k, w), path, chosen));
+        }
     }
+    let variant = |k: usize, w: usize| {
+        variants
+            .iter()
+            .position(|v| v.0 == variant_name(k, w))
+            .expect("the variant")
+    };
 
     // Every replay at once (each a process of its own): the original with both couplings (the
     // copy must give the same outputs), then every variant with both.
@@ -677,7 +693,7 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
 
     // The satellites kept.
     for (name, _, chosen) in &variants[1..] {
-        for (i, (t0, c)) in chosen.iter().enumerate() {
+        for (t0, c) in chosen {
             let list: Vec<String> = c
                 .iter()
                 .map(|((g, sv), cno)| {
@@ -697,8 +713,7 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
                 .map(|((g, sv), e)| format!("{g}:{sv} {e:+.2} m"))
                 .collect();
             eprintln!(
-                "{name}, window {} [{t0:.2}, {:.2}]: {}; their code error against the full-sky tightly coupled track: {}",
-                i + 1,
+                "{name} [{t0:.2}, {:.2}]: {}; their code error against the full-sky tightly coupled track: {}",
                 t0 + WINDOW_S,
                 list.join(", "),
                 errs.join(", ")
@@ -708,22 +723,26 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
 
     // The table.
     eprintln!();
-    let mut header = format!("{:<13} {:<9} {:>9}", "variant", "coupl.", "RMS [m]");
+    let mut header = format!("{:<16} {:<9} {:>9}", "variant", "coupl.", "RMS [m]");
     for (i, t0) in starts.iter().enumerate() {
         header += &format!(" {:>14}", format!("W{} {:.2}", i + 1, t0));
     }
     eprintln!("{header}");
     let nc = COUPLINGS.len();
-    for (i, (name, _, _)) in variants.iter().enumerate() {
+    for (i, (name, _, chosen)) in variants.iter().enumerate() {
         for (j, coupling) in COUPLINGS.iter().enumerate() {
             let r = &runs[nc * i + j];
             let (rms, n) = r.rms();
-            let mut line = format!("{name:<13} {coupling:<9} {rms:>9.3}");
-            let e: Vec<(Option<f64>, f64)> = starts.iter().map(|t0| r.window_end(*t0)).collect();
-            for (at, err) in &e {
-                line += &match at {
-                    Some(sow) => format!(" {:>14}", format!("{err:.2}@{:.2}", sow - 408_000.0)),
-                    None => format!(" {:>14}", format!("({err:.2})")),
+            let mut line = format!("{name:<16} {coupling:<9} {rms:>9.3}");
+            for t0 in &starts {
+                // A window variant: its own window's column only.
+                if !chosen.is_empty() && !chosen.iter().any(|c| c.0 == *t0) {
+                    line += &format!(" {:>14}", "–");
+                    continue;
+                }
+                line += &match r.window_end(*t0) {
+                    (Some(sow), err) => format!(" {:>14}", format!("{err:.2}@{:.2}", sow - 408_000.0)),
+                    (None, err) => format!(" {:>14}", format!("({err:.2})")),
                 };
             }
             eprintln!(
@@ -738,37 +757,44 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
     );
     // What each window cost each coupling.
     eprintln!(
-        "\nwhat each window cost (m): the distance at its end between the canyon run and the same coupling's full-sky run"
+        "\nwhat each window cost (m): the distance at its end between the window's canyon run and the same coupling's full-sky run"
     );
+    // By K (as in KS) and coupling: the cost of each window.
     let mut costs: Vec<Vec<f64>> = Vec::new();
-    for (i, (name, _, _)) in variants.iter().enumerate().skip(1) {
+    for k in KS {
         for (j, coupling) in COUPLINGS.iter().enumerate() {
-            let c: Vec<f64> = starts
-                .iter()
-                .map(|t0| runs[nc * i + j].window_cost(&runs[j], *t0))
+            let c: Vec<f64> = (0..WINDOWS)
+                .map(|w| runs[nc * variant(k, w) + j].window_cost(&runs[j], starts[w]))
                 .collect();
             let list: Vec<String> = c.iter().map(|x| format!("{x:>8.2}")).collect();
-            eprintln!("{name:<13} {coupling:<9} {}", list.join(" "));
+            eprintln!("{:<16} {coupling:<9} {}", format!("{k} satellites"), list.join(" "));
             costs.push(c);
         }
     }
-    // Why a third of loose's cost is out of reach: loose's inertial drift over the window along
-    // the direction the satellites leave unmeasured, put back into the horizontal plane. Along
-    // it the tightly coupled filter coasts on its IMU (calibrated by code and carrier ranges,
-    // not by cm-level RTK fixes as loose's was): an IMU drifting as loose's does leaves this
-    // much there alone. With 3 satellites it is the clock's direction: the receiver's clock
-    // would have to hold to (a third of loose's cost) / |w| over the window to tell a move
-    // along it, where the filter's oscillator model (a TCXO's Allan deviations) lets it wander
-    // by σ_b.
+    // Where the satellites leave the tightly coupled filter to its IMU: loose's inertial drift
+    // over the window along the direction they leave unmeasured, put back into the horizontal
+    // plane (an IMU drifting as loose's does leaves this much there alone). With 3 satellites
+    // it is the clock's direction: the receiver's clock would have to hold to (a third of
+    // loose's cost) / |w| over the window to tell a move along it, where a data sheet's TCXO
+    // lets it wander by σ_b and this receiver's clock, warming up, by more (the filter's
+    // `clock_noise_scale_pct`, printed).
     let tcxo = navsync_estimator::nav::config::ReceiverOscillator::Tcxo.noise();
     let sigma_b = tcxo.process_noise_m(WINDOW_S)[(0, 0)].sqrt();
+    let clock_scale = runs[2].summary["measurement_counters"]["clock_noise_scale_pct"]
+        .as_u64()
+        .unwrap_or(0);
+    eprintln!(
+        "\nthe receiver clock: the full-sky tightly coupled filter scaled the TCXO's random-walk FM by {:.2} (ClockWatch)",
+        clock_scale as f64 / 100.0
+    );
     for k in KS {
         let name = format!("{k} satellites");
         eprintln!(
             "\n{name}: the direction they leave unmeasured (NED; 2: u1 x u2, 3: w = U^-1 1, a clock change of 1/|w| per metre) and loose's drift along it, horizontal, vs a third of loose's cost"
         );
-        let v = variants.iter().position(|x| x.0 == name).expect("the variant");
-        for (w, (t0, chosen)) in variants[v].2.iter().enumerate() {
+        for w in 0..WINDOWS {
+            let v = variant(k, w);
+            let (t0, chosen) = &variants[v].2[0];
             let sats: Vec<Sat> = chosen.iter().map(|x| x.0).collect();
             let full_sky_tight = |sow: f64| runs[2].at(sow);
             let Some((d, scale)) = unobserved_direction(&rec, *t0, &sats, &full_sky_tight) else {
@@ -781,7 +807,7 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
             let loose = c[0].hypot(c[1]);
             let clock = scale.map_or(String::new(), |n| {
                 format!(
-                    "; |w| {n:.2}: the clock would have to hold to {:.2} m over the window, the TCXO model lets it wander {sigma_b:.1} m",
+                    "; |w| {n:.2}: the clock would have to hold to {:.2} m over the window, a data sheet's TCXO lets it wander {sigma_b:.1} m",
                     loose / 3.0 / n
                 )
             });
@@ -829,16 +855,13 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
             "full sky: tightly coupled RMS {tc_rms:.3} m > {MAX_TIGHT_RMS_M} m"
         ));
     }
-    // With 3 satellites each window costs tight less than loose coasting, bar at most one.
-    let three = variants
-        .iter()
-        .position(|v| v.0 == "3 satellites")
-        .expect("the 3-satellite variant");
-    let row = |j: usize| &costs[(three - 1) * nc + j];
-    let better = row(0).iter().zip(row(2)).filter(|(l, t)| t < l).count();
-    if better + 1 < WINDOWS {
+    // With 3 satellites every window costs tight at most a third of loose's coasting (issue 36).
+    let three = KS.iter().position(|k| *k == 3).expect("the 3-satellite variants");
+    let row = |j: usize| &costs[three * nc + j];
+    let met = row(0).iter().zip(row(2)).filter(|(l, t)| **t <= **l / 3.0).count();
+    if met < WINDOWS {
         failures.push(format!(
-            "3 satellites: tight's window costs {:?} below loose's {:?} in {better} of {WINDOWS} windows",
+            "3 satellites: tight's window costs {:?} at most a third of loose's {:?} in {met} of {WINDOWS} windows",
             row(2),
             row(0)
         ));

@@ -45,6 +45,7 @@ use crate::nav::error_state::{ATT, BG, CLK_BIAS, CLK_DRIFT, DELAY, ISB, N, POS, 
 use crate::nav::eskf::Update;
 use crate::nav::filter::DelayedFilter;
 use crate::nav::mechanization::skew;
+use crate::time::clock_model::OscillatorNoise;
 
 /// 1σ of the L1 ionospheric delay at zenith when the broadcast model is not known yet, m.
 const UNMODELLED_IONO_ZENITH_M: f64 = 10.0;
@@ -178,6 +179,85 @@ impl CodeMemory {
     }
 }
 
+/// Satellites fused in an epoch for [`ClockWatch`] to use its clock drift (one more than the
+/// velocity and the drift need: the drift is then set by the carrier phases, not the model).
+pub const CLOCK_WATCH_MIN_SATS: u64 = 5;
+/// Horizons over which [`ClockWatch`] compares the drift's change with the oscillator model,
+/// s: octaves, as an Allan plot (a warming crystal's frequency ramp shows at the long ones).
+const CLOCK_WATCH_HORIZONS_S: [f64; 4] = [1.0, 4.0, 16.0, 64.0];
+/// [`ClockWatch`] averages the last this many ratios per horizon.
+const CLOCK_WATCH_MEMORY: u32 = 8;
+
+/// Checks the receiver oscillator's model against the clock itself (covariance matching,
+/// Mehra 1972; Mohamed & Schwarz 1999): while the sky is redundant the carrier phases fix the
+/// clock drift to mm/s, so the drift's change over a horizon τ, Δd, can be compared with what
+/// the model's random-walk FM allows, q_d(τ) = q_f·c²·τ (Brown & Hwang eq. 9.3.11): the ratio
+/// r = Δd² / (q_d(τ) + the two drifts' posterior variances) has mean 1 for a clock as stable as
+/// its model. The random-walk FM is scaled by the largest mean ratio over the horizons (never
+/// below 1), so that a clock whose frequency wanders or ramps more than the data sheet says
+/// (the rtklibexplorer walk's u-blox X20: −63 → −81 m/s in 2 min after power-on, 20 m RMS of
+/// bias prediction error over 15 s where the TCXO model allows 6.3 m) is not trusted to tell
+/// a move along the one direction 3 satellites leave to the clock, and its holdover σ
+/// ([`crate::nav::navigator::Navigator::receiver_clock`]) covers it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockWatch {
+    /// Per horizon: (GPS time of week s, drift m/s, its variance m²/s²) at the horizon's
+    /// start; NaN time: none.
+    anchor: [(f64, f64, f64); CLOCK_WATCH_HORIZONS_S.len()],
+    /// Per horizon: the mean ratio and how many it averages.
+    mean_ratio: [f64; CLOCK_WATCH_HORIZONS_S.len()],
+    count: [u32; CLOCK_WATCH_HORIZONS_S.len()],
+}
+
+impl Default for ClockWatch {
+    fn default() -> Self {
+        Self {
+            anchor: [(f64::NAN, 0.0, 0.0); CLOCK_WATCH_HORIZONS_S.len()],
+            mean_ratio: [1.0; CLOCK_WATCH_HORIZONS_S.len()],
+            count: [0; CLOCK_WATCH_HORIZONS_S.len()],
+        }
+    }
+}
+
+impl ClockWatch {
+    /// The factor on the oscillator's random-walk FM, ≥ 1.
+    pub fn scale(&self) -> f64 {
+        self.mean_ratio
+            .iter()
+            .zip(self.count)
+            .filter(|(_, n)| *n > 0)
+            .fold(1.0, |s, (r, _)| s.max(*r))
+    }
+
+    /// Forgets the drifts seen (the clock was re-initialised); keeps what was learnt.
+    fn restart(&mut self) {
+        for a in &mut self.anchor {
+            a.0 = f64::NAN;
+        }
+    }
+
+    /// Takes the drift `drift_mps` ± √`var` at `tow_s` of a clock modelled by `osc`.
+    fn observe(&mut self, tow_s: f64, drift_mps: f64, var: f64, osc: &OscillatorNoise) {
+        for (k, horizon) in CLOCK_WATCH_HORIZONS_S.iter().enumerate() {
+            let (t0, d0, v0) = self.anchor[k];
+            let mut dt = tow_s - t0;
+            dt -= (dt / 604_800.0).round() * 604_800.0;
+            if !(dt > 0.0 && dt < 2.0 * horizon) {
+                // None yet, or a gap: this horizon starts again from here.
+                self.anchor[k] = (tow_s, drift_mps, var);
+                continue;
+            }
+            if dt < *horizon {
+                continue;
+            }
+            let r = (drift_mps - d0).powi(2) / (osc.process_noise_m(dt)[(1, 1)] + var + v0);
+            self.count[k] = (self.count[k] + 1).min(CLOCK_WATCH_MEMORY);
+            self.mean_ratio[k] += (r - self.mean_ratio[k]) / f64::from(self.count[k]);
+            self.anchor[k] = (tow_s, drift_mps, var);
+        }
+    }
+}
+
 /// What the ranging updates count.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RangingState {
@@ -206,6 +286,8 @@ pub struct RangingState {
     pub carrier: CarrierMemory,
     /// When each satellite's pseudorange was last fused.
     pub code_memory: CodeMemory,
+    /// The receiver clock against its oscillator model.
+    pub clock_watch: ClockWatch,
     /// Satellites below the elevation mask.
     pub below_mask: u64,
     /// Satellites below the C/N0 mask.
@@ -592,7 +674,9 @@ impl Measurement for RangeEpoch {
         if (st.clock_inits, st.clock_resets) != clock_events {
             // A clock (re)set: nothing to difference against.
             st.carrier.count = 0;
+            st.clock_watch.restart();
         }
+        f.clock_q_scale = st.clock_watch.scale();
         if self.pos_floor_std_ned_m != [0.0; 3] {
             f.pos_floor_std_ned_m = Vector3::from(self.pos_floor_std_ned_m);
             f.clock_floor_std_m = self.clock_floor_std_m;
@@ -667,6 +751,11 @@ impl Measurement for RangeEpoch {
             }
         }
         self.remember_carriers(f, eps, cfg, rc, st);
+        if let Some(osc) = cfg.noise.clock.filter(|_| used >= CLOCK_WATCH_MIN_SATS) {
+            let var = f.eskf.p[(CLK_DRIFT, CLK_DRIFT)];
+            st.clock_watch.observe(self.tow_s, f.clock_drift_mps, var, &osc);
+            f.clock_q_scale = st.clock_watch.scale();
+        }
         st.last_sats = used;
         if used > 0 {
             st.epochs_used += 1;
@@ -694,6 +783,7 @@ impl Measurement for RangeEpoch {
         out("clock_resets", st.clock_resets);
         out("isb_inits", st.isb_inits);
         out("ranges_fallback_fixes", st.fallback_fixes);
+        out("clock_noise_scale_pct", (st.clock_watch.scale() * 100.0).round() as u64);
     }
 }
 
@@ -818,6 +908,43 @@ mod tests {
         e.fuse(&mut f, 0.0, &cfg, &rc, &mut st);
         assert_eq!((st.carrier_deltas_used, st.carrier_deltas_rejected), (15, 1));
         assert!((f.pva.vel_ned_mps.x - 1.0).abs() < 0.03);
+    }
+
+    /// A clock as stable as its TCXO model keeps the model (the scale within the χ² spread of
+    /// 8 ratios); one whose frequency ramps as the walk0827 receiver's does (−0.16 m/s², on
+    /// top of the model's noise) raises it at the long horizons; a clock reset starts the
+    /// drifts again without forgetting what was learnt.
+    #[test]
+    fn the_clock_watch_scales_the_oscillator_to_what_the_clock_shows() {
+        let osc = ReceiverOscillator::Tcxo.noise();
+        // Deterministic Gaussian draws (an LCG through Box–Muller).
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut gauss = move || {
+            let mut u = || {
+                seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+                ((seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            (-2.0 * u().ln()).sqrt() * (2.0 * std::f64::consts::PI * u()).cos()
+        };
+        let q_per_step = osc.process_noise_m(DT_S)[(1, 1)];
+        let run = |ramp_mps2: f64, gauss: &mut dyn FnMut() -> f64| {
+            let mut w = ClockWatch::default();
+            let mut drift = -60.0;
+            for k in 0..2400 {
+                drift += ramp_mps2 * DT_S + q_per_step.sqrt() * gauss();
+                w.observe(1000.0 + k as f64 * DT_S, drift, 1e-6, &osc);
+            }
+            w
+        };
+        let steady = run(0.0, &mut gauss);
+        assert!(steady.scale() < 2.5, "a clock as its model: scale {}", steady.scale());
+        let mut ramping = run(-0.16, &mut gauss);
+        let s = ramping.scale();
+        assert!(s > 20.0, "a ramping clock: scale {s}");
+        ramping.restart();
+        assert_eq!(ramping.scale(), s);
+        ramping.observe(5000.0, 0.0, 1e-6, &osc);
+        assert_eq!(ramping.scale(), s, "a restart's first drift is no change");
     }
 
     /// A satellite's pseudoranges Δt apart count as one per 2τ: the first at full weight, the
