@@ -460,13 +460,10 @@ fn write_variant(rec: &Recording, input: &Path, out: &Path, windows: &[(f64, Vec
     (thinned, dropped)
 }
 
-/// `replay --estimate` of `rec` with `coupling`, as a command; the output directory (KF-GINS's
-/// result files) and the summary's path.
-fn replay_command(env: &TestEnv, rec: &Path, name: &str, coupling: &str) -> (Command, PathBuf, PathBuf) {
-    let nav = env.dir.join(name);
-    std::fs::create_dir_all(&nav).unwrap();
-    let summary = env.dir.join(format!("{name}.json"));
-    let c = env.command(&[
+/// The arguments of `replay --estimate` of `rec` with `coupling` and the walk's lever arm,
+/// then `extra`.
+fn replay_args(rec: &Path, coupling: &str, extra: &[&str]) -> Vec<String> {
+    let mut args: Vec<String> = [
         "replay",
         &p(rec),
         "--estimate",
@@ -474,13 +471,25 @@ fn replay_command(env: &TestEnv, rec: &Path, name: &str, coupling: &str) -> (Com
         "0,-0.05,0",
         "--coupling",
         coupling,
-        "--summary-json",
-        &p(&summary),
-        "--out",
-        &p(&nav),
-        "--format",
-        "kf-gins",
-    ]);
+    ]
+    .map(String::from)
+    .into();
+    args.extend(extra.iter().map(|x| x.to_string()));
+    args
+}
+
+/// `replay --estimate` of `rec` with `coupling`, as a command; the output directory (KF-GINS's
+/// result files) and the summary's path.
+fn replay_command(env: &TestEnv, rec: &Path, name: &str, coupling: &str) -> (Command, PathBuf, PathBuf) {
+    let nav = env.dir.join(name);
+    std::fs::create_dir_all(&nav).unwrap();
+    let summary = env.dir.join(format!("{name}.json"));
+    let args = replay_args(
+        rec,
+        coupling,
+        &["--summary-json", &p(&summary), "--out", &p(&nav), "--format", "kf-gins"],
+    );
+    let c = env.command(&args.iter().map(String::as_str).collect::<Vec<_>>());
     (c, nav, summary)
 }
 
@@ -499,20 +508,8 @@ struct ClockState {
 /// The tightly coupled replay of `rec`'s `TimeState`s that carry the receiver clock.
 fn clock_states(env: &TestEnv, rec: &Path, name: &str) -> Vec<ClockState> {
     let out = env.dir.join(format!("{name}.mcap"));
-    run_ok(
-        env,
-        &[
-            "replay",
-            &p(rec),
-            "--estimate",
-            "--lever-arm",
-            "0,-0.05,0",
-            "--coupling",
-            "tight",
-            "--out",
-            &p(&out),
-        ],
-    );
+    let args = replay_args(rec, "tight", &["--out", &p(&out)]);
+    run_ok(env, &args.iter().map(String::as_str).collect::<Vec<_>>());
     let mut r = SampleReader::open(&out).unwrap();
     let mut states = Vec::new();
     while let Some(s) = r.next_sample().unwrap() {
