@@ -204,7 +204,7 @@ pub struct ClockWatch {
     /// Per horizon: (GPS time of week s, drift m/s, its variance m²/s²) at the horizon's
     /// start; NaN time: none.
     anchor: [(f64, f64, f64); CLOCK_WATCH_HORIZONS_S.len()],
-    /// Per horizon: the mean ratio and how many it averages.
+    /// Per horizon: the mean ratio (1 before the first) and how many it averages.
     mean_ratio: [f64; CLOCK_WATCH_HORIZONS_S.len()],
     count: [u32; CLOCK_WATCH_HORIZONS_S.len()],
 }
@@ -222,11 +222,7 @@ impl Default for ClockWatch {
 impl ClockWatch {
     /// The factor on the oscillator's random-walk FM, ≥ 1.
     pub fn scale(&self) -> f64 {
-        self.mean_ratio
-            .iter()
-            .zip(self.count)
-            .filter(|(_, n)| *n > 0)
-            .fold(1.0, |s, (r, _)| s.max(*r))
+        self.mean_ratio.iter().fold(1.0, |s, r| s.max(*r))
     }
 
     /// Forgets the drifts seen (the clock was re-initialised); keeps what was learnt.
