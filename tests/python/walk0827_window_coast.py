@@ -41,15 +41,9 @@ def kf_gins(binary, data, work, tag, withheld):
     """Runs KF-GINS with the fixes in `withheld` ([start, end] sow, both included) left out;
     returns its navigation result rows (week, sow, lat°, lon°, h m, …)."""
     pos = os.path.join(work, f"gnss_{tag}.pos")
-    with open(os.path.join(data, "gnss.pos")) as fi, open(pos, "w") as fo:
-        for line in fi:
-            f = line.split()
-            if not f or line.lstrip().startswith(("#", "%")):
-                continue
-            t = float(f[0])
-            if any(s - 1e-6 <= t <= e + 1e-6 for s, e in withheld):
-                continue
-            fo.write(line)
+    # walk0827_bench.withhold takes half-open windows: half a 4 Hz interval past the end
+    # keeps the window's last epoch in.
+    wb.withhold(os.path.join(data, "gnss.pos"), pos, [(s, e + 0.125) for s, e in withheld])
     out = os.path.join(work, tag)
     os.makedirs(out, exist_ok=True)
     cfg = os.path.join(work, f"{tag}.yaml")
