@@ -395,6 +395,7 @@ fn enum_name(sample: &str, path: &str, v: u64) -> Option<&'static str> {
         ("GnssFix", "protocol") => match v {
             GNSS_PROTOCOL_NMEA => Some("nmea"),
             GNSS_PROTOCOL_UBX => Some("ubx"),
+            GNSS_PROTOCOL_FILE => Some("file"),
             _ => None,
         },
         ("GnssTimePulse", "time_base") => ["gnss", "utc"].get(usize::from(v)).copied(),

@@ -710,7 +710,8 @@ fn read_fixes(
                 [f.vel_n_mps, f.vel_e_mps, f.vel_d_mps] = v;
             }
         }
-        f.sentences = SENTENCE_GGA | SENTENCE_RMC | SENTENCE_GST | SENTENCE_ZDA;
+        // Positions with the noise σ KF-GINS takes them with, not a receiver's accuracy.
+        f.protocol = GNSS_PROTOCOL_FILE;
         f.mode = FixMode::Fix3d as u8;
         f.quality = 1;
         out.push(f);

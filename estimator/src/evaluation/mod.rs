@@ -55,6 +55,10 @@ pub struct Summary {
     pub pos_rms_m: Option<f64>,
     /// Largest horizontal position error, m.
     pub pos_max_m: Option<f64>,
+    /// The fraction of the compared states whose north and east errors both lie within 2σ
+    /// of their own published σ (`pos_std_ned_m`; 0.91 for a Gaussian error and a true σ,
+    /// 0.95² ≈ 0.90 if both axes are independent): whether the σ covers the error.
+    pub pos_within_2sigma: Option<f64>,
     /// Altitude RMS, m.
     pub alt_rms_m: Option<f64>,
     /// Velocity RMS (3D), m/s.
@@ -108,6 +112,8 @@ pub struct Evaluator {
     pending: VecDeque<NavState>,
     n: u64,
     sum_h2: f64,
+    /// Compared states whose N and E errors lie within 2σ.
+    within_2sigma: u64,
     max_h: f64,
     sum_alt2: f64,
     sum_v2: [f64; 3],
@@ -131,6 +137,7 @@ impl Default for Evaluator {
             pending: VecDeque::new(),
             n: 0,
             sum_h2: 0.0,
+            within_2sigma: 0,
             max_h: 0.0,
             sum_alt2: 0.0,
             sum_v2: [0.0; 3],
@@ -235,6 +242,10 @@ impl Evaluator {
         }
         self.n += 1;
         self.sum_h2 += h_err * h_err;
+        // A NaN σ never covers.
+        if d[0].abs() <= 2.0 * s.pos_std_ned_m[0] && d[1].abs() <= 2.0 * s.pos_std_ned_m[1] {
+            self.within_2sigma += 1;
+        }
         self.max_h = self.max_h.max(h_err);
         self.sum_alt2 += d[2] * d[2];
         for k in 0..3 {
@@ -267,6 +278,7 @@ impl Evaluator {
             gnss_fixes: counts.1,
             pos_rms_m: rms(self.sum_h2),
             pos_max_m: have.then_some(self.max_h),
+            pos_within_2sigma: have.then(|| self.within_2sigma as f64 / n),
             alt_rms_m: rms(self.sum_alt2),
             vel_rms_mps: rms(self.sum_v2.iter().sum()),
             vel_rms_ned_mps: have.then(|| self.sum_v2.map(|s| (s / n).sqrt())),
@@ -345,6 +357,13 @@ impl Summary {
             f(self.pos_rms_m, "m"),
             f(self.pos_max_m, "m")
         ));
+        if let Some(c) = self.pos_within_2sigma {
+            s.push_str(&format!(
+                "N and E within 2σ   {:.1} % of the states
+",
+                100.0 * c
+            ));
+        }
         s.push_str(&format!("altitude RMS        {}\n", f(self.alt_rms_m, "m")));
         s.push_str(&format!("velocity RMS        {}", f(self.vel_rms_mps, "m/s")));
         if let Some(v) = self.vel_rms_ned_mps {

@@ -1728,6 +1728,71 @@ mod tests {
         );
     }
 
+    /// A receiver's fixes whose error persists (the same 3 m north and 1 m west every second,
+    /// hAcc 2.83 m: 2 m per axis) keep the published horizontal σ at the receiver's own,
+    /// covering that error however many are fused; the same positions from a file, whose σ is
+    /// a measurement noise, let it shrink as the filter averages them.
+    #[test]
+    fn a_receivers_accuracy_is_a_floor_of_the_published_sigma_and_a_files_noise_is_not() {
+        use crate::nav::measurements::gnss::{GnssAccuracy, observation};
+        use navsync_wire::samples::{FixMode, GNSS_PROTOCOL_FILE, GNSS_PROTOCOL_UBX, GnssFix, Stamp, StampSource};
+        const SIGMA_M: f64 = 2.0;
+        let g = earth::normal_gravity(45f64.to_radians(), 300.0);
+        let run = |protocol: u8| {
+            let mut nav = Navigator::new(NavConfig::default());
+            let init = InitialState {
+                utc_ns: 0,
+                lat_deg: 45.0,
+                lon_deg: 7.0,
+                height_m: 300.0,
+                vel_ned_mps: [0.0; 3],
+                rpy_deg: [0.0; 3],
+                gyro_bias_deg_per_h: [0.0; 3],
+                accel_bias_mgal: [0.0; 3],
+                pos_std_m: [SIGMA_M; 3],
+                vel_std_mps: [0.05; 3],
+                att_std_deg: [0.5, 0.5, 2.0],
+            };
+            nav.initialize(&init, 1_000_000_000);
+            let (lat0, r) = (45f64.to_radians(), 6_378_137.0_f64);
+            let mut t_ns = 1_000_000_000;
+            // 120 s at 100 Hz, a fix every second.
+            for k in 1..=12_000 {
+                t_ns = 1_000_000_000 + k * 10_000_000;
+                nav.on_imu(t_ns, 0.01, Vector3::zeros(), Vector3::new(0.0, 0.0, -g));
+                if k % 100 == 0 {
+                    let mut fix = GnssFix::empty(Stamp::host(t_ns, 0, StampSource::Receipt));
+                    fix.lat_deg = 45.0 + (3.0 / r).to_degrees();
+                    fix.lon_deg = 7.0 - (1.0 / (r * lat0.cos())).to_degrees();
+                    (fix.alt_msl_m, fix.geoid_sep_m) = (300.0, 0.0);
+                    (fix.vel_n_mps, fix.vel_e_mps, fix.vel_d_mps) = (0.0, 0.0, 0.0);
+                    (fix.mode, fix.sats_used, fix.protocol) = (FixMode::Fix3d as u8, 9, protocol);
+                    if protocol == GNSS_PROTOCOL_FILE {
+                        [fix.std_lat_m, fix.std_lon_m, fix.std_alt_m] = [SIGMA_M, SIGMA_M, 3.0];
+                    } else {
+                        (fix.h_acc_m, fix.v_acc_m) = (SIGMA_M * std::f64::consts::SQRT_2, 3.0);
+                    }
+                    fix.s_acc_mps = 0.07;
+                    let obs = observation(&fix, t_ns, &GnssAccuracy::default()).expect("usable");
+                    nav.on_gnss(obs, t_ns);
+                }
+            }
+            let mut s = <NavState as navsync_wire::reflect::Reflect>::zeroed();
+            nav.fill(&mut s, t_ns);
+            let north_m = (s.lat_deg.to_radians() - lat0) * r;
+            (s.pos_std_ned_m, north_m)
+        };
+        let (std, north_m) = run(GNSS_PROTOCOL_UBX);
+        assert!((north_m - 3.0).abs() < 0.5, "the filter follows the fixes: {north_m} m");
+        assert!(
+            std[0] >= SIGMA_M - 1e-9 && std[1] >= SIGMA_M - 1e-9 && std[2] >= 3.0 - 1e-9,
+            "a receiver's fixes: published σ {std:?} below theirs"
+        );
+        let (std, north_m) = run(GNSS_PROTOCOL_FILE);
+        assert!((north_m - 3.0).abs() < 0.5, "{north_m} m");
+        assert!(std[0] < 1.0 && std[1] < 1.0, "a file's fixes: published σ {std:?}");
+    }
+
     /// A speed differenced from positions has the noise of the receiver's interval, not of a
     /// gap between the fixes the navigator got: standing fixes at 10 Hz (σ 0.2 m, a speed noise
     /// of 2.8 m/s) with 2 s missed never show motion.

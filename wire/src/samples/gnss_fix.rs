@@ -82,6 +82,9 @@ crate::sample_struct! {
 pub const GNSS_PROTOCOL_NMEA: u8 = 0;
 /// [`GnssFix::protocol`]: u-blox UBX.
 pub const GNSS_PROTOCOL_UBX: u8 = 1;
+/// [`GnssFix::protocol`]: no receiver's messages but a file of positions with the noise σ of
+/// each (KF-GINS's GNSS file, `navsync import kf-gins`); `sentences` 0.
+pub const GNSS_PROTOCOL_FILE: u8 = 2;
 
 /// [`GnssFix::fix_flags`]: the receiver says the fix is valid (UBX NAV-PVT `gnssFixOK`,
 /// NAV-SOL `GPSfixOK`).

@@ -17,7 +17,9 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use navsync_wire::earth;
-use navsync_wire::samples::{FIX_FLAG_INVALID_LLH, FIX_FLAG_NOT_GNSS, FIX_FLAG_RECEIVER_INVALID, GnssFix};
+use navsync_wire::samples::{
+    FIX_FLAG_INVALID_LLH, FIX_FLAG_NOT_GNSS, FIX_FLAG_RECEIVER_INVALID, GNSS_PROTOCOL_FILE, GnssFix,
+};
 
 use super::Measurement;
 use crate::declare::checks::{non_negative, positive};
@@ -49,10 +51,14 @@ pub struct GnssObservation {
     /// Track over ground, rad (NaN when unknown).
     pub track_rad: f64,
     /// 1-sigma N, E, D of the part of the fix's error that persists across epochs, m (zero:
-    /// not known). A single-point solution's errors (broadcast orbit and clock, atmosphere,
+    /// none). A single-point solution's errors (broadcast orbit and clock, atmosphere,
     /// multipath) change over minutes, not from one epoch to the next; the filter, which fuses
     /// each epoch as independent, would average them away. The published position σ is never
-    /// below it ([`DelayedFilter::pos_floor_std_ned_m`]).
+    /// below it ([`DelayedFilter::pos_floor_std_ned_m`]). A receiver's fix: its own accuracy
+    /// (u-blox hAcc and vAcc are the "accuracy estimate" of the position it reports, NMEA GST
+    /// the "standard deviation" of its errors; the interface descriptions), which no number
+    /// of its fixes improves, their errors being correlated from one to the next; a file's
+    /// ([`GNSS_PROTOCOL_FILE`]): none, its σ being the measurement noise KF-GINS takes it for.
     pub pos_floor_std_m: Vector3<f64>,
 }
 
@@ -126,8 +132,12 @@ pub fn observation(fix: &GnssFix, stamp_host_ns: i64, acc: &GnssAccuracy) -> Opt
         vel_std_mps,
         speed_mps: fix.speed_mps,
         track_rad: fix.track_deg.to_radians(),
-        // A receiver's fix: how much of its error persists is the receiver's to say.
-        pos_floor_std_m: Vector3::zeros(),
+        pos_floor_std_m: if fix.protocol == GNSS_PROTOCOL_FILE {
+            Vector3::zeros()
+        } else {
+            // No vertical floor from an altitude the receiver held.
+            Vector3::new(pos_std.x, pos_std.y, if fix.altitude_held() { 0.0 } else { pos_std.z })
+        },
     })
 }
 
@@ -368,9 +378,7 @@ impl Measurement for GnssObservation {
     ) -> bool {
         let obs = self;
         f.with_unobservable_delay_held(|f| {
-            if obs.pos_floor_std_m != Vector3::zeros() {
-                f.pos_floor_std_ned_m = obs.pos_floor_std_m;
-            }
+            f.pos_floor_std_ned_m = obs.pos_floor_std_m;
             let t_f = obs.epoch_ns(f.delay_s);
             let (dz, h, r) = position_terms(
                 &f.pva,
@@ -609,6 +617,21 @@ mod tests {
         assert_eq!(held.pos_std_m.x, measured.pos_std_m.x, "horizontal unchanged");
         // Unknown satellite count: the altitude counts as measured.
         assert!(observation(&fix(u16::MAX), 0, &acc).unwrap().pos_std_m.z < 10.0);
+    }
+
+    /// A receiver's σ is also the floor of what persists of its error (none vertically for an
+    /// altitude it held); a file's σ is a noise only.
+    #[test]
+    fn a_receivers_accuracy_persists_and_a_files_noise_does_not() {
+        let acc = GnssAccuracy::default();
+        let mut f = fix(7);
+        (f.h_acc_m, f.v_acc_m, f.protocol) = (2.0, 3.0, navsync_wire::samples::GNSS_PROTOCOL_UBX);
+        let o = observation(&f, 0, &acc).expect("usable");
+        assert_eq!(o.pos_floor_std_m, o.pos_std_m);
+        let held = observation(&fix(3), 0, &acc).expect("usable");
+        assert_eq!(held.pos_floor_std_m, Vector3::new(held.pos_std_m.x, held.pos_std_m.y, 0.0));
+        f.protocol = GNSS_PROTOCOL_FILE;
+        assert_eq!(observation(&f, 0, &acc).unwrap().pos_floor_std_m, Vector3::zeros());
     }
 
     #[test]
