@@ -636,14 +636,16 @@ pub struct SkyEpoch {
 /// The error of the receiver's own position/velocity solution: the weighted least-squares
 /// solution (position + clock, velocity + drift) of the measurement errors it does not
 /// correct (broadcast error, unmodelled ionosphere, multipath, noise), linearised at the
-/// truth — ranges of 20 000 km make the metre-level errors linear to ~10⁻⁷.
+/// truth — ranges of 20 000 km make the metre-level errors linear to ~10⁻⁷. Its accuracy
+/// estimates cover the whole error budget, the persistent errors too (as a receiver's UERE
+/// budget does), not the noise it weights by alone.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SkyFix {
     /// Position error, NED m.
     pub pos_err_ned_m: [f64; 3],
     /// Velocity error, NED m/s.
     pub vel_err_ned_mps: [f64; 3],
-    /// 1σ horizontal (RSS of north and east), m, from the solution's covariance.
+    /// 1σ horizontal (RSS of north and east), m, from the solution's covariance under the whole budget.
     pub h_acc_m: f64,
     /// 1σ vertical, m.
     pub v_acc_m: f64,
@@ -861,7 +863,7 @@ impl Sky {
             .to_radians();
         // (elevation, measurement, line of sight, pseudorange error the receiver does not
         // correct, range-rate error).
-        let mut seen: Vec<(f64, Measured, Vector3<f64>, f64, f64)> = Vec::with_capacity(MAX_PRN);
+        let mut seen: Vec<Seen> = Vec::with_capacity(MAX_PRN);
         for k in 0..self.cfg.constellation.len() {
             let a = self.cfg.constellation[k];
             if a.health != 0 {
@@ -920,9 +922,17 @@ impl Sky {
             let rr = (v_sat - v_rx).dot(&u) + C_M_S * (drift - sat.clock_drift) + rr_err;
             let pr_sigma = self.cfg.pseudorange_sigma_m.hypot(self.cfg.multipath_sigma_m) / sin_el;
             let rr_sigma = self.cfg.range_rate_sigma_mps / sin_el;
-            seen.push((
+            // What the receiver's error budget adds for the errors its corrections leave, which
+            // persist from epoch to epoch: the broadcast orbit and clock, the ionosphere and
+            // troposphere its models miss (their size here).
+            let persistent_sigma = self
+                .cfg
+                .broadcast_error_m
+                .hypot((self.cfg.ionosphere_scale - 1.0) / self.cfg.ionosphere_scale.max(1e-9) * iono_m)
+                .hypot(tropo_m - tropo_model_m);
+            seen.push(Seen {
                 el,
-                Measured {
+                meas: Measured {
                     prn: a.prn,
                     pr_m: pr,
                     doppler_hz: -rr * L1_HZ / C_M_S,
@@ -933,13 +943,14 @@ impl Sky {
                 u,
                 pr_err,
                 rr_err,
-            ));
+                persistent_sigma,
+            });
         }
-        seen.sort_by(|a, b| b.0.total_cmp(&a.0));
+        seen.sort_by(|a, b| b.el.total_cmp(&a.el));
         let max = window.as_ref().and_then(|w| w.max_sats).unwrap_or(MAX_CHANNELS);
         seen.truncate(max.min(MAX_CHANNELS));
         let fix = self.solution(&seen, &c_e_n);
-        let meas: Vec<Measured> = seen.into_iter().map(|(_, m, ..)| m).collect();
+        let meas: Vec<Measured> = seen.into_iter().map(|x| x.meas).collect();
         write_rawx(tow_s + bias_s, week, &meas, out);
         // Subframes whose transmission ended since the last epoch (at multiples of 6 s).
         let now_s = gps_ns.div_euclid(NS_PER_S);
@@ -969,24 +980,29 @@ impl Sky {
     }
 
     /// The receiver's own solution error from the tracked satellites (≥ 4), see [`SkyFix`].
-    fn solution(
-        &self,
-        seen: &[(f64, Measured, Vector3<f64>, f64, f64)],
-        c_e_n: &nalgebra::Matrix3<f64>,
-    ) -> Option<SkyFix> {
+    fn solution(&self, seen: &[Seen], c_e_n: &nalgebra::Matrix3<f64>) -> Option<SkyFix> {
         if seen.len() < 4 {
             return None;
         }
         let rr_sigma = |el: f64| self.cfg.range_rate_sigma_mps.max(1e-3) / el.sin().max(0.1);
         let pr_rows: Vec<_> = seen
             .iter()
-            .map(|(_, m, u, e, _)| (*u, m.pr_sigma_m.max(0.01), *e))
+            .map(|x| (x.u, x.meas.pr_sigma_m.max(0.01), x.pr_err))
             .collect();
-        let rr_rows: Vec<_> = seen.iter().map(|(el, _, u, _, e)| (*u, rr_sigma(*el), *e)).collect();
+        let rr_rows: Vec<_> = seen.iter().map(|x| (x.u, rr_sigma(x.el), x.rr_err)).collect();
         let (dx, p) = wls_error(&pr_rows)?;
         let (dv, pv) = wls_error(&rr_rows)?;
         let pos = c_e_n * dx.fixed_rows::<3>(0);
         let vel = c_e_n * dv.fixed_rows::<3>(0);
+        // The accuracy it reports is its solution's covariance under the whole error budget,
+        // the persistent errors too (weighted as the noise alone: P + P·Σ h hᵀ σ_p²/σ⁴·P, the
+        // covariance of the weighted solution when each range's variance is σ² + σ_p²).
+        let mut extra = nalgebra::Matrix4::zeros();
+        for ((u, sigma, _), x) in pr_rows.iter().zip(seen) {
+            let h = nalgebra::Vector4::new(-u[0], -u[1], -u[2], 1.0);
+            extra += h * h.transpose() * (x.persistent_sigma / (sigma * sigma)).powi(2);
+        }
+        let p = p + p * extra * p;
         let p_ned = c_e_n * p.fixed_view::<3, 3>(0, 0) * c_e_n.transpose();
         let trace_v = pv.fixed_view::<3, 3>(0, 0).trace();
         Some(SkyFix {
@@ -997,6 +1013,23 @@ impl Sky {
             s_acc_mps: std::f64::consts::SQRT_2 * (trace_v / 3.0).sqrt(),
         })
     }
+}
+
+/// A satellite the receiver tracks in an epoch.
+struct Seen {
+    /// Elevation, rad.
+    el: f64,
+    meas: Measured,
+    /// Line of sight, ECEF unit vector.
+    u: Vector3<f64>,
+    /// The pseudorange's error the receiver does not correct, m.
+    pr_err: f64,
+    /// The range rate's error, m/s.
+    rr_err: f64,
+    /// 1σ of the errors in `pr_err` that persist from epoch to epoch (the broadcast orbit and
+    /// clock, what the atmosphere models leave), m: the receiver's error budget beyond
+    /// `meas.pr_sigma_m`.
+    persistent_sigma: f64,
 }
 
 /// One satellite's measurement as RXM-RAWX reports it.
