@@ -913,15 +913,8 @@ mod tests {
     #[test]
     fn the_clock_watch_scales_the_oscillator_to_what_the_clock_shows() {
         let osc = ReceiverOscillator::Tcxo.noise();
-        // Deterministic Gaussian draws (an LCG through Box–Muller).
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut gauss = move || {
-            let mut u = || {
-                seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
-                ((seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            (-2.0 * u().ln()).sqrt() * (2.0 * std::f64::consts::PI * u()).cos()
-        };
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut gauss = move || crate::test_noise::gauss(&mut rng);
         let q_per_step = osc.process_noise_m(DT_S)[(1, 1)];
         let run = |ramp_mps2: f64, gauss: &mut dyn FnMut() -> f64| {
             let mut w = ClockWatch::default();
