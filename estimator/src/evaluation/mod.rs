@@ -56,8 +56,8 @@ pub struct Summary {
     /// Largest horizontal position error, m.
     pub pos_max_m: Option<f64>,
     /// The fraction of the compared states whose north and east errors both lie within 2σ
-    /// of their own published σ (`pos_std_ned_m`; 0.91 for a Gaussian error and a true σ,
-    /// 0.95² ≈ 0.90 if both axes are independent): whether the σ covers the error.
+    /// of their own published σ (`pos_std_ned_m`): whether the σ covers the error (about 0.9
+    /// for Gaussian errors and a true σ, 0.95 per axis).
     pub pos_within_2sigma: Option<f64>,
     /// Altitude RMS, m.
     pub alt_rms_m: Option<f64>,
@@ -358,11 +358,7 @@ impl Summary {
             f(self.pos_max_m, "m")
         ));
         if let Some(c) = self.pos_within_2sigma {
-            s.push_str(&format!(
-                "N and E within 2σ   {:.1} % of the states
-",
-                100.0 * c
-            ));
+            s.push_str(&format!("N and E within 2σ   {:.1} % of the states\n", 100.0 * c));
         }
         s.push_str(&format!("altitude RMS        {}\n", f(self.alt_rms_m, "m")));
         s.push_str(&format!("velocity RMS        {}", f(self.vel_rms_mps, "m/s")));
