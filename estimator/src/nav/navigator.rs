@@ -1444,23 +1444,29 @@ mod tests {
     use crate::nav::config::InitialState;
     use navsync_wire::earth;
 
-    fn aligned() -> Navigator {
+    /// A navigator initialised at 45° N, 7° E, 300 m, level and heading north, at 1 s, moving
+    /// north at `north_mps`, its position known to `pos_std_m` per axis.
+    fn aligned_with(north_mps: f64, pos_std_m: f64) -> Navigator {
         let mut nav = Navigator::new(NavConfig::default());
         let init = InitialState {
             utc_ns: 0,
             lat_deg: 45.0,
             lon_deg: 7.0,
             height_m: 300.0,
-            vel_ned_mps: [1.0, 0.0, 0.0],
+            vel_ned_mps: [north_mps, 0.0, 0.0],
             rpy_deg: [0.0, 0.0, 0.0],
             gyro_bias_deg_per_h: [0.0; 3],
             accel_bias_mgal: [0.0; 3],
-            pos_std_m: [0.1; 3],
+            pos_std_m: [pos_std_m; 3],
             vel_std_mps: [0.05; 3],
             att_std_deg: [0.5, 0.5, 2.0],
         };
         nav.initialize(&init, 1_000_000_000);
         nav
+    }
+
+    fn aligned() -> Navigator {
+        aligned_with(1.0, 0.1)
     }
 
     /// An IMU of unknown class (the generic model) gets the process noise its signal shows: a
@@ -1739,21 +1745,7 @@ mod tests {
         const SIGMA_M: f64 = 2.0;
         let g = earth::normal_gravity(45f64.to_radians(), 300.0);
         let run = |protocol: u8| {
-            let mut nav = Navigator::new(NavConfig::default());
-            let init = InitialState {
-                utc_ns: 0,
-                lat_deg: 45.0,
-                lon_deg: 7.0,
-                height_m: 300.0,
-                vel_ned_mps: [0.0; 3],
-                rpy_deg: [0.0; 3],
-                gyro_bias_deg_per_h: [0.0; 3],
-                accel_bias_mgal: [0.0; 3],
-                pos_std_m: [SIGMA_M; 3],
-                vel_std_mps: [0.05; 3],
-                att_std_deg: [0.5, 0.5, 2.0],
-            };
-            nav.initialize(&init, 1_000_000_000);
+            let mut nav = aligned_with(0.0, SIGMA_M);
             let (lat0, r) = (45f64.to_radians(), 6_378_137.0_f64);
             let mut t_ns = 1_000_000_000;
             // 120 s at 100 Hz, a fix every second.
