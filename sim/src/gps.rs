@@ -645,7 +645,8 @@ pub struct SkyFix {
     pub pos_err_ned_m: [f64; 3],
     /// Velocity error, NED m/s.
     pub vel_err_ned_mps: [f64; 3],
-    /// 1σ horizontal (RSS of north and east), m, from the solution's covariance under the whole budget.
+    /// 1σ horizontal (RSS of north and east), m, from the solution's covariance under the
+    /// whole error budget.
     pub h_acc_m: f64,
     /// 1σ vertical, m.
     pub v_acc_m: f64,
@@ -861,8 +862,6 @@ impl Sky {
             .and_then(|w| w.elevation_mask_deg)
             .unwrap_or(self.cfg.elevation_mask_deg)
             .to_radians();
-        // (elevation, measurement, line of sight, pseudorange error the receiver does not
-        // correct, range-rate error).
         let mut seen: Vec<Seen> = Vec::with_capacity(MAX_PRN);
         for k in 0..self.cfg.constellation.len() {
             let a = self.cfg.constellation[k];
@@ -907,8 +906,11 @@ impl Sky {
             .gaussian(self.cfg.broadcast_error_m);
             // What the receiver's own solution does not correct: all but the broadcast
             // ionosphere (iono_m / scale) and the troposphere model.
-            let pr_err = (self.cfg.ionosphere_scale - 1.0) / self.cfg.ionosphere_scale.max(1e-9) * iono_m
-                + (tropo_m - tropo_model_m)
+            // What the receiver's ionosphere and troposphere models leave, m.
+            let iono_left_m = (self.cfg.ionosphere_scale - 1.0) / self.cfg.ionosphere_scale.max(1e-9) * iono_m;
+            let tropo_left_m = tropo_m - tropo_model_m;
+            let pr_err = iono_left_m
+                + tropo_left_m
                 + sisre_m
                 + self.cfg.multipath_sigma_m / sin_el * self.multipath[i]
                 + self.cfg.pseudorange_sigma_m / sin_el * white[i].0;
@@ -925,11 +927,7 @@ impl Sky {
             // What the receiver's error budget adds for the errors its corrections leave, which
             // persist from epoch to epoch: the broadcast orbit and clock, the ionosphere and
             // troposphere its models miss (their size here).
-            let persistent_sigma = self
-                .cfg
-                .broadcast_error_m
-                .hypot((self.cfg.ionosphere_scale - 1.0) / self.cfg.ionosphere_scale.max(1e-9) * iono_m)
-                .hypot(tropo_m - tropo_model_m);
+            let persistent_sigma = self.cfg.broadcast_error_m.hypot(iono_left_m).hypot(tropo_left_m);
             seen.push(Seen {
                 el,
                 meas: Measured {
