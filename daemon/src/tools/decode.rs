@@ -57,7 +57,7 @@ fn sky(bytes: &[u8], file: &str, almanac: Option<&str>) -> Result<()> {
     use navsync_estimator::gnss::orbit::Orbit;
     use navsync_estimator::gnss::ranges::EphemerisStore;
     use navsync_estimator::gnss::spp;
-    use navsync_shared::time::{Civil, gps_ns_from_utc_ns, utc_ns_from_civil};
+    use navsync_shared::time::gps_ns_from_utc_ns;
     const WEEK_S: i64 = 604_800;
     let (header, _) = gpsd_header(bytes);
     let mut store = EphemerisStore::default();
@@ -72,16 +72,7 @@ fn sky(bytes: &[u8], file: &str, almanac: Option<&str>) -> Result<()> {
         };
         match messages::decode(class, id, payload) {
             Ok(Message::NavPvt(p)) if p.fix_type >= 2 => {
-                let utc = utc_ns_from_civil(&Civil {
-                    year: i64::from(p.year),
-                    month: u32::from(p.month),
-                    day: u32::from(p.day),
-                    hour: u32::from(p.hour),
-                    minute: u32::from(p.min),
-                    second: u32::from(p.sec),
-                    nanos: 0,
-                });
-                let week = gps_ns_from_utc_ns(utc).div_euclid(WEEK_S * 1_000_000_000);
+                let week = gps_ns_from_utc_ns(p.utc_second_ns()).div_euclid(WEEK_S * 1_000_000_000);
                 let rx =
                     navsync_shared::earth::geodetic_to_ecef(p.lat_deg.to_radians(), p.lon_deg.to_radians(), p.height_m);
                 pvt = Some((rx, week));

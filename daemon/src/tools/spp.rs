@@ -1,6 +1,6 @@
-//! `navsync spp REC.mcap [--out FILE.csv] [--reference X,Y,Z] [--systems G,E,C]`: the
-//! single-point solution of each raw epoch of a recording from GPS L1 C/A, Galileo E1 and
-//! BeiDou B1I/B3I with one receiver clock per system (the estimator's `gnss::spp`, with the
+//! `navsync spp REC.mcap [--out FILE.csv] [--reference X,Y,Z] [--systems G,E,C,R]`: the
+//! single-point solution of each raw epoch of a recording from GPS L1 C/A, Galileo E1,
+//! BeiDou B1I/B3I and GLONASS L1OF with one receiver clock per system (the estimator's `gnss::spp`, with the
 //! navigation data collected by `gnss::ranges::EphemerisStore` as the tightly coupled filter
 //! does), as a CSV, and its errors against a reference position (east/north/up, horizontal,
 //! vertical and 3-D RMS, m), with the satellites used per system.
@@ -40,8 +40,9 @@ pub struct SppArgs {
     #[arg(long, default_value_t = 3.0)]
     pub pseudorange_std_m: f64,
     /// The systems used, by their RINEX letters: G GPS (L1 C/A), E Galileo (E1-C, else E1-B),
-    /// C BeiDou (B1I, else B3I); one receiver clock each.
-    #[arg(long, default_value = "G,E,C", value_parser = parse_systems)]
+    /// C BeiDou (B1I, else B3I), R GLONASS (L1OF, each satellite on its channel's
+    /// frequency); one receiver clock each.
+    #[arg(long, default_value = "G,E,C,R", value_parser = parse_systems)]
     pub systems: Systems,
     /// The summary as one JSON object on stdout.
     #[arg(long)]
@@ -65,8 +66,12 @@ fn parse_systems(s: &str) -> Result<Systems, String> {
             "G" => 0,
             "E" => 2,
             "C" => 3,
-            "R" => return Err("GLONASS (R) is not solved yet: use G, E, C".into()),
-            _ => return Err(format!("unknown system '{part}': G (GPS), E (Galileo), C (BeiDou)")),
+            "R" => 6,
+            _ => {
+                return Err(format!(
+                    "unknown system '{part}': G (GPS), E (Galileo), C (BeiDou), R (GLONASS)"
+                ));
+            }
         };
         if !out.contains(&g) {
             out.push(g);
@@ -347,6 +352,7 @@ mod tests {
         assert_eq!(parse_xyz("-1,2.5,3"), Ok([-1.0, 2.5, 3.0]));
         assert!(parse_xyz("1,2").is_err() && parse_xyz("a,b,c").is_err());
         assert_eq!(parse_systems("G, E,C,G"), Ok(Systems(vec![0, 2, 3])));
-        assert!(parse_systems("R").is_err() && parse_systems("G,X").is_err());
+        assert_eq!(parse_systems("R,G"), Ok(Systems(vec![6, 0])));
+        assert!(parse_systems("G,X").is_err());
     }
 }

@@ -24,6 +24,8 @@ pub const GNSS_ID_GPS: u8 = 0;
 pub const GNSS_ID_GALILEO: u8 = 2;
 /// u-blox `gnssId` of BeiDou.
 pub const GNSS_ID_BEIDOU: u8 = 3;
+/// u-blox `gnssId` of GLONASS (its navigation data: [`glonass`](super::glonass)).
+pub const GNSS_ID_GLONASS: u8 = 6;
 /// Highest Galileo SVID.
 const MAX_GAL: usize = 36;
 /// Highest BeiDou PRN.

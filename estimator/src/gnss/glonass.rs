@@ -27,6 +27,23 @@ const OMEGA_E_RAD_S: f64 = 7.292_115e-5;
 const STEP_S: f64 = 60.0;
 /// GLONASS time is UTC(SU) + 3 h.
 pub const MOSCOW_OFFSET_S: i64 = 3 * 3600;
+/// An ephemeris is used up to this far from its t_b, s: new immediate data come every
+/// 30 min with t_b in the middle of their interval (ICD §4.4); 15 min more of margin for a
+/// receiver that has not yet received the next.
+pub const EPHEMERIS_VALID_S: f64 = 1800.0;
+
+/// The carrier frequency of GLONASS L1OF on channel `k` (−7…+6), Hz (the ICD's nominal
+/// carrier frequencies: 1602 MHz + k·562.5 kHz).
+pub fn l1of_hz(k: i8) -> f64 {
+    1_602.0e6 + f64::from(k) * 562.5e3
+}
+
+/// Seconds from t_b to the instant of GPS time `gps_tow_s` (s of week) with GPS − UTC =
+/// `leap_s`, within ±12 h (GLONASS time is UTC(SU) + 3 h; UTC(SU) is taken as UTC).
+pub fn seconds_since_tb_gps(tb_s: f64, gps_tow_s: f64, leap_s: f64) -> f64 {
+    let sod = (gps_tow_s - leap_s + MOSCOW_OFFSET_S as f64).rem_euclid(86_400.0);
+    (sod - tb_s + 43_200.0).rem_euclid(86_400.0) - 43_200.0
+}
 
 /// Why a GLONASS string was not decoded.
 #[derive(Debug, Error, Clone, Copy, PartialEq, Eq)]
@@ -65,10 +82,12 @@ pub enum GloString {
         /// z, ż, z̈.
         axis: Axis,
     },
-    /// String 4: τ_n, N_T and the slot number n.
+    /// String 4: τ_n, F_T, N_T and the slot number n.
     Four {
         /// τ_n: the satellite clock's offset from GLONASS time, s.
         tau_s: f64,
+        /// F_T: the index of the predicted user range accuracy (ICD Table 4.4).
+        accuracy_index: u8,
         /// N_T: day within the four-year interval (1 = 1 January of the leap year).
         day_in_interval: u16,
         /// n: the transmitting satellite's slot (1–24).
@@ -142,6 +161,7 @@ pub fn decode_string(words: &[u32]) -> Result<GloString, GloError> {
         },
         4 => GloString::Four {
             tau_s: signed(words, 80, 22) * 2f64.powi(-30),
+            accuracy_index: bits(words, 33, 4) as u8,
             day_in_interval: bits(words, 26, 11) as u16,
             slot: bits(words, 15, 5) as u8,
         },
@@ -170,9 +190,34 @@ pub struct GloEphemeris {
     pub health: u8,
     /// N_T: day within the four-year interval.
     pub day_in_interval: u16,
+    /// F_T: index of the predicted user range accuracy (ICD Table 4.4).
+    pub accuracy_index: u8,
 }
 
 impl GloEphemeris {
+    /// Whether the satellite is usable: B_n's most significant bit, the only one the user
+    /// checks (ICD §4.4, Table 4.5), is 0.
+    pub fn healthy(&self) -> bool {
+        self.health & 0b100 == 0
+    }
+
+    /// The predicted user range accuracy F_T, 1σ, m (ICD Table 4.4; `None` for index 15,
+    /// not used).
+    pub fn accuracy_m(&self) -> Option<f64> {
+        const F_T_M: [f64; 15] = [
+            1.0, 2.0, 2.5, 4.0, 5.0, 7.0, 10.0, 12.0, 14.0, 16.0, 32.0, 64.0, 128.0, 256.0, 512.0,
+        ];
+        F_T_M.get(usize::from(self.accuracy_index)).copied()
+    }
+
+    /// The satellite clock's offset from GLONASS time `dt_s` seconds after t_b, s: the
+    /// satellite's time runs ahead by −τ_n + γ_n·(t − t_b) (ICD §4.4, τ_n and γ_n:
+    /// t = t_k + τ_n(t_b) − γ_n(t_b)·(t_k − t_b)); relativity is in τ_n and γ_n, and no
+    /// group delay applies to L1 (τ_n is L1's).
+    pub fn clock_offset_s(&self, dt_s: f64) -> f64 {
+        -self.tau_s + self.gamma * dt_s
+    }
+
     /// Position and velocity (PZ-90, m and m/s) at `dt_s` seconds after t_b: Runge–Kutta 4
     /// of ICD Appendix A.3.1.2 in steps of at most 60 s.
     pub fn state_at(&self, dt_s: f64) -> ([f64; 3], [f64; 3]) {
@@ -291,6 +336,7 @@ impl GloStore {
             (
                 GloString::Four {
                     tau_s,
+                    accuracy_index,
                     day_in_interval,
                     slot: n,
                 },
@@ -298,6 +344,7 @@ impl GloStore {
             ) if f == frame && n == slot => {
                 e.tau_s = tau_s;
                 e.day_in_interval = day_in_interval;
+                e.accuracy_index = accuracy_index;
                 self.latest[idx] = Some(e);
                 self.counters.ephemerides += 1;
                 None
@@ -367,11 +414,12 @@ mod tests {
         assert_eq!(axis.pos_m, -1029.0 * 2f64.powi(-11) * 1e3);
         assert_eq!(axis.vel_mps, 3.0 * 2f64.powi(-20) * 1e3);
         assert_eq!(axis.acc_mps2, -(2f64.powi(-30)) * 1e3);
-        let w = words(4, &[(80, 22, (1 << 21) | 7), (26, 11, 1275), (15, 5, 3)]);
+        let w = words(4, &[(80, 22, (1 << 21) | 7), (33, 4, 6), (26, 11, 1275), (15, 5, 3)]);
         assert_eq!(
             decode_string(&w).unwrap(),
             GloString::Four {
                 tau_s: -7.0 * 2f64.powi(-30),
+                accuracy_index: 6,
                 day_in_interval: 1275,
                 slot: 3
             }

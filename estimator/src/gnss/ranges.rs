@@ -1,8 +1,9 @@
 //! A receiver's raw measurements of one epoch made ready for tightly coupled fusion: the
 //! broadcast ephemerides collected from the navigation data (GPS LNAV subframes 1–3 of one
 //! issue, IS-GPS-200N §20.3.4.4 for IODE/IODC; the ionosphere page; Galileo I/NAV and BeiDou
-//! D1/D2 through [`NavCollector`], keyed by (gnss id, sv id)), and per satellite the preferred
-//! signal's pseudorange and Doppler ([`SPP_SIGNALS`]: GPS L1 C/A, Galileo E1, BeiDou B1I/B3I)
+//! D1/D2 through [`NavCollector`], keyed by (gnss id, sv id); GLONASS immediate data through a
+//! [`GloStore`]), and per satellite the preferred signal's pseudorange and Doppler
+//! ([`SPP_SIGNALS`]: GPS L1 C/A, Galileo E1, BeiDou B1I/B3I, GLONASS L1OF)
 //! paired with its satellite's position, velocity and clock at the time of transmission. What
 //! depends on the receiver's position (the Earth's rotation during the flight, elevation,
 //! ionosphere, troposphere) is left to the filter, which knows it. The same signal choice
@@ -10,7 +11,10 @@
 
 use navsync_wire::samples::{GnssNavData, GnssRaw, RawMeasurement};
 
-use super::broadcast::{BroadcastEphemeris, GNSS_ID_BEIDOU, GNSS_ID_GALILEO, NavCollector, NavEphemeris, carries_lnav};
+use super::broadcast::{
+    BroadcastEphemeris, GNSS_ID_BEIDOU, GNSS_ID_GALILEO, GNSS_ID_GLONASS, NavCollector, NavEphemeris, carries_lnav,
+};
+use super::glonass::{self, GloEphemeris, GloStore};
 use super::lnav::{self, Ephem1, Ephem2, Ephem3, Subframe};
 use super::orbit::Orbit;
 use super::spp::{C_M_S, Klobuchar, Observation, SystemObservation};
@@ -34,8 +38,9 @@ pub const BDT_MINUS_GPST_S: f64 = -14.0;
 /// `gnssId`, `sigId`, carrier frequency in Hz, whether the broadcast group delay applies).
 /// GPS L1 C/A; Galileo E1-C, E1-B (BGD(E1,E5b) of I/NAV); BeiDou B1I D1, D2 (T_GD1), B3I
 /// D1, D2 (no group delay: B3I is the reference of BeiDou's clock parameters,
-/// BDS-SIS-ICD-B1I §5.2.4.10).
-pub const SPP_SIGNALS: [(u8, u8, f64, bool); 7] = [
+/// BDS-SIS-ICD-B1I §5.2.4.10); GLONASS L1OF (its frequency is channel 0's here, each
+/// satellite's from its channel, [`glonass::l1of_hz`]; τ_n is L1's clock, no group delay).
+pub const SPP_SIGNALS: [(u8, u8, f64, bool); 8] = [
     (GNSS_ID_GPS, 0, L1_HZ, true),
     (GNSS_ID_GALILEO, 0, L1_HZ, true),
     (GNSS_ID_GALILEO, 1, L1_HZ, true),
@@ -43,7 +48,12 @@ pub const SPP_SIGNALS: [(u8, u8, f64, bool); 7] = [
     (GNSS_ID_BEIDOU, 1, 1_561.098e6, true),
     (GNSS_ID_BEIDOU, 4, 1_268.52e6, false),
     (GNSS_ID_BEIDOU, 10, 1_268.52e6, false),
+    (GNSS_ID_GLONASS, 0, 1_602.0e6, false),
 ];
+/// 1σ of a GLONASS pseudorange's inter-frequency bias, m: each channel's code delay in the
+/// receiver differs from the others' by decimetres to metres, and one inter-system bias per
+/// system leaves it. Added in quadrature to the broadcast accuracy F_T.
+pub const GLONASS_IFB_STD_M: f64 = 1.0;
 /// An ephemeris is used up to this far from its t_oe, s (the 4 h curve fit of IS-GPS-200
 /// §20.3.4.4 is ±2 h; an hour of margin for a receiver that did not get the next issue yet).
 pub const EPHEMERIS_VALID_S: f64 = 3.0 * 3600.0;
@@ -51,9 +61,9 @@ pub const EPHEMERIS_VALID_S: f64 = 3.0 * 3600.0;
 /// One satellite's measurements with its broadcast state at transmission.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SatRange {
-    /// System, u-blox `gnssId` (GPS 0, Galileo 2, BeiDou 3).
+    /// System, u-blox `gnssId` (GPS 0, Galileo 2, BeiDou 3, GLONASS 6).
     pub gnss_id: u8,
-    /// Satellite number in its system (GPS PRN, Galileo SVID, BeiDou PRN).
+    /// Satellite number in its system (GPS PRN, Galileo SVID, BeiDou PRN, GLONASS slot).
     pub sv: u8,
     /// (f_L1 / f)² of the signal's carrier: the L1 ionospheric delay times this is the
     /// signal's (IS-GPS-200 §20.3.3.3.3.2).
@@ -127,19 +137,67 @@ impl RangeEpoch {
 
 /// The signal [`EphemerisStore::each_signal`] chose for a satellite, with its ephemeris.
 struct Signal {
-    orbit: Orbit,
+    model: SatModel,
     accuracy_m: f64,
     freq_hz: f64,
     t0_s: f64,
 }
 
-/// The systems the tightly coupled filter fuses (u-blox `gnssId`s): GPS, Galileo, BeiDou.
-pub const RANGE_SYSTEMS: [u8; 3] = [GNSS_ID_GPS, GNSS_ID_GALILEO, GNSS_ID_BEIDOU];
+/// One satellite's broadcast motion and clock: a Keplerian orbit (GPS, Galileo, BeiDou; times
+/// in the system's own time, s of week) or GLONASS immediate data (times in GPS time, s of
+/// week; the state integrated from t_b, [`GloEphemeris::state_at`]). Positions and velocities
+/// are in the ECEF of the instant asked for (PZ-90 taken as WGS 84: centimetres apart).
+#[derive(Debug, Clone, Copy)]
+enum SatModel {
+    Kepler(Orbit),
+    Glonass {
+        eph: GloEphemeris,
+        /// t_b as a GPS time of week, s (the one nearest the epoch).
+        tb_tow_s: f64,
+    },
+}
+
+impl SatModel {
+    /// Seconds from t_b to GPS time `t_s` (s of week), across a week's end.
+    fn since_tb(tb_tow_s: f64, t_s: f64) -> f64 {
+        let dt = t_s - tb_tow_s;
+        dt - (dt / 604_800.0).round() * 604_800.0
+    }
+
+    /// The satellite clock's offset at `t_s`, s (GPS, Galileo, BeiDou: with relativity and
+    /// the group delay the orbit carries).
+    fn clock_offset_s(&self, t_s: f64) -> f64 {
+        match self {
+            Self::Kepler(o) => o.clock_offset_s(t_s),
+            Self::Glonass { eph, tb_tow_s } => eph.clock_offset_s(Self::since_tb(*tb_tow_s, t_s)),
+        }
+    }
+
+    /// The satellite clock's drift at `t_s`, s/s.
+    fn clock_drift(&self, t_s: f64) -> f64 {
+        match self {
+            Self::Kepler(o) => o.clock_drift(t_s),
+            Self::Glonass { eph, .. } => eph.gamma,
+        }
+    }
+
+    /// Position (m) and velocity (m/s) at `t_s`.
+    fn state(&self, t_s: f64) -> ([f64; 3], [f64; 3]) {
+        match self {
+            Self::Kepler(o) => (o.position_ecef_m(t_s), o.velocity_ecef_mps(t_s)),
+            Self::Glonass { eph, tb_tow_s } => eph.state_at(Self::since_tb(*tb_tow_s, t_s)),
+        }
+    }
+}
+
+/// The systems the tightly coupled filter fuses (u-blox `gnssId`s): GPS, Galileo, BeiDou,
+/// GLONASS.
+pub const RANGE_SYSTEMS: [u8; 4] = [GNSS_ID_GPS, GNSS_ID_GALILEO, GNSS_ID_BEIDOU, GNSS_ID_GLONASS];
 
 /// What [`EphemerisStore::range_epoch`] left out of an epoch, by reason.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct RangeBuildCounts {
-    /// Signals not in [`SPP_SIGNALS`] (GLONASS, L2/L5/E5…), of systems not asked for, or
+    /// Signals not in [`SPP_SIGNALS`] (L2/L5/E5…, GLONASS on an unknown channel), of systems not asked for, or
     /// with a preferred signal of the same satellite in the epoch.
     pub other_signals: u64,
     /// Signals whose pseudorange the receiver marks invalid.
@@ -210,7 +268,7 @@ pub struct EphemerisStore {
     pub ephemerides: u64,
     /// Galileo and BeiDou (on the heap: ~130 kB, allocated once with the store).
     others: Box<OtherSystems>,
-    /// Galileo and BeiDou ephemerides completed.
+    /// Galileo, BeiDou and GLONASS ephemerides completed.
     pub other_ephemerides: u64,
 }
 
@@ -226,6 +284,8 @@ struct OtherSystems {
     /// BeiDou's broadcast Klobuchar coefficients (D1/D2 subframe 1), the ionosphere when no
     /// GPS page 18 came.
     bds_iono: Option<Klobuchar>,
+    /// GLONASS immediate data per slot.
+    glo: GloStore,
 }
 
 impl Default for EphemerisStore {
@@ -240,6 +300,7 @@ impl Default for EphemerisStore {
                 gal: [None; MAX_GAL],
                 bds: [None; MAX_BDS],
                 bds_iono: None,
+                glo: GloStore::default(),
             }),
             other_ephemerides: 0,
         }
@@ -250,8 +311,16 @@ impl EphemerisStore {
     /// Takes one navigation-data message: GPS LNAV subframes are decoded (parity checked) and
     /// subframes 1–3 of one issue make an ephemeris (IODC's 8 LSBs = IODE of subframes 2 and
     /// 3); subframe 4 page 18 sets the ionosphere. GPS CNAV, Galileo and BeiDou words go to
-    /// the [`NavCollector`], whose ephemerides are kept per satellite. Others are ignored.
+    /// the [`NavCollector`], whose ephemerides are kept per satellite; GLONASS strings to a
+    /// [`GloStore`]. Others are ignored.
     pub fn on_nav_data(&mut self, d: &GnssNavData) {
+        if d.gnss_id == GNSS_ID_GLONASS {
+            let n = usize::from(d.num_words).min(d.words.len());
+            let before = self.others.glo.counters.ephemerides;
+            self.others.glo.on_words(d.sv_id, &d.words[..n]);
+            self.other_ephemerides += self.others.glo.counters.ephemerides - before;
+            return;
+        }
         if !carries_lnav(d.gnss_id, d.sig_id) {
             let n = usize::from(d.num_words).min(d.words.len());
             if let Ok(Some(e)) = self
@@ -359,10 +428,25 @@ impl EphemerisStore {
     }
 
     /// The usable ephemeris of satellite `sv_id` of system `gnss_id` at `t_s` (s of week in the
-    /// system's own time): its orbit and accuracy, m.
-    fn usable_any(&self, gnss_id: u8, sv_id: u8, t_s: f64) -> Option<(Orbit, f64)> {
+    /// system's own time; GLONASS: GPS time, with GPS − UTC = `leap_s`): its model and
+    /// accuracy, m.
+    fn usable_any(&self, gnss_id: u8, sv_id: u8, t_s: f64, leap_s: f64) -> Option<(SatModel, f64)> {
         if gnss_id == GNSS_ID_GPS {
-            return self.usable_ephemeris(sv_id, t_s).map(|(o, a)| (*o, a));
+            return self
+                .usable_ephemeris(sv_id, t_s)
+                .map(|(o, a)| (SatModel::Kepler(*o), a));
+        }
+        if gnss_id == GNSS_ID_GLONASS {
+            let eph = *self.others.glo.ephemeris(sv_id).filter(|e| e.healthy())?;
+            let accuracy_m = eph.accuracy_m()?.hypot(GLONASS_IFB_STD_M);
+            let dt = glonass::seconds_since_tb_gps(eph.tb_s, t_s, leap_s);
+            return (dt.abs() <= glonass::EPHEMERIS_VALID_S).then_some((
+                SatModel::Glonass {
+                    eph,
+                    tb_tow_s: t_s - dt,
+                },
+                accuracy_m,
+            ));
         }
         let i = usize::from(sv_id).checked_sub(1)?;
         let e = match gnss_id {
@@ -374,7 +458,7 @@ impl EphemerisStore {
         .filter(|e| e.healthy && e.accuracy_m.is_finite())?;
         let mut dt = t_s - e.orbit.toe_s;
         dt -= (dt / 604_800.0).round() * 604_800.0;
-        (dt.abs() <= EPHEMERIS_VALID_S).then_some((e.orbit, e.accuracy_m))
+        (dt.abs() <= EPHEMERIS_VALID_S).then_some((SatModel::Kepler(e.orbit), e.accuracy_m))
     }
 
     /// Per satellite of the systems `systems` (u-blox `gnssId`s) the first signal of
@@ -383,7 +467,11 @@ impl EphemerisStore {
     /// clock's reference), the broadcast accuracy, m, the carrier frequency, Hz, and the
     /// reception time less the flight time, t_rx − ρ/c, in the system's own time, s of week
     /// (BeiDou: BDT = GPST − 14 s; Galileo: GST taken as GPST, the GGTO of a few ns left in the
-    /// receiver's Galileo clock). What is left out is counted in `counts`.
+    /// receiver's Galileo clock; GLONASS: GPS time, its offset from GLONASS time left in the
+    /// receiver's GLONASS clock). A GLONASS signal's carrier is its channel's (u-blox
+    /// `freqId` − 7); one without a channel (`freqId` > 13) counts as another signal. GPS −
+    /// UTC is the receiver's when it marks it valid (`recStat` bit 0), else the table's at
+    /// the epoch. What is left out is counted in `counts`.
     fn each_signal(
         &self,
         raw: &GnssRaw,
@@ -393,9 +481,18 @@ impl EphemerisStore {
     ) {
         let n = usize::from(raw.num_meas).min(raw.meas.len());
         let meas = &raw.meas[..n];
+        let leap_s = f64::from(if raw.rec_stat & 1 != 0 {
+            raw.leap_s
+        } else {
+            let gps_ns = i64::from(raw.week) * 604_800_000_000_000 + (raw.rcv_tow_s * 1e9) as i64;
+            navsync_wire::time::gps_minus_utc_s(navsync_wire::time::utc_ns_from_gps_ns(gps_ns))
+        });
         let rank = |g: u8, s: u8| SPP_SIGNALS.iter().position(|&(sg, ss, _, _)| sg == g && ss == s);
         for (k, m) in meas.iter().enumerate() {
-            let Some(r) = rank(m.gnss_id, m.sig_id).filter(|_| systems.contains(&m.gnss_id)) else {
+            let channel = (m.gnss_id == GNSS_ID_GLONASS).then_some(m.freq_id);
+            let Some(r) =
+                rank(m.gnss_id, m.sig_id).filter(|_| systems.contains(&m.gnss_id) && channel.is_none_or(|c| c <= 13))
+            else {
                 counts.other_signals += 1;
                 continue;
             };
@@ -418,23 +515,26 @@ impl EphemerisStore {
                 continue;
             }
             let (_, _, freq_hz, group_delay) = SPP_SIGNALS[r];
+            let freq_hz = channel.map_or(freq_hz, |c| glonass::l1of_hz(c as i8 - 7));
             let offset = if m.gnss_id == GNSS_ID_BEIDOU {
                 BDT_MINUS_GPST_S
             } else {
                 0.0
             };
             let t0_s = raw.rcv_tow_s + offset - m.pseudorange_m / C_M_S;
-            let Some((mut orbit, accuracy_m)) = self.usable_any(m.gnss_id, m.sv_id, t0_s) else {
+            let Some((mut model, accuracy_m)) = self.usable_any(m.gnss_id, m.sv_id, t0_s, leap_s) else {
                 counts.no_ephemeris += 1;
                 continue;
             };
-            if !group_delay {
+            if let SatModel::Kepler(orbit) = &mut model
+                && !group_delay
+            {
                 orbit.tgd_s = 0.0;
             }
             each(
                 m,
                 Signal {
-                    orbit,
+                    model,
                     accuracy_m,
                     freq_hz,
                     t0_s,
@@ -457,13 +557,13 @@ impl EphemerisStore {
     ) -> Vec<SystemObservation> {
         let mut out = Vec::new();
         self.each_signal(raw, systems, counts, |m, sig| {
-            let dt_sv = sig.orbit.clock_offset_s(sig.t0_s);
+            let dt_sv = sig.model.clock_offset_s(sig.t0_s);
             let t_tx = sig.t0_s - dt_sv;
             out.push(SystemObservation {
                 obs: Observation {
                     sv: m.sv_id,
                     pseudorange_m: m.pseudorange_m,
-                    sat_ecef_m: sig.orbit.position_ecef_m(t_tx),
+                    sat_ecef_m: sig.model.state(t_tx).0,
                     sat_clock_s: dt_sv,
                     sigma_zenith_m: f64::from(m.pseudorange_std_m).max(sig.accuracy_m),
                 },
@@ -533,8 +633,9 @@ impl EphemerisStore {
         let mut over = 0;
         self.each_signal(raw, &RANGE_SYSTEMS, counts, |m, sig| {
             let lambda = C_M_S / sig.freq_hz;
-            let dt_sv = sig.orbit.clock_offset_s(sig.t0_s);
+            let dt_sv = sig.model.clock_offset_s(sig.t0_s);
             let t_tx = sig.t0_s - dt_sv;
+            let (sat_ecef_m, sat_vel_mps) = sig.model.state(t_tx);
             let doppler = f64::from(m.doppler_hz);
             let sat = SatRange {
                 gnss_id: m.gnss_id,
@@ -543,12 +644,12 @@ impl EphemerisStore {
                 cno_dbhz: m.cno_dbhz,
                 pseudorange_m: m.pseudorange_m + C_M_S * dt_sv,
                 range_rate_mps: if doppler.is_finite() {
-                    -lambda * doppler + C_M_S * sig.orbit.clock_drift(t_tx)
+                    -lambda * doppler + C_M_S * sig.model.clock_drift(t_tx)
                 } else {
                     f64::NAN
                 },
-                sat_ecef_m: sig.orbit.position_ecef_m(t_tx),
-                sat_vel_mps: sig.orbit.velocity_ecef_mps(t_tx),
+                sat_ecef_m,
+                sat_vel_mps,
                 // The receiver's σ, at least the broadcast accuracy.
                 pseudorange_std_m: f64::from(m.pseudorange_std_m).max(sig.accuracy_m),
                 range_rate_std_mps: (f64::from(m.doppler_std_hz) * lambda).max(0.0),

@@ -316,7 +316,13 @@ fn solve_excluding<O: Measured>(
 ) -> Result<Solution, SppError> {
     let mut x = VecX::zeros();
     x.fixed_rows_mut::<3>(0).copy_from_slice(&init);
-    for iter in 0..15 {
+    // The previous step, m: the mask and the atmosphere apply once the position is within a
+    // kilometre (elevations then within a hundredth of a degree). From the Earth's centre
+    // with a receiver clock tens of km off, the first step can land hundreds of km away,
+    // where a satellite low in the sky would be masked wrongly (with exactly four, no
+    // solution at all).
+    let mut last_step_m = f64::INFINITY;
+    for _ in 0..15 {
         let rx = [x[0], x[1], x[2]];
         let geo = geodetic_from_ecef(rx[0], rx[1], rx[2]);
         let (mut n, mut b, mut used, mut chi2) = (MatX::zeros(), VecX::zeros(), 0usize, 0.0);
@@ -333,7 +339,7 @@ fn solve_excluding<O: Measured>(
             // satellite counts, without atmosphere or mask.
             let (mut model, mut sin_el) = (r + x[3 + sys] - C_M_S * o.sat_clock_s, 1.0);
             let mut atmosphere_var = 0.0;
-            if let Some(g) = geo.filter(|g| g.height_m > -1e4 && iter > 0) {
+            if let Some(g) = geo.filter(|g| g.height_m > -1e4 && last_step_m < 1e3) {
                 let (el, az) = elevation_azimuth(rx, sat);
                 if el < settings.elevation_mask_rad {
                     continue;
@@ -371,7 +377,9 @@ fn solve_excluding<O: Measured>(
         };
         let dx = cov * b;
         x += dx;
-        if dx.norm() < 1e-4 && iter > 0 {
+        let near = last_step_m < 1e3;
+        last_step_m = dx.fixed_rows::<3>(0).norm();
+        if dx.norm() < 1e-4 && near {
             let reference = per_system.iter().position(|&c| c > 0).unwrap_or(0);
             let keep = [0, 1, 2, 3 + reference];
             let cov4 = Matrix4::from_fn(|i, j| cov[(keep[i], keep[j])]);

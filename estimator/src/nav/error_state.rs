@@ -4,7 +4,7 @@
 //! Inertial Navigation*, ch. 2): position and velocity errors are *computed − true* (NED, m and
 //! m/s); the attitude error φ is the phi angle with C_b^n(true) = exp([φ×]) C_b^n(computed); the
 //! sensor errors (biases, scale factors) and the GNSS delay are *true − estimated*, fed back by
-//! addition. Error state (N = 26):
+//! addition. Error state (N = 27):
 //!
 //! | index | state | unit |
 //! |---|---|---|
@@ -20,13 +20,15 @@
 //! | 23 | receiver clock drift c·δṫ_r (tightly coupled only) | m/s |
 //! | 24 | inter-system bias Galileo − GPS of the receiver's clock (tightly coupled only) | m |
 //! | 25 | inter-system bias BeiDou − GPS (tightly coupled only) | m |
+//! | 26 | inter-system bias GLONASS − GPS (tightly coupled only) | m |
 //!
 //! The clock states are frozen (zero covariance, no process noise) unless the filter is
 //! tightly coupled ([`ProcessNoise::clock`]); loosely coupled, the receiver solved its clock.
 //! One oscillator drives every system's clock: each system's bias is the GPS one plus its
 //! inter-system bias (the receiver's signal delays of that system and the offset between the
 //! systems' time scales, GGTO of Galileo OS SIS ICD §5.1.5; BDT − GPST beyond its 14 s is
-//! kept to < 100 ns, BDS-SIS-ICD-B1I §5.2.4.19), nearly constant: a random walk of
+//! kept to < 100 ns, BDS-SIS-ICD-B1I §5.2.4.19; GLONASS time's offset from GPS time, tens of
+//! ns, with the receiver's GLONASS delays), nearly constant: a random walk of
 //! [`ISB_RW_M_SQRT_S`] (RTKLIB instead keeps one free clock per system).
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
@@ -38,7 +40,7 @@ use crate::time::clock_model::OscillatorNoise;
 use super::mechanization::{Pva, skew};
 
 /// Error-state dimension.
-pub const N: usize = 26;
+pub const N: usize = 27;
 /// Position error.
 pub const POS: usize = 0;
 /// Velocity error.
@@ -59,10 +61,11 @@ pub const DELAY: usize = 21;
 pub const CLK_BIAS: usize = 22;
 /// Receiver clock drift, m/s.
 pub const CLK_DRIFT: usize = 23;
-/// Inter-system biases of the receiver clock, m: Galileo's, then BeiDou's, minus GPS's.
+/// Inter-system biases of the receiver clock, m: Galileo's, BeiDou's, then GLONASS's, minus
+/// GPS's.
 pub const ISB: usize = 24;
 /// Systems with an inter-system bias state.
-pub const ISB_SYSTEMS: usize = 2;
+pub const ISB_SYSTEMS: usize = 3;
 /// Random walk of an inter-system bias, m/√s (1 cm/√s: 0.6 m in an hour, ample for a
 /// hardware delay drifting with temperature and for GGTO's few ns a day).
 pub const ISB_RW_M_SQRT_S: f64 = 0.01;

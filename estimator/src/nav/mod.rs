@@ -1,7 +1,7 @@
 //! The navigation filter.
 //!
 //! - [`mechanization`]: strapdown INS in NED on WGS-84 (increments, coning/sculling).
-//! - [`error_state`], [`eskf`]: the 26-state error model (KF-GINS conventions + GNSS delay Δ + receiver clock)
+//! - [`error_state`], [`eskf`]: the 27-state error model (KF-GINS conventions + GNSS delay Δ + receiver clock)
 //!   and the Kalman filter engine with chi-square gating.
 //! - [`config`]: the filter's settings (a leaf: one declaration per setting).
 //! - [`alignment`]: levelling and GNSS-course heading.

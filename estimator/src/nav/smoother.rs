@@ -337,7 +337,7 @@ mod tests {
             scale_a: Vector3::zeros(),
             delay_s: 0.1,
             clock: (0.0, 0.0),
-            isb_m: [1.5, -2.0],
+            isb_m: [1.5, -2.0, 0.7],
             pos_floor_std_ned_m: Vector3::zeros(),
             sigma_scale: 1.0,
             delay_doubt: DelayDoubt::default(),

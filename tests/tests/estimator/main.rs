@@ -7,6 +7,7 @@ mod gps_sky;
 
 mod broadcast_walk;
 mod external_data;
+mod glonass;
 mod history_generated;
 mod kf_gins;
 mod lnav_gpsd;

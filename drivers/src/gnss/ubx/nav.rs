@@ -82,6 +82,19 @@ pub struct NavPvt {
 }
 
 impl NavPvt {
+    /// The UTC second of the date and time fields, ns since 1970 (`nano` not added).
+    pub fn utc_second_ns(&self) -> i64 {
+        navsync_shared::time::utc_ns_from_civil(&navsync_shared::time::Civil {
+            year: i64::from(self.year),
+            month: u32::from(self.month),
+            day: u32::from(self.day),
+            hour: u32::from(self.hour),
+            minute: u32::from(self.min),
+            second: u32::from(self.sec),
+            nanos: 0,
+        })
+    }
+
     /// `validDate` and `validTime`: the UTC date and time fields are valid.
     pub fn valid_date_time(&self) -> bool {
         self.valid & 0x03 == 0x03

@@ -1,7 +1,7 @@
 //! Tightly coupled GNSS aiding: every satellite's pseudorange and Doppler fused one by one
 //! (scalar updates, each gated on its own), with the receiver clock bias and drift as filter
-//! states ([`crate::nav::error_state::CLK_BIAS`], `CLK_DRIFT`) and, for Galileo and BeiDou,
-//! the inter-system bias of their clock ([`crate::nav::error_state::ISB`]); one
+//! states ([`crate::nav::error_state::CLK_BIAS`], `CLK_DRIFT`) and, for Galileo, BeiDou and
+//! GLONASS, the inter-system bias of their clock ([`crate::nav::error_state::ISB`]); one
 //! [`Measurement`] kind of
 //! the navigator's queue, active when the filter estimates the clock
 //! ([`crate::nav::error_state::ProcessNoise::clock`]). One satellite helps: with 1–3 in view
@@ -37,11 +37,11 @@ use navsync_wire::earth;
 use navsync_wire::samples::RawMeasurement;
 
 use super::Measurement;
-use crate::gnss::broadcast::{GNSS_ID_BEIDOU, GNSS_ID_GALILEO};
+use crate::gnss::broadcast::{GNSS_ID_BEIDOU, GNSS_ID_GALILEO, GNSS_ID_GLONASS};
 use crate::gnss::ranges::{GNSS_ID_GPS, MAX_RANGE_SATS, RangeEpoch, SatRange};
 use crate::gnss::spp::{C_M_S, atmosphere_var_m2, ned_from_ecef, rotate_for_flight, troposphere_delay_m};
 use crate::nav::config::NavConfig;
-use crate::nav::error_state::{ATT, BG, CLK_BIAS, CLK_DRIFT, DELAY, ISB, N, POS, StateVec, VEL};
+use crate::nav::error_state::{ATT, BG, CLK_BIAS, CLK_DRIFT, DELAY, ISB, ISB_SYSTEMS, N, POS, StateVec, VEL};
 use crate::nav::eskf::Update;
 use crate::nav::filter::DelayedFilter;
 use crate::nav::mechanization::skew;
@@ -150,13 +150,13 @@ pub struct CarrierMemory {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CodeMemory {
     /// GPS time of week, s, by system slot ([`system_slot`]) and satellite number; NaN: never.
-    last_tow_s: [[f64; 64]; 3],
+    last_tow_s: [[f64; 64]; SLOTS],
 }
 
 impl Default for CodeMemory {
     fn default() -> Self {
         Self {
-            last_tow_s: [[f64::NAN; 64]; 3],
+            last_tow_s: [[f64::NAN; 64]; SLOTS],
         }
     }
 }
@@ -264,7 +264,7 @@ pub struct RangingState {
     /// Pseudoranges fused.
     pub ranges_used: u64,
     /// Pseudoranges fused per system: GPS, Galileo, BeiDou.
-    pub ranges_used_by_system: [u64; 3],
+    pub ranges_used_by_system: [u64; SLOTS],
     /// Pseudoranges that failed the innovation gate.
     pub ranges_rejected: u64,
     /// Range rates fused.
@@ -440,9 +440,9 @@ impl RangeEpoch {
         st: &mut RangingState,
     ) -> bool {
         let a = Antenna::of(f, &Vector3::from(cfg.gnss_lever_arm_m), eps);
-        // Residuals without any receiver clock, by system (0 GPS, 1 Galileo, 2 BeiDou).
-        let mut res = [[0.0; MAX_RANGE_SATS]; 3];
-        let mut n = [0usize; 3];
+        // Residuals without any receiver clock, by system slot ([`system_slot`]).
+        let mut res = [[0.0; MAX_RANGE_SATS]; SLOTS];
+        let mut n = [0usize; SLOTS];
         let mut rates = [0.0; MAX_RANGE_SATS];
         let mut m = 0;
         for s in self.sats() {
@@ -465,7 +465,7 @@ impl RangeEpoch {
             // A jump of the receiver's clock shows in every anchored system's residuals.
             let mut all = [0.0; MAX_RANGE_SATS];
             let mut c = 0;
-            for k in (0..3).filter(|&k| anchored(f, k)) {
+            for k in (0..SLOTS).filter(|&k| anchored(f, k)) {
                 for r in &res[k][..n[k]] {
                     all[c] = r - isb_now(f, k);
                     c += 1;
@@ -479,7 +479,7 @@ impl RangeEpoch {
                 st.clock_resets += 1;
             }
         } else {
-            let k = (0..3).find(|&k| n[k] > 0).unwrap_or(0);
+            let k = (0..SLOTS).find(|&k| n[k] > 0).unwrap_or(0);
             f.clock_drift_mps = if m > 0 { median(&mut rates, m) } else { 0.0 };
             f.clock_bias_m = median(&mut res[k], n[k]) + f.clock_drift_mps * eps;
             f.eskf.reopen(CLK_BIAS, rc.clock_init_std_m.powi(2) + pos_var);
@@ -487,7 +487,7 @@ impl RangeEpoch {
             f.clock_valid = true;
             st.clock_inits += 1;
         }
-        for k in 1..3 {
+        for k in 1..SLOTS {
             if n[k] == 0 || f.isb_valid[k - 1] {
                 continue;
             }
@@ -632,13 +632,17 @@ fn range_rate_row(f: &DelayedFilter, a: &Antenna, g: &Sight, lever_b: &Vector3<f
     h
 }
 
-/// The slot of system `gnss_id` among the filter's clocks: 0 GPS, 1 Galileo, 2 BeiDou
+/// Clocks of the filter: GPS's and one per inter-system bias.
+const SLOTS: usize = 1 + ISB_SYSTEMS;
+
+/// The slot of system `gnss_id` among the filter's clocks: 0 GPS, 1 Galileo, 2 BeiDou, 3 GLONASS
 /// (1 + the index of its inter-system bias state); `None` for systems not fused.
 fn system_slot(gnss_id: u8) -> Option<usize> {
     match gnss_id {
         GNSS_ID_GPS => Some(0),
         GNSS_ID_GALILEO => Some(1),
         GNSS_ID_BEIDOU => Some(2),
+        GNSS_ID_GLONASS => Some(3),
         _ => None,
     }
 }
@@ -767,6 +771,7 @@ impl Measurement for RangeEpoch {
         out("ranges_used_gps", st.ranges_used_by_system[0]);
         out("ranges_used_galileo", st.ranges_used_by_system[1]);
         out("ranges_used_beidou", st.ranges_used_by_system[2]);
+        out("ranges_used_glonass", st.ranges_used_by_system[3]);
         out("ranges_rejected", st.ranges_rejected);
         out("range_rates_used", st.rates_used);
         out("range_rates_rejected", st.rates_rejected);
@@ -866,6 +871,33 @@ mod tests {
         e
     }
 
+    /// GLONASS ranges get their own clock: their first epoch sets its inter-system bias (30 m
+    /// here, GLONASS time's offset and the receiver's delays) from their median, then they are
+    /// fused beside GPS's without moving the position.
+    #[test]
+    fn glonass_ranges_have_their_own_inter_system_bias() {
+        let (cfg, rc) = (cfg(), RangingConfig::default());
+        let origin = filter(0.0);
+        let mut f = filter(0.0);
+        let mut st = RangingState::default();
+        for k in 0..8 {
+            let mut e = epoch(&origin, &origin, 100.0 + k as f64 * DT_S);
+            for s in &mut e.sats[4..6] {
+                (s.gnss_id, s.sv) = (GNSS_ID_GLONASS, s.sv + 10);
+                s.pseudorange_m += 30.0;
+                s.carrier_m += 30.0;
+            }
+            assert!(e.fuse(&mut f, 0.0, &cfg, &rc, &mut st));
+        }
+        assert_eq!((st.isb_inits, st.ranges_used_by_system), (1, [32, 0, 0, 16]));
+        assert!(f.isb_valid[2] && !f.isb_valid[0] && !f.isb_valid[1]);
+        assert!((f.isb_m[2] - 30.0).abs() < 0.01, "GLONASS − GPS {} m", f.isb_m[2]);
+        let d = Antenna::of(&f, &Vector3::zeros(), 0.0).ecef_m;
+        let o = Antenna::of(&origin, &Vector3::zeros(), 0.0).ecef_m;
+        let moved = (0..3).map(|i| (d[i] - o[i]).powi(2)).sum::<f64>().sqrt();
+        assert!(moved < 0.01, "moved {moved} m");
+    }
+
     /// The carrier's change over an epoch corrects a velocity 0.3 m/s off; a slip the receiver
     /// reports (lock time restarted, half-cycle flag changed) is not differenced, one it does not
     /// report (a cycle) fails the gate.
@@ -952,6 +984,6 @@ mod tests {
         assert_eq!(m.inflation(&s, 31.25, 5.0), 1.0);
         // Another satellite has its own history; a system not fused is not weighted.
         assert_eq!(m.inflation(&SatRange { sv: 6, ..s }, 31.5, 5.0), 1.0);
-        assert_eq!(m.inflation(&SatRange { gnss_id: 6, ..s }, 31.5, 5.0), 1.0);
+        assert_eq!(m.inflation(&SatRange { gnss_id: 1, ..s }, 31.5, 5.0), 1.0);
     }
 }
