@@ -1,6 +1,6 @@
-//! `navsync import rinex OBS NAV --out REC.mcap`: a RINEX observation file and its GPS
-//! navigation file as a recording of a receiver's raw data (RINEX 2.11 / 3.05; the parser is
-//! `navsync_drivers::gnss::rinex`).
+//! `navsync import rinex OBS NAV [NAV…] --out REC.mcap`: a RINEX observation file and its GPS
+//! and GLONASS navigation files as a recording of a receiver's raw data (RINEX 2.11 / 3.05; the
+//! parser is `navsync_drivers::gnss::rinex`).
 //!
 //! Each observation epoch is a `GnssRaw` on `navsync/gnss/0/raw` (its GNSS time in `week` and
 //! `rcv_tow_s`). The navigation file reaches the estimator the way a receiver's does, as GPS
@@ -8,16 +8,20 @@
 //! integers of subframes 1–3 (IS-GPS-200 Tables 20-I and 20-III: RINEX holds those integers
 //! times their scale factors, so rounding value / scale recovers them) and the header's α/β into
 //! subframe 4 page 18, encoded with parity by `lnav::encode`: one decoder and one ephemeris store
-//! (`gnss::ranges::EphemerisStore`) for live and imported data. An issue is delivered when its
-//! t_oe becomes the nearest to the epoch (RTKLIB's choice among a file's ephemerides; the first
-//! issue of each satellite before the first epoch).
+//! (`gnss::ranges::EphemerisStore`) for live and imported data. A GLONASS record becomes strings
+//! 1–4 of one frame (`glonass::encode_strings`, GLONASS ICD Table 4.5; t_b and t_k moved from
+//! RINEX's UTC to Moscow time, F_T from RINEX 3.05's URAI, else index 4, 5 m), and its channel
+//! gives the observations' GLONASS `freqId` when the observation header has none. An issue is
+//! delivered when its t_oe (GLONASS: t_b) becomes the nearest to the epoch (RTKLIB's choice
+//! among a file's ephemerides; the first issue of each satellite before the first epoch).
 //!
 //! Host time: GPS time shifted so that the first epoch is at `kf_gins::HOST_BASE_NS`, the same
 //! synthetic axis as `import kf-gins` (declared as `navsync.time_axis` on the raw channel).
 
 use std::path::{Path, PathBuf};
 
-use navsync_drivers::gnss::rinex::{self, GpsEphemeris, NavFile, ObsFile, RinexError};
+use navsync_drivers::gnss::rinex::{self, GloRecord, GpsEphemeris, NavFile, ObsFile, RinexError};
+use navsync_estimator::gnss::glonass::{self, GloEphemeris};
 use navsync_estimator::gnss::lnav::{self, Ephem1, Ephem2, Ephem3, IonoUtc, Subframe};
 use navsync_estimator::gnss::orbit::GPS_PI;
 use navsync_recording::{RecordingError, SampleRecorder};
@@ -36,8 +40,10 @@ const WEEK_S: f64 = 604_800.0;
 pub struct RinexArgs {
     /// RINEX observation file (2.10/2.11 or 3.0x).
     pub obs: PathBuf,
-    /// RINEX GPS navigation file (2.10/2.11 or 3.0x, GPS or mixed).
-    pub nav: PathBuf,
+    /// RINEX navigation files (2.10/2.11 GPS `N` or GLONASS `G`, or 3.0x GPS, GLONASS or
+    /// mixed): their GPS and GLONASS records.
+    #[arg(required = true, num_args = 1..)]
+    pub nav: Vec<PathBuf>,
     /// The output recording (MCAP).
     #[arg(short, long)]
     pub out: PathBuf,
@@ -81,6 +87,10 @@ pub struct RinexStats {
     pub ephemerides: u64,
     /// Subframes written (including page 18).
     pub subframes: u64,
+    /// GLONASS ephemerides (each as strings 1–4).
+    pub glonass_ephemerides: u64,
+    /// GLONASS measurements without a channel in any file (left out by the estimator).
+    pub glonass_without_channel: u64,
     /// The header's approximate position, ECEF m.
     pub approx_ecef_m: Option<[f64; 3]>,
     /// The largest |value / scale − integer| over the quantised fields: near 0 for broadcast
@@ -94,20 +104,37 @@ pub fn main(args: &RinexArgs) -> anyhow::Result<()> {
     let s = import(args).with_context(|| format!("importing into {}", args.out.display()))?;
     eprintln!(
         "{}: {} epochs, {} measurements ({} observations of signals without a u-blox id left out), \
-         {} GPS ephemerides as {} LNAV subframes (largest rounding {:.1e} LSB)",
+         {} GPS ephemerides as {} LNAV subframes, {} GLONASS ephemerides as strings 1–4 (largest \
+         rounding {:.1e} LSB)",
         args.out.display(),
         s.epochs,
         s.measurements,
         s.unmapped,
         s.ephemerides,
         s.subframes,
+        s.glonass_ephemerides,
         s.worst_quantisation
     );
+    if s.glonass_without_channel > 0 {
+        eprintln!(
+            "  {} GLONASS measurements without a frequency channel (no GLONASS SLOT / FRQ # header, \
+             no navigation record of their slot): left out of the solutions",
+            s.glonass_without_channel
+        );
+    }
     if let Some(p) = s.approx_ecef_m {
         eprintln!("  header position (ECEF m): {:.4},{:.4},{:.4}", p[0], p[1], p[2]);
     }
     anyhow::ensure!(s.epochs > 0, "no observation epoch in {}", args.obs.display());
-    anyhow::ensure!(s.ephemerides > 0, "no GPS ephemeris in {}", args.nav.display());
+    anyhow::ensure!(
+        s.ephemerides + s.glonass_ephemerides > 0,
+        "no GPS or GLONASS ephemeris in {}",
+        args.nav
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
     Ok(())
 }
 
@@ -121,11 +148,128 @@ fn read(path: &Path) -> Result<String, RinexImportError> {
         })
 }
 
-/// Reads and parses both files.
-pub fn parse_files(obs: &Path, nav: &Path) -> Result<(ObsFile, NavFile), RinexImportError> {
+/// Reads and parses the files: the observations, and each navigation file with its name.
+pub fn parse_files(obs: &Path, navs: &[PathBuf]) -> Result<(ObsFile, Vec<(String, NavFile)>), RinexImportError> {
     let o = rinex::parse_obs(&obs.display().to_string(), &read(obs)?)?;
-    let n = rinex::parse_nav(&nav.display().to_string(), &read(nav)?)?;
+    let mut n = Vec::with_capacity(navs.len());
+    for nav in navs {
+        let name = nav.display().to_string();
+        let parsed = rinex::parse_nav(&name, &read(nav)?)?;
+        n.push((name, parsed));
+    }
     Ok((o, n))
+}
+
+/// One navigation record of any file.
+#[derive(Debug, Clone, Copy)]
+enum Record {
+    Gps(GpsEphemeris),
+    Glonass(GloRecord),
+}
+
+impl Record {
+    /// (u-blox gnssId, satellite) and the reference time (t_oe, t_b), GPS ns.
+    fn key(&self) -> ((u8, u8), i64) {
+        let gps_ns = |week: f64, tow_s: f64| week as i64 * WEEK_NS + (tow_s * 1e9).round() as i64;
+        match self {
+            Self::Gps(e) => ((0, e.prn), gps_ns(e.week, e.toe_s)),
+            Self::Glonass(r) => ((6, r.slot), gps_ns(f64::from(r.toc.week), r.toc.tow_s)),
+        }
+    }
+}
+
+/// The RINEX record of GLONASS immediate data `e` received near the epoch `near` (its t_b the
+/// instant of that Moscow time of day nearest the epoch; GPS − UTC the receiver's when valid,
+/// else the table's), on channel `channel`: the inverse of [`glonass_strings`].
+pub fn glonass_record_of(e: &GloEphemeris, near: &navsync_shared::samples::GnssRaw, channel: i8) -> GloRecord {
+    let gps_s = f64::from(near.week) * WEEK_S + near.rcv_tow_s;
+    let leap = if near.rec_stat & 1 != 0 {
+        f64::from(near.leap_s)
+    } else {
+        let gps_ns = (gps_s * 1e9) as i64;
+        f64::from(navsync_shared::time::gps_minus_utc_s(utc_ns_from_gps_ns(gps_ns)))
+    };
+    let moscow = glonass::MOSCOW_OFFSET_S as f64;
+    let utc_s = gps_s - leap;
+    let dt = (e.tb_s - (utc_s + moscow).rem_euclid(86_400.0) + 43_200.0).rem_euclid(86_400.0) - 43_200.0;
+    let toc_utc_s = (utc_s + dt).round();
+    let toc_gps_s = toc_utc_s + leap;
+    let week = (toc_gps_s / WEEK_S).floor();
+    // Seconds since 1970 of the UTC instant, for its date.
+    let unix_s = toc_utc_s + navsync_shared::time::GPS_EPOCH_UNIX_S as f64;
+    let day = (unix_s / 86_400.0).floor();
+    GloRecord {
+        slot: e.slot,
+        line: 0,
+        toc: rinex::GpsTime {
+            week: week as u32,
+            tow_s: toc_gps_s - week * WEEK_S,
+        },
+        toc_utc_sod_s: unix_s - day * 86_400.0,
+        toc_utc_day: day as i64,
+        tau_s: e.tau_s,
+        gamma: e.gamma,
+        tk_s: (e.tk_s - moscow).rem_euclid(86_400.0),
+        pos_m: e.pos_m,
+        vel_mps: e.vel_mps,
+        acc_mps2: e.acc_mps2,
+        health: if e.healthy() { 0.0 } else { 1.0 },
+        channel,
+        age_days: f64::from(e.age_days),
+        accuracy_index: Some(e.accuracy_index),
+    }
+}
+
+/// Strings 1–4 of a GLONASS record: t_b and t_k in Moscow time (UTC + 3 h), N_T the day of the
+/// four-year interval (1 = 1 January of the leap year), F_T `URAI` else index 4 (5 m); the
+/// largest rounding of its values to their scale factors goes to `worst`.
+fn glonass_strings(r: &GloRecord, file: &str, frame: u32, worst: &mut f64) -> Result<[[u32; 4]; 4], RinexError> {
+    let err = |field: &str, problem: String| RinexError {
+        file: file.to_string(),
+        line: r.line,
+        field: field.to_string(),
+        problem,
+    };
+    let moscow = glonass::MOSCOW_OFFSET_S as f64;
+    let tb_s = (r.toc_utc_sod_s + moscow).rem_euclid(86_400.0);
+    if (tb_s / 900.0).fract() != 0.0 {
+        return Err(err(
+            "toc",
+            format!("t_b {tb_s} s of the Moscow day is not a quarter hour"),
+        ));
+    }
+    let day = r.toc_utc_day + ((r.toc_utc_sod_s + moscow) / 86_400.0).floor() as i64;
+    let (year, _, _) = navsync_shared::time::civil_from_days(day);
+    let leap_year = year - year.rem_euclid(4);
+    let n_t = day - navsync_shared::time::days_from_civil(leap_year, 1, 1) + 1;
+    let e = GloEphemeris {
+        slot: r.slot,
+        tb_s,
+        pos_m: r.pos_m,
+        vel_mps: r.vel_mps,
+        acc_mps2: r.acc_mps2,
+        gamma: r.gamma,
+        tau_s: r.tau_s,
+        health: if r.health != 0.0 { 0b100 } else { 0 },
+        day_in_interval: n_t as u16,
+        accuracy_index: r.accuracy_index.unwrap_or(4),
+        age_days: r.age_days.clamp(0.0, 31.0) as u8,
+        tk_s: (r.tk_s + moscow).rem_euclid(86_400.0),
+    };
+    let scaled = (0..3)
+        .flat_map(|i| {
+            [
+                e.pos_m[i] / (2f64.powi(-11) * 1e3),
+                e.vel_mps[i] / (2f64.powi(-20) * 1e3),
+                e.acc_mps2[i] / (2f64.powi(-30) * 1e3),
+            ]
+        })
+        .chain([e.gamma / 2f64.powi(-40), e.tau_s / 2f64.powi(-30)]);
+    for v in scaled {
+        *worst = worst.max((v - v.round()).abs());
+    }
+    glonass::encode_strings(&e, frame)
+        .ok_or_else(|| err("GLONASS broadcast orbit", "a value beyond its field in the ICD".into()))
 }
 
 /// Quantises RINEX values to LNAV integers, checking each fits its bits.
@@ -334,24 +478,38 @@ pub fn iono_page(alpha: [f64; 4], beta: [f64; 4], file: &str) -> Result<IonoUtc,
 }
 
 /// A subframe as the sample a receiver's driver publishes (UBX-RXM-SFRBX's content).
-fn nav_sample(prn: u8, sf: &Subframe, tow_s: f64, host_ns: i64, seq: u64) -> Option<GnssNavData> {
+fn nav_sample(prn: u8, sf: &Subframe, tow_s: f64) -> Option<GnssNavData> {
     // The HOW's TOW count: the next subframe's start, 6 s units.
     let tow_count = ((tow_s / 6.0).floor() as i64 + 1).rem_euclid(100_800) as u32;
     let words = lnav::encode(tow_count, sf)?;
     let mut d = GnssNavData::zeroed();
-    d.stamp = Stamp::host(host_ns, seq, StampSource::Simulated);
     d.words[..10].copy_from_slice(&words);
     (d.gnss_id, d.sv_id, d.sig_id, d.num_words, d.version) = (0, prn, 0, 10, 2);
     Some(d)
 }
 
+/// GLONASS strings (u-blox RXM-SFRBX words: the string, then the frame in word 3) of slot
+/// `slot` as a navigation-data sample.
+fn glonass_sample(slot: u8, words: &[u32; 4]) -> GnssNavData {
+    let mut d = GnssNavData::zeroed();
+    d.words[..4].copy_from_slice(words);
+    (d.gnss_id, d.sv_id, d.sig_id, d.num_words, d.version) = (6, slot, 0, 4, 2);
+    d
+}
+
 /// Runs `navsync import rinex`.
 pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
-    let (obs, nav) = parse_files(&args.obs, &args.nav)?;
-    let nav_name = args.nav.display().to_string();
+    let (mut obs, navs) = parse_files(&args.obs, &args.nav)?;
+    let mut channels = [None; 25];
+    for (_, n) in &navs {
+        for (c, k) in channels.iter_mut().zip(n.glonass_channels()) {
+            *c = c.or(k);
+        }
+    }
     let mut stats = RinexStats {
         approx_ecef_m: obs.approx_ecef_m,
         unmapped: obs.unmapped,
+        glonass_without_channel: obs.fill_glonass_channels(&channels),
         ..RinexStats::default()
     };
     // GPS ns of an epoch; the first epoch is the host axis's origin.
@@ -359,54 +517,78 @@ pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
     let t0 = obs.epochs.first().map_or(0, |e| gps_ns(i64::from(e.week), e.rcv_tow_s));
     let host_of = |g: i64| HOST_BASE_NS + (g - t0);
     // Each issue's delivery: before the first epoch for a satellite's first issue, else when
-    // its t_oe becomes the nearer one (the midpoint between the two t_oe).
-    let mut ephs: Vec<(i64, GpsEphemeris)> = nav
-        .ephemerides
-        .iter()
-        .map(|e| (gps_ns(e.week as i64, e.toe_s), *e))
-        .collect();
-    ephs.sort_by_key(|(toe, e)| (e.prn, *toe));
-    ephs.dedup_by_key(|(toe, e)| (e.prn, *toe));
-    let mut deliveries: Vec<(i64, GpsEphemeris)> = Vec::with_capacity(ephs.len());
-    for (k, (toe, e)) in ephs.iter().enumerate() {
-        let at = match k.checked_sub(1).map(|j| ephs[j]) {
-            Some((prev, p)) if p.prn == e.prn => (prev + toe) / 2,
+    // its t_oe (t_b) becomes the nearer one (the midpoint between the two).
+    let mut recs: Vec<(usize, Record)> = Vec::new();
+    for (f, (_, n)) in navs.iter().enumerate() {
+        recs.extend(n.ephemerides.iter().map(|e| (f, Record::Gps(*e))));
+        recs.extend(n.glonass.iter().map(|r| (f, Record::Glonass(*r))));
+    }
+    recs.sort_by_key(|(_, r)| r.key());
+    recs.dedup_by_key(|(_, r)| r.key());
+    let mut deliveries: Vec<(i64, usize, Record)> = Vec::with_capacity(recs.len());
+    for (k, (f, r)) in recs.iter().enumerate() {
+        let (sat, t) = r.key();
+        let at = match k.checked_sub(1).map(|j| recs[j].1.key()) {
+            Some((prev_sat, prev)) if prev_sat == sat => (prev + t) / 2,
             _ => i64::MIN,
         };
-        deliveries.push((at.max(t0 - NS_PER_S), *e));
+        deliveries.push((at.max(t0 - NS_PER_S), *f, *r));
     }
-    deliveries.sort_by_key(|(at, e)| (*at, e.prn));
+    deliveries.sort_by_key(|(at, _, r)| (*at, r.key().0));
 
     let raw_service = services::gnss_raw(&args.gnss_id);
     let nav_service = services::gnss_nav_data(&args.gnss_id);
-    let inputs = [args.obs.as_path(), args.nav.as_path()];
+    let inputs: Vec<&Path> = std::iter::once(args.obs.as_path())
+        .chain(args.nav.iter().map(PathBuf::as_path))
+        .collect();
     let (mut rec, _) = super::kf_gins::imported_recording(&args.out, &inputs, args.force, &raw_service, t0)?;
     let log_time = |host: i64| utc_ns_from_gps_ns(t0 + (host - HOST_BASE_NS)).max(0) as u64;
     let mut nav_seq = 0u64;
     let mut write_nav =
-        |rec: &mut SampleRecorder<_>, prn: u8, sf: &Subframe, at: i64| -> Result<(), RinexImportError> {
+        |rec: &mut SampleRecorder<_>, d: Option<GnssNavData>, at: i64| -> Result<(), RinexImportError> {
             let host = host_of(at);
-            let tow = (at.rem_euclid(WEEK_NS)) as f64 / 1e9;
-            if let Some(d) = nav_sample(prn, sf, tow, host, nav_seq) {
+            if let Some(mut d) = d {
+                d.stamp = Stamp::host(host, nav_seq, StampSource::Simulated);
                 rec.write(&nav_service, &AnySample::NavData(d), log_time(host), host.max(0) as u64)?;
                 nav_seq += 1;
             }
             Ok(())
         };
-    if let (Some(a), Some(b), Some((_, first))) = (nav.iono_alpha, nav.iono_beta, deliveries.first()) {
-        let page = iono_page(a, b, &nav_name)?;
-        write_nav(&mut rec, first.prn, &Subframe::IonoUtc(page), t0 - NS_PER_S)?;
+    let tow = |at: i64| at.rem_euclid(WEEK_NS) as f64 / 1e9;
+    let iono = navs
+        .iter()
+        .find_map(|(name, n)| Some((name, n.iono_alpha?, n.iono_beta?)));
+    let first_gps = deliveries.iter().find_map(|(_, _, r)| match r {
+        Record::Gps(e) => Some(e.prn),
+        Record::Glonass(_) => None,
+    });
+    if let (Some((name, a, b)), Some(prn)) = (iono, first_gps) {
+        let page = iono_page(a, b, name)?;
+        let at = t0 - NS_PER_S;
+        write_nav(&mut rec, nav_sample(prn, &Subframe::IonoUtc(page), tow(at)), at)?;
         stats.subframes += 1;
     }
     let mut next = deliveries.iter().peekable();
     for (i, raw) in obs.epochs.iter().enumerate() {
         let g = gps_ns(i64::from(raw.week), raw.rcv_tow_s);
-        while let Some((at, e)) = next.next_if(|(at, _)| *at <= g) {
-            for sf in subframes_of(e, &nav_name, &mut stats.worst_quantisation)? {
-                write_nav(&mut rec, e.prn, &sf, *at)?;
-                stats.subframes += 1;
+        while let Some((at, f, r)) = next.next_if(|(at, _, _)| *at <= g) {
+            let name = &navs[*f].0;
+            match r {
+                Record::Gps(e) => {
+                    for sf in subframes_of(e, name, &mut stats.worst_quantisation)? {
+                        write_nav(&mut rec, nav_sample(e.prn, &sf, tow(*at)), *at)?;
+                        stats.subframes += 1;
+                    }
+                    stats.ephemerides += 1;
+                }
+                Record::Glonass(r) => {
+                    let frame = stats.glonass_ephemerides as u32;
+                    for words in glonass_strings(r, name, frame, &mut stats.worst_quantisation)? {
+                        write_nav(&mut rec, Some(glonass_sample(r.slot, &words)), *at)?;
+                    }
+                    stats.glonass_ephemerides += 1;
+                }
             }
-            stats.ephemerides += 1;
         }
         let mut r = *raw;
         let host = host_of(g);

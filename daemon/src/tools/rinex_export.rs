@@ -1,23 +1,27 @@
 //! `navsync export rinex REC.mcap --obs OUT.obs --nav OUT.nav`: a recording's raw
-//! measurements as a RINEX 3.05 observation file and the GPS ephemerides of its navigation
-//! data as a RINEX 3.05 navigation file, the inverse of `navsync import rinex` (the text is
-//! written by `navsync_drivers::gnss::rinex_write`, RINEX 3.05 Tables A2/A3 and A5/A8).
+//! measurements as a RINEX 3.05 observation file and the GPS and GLONASS ephemerides of its
+//! navigation data as a RINEX 3.05 navigation file, the inverse of `navsync import rinex` (the
+//! text is written by `navsync_drivers::gnss::rinex_write`, RINEX 3.05 Tables A2/A3 and
+//! A5/A8/A10).
 //!
 //! The raw epochs (`GnssRaw` on `navsync/gnss/{id}/raw`, from `import rinex` or a u-blox
 //! receiver's RXM-RAWX) are written at their receiver time, GPS time. The navigation data
 //! (`GnssNavData` on `…/nav-data`, RXM-SFRBX) are decoded by the estimator's LNAV decoder
 //! (`gnss::lnav`, parity checked); every issue of subframes 1–3 whose IODC and IODEs agree is one
 //! ephemeris (the same issue repeated every 30 s is written once), scaled back to RINEX units by
-//! `rinex::ephemeris_of`, and the last subframe 4 page 18 gives the header's Klobuchar α/β. The
+//! `rinex::ephemeris_of`, and the last subframe 4 page 18 gives the header's Klobuchar α/β.
+//! GLONASS strings 1–4 of one frame (`gnss::glonass`) are one ephemeris (written once per
+//! t_b), its UTC date the one nearest the epochs around it, its channel the observations'. The
 //! header's `APPROX POSITION XYZ` is the first epoch's single-point solution (`navsync spp`'s),
 //! zeros when no epoch has one.
 
 use std::io::Write;
 use std::path::PathBuf;
 
-use navsync_drivers::gnss::rinex::GpsEphemeris;
+use navsync_drivers::gnss::rinex::{GloRecord, GpsEphemeris};
 use navsync_drivers::gnss::rinex_write::{self, ObsHeader, RinexWriteError};
-use navsync_estimator::gnss::broadcast::carries_lnav;
+use navsync_estimator::gnss::broadcast::{GNSS_ID_GLONASS, carries_lnav};
+use navsync_estimator::gnss::glonass::{GloEphemeris, GloStore};
 use navsync_estimator::gnss::lnav::{self, Ephem1, Ephem2, Ephem3, Subframe};
 use navsync_estimator::gnss::ranges::{EphemerisStore, RangeBuildCounts};
 use navsync_estimator::gnss::spp::SppSettings;
@@ -27,7 +31,7 @@ use navsync_shared::samples::{AnySample, GnssRaw};
 use navsync_shared::services;
 use navsync_shared::time::{civil_from_utc_ns, realtime_now_ns};
 
-use super::rinex::{ephemeris_of, iono_of_page};
+use super::rinex::{ephemeris_of, glonass_record_of, iono_of_page};
 
 /// `navsync export …`.
 #[derive(Debug, Clone, clap::Subcommand)]
@@ -46,7 +50,7 @@ pub struct RinexExportArgs {
     /// The observation file to write (RINEX 3.05).
     #[arg(long)]
     pub obs: PathBuf,
-    /// The GPS navigation file to write (RINEX 3.05).
+    /// The GPS and GLONASS navigation file to write (RINEX 3.05).
     #[arg(long)]
     pub nav: PathBuf,
     /// The receiver's id in the recording (`navsync/gnss/ID/raw`, `…/nav-data`).
@@ -96,6 +100,10 @@ pub struct ExportStats {
     pub unmapped: u64,
     /// GPS ephemerides written.
     pub ephemerides: u64,
+    /// GLONASS ephemerides written.
+    pub glonass_ephemerides: u64,
+    /// GLONASS ephemerides not written: no observation gives their slot's channel.
+    pub glonass_without_channel: u64,
     /// Navigation messages that failed the LNAV parity or preamble check.
     pub bad_subframes: u64,
     /// The header's Klobuchar α/β were written (subframe 4 page 18 seen).
@@ -119,7 +127,8 @@ pub fn main(cmd: ExportCommand) -> anyhow::Result<()> {
     let s = export(&args).with_context(|| format!("exporting {}", args.recording.display()))?;
     eprintln!(
         "{}: {} epochs, {} measurements ({} of signals without a RINEX code left out); {}: {} GPS \
-         ephemerides{} ({} navigation messages failed the parity check)",
+         ephemerides{}, {} GLONASS ephemerides ({} navigation messages failed the parity check; {} GLONASS \
+         ephemerides without a channel left out)",
         args.obs.display(),
         s.epochs,
         s.measurements,
@@ -127,7 +136,9 @@ pub fn main(cmd: ExportCommand) -> anyhow::Result<()> {
         args.nav.display(),
         s.ephemerides,
         if s.iono { " and the Klobuchar α/β" } else { "" },
-        s.bad_subframes
+        s.glonass_ephemerides,
+        s.bad_subframes,
+        s.glonass_without_channel
     );
     match s.approx_ecef_m {
         Some(p) => eprintln!(
@@ -136,7 +147,11 @@ pub fn main(cmd: ExportCommand) -> anyhow::Result<()> {
         ),
         None => eprintln!("  no epoch solved: approximate position written as zeros"),
     }
-    anyhow::ensure!(s.ephemerides > 0, "no GPS ephemeris in {}", args.recording.display());
+    anyhow::ensure!(
+        s.ephemerides + s.glonass_ephemerides > 0,
+        "no GPS or GLONASS ephemeris in {}",
+        args.recording.display()
+    );
     Ok(())
 }
 
@@ -161,6 +176,9 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
     let mut issues = [Issue::default(); 32];
     let mut complete: Vec<(u8, u32, Ephem1, Ephem2, Ephem3)> = Vec::new();
     let mut iono = None;
+    // GLONASS: each ephemeris once (t_k aside), with the number of epochs read before it.
+    let mut glo = GloStore::default();
+    let mut glo_done: Vec<(usize, GloEphemeris)> = Vec::new();
     // The first single-point solution, with the ephemerides received up to its epoch.
     let mut store = EphemerisStore::default();
     let settings = SppSettings::default();
@@ -178,6 +196,20 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
             }
             AnySample::NavData(d) if s.service == nav_service => {
                 store.on_nav_data(&d);
+                if d.gnss_id == GNSS_ID_GLONASS {
+                    let before = glo.counters.ephemerides;
+                    glo.on_words(d.sv_id, &d.words[..usize::from(d.num_words).min(d.words.len())]);
+                    let same = |a: &GloEphemeris, b: &GloEphemeris| {
+                        GloEphemeris { tk_s: 0.0, ..*a } == GloEphemeris { tk_s: 0.0, ..*b }
+                    };
+                    if glo.counters.ephemerides > before
+                        && let Some(e) = glo.ephemeris(d.sv_id)
+                        && !glo_done.iter().any(|(_, x)| same(x, e))
+                    {
+                        glo_done.push((epochs.len(), *e));
+                    }
+                    continue;
+                }
                 if !carries_lnav(d.gnss_id, d.sig_id) || d.num_words < 10 {
                     continue;
                 }
@@ -216,6 +248,20 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
         .collect();
     stats.ephemerides = ephemerides.len() as u64;
     stats.iono = iono.is_some();
+    let mut glonass: Vec<GloRecord> = Vec::new();
+    for (at, e) in &glo_done {
+        let channel = epochs.iter().find_map(|raw| {
+            raw.meas[..usize::from(raw.num_meas).min(raw.meas.len())]
+                .iter()
+                .find(|m| m.gnss_id == GNSS_ID_GLONASS && m.sv_id == e.slot && m.freq_id <= 13)
+                .map(|m| m.freq_id as i8 - 7)
+        });
+        match (channel, epochs.get(*at).or(epochs.last())) {
+            (Some(k), Some(near)) => glonass.push(glonass_record_of(e, near, k)),
+            _ => stats.glonass_without_channel += 1,
+        }
+    }
+    stats.glonass_ephemerides = glonass.len() as u64;
 
     let program = format!("navsync {}", env!("CARGO_PKG_VERSION"));
     let c = civil_from_utc_ns(realtime_now_ns());
@@ -236,7 +282,7 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
     };
     let obs = rinex_write::write_obs(&header, &epochs)?;
     stats.unmapped = obs.unmapped;
-    let nav = rinex_write::write_nav(&program, &date, iono, &ephemerides);
+    let nav = rinex_write::write_nav(&program, &date, iono, &ephemerides, &glonass);
 
     // Both files complete before either is renamed into place.
     let inputs = [args.recording.as_path()];

@@ -239,7 +239,7 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
         let mut w = std::io::BufWriter::new(f);
         writeln!(
             w,
-            "week,tow_s,x_m,y_m,z_m,lat_deg,lon_deg,height_m,clock_bias_m,sats,excluded_prn,east_m,north_m,up_m,gps,galileo,beidou,excluded"
+            "week,tow_s,x_m,y_m,z_m,lat_deg,lon_deg,height_m,clock_bias_m,sats,excluded_prn,east_m,north_m,up_m,gps,galileo,beidou,glonass,excluded"
         )?;
         for (k, s) in r.solutions.iter().enumerate() {
             let p = s.sol.ecef_m;
@@ -248,7 +248,7 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
             let e = errors.get(k).copied().unwrap_or([f64::NAN; 3]);
             writeln!(
                 w,
-                "{},{:.3},{:.4},{:.4},{:.4},{:.9},{:.9},{:.4},{:.3},{},{},{:.4},{:.4},{:.4},{},{},{},{}",
+                "{},{:.3},{:.4},{:.4},{:.4},{:.9},{:.9},{:.4},{:.3},{},{},{:.4},{:.4},{:.4},{},{},{},{},{}",
                 s.week,
                 s.tow_s,
                 p[0],
@@ -266,6 +266,7 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
                 s.sol.used_per_system[0],
                 s.sol.used_per_system[1],
                 s.sol.used_per_system[2],
+                s.sol.used_per_system[3],
                 excluded_name(&s.sol),
             )?;
         }

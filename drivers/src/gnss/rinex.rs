@@ -1,15 +1,22 @@
-//! RINEX observation and GPS navigation files, parsed from text (pure: no I/O).
+//! RINEX observation and GPS and GLONASS navigation files, parsed from text (pure: no I/O).
 //!
 //! Formats: RINEX 2.11 (IGS/RTCM-SC104, "RINEX: The Receiver Independent Exchange Format
-//! Version 2.11", 2012 update: Tables A1–A4; 2.10 is the same layout) and RINEX 3.05 (IGS/RTCM
-//! 2020: Tables A1–A7 observation, A8 GPS navigation; 3.00–3.04 share it). Observation epochs
-//! become [`GnssRaw`] samples with u-blox `gnssId`/`sigId` (UBX-RXM-RAWX's convention, GPS L1
-//! C/A first); a GPS navigation record becomes a [`GpsEphemeris`] in RINEX's units (s, m, rad)
-//! and the header's Klobuchar α/β. Errors name the file, the line (1-based) and the field.
+//! Version 2.11", 2012 update: Tables A1–A4, A11 GLONASS navigation; 2.10 is the same layout)
+//! and RINEX 3.05 (IGS/RTCM 2020: Tables A1–A7 observation, A8 GPS navigation, A10 GLONASS
+//! navigation; 3.00–3.04 share it). Observation epochs become [`GnssRaw`] samples with u-blox
+//! `gnssId`/`sigId` (UBX-RXM-RAWX's convention, GPS L1 C/A first; a GLONASS signal's `freqId`
+//! from the header's `GLONASS SLOT / FRQ #`, else [`GLONASS_CHANNEL_UNKNOWN`]); a GPS navigation
+//! record becomes a [`GpsEphemeris`] in RINEX's units (s, m, rad), a GLONASS one a
+//! [`GloRecord`] (SI units), and the header's Klobuchar α/β. Errors name the file, the line
+//! (1-based) and the field.
 
 use navsync_shared::reflect::Reflect;
 use navsync_shared::samples::{GnssRaw, LOCK_TIME_MAX_MS, MAX_RAW_MEASUREMENTS, RawMeasurement};
-use navsync_shared::time::days_from_civil;
+use navsync_shared::time::{GPS_EPOCH_UNIX_S, days_from_civil, gps_minus_utc_s};
+
+/// `freqId` of a GLONASS measurement whose channel the file does not give (u-blox's are
+/// 0–13, channel + 7): the estimator leaves it out rather than guess its carrier.
+pub const GLONASS_CHANNEL_UNKNOWN: u8 = 255;
 
 /// Seconds in a GPS week.
 const WEEK_S: f64 = 604_800.0;
@@ -29,7 +36,7 @@ pub struct RinexError {
 }
 
 /// A GPS time: full week and seconds of week.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct GpsTime {
     /// Weeks since 1980-01-06.
     pub week: u32,
@@ -50,6 +57,64 @@ pub struct ObsFile {
     pub epochs: Vec<GnssRaw>,
     /// Observations without a u-blox signal id (P(Y), L2 semi-codeless …), not kept.
     pub unmapped: u64,
+    /// GLONASS channel of each slot (index 1–24) from `GLONASS SLOT / FRQ #`, if given.
+    pub glonass_channels: [Option<i8>; 25],
+}
+
+impl ObsFile {
+    /// Gives the GLONASS measurements without a channel the one of `channels` (by slot, e.g.
+    /// a navigation file's); returns how many are still without one.
+    pub fn fill_glonass_channels(&mut self, channels: &[Option<i8>; 25]) -> u64 {
+        let mut left = 0;
+        for e in &mut self.epochs {
+            let n = usize::from(e.num_meas);
+            for m in e.meas[..n]
+                .iter_mut()
+                .filter(|m| m.gnss_id == 6 && m.freq_id == GLONASS_CHANNEL_UNKNOWN)
+            {
+                match channels.get(usize::from(m.sv_id)).copied().flatten() {
+                    Some(k) => m.freq_id = (k + 7) as u8,
+                    None => left += 1,
+                }
+            }
+        }
+        left
+    }
+}
+
+/// A GLONASS broadcast ephemeris (RINEX 2.11 Table A11, RINEX 3.05 Table A10) in SI units.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GloRecord {
+    /// Slot number n (RINEX `Rnn`).
+    pub slot: u8,
+    /// Line of the record in the file.
+    pub line: usize,
+    /// t_b (the record's epoch, UTC in the file) as a GPS time.
+    pub toc: GpsTime,
+    /// t_b as a UTC time of day, s (0–86 400).
+    pub toc_utc_sod_s: f64,
+    /// Days since 1970-01-01 of t_b's UTC date.
+    pub toc_utc_day: i64,
+    /// τ_n, s (RINEX gives −τ_n, the "SV clock bias").
+    pub tau_s: f64,
+    /// γ_n (relative frequency bias).
+    pub gamma: f64,
+    /// t_k, the message frame time, s of the UTC day.
+    pub tk_s: f64,
+    /// Position at t_b, PZ-90, m (RINEX: km).
+    pub pos_m: [f64; 3],
+    /// Velocity, m/s.
+    pub vel_mps: [f64; 3],
+    /// Lunisolar acceleration, m/s².
+    pub acc_mps2: [f64; 3],
+    /// Health: 0 healthy (the most significant bit of B_n).
+    pub health: f64,
+    /// Frequency channel k, −7…+6.
+    pub channel: i8,
+    /// Age of the operational information E_n, days.
+    pub age_days: f64,
+    /// F_T, the accuracy index (RINEX 3.05 line 5, URAI), when given.
+    pub accuracy_index: Option<u8>,
 }
 
 /// A GPS broadcast ephemeris in RINEX units (RINEX 2.11 Table A4, RINEX 3.05 Table A8).
@@ -130,8 +195,23 @@ pub struct NavFile {
     pub iono_beta: Option<[f64; 4]>,
     /// GPS ephemerides in file order.
     pub ephemerides: Vec<GpsEphemeris>,
+    /// GLONASS ephemerides in file order.
+    pub glonass: Vec<GloRecord>,
     /// Records of other systems (RINEX 3 mixed files), skipped.
     pub other_systems: u64,
+}
+
+impl NavFile {
+    /// The GLONASS channel of each slot (index 1–24) its records give.
+    pub fn glonass_channels(&self) -> [Option<i8>; 25] {
+        let mut out = [None; 25];
+        for r in &self.glonass {
+            if let Some(c) = out.get_mut(usize::from(r.slot)) {
+                *c = Some(r.channel);
+            }
+        }
+        out
+    }
 }
 
 /// Lines of one file with their numbers, for errors.
@@ -362,6 +442,7 @@ pub fn parse_obs(file: &str, text: &str) -> Result<ObsFile, RinexError> {
         leap_s: None,
         epochs: Vec::new(),
         unmapped: 0,
+        glonass_channels: [None; 25],
     };
     let mut types = TypeTable::default();
     let (mut v2_count, mut v3_pending): (usize, Option<(char, usize)>) = (0, None);
@@ -385,6 +466,34 @@ pub fn parse_obs(file: &str, text: &str) -> Result<ObsFile, RinexError> {
                 ]);
             }
             "LEAP SECONDS" => out.leap_s = Some(num(0, 6, label)? as i16),
+            // RINEX 3.05 Table A2: up to 8 of `Rnn k` per line after the count (columns 1–3).
+            "GLONASS SLOT / FRQ #" => {
+                for j in 0..8 {
+                    let sat = col(l, 4 + 7 * j, 7 + 7 * j).trim();
+                    if sat.is_empty() {
+                        break;
+                    }
+                    let (sys, slot) = sat_id(&lines, n, sat)?;
+                    let k = col(l, 7 + 7 * j, 10 + 7 * j)
+                        .trim()
+                        .parse::<i8>()
+                        .ok()
+                        .filter(|k| (-7..=6).contains(k));
+                    let Some(k) = k.filter(|_| sys == 'R') else {
+                        return Err(lines.err(
+                            n,
+                            label,
+                            format!(
+                                "'{}' is not a GLONASS slot and channel −7…+6",
+                                col(l, 4 + 7 * j, 10 + 7 * j)
+                            ),
+                        ));
+                    };
+                    if let Some(c) = out.glonass_channels.get_mut(usize::from(slot)) {
+                        *c = Some(k);
+                    }
+                }
+            }
             "TIME OF FIRST OBS" => {
                 let sys = col(l, 48, 51).trim();
                 if !sys.is_empty() && sys != "GPS" {
@@ -521,6 +630,8 @@ pub fn parse_obs(file: &str, text: &str) -> Result<ObsFile, RinexError> {
         raw.num_meas = meas.len().min(MAX_RAW_MEASUREMENTS) as u8;
         out.epochs.push(raw);
     }
+    let channels = out.glonass_channels;
+    out.fill_glonass_channels(&channels);
     Ok(out)
 }
 
@@ -577,6 +688,9 @@ fn signals(
         };
         let mut m = RawMeasurement::zeroed();
         (m.gnss_id, m.sv_id, m.sig_id) = (gnss_id, sat.1, sig_id);
+        if gnss_id == 6 {
+            m.freq_id = GLONASS_CHANNEL_UNKNOWN;
+        }
         m.pseudorange_m = f64::NAN;
         m.carrier_phase_cycles = f64::NAN;
         m.doppler_hz = f32::NAN;
@@ -608,16 +722,18 @@ fn signals(
     }
 }
 
-/// Parses a navigation file's GPS records and ionosphere (`file` names it in errors).
+/// Parses a navigation file's GPS and GLONASS records and its ionosphere (`file` names it in
+/// errors): RINEX 3 GPS, GLONASS or mixed files, RINEX 2 GPS (`N`) or GLONASS (`G`) files.
 pub fn parse_nav(file: &str, text: &str) -> Result<NavFile, RinexError> {
     let mut lines = Lines::new(file, text);
-    let (version, system) = version_line(&mut lines, 'N')?;
+    let glonass_v2 = lines.lines.first().is_some_and(|l| col(l, 20, 21) == "G");
+    let (version, system) = version_line(&mut lines, if glonass_v2 { 'G' } else { 'N' })?;
     let v3 = version >= 3.0;
-    if v3 && !matches!(system, 'G' | 'M') {
+    if v3 && !matches!(system, 'G' | 'M' | 'R') {
         return Err(lines.err(
             1,
             "RINEX VERSION / TYPE",
-            format!("system '{system}': GPS or mixed expected"),
+            format!("system '{system}': GPS, GLONASS or mixed expected"),
         ));
     }
     let mut out = NavFile {
@@ -655,11 +771,15 @@ pub fn parse_nav(file: &str, text: &str) -> Result<NavFile, RinexError> {
             continue;
         }
         // RINEX 3: 'Gnn yyyy mm dd hh mm ss' then 3 × D19.12 from column 24; other systems'
-        // records have 4 lines (GLONASS, SBAS) or 8. RINEX 2: 'nn yy mm dd hh mm ss.s' to 22.
+        // records have 4 lines (SBAS) or 8 (GLONASS: `glonass_record`). RINEX 2: 'nn yy mm dd hh mm ss.s' to 22.
+        if (v3 && col(l, 0, 1) == "R") || (!v3 && glonass_v2) {
+            out.glonass.push(glonass_record(&mut lines, n, l, v3)?);
+            continue;
+        }
         let (prn_text, time_text, first) = if v3 {
             let sys = col(l, 0, 1);
             if sys != "G" {
-                let more = if matches!(sys, "R" | "S") { 3 } else { 7 };
+                let more = if sys == "S" { 3 } else { 7 };
                 for _ in 0..more {
                     lines.need("navigation record")?;
                 }
@@ -712,22 +832,7 @@ pub fn parse_nav(file: &str, text: &str) -> Result<NavFile, RinexError> {
             "spare",
         ];
         let indent = if v3 { 4 } else { 3 };
-        let mut rows = vec![(n, l, first, 3usize)];
-        for _ in 0..7 {
-            let (m, line) = lines.need("broadcast orbit")?;
-            rows.push((m, line, indent, 4));
-        }
-        let mut v = [0.0f64; 31];
-        let mut from = 0;
-        for (m, line, at, count) in rows {
-            for k in 0..count {
-                let a = at + 19 * k;
-                v[from + k] = number(col(line, a, a + 19))
-                    .map_err(|p| lines.err(m, NAMES[from + k], p))?
-                    .unwrap_or(0.0);
-            }
-            from += count;
-        }
+        let v = record_values(&mut lines, (n, l, first), indent, &NAMES, "broadcast orbit")?;
         let e = GpsEphemeris {
             prn,
             line: n,
@@ -770,6 +875,123 @@ pub fn parse_nav(file: &str, text: &str) -> Result<NavFile, RinexError> {
         out.ephemerides.push(e);
     }
     Ok(out)
+}
+
+/// The `K` values of a navigation record (blank: 0): 3 on its first line `(n, l)` from column
+/// `first`, then 4 per orbit line from column `indent` (the last may be short), each D19.12,
+/// named by `names` in errors.
+fn record_values<const K: usize>(
+    lines: &mut Lines<'_>,
+    (n, l, first): (usize, &str, usize),
+    indent: usize,
+    names: &[&str; K],
+    what: &str,
+) -> Result<[f64; K], RinexError> {
+    let mut v = [0.0f64; K];
+    let (mut m, mut line, mut at, mut per_line) = (n, l, first, 3);
+    let mut k = 0;
+    while k < K {
+        for j in 0..per_line.min(K - k) {
+            let a = at + 19 * j;
+            v[k + j] = number(col(line, a, a + 19))
+                .map_err(|p| lines.err(m, names[k + j], p))?
+                .unwrap_or(0.0);
+        }
+        k += per_line;
+        if k < K {
+            (m, line) = lines.need(what)?;
+            (at, per_line) = (indent, 4);
+        }
+    }
+    Ok(v)
+}
+
+/// One GLONASS record from its first line `l` (line `n`): RINEX 3 `Rnn yyyy mm dd hh mm ss`
+/// or RINEX 2 `nn yy mm dd hh mm ss.s`, −τ_n, γ_n, t_k; three orbit lines of x, ẋ, ẍ (km,
+/// km/s, km/s²) with health, channel and age; in RINEX 3.05 a fourth (status, L1/L2 delay,
+/// URAI, health flags) when the next line is a continuation.
+fn glonass_record(lines: &mut Lines<'_>, n: usize, l: &str, v3: bool) -> Result<GloRecord, RinexError> {
+    let (slot_text, time_text, first, indent) = if v3 {
+        (col(l, 1, 3), col(l, 4, 23), 23, 4)
+    } else {
+        (col(l, 0, 2), col(l, 3, 22), 22, 3)
+    };
+    let slot = slot_text
+        .trim()
+        .parse::<u8>()
+        .ok()
+        .filter(|s| (1..=24).contains(s))
+        .ok_or_else(|| lines.err(n, "slot", format!("'{slot_text}' is not a GLONASS slot 1–24")))?;
+    // t_b is UTC in the file (RINEX 3.05 Table A10): its GPS time adds GPS − UTC.
+    let utc = epoch_fields(lines, n, "toc", time_text)?;
+    let utc_s = f64::from(utc.week) * WEEK_S + utc.tow_s + GPS_EPOCH_UNIX_S as f64;
+    let leap = f64::from(gps_minus_utc_s((utc_s * 1e9) as i64));
+    let gps_s = f64::from(utc.week) * WEEK_S + utc.tow_s + leap;
+    let week = (gps_s / WEEK_S).floor();
+    let day = (utc_s / 86_400.0).floor();
+    const NAMES: [&str; 15] = [
+        "SV clock bias (-TauN)",
+        "SV relative frequency bias (GammaN)",
+        "message frame time (tk)",
+        "X",
+        "X velocity",
+        "X acceleration",
+        "health",
+        "Y",
+        "Y velocity",
+        "Y acceleration",
+        "frequency number",
+        "Z",
+        "Z velocity",
+        "Z acceleration",
+        "age of operation",
+    ];
+    let v = record_values(lines, (n, l, first), indent, &NAMES, "GLONASS broadcast orbit")?;
+    let mut accuracy_index = None;
+    let continued = lines
+        .lines
+        .get(lines.next)
+        .is_some_and(|c| v3 && c.starts_with("    ") && !c.trim().is_empty());
+    if continued {
+        let (m, line) = lines.need("GLONASS broadcast orbit 4")?;
+        let a = indent + 19 * 2;
+        accuracy_index = number(col(line, a, a + 19))
+            .map_err(|p| lines.err(m, "URAI", p))?
+            .filter(|u| (0.0..15.0).contains(u))
+            .map(|u| u as u8);
+    }
+    let pos_m = [v[3] * 1e3, v[7] * 1e3, v[11] * 1e3];
+    let radius = pos_m.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if !(19.0e6..30.0e6).contains(&radius) {
+        return Err(lines.err(
+            n,
+            "X, Y, Z",
+            format!("a radius of {:.0} km is not a GLONASS orbit", radius / 1e3),
+        ));
+    }
+    if !(-7.0..=13.0).contains(&v[10]) || v[10].fract() != 0.0 {
+        return Err(lines.err(n + 2, "frequency number", format!("{} is not a channel −7…+13", v[10])));
+    }
+    Ok(GloRecord {
+        slot,
+        line: n,
+        toc: GpsTime {
+            week: week as u32,
+            tow_s: gps_s - week * WEEK_S,
+        },
+        toc_utc_sod_s: utc_s - day * 86_400.0,
+        toc_utc_day: day as i64,
+        tau_s: -v[0],
+        gamma: v[1],
+        tk_s: v[2].rem_euclid(86_400.0),
+        pos_m,
+        vel_mps: [v[4] * 1e3, v[8] * 1e3, v[12] * 1e3],
+        acc_mps2: [v[5] * 1e3, v[9] * 1e3, v[13] * 1e3],
+        health: v[6],
+        channel: v[10] as i8,
+        age_days: v[14],
+        accuracy_index,
+    })
 }
 
 #[cfg(test)]
@@ -879,8 +1101,10 @@ E11  23000000.500    23000005.000
         );
     }
 
+    /// A mixed RINEX 3.05 file: a GLONASS record (with 3.05's fourth orbit line) read, in SI
+    /// units with t_b moved from UTC to GPS time; a Galileo record skipped; a GPS one read.
     #[test]
-    fn rinex3_navigation_skips_other_systems() {
+    fn rinex3_navigation_reads_gps_and_glonass_and_skips_other_systems() {
         // Fixed columns: 4X then 4 × D19.12 per orbit line (RINEX 3.05 Table A8).
         let orbit = |v: [f64; 4]| format!("    {}\n", v.map(|x| format!("{x:19.12E}")).concat());
         let mut nav3 = String::from(concat!(
@@ -888,9 +1112,14 @@ E11  23000000.500    23000005.000
             "GPSA   1.1180D-08  1.4900D-08 -5.9600D-08 -5.9600D-08       IONOSPHERIC CORR\n",
             "GPSB   8.8060D+04  1.6380D+04 -1.9660D+05 -1.3110D+05       IONOSPHERIC CORR\n",
             "                                                            END OF HEADER\n",
-            "R05 2020 06 14 12 15 00 1.000000000000D-05 0.000000000000D+00 0.000000000000D+00\n",
+            "R05 2020 06 14 12 15 00-1.000000000000D-05 9.094947017729D-13 4.356000000000D+04\n",
         ));
-        for _ in 0..3 {
+        nav3 += &orbit([-8215.504394531, -2.294995307922, 9.313225746155e-10, 0.0]);
+        nav3 += &orbit([14491.53320312, 1.309631347656, 0.0, -4.0]);
+        nav3 += &orbit([19337.97607422, -1.966602325439, -2.793967723846e-9, 2.0]);
+        nav3 += &orbit([0.0, 0.0, 6.0, 0.0]);
+        nav3 += "E11 2020 06 14 12 10 00 1.000000000000D-05 0.000000000000D+00 0.000000000000D+00\n";
+        for _ in 0..7 {
             nav3 += &orbit([1.0, 2.0, 3.0, 4.0]);
         }
         nav3 += "G07 2020 06 14 12 00 00 1.000000000000D-05 2.000000000000D-12 0.000000000000D+00\n";
@@ -906,13 +1135,76 @@ E11  23000000.500    23000005.000
         }
         nav3 += &format!("    {:19.12E}{:19.12E}\n", 210_000.0, 4.0);
         let f = parse_nav("b.rnx", &nav3).unwrap();
-        assert_eq!((f.other_systems, f.ephemerides.len()), (1, 1));
+        assert_eq!((f.other_systems, f.ephemerides.len(), f.glonass.len()), (1, 1, 1));
         let e = f.ephemerides[0];
         assert_eq!(
             (e.prn, e.line, e.toe_s, e.week, e.iodc, e.fit_h),
-            (7, 9, 216_000.0, 2109.0, 40.0, 4.0)
+            (7, 18, 216_000.0, 2109.0, 40.0, 4.0)
         );
         assert_eq!(f.iono_beta.unwrap()[3], -1.311e5);
+        let r = f.glonass[0];
+        // 2020-06-14 is a Sunday: 12:15 UTC is 12:15:18 GPS of week 2110.
+        assert_eq!((r.slot, r.line, r.toc.week, r.toc.tow_s), (5, 5, 2110, 44_118.0));
+        assert_eq!((r.toc_utc_sod_s, r.tau_s, r.tk_s), (44_100.0, 1e-5, 43_560.0));
+        assert_eq!(
+            (r.channel, r.age_days, r.accuracy_index, r.health),
+            (-4, 2.0, Some(6), 0.0)
+        );
+        assert!((r.pos_m[0] + 8_215_504.394531).abs() < 1e-6 && (r.vel_mps[2] + 1966.602325439).abs() < 1e-9);
+        assert_eq!(f.glonass_channels()[5], Some(-4));
+        // A position off any GLONASS orbit names its line.
+        let bad = nav3.replacen("-8.215504394531E3", "-8.215504394531E5", 1);
+        assert_ne!(bad, nav3);
+        let err = parse_nav("b.rnx", &bad).unwrap_err();
+        assert_eq!((err.line, err.field.as_str()), (5, "X, Y, Z"), "{err}");
+    }
+
+    /// A RINEX 2 GLONASS navigation file (type `G`, RINEX 2.11 Table A11): 4 lines per record.
+    #[test]
+    fn rinex2_glonass_navigation_is_read() {
+        let orbit = |v: [f64; 4]| format!("   {}\n", v.map(|x| format!("{x:19.12E}")).concat());
+        let mut nav2 = String::from(concat!(
+            "     2.11           G: GLONASS NAV DATA                     RINEX VERSION / TYPE\n",
+            "                                                            END OF HEADER\n",
+            " 5 20  6 14 12 15  0.0-1.000000000000D-05 9.094947017729D-13 4.356000000000D+04\n",
+        ));
+        nav2 += &orbit([-8215.504394531, -2.294995307922, 0.0, 0.0]);
+        nav2 += &orbit([14491.53320312, 1.309631347656, 0.0, 3.0]);
+        nav2 += &orbit([19337.97607422, -1.966602325439, 0.0, 0.0]);
+        let f = parse_nav("a.20g", &nav2).unwrap();
+        assert_eq!((f.glonass.len(), f.ephemerides.len()), (1, 0));
+        assert_eq!(
+            (f.glonass[0].slot, f.glonass[0].channel, f.glonass[0].accuracy_index),
+            (5, 3, None)
+        );
+    }
+
+    /// `GLONASS SLOT / FRQ #` gives the observations their channel; a slot it does not list
+    /// stays unknown until a navigation file gives it.
+    #[test]
+    fn glonass_observations_take_their_channel_from_the_header() {
+        let obs = concat!(
+            "     3.05           OBSERVATION DATA    M                   RINEX VERSION / TYPE\n",
+            "R    1 C1C                                                  SYS / # / OBS TYPES\n",
+            "  1 R03 -4                                                  GLONASS SLOT / FRQ #\n",
+            "                                                            END OF HEADER\n",
+            "> 2020 06 14 12 15  0.0000000  0  2\n",
+            "R03  22114715.901\n",
+            "R07  21114715.901\n",
+        );
+        let mut f = parse_obs("c.obs", obs).unwrap();
+        let m = f.epochs[0].meas;
+        assert_eq!(
+            (m[0].sv_id, m[0].freq_id, m[1].sv_id, m[1].freq_id),
+            (3, 3, 7, GLONASS_CHANNEL_UNKNOWN)
+        );
+        let mut channels = [None; 25];
+        channels[7] = Some(6);
+        assert_eq!(f.fill_glonass_channels(&channels), 0);
+        assert_eq!(f.epochs[0].meas[1].freq_id, 13);
+        let bad = obs.replace("R03 -4", "R03 -9");
+        let err = parse_obs("c.obs", &bad).unwrap_err();
+        assert_eq!((err.line, err.field.as_str()), (3, "GLONASS SLOT / FRQ #"), "{err}");
     }
 
     #[test]

@@ -1,18 +1,19 @@
-//! RINEX 3.05 observation and GPS navigation files written as text (pure: no I/O), the inverse
-//! of [`super::rinex`]: a receiver's [`GnssRaw`] epochs and its GPS ephemerides out.
+//! RINEX 3.05 observation and GPS/GLONASS navigation files written as text (pure: no I/O), the
+//! inverse of [`super::rinex`]: a receiver's [`GnssRaw`] epochs and its GPS and GLONASS
+//! ephemerides out.
 //!
 //! Format: RINEX 3.05 (IGS/RTCM-SC104, "RINEX The Receiver Independent Exchange Format Version
 //! 3.05", 2020): observation header Table A2, records Table A3 (§5.4 half-cycle ambiguities,
 //! §5.7 signal strength), observation codes §5.1 (the u-blox signal ids mapped back by
 //! [`super::rinex::rinex_signal`]); navigation header Table A5 (`IONOSPHERIC CORR` GPSA/GPSB),
-//! GPS records Table A8.
+//! GPS records Table A8, GLONASS records Table A10.
 
 use std::fmt::Write;
 
 use navsync_shared::samples::{GnssRaw, RawMeasurement};
 use navsync_shared::time::{civil_from_days, days_from_civil};
 
-use super::rinex::{GpsEphemeris, rinex_signal};
+use super::rinex::{GloRecord, GpsEphemeris, rinex_signal};
 
 /// Seconds in a GPS week.
 const WEEK_S: f64 = 604_800.0;
@@ -336,19 +337,29 @@ pub fn write_obs(h: &ObsHeader, epochs: &[GnssRaw]) -> Result<ObsText, RinexWrit
     Ok(ObsText { text: out, unmapped })
 }
 
-/// A GPS navigation file (RINEX 3.05, Tables A5 and A8): the header with the Klobuchar α/β as
-/// `IONOSPHERIC CORR` GPSA/GPSB when given, then each ephemeris (t_oc as a calendar epoch,
-/// values as D19.12, the fit interval in hours).
+/// A GPS and GLONASS navigation file (RINEX 3.05, Tables A5, A8 and A10): the header with the
+/// Klobuchar α/β as `IONOSPHERIC CORR` GPSA/GPSB when given, then each GPS ephemeris (t_oc as
+/// a calendar epoch, values as D19.12, the fit interval in hours) and each GLONASS one (t_b as
+/// a UTC calendar epoch, −τ_n, γ_n, t_k as s of the UTC day; km, km/s, km/s²; health, channel,
+/// age; 3.05's fourth orbit line with status flags and the L1/L2 delay difference unknown, 0,
+/// the accuracy index F_T as URAI (4, 5 m, when unknown), health flags 0). The system is `G`,
+/// `R` or `M` (mixed) after what it holds.
 pub fn write_nav(
     program: &str,
     date: &str,
     iono: Option<([f64; 4], [f64; 4])>,
     ephemerides: &[GpsEphemeris],
+    glonass: &[GloRecord],
 ) -> String {
     let mut out = String::new();
+    let system = match (ephemerides.is_empty(), glonass.is_empty()) {
+        (false, false) => "M: MIXED",
+        (true, false) => "R: GLONASS",
+        _ => "G: GPS",
+    };
     header(
         &mut out,
-        &format!("{:9.2}{:11}{:<20}{:<20}", 3.05, "", "N: GNSS NAV DATA", "G: GPS"),
+        &format!("{:9.2}{:11}{:<20}{:<20}", 3.05, "", "N: GNSS NAV DATA", system),
         "RINEX VERSION / TYPE",
     );
     header(
@@ -387,6 +398,35 @@ pub fn write_nav(
         for row in rows {
             let _ = writeln!(out, "    {}", row.iter().map(|x| f(*x)).collect::<String>());
         }
+    }
+    for r in glonass {
+        let f = |x: f64| fortran_e(x, 19, 12);
+        let (y, mo, d) = civil_from_days(r.toc_utc_day);
+        let sod = r.toc_utc_sod_s.round() as u32;
+        let _ = writeln!(
+            out,
+            "R{:02} {y:4} {mo:02} {d:02} {:02} {:02} {:02}{}{}{}",
+            r.slot,
+            sod / 3600,
+            sod / 60 % 60,
+            sod % 60,
+            f(-r.tau_s),
+            f(r.gamma),
+            f(r.tk_s)
+        );
+        let extra = [r.health, f64::from(r.channel), r.age_days];
+        for (i, last) in extra.into_iter().enumerate() {
+            let _ = writeln!(
+                out,
+                "    {}{}{}{}",
+                f(r.pos_m[i] / 1e3),
+                f(r.vel_mps[i] / 1e3),
+                f(r.acc_mps2[i] / 1e3),
+                f(last)
+            );
+        }
+        let urai = f64::from(r.accuracy_index.unwrap_or(4));
+        let _ = writeln!(out, "    {}{}{}{}", f(0.0), f(0.0), f(urai), f(0.0));
     }
     out
 }
@@ -505,6 +545,66 @@ mod tests {
         ));
     }
 
+    /// A GLONASS record written (with 3.05's fourth orbit line) reads back the same, beside
+    /// a GPS one in a mixed file and alone in a GLONASS file.
+    #[test]
+    fn glonass_records_are_written_and_read_back() {
+        let r = GloRecord {
+            slot: 12,
+            line: 0,
+            toc: super::super::rinex::GpsTime {
+                week: 2268,
+                tow_s: 312_318.0,
+            },
+            toc_utc_sod_s: 53_100.0,
+            toc_utc_day: 19_536,
+            tau_s: -2.856153326e-5,
+            gamma: 9.094947017729e-13,
+            tk_s: 53_820.0,
+            pos_m: [-8_905_342.7, 14_087_869.1, 19_335_698.6],
+            vel_mps: [-2_294.995307922, 1_309.631347656, -1_966.602325439],
+            acc_mps2: [9.313225746155e-7, 0.0, -2.793967723846e-6],
+            health: 0.0,
+            channel: -5,
+            age_days: 1.0,
+            accuracy_index: Some(3),
+        };
+        for mixed in [false, true] {
+            let text = write_nav("navsync", "20261205 061500 UTC", None, &[], &[r]);
+            let text = if mixed {
+                text.replace("R: GLONASS", "M: MIXED  ")
+            } else {
+                text
+            };
+            assert!(
+                text.lines()
+                    .next()
+                    .unwrap()
+                    .contains(if mixed { "M: MIXED" } else { "R: GLONASS" })
+            );
+            let back = parse_nav("g.nav", &text).unwrap();
+            assert_eq!(back.glonass.len(), 1);
+            let b = back.glonass[0];
+            assert_eq!(
+                (b.slot, b.toc, b.toc_utc_sod_s, b.toc_utc_day),
+                (12, r.toc, 53_100.0, 19_536)
+            );
+            assert_eq!(
+                (b.channel, b.age_days, b.accuracy_index, b.tk_s),
+                (-5, 1.0, Some(3), 53_820.0)
+            );
+            for i in 0..3 {
+                assert!(
+                    (b.pos_m[i] - r.pos_m[i]).abs() < 1e-6,
+                    "{i}: {}",
+                    b.pos_m[i] - r.pos_m[i]
+                );
+                assert!((b.vel_mps[i] - r.vel_mps[i]).abs() < 1e-9 && (b.acc_mps2[i] - r.acc_mps2[i]).abs() < 1e-15);
+            }
+            assert!((b.tau_s - r.tau_s).abs() < 1e-17 && (b.gamma - r.gamma).abs() < 1e-24);
+        }
+    }
+
     #[test]
     fn ephemerides_are_written_as_rinex_305_and_read_back() {
         assert_eq!(fortran_e(-3.25962901115e-9, 19, 12), "-3.259629011150E-09");
@@ -545,7 +645,7 @@ mod tests {
         };
         let alpha = [1.118e-8, 1.49e-8, -5.96e-8, -5.96e-8];
         let beta = [88_060.0, 16_380.0, -196_600.0, -131_100.0];
-        let text = write_nav("navsync", "20261205 061500 UTC", Some((alpha, beta)), &[e]);
+        let text = write_nav("navsync", "20261205 061500 UTC", Some((alpha, beta)), &[e], &[]);
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(
             lines[2],

@@ -88,6 +88,8 @@ pub enum GloString {
         tau_s: f64,
         /// F_T: the index of the predicted user range accuracy (ICD Table 4.4).
         accuracy_index: u8,
+        /// E_n: age of the immediate data, days.
+        age_days: u8,
         /// N_T: day within the four-year interval (1 = 1 January of the leap year).
         day_in_interval: u16,
         /// n: the transmitting satellite's slot (1–24).
@@ -162,6 +164,7 @@ pub fn decode_string(words: &[u32]) -> Result<GloString, GloError> {
         4 => GloString::Four {
             tau_s: signed(words, 80, 22) * 2f64.powi(-30),
             accuracy_index: bits(words, 33, 4) as u8,
+            age_days: bits(words, 53, 5) as u8,
             day_in_interval: bits(words, 26, 11) as u16,
             slot: bits(words, 15, 5) as u8,
         },
@@ -192,6 +195,10 @@ pub struct GloEphemeris {
     pub day_in_interval: u16,
     /// F_T: index of the predicted user range accuracy (ICD Table 4.4).
     pub accuracy_index: u8,
+    /// E_n: age of the immediate data, days.
+    pub age_days: u8,
+    /// t_k: start of the frame that carried it, s of the Moscow day.
+    pub tk_s: f64,
 }
 
 impl GloEphemeris {
@@ -268,6 +275,53 @@ fn add(s: &[f64; 6], k: &[f64; 6], h: f64) -> [f64; 6] {
     std::array::from_fn(|i| s[i] + h * k[i])
 }
 
+/// Strings 1–4 of a frame carrying `e` (the inverse of [`decode_string`]: each field rounded
+/// to its scale factor, sign-magnitude, ICD Table 4.5; t_k to its 30 s) with `frame` in word
+/// 3, as u-blox delivers them (unused bits and Hamming bits zero). `None` when a value does
+/// not fit its field.
+pub fn encode_strings(e: &GloEphemeris, frame: u32) -> Option<[[u32; 4]; 4]> {
+    fn put(w: &mut [u32; 4], b: u32, n: u32, v: u64) {
+        for k in 0..n {
+            if (v >> (n - 1 - k)) & 1 == 1 {
+                let offset = (85 - (b - k)) as usize;
+                w[offset / 32] |= 1 << (31 - offset % 32);
+            }
+        }
+    }
+    fn unsigned(value: f64, n: u32) -> Option<u64> {
+        let v = value.round();
+        (v >= 0.0 && v < 2f64.powi(n as i32)).then_some(v as u64)
+    }
+    fn signed(value: f64, lsb: f64, n: u32) -> Option<u64> {
+        let v = (value / lsb).round();
+        let magnitude = unsigned(v.abs(), n - 1)?;
+        Some(if v < 0.0 { (1 << (n - 1)) | magnitude } else { magnitude })
+    }
+    let mut s = [[0u32; 4]; 4];
+    for (i, w) in s.iter_mut().enumerate() {
+        put(w, 84, 4, i as u64 + 1);
+        w[3] = frame;
+    }
+    for (i, w) in s.iter_mut().take(3).enumerate() {
+        put(w, 64, 24, signed(e.vel_mps[i], 2f64.powi(-20) * 1e3, 24)?);
+        put(w, 40, 5, signed(e.acc_mps2[i], 2f64.powi(-30) * 1e3, 5)?);
+        put(w, 35, 27, signed(e.pos_m[i], 2f64.powi(-11) * 1e3, 27)?);
+    }
+    let tk = unsigned((e.tk_s / 30.0).floor(), 12)?;
+    put(&mut s[0], 76, 5, (tk / 120) % 24);
+    put(&mut s[0], 71, 6, (tk / 2) % 60);
+    put(&mut s[0], 65, 1, tk % 2);
+    put(&mut s[1], 80, 3, u64::from(e.health & 7));
+    put(&mut s[1], 76, 7, unsigned(e.tb_s / 900.0, 7)?);
+    put(&mut s[2], 79, 11, signed(e.gamma, 2f64.powi(-40), 11)?);
+    put(&mut s[3], 80, 22, signed(e.tau_s, 2f64.powi(-30), 22)?);
+    put(&mut s[3], 53, 5, u64::from(e.age_days & 31));
+    put(&mut s[3], 33, 4, u64::from(e.accuracy_index & 15));
+    put(&mut s[3], 26, 11, u64::from(e.day_in_interval & 0x7FF));
+    put(&mut s[3], 15, 5, u64::from(e.slot & 31));
+    Some(s)
+}
+
 /// Seconds from t_b to the instant at UTC `utc_ns`, within ±12 h (t_b is a time of the
 /// Moscow day).
 pub fn seconds_since_tb(tb_s: f64, utc_ns: i64) -> f64 {
@@ -314,9 +368,10 @@ impl GloStore {
             }
         };
         let next = match (s, self.partial[idx].take()) {
-            (GloString::One { axis, .. }, _) => {
+            (GloString::One { axis, tk_s }, _) => {
                 let mut e = GloEphemeris {
                     slot,
+                    tk_s,
                     ..GloEphemeris::default()
                 };
                 set_axis(&mut e, 0, &axis);
@@ -337,6 +392,7 @@ impl GloStore {
                 GloString::Four {
                     tau_s,
                     accuracy_index,
+                    age_days,
                     day_in_interval,
                     slot: n,
                 },
@@ -345,6 +401,7 @@ impl GloStore {
                 e.tau_s = tau_s;
                 e.day_in_interval = day_in_interval;
                 e.accuracy_index = accuracy_index;
+                e.age_days = age_days;
                 self.latest[idx] = Some(e);
                 self.counters.ephemerides += 1;
                 None
@@ -420,6 +477,7 @@ mod tests {
             GloString::Four {
                 tau_s: -7.0 * 2f64.powi(-30),
                 accuracy_index: 6,
+                age_days: 0,
                 day_in_interval: 1275,
                 slot: 3
             }
@@ -463,6 +521,41 @@ mod tests {
         st.on_words(0, &s[0]);
         st.on_words(25, &s[0]);
         assert_eq!(st.counters.bad_strings, 2);
+    }
+
+    /// Encoded strings decode to the same immediate data (values on their scale factors).
+    #[test]
+    fn encoded_strings_decode_to_the_same_ephemeris() {
+        let e = GloEphemeris {
+            slot: 11,
+            tb_s: 71.0 * 900.0,
+            pos_m: [-1029.0 * 2f64.powi(-11) * 1e3, 12_345_678.0 * 2f64.powi(-11) * 1e3, 0.0],
+            vel_mps: [3.0 * 2f64.powi(-20) * 1e3, -2_000_000.0 * 2f64.powi(-20) * 1e3, 0.0],
+            acc_mps2: [-(2f64.powi(-30)) * 1e3, 0.0, 9.0 * 2f64.powi(-30) * 1e3],
+            gamma: -3.0 * 2f64.powi(-40),
+            tau_s: 12_345.0 * 2f64.powi(-30),
+            health: 0,
+            day_in_interval: 1275,
+            accuracy_index: 6,
+            age_days: 3,
+            tk_s: 17.0 * 3600.0 + 57.0 * 60.0 + 30.0,
+        };
+        let s = encode_strings(&e, 0x086d_0001).unwrap();
+        let mut st = GloStore::default();
+        for w in &s {
+            st.on_words(11, w);
+        }
+        assert_eq!(st.ephemeris(11), Some(&e));
+        let GloString::One { tk_s, .. } = decode_string(&s[0]).unwrap() else {
+            panic!()
+        };
+        assert_eq!(tk_s, 17.0 * 3600.0 + 57.0 * 60.0 + 30.0);
+        // A position beyond 27 bits of 2⁻¹¹ km does not fit.
+        let far = GloEphemeris {
+            pos_m: [7.0e7, 0.0, 0.0],
+            ..e
+        };
+        assert!(encode_strings(&far, 0).is_none());
     }
 
     #[test]
