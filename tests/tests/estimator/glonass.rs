@@ -262,6 +262,28 @@ fn glonass_through_rinex_agrees_with_rtklib() {
         let text = write_nav("navsync test", "20261206 000000 UTC", None, gps_records, &records);
         std::fs::write(&nav, text).unwrap();
         run_ok(&env, &["import", "rinex", &s(&obs), &s(&nav), "--out", &s(&rec)]);
+        // And out again: `export rinex` writes the same GLONASS records back.
+        let (obs2, nav2) = (
+            env.dir.join(format!("{tag}-2.obs")),
+            env.dir.join(format!("{tag}-2.nav")),
+        );
+        run_ok(
+            &env,
+            &["export", "rinex", &s(&rec), "--obs", &s(&obs2), "--nav", &s(&nav2)],
+        );
+        let back = navsync_drivers::gnss::rinex::parse_nav("back", &std::fs::read_to_string(&nav2).unwrap()).unwrap();
+        assert_eq!(back.glonass.len(), records.len(), "{name}: GLONASS records exported");
+        for (b, r) in back.glonass.iter().zip(&records) {
+            // RINEX's D19.12: twelve significant digits.
+            let near = |a: f64, b: f64| (a - b).abs() <= 1e-11 * b.abs();
+            assert_eq!((b.slot, b.toc, b.channel), (r.slot, r.toc, r.channel));
+            assert!(
+                near(b.tau_s, r.tau_s) && near(b.gamma, r.gamma),
+                "{name}: slot {}",
+                r.slot
+            );
+            assert!((0..3).all(|i| near(b.pos_m[i], r.pos_m[i])), "{name}: slot {}", r.slot);
+        }
         let csv = env.dir.join(format!("{tag}.csv"));
         run_ok(&env, &["spp", &s(&rec), "--systems", name, "--out", &s(&csv)]);
         let text = std::fs::read_to_string(&csv).unwrap();
