@@ -197,8 +197,8 @@ pub const RANGE_SYSTEMS: [u8; 4] = [GNSS_ID_GPS, GNSS_ID_GALILEO, GNSS_ID_BEIDOU
 /// What [`EphemerisStore::range_epoch`] left out of an epoch, by reason.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct RangeBuildCounts {
-    /// Signals not in [`SPP_SIGNALS`] (L2/L5/E5…, GLONASS on an unknown channel), of systems not asked for, or
-    /// with a preferred signal of the same satellite in the epoch.
+    /// Signals not in [`SPP_SIGNALS`] (L2/L5/E5…, GLONASS on an unknown channel), of systems
+    /// not asked for, or with a preferred signal of the same satellite in the epoch.
     pub other_signals: u64,
     /// Signals whose pseudorange the receiver marks invalid.
     pub invalid: u64,
@@ -266,13 +266,13 @@ pub struct EphemerisStore {
     pub bad_subframes: u64,
     /// Ephemerides completed (a new issue of subframes 1–3).
     pub ephemerides: u64,
-    /// Galileo and BeiDou (on the heap: ~130 kB, allocated once with the store).
+    /// Galileo, BeiDou and GLONASS (on the heap: ~130 kB, allocated once with the store).
     others: Box<OtherSystems>,
     /// Galileo, BeiDou and GLONASS ephemerides completed.
     pub other_ephemerides: u64,
 }
 
-/// The Galileo and BeiDou part of an [`EphemerisStore`].
+/// The Galileo, BeiDou and GLONASS part of an [`EphemerisStore`].
 #[derive(Debug, Clone)]
 struct OtherSystems {
     /// Navigation data assembled per satellite.
