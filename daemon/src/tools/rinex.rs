@@ -183,12 +183,7 @@ impl Record {
 /// else the table's), on channel `channel`: the inverse of [`glonass_strings`].
 pub fn glonass_record_of(e: &GloEphemeris, near: &navsync_shared::samples::GnssRaw, channel: i8) -> GloRecord {
     let gps_s = f64::from(near.week) * WEEK_S + near.rcv_tow_s;
-    let leap = if near.rec_stat & 1 != 0 {
-        f64::from(near.leap_s)
-    } else {
-        let gps_ns = (gps_s * 1e9) as i64;
-        f64::from(navsync_shared::time::gps_minus_utc_s(utc_ns_from_gps_ns(gps_ns)))
-    };
+    let leap = f64::from(near.gps_minus_utc_s());
     let moscow = glonass::MOSCOW_OFFSET_S as f64;
     let utc_s = gps_s - leap;
     let dt = (e.tb_s - (utc_s + moscow).rem_euclid(86_400.0) + 43_200.0).rem_euclid(86_400.0) - 43_200.0;

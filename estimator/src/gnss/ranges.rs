@@ -470,8 +470,7 @@ impl EphemerisStore {
     /// receiver's Galileo clock; GLONASS: GPS time, its offset from GLONASS time left in the
     /// receiver's GLONASS clock). A GLONASS signal's carrier is its channel's (u-blox
     /// `freqId` − 7); one without a channel (`freqId` > 13) counts as another signal. GPS −
-    /// UTC is the receiver's when it marks it valid (`recStat` bit 0), else the table's at
-    /// the epoch. What is left out is counted in `counts`.
+    /// UTC: [`GnssRaw::gps_minus_utc_s`]. What is left out is counted in `counts`.
     fn each_signal(
         &self,
         raw: &GnssRaw,
@@ -481,12 +480,7 @@ impl EphemerisStore {
     ) {
         let n = usize::from(raw.num_meas).min(raw.meas.len());
         let meas = &raw.meas[..n];
-        let leap_s = f64::from(if raw.rec_stat & 1 != 0 {
-            raw.leap_s
-        } else {
-            let gps_ns = i64::from(raw.week) * 604_800_000_000_000 + (raw.rcv_tow_s * 1e9) as i64;
-            navsync_wire::time::gps_minus_utc_s(navsync_wire::time::utc_ns_from_gps_ns(gps_ns))
-        });
+        let leap_s = f64::from(raw.gps_minus_utc_s());
         let rank = |g: u8, s: u8| SPP_SIGNALS.iter().position(|&(sg, ss, _, _)| sg == g && ss == s);
         for (k, m) in meas.iter().enumerate() {
             let channel = (m.gnss_id == GNSS_ID_GLONASS).then_some(m.freq_id);

@@ -66,6 +66,18 @@ crate::sample_struct! {
 /// u-blox `locktime` saturates here, ms (the u-blox interface description, UBX-RXM-RAWX).
 pub const LOCK_TIME_MAX_MS: u16 = 64_500;
 
+impl GnssRaw {
+    /// GPS − UTC at the epoch, s: the receiver's when it marks it valid (`recStat` bit 0),
+    /// else the leap-second table's ([`crate::time::gps_minus_utc_s`]) at the epoch's time.
+    pub fn gps_minus_utc_s(&self) -> i16 {
+        if self.rec_stat & 1 != 0 {
+            return self.leap_s;
+        }
+        let gps_ns = i64::from(self.week) * 604_800_000_000_000 + (self.rcv_tow_s * 1e9) as i64;
+        crate::time::gps_minus_utc_s(crate::time::utc_ns_from_gps_ns(gps_ns))
+    }
+}
+
 impl RawMeasurement {
     /// Whether the receiver kept lock on a carrier between a measurement with lock time
     /// `prev_ms` and this one `dt_s` later with `lock_time_ms`: the count did not fall (unless
