@@ -1,8 +1,8 @@
 //! `navsync export rinex REC.mcap --obs OUT.obs --nav OUT.nav`: a recording's raw
-//! measurements as a RINEX 3.05 observation file and the GPS and GLONASS ephemerides of its
-//! navigation data as a RINEX 3.05 navigation file, the inverse of `navsync import rinex` (the
-//! text is written by `navsync_drivers::gnss::rinex_write`, RINEX 3.05 Tables A2/A3 and
-//! A5/A8/A10).
+//! measurements as a RINEX 3.05 observation file and the GPS, GLONASS, Galileo and BeiDou
+//! ephemerides of its navigation data as a RINEX 3.05 navigation file, the inverse of `navsync
+//! import rinex` (the text is written by `navsync_drivers::gnss::rinex_write`, RINEX 3.05 Tables
+//! A2/A3 and A5/A8/A10 and the Galileo and BDS record tables).
 //!
 //! The raw epochs (`GnssRaw` on `navsync/gnss/{id}/raw`, from `import rinex` or a u-blox
 //! receiver's RXM-RAWX) are written at their receiver time, GPS time. The navigation data
@@ -11,7 +11,10 @@
 //! ephemeris (the same issue repeated every 30 s is written once), scaled back to RINEX units by
 //! `rinex::ephemeris_of`, and the last subframe 4 page 18 gives the header's Klobuchar α/β.
 //! GLONASS strings 1–4 of one frame (`gnss::glonass`) are one ephemeris (written once per
-//! t_b), its UTC date the one nearest the epochs around it, its channel the observations'. The
+//! t_b), its UTC date the one nearest the epochs around it, its channel the observations'.
+//! Galileo I/NAV and F/NAV and BeiDou D1/D2 words go through the estimator's
+//! [`NavCollector`]: each ephemeris it completes is one record ([`kepler_record_of`]); GPS
+//! CNAV's are counted and left out (RINEX 3.05 has no CNAV record). The
 //! header's `APPROX POSITION XYZ` is the first epoch's single-point solution (`navsync spp`'s),
 //! zeros when no epoch has one.
 
@@ -19,8 +22,9 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use navsync_drivers::gnss::rinex::{GloRecord, GpsEphemeris};
-use navsync_drivers::gnss::rinex_write::{self, ObsHeader, RinexWriteError};
-use navsync_estimator::gnss::broadcast::{GNSS_ID_GLONASS, carries_lnav};
+use navsync_drivers::gnss::rinex_write::{self, KeplerRecord, NavRecords, ObsHeader, RinexWriteError};
+use navsync_estimator::gnss::broadcast::{GNSS_ID_GLONASS, NavCollector, NavEphemeris, carries_lnav};
+use navsync_estimator::gnss::galileo;
 use navsync_estimator::gnss::glonass::{GloEphemeris, GloStore};
 use navsync_estimator::gnss::lnav::{self, Ephem1, Ephem2, Ephem3, Subframe};
 use navsync_estimator::gnss::ranges::{EphemerisStore, RangeBuildCounts};
@@ -36,7 +40,7 @@ use super::rinex::{ephemeris_of, glonass_record_of, iono_of_page};
 /// `navsync export …`.
 #[derive(Debug, Clone, clap::Subcommand)]
 pub enum ExportCommand {
-    /// A recording's raw measurements and GPS navigation data as RINEX 3.05 observation and
+    /// A recording's raw measurements and navigation data as RINEX 3.05 observation and
     /// navigation files.
     Rinex(RinexExportArgs),
 }
@@ -50,7 +54,7 @@ pub struct RinexExportArgs {
     /// The observation file to write (RINEX 3.05).
     #[arg(long)]
     pub obs: PathBuf,
-    /// The GPS and GLONASS navigation file to write (RINEX 3.05).
+    /// The navigation file to write (RINEX 3.05): GPS, GLONASS, Galileo and BeiDou records.
     #[arg(long)]
     pub nav: PathBuf,
     /// The receiver's id in the recording (`navsync/gnss/ID/raw`, `…/nav-data`).
@@ -104,6 +108,12 @@ pub struct ExportStats {
     pub glonass_ephemerides: u64,
     /// GLONASS ephemerides not written: no observation gives their slot's channel.
     pub glonass_without_channel: u64,
+    /// Galileo ephemerides written (I/NAV and F/NAV, each issue once).
+    pub galileo_ephemerides: u64,
+    /// BeiDou ephemerides written (D1 and D2).
+    pub beidou_ephemerides: u64,
+    /// GPS CNAV ephemerides not written: RINEX 3.05 has no record for them (RINEX 4's `CNAV`).
+    pub gps_cnav_left_out: u64,
     /// Navigation messages that failed the LNAV parity or preamble check.
     pub bad_subframes: u64,
     /// The header's Klobuchar α/β were written (subframe 4 page 18 seen).
@@ -127,8 +137,9 @@ pub fn main(cmd: ExportCommand) -> anyhow::Result<()> {
     let s = export(&args).with_context(|| format!("exporting {}", args.recording.display()))?;
     eprintln!(
         "{}: {} epochs, {} measurements ({} of signals without a RINEX code left out); {}: {} GPS \
-         ephemerides{}, {} GLONASS ephemerides ({} navigation messages failed the parity check; {} GLONASS \
-         ephemerides without a channel left out)",
+         ephemerides{}, {} GLONASS, {} Galileo, {} BeiDou ephemerides ({} navigation messages failed the \
+         parity check; {} GLONASS ephemerides without a channel and {} GPS CNAV ones, which RINEX 3.05 \
+         has no record for, left out)",
         args.obs.display(),
         s.epochs,
         s.measurements,
@@ -137,8 +148,11 @@ pub fn main(cmd: ExportCommand) -> anyhow::Result<()> {
         s.ephemerides,
         if s.iono { " and the Klobuchar α/β" } else { "" },
         s.glonass_ephemerides,
+        s.galileo_ephemerides,
+        s.beidou_ephemerides,
         s.bad_subframes,
-        s.glonass_without_channel
+        s.glonass_without_channel,
+        s.gps_cnav_left_out
     );
     match s.approx_ecef_m {
         Some(p) => eprintln!(
@@ -148,8 +162,8 @@ pub fn main(cmd: ExportCommand) -> anyhow::Result<()> {
         None => eprintln!("  no epoch solved: approximate position written as zeros"),
     }
     anyhow::ensure!(
-        s.ephemerides + s.glonass_ephemerides > 0,
-        "no GPS or GLONASS ephemeris in {}",
+        s.ephemerides + s.glonass_ephemerides + s.galileo_ephemerides + s.beidou_ephemerides > 0,
+        "no GPS, GLONASS, Galileo or BeiDou ephemeris in {}",
         args.recording.display()
     );
     Ok(())
@@ -179,6 +193,9 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
     // GLONASS: each ephemeris once (t_k aside), with the number of epochs read before it.
     let mut glo = GloStore::default();
     let mut glo_done: Vec<(usize, GloEphemeris)> = Vec::new();
+    // Galileo, BeiDou (and GPS CNAV) ephemerides, each once, with the epochs read before it.
+    let mut others = NavCollector::default();
+    let mut others_done: Vec<(usize, NavEphemeris)> = Vec::new();
     // The first single-point solution, with the ephemerides received up to its epoch.
     let mut store = EphemerisStore::default();
     let settings = SppSettings::default();
@@ -210,7 +227,16 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
                     }
                     continue;
                 }
-                if !carries_lnav(d.gnss_id, d.sig_id) || d.num_words < 10 {
+                if !carries_lnav(d.gnss_id, d.sig_id) {
+                    let n = usize::from(d.num_words).min(d.words.len());
+                    if let Ok(Some(e)) = others.on_words(d.gnss_id, d.sv_id, d.sig_id, &d.words[..n])
+                        && !others_done.iter().any(|(_, x)| *x == e)
+                    {
+                        others_done.push((epochs.len(), e));
+                    }
+                    continue;
+                }
+                if d.num_words < 10 {
                     continue;
                 }
                 let Ok(dec) = lnav::decode(&d.words[..10]) else {
@@ -262,6 +288,16 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
         }
     }
     stats.glonass_ephemerides = glonass.len() as u64;
+    let mut kepler: Vec<KeplerRecord> = Vec::new();
+    for (at, e) in &others_done {
+        match (kepler_record_of(e, epochs.get(*at).or(epochs.last())), e) {
+            (Some(k), _) => kepler.push(k),
+            (None, NavEphemeris::GpsCnav(_)) => stats.gps_cnav_left_out += 1,
+            (None, _) => {}
+        }
+    }
+    stats.galileo_ephemerides = kepler.iter().filter(|k| k.system == 'E').count() as u64;
+    stats.beidou_ephemerides = kepler.iter().filter(|k| k.system == 'C').count() as u64;
 
     let program = format!("navsync {}", env!("CARGO_PKG_VERSION"));
     let c = civil_from_utc_ns(realtime_now_ns());
@@ -282,7 +318,16 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
     };
     let obs = rinex_write::write_obs(&header, &epochs)?;
     stats.unmapped = obs.unmapped;
-    let nav = rinex_write::write_nav(&program, &date, iono, &ephemerides, &glonass);
+    let nav = rinex_write::write_nav(
+        &program,
+        &date,
+        &NavRecords {
+            iono,
+            gps: &ephemerides,
+            glonass: &glonass,
+            kepler: &kepler,
+        },
+    );
 
     // Both files complete before either is renamed into place.
     let inputs = [args.recording.as_path()];
@@ -300,4 +345,91 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
         f.commit()?;
     }
     Ok(stats)
+}
+
+/// The week of seconds-of-week `t_s` nearest the instant `near_week`, `near_s` of the same time
+/// scale.
+fn week_near(t_s: f64, near_week: i64, near_s: f64) -> u32 {
+    (near_week - ((t_s - near_s) / 604_800.0).round() as i64).max(0) as u32
+}
+
+/// The RINEX record of a Galileo (I/NAV, F/NAV) or BeiDou (D1, D2) ephemeris received near the
+/// epoch `near` (which resolves the weeks of t_oc and t_oe; Galileo's 12-bit and BeiDou's 13-bit
+/// week numbers are not used); `None` for GPS CNAV, which RINEX 3.05 has no record for, and
+/// without an epoch. Galileo's data sources (RINEX 3.05 Galileo record, ORBIT 5): I/NAV
+/// 513 (bits 0 and 9: E1-B, clock for E5b,E1), F/NAV 258 (bits 1 and 8: E5a-I, clock for
+/// E5a,E1), as RTKLIB's `convbin` writes them; SV health bits 0–2 E1-B DVS/HS, 3–5 E5a, 6–8
+/// E5b (OS SIS ICD §5.1.9.3). BeiDou's times are BDT (GPS − 14 s, BDS-SIS-ICD-B1I §4.3).
+pub fn kepler_record_of(e: &NavEphemeris, near: Option<&GnssRaw>) -> Option<KeplerRecord> {
+    let near = near?;
+    let (gps_week, gps_s) = (i64::from(near.week), near.rcv_tow_s);
+    let o = e.broadcast().orbit;
+    let sisa = |index: u8| galileo::sisa_m(index).unwrap_or(-1.0);
+    let (system, sv, week, iod, sources, accuracy, health, delays, tx, last) = match e {
+        NavEphemeris::Galileo(g) => {
+            let w5 = &g.w5;
+            let health = u16::from(w5.e1b_dvs)
+                | (u16::from(w5.e1b_hs) << 1)
+                | (u16::from(w5.e5b_dvs) << 6)
+                | (u16::from(w5.e5b_hs) << 7);
+            (
+                'E',
+                g.sv,
+                week_near(o.toe_s, gps_week, gps_s),
+                g.w1.iod_nav,
+                513.0,
+                sisa(g.w3.sisa),
+                f64::from(health),
+                [w5.bgd_e1_e5a_s, w5.bgd_e1_e5b_s],
+                f64::from(w5.tow_s),
+                0.0,
+            )
+        }
+        NavEphemeris::GalileoFnav(f) => (
+            'E',
+            f.sv,
+            week_near(o.toe_s, gps_week, gps_s),
+            f.p1.iod_nav,
+            258.0,
+            sisa(f.p1.sisa),
+            f64::from((f.p1.e5a_dvs << 3) | (f.p1.e5a_hs << 4)),
+            [f.p1.bgd_e1_e5a_s, 0.0],
+            f64::from(f.p1.tow_s),
+            0.0,
+        ),
+        NavEphemeris::Beidou(b) => {
+            let bdt_s = gps_s + navsync_estimator::gnss::ranges::BDT_MINUS_GPST_S;
+            let bdt_week = gps_week - i64::from(rinex_write::BDT_WEEK_OFFSET);
+            (
+                'C',
+                b.sv,
+                week_near(o.toe_s, bdt_week, bdt_s),
+                u16::from(b.s1.aode),
+                0.0,
+                navsync_estimator::gnss::ranges::ura_m(b.s1.urai).unwrap_or(-1.0),
+                f64::from(b.s1.sat_h1),
+                [b.s1.tgd1_s, b.s1.tgd2_s],
+                f64::from(b.sow_s),
+                f64::from(b.s1.aodc),
+            )
+        }
+        NavEphemeris::GpsCnav(_) => return None,
+    };
+    let toc_week = (i64::from(week) - ((o.toc_s - o.toe_s) / 604_800.0).round() as i64).max(0) as u32;
+    Some(KeplerRecord {
+        system,
+        sv,
+        toc_week,
+        toc_s: o.toc_s,
+        af: o.af,
+        orbit: [
+            [f64::from(iod), o.crs, o.delta_n_rad_s, o.m0_rad],
+            [o.cuc, o.e, o.cus, o.sqrt_a],
+            [o.toe_s, o.cic, o.omega0_rad, o.cis],
+            [o.i0_rad, o.crc, o.omega_rad, o.omega_dot_rad_s],
+            [o.idot_rad_s, sources, f64::from(week), 0.0],
+            [accuracy, health, delays[0], delays[1]],
+            [tx, last, 0.0, 0.0],
+        ],
+    })
 }

@@ -352,8 +352,9 @@ fn version_line(lines: &mut Lines<'_>, want: char) -> Result<(f64, char), RinexE
 /// their u-blox (gnssId, sigId) (u-blox interface description, "Signal identifiers"): the one
 /// table both directions use, [`ublox_signal`] (import) and [`rinex_signal`] (export). Where two
 /// RINEX codes name one u-blox signal (BeiDou B1I: C2I since RINEX 3.02, C1I before) the first
-/// is the one written.
-pub const SIGNALS: [(char, char, char, u8, u8); 20] = [
+/// is the one written; where one RINEX code names two u-blox signals (BeiDou's D1 and D2 of one
+/// band: the code is the band's, D2 the GEO satellites' message) the first is the one read.
+pub const SIGNALS: [(char, char, char, u8, u8); 24] = [
     ('G', '1', 'C', 0, 0),
     ('G', '2', 'L', 0, 3),
     ('G', '2', 'S', 0, 4),
@@ -369,6 +370,10 @@ pub const SIGNALS: [(char, char, char, u8, u8); 20] = [
     ('C', '2', 'I', 3, 0),
     ('C', '1', 'I', 3, 0),
     ('C', '7', 'I', 3, 2),
+    ('C', '6', 'I', 3, 4),
+    ('C', '2', 'I', 3, 1),
+    ('C', '7', 'I', 3, 3),
+    ('C', '6', 'I', 3, 10),
     ('J', '1', 'C', 5, 0),
     ('J', '2', 'S', 5, 4),
     ('J', '2', 'L', 5, 5),
@@ -1209,12 +1214,25 @@ E11  23000000.500    23000005.000
 
     #[test]
     fn the_signal_table_maps_both_ways() {
-        for (sys, band, attr, g, sig) in SIGNALS {
-            assert_eq!(ublox_signal(sys, band, attr), Some((g, sig)));
+        for (k, (sys, band, attr, g, sig)) in SIGNALS.into_iter().enumerate() {
+            // A code read as the first u-blox signal it names: the same system and band.
+            let first = SIGNALS
+                .iter()
+                .position(|s| (s.0, s.1, s.2) == (sys, band, attr))
+                .unwrap();
+            let read = ublox_signal(sys, band, attr).unwrap();
+            assert_eq!(read, (SIGNALS[first].3, SIGNALS[first].4));
+            assert!(first == k || (read.0 == g && sys == 'C'), "{sys}{band}{attr}");
+            // A u-blox signal written as its first code, which reads back to it or, for
+            // BeiDou's D2, to the D1 signal of its band.
             let back = rinex_signal(g, sig).unwrap();
-            assert_eq!(ublox_signal(back.0, back.1, back.2), Some((g, sig)));
+            let again = ublox_signal(back.0, back.1, back.2).unwrap();
+            assert!(again == (g, sig) || (g == 3 && [(1, 0), (3, 2), (10, 4)].contains(&(sig, again.1))));
         }
         assert_eq!(rinex_signal(3, 0), Some(('C', '2', 'I')));
+        // BeiDou's D2 (GEO) signals are written with their band's code and read as D1's.
+        assert_eq!(rinex_signal(3, 10), Some(('C', '6', 'I')));
+        assert_eq!(ublox_signal('C', '6', 'I'), Some((3, 4)));
         assert_eq!(rinex_signal(0, 0), Some(('G', '1', 'C')));
         assert_eq!((rinex_signal(0, 1), ublox_signal('G', '2', 'W')), (None, None));
     }

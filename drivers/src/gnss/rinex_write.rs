@@ -1,12 +1,13 @@
-//! RINEX 3.05 observation and GPS/GLONASS navigation files written as text (pure: no I/O), the
-//! inverse of [`super::rinex`]: a receiver's [`GnssRaw`] epochs and its GPS and GLONASS
+//! RINEX 3.05 observation and navigation files written as text (pure: no I/O), the inverse of
+//! [`super::rinex`]: a receiver's [`GnssRaw`] epochs and its GPS, GLONASS, Galileo and BeiDou
 //! ephemerides out.
 //!
 //! Format: RINEX 3.05 (IGS/RTCM-SC104, "RINEX The Receiver Independent Exchange Format Version
 //! 3.05", 2020): observation header Table A2, records Table A3 (§5.4 half-cycle ambiguities,
 //! §5.7 signal strength), observation codes §5.1 (the u-blox signal ids mapped back by
 //! [`super::rinex::rinex_signal`]); navigation header Table A5 (`IONOSPHERIC CORR` GPSA/GPSB),
-//! GPS records Table A8, GLONASS records Table A10.
+//! GPS records Table A8, GLONASS records Table A10, and the appendix's "GALILEO" and "BDS
+//! NAVIGATION MESSAGE FILE – DATA RECORD DESCRIPTION" tables.
 
 use std::fmt::Write;
 
@@ -337,25 +338,76 @@ pub fn write_obs(h: &ObsHeader, epochs: &[GnssRaw]) -> Result<ObsText, RinexWrit
     Ok(ObsText { text: out, unmapped })
 }
 
-/// A GPS and GLONASS navigation file (RINEX 3.05, Tables A5, A8 and A10): the header with the
-/// Klobuchar α/β as `IONOSPHERIC CORR` GPSA/GPSB when given, then each GPS ephemeris (t_oc as
-/// a calendar epoch, values as D19.12, the fit interval in hours) and each GLONASS one (t_b as
-/// a UTC calendar epoch, −τ_n, γ_n, t_k as s of the UTC day; km, km/s, km/s²; health, channel,
-/// age; 3.05's fourth orbit line with status flags and the L1/L2 delay difference unknown, 0,
-/// the accuracy index F_T as URAI (4, 5 m, when unknown), health flags 0). The system is `G`,
-/// `R` or `M` (mixed) after what it holds.
-pub fn write_nav(
-    program: &str,
-    date: &str,
-    iono: Option<([f64; 4], [f64; 4])>,
-    ephemerides: &[GpsEphemeris],
-    glonass: &[GloRecord],
-) -> String {
+/// Weeks from the GPS epoch (1980-01-06) to the BDT epoch (2006-01-01, a Sunday): BDT week w
+/// starts on the calendar day of GPS week w + 1356 (BDS-SIS-ICD-B1I §4.3: BDT counts from
+/// 2006-01-01 00:00:00 UTC, 14 s behind GPS time).
+pub const BDT_WEEK_OFFSET: u32 = 1356;
+
+/// A Galileo or a BeiDou navigation record (RINEX 3.05's Galileo and BDS navigation data record
+/// tables: the layout of GPS's Table A8 with other meanings in some fields), in the system's own time: GST, written as GPS
+/// time (the same weeks and seconds), or BDT.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KeplerRecord {
+    /// `'E'` Galileo or `'C'` BeiDou.
+    pub system: char,
+    /// Satellite (Galileo SVID, BeiDou PRN).
+    pub sv: u8,
+    /// The week of t_oc: Galileo's as RINEX counts it (continuous, aligned with GPS weeks),
+    /// BeiDou's BDT week (weeks since 2006-01-01).
+    pub toc_week: u32,
+    /// t_oc, s of that week.
+    pub toc_s: f64,
+    /// Clock bias (s), drift (s/s), drift rate (s/s²).
+    pub af: [f64; 3],
+    /// BROADCAST ORBIT 1–7 in the table's order and units. Galileo: IODnav, C_rs, Δn, M_0 /
+    /// C_uc, e, C_us, √A / t_oe, C_ic, Ω_0, C_is / i_0, C_rc, ω, Ω̇ / IDOT, data sources, GAL
+    /// week, spare / SISA (m), SV health, BGD E5a/E1, BGD E5b/E1 / transmission time, spare.
+    /// BeiDou: AODE … / IDOT, spare, BDT week, spare / URA (m), SatH1, T_GD1 B1/B3, T_GD2
+    /// B2/B3 / transmission time, AODC. Of ORBIT 7 the first two are written.
+    pub orbit: [[f64; 4]; 7],
+}
+
+/// The records of a navigation file.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NavRecords<'a> {
+    /// GPS's Klobuchar α/β (`IONOSPHERIC CORR` GPSA/GPSB).
+    pub iono: Option<([f64; 4], [f64; 4])>,
+    /// GPS LNAV ephemerides.
+    pub gps: &'a [GpsEphemeris],
+    /// GLONASS ephemerides.
+    pub glonass: &'a [GloRecord],
+    /// Galileo and BeiDou ephemerides.
+    pub kepler: &'a [KeplerRecord],
+}
+
+/// A navigation file (RINEX 3.05, Tables A5, A8, A10 and the Galileo and BDS record tables):
+/// the header with the Klobuchar
+/// α/β as `IONOSPHERIC CORR` GPSA/GPSB when given, then each GPS ephemeris (t_oc as a calendar
+/// epoch, values as D19.12, the fit interval in hours), each GLONASS one (t_b as a UTC
+/// calendar epoch, −τ_n, γ_n, t_k as s of the UTC day; km, km/s, km/s²; health, channel, age;
+/// 3.05's fourth orbit line with status flags and the L1/L2 delay difference unknown, 0, the
+/// accuracy index F_T as URAI (4, 5 m, when unknown), health flags 0) and each Galileo and
+/// BeiDou one (t_oc as a calendar epoch of GST, of BDT). The system is `G`, `R`, `E`, `C` or
+/// `M` (mixed) after what it holds.
+pub fn write_nav(program: &str, date: &str, records: &NavRecords) -> String {
+    let NavRecords {
+        iono,
+        gps: ephemerides,
+        glonass,
+        kepler,
+    } = *records;
+    let mut systems: Vec<char> = kepler.iter().map(|k| k.system).collect();
+    systems.extend(ephemerides.first().map(|_| 'G'));
+    systems.extend(glonass.first().map(|_| 'R'));
+    systems.sort_unstable();
+    systems.dedup();
     let mut out = String::new();
-    let system = match (ephemerides.is_empty(), glonass.is_empty()) {
-        (false, false) => "M: MIXED",
-        (true, false) => "R: GLONASS",
-        _ => "G: GPS",
+    let system = match systems.as_slice() {
+        ['R'] => "R: GLONASS",
+        ['E'] => "E: GALILEO",
+        ['C'] => "C: BEIDOU",
+        [] | ['G'] => "G: GPS",
+        _ => "M: MIXED",
     };
     header(
         &mut out,
@@ -427,6 +479,27 @@ pub fn write_nav(
         }
         let urai = f64::from(r.accuracy_index.unwrap_or(4));
         let _ = writeln!(out, "    {}{}{}{}", f(0.0), f(0.0), f(urai), f(0.0));
+    }
+    for k in kepler {
+        let f = |x: f64| fortran_e(x, 19, 12);
+        // BDT's calendar is GPS's shifted by whole weeks (no leap second between the epochs'
+        // days matters: each scale's own calendar is written).
+        let week = k.toc_week + if k.system == 'C' { BDT_WEEK_OFFSET } else { 0 };
+        let (y, mo, d, hh, mm, ss) = calendar(week, k.toc_s);
+        let _ = writeln!(
+            out,
+            "{}{:02} {y:4} {mo:02} {d:02} {hh:02} {mm:02} {:02}{}{}{}",
+            k.system,
+            k.sv,
+            ss.round() as u32,
+            f(k.af[0]),
+            f(k.af[1]),
+            f(k.af[2])
+        );
+        for (i, row) in k.orbit.iter().enumerate() {
+            let row = if i == 6 { &row[..2] } else { &row[..] };
+            let _ = writeln!(out, "    {}", row.iter().map(|x| f(*x)).collect::<String>());
+        }
     }
     out
 }
@@ -570,7 +643,14 @@ mod tests {
             accuracy_index: Some(3),
         };
         for mixed in [false, true] {
-            let text = write_nav("navsync", "20261205 061500 UTC", None, &[], &[r]);
+            let text = write_nav(
+                "navsync",
+                "20261205 061500 UTC",
+                &NavRecords {
+                    glonass: &[r],
+                    ..NavRecords::default()
+                },
+            );
             let text = if mixed {
                 text.replace("R: GLONASS", "M: MIXED  ")
             } else {
@@ -645,7 +725,15 @@ mod tests {
         };
         let alpha = [1.118e-8, 1.49e-8, -5.96e-8, -5.96e-8];
         let beta = [88_060.0, 16_380.0, -196_600.0, -131_100.0];
-        let text = write_nav("navsync", "20261205 061500 UTC", Some((alpha, beta)), &[e], &[]);
+        let text = write_nav(
+            "navsync",
+            "20261205 061500 UTC",
+            &NavRecords {
+                iono: Some((alpha, beta)),
+                gps: &[e],
+                ..NavRecords::default()
+            },
+        );
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(
             lines[2],
@@ -660,5 +748,56 @@ mod tests {
         assert_eq!(back.version, 3.05);
         assert_eq!((back.iono_alpha, back.iono_beta), (Some(alpha), Some(beta)));
         assert_eq!(back.ephemerides, [GpsEphemeris { line: 6, ..e }]);
+    }
+
+    /// Galileo records are dated in GST (GPS's weeks and calendar), BeiDou's in BDT (its week
+    /// 0 began on 2006-01-01): the walk's C21 of BDT week 1025, t_oc 406800 s, and E07 of week
+    /// 2381, t_oc 407400 s, as RTKLIB's `convbin` dates them (2025-08-28 17:00:00 and 17:10:00);
+    /// eight lines each, ORBIT 7 with two values, the file `M` when mixed, `E` when Galileo alone.
+    #[test]
+    fn galileo_and_beidou_records_are_dated_in_their_own_time() {
+        let mut orbit = [[0.0; 4]; 7];
+        orbit[6] = [408_630.0, 1.0, 0.0, 0.0];
+        let c21 = KeplerRecord {
+            system: 'C',
+            sv: 21,
+            toc_week: 1025,
+            toc_s: 406_800.0,
+            af: [-9.634450543672e-4, -6.846967437468e-12, 0.0],
+            orbit,
+        };
+        let e07 = KeplerRecord {
+            system: 'E',
+            sv: 7,
+            toc_week: 2381,
+            toc_s: 407_400.0,
+            ..c21
+        };
+        let text = write_nav(
+            "navsync",
+            "20261206 000000 UTC",
+            &NavRecords {
+                kepler: &[c21, e07],
+                ..NavRecords::default()
+            },
+        );
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(lines[0].contains("M: MIXED"), "{}", lines[0]);
+        assert_eq!(lines.len(), 3 + 2 * 8);
+        assert_eq!(
+            lines[3],
+            "C21 2025 08 28 17 00 00-9.634450543672E-04-6.846967437468E-12 0.000000000000E+00"
+        );
+        assert_eq!(lines[10], "     4.086300000000E+05 1.000000000000E+00");
+        assert!(lines[11].starts_with("E07 2025 08 28 17 10 00"), "{}", lines[11]);
+        let alone = write_nav(
+            "navsync",
+            "20261206 000000 UTC",
+            &NavRecords {
+                kepler: &[e07],
+                ..NavRecords::default()
+            },
+        );
+        assert!(alone.lines().next().unwrap().contains("E: GALILEO"));
     }
 }

@@ -184,7 +184,7 @@ fn glonass_pseudoranges_solve_with_real_immediate_data() {
 fn glonass_through_rinex_agrees_with_rtklib() {
     use navsync::tools::rinex::{ephemeris_of, glonass_record_of, subframes_of};
     use navsync_drivers::gnss::rinex::GpsEphemeris;
-    use navsync_drivers::gnss::rinex_write::{ObsHeader, write_nav, write_obs};
+    use navsync_drivers::gnss::rinex_write::{NavRecords, ObsHeader, write_nav, write_obs};
     use navsync_estimator::gnss::lnav::Subframe;
     let env = navsync_tests::TestEnv::new("glorinex");
     let bytes = std::fs::read(shared_material("corpora/gpsd-ubx").join("ublox-glo.log")).unwrap();
@@ -259,7 +259,15 @@ fn glonass_through_rinex_agrees_with_rtklib() {
             env.dir.join(format!("{tag}.mcap")),
         );
         std::fs::write(&obs, write_obs(&header, &epochs).unwrap().text).unwrap();
-        let text = write_nav("navsync test", "20261206 000000 UTC", None, gps_records, &records);
+        let text = write_nav(
+            "navsync test",
+            "20261206 000000 UTC",
+            &NavRecords {
+                gps: gps_records,
+                glonass: &records,
+                ..NavRecords::default()
+            },
+        );
         std::fs::write(&nav, text).unwrap();
         run_ok(&env, &["import", "rinex", &s(&obs), &s(&nav), "--out", &s(&rec)]);
         // And out again: `export rinex` writes the same GLONASS records back.

@@ -160,6 +160,28 @@ fn rtklib_spp(rnx2rtkp: &Path, obs: &Path, nav: &Path, out: &Path, systems: &str
         .collect()
 }
 
+/// RTKLIB's `convbin` and `rnx2rtkp`, when built (else the test is skipped, saying why).
+pub(crate) fn rtklib_tools() -> Option<(PathBuf, PathBuf)> {
+    Some((
+        rtklib("convbin", "NAVSYNC_CONVBIN")?,
+        rtklib("rnx2rtkp", "NAVSYNC_RNX2RTKP")?,
+    ))
+}
+
+/// RTKLIB's `convbin` of the walk's u-blox log to RINEX `version` observation and navigation
+/// files.
+pub(crate) fn convbin_walk(convbin: &Path, version: &str, obs: &Path, nav: &Path) {
+    let o = std::process::Command::new(convbin)
+        .args(["-r", "ubx", "-v", version, "-o"])
+        .arg(obs)
+        .arg("-n")
+        .arg(nav)
+        .arg(data().join("source/gnss_1730.ubx"))
+        .output()
+        .unwrap();
+    assert!(o.status.success() && obs.is_file() && nav.is_file(), "convbin failed");
+}
+
 /// navsync's horizontal RMS at the RTK-fixed epochs at most RTKLIB's on the same log over each
 /// one's own solutions, and GPS alone at most RTKLIB's GPS alone. Over the epochs both solved
 /// the two use different satellites (RTKLIB does not decode CNAV: no ephemeris of G08, G18,
@@ -167,23 +189,12 @@ fn rtklib_spp(rnx2rtkp: &Path, obs: &Path, nav: &Path, out: &Path, systems: &str
 /// asserted within 5 %.
 #[test]
 fn walk_spp_is_no_worse_than_rtklib() {
-    let (Some(convbin), Some(rnx2rtkp)) = (
-        rtklib("convbin", "NAVSYNC_CONVBIN"),
-        rtklib("rnx2rtkp", "NAVSYNC_RNX2RTKP"),
-    ) else {
+    let Some((convbin, rnx2rtkp)) = rtklib_tools() else {
         return;
     };
     let env = TestEnv::new("sppwalkrtk");
     let (obs, nav) = (env.dir.join("walk.obs"), env.dir.join("walk.nav"));
-    let o = std::process::Command::new(convbin)
-        .args(["-r", "ubx", "-v", "3.04", "-o"])
-        .arg(&obs)
-        .arg("-n")
-        .arg(&nav)
-        .arg(data().join("source/gnss_1730.ubx"))
-        .output()
-        .unwrap();
-    assert!(o.status.success() && obs.is_file() && nav.is_file(), "convbin failed");
+    convbin_walk(&convbin, "3.04", &obs, &nav);
     let fixed = rtk_fixed();
     let theirs = rtklib_spp(&rnx2rtkp, &obs, &nav, &env.dir.join("rtk.pos"), "G,E,C");
     let (ours, _, _) = navsync(&env, "G,E,C");
