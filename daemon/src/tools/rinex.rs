@@ -1,6 +1,6 @@
-//! `navsync import rinex OBS NAV [NAV…] --out REC.mcap`: a RINEX observation file and its GPS
-//! and GLONASS navigation files as a recording of a receiver's raw data (RINEX 2.11 / 3.05; the
-//! parser is `navsync_drivers::gnss::rinex`).
+//! `navsync import rinex OBS NAV [NAV…] --out REC.mcap`: a RINEX observation file and its
+//! navigation files (GPS, GLONASS, Galileo, BeiDou) as a recording of a receiver's raw data
+//! (RINEX 2.11 / 3.05; the parser is `navsync_drivers::gnss::rinex`).
 //!
 //! Each observation epoch is a `GnssRaw` on `navsync/gnss/0/raw` (its GNSS time in `week` and
 //! `rcv_tow_s`). The navigation file reaches the estimator the way a receiver's does, as GPS
@@ -11,7 +11,11 @@
 //! (`gnss::ranges::EphemerisStore`) for live and imported data. A GLONASS record becomes strings
 //! 1–4 of one frame (`glonass::encode_strings`, GLONASS ICD Table 4.5; t_b and t_k moved from
 //! RINEX's UTC to Moscow time, F_T from RINEX 3.05's URAI, else index 4, 5 m), and its channel
-//! gives the observations' GLONASS `freqId` when the observation header has none. An issue is
+//! gives the observations' GLONASS `freqId` when the observation header has none. A Galileo
+//! I/NAV record becomes word types 1–5 as E1-B page pairs (`galileo::encode_word`, OS SIS ICD
+//! Table 40, CRC-24Q), a BeiDou MEO/IGSO record D1 subframes 1–3 (`beidou::encode_d1`,
+//! BDS-SIS-ICD-B1I §5.2, BCH parity); Galileo F/NAV records (the I/NAV ones serve E1) and BeiDou
+//! GEO records (D2 is not written) are counted and left out. An issue is
 //! delivered when its t_oe (GLONASS: t_b) becomes the nearest to the epoch (RTKLIB's choice
 //! among a file's ephemerides; the first issue of each satellite before the first epoch).
 //!
@@ -20,7 +24,10 @@
 
 use std::path::{Path, PathBuf};
 
-use navsync_drivers::gnss::rinex::{self, GloRecord, GpsEphemeris, NavFile, ObsFile, RinexError};
+use navsync_drivers::gnss::rinex::{self, GloRecord, GpsEphemeris, KeplerRecord, NavFile, ObsFile, RinexError};
+use navsync_estimator::gnss::beidou::{self, D1Body, D1Subframe, Sub1, Sub2, Sub3};
+use navsync_estimator::gnss::bits::OutOfRange;
+use navsync_estimator::gnss::galileo::{self, GalEphemeris, Word1, Word2, Word3, Word4, Word5};
 use navsync_estimator::gnss::glonass::{self, GloEphemeris};
 use navsync_estimator::gnss::lnav::{self, Ephem1, Ephem2, Ephem3, IonoUtc, Subframe};
 use navsync_estimator::gnss::orbit::GPS_PI;
@@ -40,8 +47,8 @@ const WEEK_S: f64 = 604_800.0;
 pub struct RinexArgs {
     /// RINEX observation file (2.10/2.11 or 3.0x).
     pub obs: PathBuf,
-    /// RINEX navigation files (2.10/2.11 GPS `N` or GLONASS `G`, or 3.0x GPS, GLONASS or
-    /// mixed): their GPS and GLONASS records.
+    /// RINEX navigation files (2.10/2.11 GPS `N` or GLONASS `G`, or 3.0x GPS, GLONASS,
+    /// Galileo, BeiDou or mixed): their GPS, GLONASS, Galileo I/NAV and BeiDou D1 records.
     #[arg(required = true, num_args = 1..)]
     pub nav: Vec<PathBuf>,
     /// The output recording (MCAP).
@@ -91,6 +98,17 @@ pub struct RinexStats {
     pub glonass_ephemerides: u64,
     /// GLONASS measurements without a channel in any file (left out by the estimator).
     pub glonass_without_channel: u64,
+    /// Galileo ephemerides (each as I/NAV word types 1–5 on E1-B).
+    pub galileo_ephemerides: u64,
+    /// Galileo F/NAV records left out (the I/NAV ones of the same satellites serve E1).
+    pub galileo_fnav_left_out: u64,
+    /// BeiDou ephemerides (each as D1 subframes 1–3).
+    pub beidou_ephemerides: u64,
+    /// BeiDou GEO records left out (their D2 message is not written).
+    pub beidou_geo_left_out: u64,
+    /// BeiDou records whose AODE did not fit its 5 bits (RTKLIB writes its own issue number
+    /// there): its 5 low bits were kept.
+    pub beidou_aode_wrapped: u64,
     /// The header's approximate position, ECEF m.
     pub approx_ecef_m: Option<[f64; 3]>,
     /// The largest |value / scale − integer| over the quantised fields: near 0 for broadcast
@@ -115,6 +133,17 @@ pub fn main(args: &RinexArgs) -> anyhow::Result<()> {
         s.glonass_ephemerides,
         s.worst_quantisation
     );
+    if s.galileo_ephemerides + s.beidou_ephemerides + s.galileo_fnav_left_out + s.beidou_geo_left_out > 0 {
+        eprintln!(
+            "  {} Galileo ephemerides as I/NAV words 1–5, {} BeiDou ones as D1 subframes 1–3 ({} Galileo \
+             F/NAV and {} BeiDou GEO records left out; {} BeiDou AODE beyond 5 bits kept mod 32)",
+            s.galileo_ephemerides,
+            s.beidou_ephemerides,
+            s.galileo_fnav_left_out,
+            s.beidou_geo_left_out,
+            s.beidou_aode_wrapped
+        );
+    }
     if s.glonass_without_channel > 0 {
         eprintln!(
             "  {} GLONASS measurements without a frequency channel (no GLONASS SLOT / FRQ # header, \
@@ -127,8 +156,8 @@ pub fn main(args: &RinexArgs) -> anyhow::Result<()> {
     }
     anyhow::ensure!(s.epochs > 0, "no observation epoch in {}", args.obs.display());
     anyhow::ensure!(
-        s.ephemerides + s.glonass_ephemerides > 0,
-        "no GPS or GLONASS ephemeris in {}",
+        s.ephemerides + s.glonass_ephemerides + s.galileo_ephemerides + s.beidou_ephemerides > 0,
+        "no GPS, GLONASS, Galileo or BeiDou ephemeris in {}",
         args.nav
             .iter()
             .map(|p| p.display().to_string())
@@ -165,6 +194,8 @@ pub fn parse_files(obs: &Path, navs: &[PathBuf]) -> Result<(ObsFile, Vec<(String
 enum Record {
     Gps(GpsEphemeris),
     Glonass(GloRecord),
+    /// Galileo I/NAV or BeiDou D1.
+    Kepler(KeplerRecord),
 }
 
 impl Record {
@@ -174,6 +205,12 @@ impl Record {
         match self {
             Self::Gps(e) => ((0, e.prn), gps_ns(e.week, e.toe_s)),
             Self::Glonass(r) => ((6, r.slot), gps_ns(f64::from(r.toc.week), r.toc.tow_s)),
+            // t_oe of GST (GPS's weeks) or of BDT (GPS − 14 s, weeks from GPS week 1356).
+            Self::Kepler(k) if k.system == 'C' => (
+                (3, k.sv),
+                gps_ns(k.orbit[4][2] + f64::from(rinex::BDT_WEEK_OFFSET), k.orbit[2][0] + 14.0),
+            ),
+            Self::Kepler(k) => ((2, k.sv), gps_ns(k.orbit[4][2], k.orbit[2][0])),
         }
     }
 }
@@ -492,6 +529,169 @@ fn glonass_sample(slot: u8, words: &[u32; 4]) -> GnssNavData {
     d
 }
 
+/// Words of a u-blox RXM-SFRBX (`gnss_id`, `sv_id`, `sig_id` as u-blox numbers them) as a
+/// navigation-data sample.
+fn nav_words(gnss_id: u8, sv_id: u8, sig_id: u8, words: &[u32]) -> GnssNavData {
+    let mut d = GnssNavData::zeroed();
+    let n = words.len().min(d.words.len());
+    d.words[..n].copy_from_slice(&words[..n]);
+    (d.gnss_id, d.sv_id, d.sig_id, d.num_words, d.version) = (gnss_id, sv_id, sig_id, n as u8, 2);
+    d
+}
+
+/// A field that does not fit as the RINEX error of record `k`.
+fn field_error<'a>(k: &KeplerRecord, file: &'a str) -> impl Fn(OutOfRange) -> RinexError + 'a {
+    let line = k.line;
+    move |e| RinexError {
+        file: file.to_string(),
+        line,
+        field: e.field.to_string(),
+        problem: e.to_string(),
+    }
+}
+
+/// A RINEX 3 Galileo I/NAV record as the page pairs of word types 1–5 on E1-B (Galileo OS SIS
+/// ICD Table 40 and the scale factors of Tables 60, 63, 68: `galileo::encode_word`): the SISA
+/// in m as its index (Table 76), SV health bits 0–2 and 6–8 as E1-B's and E5b's DVS and HS,
+/// GST's week as RINEX's Galileo week − 1024 (mod 4096), word 5's time of week the record's
+/// transmission time; the ionosphere (a_i) zero. The largest rounding goes to `worst`.
+fn galileo_pages(k: &KeplerRecord, file: &str, worst: &mut f64) -> Result<[[u32; 8]; 5], RinexError> {
+    let o = &k.orbit;
+    let iod_nav = o[0][0].round().clamp(0.0, f64::from(u16::MAX)) as u16;
+    let health = o[5][1].round().clamp(0.0, 511.0) as u16;
+    let bit = |b: u16, n: u16| ((health >> b) & ((1 << n) - 1)) as u8;
+    let e = GalEphemeris {
+        sv: k.sv,
+        w1: Word1 {
+            iod_nav,
+            toe_s: o[2][0],
+            m0_rad: o[0][3],
+            e: o[1][1],
+            sqrt_a: o[1][3],
+        },
+        w2: Word2 {
+            iod_nav,
+            omega0_rad: o[2][2],
+            i0_rad: o[3][0],
+            omega_rad: o[3][2],
+            idot_rad_s: o[4][0],
+        },
+        w3: Word3 {
+            iod_nav,
+            omega_dot_rad_s: o[3][3],
+            delta_n_rad_s: o[0][2],
+            cuc_rad: o[1][0],
+            cus_rad: o[1][2],
+            crc_m: o[3][1],
+            crs_m: o[0][1],
+            sisa: galileo::sisa_index(o[5][0]),
+        },
+        w4: Word4 {
+            iod_nav,
+            svid: k.sv,
+            cic_rad: o[2][1],
+            cis_rad: o[2][3],
+            toc_s: k.toc_s,
+            af0_s: k.af[0],
+            af1: k.af[1],
+            af2_per_s: k.af[2],
+        },
+        w5: Word5 {
+            ai: [0.0; 3],
+            region_flags: 0,
+            bgd_e1_e5a_s: o[5][2],
+            bgd_e1_e5b_s: o[5][3],
+            e5b_hs: bit(7, 2),
+            e1b_hs: bit(1, 2),
+            e5b_dvs: bit(6, 1),
+            e1b_dvs: bit(0, 1),
+            wn: ((o[4][2] as i64 - 1024).rem_euclid(4096)) as u16,
+            tow_s: o[6][0].clamp(0.0, WEEK_S - 1.0) as u32,
+        },
+    };
+    let mut out = [[0u32; 8]; 5];
+    for (slot, w) in out.iter_mut().zip(galileo::words_of(&e)) {
+        *slot = galileo::page_pair(galileo::encode_word(&w, worst).map_err(field_error(k, file))?);
+    }
+    Ok(out)
+}
+
+/// A RINEX 3 BeiDou (MEO/IGSO) record as D1 subframes 1–3 (BDS-SIS-ICD-B1I Figures 5-4 to
+/// 5-6, `beidou::encode_d1`): the URA in m as its index (IS-GPS-200's table, §5.2.4.5), the
+/// Klobuchar α/β of the file's `BDSA`/`BDSB` header (else zero), subframe 1's SOW the record's
+/// t_oe; with whether its AODE had to be cut to 5 bits (RTKLIB writes its own issue number
+/// there).
+fn beidou_subframes(
+    k: &KeplerRecord,
+    iono: Option<([f64; 4], [f64; 4])>,
+    file: &str,
+    worst: &mut f64,
+) -> Result<([[u32; 10]; 3], bool), RinexError> {
+    let o = &k.orbit;
+    let err = |field: &str, problem: String| RinexError {
+        file: file.to_string(),
+        line: k.line,
+        field: field.to_string(),
+        problem,
+    };
+    let toe_s = o[2][0];
+    if toe_s.rem_euclid(8.0) != 0.0 {
+        return Err(err("Toe", format!("{toe_s} s is not a multiple of 8 s")));
+    }
+    let toe8 = (toe_s / 8.0) as u32;
+    let aode = o[0][0].round().max(0.0) as u64;
+    let (alpha, beta) = iono.unwrap_or_default();
+    let small = |x: f64| x.round().clamp(0.0, 255.0) as u8;
+    let body = [
+        D1Body::Sub1(Sub1 {
+            sat_h1: small(o[5][1]),
+            aodc: small(o[6][1]),
+            urai: ura_index(o[5][0]),
+            week: o[4][2].clamp(0.0, f64::from(u16::MAX)) as u16,
+            toc_s: k.toc_s,
+            tgd1_s: o[5][2],
+            tgd2_s: o[5][3],
+            alpha,
+            beta,
+            a0_s: k.af[0],
+            a1: k.af[1],
+            a2_per_s: k.af[2],
+            aode: (aode % 32) as u8,
+        }),
+        D1Body::Sub2(Sub2 {
+            delta_n_rad_s: o[0][2],
+            cuc_rad: o[1][0],
+            m0_rad: o[0][3],
+            e: o[1][1],
+            cus_rad: o[1][2],
+            crc_m: o[3][1],
+            crs_m: o[0][1],
+            sqrt_a: o[1][3],
+            toe_msb: (toe8 >> 15) as u8,
+        }),
+        D1Body::Sub3(Sub3 {
+            toe_lsb: (toe8 & 0x7FFF) as u16,
+            i0_rad: o[3][0],
+            cic_rad: o[2][1],
+            omega_dot_rad_s: o[3][3],
+            cis_rad: o[2][3],
+            idot_rad_s: o[4][0],
+            omega0_rad: o[2][2],
+            omega_rad: o[3][2],
+        }),
+    ];
+    let mut out = [[0u32; 10]; 3];
+    for (i, (slot, body)) in out.iter_mut().zip(body).enumerate() {
+        let sf = D1Subframe {
+            id: i as u8 + 1,
+            sow_s: toe_s as u32 + 6 * i as u32,
+            body,
+        };
+        *slot = beidou::encode_d1(&sf, worst).map_err(field_error(k, file))?;
+    }
+    Ok((out, aode > 31))
+}
+
 /// Runs `navsync import rinex`.
 pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
     let (mut obs, navs) = parse_files(&args.obs, &args.nav)?;
@@ -517,6 +717,16 @@ pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
     for (f, (_, n)) in navs.iter().enumerate() {
         recs.extend(n.ephemerides.iter().map(|e| (f, Record::Gps(*e))));
         recs.extend(n.glonass.iter().map(|r| (f, Record::Glonass(*r))));
+        for k in &n.kepler {
+            // Galileo: the I/NAV records (data sources bit 0 E1-B or 2 E5b-I, RINEX 3.05).
+            let fnav_only = k.system == 'E' && (k.orbit[4][1] as u32) & 0b101 == 0;
+            let geo = k.system == 'C' && beidou::is_geo(k.sv);
+            stats.galileo_fnav_left_out += u64::from(fnav_only);
+            stats.beidou_geo_left_out += u64::from(geo);
+            if !fnav_only && !geo {
+                recs.push((f, Record::Kepler(*k)));
+            }
+        }
     }
     recs.sort_by_key(|(_, r)| r.key());
     recs.dedup_by_key(|(_, r)| r.key());
@@ -555,7 +765,7 @@ pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
         .find_map(|(name, n)| Some((name, n.iono_alpha?, n.iono_beta?)));
     let first_gps = deliveries.iter().find_map(|(_, _, r)| match r {
         Record::Gps(e) => Some(e.prn),
-        Record::Glonass(_) => None,
+        _ => None,
     });
     if let (Some((name, a, b)), Some(prn)) = (iono, first_gps) {
         let page = iono_page(a, b, name)?;
@@ -582,6 +792,21 @@ pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
                         write_nav(&mut rec, Some(glonass_sample(r.slot, &words)), *at)?;
                     }
                     stats.glonass_ephemerides += 1;
+                }
+                Record::Kepler(k) if k.system == 'E' => {
+                    for words in galileo_pages(k, name, &mut stats.worst_quantisation)? {
+                        write_nav(&mut rec, Some(nav_words(2, k.sv, 1, &words)), *at)?;
+                    }
+                    stats.galileo_ephemerides += 1;
+                }
+                Record::Kepler(k) => {
+                    let bds_iono = navs[*f].1.bds_iono;
+                    let (subframes, wrapped) = beidou_subframes(k, bds_iono, name, &mut stats.worst_quantisation)?;
+                    for words in subframes {
+                        write_nav(&mut rec, Some(nav_words(3, k.sv, 0, &words)), *at)?;
+                    }
+                    stats.beidou_ephemerides += 1;
+                    stats.beidou_aode_wrapped += u64::from(wrapped);
                 }
             }
         }

@@ -21,8 +21,8 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use navsync_drivers::gnss::rinex::{GloRecord, GpsEphemeris};
-use navsync_drivers::gnss::rinex_write::{self, KeplerRecord, NavRecords, ObsHeader, RinexWriteError};
+use navsync_drivers::gnss::rinex::{self, GloRecord, GpsEphemeris, KeplerRecord};
+use navsync_drivers::gnss::rinex_write::{self, NavRecords, ObsHeader, RinexWriteError};
 use navsync_estimator::gnss::broadcast::{GNSS_ID_GLONASS, NavCollector, NavEphemeris, carries_lnav};
 use navsync_estimator::gnss::galileo;
 use navsync_estimator::gnss::glonass::{GloEphemeris, GloStore};
@@ -116,8 +116,11 @@ pub struct ExportStats {
     pub gps_cnav_left_out: u64,
     /// Navigation messages that failed the LNAV parity or preamble check.
     pub bad_subframes: u64,
-    /// The header's Klobuchar α/β were written (subframe 4 page 18 seen).
+    /// The header's GPS Klobuchar α/β were written (subframe 4 page 18, else CNAV message
+    /// type 30, seen).
     pub iono: bool,
+    /// The header's BeiDou Klobuchar α/β were written (a D1 subframe 1 with them seen).
+    pub bds_iono: bool,
     /// The header's approximate position (first single-point solution), if any epoch solved.
     pub approx_ecef_m: Option<[f64; 3]>,
 }
@@ -146,7 +149,12 @@ pub fn main(cmd: ExportCommand) -> anyhow::Result<()> {
         s.unmapped,
         args.nav.display(),
         s.ephemerides,
-        if s.iono { " and the Klobuchar α/β" } else { "" },
+        match (s.iono, s.bds_iono) {
+            (true, true) => " and GPS's and BeiDou's Klobuchar α/β",
+            (true, false) => " and GPS's Klobuchar α/β",
+            (false, true) => " and BeiDou's Klobuchar α/β",
+            (false, false) => "",
+        },
         s.glonass_ephemerides,
         s.galileo_ephemerides,
         s.beidou_ephemerides,
@@ -273,7 +281,15 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
         .map(|(prn, how, s1, s2, s3)| ephemeris_of(*prn, *how, s1, s2, s3, near_week))
         .collect();
     stats.ephemerides = ephemerides.len() as u64;
+    // GPS's Klobuchar: LNAV page 18's, else CNAV message type 30's (the same parameters,
+    // IS-GPS-200 §30.3.3.3); BeiDou's: the last D1 subframe 1's.
+    let iono = iono.or(others.gps_cnav_iono);
+    let bds_iono = others_done.iter().rev().find_map(|(_, e)| match e {
+        NavEphemeris::Beidou(b) if b.s1.alpha.iter().any(|a| *a != 0.0) => Some((b.s1.alpha, b.s1.beta)),
+        _ => None,
+    });
     stats.iono = iono.is_some();
+    stats.bds_iono = bds_iono.is_some();
     let mut glonass: Vec<GloRecord> = Vec::new();
     for (at, e) in &glo_done {
         let channel = epochs.iter().find_map(|raw| {
@@ -323,6 +339,7 @@ pub fn export(args: &RinexExportArgs) -> Result<ExportStats, RinexExportError> {
         &date,
         &NavRecords {
             iono,
+            bds_iono,
             gps: &ephemerides,
             glonass: &glonass,
             kepler: &kepler,
@@ -399,7 +416,7 @@ pub fn kepler_record_of(e: &NavEphemeris, near: Option<&GnssRaw>) -> Option<Kepl
         ),
         NavEphemeris::Beidou(b) => {
             let bdt_s = gps_s + navsync_estimator::gnss::ranges::BDT_MINUS_GPST_S;
-            let bdt_week = gps_week - i64::from(rinex_write::BDT_WEEK_OFFSET);
+            let bdt_week = gps_week - i64::from(rinex::BDT_WEEK_OFFSET);
             (
                 'C',
                 b.sv,
@@ -417,6 +434,7 @@ pub fn kepler_record_of(e: &NavEphemeris, near: Option<&GnssRaw>) -> Option<Kepl
     };
     let toc_week = (i64::from(week) - ((o.toc_s - o.toe_s) / 604_800.0).round() as i64).max(0) as u32;
     Some(KeplerRecord {
+        line: 0,
         system,
         sv,
         toc_week,

@@ -243,26 +243,27 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
         )?;
         for (k, s) in r.solutions.iter().enumerate() {
             let p = s.sol.ecef_m;
+            // A value that does not exist (no geodetic form, no --reference) is an empty field.
+            let opt = |v: Option<f64>, decimals: usize| v.map_or(String::new(), |x| format!("{x:.decimals$}"));
             let g = geodetic_from_ecef(p[0], p[1], p[2]);
-            let (lat, lon, h) = g.map_or((f64::NAN, f64::NAN, f64::NAN), |g| (g.lat_deg, g.lon_deg, g.height_m));
-            let e = errors.get(k).copied().unwrap_or([f64::NAN; 3]);
+            let e = errors.get(k).copied();
             writeln!(
                 w,
-                "{},{:.3},{:.4},{:.4},{:.4},{:.9},{:.9},{:.4},{:.3},{},{},{:.4},{:.4},{:.4},{},{},{},{},{}",
+                "{},{:.3},{:.4},{:.4},{:.4},{},{},{},{:.3},{},{},{},{},{},{},{},{},{},{}",
                 s.week,
                 s.tow_s,
                 p[0],
                 p[1],
                 p[2],
-                lat,
-                lon,
-                h,
+                opt(g.map(|g| g.lat_deg), 9),
+                opt(g.map(|g| g.lon_deg), 9),
+                opt(g.map(|g| g.height_m), 4),
                 s.sol.clock_bias_m,
                 s.sol.used,
                 s.sol.excluded.map_or(String::new(), |x| x.to_string()),
-                e[0],
-                e[1],
-                e[2],
+                opt(e.map(|e| e[0]), 4),
+                opt(e.map(|e| e[1]), 4),
+                opt(e.map(|e| e[2]), 4),
                 s.sol.used_per_system[0],
                 s.sol.used_per_system[1],
                 s.sol.used_per_system[2],

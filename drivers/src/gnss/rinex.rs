@@ -44,6 +44,37 @@ pub struct GpsTime {
     pub tow_s: f64,
 }
 
+/// Weeks from the GPS epoch (1980-01-06) to the BDT epoch (2006-01-01, a Sunday): BDT week w
+/// starts on the calendar day of GPS week w + 1356 (BDS-SIS-ICD-B1I §4.3: BDT counts from
+/// 2006-01-01 00:00:00 UTC, 14 s behind GPS time).
+pub const BDT_WEEK_OFFSET: u32 = 1356;
+
+/// A Galileo or a BeiDou navigation record (RINEX 3.05's Galileo and BDS navigation data record
+/// tables: the layout of GPS's Table A8 with other meanings in some fields), in the system's own time: GST, written as GPS
+/// time (the same weeks and seconds), or BDT.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KeplerRecord {
+    /// Line of the record in the file (0 when made, not read).
+    pub line: usize,
+    /// `'E'` Galileo or `'C'` BeiDou.
+    pub system: char,
+    /// Satellite (Galileo SVID, BeiDou PRN).
+    pub sv: u8,
+    /// The week of t_oc: Galileo's as RINEX counts it (continuous, aligned with GPS weeks),
+    /// BeiDou's BDT week (weeks since 2006-01-01).
+    pub toc_week: u32,
+    /// t_oc, s of that week.
+    pub toc_s: f64,
+    /// Clock bias (s), drift (s/s), drift rate (s/s²).
+    pub af: [f64; 3],
+    /// BROADCAST ORBIT 1–7 in the table's order and units. Galileo: IODnav, C_rs, Δn, M_0 /
+    /// C_uc, e, C_us, √A / t_oe, C_ic, Ω_0, C_is / i_0, C_rc, ω, Ω̇ / IDOT, data sources, GAL
+    /// week, spare / SISA (m), SV health, BGD E5a/E1, BGD E5b/E1 / transmission time, spare.
+    /// BeiDou: AODE … / IDOT, spare, BDT week, spare / URA (m), SatH1, T_GD1 B1/B3, T_GD2
+    /// B2/B3 / transmission time, AODC. Of ORBIT 7 the first two are written and read.
+    pub orbit: [[f64; 4]; 7],
+}
+
 /// An observation file.
 #[derive(Debug, Clone)]
 pub struct ObsFile {
@@ -197,7 +228,11 @@ pub struct NavFile {
     pub ephemerides: Vec<GpsEphemeris>,
     /// GLONASS ephemerides in file order.
     pub glonass: Vec<GloRecord>,
-    /// Records of other systems (RINEX 3 mixed files), skipped.
+    /// Galileo and BeiDou ephemerides in file order (RINEX 3).
+    pub kepler: Vec<KeplerRecord>,
+    /// BeiDou's Klobuchar α and β (`IONOSPHERIC CORR` BDSA/BDSB), if in the header.
+    pub bds_iono: Option<([f64; 4], [f64; 4])>,
+    /// Records of other systems (SBAS, QZSS, NavIC), skipped.
     pub other_systems: u64,
 }
 
@@ -353,8 +388,10 @@ fn version_line(lines: &mut Lines<'_>, want: char) -> Result<(f64, char), RinexE
 /// table both directions use, [`ublox_signal`] (import) and [`rinex_signal`] (export). Where two
 /// RINEX codes name one u-blox signal (BeiDou B1I: C2I since RINEX 3.02, C1I before) the first
 /// is the one written; where one RINEX code names two u-blox signals (BeiDou's D1 and D2 of one
-/// band: the code is the band's, D2 the GEO satellites' message) the first is the one read.
-pub const SIGNALS: [(char, char, char, u8, u8); 24] = [
+/// band: the code is the band's, D2 the GEO satellites' message; the `X` codes of two
+/// components tracked together, RINEX 3.05 §5.1, as RTKLIB writes a u-blox receiver's
+/// signals: read as the band's first u-blox signal) the first is the one read.
+pub const SIGNALS: [(char, char, char, u8, u8); 30] = [
     ('G', '1', 'C', 0, 0),
     ('G', '2', 'L', 0, 3),
     ('G', '2', 'S', 0, 4),
@@ -374,6 +411,12 @@ pub const SIGNALS: [(char, char, char, u8, u8); 24] = [
     ('C', '2', 'I', 3, 1),
     ('C', '7', 'I', 3, 3),
     ('C', '6', 'I', 3, 10),
+    ('G', '2', 'X', 0, 3),
+    ('G', '5', 'X', 0, 6),
+    ('E', '1', 'X', 2, 0),
+    ('E', '5', 'X', 2, 3),
+    ('E', '7', 'X', 2, 5),
+    ('J', '2', 'X', 5, 4),
     ('J', '1', 'C', 5, 0),
     ('J', '2', 'S', 5, 4),
     ('J', '2', 'L', 5, 5),
@@ -734,13 +777,14 @@ pub fn parse_nav(file: &str, text: &str) -> Result<NavFile, RinexError> {
     let glonass_v2 = lines.lines.first().is_some_and(|l| col(l, 20, 21) == "G");
     let (version, system) = version_line(&mut lines, if glonass_v2 { 'G' } else { 'N' })?;
     let v3 = version >= 3.0;
-    if v3 && !matches!(system, 'G' | 'M' | 'R') {
+    if v3 && !matches!(system, 'G' | 'M' | 'R' | 'E' | 'C') {
         return Err(lines.err(
             1,
             "RINEX VERSION / TYPE",
-            format!("system '{system}': GPS, GLONASS or mixed expected"),
+            format!("system '{system}': GPS, GLONASS, Galileo, BeiDou or mixed expected"),
         ));
     }
+    let (mut bds_alpha, mut bds_beta) = (None, None);
     let mut out = NavFile {
         version,
         ..NavFile::default()
@@ -760,12 +804,17 @@ pub fn parse_nav(file: &str, text: &str) -> Result<NavFile, RinexError> {
             Ok(v)
         };
         match label {
-            "END OF HEADER" => break,
+            "END OF HEADER" => {
+                out.bds_iono = bds_alpha.zip(bds_beta);
+                break;
+            }
             "ION ALPHA" => out.iono_alpha = Some(four(2, label)?),
             "ION BETA" => out.iono_beta = Some(four(2, label)?),
             "IONOSPHERIC CORR" => match col(l, 0, 4) {
                 "GPSA" => out.iono_alpha = Some(four(5, "IONOSPHERIC CORR GPSA")?),
                 "GPSB" => out.iono_beta = Some(four(5, "IONOSPHERIC CORR GPSB")?),
+                "BDSA" => bds_alpha = Some(four(5, "IONOSPHERIC CORR BDSA")?),
+                "BDSB" => bds_beta = Some(four(5, "IONOSPHERIC CORR BDSB")?),
                 _ => {}
             },
             _ => {}
@@ -783,6 +832,10 @@ pub fn parse_nav(file: &str, text: &str) -> Result<NavFile, RinexError> {
         }
         let (prn_text, time_text, first) = if v3 {
             let sys = col(l, 0, 1);
+            if sys == "E" || sys == "C" {
+                out.kepler.push(kepler_record(&mut lines, n, l)?);
+                continue;
+            }
             if sys != "G" {
                 let more = if sys == "S" { 3 } else { 7 };
                 for _ in 0..more {
@@ -803,41 +856,24 @@ pub fn parse_nav(file: &str, text: &str) -> Result<NavFile, RinexError> {
             .ok_or_else(|| lines.err(n, "PRN", format!("'{prn_text}' is not a GPS PRN")))?;
         let toc = epoch_fields(&lines, n, "toc", time_text)?;
         // 3 values on the first line, 4 on each of the 7 orbit lines (the last may be short).
-        const NAMES: [&str; 31] = [
-            "af0",
-            "af1",
-            "af2",
-            "IODE",
-            "Crs",
-            "Delta n",
-            "M0",
-            "Cuc",
-            "e",
-            "Cus",
-            "sqrt(A)",
-            "Toe",
-            "Cic",
-            "OMEGA0",
-            "Cis",
-            "i0",
-            "Crc",
-            "omega",
-            "OMEGA DOT",
-            "IDOT",
-            "L2 codes",
-            "GPS week",
-            "L2 P flag",
-            "SV accuracy",
-            "SV health",
-            "TGD",
-            "IODC",
-            "transmission time",
-            "fit interval",
-            "spare",
-            "spare",
-        ];
+        let names = record_names(
+            ["af0", "af1", "af2", "IODE"],
+            [
+                "L2 codes",
+                "GPS week",
+                "L2 P flag",
+                "SV accuracy",
+                "SV health",
+                "TGD",
+                "IODC",
+                "transmission time",
+                "fit interval",
+                "spare",
+                "spare",
+            ],
+        );
         let indent = if v3 { 4 } else { 3 };
-        let v = record_values(&mut lines, (n, l, first), indent, &NAMES, "broadcast orbit")?;
+        let v = record_values(&mut lines, (n, l, first), indent, &names, "broadcast orbit")?;
         let e = GpsEphemeris {
             prn,
             line: n,
@@ -880,6 +916,116 @@ pub fn parse_nav(file: &str, text: &str) -> Result<NavFile, RinexError> {
         out.ephemerides.push(e);
     }
     Ok(out)
+}
+
+/// The names of a GPS, Galileo or BeiDou record's 31 values (for errors): the clock and issue
+/// `head`, the Keplerian orbit the three share (ORBIT 1–4 after the issue, and IDOT), then the
+/// system's own `tail`.
+fn record_names(head: [&'static str; 4], tail: [&'static str; 11]) -> [&'static str; 31] {
+    const ORBIT: [&str; 16] = [
+        "Crs",
+        "Delta n",
+        "M0",
+        "Cuc",
+        "e",
+        "Cus",
+        "sqrt(A)",
+        "Toe",
+        "Cic",
+        "OMEGA0",
+        "Cis",
+        "i0",
+        "Crc",
+        "omega",
+        "OMEGA DOT",
+        "IDOT",
+    ];
+    let mut out = [""; 31];
+    for (o, n) in out.iter_mut().zip(head.iter().chain(&ORBIT).chain(&tail)) {
+        *o = n;
+    }
+    out
+}
+
+/// One Galileo or BeiDou record (RINEX 3) from its first line `l` (line `n`): `Ennn`/`Cnn`,
+/// t_oc as a calendar epoch of GST (GPS's calendar) or BDT, the clock, then seven orbit lines
+/// ([`KeplerRecord`]).
+fn kepler_record(lines: &mut Lines<'_>, n: usize, l: &str) -> Result<KeplerRecord, RinexError> {
+    let system = col(l, 0, 1).chars().next().unwrap_or(' ');
+    let (max, what) = if system == 'E' {
+        (36, "Galileo SVID")
+    } else {
+        (63, "BeiDou PRN")
+    };
+    let sv_text = col(l, 1, 3);
+    let sv = sv_text
+        .trim()
+        .parse::<u8>()
+        .ok()
+        .filter(|p| (1..=max).contains(p))
+        .ok_or_else(|| lines.err(n, "PRN", format!("'{sv_text}' is not a {what}")))?;
+    // The epoch in the system's own calendar: BDT's weeks count from GPS week 1356.
+    let toc = epoch_fields(lines, n, "toc", col(l, 4, 23))?;
+    let offset = if system == 'C' { BDT_WEEK_OFFSET } else { 0 };
+    let toc_week = toc
+        .week
+        .checked_sub(offset)
+        .ok_or_else(|| lines.err(n, "toc", "before the BDT epoch (2006-01-01)"))?;
+    let names = if system == 'E' {
+        record_names(
+            ["af0", "af1", "af2", "IODnav"],
+            [
+                "data sources",
+                "GAL week",
+                "spare",
+                "SISA",
+                "SV health",
+                "BGD E5a/E1",
+                "BGD E5b/E1",
+                "transmission time",
+                "spare",
+                "spare",
+                "spare",
+            ],
+        )
+    } else {
+        record_names(
+            ["a0", "a1", "a2", "AODE"],
+            [
+                "spare",
+                "BDT week",
+                "spare",
+                "SV accuracy",
+                "SatH1",
+                "TGD1",
+                "TGD2",
+                "transmission time",
+                "AODC",
+                "spare",
+                "spare",
+            ],
+        )
+    };
+    let v = record_values(lines, (n, l, 23), 4, &names, "broadcast orbit")?;
+    let mut orbit = [[0.0; 4]; 7];
+    for (k, x) in v[3..].iter().enumerate() {
+        orbit[k / 4][k % 4] = *x;
+    }
+    if v[10] <= 0.0 || !(0.0..1.0).contains(&v[8]) || !(0.0..WEEK_S).contains(&v[11]) {
+        return Err(lines.err(n, "broadcast orbit", "sqrt(A), e or Toe out of range"));
+    }
+    if !(0.0..=6000.0).contains(&v[21]) || v[21].fract() != 0.0 {
+        return Err(lines.err(n, names[21], format!("{} is not a week", v[21])));
+    }
+    Ok(KeplerRecord {
+        line: n,
+        system,
+        sv,
+        toc_week,
+        toc_s: toc.tow_s,
+        af: [v[0], v[1], v[2]],
+        orbit,
+    })
 }
 
 /// The `K` values of a navigation record (blank: 0): 3 on its first line `(n, l)` from column
@@ -1107,9 +1253,10 @@ E11  23000000.500    23000005.000
     }
 
     /// A mixed RINEX 3.05 file: a GLONASS record (with 3.05's fourth orbit line) read, in SI
-    /// units with t_b moved from UTC to GPS time; a Galileo record skipped; a GPS one read.
+    /// units with t_b moved from UTC to GPS time; a Galileo and a BeiDou record read, each
+    /// dated in its own time; an SBAS record skipped; a GPS one read.
     #[test]
-    fn rinex3_navigation_reads_gps_and_glonass_and_skips_other_systems() {
+    fn rinex3_navigation_reads_every_system_but_sbas() {
         // Fixed columns: 4X then 4 × D19.12 per orbit line (RINEX 3.05 Table A8).
         let orbit = |v: [f64; 4]| format!("    {}\n", v.map(|x| format!("{x:19.12E}")).concat());
         let mut nav3 = String::from(concat!(
@@ -1124,7 +1271,28 @@ E11  23000000.500    23000005.000
         nav3 += &orbit([19337.97607422, -1.966602325439, -2.793967723846e-9, 2.0]);
         nav3 += &orbit([0.0, 0.0, 6.0, 0.0]);
         nav3 += "E11 2020 06 14 12 10 00 1.000000000000D-05 0.000000000000D+00 0.000000000000D+00\n";
-        for _ in 0..7 {
+        let kepler = |week: f64| {
+            [
+                [44.0, -35.28, 3.58e-9, 0.61],
+                [-1.48e-6, 3.1e-4, 4.77e-6, 5440.6],
+                [43_800.0, 8.9e-8, 2.38, 0.0],
+                [0.965, 238.9, 0.33, -5.8e-9],
+                [5.2e-11, 513.0, week, 0.0],
+                [3.12, 0.0, 4.66e-9, 4.89e-9],
+                [43_000.0, 1.0, 0.0, 0.0],
+            ]
+        };
+        for v in kepler(2110.0) {
+            nav3 += &orbit(v);
+        }
+        // BeiDou: the epoch in BDT's calendar (week 754 = GPS week 2110's days).
+        nav3 += "C21 2020 06 14 12 00 00 1.000000000000D-05 0.000000000000D+00 0.000000000000D+00\n";
+        for v in kepler(754.0) {
+            nav3 += &orbit(v);
+        }
+        // SBAS: 3 orbit lines, skipped.
+        nav3 += "S33 2020 06 14 12 00 00 1.000000000000D-05 0.000000000000D+00 0.000000000000D+00\n";
+        for _ in 0..3 {
             nav3 += &orbit([1.0, 2.0, 3.0, 4.0]);
         }
         nav3 += "G07 2020 06 14 12 00 00 1.000000000000D-05 2.000000000000D-12 0.000000000000D+00\n";
@@ -1144,8 +1312,26 @@ E11  23000000.500    23000005.000
         let e = f.ephemerides[0];
         assert_eq!(
             (e.prn, e.line, e.toe_s, e.week, e.iodc, e.fit_h),
-            (7, 18, 216_000.0, 2109.0, 40.0, 4.0)
+            (7, 30, 216_000.0, 2109.0, 40.0, 4.0)
         );
+        let [gal, bds] = [f.kepler[0], f.kepler[1]];
+        assert_eq!(
+            (gal.system, gal.sv, gal.line, gal.toc_week, gal.toc_s),
+            ('E', 11, 10, 2110, 43_800.0)
+        );
+        assert_eq!(
+            (bds.system, bds.sv, bds.line, bds.toc_week, bds.toc_s),
+            ('C', 21, 18, 754, 43_200.0)
+        );
+        assert_eq!(
+            (gal.af[0], gal.orbit[1][3], gal.orbit[4][1], gal.orbit[6]),
+            (1e-5, 5440.6, 513.0, [43_000.0, 1.0, 0.0, 0.0])
+        );
+        // A Galileo SVID beyond 36 and a week that is not one name their line and field.
+        let err = parse_nav("b.rnx", &nav3.replacen("E11 ", "E41 ", 1)).unwrap_err();
+        assert_eq!((err.line, err.field.as_str()), (10, "PRN"), "{err}");
+        let err = parse_nav("b.rnx", &nav3.replacen("7.540000000000E2", "7.545000000000E2", 1)).unwrap_err();
+        assert_eq!((err.line, err.field.as_str()), (18, "BDT week"), "{err}");
         assert_eq!(f.iono_beta.unwrap()[3], -1.311e5);
         let r = f.glonass[0];
         // 2020-06-14 is a Sunday: 12:15 UTC is 12:15:18 GPS of week 2110.
@@ -1223,6 +1409,11 @@ E11  23000000.500    23000005.000
             let read = ublox_signal(sys, band, attr).unwrap();
             assert_eq!(read, (SIGNALS[first].3, SIGNALS[first].4));
             assert!(first == k || (read.0 == g && sys == 'C'), "{sys}{band}{attr}");
+            // An `X` code reads as a signal whose own code is of the same system and band.
+            if attr == 'X' {
+                let own = rinex_signal(read.0, read.1).unwrap();
+                assert_eq!((own.0, own.1), (sys, band));
+            }
             // A u-blox signal written as its first code, which reads back to it or, for
             // BeiDou's D2, to the D1 signal of its band.
             let back = rinex_signal(g, sig).unwrap();

@@ -14,7 +14,7 @@ use std::fmt::Write;
 use navsync_shared::samples::{GnssRaw, RawMeasurement};
 use navsync_shared::time::{civil_from_days, days_from_civil};
 
-use super::rinex::{GloRecord, GpsEphemeris, rinex_signal};
+use super::rinex::{GloRecord, GpsEphemeris, KeplerRecord, rinex_signal};
 
 /// Seconds in a GPS week.
 const WEEK_S: f64 = 604_800.0;
@@ -338,40 +338,13 @@ pub fn write_obs(h: &ObsHeader, epochs: &[GnssRaw]) -> Result<ObsText, RinexWrit
     Ok(ObsText { text: out, unmapped })
 }
 
-/// Weeks from the GPS epoch (1980-01-06) to the BDT epoch (2006-01-01, a Sunday): BDT week w
-/// starts on the calendar day of GPS week w + 1356 (BDS-SIS-ICD-B1I §4.3: BDT counts from
-/// 2006-01-01 00:00:00 UTC, 14 s behind GPS time).
-pub const BDT_WEEK_OFFSET: u32 = 1356;
-
-/// A Galileo or a BeiDou navigation record (RINEX 3.05's Galileo and BDS navigation data record
-/// tables: the layout of GPS's Table A8 with other meanings in some fields), in the system's own time: GST, written as GPS
-/// time (the same weeks and seconds), or BDT.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct KeplerRecord {
-    /// `'E'` Galileo or `'C'` BeiDou.
-    pub system: char,
-    /// Satellite (Galileo SVID, BeiDou PRN).
-    pub sv: u8,
-    /// The week of t_oc: Galileo's as RINEX counts it (continuous, aligned with GPS weeks),
-    /// BeiDou's BDT week (weeks since 2006-01-01).
-    pub toc_week: u32,
-    /// t_oc, s of that week.
-    pub toc_s: f64,
-    /// Clock bias (s), drift (s/s), drift rate (s/s²).
-    pub af: [f64; 3],
-    /// BROADCAST ORBIT 1–7 in the table's order and units. Galileo: IODnav, C_rs, Δn, M_0 /
-    /// C_uc, e, C_us, √A / t_oe, C_ic, Ω_0, C_is / i_0, C_rc, ω, Ω̇ / IDOT, data sources, GAL
-    /// week, spare / SISA (m), SV health, BGD E5a/E1, BGD E5b/E1 / transmission time, spare.
-    /// BeiDou: AODE … / IDOT, spare, BDT week, spare / URA (m), SatH1, T_GD1 B1/B3, T_GD2
-    /// B2/B3 / transmission time, AODC. Of ORBIT 7 the first two are written.
-    pub orbit: [[f64; 4]; 7],
-}
-
 /// The records of a navigation file.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct NavRecords<'a> {
     /// GPS's Klobuchar α/β (`IONOSPHERIC CORR` GPSA/GPSB).
     pub iono: Option<([f64; 4], [f64; 4])>,
+    /// BeiDou's Klobuchar α/β (`IONOSPHERIC CORR` BDSA/BDSB).
+    pub bds_iono: Option<([f64; 4], [f64; 4])>,
     /// GPS LNAV ephemerides.
     pub gps: &'a [GpsEphemeris],
     /// GLONASS ephemerides.
@@ -392,6 +365,7 @@ pub struct NavRecords<'a> {
 pub fn write_nav(program: &str, date: &str, records: &NavRecords) -> String {
     let NavRecords {
         iono,
+        bds_iono,
         gps: ephemerides,
         glonass,
         kepler,
@@ -419,8 +393,9 @@ pub fn write_nav(program: &str, date: &str, records: &NavRecords) -> String {
         &format!("{program:<20.20}{:<20}{date:<20.20}", ""),
         "PGM / RUN BY / DATE",
     );
-    if let Some((a, b)) = iono {
-        for (name, v) in [("GPSA", a), ("GPSB", b)] {
+    for (names, coefficients) in [(["GPSA", "GPSB"], iono), (["BDSA", "BDSB"], bds_iono)] {
+        let Some((a, b)) = coefficients else { continue };
+        for (name, v) in names.into_iter().zip([a, b]) {
             let coefficients: String = v.iter().map(|x| fortran_e(*x, 12, 4)).collect();
             header(&mut out, &format!("{name} {coefficients}"), "IONOSPHERIC CORR");
         }
@@ -484,7 +459,12 @@ pub fn write_nav(program: &str, date: &str, records: &NavRecords) -> String {
         let f = |x: f64| fortran_e(x, 19, 12);
         // BDT's calendar is GPS's shifted by whole weeks (no leap second between the epochs'
         // days matters: each scale's own calendar is written).
-        let week = k.toc_week + if k.system == 'C' { BDT_WEEK_OFFSET } else { 0 };
+        let week = k.toc_week
+            + if k.system == 'C' {
+                super::rinex::BDT_WEEK_OFFSET
+            } else {
+                0
+            };
         let (y, mo, d, hh, mm, ss) = calendar(week, k.toc_s);
         let _ = writeln!(
             out,
@@ -759,6 +739,7 @@ mod tests {
         let mut orbit = [[0.0; 4]; 7];
         orbit[6] = [408_630.0, 1.0, 0.0, 0.0];
         let c21 = KeplerRecord {
+            line: 0,
             system: 'C',
             sv: 21,
             toc_week: 1025,

@@ -9,6 +9,7 @@
 //! preamble … the 26 information bits then 4 parity bits; words 2–10 = the two 11-bit
 //! information halves, then the 4 parity bits of the first, then of the second. The parity of
 //! every code word is checked (a subframe with an error is rejected, not corrected).
+//! [`encode_d1`] writes the words back (with [`d1_subframes`], a whole [`BdsEphemeris`]).
 //!
 //! Bits are numbered here as the information bits of the subframe, 0..224 (parity left out),
 //! which makes every field contiguous (the ICD's figures split fields at word boundaries).
@@ -18,6 +19,7 @@
 //! ([`OrbitFrame::BeiDouGeo`](super::orbit::OrbitFrame::BeiDouGeo)); page 2's ionosphere is
 //! not decoded (zero in a D2 ephemeris).
 
+use super::bits::{OutOfRange, check, quantise};
 use super::orbit::{GPS_PI, Orbit, OrbitFrame};
 
 /// Why a subframe was not decoded.
@@ -273,6 +275,135 @@ pub fn decode_d1(words: &[u32]) -> Result<D1Subframe, BdsError> {
     Ok(D1Subframe { id, sow_s, body })
 }
 
+/// Writes the low `n` bits of `v` (two's complement for a negative `v`) at information bits
+/// `from..from+n` (n ≤ 64, `from + n` ≤ 224): the inverse of [`u`] and [`s`].
+fn put(d: &mut [u128; 2], from: u32, n: u32, v: i64) {
+    for k in 0..n {
+        let b = from + k;
+        let bit = ((v >> (n - 1 - k)) & 1) as u128;
+        let (i, off) = ((b / 128) as usize, b % 128);
+        d[i] = (d[i] & !(1 << (127 - off))) | (bit << (127 - off));
+    }
+}
+
+/// The ten u-blox words of 224 information bits, BCH parity added (the inverse of
+/// [`info_bits`]; systematic code, parity = X⁴·m(X) mod g(X), §5.1.3).
+fn words_from_info(d: &[u128; 2]) -> [u32; 10] {
+    let mut out = [0u32; 10];
+    let at = |a: u32, n: u32| u(d, a, n) as u32;
+    let w0 = at(0, 26);
+    out[0] = (w0 << 4) | bch_syndrome((w0 & 0x7FF) << 4);
+    for (k, w) in out.iter_mut().enumerate().skip(1) {
+        let from = 26 + 22 * (k as u32 - 1);
+        let (a, b) = (at(from, 11), at(from + 11, 11));
+        *w = (a << 19) | (b << 8) | (bch_syndrome(a << 4) << 4) | bch_syndrome(b << 4);
+    }
+    out
+}
+
+/// The ten u-blox words (RXM-SFRBX layout, as [`decode_d1`] reads them: 30 bits right-aligned,
+/// word 1 = 26 information bits then 4 parity bits, words 2–10 = two 11-bit halves then their
+/// two 4-bit parities) of D1 subframe `sf`, with BCH(15,11) parity (g(X) = X⁴ + X + 1,
+/// BDS-SIS-ICD-B1I §5.1.3) on every code word: the inverse of [`decode_d1`].
+///
+/// Preamble 0x712, Rev 0, FraID (1–3 from the body's variant, `sf.id` for
+/// [`D1Body::Other`], whose 186 body bits are written 0), SOW (s, 20 bits), then the fields of
+/// Figures 5-4 to 5-6 in SI units as in [`Sub1`]–[`Sub3`] (semicircles via [`GPS_PI`], as the
+/// decoder does). Scaled values are rounded to the nearest multiple of their scale factor
+/// (§5.2.4, Tables 5-5 to 5-11); `worst` receives the largest |value/scale −
+/// round(value/scale)| over them, in LSB, so that a caller can tell values off the grid. A
+/// value (or integer) beyond its field's range, or not finite, is an error naming the field.
+pub fn encode_d1(sf: &D1Subframe, worst: &mut f64) -> Result<[u32; 10], OutOfRange> {
+    let mut d = [0u128; 2];
+    let id = match sf.body {
+        D1Body::Sub1(_) => 1,
+        D1Body::Sub2(_) => 2,
+        D1Body::Sub3(_) => 3,
+        D1Body::Other => sf.id,
+    };
+    let raw = |d: &mut [u128; 2], field, from, n, v: i64| -> Result<(), OutOfRange> {
+        put(d, from, n, check(field, n, false, v)?);
+        Ok(())
+    };
+    raw(&mut d, "preamble", 0, 11, 0x712)?;
+    raw(&mut d, "FraID", 15, 3, i64::from(id))?;
+    raw(&mut d, "SOW", 18, 20, i64::from(sf.sow_s))?;
+    let sc = GPS_PI;
+    // (field, first bit, bits, signed, value, scale)
+    type Field = (&'static str, u32, u32, bool, f64, f64);
+    let mut scaled = |d: &mut [u128; 2], fields: &[Field]| -> Result<(), OutOfRange> {
+        for &(field, from, n, signed, x, scale) in fields {
+            put(d, from, n, quantise(field, n, signed, x, scale, worst)?);
+        }
+        Ok(())
+    };
+    match sf.body {
+        D1Body::Sub1(b) => {
+            for (field, from, n, v) in [
+                ("SatH1", 38, 1, b.sat_h1),
+                ("AODC", 39, 5, b.aodc),
+                ("URAI", 44, 4, b.urai),
+                ("AODE", 219, 5, b.aode),
+            ] {
+                raw(&mut d, field, from, n, i64::from(v))?;
+            }
+            raw(&mut d, "WN", 48, 13, i64::from(b.week))?;
+            scaled(
+                &mut d,
+                &[
+                    ("toc", 61, 17, false, b.toc_s, 8.0),
+                    ("TGD1", 78, 10, true, b.tgd1_s, 0.1e-9),
+                    ("TGD2", 88, 10, true, b.tgd2_s, 0.1e-9),
+                    ("alpha0", 98, 8, true, b.alpha[0], p2(-30)),
+                    ("alpha1", 106, 8, true, b.alpha[1], p2(-27)),
+                    ("alpha2", 114, 8, true, b.alpha[2], p2(-24)),
+                    ("alpha3", 122, 8, true, b.alpha[3], p2(-24)),
+                    ("beta0", 130, 8, true, b.beta[0], p2(11)),
+                    ("beta1", 138, 8, true, b.beta[1], p2(14)),
+                    ("beta2", 146, 8, true, b.beta[2], p2(16)),
+                    ("beta3", 154, 8, true, b.beta[3], p2(16)),
+                    ("a2", 162, 11, true, b.a2_per_s, p2(-66)),
+                    ("a0", 173, 24, true, b.a0_s, p2(-33)),
+                    ("a1", 197, 22, true, b.a1, p2(-50)),
+                ],
+            )?;
+        }
+        D1Body::Sub2(b) => {
+            scaled(
+                &mut d,
+                &[
+                    ("Delta n", 38, 16, true, b.delta_n_rad_s, p2(-43) * sc),
+                    ("Cuc", 54, 18, true, b.cuc_rad, p2(-31)),
+                    ("M0", 72, 32, true, b.m0_rad, p2(-31) * sc),
+                    ("e", 104, 32, false, b.e, p2(-33)),
+                    ("Cus", 136, 18, true, b.cus_rad, p2(-31)),
+                    ("Crc", 154, 18, true, b.crc_m, p2(-6)),
+                    ("Crs", 172, 18, true, b.crs_m, p2(-6)),
+                    ("sqrt(A)", 190, 32, false, b.sqrt_a, p2(-19)),
+                ],
+            )?;
+            raw(&mut d, "toe (MSB)", 222, 2, i64::from(b.toe_msb))?;
+        }
+        D1Body::Sub3(b) => {
+            raw(&mut d, "toe (LSB)", 38, 15, i64::from(b.toe_lsb))?;
+            scaled(
+                &mut d,
+                &[
+                    ("i0", 53, 32, true, b.i0_rad, p2(-31) * sc),
+                    ("Cic", 85, 18, true, b.cic_rad, p2(-31)),
+                    ("OMEGA DOT", 103, 24, true, b.omega_dot_rad_s, p2(-43) * sc),
+                    ("Cis", 127, 18, true, b.cis_rad, p2(-31)),
+                    ("IDOT", 145, 14, true, b.idot_rad_s, p2(-43) * sc),
+                    ("OMEGA0", 159, 32, true, b.omega0_rad, p2(-31) * sc),
+                    ("omega", 191, 32, true, b.omega_rad, p2(-31) * sc),
+                ],
+            )?;
+        }
+        D1Body::Other => {}
+    }
+    Ok(words_from_info(&d))
+}
+
 /// Whether BeiDou PRN `prn` is a GEO satellite (D2 message, GEO orbit formulas):
 /// PRN 1–5 and 59–63 (BDS-SIS-ICD-B1I §3.2, §5.3).
 pub fn is_geo(prn: u8) -> bool {
@@ -512,6 +643,18 @@ impl BdsAssembler {
     }
 }
 
+/// Ephemeris `e` as its D1 subframes 1, 2, 3 (FraID 1–3, SOW `e.sow_s`, + 6 s, + 12 s; not
+/// wrapped at the week's end, as [`BdsAssembler`] expects): the inverse of
+/// [`BdsAssembler::on_subframe`], for [`encode_d1`].
+pub fn d1_subframes(e: &BdsEphemeris) -> [D1Subframe; 3] {
+    [
+        (1, e.sow_s, D1Body::Sub1(e.s1)),
+        (2, e.sow_s.wrapping_add(6), D1Body::Sub2(e.s2)),
+        (3, e.sow_s.wrapping_add(12), D1Body::Sub3(e.s3)),
+    ]
+    .map(|(id, sow_s, body)| D1Subframe { id, sow_s, body })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -707,31 +850,6 @@ mod tests {
         );
     }
 
-    /// Writes `n` bits of `v` at information bits `from..from+n`.
-    fn put(d: &mut [u128; 2], from: u32, n: u32, v: i64) {
-        for k in 0..n {
-            let b = from + k;
-            let bit = ((v >> (n - 1 - k)) & 1) as u128;
-            let (i, off) = ((b / 128) as usize, b % 128);
-            d[i] = (d[i] & !(1 << (127 - off))) | (bit << (127 - off));
-        }
-    }
-
-    /// The ten u-blox words of 224 information bits, BCH parity added (the inverse of
-    /// `info_bits`).
-    fn words_from_info(d: &[u128; 2]) -> [u32; 10] {
-        let mut out = [0u32; 10];
-        let at = |a: u32, n: u32| u(d, a, n) as u32;
-        let w0 = at(0, 26);
-        out[0] = (w0 << 4) | bch_syndrome((w0 & 0x7FF) << 4);
-        for (k, w) in out.iter_mut().enumerate().skip(1) {
-            let from = 26 + 22 * (k as u32 - 1);
-            let (a, b) = (at(from, 11), at(from + 11, 11));
-            *w = (a << 19) | (b << 8) | (bch_syndrome(a << 4) << 4) | bch_syndrome(b << 4);
-        }
-        out
-    }
-
     /// A GEO's D2 subframe 1 pages 1 and 3–10 written with the bit table of Figure 5-10
     /// (page 1 at SOW 100 000) decode into the ephemeris with the GEO orbit; fields split
     /// between pages keep their sign; a page missing, out of its cycle, or with a flipped bit
@@ -832,6 +950,127 @@ mod tests {
         let mut page0 = pages[0];
         put(&mut page0, 38, 4, 0);
         assert_eq!(decode_d2(&words_from_info(&page0)), Err(BdsError::Page(0)));
+    }
+
+    /// `encode_d1` inverts `decode_d1` on C21's subframes 1–3 (values on the grid to 1e-6
+    /// LSB) and gives back the receiver's own words; every code word of its output passes the
+    /// BCH check, and a flipped bit fails it (a preamble bit: no preamble; the 4 Rev bits of
+    /// word 1 are sent unencoded and unused).
+    #[test]
+    fn encode_d1_inverts_decode_d1() {
+        for w in &C21 {
+            let sf = decode_d1(w).unwrap();
+            let mut worst = 0.0;
+            let enc = encode_d1(&sf, &mut worst).unwrap();
+            assert!(worst < 1e-6, "subframe {}: {worst} LSB off the grid", sf.id);
+            assert_eq!(decode_d1(&enc), Ok(sf));
+            assert_eq!(enc, w.map(|x| x & 0x3FFF_FFFF), "subframe {}", sf.id);
+            for k in 0..10 {
+                for bit in 0..30 {
+                    let mut bad = enc;
+                    bad[k] ^= 1 << bit;
+                    let got = decode_d1(&bad);
+                    match (k, bit) {
+                        (0, 19..) => assert!(matches!(got, Err(BdsError::Preamble(_))), "word {k} bit {bit}"),
+                        (0, 15..=18) => assert_eq!(got, Ok(sf), "Rev bit {bit}"),
+                        _ => assert_eq!(got, Err(BdsError::Parity(k)), "word {k} bit {bit}"),
+                    }
+                }
+            }
+        }
+        // Subframes 4 and 5: header only, body zero.
+        let other = D1Subframe {
+            id: 4,
+            sow_s: 408_648,
+            body: D1Body::Other,
+        };
+        let mut worst = 0.0;
+        let enc = encode_d1(&other, &mut worst).unwrap();
+        assert_eq!((decode_d1(&enc), worst), (Ok(other), 0.0));
+        assert!(enc[2..].iter().all(|&w| w == 0));
+    }
+
+    /// An ephemeris split by `d1_subframes`, encoded, decoded and assembled again is the same.
+    #[test]
+    fn d1_subframes_reassemble_the_ephemeris() {
+        let e = c21();
+        let sfs = d1_subframes(&e);
+        assert_eq!(sfs.map(|x| (x.id, x.sow_s)), [(1, 408_630), (2, 408_636), (3, 408_642)]);
+        let mut a = BdsAssembler::default();
+        let mut worst = 0.0;
+        let mut out = None;
+        for sf in &sfs {
+            out = a.on_subframe(21, &decode_d1(&encode_d1(sf, &mut worst).unwrap()).unwrap());
+        }
+        assert!(worst < 1e-6, "{worst}");
+        assert_eq!(out, Some(e));
+        for (sf, w) in sfs.iter().zip(&C21) {
+            assert_eq!(encode_d1(sf, &mut worst).unwrap(), w.map(|x| x & 0x3FFF_FFFF));
+        }
+    }
+
+    /// A value off the grid is rounded to the nearest LSB and reported in `worst`; a value out
+    /// of its field's range, or NaN, is an error naming the field.
+    #[test]
+    fn encode_d1_reports_values_off_the_grid() {
+        let e = c21();
+        let [s1, s2, s3] = d1_subframes(&e);
+        let D1Body::Sub1(b1) = s1.body else { unreachable!() };
+        for (off, back) in [(0.3, 0.0), (-0.3, 0.0), (0.7, 1.0), (-0.7, -1.0)] {
+            let sf = D1Subframe {
+                body: D1Body::Sub1(Sub1 {
+                    a0_s: b1.a0_s + off * p2(-33),
+                    ..b1
+                }),
+                ..s1
+            };
+            let mut worst = 0.0;
+            let dec = decode_d1(&encode_d1(&sf, &mut worst).unwrap()).unwrap();
+            assert!((worst - 0.3).abs() < 1e-6, "{off}: {worst}");
+            let D1Body::Sub1(d1) = dec.body else { unreachable!() };
+            assert_eq!(
+                d1,
+                Sub1 {
+                    a0_s: b1.a0_s + back * p2(-33),
+                    ..b1
+                },
+                "{off}"
+            );
+        }
+        // Out of range or not finite: an error naming the field.
+        let D1Body::Sub2(b2) = s2.body else { unreachable!() };
+        let D1Body::Sub3(b3) = s3.body else { unreachable!() };
+        let mut worst = 0.0;
+        for (body, field) in [
+            (
+                D1Body::Sub1(Sub1 {
+                    tgd1_s: 1029.0 * 0.1e-9,
+                    ..b1
+                }),
+                "TGD1",
+            ),
+            (D1Body::Sub1(Sub1 { week: 0x2000, ..b1 }), "WN"),
+            (D1Body::Sub1(Sub1 { a1: 1e30, ..b1 }), "a1"),
+            (D1Body::Sub2(Sub2 { e: -0.01, ..b2 }), "e"),
+            (
+                D1Body::Sub3(Sub3 {
+                    omega_rad: f64::NAN,
+                    ..b3
+                }),
+                "omega",
+            ),
+            (D1Body::Sub3(Sub3 { toe_lsb: 0x8000, ..b3 }), "toe (LSB)"),
+        ] {
+            let err = encode_d1(&D1Subframe { body, ..s1 }, &mut worst).unwrap_err();
+            assert_eq!(err.field, field);
+        }
+        let mut worst = 0.0;
+        let neg = D1Subframe {
+            body: D1Body::Sub2(Sub2 { crs_m: -1.0, ..b2 }),
+            ..s2
+        };
+        assert_eq!(decode_d1(&encode_d1(&neg, &mut worst).unwrap()).unwrap().body, neg.body);
+        assert_eq!(worst, 0.0);
     }
 
     #[test]

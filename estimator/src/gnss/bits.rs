@@ -1,6 +1,7 @@
 //! Bit fields of navigation data as u-blox delivers it in UBX-RXM-SFRBX: the message's bits
 //! from word 0's most significant bit on (GPS CNAV, Galileo F/NAV), as the interface
-//! control documents number them (bit 0 = the first transmitted).
+//! control documents number them (bit 0 = the first transmitted); and the other way, values
+//! quantised into fields for the encoders (RINEX import).
 
 /// The words of one message, read MSB first.
 pub(crate) struct Bits<'a>(pub(crate) &'a [u32]);
@@ -27,4 +28,52 @@ impl Bits<'_> {
     pub(crate) fn crc24q_ok(&self, n: u32) -> bool {
         u64::from(super::galileo::crc24q(n, |i| self.bit(i) as u32)) == self.u(n, 24)
     }
+}
+
+/// A value that does not fit its field of a navigation message.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("{field} = {value:e} does not fit its {bits}-bit field")]
+pub struct OutOfRange {
+    /// The field (the ICD's name).
+    pub field: &'static str,
+    /// The value, in the field's SI unit (semicircle fields in rad).
+    pub value: f64,
+    /// The field's width.
+    pub bits: u32,
+}
+
+/// The integer `v` as a field of `bits` bits (two's complement when `signed`): `v` when it
+/// fits.
+pub fn check(field: &'static str, bits: u32, signed: bool, v: i64) -> Result<i64, OutOfRange> {
+    let fits = if signed {
+        (-(1i64 << (bits - 1))..(1i64 << (bits - 1))).contains(&v)
+    } else {
+        (0..(1i64 << bits)).contains(&v)
+    };
+    fits.then_some(v).ok_or(OutOfRange {
+        field,
+        value: v as f64,
+        bits,
+    })
+}
+
+/// round(`x` / `scale`) as a field of `bits` bits ([`check`]); `worst` receives the largest
+/// |x / scale − round(x / scale)|, in LSBs.
+pub fn quantise(
+    field: &'static str,
+    bits: u32,
+    signed: bool,
+    x: f64,
+    scale: f64,
+    worst: &mut f64,
+) -> Result<i64, OutOfRange> {
+    let q = x / scale;
+    let r = q.round();
+    let err = OutOfRange { field, value: x, bits };
+    if !r.is_finite() || r.abs() > 2f64.powi(62) {
+        return Err(err);
+    }
+    let v = check(field, bits, signed, r as i64).map_err(|_| err)?;
+    *worst = worst.max((q - r).abs());
+    Ok(v)
 }

@@ -9,7 +9,7 @@
 //! ([`broadcast`]), their orbits through [`orbit`] with each system's constants.
 
 pub mod beidou;
-mod bits;
+pub mod bits;
 pub mod broadcast;
 pub mod cnav;
 pub mod fnav;

@@ -112,15 +112,25 @@ pub fn troposphere_delay_m(lat_rad: f64, h_m: f64, el_rad: f64) -> f64 {
     (zenith_h + zenith_w) * mapping
 }
 
+/// The L1 ionospheric delay at zenith taken as error where no broadcast model is known, m
+/// (≈ 10 m by day at mid-latitudes; RTKLIB's `ERR_ION` is 5 m).
+pub const UNMODELLED_IONO_ZENITH_M: f64 = 10.0;
+
 /// Variance of what the atmosphere models leave in a pseudorange, m²: half the broadcast
 /// ionosphere's delay `iono_m` (the Klobuchar model corrects about half of the delay,
 /// IS-GPS-200 §20.3.3.5.2.5) and 0.3 m of the troposphere's at zenith, mapped with
 /// 1/(sin el + 0.1) — RTKLIB's `ERR_BRDCI` and `ERR_SAAS` (T. Takasu, RTKLIB 2.4.2 manual,
 /// Appendix E.6; `pntpos.c`). Both change over minutes and across the sky, not per epoch.
-pub fn atmosphere_var_m2(iono_m: f64, el_rad: f64) -> f64 {
+/// Without a broadcast model (`iono_m` `None`) the whole delay is error:
+/// [`UNMODELLED_IONO_ZENITH_M`] × `iono_scale` (f_L1/f)² / sin el.
+pub fn atmosphere_var_m2(iono_m: Option<f64>, iono_scale: f64, el_rad: f64) -> f64 {
     const IONO_RESIDUAL: f64 = 0.5;
     const TROPO_ZENITH_M: f64 = 0.3;
-    (IONO_RESIDUAL * iono_m).powi(2) + (TROPO_ZENITH_M / (el_rad.sin() + 0.1)).powi(2)
+    let iono_var = match iono_m {
+        Some(d) => (IONO_RESIDUAL * d).powi(2),
+        None => (iono_scale * UNMODELLED_IONO_ZENITH_M / el_rad.sin().max(0.1)).powi(2),
+    };
+    iono_var + (TROPO_ZENITH_M / (el_rad.max(0.0).sin() + 0.1)).powi(2)
 }
 
 /// One satellite's measurement for [`solve`].
@@ -346,9 +356,9 @@ fn solve_excluding<O: Measured>(
                 }
                 sin_el = el.sin();
                 let (lat, lon) = (g.lat_deg.to_radians(), g.lon_deg.to_radians());
-                let iono_m = iono.map_or(0.0, |k| C_M_S * k.delay_s(lat, lon, el, az, t_rx_s) * m.iono_scale());
-                model += iono_m + troposphere_delay_m(lat, g.height_m, el);
-                atmosphere_var = atmosphere_var_m2(iono_m, el);
+                let iono_m = iono.map(|k| C_M_S * k.delay_s(lat, lon, el, az, t_rx_s) * m.iono_scale());
+                model += iono_m.unwrap_or(0.0) + troposphere_delay_m(lat, g.height_m, el);
+                atmosphere_var = atmosphere_var_m2(iono_m, m.iono_scale(), el);
             }
             let w = 1.0 / ((o.sigma_zenith_m / sin_el).powi(2) + atmosphere_var);
             let mut h = VecX::zeros();
@@ -504,7 +514,9 @@ mod tests {
 
     /// A receiver 1 km up at 40° N 105° W seeing `n` satellites spread in azimuth and
     /// elevation, each of system `systems[k % len]`, with exact pseudoranges for receiver
-    /// clocks `clocks_m` (by [`SYSTEMS`] index) and the troposphere the solver models.
+    /// clocks `clocks_m` (by [`SYSTEMS`] index) and the troposphere the solver models; free of
+    /// the ionosphere (`iono_scale` 0, as an ionosphere-free combination would be), so that
+    /// without a broadcast model the solver adds no σ for it.
     fn synthetic(n: usize, systems: &[u8], clocks_m: [f64; MAX_SYSTEMS]) -> ([f64; 3], Vec<SystemObservation>) {
         let rx = navsync_wire::earth::geodetic_to_ecef(40f64.to_radians(), (-105f64).to_radians(), 1000.0);
         let c_en = ned_from_ecef(40f64.to_radians(), (-105f64).to_radians());
@@ -532,7 +544,7 @@ mod tests {
                         sigma_zenith_m: 1.0,
                     },
                     gnss_id,
-                    iono_scale: 1.0,
+                    iono_scale: 0.0,
                 }
             })
             .collect();
@@ -591,7 +603,12 @@ mod tests {
         few[1].obs.pseudorange_m += 40.0;
         let s = solve(&few, None, 0.0, [0.0; 3], &SppSettings::default()).unwrap();
         assert!(s.excluded.is_none() && s.dof() == 1 && s.chi2 > 1.0);
+        // (An `Observation` is an L1 range: `iono_scale` 1.)
         let (_, gps) = synthetic(8, &[0], clocks);
+        let gps: Vec<_> = gps
+            .iter()
+            .map(|o| SystemObservation { iono_scale: 1.0, ..*o })
+            .collect();
         let plain: Vec<Observation> = gps.iter().map(|o| o.obs).collect();
         let a = solve(&plain, None, 0.0, [0.0; 3], &SppSettings::default()).unwrap();
         let b = solve(&gps, None, 0.0, [0.0; 3], &SppSettings::default()).unwrap();

@@ -33,7 +33,7 @@ fn p(x: &Path) -> String {
 
 /// The receiver's RTK-fixed positions (`gnss_q.txt` Q = 1, `gnss.pos`), ECEF m, by GPS
 /// seconds of week in ms.
-fn rtk_fixed() -> HashMap<i64, [f64; 3]> {
+pub(crate) fn rtk_fixed() -> HashMap<i64, [f64; 3]> {
     let read = |name: &str| std::fs::read_to_string(data().join(name)).unwrap();
     let fixed: Vec<i64> = read("gnss_q.txt")
         .lines()
@@ -69,7 +69,11 @@ fn horizontal(p: [f64; 3], reference: [f64; 3]) -> f64 {
 
 /// Horizontal RMS of the solutions at the RTK-fixed epochs of `only` (all when `None`), and
 /// their number.
-fn score(solutions: &HashMap<i64, [f64; 3]>, fixed: &HashMap<i64, [f64; 3]>, only: Option<&[i64]>) -> (f64, usize) {
+pub(crate) fn score(
+    solutions: &HashMap<i64, [f64; 3]>,
+    fixed: &HashMap<i64, [f64; 3]>,
+    only: Option<&[i64]>,
+) -> (f64, usize) {
     let errors: Vec<f64> = solutions
         .iter()
         .filter(|(t, _)| only.is_none_or(|o| o.contains(t)))
@@ -91,8 +95,18 @@ fn navsync(env: &TestEnv, systems: &str) -> (HashMap<i64, [f64; 3]>, Vec<[usize;
         );
         run_ok(env, &["import", "ubx", &log, "--imu", &imu, "--out", &r]);
     }
-    let csv = env.dir.join(format!("walk-{}.csv", systems.replace(',', "")));
-    let (r, c) = (p(&rec), p(&csv));
+    navsync_spp(env, &rec, systems)
+}
+
+/// `navsync spp` of recording `rec` with `systems`, as [`navsync`] returns it.
+pub(crate) fn navsync_spp(
+    env: &TestEnv,
+    rec: &Path,
+    systems: &str,
+) -> (HashMap<i64, [f64; 3]>, Vec<[usize; 3]>, Value) {
+    let stem = rec.file_stem().unwrap().to_string_lossy();
+    let csv = env.dir.join(format!("{stem}-{}.csv", systems.replace(',', "")));
+    let (r, c) = (p(rec), p(&csv));
     let out = run_ok(env, &["spp", &r, "--systems", systems, "--out", &c, "--json"]);
     let summary: Value = serde_json::from_str(out.trim()).unwrap();
     let text = std::fs::read_to_string(&csv).unwrap();
@@ -153,7 +167,7 @@ fn walk_spp_uses_every_system() {
 
 /// RTKLIB's single-point solution of `obs`/`nav` with `systems` (`-sys`), ECEF m by time in
 /// ms of GPS week.
-fn rtklib_spp(rnx2rtkp: &Path, obs: &Path, nav: &Path, out: &Path, systems: &str) -> HashMap<i64, [f64; 3]> {
+pub(crate) fn rtklib_spp(rnx2rtkp: &Path, obs: &Path, nav: &Path, out: &Path, systems: &str) -> HashMap<i64, [f64; 3]> {
     rtklib_spp_systems(rnx2rtkp, obs, nav, out, systems)
         .into_iter()
         .filter_map(|(t, p)| Some((ms(t.split_whitespace().nth(1)?.parse().ok()?)?, p)))

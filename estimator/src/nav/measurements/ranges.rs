@@ -47,8 +47,6 @@ use crate::nav::filter::DelayedFilter;
 use crate::nav::mechanization::skew;
 use crate::time::clock_model::OscillatorNoise;
 
-/// 1σ of the L1 ionospheric delay at zenith when the broadcast model is not known yet, m.
-const UNMODELLED_IONO_ZENITH_M: f64 = 10.0;
 /// 1σ at zenith of a time-differenced carrier phase, m: the phase noise of both epochs
 /// (u-blox reports 0.004–0.06 cycles, ≤ 1 cm at L1; the receiver's own σ·√2 when larger),
 /// the change of multipath, and what the first-order model leaves over the interval (half the
@@ -373,28 +371,23 @@ fn sight(a: &Antenna, s: &SatRange, e: &RangeEpoch) -> Sight {
     let u_ned = a.c_ne.transpose() * u_ecef;
     let el_rad = (-u_ned.z).clamp(-1.0, 1.0).asin();
     let az_rad = u_ned.y.atan2(u_ned.x).rem_euclid(2.0 * std::f64::consts::PI);
-    let iono = e.iono.map_or(0.0, |k| {
-        s.iono_scale * C_M_S * k.delay_s(a.lat_rad, a.lon_rad, el_rad, az_rad, e.tow_s)
-    });
+    let iono = e
+        .iono
+        .map(|k| s.iono_scale * C_M_S * k.delay_s(a.lat_rad, a.lon_rad, el_rad, az_rad, e.tow_s));
     let tropo = if el_rad > 0.0 {
         troposphere_delay_m(a.lat_rad, a.h_m, el_rad)
     } else {
         0.0
     };
-    // Without the broadcast ionosphere the whole delay is error: ≈ 10 m at zenith by day.
-    let iono_unmodelled = if e.iono.is_some() {
-        0.0
-    } else {
-        s.iono_scale * UNMODELLED_IONO_ZENITH_M / el_rad.sin().max(0.1)
-    };
-    let atmosphere_var_m2 = atmosphere_var_m2(iono, el_rad.max(0.0)) + iono_unmodelled * iono_unmodelled;
+    // Without the broadcast ionosphere the whole delay is error (`atmosphere_var_m2`).
+    let atmosphere_var_m2 = atmosphere_var_m2(iono, s.iono_scale, el_rad);
     Sight {
         range_m,
         u_ecef,
         u_ned,
         sat_vel: Vector3::from(rotate_for_flight(s.sat_vel_mps, tau)),
         el_rad,
-        atmosphere_m: iono + tropo,
+        atmosphere_m: iono.unwrap_or(0.0) + tropo,
         atmosphere_var_m2,
     }
 }
