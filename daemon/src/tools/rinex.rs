@@ -906,4 +906,110 @@ mod tests {
         let err = subframes_of(&bad, "x.05n", &mut worst).unwrap_err();
         assert_eq!((err.file.as_str(), err.line, err.field.as_str()), ("x.05n", 42, "Crs"));
     }
+
+    /// The walk's E07 and C21 records as `convbin` writes them become words that the
+    /// estimator's decoders complete into ephemerides with the records' values (on the ICD's
+    /// grid: no rounding); a value beyond its field, or a t_oe off BeiDou's 8 s grid, is an
+    /// error at the record's line naming the field.
+    #[test]
+    fn galileo_and_beidou_records_become_words_the_decoders_read() {
+        use navsync_estimator::gnss::beidou::{BdsAssembler, decode_d1};
+        use navsync_estimator::gnss::galileo::GalAssembler;
+        let e07 = KeplerRecord {
+            line: 12,
+            system: 'E',
+            sv: 7,
+            toc_week: 2381,
+            toc_s: 407_400.0,
+            af: [-2.029410679825e-4, -2.060573933704e-12, 0.0],
+            orbit: [
+                [44.0, -35.28125, 3.581934916253e-9, 0.6130816616549],
+                [-1.486390829086e-6, 3.099185414612e-4, 4.768371582031e-6, 5440.609928131],
+                [407_400.0, 8.940696716309e-8, 2.38676450559, 0.0],
+                [0.965454400011, 238.96875, 0.3301908596947, -5.789169713584e-9],
+                [5.178787145843e-11, 513.0, 2381.0, 0.0],
+                [3.12, 0.0, 4.656612873077e-9, 4.889443516731e-9],
+                [408_655.0, 0.0, 0.0, 0.0],
+            ],
+        };
+        let mut worst = 0.0;
+        let mut a = GalAssembler::default();
+        let gal = galileo_pages(&e07, "w.nav", &mut worst)
+            .unwrap()
+            .iter()
+            .filter_map(|w| a.on_word(7, &galileo::decode(w).unwrap()))
+            .last()
+            .unwrap();
+        let o = gal.orbit();
+        assert!(worst < 1e-3, "{worst}");
+        assert_eq!(
+            (o.toe_s, o.toc_s, gal.iod_nav(), gal.w5.wn, gal.sisa_m()),
+            (407_400.0, 407_400.0, 44, 1357, Some(3.12))
+        );
+        assert!((o.sqrt_a - 5440.609928131).abs() < 1e-9 && (o.tgd_s - 4.889443516731e-9).abs() < 1e-18);
+        assert!(gal.healthy());
+        let bad = KeplerRecord {
+            af: [1.0, 0.0, 0.0],
+            ..e07
+        };
+        let err = galileo_pages(&bad, "w.nav", &mut worst).unwrap_err();
+        assert_eq!(
+            (err.file.as_str(), err.line, err.field.as_str()),
+            ("w.nav", 12, "af0"),
+            "{err}"
+        );
+
+        let c21 = KeplerRecord {
+            line: 40,
+            system: 'C',
+            sv: 21,
+            toc_week: 1025,
+            toc_s: 406_800.0,
+            af: [-9.634450543672e-4, -6.846967437468e-12, 0.0],
+            orbit: [
+                [85.0, -3.5, 3.659438144573e-9, 0.8863045281069],
+                [-1.336447894573e-7, 5.563498707488e-4, 6.671529263258e-6, 5282.626552582],
+                [406_800.0, 4.516914486885e-8, 1.750643840109, -5.215406417847e-8],
+                [0.9838546573813, 238.25, 5.962172078684e-2, -6.660634585023e-9],
+                [3.675153084878e-10, 0.0, 1025.0, 0.0],
+                [2.0, 0.0, 1.33e-8, 1.33e-8],
+                [408_630.0, 1.0, 0.0, 0.0],
+            ],
+        };
+        let mut worst = 0.0;
+        let (words, wrapped) = beidou_subframes(&c21, None, "w.nav", &mut worst).unwrap();
+        let mut a = BdsAssembler::default();
+        let bds = words
+            .iter()
+            .filter_map(|w| a.on_subframe(21, &decode_d1(w).unwrap()))
+            .last()
+            .unwrap();
+        assert!(wrapped && worst < 1e-3, "{worst}");
+        let o = bds.orbit();
+        assert_eq!(
+            (o.toe_s, bds.s1.aode, bds.s1.aodc, bds.s1.week, bds.s1.urai),
+            (406_800.0, 85 % 32, 1, 1025, 0)
+        );
+        assert!((o.sqrt_a - 5282.626552582).abs() < 1e-9 && (bds.s1.tgd1_s - 1.33e-8).abs() < 1e-18);
+        let off = KeplerRecord {
+            orbit: [
+                c21.orbit[0],
+                c21.orbit[1],
+                [406_804.0, 0.0, 0.0, 0.0],
+                c21.orbit[3],
+                c21.orbit[4],
+                c21.orbit[5],
+                c21.orbit[6],
+            ],
+            ..c21
+        };
+        let err = beidou_subframes(&off, None, "w.nav", &mut worst).unwrap_err();
+        assert_eq!((err.line, err.field.as_str()), (40, "Toe"), "{err}");
+        let bad = KeplerRecord {
+            af: [0.0, 1.0, 0.0],
+            ..c21
+        };
+        let err = beidou_subframes(&bad, None, "w.nav", &mut worst).unwrap_err();
+        assert_eq!((err.line, err.field.as_str()), (40, "a1"), "{err}");
+    }
 }
