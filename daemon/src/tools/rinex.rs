@@ -14,8 +14,8 @@
 //! gives the observations' GLONASS `freqId` when the observation header has none. A Galileo
 //! I/NAV record becomes word types 1–5 as E1-B page pairs (`galileo::encode_word`, OS SIS ICD
 //! Table 40, CRC-24Q), a BeiDou MEO/IGSO record D1 subframes 1–3 (`beidou::encode_d1`,
-//! BDS-SIS-ICD-B1I §5.2, BCH parity); Galileo F/NAV records (the I/NAV ones serve E1) and BeiDou
-//! GEO records (D2 is not written) are counted and left out. An issue is
+//! BDS-SIS-ICD-B1I §5.2, BCH parity), a GEO one D2 subframe 1 pages 1–10 (`beidou::encode_d2`,
+//! §5.3); Galileo F/NAV records (the I/NAV ones serve E1) are counted and left out. An issue is
 //! delivered when its t_oe (GLONASS: t_b) becomes the nearest to the epoch (RTKLIB's choice
 //! among a file's ephemerides; the first issue of each satellite before the first epoch).
 //!
@@ -25,7 +25,7 @@
 use std::path::{Path, PathBuf};
 
 use navsync_drivers::gnss::rinex::{self, GloRecord, GpsEphemeris, KeplerRecord, NavFile, ObsFile, RinexError};
-use navsync_estimator::gnss::beidou::{self, D1Body, D1Subframe, Sub1, Sub2, Sub3};
+use navsync_estimator::gnss::beidou::{self, BdsEphemeris, Sub1, Sub2, Sub3};
 use navsync_estimator::gnss::bits::OutOfRange;
 use navsync_estimator::gnss::galileo::{self, GalEphemeris, Word1, Word2, Word3, Word4, Word5};
 use navsync_estimator::gnss::glonass::{self, GloEphemeris};
@@ -102,10 +102,8 @@ pub struct RinexStats {
     pub galileo_ephemerides: u64,
     /// Galileo F/NAV records left out (the I/NAV ones of the same satellites serve E1).
     pub galileo_fnav_left_out: u64,
-    /// BeiDou ephemerides (each as D1 subframes 1–3).
+    /// BeiDou ephemerides (each as D1 subframes 1–3, a GEO's as D2 subframe 1 pages 1–10).
     pub beidou_ephemerides: u64,
-    /// BeiDou GEO records left out (their D2 message is not written).
-    pub beidou_geo_left_out: u64,
     /// BeiDou records whose AODE did not fit its 5 bits (RTKLIB writes its own issue number
     /// there): its 5 low bits were kept.
     pub beidou_aode_wrapped: u64,
@@ -133,15 +131,11 @@ pub fn main(args: &RinexArgs) -> anyhow::Result<()> {
         s.glonass_ephemerides,
         s.worst_quantisation
     );
-    if s.galileo_ephemerides + s.beidou_ephemerides + s.galileo_fnav_left_out + s.beidou_geo_left_out > 0 {
+    if s.galileo_ephemerides + s.beidou_ephemerides + s.galileo_fnav_left_out > 0 {
         eprintln!(
-            "  {} Galileo ephemerides as I/NAV words 1–5, {} BeiDou ones as D1 subframes 1–3 ({} Galileo \
-             F/NAV and {} BeiDou GEO records left out; {} BeiDou AODE beyond 5 bits kept mod 32)",
-            s.galileo_ephemerides,
-            s.beidou_ephemerides,
-            s.galileo_fnav_left_out,
-            s.beidou_geo_left_out,
-            s.beidou_aode_wrapped
+            "  {} Galileo ephemerides as I/NAV words 1–5, {} BeiDou ones as D1 subframes (GEO: D2 pages) \
+             ({} Galileo F/NAV records left out; {} BeiDou AODE beyond 5 bits kept mod 32)",
+            s.galileo_ephemerides, s.beidou_ephemerides, s.galileo_fnav_left_out, s.beidou_aode_wrapped
         );
     }
     if s.glonass_without_channel > 0 {
@@ -616,34 +610,34 @@ fn galileo_pages(k: &KeplerRecord, file: &str, worst: &mut f64) -> Result<[[u32;
     Ok(out)
 }
 
-/// A RINEX 3 BeiDou (MEO/IGSO) record as D1 subframes 1–3 (BDS-SIS-ICD-B1I Figures 5-4 to
-/// 5-6, `beidou::encode_d1`): the URA in m as its index (IS-GPS-200's table, §5.2.4.5), the
-/// Klobuchar α/β of the file's `BDSA`/`BDSB` header (else zero), subframe 1's SOW the record's
-/// t_oe; with whether its AODE had to be cut to 5 bits (RTKLIB writes its own issue number
-/// there).
-fn beidou_subframes(
+/// A RINEX 3 BeiDou record as the ephemeris its broadcast carries (BDS-SIS-ICD-B1I §5.2.4):
+/// the URA in m as its index (IS-GPS-200's table, §5.2.4.5), the Klobuchar α/β of the file's
+/// `BDSA`/`BDSB` header (else zero; a GEO's D2 pages do not carry them), subframe 1's SOW the
+/// record's t_oe; with whether its AODE had to be cut to 5 bits (RTKLIB writes its own issue
+/// number there).
+fn beidou_ephemeris(
     k: &KeplerRecord,
     iono: Option<([f64; 4], [f64; 4])>,
     file: &str,
-    worst: &mut f64,
-) -> Result<([[u32; 10]; 3], bool), RinexError> {
+) -> Result<(BdsEphemeris, bool), RinexError> {
     let o = &k.orbit;
-    let err = |field: &str, problem: String| RinexError {
-        file: file.to_string(),
-        line: k.line,
-        field: field.to_string(),
-        problem,
-    };
     let toe_s = o[2][0];
     if toe_s.rem_euclid(8.0) != 0.0 {
-        return Err(err("Toe", format!("{toe_s} s is not a multiple of 8 s")));
+        return Err(RinexError {
+            file: file.to_string(),
+            line: k.line,
+            field: "Toe".to_string(),
+            problem: format!("{toe_s} s is not a multiple of 8 s"),
+        });
     }
     let toe8 = (toe_s / 8.0) as u32;
     let aode = o[0][0].round().max(0.0) as u64;
     let (alpha, beta) = iono.unwrap_or_default();
     let small = |x: f64| x.round().clamp(0.0, 255.0) as u8;
-    let body = [
-        D1Body::Sub1(Sub1 {
+    let e = BdsEphemeris {
+        sv: k.sv,
+        sow_s: toe_s as u32,
+        s1: Sub1 {
             sat_h1: small(o[5][1]),
             aodc: small(o[6][1]),
             urai: ura_index(o[5][0]),
@@ -657,8 +651,8 @@ fn beidou_subframes(
             a1: k.af[1],
             a2_per_s: k.af[2],
             aode: (aode % 32) as u8,
-        }),
-        D1Body::Sub2(Sub2 {
+        },
+        s2: Sub2 {
             delta_n_rad_s: o[0][2],
             cuc_rad: o[1][0],
             m0_rad: o[0][3],
@@ -668,8 +662,8 @@ fn beidou_subframes(
             crs_m: o[0][1],
             sqrt_a: o[1][3],
             toe_msb: (toe8 >> 15) as u8,
-        }),
-        D1Body::Sub3(Sub3 {
+        },
+        s3: Sub3 {
             toe_lsb: (toe8 & 0x7FFF) as u16,
             i0_rad: o[3][0],
             cic_rad: o[2][1],
@@ -678,18 +672,29 @@ fn beidou_subframes(
             idot_rad_s: o[4][0],
             omega0_rad: o[2][2],
             omega_rad: o[3][2],
-        }),
-    ];
-    let mut out = [[0u32; 10]; 3];
-    for (i, (slot, body)) in out.iter_mut().zip(body).enumerate() {
-        let sf = D1Subframe {
-            id: i as u8 + 1,
-            sow_s: toe_s as u32 + 6 * i as u32,
-            body,
-        };
-        *slot = beidou::encode_d1(&sf, worst).map_err(field_error(k, file))?;
+        },
+    };
+    Ok((e, aode > 31))
+}
+
+/// A BeiDou ephemeris as the words a receiver would deliver: a MEO/IGSO satellite's D1
+/// subframes 1–3 on B1I (`beidou::encode_d1`, u-blox sigId 0), a GEO's D2 subframe 1 pages
+/// 1–10 (`beidou::encode_d2`, sigId 1); each of ten words with BCH parity.
+fn beidou_words(
+    e: &BdsEphemeris,
+    k: &KeplerRecord,
+    file: &str,
+    worst: &mut f64,
+) -> Result<(u8, Vec<[u32; 10]>), RinexError> {
+    if beidou::is_geo(e.sv) {
+        let pages = beidou::encode_d2(e, worst).map_err(field_error(k, file))?;
+        return Ok((1, pages.to_vec()));
     }
-    Ok((out, aode > 31))
+    let mut out = Vec::with_capacity(3);
+    for sf in beidou::d1_subframes(e) {
+        out.push(beidou::encode_d1(&sf, worst).map_err(field_error(k, file))?);
+    }
+    Ok((0, out))
 }
 
 /// Runs `navsync import rinex`.
@@ -720,10 +725,8 @@ pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
         for k in &n.kepler {
             // Galileo: the I/NAV records (data sources bit 0 E1-B or 2 E5b-I, RINEX 3.05).
             let fnav_only = k.system == 'E' && (k.orbit[4][1] as u32) & 0b101 == 0;
-            let geo = k.system == 'C' && beidou::is_geo(k.sv);
             stats.galileo_fnav_left_out += u64::from(fnav_only);
-            stats.beidou_geo_left_out += u64::from(geo);
-            if !fnav_only && !geo {
+            if !fnav_only {
                 recs.push((f, Record::Kepler(*k)));
             }
         }
@@ -800,10 +803,10 @@ pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
                     stats.galileo_ephemerides += 1;
                 }
                 Record::Kepler(k) => {
-                    let bds_iono = navs[*f].1.bds_iono;
-                    let (subframes, wrapped) = beidou_subframes(k, bds_iono, name, &mut stats.worst_quantisation)?;
-                    for words in subframes {
-                        write_nav(&mut rec, Some(nav_words(3, k.sv, 0, &words)), *at)?;
+                    let (e, wrapped) = beidou_ephemeris(k, navs[*f].1.bds_iono, name)?;
+                    let (sig, words) = beidou_words(&e, k, name, &mut stats.worst_quantisation)?;
+                    for w in words {
+                        write_nav(&mut rec, Some(nav_words(3, k.sv, sig, &w)), *at)?;
                     }
                     stats.beidou_ephemerides += 1;
                     stats.beidou_aode_wrapped += u64::from(wrapped);
@@ -913,8 +916,9 @@ mod tests {
     /// error at the record's line naming the field.
     #[test]
     fn galileo_and_beidou_records_become_words_the_decoders_read() {
-        use navsync_estimator::gnss::beidou::{BdsAssembler, decode_d1};
+        use navsync_estimator::gnss::beidou::{BdsAssembler, D2Assembler, decode_d1, decode_d2};
         use navsync_estimator::gnss::galileo::GalAssembler;
+        use navsync_estimator::gnss::orbit::OrbitFrame;
         let e07 = KeplerRecord {
             line: 12,
             system: 'E',
@@ -977,14 +981,27 @@ mod tests {
             ],
         };
         let mut worst = 0.0;
-        let (words, wrapped) = beidou_subframes(&c21, None, "w.nav", &mut worst).unwrap();
+        let (e, wrapped) = beidou_ephemeris(&c21, None, "w.nav").unwrap();
+        let (sig, words) = beidou_words(&e, &c21, "w.nav", &mut worst).unwrap();
         let mut a = BdsAssembler::default();
         let bds = words
             .iter()
             .filter_map(|w| a.on_subframe(21, &decode_d1(w).unwrap()))
             .last()
             .unwrap();
-        assert!(wrapped && worst < 1e-3, "{worst}");
+        assert!(sig == 0 && wrapped && worst < 1e-3, "{worst}");
+        // The same orbit as a GEO's (PRN 3): D2 pages on B1I D2, the same ephemeris.
+        let geo = KeplerRecord { sv: 3, ..c21 };
+        let (e3, _) = beidou_ephemeris(&geo, None, "w.nav").unwrap();
+        let (sig, pages) = beidou_words(&e3, &geo, "w.nav", &mut worst).unwrap();
+        let mut d2 = D2Assembler::default();
+        let back = pages
+            .iter()
+            .filter_map(|w| d2.on_page(3, &decode_d2(w).unwrap()?))
+            .last()
+            .unwrap();
+        assert_eq!((sig, pages.len(), back.orbit().frame), (1, 10, OrbitFrame::BeiDouGeo));
+        assert_eq!(BdsEphemeris { sv: 21, ..back }, bds);
         let o = bds.orbit();
         assert_eq!(
             (o.toe_s, bds.s1.aode, bds.s1.aodc, bds.s1.week, bds.s1.urai),
@@ -1003,13 +1020,14 @@ mod tests {
             ],
             ..c21
         };
-        let err = beidou_subframes(&off, None, "w.nav", &mut worst).unwrap_err();
+        let err = beidou_ephemeris(&off, None, "w.nav").unwrap_err();
         assert_eq!((err.line, err.field.as_str()), (40, "Toe"), "{err}");
         let bad = KeplerRecord {
             af: [0.0, 1.0, 0.0],
             ..c21
         };
-        let err = beidou_subframes(&bad, None, "w.nav", &mut worst).unwrap_err();
+        let (e, _) = beidou_ephemeris(&bad, None, "w.nav").unwrap();
+        let err = beidou_words(&e, &bad, "w.nav", &mut worst).unwrap_err();
         assert_eq!((err.line, err.field.as_str()), (40, "a1"), "{err}");
     }
 }

@@ -16,8 +16,8 @@
 //! D2 (GEO, §5.3): subframe 1 pages 1 and 3–10 (Figure 5-10, the page number Pnum in
 //! information bits 38–41; the ephemeris and clock spread over the pages, fields split between
 //! consecutive pages) make the same [`BdsEphemeris`] with the GEO orbit
-//! ([`OrbitFrame::BeiDouGeo`](super::orbit::OrbitFrame::BeiDouGeo)); page 2's ionosphere is
-//! not decoded (zero in a D2 ephemeris).
+//! ([`OrbitFrame::BeiDouGeo`]); page 2's ionosphere is not decoded (zero in a D2 ephemeris).
+//! [`encode_d2`] writes such an ephemeris back as the ten pages.
 
 use super::bits::{OutOfRange, check, quantise};
 use super::orbit::{GPS_PI, Orbit, OrbitFrame};
@@ -655,6 +655,112 @@ pub fn d1_subframes(e: &BdsEphemeris) -> [D1Subframe; 3] {
     .map(|(id, sow_s, body)| D1Subframe { id, sow_s, body })
 }
 
+/// A part of a D2 field: (page 1..=10, first information bit, bits).
+type D2Part = (usize, u32, u32);
+
+/// Ephemeris `e` of a GEO satellite as the ten u-blox words (the RXM-SFRBX layout of
+/// [`encode_d1`], BCH(15,11) parity on every code word) of its D2 subframe 1 pages 1–10
+/// (BDS-SIS-ICD-B1I §5.3.3.1, Figure 5-10), in page order: the inverse of [`decode_d2`] and
+/// [`D2Assembler::on_page`].
+///
+/// Every page: preamble 0x712, Rev 0, FraID 1, SOW `e.sow_s + 3·(k − 1)` s for page k (not
+/// wrapped at the week's end, as [`D2Assembler`] expects), Pnum k in information bits 38–41;
+/// bits not listed here are 0. The fields, in SI units as in [`Sub1`]–[`Sub3`] (semicircles
+/// via [`GPS_PI`]) with the scale factors of D1 (§5.2.4, Tables 5-5 to 5-11); a field split
+/// between two pages has its most significant part on the earlier page (two's complement
+/// across the split):
+///
+/// - page 1: SatH1, AODC, URAI, WN, t_oc (2³ s), T_GD1, T_GD2 (0.1 ns);
+/// - page 2: header and Pnum only. Its body is the ionosphere, which [`decode_d2`] and
+///   [`D2Assembler`] do not read: `e.s1.alpha` and `e.s1.beta` are not written, and a
+///   decoded D2 ephemeris has them zero;
+/// - page 3: a0 (2⁻³³ s), a1's 4 MSB;
+/// - page 4: a1's 18 LSB (2⁻⁵⁰), a2 (2⁻⁶⁶), AODE, Δn (2⁻⁴³ π/s), C_uc's 14 MSB;
+/// - page 5: C_uc's 4 LSB (2⁻³¹ rad), M0 (2⁻³¹ π), C_us (2⁻³¹ rad), e's 10 MSB;
+/// - page 6: e's 22 LSB (2⁻³³), √A (2⁻¹⁹ √m), C_ic's 10 MSB;
+/// - page 7: C_ic's 8 LSB (2⁻³¹ rad), C_is (2⁻³¹ rad), t_oe (17 bits, 2³ s), i0's 21 MSB;
+/// - page 8: i0's 11 LSB (2⁻³¹ π), C_rc, C_rs (2⁻⁶ m), Ω̇'s 19 MSB;
+/// - page 9: Ω̇'s 5 LSB (2⁻⁴³ π/s), Ω0 (2⁻³¹ π), ω's 27 MSB;
+/// - page 10: ω's 5 LSB (2⁻³¹ π), IDOT (2⁻⁴³ π/s).
+///
+/// `e.sv` is not broadcast (the assembler is told it). [`D2Assembler`] makes an ephemeris
+/// only when t_oc = t_oe. Scaled values are rounded to the nearest multiple of their scale
+/// factor; `worst` receives the largest |value/scale − round(value/scale)| over them, in LSB.
+/// A value (or integer, or a page's SOW) beyond its field's range, or not finite, is an error
+/// naming the field (t_oe: "toe" for either of `toe_msb` (2 bits) and `toe_lsb` (15 bits)).
+pub fn encode_d2(e: &BdsEphemeris, worst: &mut f64) -> Result<[[u32; 10]; 10], OutOfRange> {
+    let mut pages = [[0u128; 2]; 10];
+    for (k, d) in (0i64..).zip(pages.iter_mut()) {
+        put(d, 0, 11, 0x712);
+        put(d, 15, 3, 1);
+        put(d, 18, 20, check("SOW", 20, false, i64::from(e.sow_s) + 3 * k)?);
+        put(d, 38, 4, k + 1);
+    }
+    let mut write = |(k, from, n): D2Part, v: i64| put(&mut pages[k - 1], from, n, v);
+    let (s1, s2, s3) = (&e.s1, &e.s2, &e.s3);
+    for (field, part, v) in [
+        ("SatH1", (1, 42, 1), i64::from(s1.sat_h1)),
+        ("AODC", (1, 43, 5), i64::from(s1.aodc)),
+        ("URAI", (1, 48, 4), i64::from(s1.urai)),
+        ("WN", (1, 52, 13), i64::from(s1.week)),
+        ("AODE", (4, 71, 5), i64::from(s1.aode)),
+    ] {
+        write(part, check(field, part.2, false, v)?);
+    }
+    let toe_msb = check("toe", 2, false, i64::from(s2.toe_msb))?;
+    let toe_lsb = check("toe", 15, false, i64::from(s3.toe_lsb))?;
+    write((7, 68, 17), (toe_msb << 15) | toe_lsb);
+    let sc = GPS_PI;
+    // (field, signed, value, scale, MSB part, LSB part on the next page)
+    type Field = (&'static str, bool, f64, f64, D2Part, Option<D2Part>);
+    let fields: &[Field] = &[
+        ("toc", false, s1.toc_s, 8.0, (1, 65, 17), None),
+        ("TGD1", true, s1.tgd1_s, 0.1e-9, (1, 82, 10), None),
+        ("TGD2", true, s1.tgd2_s, 0.1e-9, (1, 92, 10), None),
+        ("a0", true, s1.a0_s, p2(-33), (3, 80, 24), None),
+        ("a1", true, s1.a1, p2(-50), (3, 104, 4), Some((4, 42, 18))),
+        ("a2", true, s1.a2_per_s, p2(-66), (4, 60, 11), None),
+        ("Delta n", true, s2.delta_n_rad_s, p2(-43) * sc, (4, 76, 16), None),
+        ("Cuc", true, s2.cuc_rad, p2(-31), (4, 92, 14), Some((5, 42, 4))),
+        ("M0", true, s2.m0_rad, p2(-31) * sc, (5, 46, 32), None),
+        ("Cus", true, s2.cus_rad, p2(-31), (5, 78, 18), None),
+        ("e", false, s2.e, p2(-33), (5, 96, 10), Some((6, 42, 22))),
+        ("sqrt(A)", false, s2.sqrt_a, p2(-19), (6, 64, 32), None),
+        ("Cic", true, s3.cic_rad, p2(-31), (6, 96, 10), Some((7, 42, 8))),
+        ("Cis", true, s3.cis_rad, p2(-31), (7, 50, 18), None),
+        ("i0", true, s3.i0_rad, p2(-31) * sc, (7, 85, 21), Some((8, 42, 11))),
+        ("Crc", true, s2.crc_m, p2(-6), (8, 53, 18), None),
+        ("Crs", true, s2.crs_m, p2(-6), (8, 71, 18), None),
+        (
+            "OMEGA DOT",
+            true,
+            s3.omega_dot_rad_s,
+            p2(-43) * sc,
+            (8, 89, 19),
+            Some((9, 42, 5)),
+        ),
+        ("OMEGA0", true, s3.omega0_rad, p2(-31) * sc, (9, 47, 32), None),
+        (
+            "omega",
+            true,
+            s3.omega_rad,
+            p2(-31) * sc,
+            (9, 79, 27),
+            Some((10, 42, 5)),
+        ),
+        ("IDOT", true, s3.idot_rad_s, p2(-43) * sc, (10, 47, 14), None),
+    ];
+    for &(field, signed, x, scale, hi, lo) in fields {
+        let lo_n = lo.map_or(0, |l| l.2);
+        let v = quantise(field, hi.2 + lo_n, signed, x, scale, worst)?;
+        write(hi, v >> lo_n);
+        if let Some(lo) = lo {
+            write(lo, v);
+        }
+    }
+    Ok(pages.map(|d| words_from_info(&d)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -850,106 +956,200 @@ mod tests {
         );
     }
 
-    /// A GEO's D2 subframe 1 pages 1 and 3–10 written with the bit table of Figure 5-10
-    /// (page 1 at SOW 100 000) decode into the ephemeris with the GEO orbit; fields split
-    /// between pages keep their sign; a page missing, out of its cycle, or with a flipped bit
-    /// makes none. (The walk's log has no GEO: this checks the assembly, not the ICD's table.)
+    /// A made-up GEO ephemeris (C01, page 1 at SOW 100 000), every field nonzero, the fields
+    /// split between pages negative (their sign on the earlier page).
+    fn geo() -> BdsEphemeris {
+        let sc = GPS_PI;
+        BdsEphemeris {
+            sv: 1,
+            sow_s: 100_000,
+            s1: Sub1 {
+                sat_h1: 1,
+                aodc: 9,
+                urai: 2,
+                week: 1025,
+                toc_s: 406_800.0,
+                tgd1_s: -133.0 * 0.1e-9,
+                tgd2_s: 57.0 * 0.1e-9,
+                alpha: [0.0; 4],
+                beta: [0.0; 4],
+                a0_s: -1_234_567.0 * p2(-33),
+                a1: -1_000_001.0 * p2(-50),
+                a2_per_s: -3.0 * p2(-66),
+                aode: 17,
+            },
+            s2: Sub2 {
+                delta_n_rad_s: -12_345.0 * p2(-43) * sc,
+                cuc_rad: -54_321.0 * p2(-31),
+                m0_rad: -2e9 * p2(-31) * sc,
+                e: f64::from(0x00AB_CDEFu32) * p2(-33),
+                cus_rad: 77_777.0 * p2(-31),
+                crc_m: -99_999.0 * p2(-6),
+                crs_m: 88_888.0 * p2(-6),
+                sqrt_a: f64::from(0xC1D2_E3F4u32) * p2(-19),
+                toe_msb: (50_850 >> 15) as u8,
+            },
+            s3: Sub3 {
+                toe_lsb: 50_850 & 0x7FFF,
+                i0_rad: -123_456_789.0 * p2(-31) * sc,
+                cic_rad: -1_234.0 * p2(-31),
+                omega_dot_rad_s: -456_789.0 * p2(-43) * sc,
+                cis_rad: -4_321.0 * p2(-31),
+                idot_rad_s: -4_321.0 * p2(-43) * sc,
+                omega0_rad: 1.5e9 * p2(-31) * sc,
+                omega_rad: -987_654_321.0 * p2(-31) * sc,
+            },
+        }
+    }
+
+    /// `e` through `encode_d2`, `decode_d2` and `D2Assembler::on_page`, pages 1–10 in order:
+    /// the ephemeris made at page 10 (none before), and `worst`.
+    fn d2_round_trip(e: &BdsEphemeris) -> (Option<BdsEphemeris>, f64) {
+        let mut worst = 0.0;
+        let words = encode_d2(e, &mut worst).unwrap();
+        let mut a = D2Assembler::default();
+        let mut out = None;
+        for (k, w) in words.iter().enumerate() {
+            let p = decode_d2(w).unwrap().unwrap();
+            assert_eq!((p.page, p.sow_s), (k as u8 + 1, e.sow_s + 3 * k as u32));
+            let eph = a.on_page(e.sv, &p);
+            assert_eq!(eph.is_some(), k == 9, "page {}", k + 1);
+            out = out.or(eph);
+        }
+        (out, worst)
+    }
+
+    /// A GEO's D2 subframe 1 pages 1–10 written by `encode_d2` (the bit table of Figure
+    /// 5-10; page 2 header only) decode into the same ephemeris with the GEO orbit; fields
+    /// split between pages keep their sign; a page missing, out of its cycle, or with a
+    /// flipped bit makes none. (The walk's log has no GEO: this checks the encoder against the
+    /// decoder, not the ICD's table.)
     #[test]
     fn d2_pages_make_a_geo_ephemeris() {
         // The encoder gives back the receiver's own words (C21's D1 subframes).
         for w in &C21 {
             assert_eq!(words_from_info(&info_bits(w).unwrap()), *w);
         }
-        let mut pages = [[0u128; 2]; 10];
-        for (k, d) in pages.iter_mut().enumerate() {
-            put(d, 0, 11, 0x712);
-            put(d, 15, 3, 1);
-            put(d, 18, 20, 100_000 + 3 * k as i64);
-            put(d, 38, 4, k as i64 + 1);
-        }
-        let split =
-            |pages: &mut [[u128; 2]; 10], (p1, a1, n1): (usize, u32, u32), (p2, a2, n2): (usize, u32, u32), v: i64| {
-                put(&mut pages[p1 - 1], a1, n1, v >> n2);
-                put(&mut pages[p2 - 1], a2, n2, v);
-            };
-        put(&mut pages[0], 48, 4, 2); // URAI
-        put(&mut pages[0], 52, 13, 1025); // week
-        put(&mut pages[0], 65, 17, 50_850); // toc / 8
-        put(&mut pages[0], 82, 10, -133); // TGD1
-        put(&mut pages[2], 80, 24, -1_234_567); // a0
-        split(&mut pages, (3, 104, 4), (4, 42, 18), -1_000_001); // a1
-        put(&mut pages[3], 60, 11, -3); // a2
-        put(&mut pages[3], 71, 5, 17); // AODE
-        put(&mut pages[3], 76, 16, -12_345); // Δn
-        split(&mut pages, (4, 92, 14), (5, 42, 4), -54_321); // Cuc
-        put(&mut pages[4], 46, 32, -2_000_000_000); // M0
-        put(&mut pages[4], 78, 18, 77_777); // Cus
-        split(&mut pages, (5, 96, 10), (6, 42, 22), 0x00AB_CDEF); // e
-        put(&mut pages[5], 64, 32, 0xC1D2_E3F4u32 as i64); // √A
-        split(&mut pages, (6, 96, 10), (7, 42, 8), -1_234); // Cic
-        put(&mut pages[6], 50, 18, -4_321); // Cis
-        put(&mut pages[6], 68, 17, 50_850); // toe / 8
-        split(&mut pages, (7, 85, 21), (8, 42, 11), -123_456_789); // i0
-        put(&mut pages[7], 53, 18, -99_999); // Crc
-        put(&mut pages[7], 71, 18, 88_888); // Crs
-        split(&mut pages, (8, 89, 19), (9, 42, 5), -456_789); // Ω̇
-        put(&mut pages[8], 47, 32, 1_500_000_000); // Ω0
-        split(&mut pages, (9, 79, 27), (10, 42, 5), -987_654_321); // ω
-        put(&mut pages[9], 47, 14, -4_321); // IDOT
-        let words: Vec<[u32; 10]> = pages.iter().map(words_from_info).collect();
-        let mut a = D2Assembler::default();
-        let mut eph = None;
-        for (k, w) in words.iter().enumerate() {
-            let p = decode_d2(w).unwrap().unwrap();
-            assert_eq!((p.page, p.sow_s), (k as u8 + 1, 100_000 + 3 * k as u32));
-            if k != 1 {
-                eph = a.on_page(1, &p).or(eph);
-            }
-        }
+        let g = geo();
+        let (eph, worst) = d2_round_trip(&g);
+        assert!(worst < 1e-6, "{worst}");
         let e = eph.expect("an ephemeris after page 10");
+        assert_eq!(e, g);
         let o = e.orbit();
-        let sc = GPS_PI;
         assert_eq!(o.frame, OrbitFrame::BeiDouGeo);
         assert_eq!((e.s1.week, e.s1.urai, e.s1.aode, e.sow_s), (1025, 2, 17, 100_000));
         assert_eq!((o.toe_s, o.toc_s), (406_800.0, 406_800.0));
-        let want = [
-            (e.s1.tgd1_s, -133.0 * 0.1e-9),
-            (o.af[0], -1_234_567.0 * p2(-33)),
-            (o.af[1], -1_000_001.0 * p2(-50)),
-            (o.af[2], -3.0 * p2(-66)),
-            (o.delta_n_rad_s, -12_345.0 * p2(-43) * sc),
-            (o.cuc, -54_321.0 * p2(-31)),
-            (o.m0_rad, -2e9 * p2(-31) * sc),
-            (o.cus, 77_777.0 * p2(-31)),
-            (o.e, f64::from(0x00AB_CDEFu32) * p2(-33)),
-            (o.sqrt_a, f64::from(0xC1D2_E3F4u32) * p2(-19)),
-            (o.cic, -1_234.0 * p2(-31)),
-            (o.cis, -4_321.0 * p2(-31)),
-            (o.i0_rad, -123_456_789.0 * p2(-31) * sc),
-            (o.crc, -99_999.0 * p2(-6)),
-            (o.crs, 88_888.0 * p2(-6)),
-            (o.omega_dot_rad_s, -456_789.0 * p2(-43) * sc),
-            (o.omega0_rad, 1.5e9 * p2(-31) * sc),
-            (o.omega_rad, -987_654_321.0 * p2(-31) * sc),
-            (o.idot_rad_s, -4_321.0 * p2(-43) * sc),
-        ];
-        for (i, (ours, exp)) in want.iter().enumerate() {
-            assert_eq!(ours, exp, "field {i}");
-        }
+        // C21's broadcast values, as if from a GEO (no ionosphere in D2 subframe 1's pages).
+        let c = BdsEphemeris {
+            sv: 3,
+            s1: Sub1 {
+                alpha: [0.0; 4],
+                beta: [0.0; 4],
+                ..c21().s1
+            },
+            ..c21()
+        };
+        let (eph, worst) = d2_round_trip(&c);
+        assert_eq!((eph, worst < 1e-6), (Some(c), true), "{worst}");
+        // The ionosphere is left out: zero in the decoded ephemeris.
+        let with_iono = BdsEphemeris { s1: c21().s1, ..c };
+        assert_eq!(d2_round_trip(&with_iono).0, Some(c));
+        // Page 2: header and Pnum only.
+        let mut worst = 0.0;
+        let words = encode_d2(&g, &mut worst).unwrap();
+        let d = info_bits(&words[1]).unwrap();
+        assert_eq!(
+            (u(&d, 38, 4), u(&d, 42, 64), u(&d, 106, 64), u(&d, 170, 54)),
+            (2, 0, 0, 0)
+        );
         // Page 7 of another cycle: no ephemeris; a flipped bit: rejected.
         let mut late = decode_d2(&words[6]).unwrap().unwrap();
         late.sow_s += 30;
         let mut b = D2Assembler::default();
-        for (k, w) in words.iter().enumerate().filter(|(k, _)| *k != 1 && *k != 6) {
+        for (k, w) in words.iter().enumerate().filter(|(k, _)| *k != 6) {
             assert_eq!(b.on_page(1, &decode_d2(w).unwrap().unwrap()), None, "page {}", k + 1);
         }
         assert_eq!(b.on_page(1, &late), None);
         let mut bad = words[3];
         bad[4] ^= 1 << 12;
         assert_eq!(decode_d2(&bad), Err(BdsError::Parity(4)));
-        let mut page0 = pages[0];
+        let mut page0 = info_bits(&words[0]).unwrap();
         put(&mut page0, 38, 4, 0);
         assert_eq!(decode_d2(&words_from_info(&page0)), Err(BdsError::Page(0)));
+    }
+
+    /// Values at the ends of their fields (split fields too) come back; one LSB beyond, a
+    /// value of the wrong sign, or NaN is an error naming the field.
+    #[test]
+    fn encode_d2_refuses_values_beyond_their_fields() {
+        type Edit = fn(&mut BdsEphemeris);
+        let edges: [Edit; 9] = [
+            |e| e.s1.a1 = -p2(21) * p2(-50),
+            |e| e.s1.a1 = (p2(21) - 1.0) * p2(-50),
+            |e| e.s2.cuc_rad = -p2(17) * p2(-31),
+            |e| e.s2.e = (p2(32) - 1.0) * p2(-33),
+            |e| e.s3.cic_rad = (p2(17) - 1.0) * p2(-31),
+            |e| e.s3.i0_rad = -p2(31) * p2(-31) * GPS_PI,
+            |e| e.s3.omega_dot_rad_s = (p2(23) - 1.0) * p2(-43) * GPS_PI,
+            |e| e.s3.omega_rad = -p2(31) * p2(-31) * GPS_PI,
+            |e| e.sow_s = (1 << 20) - 28,
+        ];
+        for (i, f) in edges.iter().enumerate() {
+            let mut e = geo();
+            f(&mut e);
+            let (eph, worst) = d2_round_trip(&e);
+            assert_eq!(eph, Some(e), "edge {i}");
+            assert!(worst < 1e-6, "edge {i}: {worst}");
+        }
+        let beyond: [(Edit, &str); 14] = [
+            (|e| e.s1.a0_s = 1.0, "a0"),
+            (|e| e.s2.e = -0.1, "e"),
+            (|e| e.s2.e = 0.5, "e"),
+            (|e| e.s1.a1 = p2(21) * p2(-50), "a1"),
+            (|e| e.s2.cuc_rad = -(p2(17) + 1.0) * p2(-31), "Cuc"),
+            (|e| e.s3.omega_rad = f64::NAN, "omega"),
+            (|e| e.s2.sqrt_a = -1.0, "sqrt(A)"),
+            (|e| e.s1.tgd1_s = 512.0 * 0.1e-9, "TGD1"),
+            (|e| e.s1.week = 0x2000, "WN"),
+            (|e| e.s1.aode = 32, "AODE"),
+            (|e| e.s2.toe_msb = 4, "toe"),
+            (|e| e.s3.toe_lsb = 0x8000, "toe"),
+            (|e| e.s1.toc_s = -8.0, "toc"),
+            (|e| e.sow_s = (1 << 20) - 27, "SOW"),
+        ];
+        for (f, field) in beyond {
+            let mut e = geo();
+            f(&mut e);
+            let mut worst = 0.0;
+            assert_eq!(encode_d2(&e, &mut worst).map_err(|x| x.field), Err(field));
+        }
+    }
+
+    /// Every code word of every page passes the BCH check, and a flipped bit fails it (a
+    /// preamble bit: no preamble; the 4 Rev bits of word 1 are sent unencoded and unused).
+    #[test]
+    fn encode_d2_pages_pass_parity_and_a_flipped_bit_fails() {
+        let mut worst = 0.0;
+        let g = geo();
+        for (p, page) in encode_d2(&g, &mut worst).unwrap().iter().enumerate() {
+            let ok = decode_d2(page).unwrap().unwrap();
+            assert_eq!(ok.page, p as u8 + 1);
+            for k in 0..10 {
+                for bit in 0..30 {
+                    let mut bad = *page;
+                    bad[k] ^= 1 << bit;
+                    let got = decode_d2(&bad);
+                    match (k, bit) {
+                        (0, 19..) => assert!(matches!(got, Err(BdsError::Preamble(_))), "word {k} bit {bit}"),
+                        (0, 15..=18) => {
+                            let q = got.unwrap().unwrap();
+                            assert_eq!((q.page, q.sow_s), (ok.page, ok.sow_s), "Rev bit {bit}");
+                        }
+                        _ => assert_eq!(got, Err(BdsError::Parity(k)), "page {} word {k} bit {bit}", p + 1),
+                    }
+                }
+            }
+        }
     }
 
     /// `encode_d1` inverts `decode_d1` on C21's subframes 1–3 (values on the grid to 1e-6
