@@ -1030,4 +1030,67 @@ mod tests {
         let err = beidou_words(&e, &bad, "w.nav", &mut worst).unwrap_err();
         assert_eq!((err.line, err.field.as_str()), (40, "a1"), "{err}");
     }
+
+    /// Any record a file may hold (NaN, infinities, huge, negative, fractional values in any
+    /// field; any satellite number) is words or an error naming a field, never a panic.
+    #[test]
+    fn arbitrary_galileo_and_beidou_records_never_panic() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let specials = [
+            f64::NAN,
+            f64::INFINITY,
+            -1e300,
+            -1.0,
+            0.0,
+            0.5,
+            1.0,
+            1e9,
+            604_800.0,
+            406_800.0,
+        ];
+        let (mut ok, mut errors) = (0, 0);
+        for _ in 0..20_000 {
+            let value = |r: u64| {
+                if r % 4 == 0 {
+                    specials[(r >> 8) as usize % specials.len()]
+                } else {
+                    f64::from_bits(r >> 2) % 1e6
+                }
+            };
+            let mut orbit = [[0.0; 4]; 7];
+            for v in orbit.iter_mut().flatten() {
+                *v = value(next());
+            }
+            let k = KeplerRecord {
+                line: 7,
+                system: if next() % 2 == 0 { 'E' } else { 'C' },
+                sv: (next() % 70) as u8,
+                toc_week: (next() % 5000) as u32,
+                toc_s: value(next()),
+                af: [value(next()), value(next()), value(next())],
+                orbit,
+            };
+            let mut worst = 0.0;
+            let r = if k.system == 'E' {
+                galileo_pages(&k, "x", &mut worst).map(|_| ())
+            } else {
+                beidou_ephemeris(&k, None, "x").and_then(|(e, _)| beidou_words(&e, &k, "x", &mut worst).map(|_| ()))
+            };
+            match r {
+                Ok(()) => ok += 1,
+                Err(e) => {
+                    assert_eq!((e.line, e.file.as_str()), (7, "x"));
+                    assert!(!e.field.is_empty());
+                    errors += 1;
+                }
+            }
+        }
+        assert!(errors > 1000, "{ok} encoded, {errors} errors");
+    }
 }

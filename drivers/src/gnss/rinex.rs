@@ -1252,11 +1252,9 @@ E11  23000000.500    23000005.000
         );
     }
 
-    /// A mixed RINEX 3.05 file: a GLONASS record (with 3.05's fourth orbit line) read, in SI
-    /// units with t_b moved from UTC to GPS time; a Galileo and a BeiDou record read, each
-    /// dated in its own time; an SBAS record skipped; a GPS one read.
-    #[test]
-    fn rinex3_navigation_reads_every_system_but_sbas() {
+    /// A mixed RINEX 3.05 navigation file: GLONASS (with 3.05's fourth orbit line), Galileo,
+    /// BeiDou, SBAS and GPS records, the GPS header α/β.
+    fn mixed_nav3() -> String {
         // Fixed columns: 4X then 4 × D19.12 per orbit line (RINEX 3.05 Table A8).
         let orbit = |v: [f64; 4]| format!("    {}\n", v.map(|x| format!("{x:19.12E}")).concat());
         let mut nav3 = String::from(concat!(
@@ -1307,6 +1305,15 @@ E11  23000000.500    23000005.000
             nav3 += &orbit(v);
         }
         nav3 += &format!("    {:19.12E}{:19.12E}\n", 210_000.0, 4.0);
+        nav3
+    }
+
+    /// A mixed RINEX 3.05 file: a GLONASS record (with 3.05's fourth orbit line) read, in SI
+    /// units with t_b moved from UTC to GPS time; a Galileo and a BeiDou record read, each
+    /// dated in its own time; an SBAS record skipped; a GPS one read.
+    #[test]
+    fn rinex3_navigation_reads_every_system_but_sbas() {
+        let nav3 = mixed_nav3();
         let f = parse_nav("b.rnx", &nav3).unwrap();
         assert_eq!((f.other_systems, f.ephemerides.len(), f.glonass.len()), (1, 1, 1));
         let e = f.ephemerides[0];
@@ -1447,5 +1454,72 @@ E11  23000000.500    23000005.000
         assert_eq!((e.line, e.field.as_str()), (1, "RINEX VERSION / TYPE"));
         let e = parse_obs("a.05o", &OBS2.replace("  0  2G 3G 7", "  0  xG 3G 7")).unwrap_err();
         assert_eq!((e.line, e.field.as_str()), (6, "number of satellites"));
+    }
+
+    /// Bad input is an error, never a panic: 30 000 mutations (bytes changed, lines cut,
+    /// duplicated or dropped, the file truncated) of the observation and navigation fixtures
+    /// each parse to a file or to an error naming a line of the file.
+    #[test]
+    fn mutated_files_are_errors_not_panics() {
+        let mut x = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let nav3 = mixed_nav3();
+        let inputs: [(&str, &str, bool); 3] = [("a.05o", OBS2, true), ("b.rnx", OBS3, true), ("c.rnx", &nav3, false)];
+        let (mut ok, mut errors) = (0, 0);
+        for _ in 0..10_000 {
+            for (name, text, obs) in inputs {
+                let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+                for _ in 0..1 + next() % 3 {
+                    if lines.is_empty() {
+                        break;
+                    }
+                    let r = next();
+                    let i = (r >> 8) as usize % lines.len();
+                    match r % 6 {
+                        0 => {
+                            lines.remove(i);
+                        }
+                        1 => lines.insert(i, lines[i].clone()),
+                        2 => {
+                            let l = &mut lines[i];
+                            let cut = (r >> 20) as usize % (l.len() + 1);
+                            l.truncate(cut);
+                        }
+                        3 => lines.truncate(i),
+                        _ => {
+                            let l = &mut lines[i];
+                            if !l.is_empty() {
+                                let at = (r >> 20) as usize % l.len();
+                                let c = b" 0123456789.-+DEeGRECSnaN\t"[(r >> 40) as usize % 26] as char;
+                                let mut b: Vec<char> = l.chars().collect();
+                                let k = at.min(b.len() - 1);
+                                b[k] = c;
+                                *l = b.into_iter().collect();
+                            }
+                        }
+                    }
+                }
+                let text = lines.join("\n");
+                let n = lines.len().max(1);
+                let line = if obs {
+                    parse_obs(name, &text).map(|_| ()).map_err(|e| e.line)
+                } else {
+                    parse_nav(name, &text).map(|_| ()).map_err(|e| e.line)
+                };
+                match line {
+                    Ok(()) => ok += 1,
+                    Err(l) => {
+                        assert!(l <= n + 1, "{name}: error at line {l} of {n}");
+                        errors += 1;
+                    }
+                }
+            }
+        }
+        assert!(ok > 1000 && errors > 1000, "{ok} parsed, {errors} errors");
     }
 }
