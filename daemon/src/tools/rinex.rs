@@ -1057,7 +1057,7 @@ mod tests {
         let (mut ok, mut errors) = (0, 0);
         for _ in 0..20_000 {
             let value = |r: u64| {
-                if r % 4 == 0 {
+                if r.is_multiple_of(4) {
                     specials[(r >> 8) as usize % specials.len()]
                 } else {
                     f64::from_bits(r >> 2) % 1e6
