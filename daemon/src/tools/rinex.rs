@@ -15,7 +15,7 @@
 //! I/NAV record becomes word types 1–5 as E1-B page pairs (`galileo::encode_word`, OS SIS ICD
 //! Table 40, CRC-24Q), a BeiDou MEO/IGSO record D1 subframes 1–3 (`beidou::encode_d1`,
 //! BDS-SIS-ICD-B1I §5.2, BCH parity), a GEO one D2 subframe 1 pages 1–10 (`beidou::encode_d2`,
-//! §5.3); Galileo F/NAV records (the I/NAV ones serve E1) are counted and left out. An issue is
+//! §5.3), a Galileo F/NAV record page types 1–4 on E5a-I (`fnav::encode_page`). An issue is
 //! delivered when its t_oe (GLONASS: t_b) becomes the nearest to the epoch (RTKLIB's choice
 //! among a file's ephemerides; the first issue of each satellite before the first epoch).
 //!
@@ -27,6 +27,7 @@ use std::path::{Path, PathBuf};
 use navsync_drivers::gnss::rinex::{self, GloRecord, GpsEphemeris, KeplerRecord, NavFile, ObsFile, RinexError};
 use navsync_estimator::gnss::beidou::{self, BdsEphemeris, Sub1, Sub2, Sub3};
 use navsync_estimator::gnss::bits::OutOfRange;
+use navsync_estimator::gnss::fnav::{self, FnavEphemeris};
 use navsync_estimator::gnss::galileo::{self, GalEphemeris, Word1, Word2, Word3, Word4, Word5};
 use navsync_estimator::gnss::glonass::{self, GloEphemeris};
 use navsync_estimator::gnss::lnav::{self, Ephem1, Ephem2, Ephem3, IonoUtc, Subframe};
@@ -98,10 +99,9 @@ pub struct RinexStats {
     pub glonass_ephemerides: u64,
     /// GLONASS measurements without a channel in any file (left out by the estimator).
     pub glonass_without_channel: u64,
-    /// Galileo ephemerides (each as I/NAV word types 1–5 on E1-B).
+    /// Galileo ephemerides (each as I/NAV word types 1–5 on E1-B, or F/NAV page types 1–4
+    /// on E5a-I).
     pub galileo_ephemerides: u64,
-    /// Galileo F/NAV records left out (the I/NAV ones of the same satellites serve E1).
-    pub galileo_fnav_left_out: u64,
     /// BeiDou ephemerides (each as D1 subframes 1–3, a GEO's as D2 subframe 1 pages 1–10).
     pub beidou_ephemerides: u64,
     /// BeiDou records whose AODE did not fit its 5 bits (RTKLIB writes its own issue number
@@ -131,11 +131,11 @@ pub fn main(args: &RinexArgs) -> anyhow::Result<()> {
         s.glonass_ephemerides,
         s.worst_quantisation
     );
-    if s.galileo_ephemerides + s.beidou_ephemerides + s.galileo_fnav_left_out > 0 {
+    if s.galileo_ephemerides + s.beidou_ephemerides > 0 {
         eprintln!(
-            "  {} Galileo ephemerides as I/NAV words 1–5, {} BeiDou ones as D1 subframes (GEO: D2 pages) \
-             ({} Galileo F/NAV records left out; {} BeiDou AODE beyond 5 bits kept mod 32)",
-            s.galileo_ephemerides, s.beidou_ephemerides, s.galileo_fnav_left_out, s.beidou_aode_wrapped
+            "  {} Galileo ephemerides as I/NAV words 1–5 or F/NAV pages 1–4, {} BeiDou ones as D1 \
+             subframes (GEO: D2 pages) ({} BeiDou AODE beyond 5 bits kept mod 32)",
+            s.galileo_ephemerides, s.beidou_ephemerides, s.beidou_aode_wrapped
         );
     }
     if s.glonass_without_channel > 0 {
@@ -204,7 +204,11 @@ impl Record {
                 (3, k.sv),
                 gps_ns(k.orbit[4][2] + f64::from(rinex::BDT_WEEK_OFFSET), k.orbit[2][0] + 14.0),
             ),
-            Self::Kepler(k) => ((2, k.sv), gps_ns(k.orbit[4][2], k.orbit[2][0])),
+            // F/NAV records keyed apart from I/NAV ones (both are delivered, as a receiver does).
+            Self::Kepler(k) => (
+                (if is_fnav(k) { 0x82 } else { 2 }, k.sv),
+                gps_ns(k.orbit[4][2], k.orbit[2][0]),
+            ),
         }
     }
 }
@@ -610,6 +614,68 @@ fn galileo_pages(k: &KeplerRecord, file: &str, worst: &mut f64) -> Result<[[u32;
     Ok(out)
 }
 
+/// Whether a record is Galileo F/NAV: data sources (RINEX 3.05, ORBIT 5) with bit 1 (E5a-I)
+/// and neither I/NAV bit (0 E1-B, 2 E5b-I).
+fn is_fnav(k: &KeplerRecord) -> bool {
+    let sources = k.orbit[4][1].clamp(0.0, 1023.0) as u32;
+    k.system == 'E' && sources & 0b010 != 0 && sources & 0b101 == 0
+}
+
+/// A RINEX 3 Galileo F/NAV record as page types 1–4 on E5a-I (OS SIS ICD §4.2.2,
+/// `fnav::encode_page`): its (E1,E5a) clock, SISA(E1,E5a) as the index, health bits 3–5 as
+/// E5a's DVS and HS, BGD(E1,E5a), GST's week and the transmission time in page 1.
+fn fnav_pages(k: &KeplerRecord, file: &str, worst: &mut f64) -> Result<[[u32; 8]; 4], RinexError> {
+    let o = &k.orbit;
+    let iod_nav = o[0][0].round().clamp(0.0, f64::from(u16::MAX)) as u16;
+    let health = o[5][1].round().clamp(0.0, 511.0) as u16;
+    let e = FnavEphemeris {
+        sv: k.sv,
+        p1: fnav::Page1 {
+            svid: k.sv,
+            iod_nav,
+            toc_s: k.toc_s,
+            af: k.af,
+            sisa: galileo::sisa_index(o[5][0]),
+            ai: [0.0; 3],
+            bgd_e1_e5a_s: o[5][2],
+            e5a_hs: ((health >> 4) & 3) as u8,
+            wn: ((o[4][2] as i64 - 1024).rem_euclid(4096)) as u16,
+            tow_s: o[6][0].clamp(0.0, WEEK_S - 1.0) as u32,
+            e5a_dvs: ((health >> 3) & 1) as u8,
+        },
+        p2: fnav::Page2 {
+            iod_nav,
+            m0_rad: o[0][3],
+            omega_dot_rad_s: o[3][3],
+            e: o[1][1],
+            sqrt_a: o[1][3],
+            omega0_rad: o[2][2],
+            idot_rad_s: o[4][0],
+        },
+        p3: fnav::Page3 {
+            iod_nav,
+            i0_rad: o[3][0],
+            omega_rad: o[3][2],
+            delta_n_rad_s: o[0][2],
+            cuc_rad: o[1][0],
+            cus_rad: o[1][2],
+            crc_m: o[3][1],
+            crs_m: o[0][1],
+            toe_s: o[2][0],
+        },
+        p4: fnav::Page4 {
+            iod_nav,
+            cic_rad: o[2][1],
+            cis_rad: o[2][3],
+        },
+    };
+    let mut out = [[0u32; 8]; 4];
+    for (slot, page) in out.iter_mut().zip(fnav::pages_of(&e)) {
+        *slot = fnav::encode_page(&page, worst).map_err(field_error(k, file))?;
+    }
+    Ok(out)
+}
+
 /// A RINEX 3 BeiDou record as the ephemeris its broadcast carries (BDS-SIS-ICD-B1I §5.2.4):
 /// the URA in m as its index (IS-GPS-200's table, §5.2.4.5), the Klobuchar α/β of the file's
 /// `BDSA`/`BDSB` header (else zero; a GEO's D2 pages do not carry them), subframe 1's SOW the
@@ -722,14 +788,7 @@ pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
     for (f, (_, n)) in navs.iter().enumerate() {
         recs.extend(n.ephemerides.iter().map(|e| (f, Record::Gps(*e))));
         recs.extend(n.glonass.iter().map(|r| (f, Record::Glonass(*r))));
-        for k in &n.kepler {
-            // Galileo: the I/NAV records (data sources bit 0 E1-B or 2 E5b-I, RINEX 3.05).
-            let fnav_only = k.system == 'E' && (k.orbit[4][1] as u32) & 0b101 == 0;
-            stats.galileo_fnav_left_out += u64::from(fnav_only);
-            if !fnav_only {
-                recs.push((f, Record::Kepler(*k)));
-            }
-        }
+        recs.extend(n.kepler.iter().map(|k| (f, Record::Kepler(*k))));
     }
     recs.sort_by_key(|(_, r)| r.key());
     recs.dedup_by_key(|(_, r)| r.key());
@@ -795,6 +854,12 @@ pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
                         write_nav(&mut rec, Some(glonass_sample(r.slot, &words)), *at)?;
                     }
                     stats.glonass_ephemerides += 1;
+                }
+                Record::Kepler(k) if is_fnav(k) => {
+                    for words in fnav_pages(k, name, &mut stats.worst_quantisation)? {
+                        write_nav(&mut rec, Some(nav_words(2, k.sv, 3, &words)), *at)?;
+                    }
+                    stats.galileo_ephemerides += 1;
                 }
                 Record::Kepler(k) if k.system == 'E' => {
                     for words in galileo_pages(k, name, &mut stats.worst_quantisation)? {
@@ -962,6 +1027,28 @@ mod tests {
             ("w.nav", 12, "af0"),
             "{err}"
         );
+        // The same satellite's F/NAV record (data sources 258, the (E1,E5a) clock): page types
+        // 1–4 on E5a-I, with BGD(E1,E5a) as its group delay.
+        let mut orbit = e07.orbit;
+        (orbit[4][1], orbit[5][3]) = (258.0, 0.0);
+        let f07 = KeplerRecord {
+            af: [-2.029420575127e-4, -2.074784788419e-12, 0.0],
+            orbit,
+            ..e07
+        };
+        assert!(is_fnav(&f07) && !is_fnav(&e07));
+        let mut a = navsync_estimator::gnss::fnav::FnavAssembler::default();
+        let f = fnav_pages(&f07, "w.nav", &mut worst)
+            .unwrap()
+            .iter()
+            .filter_map(|w| a.on_page(7, &fnav::decode(w).unwrap()))
+            .last()
+            .unwrap();
+        let o = f.orbit();
+        assert!(worst < 1e-3, "{worst}");
+        assert_eq!((o.toe_s, o.tgd_s, f.p1.wn), (407_400.0, 4.6566128730773926e-9, 1357));
+        assert!((o.af[0] + 2.029420575127e-4).abs() < 2f64.powi(-34));
+        assert!(f.healthy());
 
         let c21 = KeplerRecord {
             line: 40,
@@ -1078,7 +1165,8 @@ mod tests {
             };
             let mut worst = 0.0;
             let r = if k.system == 'E' {
-                galileo_pages(&k, "x", &mut worst).map(|_| ())
+                let fnav = fnav_pages(&k, "x", &mut worst).map(|_| ());
+                galileo_pages(&k, "x", &mut worst).map(|_| ()).and(fnav)
             } else {
                 beidou_ephemeris(&k, None, "x").and_then(|(e, _)| beidou_words(&e, &k, "x", &mut worst).map(|_| ()))
             };

@@ -77,3 +77,48 @@ pub fn quantise(
     *worst = worst.max((q - r).abs());
     Ok(v)
 }
+
+/// The words of one message being written, MSB first from word 0's most significant bit (the
+/// layout [`Bits`] reads): fields checked against their width ([`check`], [`quantise`]), the
+/// largest rounding in LSBs kept in `worst`.
+pub(crate) struct BitsWriter<'a, const N: usize> {
+    /// The words.
+    pub(crate) w: [u32; N],
+    worst: &'a mut f64,
+}
+
+impl<'a, const N: usize> BitsWriter<'a, N> {
+    /// All bits 0.
+    pub(crate) fn new(worst: &'a mut f64) -> Self {
+        Self { w: [0; N], worst }
+    }
+
+    /// Bits `from..from+n` := `v` (two's complement when negative), which must fit.
+    pub(crate) fn raw(
+        &mut self,
+        field: &'static str,
+        (from, n, signed): (u32, u32, bool),
+        v: i64,
+    ) -> Result<(), OutOfRange> {
+        let v = check(field, n, signed, v)?;
+        for i in 0..n {
+            let at = from + i;
+            if let Some(word) = self.w.get_mut((at / 32) as usize) {
+                *word |= (((v >> (n - 1 - i)) & 1) as u32) << (31 - at % 32);
+            }
+        }
+        Ok(())
+    }
+
+    /// Bits `from..from+n` := round(`x` / `scale`), which must fit.
+    pub(crate) fn put(
+        &mut self,
+        field: &'static str,
+        at: (u32, u32, bool),
+        x: f64,
+        scale: f64,
+    ) -> Result<(), OutOfRange> {
+        let v = quantise(field, at.1, at.2, x, scale, self.worst)?;
+        self.raw(field, at, v)
+    }
+}

@@ -9,9 +9,10 @@
 //!
 //! Bytes in: the 8 words u-blox puts in a Galileo F/NAV UBX-RXM-SFRBX (sigId 3, E5a-I; u-blox
 //! interface description, "Galileo F/NAV": the page's 244 bits from word 0's most significant
-//! bit, 12 bits of padding).
+//! bit, 12 bits of padding). And the other way ([`encode_page`], [`pages_of`]): pages 1–4 of
+//! an ephemeris as those 8 words, its values quantised into their fields (RINEX import).
 
-use super::bits::Bits;
+use super::bits::{Bits, BitsWriter, OutOfRange};
 use super::orbit::{GPS_PI, Orbit, OrbitFrame};
 
 /// Why a page was not decoded.
@@ -179,6 +180,83 @@ pub fn decode(words: &[u32]) -> Result<FnavPage, FnavError> {
     })
 }
 
+/// The 8 u-blox words of one F/NAV page (the inverse of [`decode`]): the page type (6 bits)
+/// and every field [`decode`] reads, at the same bit positions and with the same scale
+/// factors (the bit allocation of F/NAV page types 1–4, Galileo OS SIS ICD §4.2.2 page layout
+/// and the "Bits Allocation for F/NAV Page Type 1–4" tables; the scale factors of §5.1's
+/// tables, semicircles × [`GPS_PI`] as in [`decode`]); then the CRC-24Q of the first 214 bits
+/// (page type and data) in bits 214..238, the 6 tail bits and the 12 bits of u-blox padding 0
+/// (u-blox "Galileo F/NAV" word layout: the page's 244 bits from word 0's most significant
+/// bit). The fields [`decode`] does not read (page 1's ionospheric region flags, pages 2 and
+/// 3's WN and TOW, page 4's GST-UTC and GST-GPS conversion and TOW, the spare bits) are 0.
+///
+/// Other page types ([`FnavPage::Other`]) give their type's 6 bits, zero data and the CRC (a
+/// type beyond 63 is an error naming "page type"); an `Other(1..=4)`, which [`decode`] never
+/// returns, thus decodes as that page type with zero fields.
+///
+/// `worst` receives the largest |value / scale − round(value / scale)| over the fields, in
+/// LSBs (0 for values that came from a broadcast); a value beyond its field's range, or not
+/// finite, is an error naming the field.
+pub fn encode_page(page: &FnavPage, worst: &mut f64) -> Result<[u32; 8], OutOfRange> {
+    let sc = GPS_PI;
+    let mut x = BitsWriter::<8>::new(worst);
+    let (uns, sig) = (|a, n| (a, n, false), |a, n| (a, n, true));
+    let head = |x: &mut BitsWriter<8>, t: i64, iod: u16| {
+        x.raw("page type", uns(0, 6), t)?;
+        x.raw("IODnav", uns(6, 10), i64::from(iod))
+    };
+    match *page {
+        FnavPage::Clock1(a) => {
+            x.raw("page type", uns(0, 6), 1)?;
+            x.raw("SVID", uns(6, 6), i64::from(a.svid))?;
+            x.raw("IODnav", uns(12, 10), i64::from(a.iod_nav))?;
+            x.put("t0c", uns(22, 14), a.toc_s, 60.0)?;
+            x.put("af0", sig(36, 31), a.af[0], p2(-34))?;
+            x.put("af1", sig(67, 21), a.af[1], p2(-46))?;
+            x.put("af2", sig(88, 6), a.af[2], p2(-59))?;
+            x.raw("SISA", uns(94, 8), i64::from(a.sisa))?;
+            x.put("ai0", uns(102, 11), a.ai[0], p2(-2))?;
+            x.put("ai1", sig(113, 11), a.ai[1], p2(-8))?;
+            x.put("ai2", sig(124, 14), a.ai[2], p2(-15))?;
+            x.put("BGD(E1,E5a)", sig(143, 10), a.bgd_e1_e5a_s, p2(-32))?;
+            x.raw("E5a HS", uns(153, 2), i64::from(a.e5a_hs))?;
+            x.raw("WN", uns(155, 12), i64::from(a.wn))?;
+            x.raw("TOW", uns(167, 20), i64::from(a.tow_s))?;
+            x.raw("E5a DVS", uns(187, 1), i64::from(a.e5a_dvs))?;
+        }
+        FnavPage::Ephem2(a) => {
+            head(&mut x, 2, a.iod_nav)?;
+            x.put("M0", sig(16, 32), a.m0_rad, p2(-31) * sc)?;
+            x.put("OMEGA DOT", sig(48, 24), a.omega_dot_rad_s, p2(-43) * sc)?;
+            x.put("e", uns(72, 32), a.e, p2(-33))?;
+            x.put("sqrt(A)", uns(104, 32), a.sqrt_a, p2(-19))?;
+            x.put("OMEGA0", sig(136, 32), a.omega0_rad, p2(-31) * sc)?;
+            x.put("IDOT", sig(168, 14), a.idot_rad_s, p2(-43) * sc)?;
+        }
+        FnavPage::Ephem3(a) => {
+            head(&mut x, 3, a.iod_nav)?;
+            x.put("i0", sig(16, 32), a.i0_rad, p2(-31) * sc)?;
+            x.put("omega", sig(48, 32), a.omega_rad, p2(-31) * sc)?;
+            x.put("Delta n", sig(80, 16), a.delta_n_rad_s, p2(-43) * sc)?;
+            x.put("Cuc", sig(96, 16), a.cuc_rad, p2(-29))?;
+            x.put("Cus", sig(112, 16), a.cus_rad, p2(-29))?;
+            x.put("Crc", sig(128, 16), a.crc_m, p2(-5))?;
+            x.put("Crs", sig(144, 16), a.crs_m, p2(-5))?;
+            x.put("t0e", uns(160, 14), a.toe_s, 60.0)?;
+        }
+        FnavPage::Ephem4(a) => {
+            head(&mut x, 4, a.iod_nav)?;
+            x.put("Cic", sig(16, 16), a.cic_rad, p2(-29))?;
+            x.put("Cis", sig(32, 16), a.cis_rad, p2(-29))?;
+        }
+        FnavPage::Other(t) => x.raw("page type", uns(0, 6), i64::from(t))?,
+    }
+    let page = x.w;
+    let crc = super::galileo::crc24q(214, |i| Bits(&page).bit(i) as u32);
+    x.raw("CRC", uns(214, 24), i64::from(crc))?;
+    Ok(x.w)
+}
+
 /// A complete F/NAV ephemeris: page types 1–4 of one IODnav.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct FnavEphemeris {
@@ -271,6 +349,17 @@ impl FnavAssembler {
         self.last = Some(orbit);
         new.then_some(eph)
     }
+}
+
+/// Page types 1–4 of an ephemeris, in that order (the inverse of [`FnavAssembler`]: fed to
+/// [`FnavAssembler::on_page`] with satellite `e.sv`, the last completes an equal ephemeris).
+pub fn pages_of(e: &FnavEphemeris) -> [FnavPage; 4] {
+    [
+        FnavPage::Clock1(e.p1),
+        FnavPage::Ephem2(e.p2),
+        FnavPage::Ephem3(e.p3),
+        FnavPage::Ephem4(e.p4),
+    ]
 }
 
 #[cfg(test)]
@@ -379,5 +468,105 @@ mod tests {
         assert_eq!(a.on_page(8, &FnavPage::Clock1(p1)), None);
         p1.iod_nav = 44;
         assert!(a.on_page(8, &FnavPage::Clock1(p1)).is_some());
+    }
+
+    /// Encoding is the inverse of decoding: E08's four real pages decode, encode and decode to
+    /// the same pages with no rounding (broadcast values lie on the grid), as 8 words whose
+    /// tail and padding are 0.
+    #[test]
+    fn encoded_pages_decode_to_the_same_pages() {
+        for w in E08_IOD44 {
+            let page = decode(&w).unwrap();
+            let mut worst = 0.0;
+            let again = encode_page(&page, &mut worst).unwrap();
+            assert_eq!(decode(&again), Ok(page));
+            assert!(worst < 1e-6, "{worst}");
+            // Bits 238..256: the tail and u-blox's padding.
+            assert_eq!(again[7] & 0x3_FFFF, 0, "{again:08X?}");
+            // The page type as broadcast.
+            assert_eq!(again[0] >> 26, w[0] >> 26);
+        }
+        // Other page types: the type alone, under a valid CRC; a type beyond 6 bits is refused.
+        let mut worst = 0.0;
+        for t in [0, 5, 6, 63] {
+            let page = encode_page(&FnavPage::Other(t), &mut worst).unwrap();
+            assert_eq!(decode(&page), Ok(FnavPage::Other(t)));
+        }
+        assert_eq!(
+            encode_page(&FnavPage::Other(64), &mut worst).unwrap_err().field,
+            "page type"
+        );
+    }
+
+    /// E08's ephemeris → pages 1–4 → encoded → decoded → assembled is the same ephemeris.
+    #[test]
+    fn encoded_ephemeris_assembles_to_the_same() {
+        let e = e08();
+        let mut a = FnavAssembler::default();
+        let mut worst = 0.0;
+        let mut back = None;
+        for (k, p) in pages_of(&e).iter().enumerate() {
+            let w = encode_page(p, &mut worst).unwrap();
+            let eph = a.on_page(e.sv, &decode(&w).unwrap());
+            assert_eq!(eph.is_some(), k == 3, "page {k}");
+            back = back.or(eph);
+        }
+        assert_eq!(back, Some(e));
+        assert!(worst < 1e-6, "{worst}");
+    }
+
+    /// A flipped bit of an encoded page (under the CRC or of the CRC) fails the CRC; an
+    /// off-grid value is rounded and reported in `worst`; a value beyond its field, or not
+    /// finite, is an error naming the field.
+    #[test]
+    fn encoded_page_errors() {
+        let e = e08();
+        let mut worst = 0.0;
+        for p in pages_of(&e) {
+            let good = encode_page(&p, &mut worst).unwrap();
+            for b in [0usize, 3, 40, 100, 187, 213, 214, 237] {
+                let mut bad = good;
+                bad[b / 32] ^= 1 << (31 - b % 32);
+                assert_eq!(decode(&bad), Err(FnavError::Crc), "{p:?} bit {b}");
+            }
+        }
+        let mut p1 = e.p1;
+        p1.af[0] += 0.25 * p2(-34);
+        encode_page(&FnavPage::Clock1(p1), &mut worst).unwrap();
+        assert!((worst - 0.25).abs() < 1e-6, "{worst}");
+        p1.af[0] = 1.0;
+        let err = encode_page(&FnavPage::Clock1(p1), &mut worst).unwrap_err();
+        assert_eq!((err.field, err.value, err.bits), ("af0", 1.0, 31));
+        let mut q2 = e.p2;
+        q2.e = -0.1;
+        let err = encode_page(&FnavPage::Ephem2(q2), &mut worst).unwrap_err();
+        assert_eq!((err.field, err.value, err.bits), ("e", -0.1, 32));
+        let mut p3 = e.p3;
+        p3.toe_s = f64::NAN;
+        assert_eq!(encode_page(&FnavPage::Ephem3(p3), &mut worst).unwrap_err().field, "t0e");
+        let mut p4 = e.p4;
+        p4.cis_rad = f64::INFINITY;
+        assert_eq!(encode_page(&FnavPage::Ephem4(p4), &mut worst).unwrap_err().field, "Cis");
+        let mut p1 = e.p1;
+        p1.svid = 64;
+        assert_eq!(
+            encode_page(&FnavPage::Clock1(p1), &mut worst).unwrap_err().field,
+            "SVID"
+        );
+        p1.svid = 8;
+        p1.e5a_hs = 4;
+        assert_eq!(
+            encode_page(&FnavPage::Clock1(p1), &mut worst).unwrap_err().field,
+            "E5a HS"
+        );
+        p1.e5a_hs = 0;
+        p1.iod_nav = 1024;
+        assert_eq!(
+            encode_page(&FnavPage::Clock1(p1), &mut worst).unwrap_err().field,
+            "IODnav"
+        );
+        p1.iod_nav = 44;
+        p1.tow_s = 1 << 20;
+        assert_eq!(encode_page(&FnavPage::Clock1(p1), &mut worst).unwrap_err().field, "TOW");
     }
 }

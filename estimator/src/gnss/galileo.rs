@@ -12,7 +12,7 @@
 //! (120 bits and 8 bits of padding), words 4–7 the odd part the same way. Alert pages (page
 //! type 1) and dummy words (type 63) carry no ephemeris.
 
-use super::bits::{OutOfRange, check, quantise};
+use super::bits::{BitsWriter, OutOfRange};
 use super::orbit::{GPS_PI, Orbit, OrbitFrame};
 
 /// Why a page pair was not decoded.
@@ -280,34 +280,6 @@ pub fn decode_word(w: u128) -> InavWord {
     }
 }
 
-/// A 128-bit I/NAV word being written: fields put at the bit positions [`decode_word`] reads,
-/// each value rounded to its scale factor (the largest rounding, in LSBs, kept in `worst`).
-struct WordWriter<'a> {
-    w: u128,
-    worst: &'a mut f64,
-}
-
-impl WordWriter<'_> {
-    /// Bits `from..from+n` := `v` (two's complement when negative), which must fit.
-    fn raw(&mut self, field: &'static str, (from, n, signed): (u32, u32, bool), v: i64) -> Result<(), OutOfRange> {
-        let v = check(field, n, signed, v)?;
-        self.w |= ((v as u128) & ((1u128 << n) - 1)) << (128 - from - n);
-        Ok(())
-    }
-
-    /// Bits `from..from+n` := round(`x` / `scale`), which must fit.
-    fn put(
-        &mut self,
-        field: &'static str,
-        (from, n, signed): (u32, u32, bool),
-        x: f64,
-        scale: f64,
-    ) -> Result<(), OutOfRange> {
-        let v = quantise(field, n, signed, x, scale, self.worst)?;
-        self.raw(field, (from, n, signed), v)
-    }
-}
-
 /// The 128-bit I/NAV word of word types 0 (GST), 1–5 (the inverse of [`decode_word`], same
 /// Table 40 bit allocation and scale factors); other words give their type's 6 bits and zeros.
 /// `worst` receives the largest |value / scale − round(value / scale)| over the fields, in
@@ -315,9 +287,9 @@ impl WordWriter<'_> {
 /// error naming the field.
 pub fn encode_word(word: &InavWord, worst: &mut f64) -> Result<u128, OutOfRange> {
     let sc = GPS_PI;
-    let mut x = WordWriter { w: 0, worst };
+    let mut x = BitsWriter::<4>::new(worst);
     let (uns, sig) = (|a, n| (a, n, false), |a, n| (a, n, true));
-    let head = |x: &mut WordWriter, t: i64, iod: u16| {
+    let head = |x: &mut BitsWriter<4>, t: i64, iod: u16| {
         x.raw("word type", uns(0, 6), t)?;
         x.raw("IODnav", uns(6, 10), i64::from(iod))
     };
@@ -378,7 +350,7 @@ pub fn encode_word(word: &InavWord, worst: &mut f64) -> Result<u128, OutOfRange>
         }
         InavWord::Other(t) => x.raw("word type", uns(0, 6), i64::from(t))?,
     }
-    Ok(x.w)
+    Ok(x.w.iter().fold(0u128, |a, &w| (a << 32) | u128::from(w)))
 }
 
 /// The 8 u-blox words of a nominal page pair carrying `word` (the inverse of
