@@ -49,7 +49,7 @@ pub struct RinexArgs {
     /// RINEX observation file (2.10/2.11 or 3.0x).
     pub obs: PathBuf,
     /// RINEX navigation files (2.10/2.11 GPS `N` or GLONASS `G`, or 3.0x GPS, GLONASS,
-    /// Galileo, BeiDou or mixed): their GPS, GLONASS, Galileo I/NAV and BeiDou D1 records.
+    /// Galileo, BeiDou or mixed): their GPS, GLONASS, Galileo and BeiDou records.
     #[arg(required = true, num_args = 1..)]
     pub nav: Vec<PathBuf>,
     /// The output recording (MCAP).
@@ -188,12 +188,13 @@ pub fn parse_files(obs: &Path, navs: &[PathBuf]) -> Result<(ObsFile, Vec<(String
 enum Record {
     Gps(GpsEphemeris),
     Glonass(GloRecord),
-    /// Galileo I/NAV or BeiDou D1.
+    /// Galileo (I/NAV or F/NAV) or BeiDou.
     Kepler(KeplerRecord),
 }
 
 impl Record {
-    /// (u-blox gnssId, satellite) and the reference time (t_oe, t_b), GPS ns.
+    /// (u-blox gnssId, with bit 7 set for Galileo F/NAV; satellite) and the reference time
+    /// (t_oe, t_b), GPS ns.
     fn key(&self) -> ((u8, u8), i64) {
         let gps_ns = |week: f64, tow_s: f64| week as i64 * WEEK_NS + (tow_s * 1e9).round() as i64;
         match self {
@@ -518,17 +519,8 @@ fn nav_sample(prn: u8, sf: &Subframe, tow_s: f64) -> Option<GnssNavData> {
     Some(d)
 }
 
-/// GLONASS strings (u-blox RXM-SFRBX words: the string, then the frame in word 3) of slot
-/// `slot` as a navigation-data sample.
-fn glonass_sample(slot: u8, words: &[u32; 4]) -> GnssNavData {
-    let mut d = GnssNavData::zeroed();
-    d.words[..4].copy_from_slice(words);
-    (d.gnss_id, d.sv_id, d.sig_id, d.num_words, d.version) = (6, slot, 0, 4, 2);
-    d
-}
-
 /// Words of a u-blox RXM-SFRBX (`gnss_id`, `sv_id`, `sig_id` as u-blox numbers them) as a
-/// navigation-data sample.
+/// navigation-data sample (GLONASS: the string, then the frame in word 3).
 fn nav_words(gnss_id: u8, sv_id: u8, sig_id: u8, words: &[u32]) -> GnssNavData {
     let mut d = GnssNavData::zeroed();
     let n = words.len().min(d.words.len());
@@ -603,7 +595,7 @@ fn galileo_pages(k: &KeplerRecord, file: &str, worst: &mut f64) -> Result<[[u32;
             e1b_hs: bit(1, 2),
             e5b_dvs: bit(6, 1),
             e1b_dvs: bit(0, 1),
-            wn: ((o[4][2] as i64 - 1024).rem_euclid(4096)) as u16,
+            wn: gst_week(o[4][2]),
             tow_s: o[6][0].clamp(0.0, WEEK_S - 1.0) as u32,
         },
     };
@@ -612,6 +604,12 @@ fn galileo_pages(k: &KeplerRecord, file: &str, worst: &mut f64) -> Result<[[u32;
         *slot = galileo::page_pair(galileo::encode_word(&w, worst).map_err(field_error(k, file))?);
     }
     Ok(out)
+}
+
+/// GST's 12-bit week number of RINEX's Galileo week (continuous, aligned with GPS's: GST
+/// week 0 is GPS week 1024, OS SIS ICD §5.1.2).
+fn gst_week(gal_week: f64) -> u16 {
+    ((gal_week.clamp(0.0, 1e6) as i64 - 1024).rem_euclid(4096)) as u16
 }
 
 /// Whether a record is Galileo F/NAV: data sources (RINEX 3.05, ORBIT 5) with bit 1 (E5a-I)
@@ -639,7 +637,7 @@ fn fnav_pages(k: &KeplerRecord, file: &str, worst: &mut f64) -> Result<[[u32; 8]
             ai: [0.0; 3],
             bgd_e1_e5a_s: o[5][2],
             e5a_hs: ((health >> 4) & 3) as u8,
-            wn: ((o[4][2] as i64 - 1024).rem_euclid(4096)) as u16,
+            wn: gst_week(o[4][2]),
             tow_s: o[6][0].clamp(0.0, WEEK_S - 1.0) as u32,
             e5a_dvs: ((health >> 3) & 1) as u8,
         },
@@ -851,7 +849,7 @@ pub fn import(args: &RinexArgs) -> Result<RinexStats, RinexImportError> {
                 Record::Glonass(r) => {
                     let frame = stats.glonass_ephemerides as u32;
                     for words in glonass_strings(r, name, frame, &mut stats.worst_quantisation)? {
-                        write_nav(&mut rec, Some(glonass_sample(r.slot, &words)), *at)?;
+                        write_nav(&mut rec, Some(nav_words(6, r.slot, 0, &words)), *at)?;
                     }
                     stats.glonass_ephemerides += 1;
                 }
