@@ -700,6 +700,7 @@ fn single_point_observation(e: &RangeEpoch, rc: &RangingConfig) -> Option<(gnss:
         },
         gnss_id: 0,
         iono_scale: 1.0,
+        noise_gain: 1.0,
     }; crate::gnss::ranges::MAX_RANGE_SATS];
     let mut rates = [spp::RangeRate {
         sv: 0,

@@ -1,6 +1,7 @@
-//! `navsync spp REC.mcap [--out FILE.csv] [--reference X,Y,Z] [--systems G,E,C,R]`: the
-//! single-point solution of each raw epoch of a recording from GPS L1 C/A, Galileo E1,
-//! BeiDou B1I/B3I and GLONASS L1OF with one receiver clock per system (the estimator's `gnss::spp`, with the
+//! `navsync spp REC.mcap [--out FILE.csv] [--reference X,Y,Z] [--systems G,E,C,R]
+//! [--dual-frequency]`: the single-point solution of each raw epoch of a recording from GPS L1
+//! C/A, Galileo E1, BeiDou B1I/B3I and GLONASS L1OF (with `--dual-frequency` GPS L1 C/A + L2C
+//! and Galileo E1 + E5a ionosphere-free) with one receiver clock per system (the estimator's `gnss::spp`, with the
 //! navigation data collected by `gnss::ranges::EphemerisStore` as the tightly coupled filter
 //! does), as a CSV, and its errors against a reference position (east/north/up, horizontal,
 //! vertical and 3-D RMS, m), with the satellites used per system.
@@ -44,6 +45,12 @@ pub struct SppArgs {
     /// frequency); one receiver clock each.
     #[arg(long, default_value = "G,E,C,R", value_parser = parse_systems)]
     pub systems: Systems,
+    /// GPS and Galileo as the ionosphere-free combination of two signals (GPS L1 C/A and L2C,
+    /// Galileo E1 and E5a) instead of one signal with the broadcast ionosphere model: no
+    /// ionospheric error, about 3× the noise; a satellite without its second signal is left
+    /// out. BeiDou and GLONASS stay on one frequency.
+    #[arg(long)]
+    pub dual_frequency: bool,
     /// The summary as one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -139,7 +146,11 @@ pub fn solve_recording(args: &SppArgs) -> anyhow::Result<SppRun> {
             AnySample::Raw(raw) if s.service == raw_service => {
                 run.epochs += 1;
                 let (std, systems) = (args.pseudorange_std_m, &args.systems.0);
-                match solve_epoch_systems(&store, &raw, systems, init, &settings, std, &mut run.counts) {
+                let signals = Signals {
+                    systems,
+                    dual_frequency: args.dual_frequency,
+                };
+                match solve_epoch_systems(&store, &raw, signals, init, &settings, std, &mut run.counts) {
                     Ok(sol) => {
                         init = sol.ecef_m;
                         for (k, &n) in sol.used_per_system.iter().enumerate() {
@@ -173,22 +184,36 @@ pub fn solve_epoch(
     pseudorange_std_m: f64,
     counts: &mut RangeBuildCounts,
 ) -> Result<spp::Solution, SppError> {
-    solve_epoch_systems(store, raw, &[0], init, settings, pseudorange_std_m, counts)
+    let signals = Signals {
+        systems: &[0],
+        dual_frequency: false,
+    };
+    solve_epoch_systems(store, raw, signals, init, settings, pseudorange_std_m, counts)
 }
 
-/// [`solve_epoch`] with the systems `systems` (u-blox `gnssId`s), one receiver clock each.
+/// What [`solve_epoch_systems`] takes of an epoch.
+#[derive(Debug, Clone, Copy)]
+pub struct Signals<'a> {
+    /// The systems (u-blox `gnssId`s), one receiver clock each.
+    pub systems: &'a [u8],
+    /// Ionosphere-free combinations where a second signal was tracked (`--dual-frequency`).
+    pub dual_frequency: bool,
+}
+
+/// [`solve_epoch`] with the systems and signals of `signals`; the σ floor `pseudorange_std_m`
+/// is one signal's (scaled by a combination's noise gain).
 pub fn solve_epoch_systems(
     store: &EphemerisStore,
     raw: &GnssRaw,
-    systems: &[u8],
+    signals: Signals,
     init: [f64; 3],
     settings: &SppSettings,
     pseudorange_std_m: f64,
     counts: &mut RangeBuildCounts,
 ) -> Result<spp::Solution, SppError> {
-    let mut obs = store.system_observations(raw, systems, counts);
+    let mut obs = store.system_observations(raw, signals.systems, signals.dual_frequency, counts);
     for o in &mut obs {
-        o.obs.sigma_zenith_m = o.obs.sigma_zenith_m.max(pseudorange_std_m);
+        o.obs.sigma_zenith_m = o.obs.sigma_zenith_m.max(pseudorange_std_m * o.noise_gain);
     }
     spp::solve(&obs, store.iono().as_ref(), raw.rcv_tow_s, init, settings)
 }
@@ -282,6 +307,8 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
             "no_convergence": r.no_convergence,
             "no_ephemeris": r.counts.no_ephemeris,
             "other_signals": r.counts.other_signals,
+            "dual_frequency": args.dual_frequency,
+            "no_second_signal": r.counts.no_second_signal,
             "systems": args.systems.0.iter().filter_map(|g| spp::system_index(*g)).map(|k| LETTERS[k].to_string()).collect::<Vec<_>>(),
             "epochs_with_system": system_map(&r.epochs_with_system),
             "satellites_used_per_system": system_map(&r.used_per_system),
@@ -311,6 +338,12 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
             per_system(&r.epochs_with_system),
             mean.join(", ")
         );
+        if args.dual_frequency {
+            println!(
+                "ionosphere-free (GPS L1/L2C, Galileo E1/E5a); {} GPS and Galileo measurements left out without their second signal",
+                r.counts.no_second_signal
+            );
+        }
         if args.reference.is_some() {
             println!("against the reference: horizontal RMS {h:.3} m, vertical RMS {v:.3} m, 3-D RMS {d3:.3} m");
         }

@@ -669,8 +669,17 @@ pub fn parse_obs(file: &str, text: &str) -> Result<ObsFile, RinexError> {
             let now_s = f64::from(t.week) * 604_800.0 + t.tow_s;
             signals(sat, list, &values, (now_s, &mut locks), &mut meas, &mut out.unmapped);
         }
-        // GPS L1 C/A first, then by system, signal and satellite.
-        meas.sort_by_key(|m| (m.gnss_id != 0 || m.sig_id != 0, m.gnss_id, m.sig_id, m.sv_id));
+        // By `keep_rank` (what a full epoch keeps first), GPS L1 C/A first, then by system,
+        // signal and satellite.
+        meas.sort_by_key(|m| {
+            (
+                m.keep_rank(),
+                m.gnss_id != 0 || m.sig_id != 0,
+                m.gnss_id,
+                m.sig_id,
+                m.sv_id,
+            )
+        });
         raw.dropped = meas.len().saturating_sub(MAX_RAW_MEASUREMENTS).min(255) as u8;
         for (slot, m) in raw.meas.iter_mut().zip(&meas) {
             *slot = *m;

@@ -70,6 +70,102 @@ pub struct BroadcastEphemeris {
     pub healthy: bool,
     /// Signal-in-space accuracy, m (GPS URA, Galileo SISA, BeiDou URA); ∞ when not predicted.
     pub accuracy_m: f64,
+    /// Each signal's group delay against the clock of `orbit` (Galileo; GPS's are the
+    /// store's, [`SignalDelays::gps`]).
+    pub delays: SignalDelays,
+}
+
+/// GPS L2 carrier frequency, Hz (IS-GPS-200 §3.3.1.1).
+pub const L2_HZ: f64 = 1_227.60e6;
+/// GPS L5 and Galileo E5a carrier frequency, Hz (IS-GPS-705 §3.3.1.1; OS SIS ICD §2.3.1).
+pub const L5_HZ: f64 = 1_176.45e6;
+/// Galileo E5b carrier frequency, Hz (OS SIS ICD §2.3.1).
+pub const E5B_HZ: f64 = 1_207.14e6;
+/// GPS L1 and Galileo E1 carrier frequency, Hz.
+const L1_HZ: f64 = 1_575.42e6;
+
+/// Each signal's group delay against the clock an ephemeris' a_f0..a_f2 describe, s: the
+/// pseudorange on that signal is late by it (its single-frequency user's satellite clock is the
+/// ephemeris' less this). `None`: not broadcast. Two signals' ionosphere-free combination keeps
+/// f₁²B₁ − f₂²B₂ over f₁² − f₂² of them ([`combined_s`](Self::combined_s)).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SignalDelays {
+    /// GPS L1 C/A, Galileo E1.
+    pub l1_s: Option<f64>,
+    /// GPS L2C, Galileo E5b.
+    pub l2_s: Option<f64>,
+    /// GPS L5, Galileo E5a.
+    pub l5_s: Option<f64>,
+    /// GPS: the inter-signal corrections (CNAV message type 30) were not received and are
+    /// taken as 0 (they are ≲ 1 ns; the user adds their σ).
+    pub isc_unknown: bool,
+}
+
+impl SignalDelays {
+    /// GPS, from T_GD and the inter-signal corrections of CNAV message type 30 when received
+    /// (`delays`; else taken as 0 and [`isc_unknown`](Self::isc_unknown) set). The clock of both
+    /// LNAV and CNAV is the L1 P(Y)/L2 P(Y) ionosphere-free one; a single-frequency user's is
+    /// Δt_SV − γ·T_GD + ISC, γ = (f_L1/f)² (IS-GPS-200 §30.3.3.3.1.1.1; IS-GPS-705
+    /// §20.3.3.3.1.2.1): B = γ·T_GD − ISC. L5: ISC_L5Q5, else ISC_L5I5.
+    pub fn gps(tgd_s: f64, delays: Option<&cnav::GroupDelays>) -> Self {
+        let tgd_s = delays.and_then(|d| d.tgd_s).unwrap_or(tgd_s);
+        let isc = |f: fn(&cnav::GroupDelays) -> Option<f64>| delays.and_then(f);
+        let l1 = isc(|d| d.isc_l1ca_s);
+        let l2 = isc(|d| d.isc_l2c_s);
+        let l5 = isc(|d| d.isc_l5q5_s.or(d.isc_l5i5_s));
+        let gamma = |f: f64| (L1_HZ / f).powi(2);
+        Self {
+            l1_s: Some(tgd_s - l1.unwrap_or(0.0)),
+            l2_s: Some(gamma(L2_HZ) * tgd_s - l2.unwrap_or(0.0)),
+            l5_s: Some(gamma(L5_HZ) * tgd_s - l5.unwrap_or(0.0)),
+            isc_unknown: l1.is_none() || l2.is_none() || l5.is_none(),
+        }
+    }
+
+    /// Galileo, with the clock of I/NAV (E1,E5b) or F/NAV (E1,E5a) and the BGDs the message
+    /// carries (OS SIS ICD §5.1.5: a single-frequency user's clock on E1 is the pair's less
+    /// BGD, on the pair's other signal less (f_E1/f)²·BGD). I/NAV's E5a delay goes through E1,
+    /// which both clocks share: BGD(E1,E5b) − BGD(E1,E5a) + (f_E1/f_E5a)²·BGD(E1,E5a).
+    pub fn galileo(bgd_e1_e5a_s: f64, bgd_e1_e5b_s: Option<f64>) -> Self {
+        let gamma = |f: f64| (L1_HZ / f).powi(2);
+        let a = bgd_e1_e5a_s;
+        match bgd_e1_e5b_s {
+            Some(b) => Self {
+                l1_s: Some(b),
+                l2_s: Some(gamma(E5B_HZ) * b),
+                l5_s: Some(b - a + gamma(L5_HZ) * a),
+                isc_unknown: false,
+            },
+            None => Self {
+                l1_s: Some(a),
+                l2_s: None,
+                l5_s: Some(gamma(L5_HZ) * a),
+                isc_unknown: false,
+            },
+        }
+    }
+
+    /// The delay of the signal on carrier `freq_hz` (L1/E1, L2/E5b, L5/E5a), s.
+    pub fn at(&self, freq_hz: f64) -> Option<f64> {
+        [
+            (L1_HZ, self.l1_s),
+            (L2_HZ, self.l2_s),
+            (E5B_HZ, self.l2_s),
+            (L5_HZ, self.l5_s),
+        ]
+        .into_iter()
+        .find(|(f, _)| (f - freq_hz).abs() < 1e3)
+        .and_then(|(_, d)| d)
+    }
+
+    /// What the ionosphere-free combination of the signals on `f1_hz` and `f2_hz` keeps of
+    /// their delays, s: (f₁²B₁ − f₂²B₂) / (f₁² − f₂²) (0 for GPS L1/L2 without inter-signal
+    /// corrections: T_GD's definition, IS-GPS-200 §20.3.3.3.3.2).
+    pub fn combined_s(&self, f1_hz: f64, f2_hz: f64) -> Option<f64> {
+        let (b1, b2) = (self.at(f1_hz)?, self.at(f2_hz)?);
+        let (g1, g2) = (f1_hz * f1_hz, f2_hz * f2_hz);
+        Some((g1 * b1 - g2 * b2) / (g1 - g2))
+    }
 }
 
 impl NavEphemeris {
@@ -83,6 +179,7 @@ impl NavEphemeris {
                 iod: e.iod_nav(),
                 healthy: e.healthy(),
                 accuracy_m: e.sisa_m().unwrap_or(f64::INFINITY),
+                delays: SignalDelays::galileo(e.w5.bgd_e1_e5a_s, Some(e.w5.bgd_e1_e5b_s)),
             },
             Self::GalileoFnav(e) => BroadcastEphemeris {
                 gnss_id: GNSS_ID_GALILEO,
@@ -91,6 +188,7 @@ impl NavEphemeris {
                 iod: e.p1.iod_nav,
                 healthy: e.healthy(),
                 accuracy_m: e.sisa_m().unwrap_or(f64::INFINITY),
+                delays: SignalDelays::galileo(e.p1.bgd_e1_e5a_s, None),
             },
             Self::Beidou(e) => BroadcastEphemeris {
                 gnss_id: GNSS_ID_BEIDOU,
@@ -100,6 +198,7 @@ impl NavEphemeris {
                 healthy: e.healthy(),
                 // BDS-SIS-ICD-B1I §5.2.4.5: URA as GPS's URA index (IS-GPS-200).
                 accuracy_m: super::ranges::ura_m(e.s1.urai).unwrap_or(f64::INFINITY),
+                delays: SignalDelays::default(),
             },
             Self::GpsCnav(e) => BroadcastEphemeris {
                 gnss_id: GNSS_ID_GPS,
@@ -108,6 +207,7 @@ impl NavEphemeris {
                 iod: (e.e10.toe_s / 300.0) as u16,
                 healthy: e.healthy(),
                 accuracy_m: e.accuracy_m().unwrap_or(f64::INFINITY),
+                delays: SignalDelays::gps(0.0, Some(&e.delays)),
             },
         }
     }
@@ -233,6 +333,52 @@ impl NavCollector {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// GPS: without inter-signal corrections L1/L2 keeps nothing of T_GD (its definition);
+    /// with them the combination keeps what IS-GPS-200 §30.3.3.3.1.1.1 adds to it, c·(ISC_L2C
+    /// − γ·ISC_L1C/A)/(1 − γ) with the opposite sign (here a delay, there a correction), and
+    /// each single frequency's delay is γ·T_GD − ISC.
+    #[test]
+    fn gps_delays_follow_the_interface_specification() {
+        let tgd = -8.3e-9;
+        let none = SignalDelays::gps(tgd, None);
+        assert!(none.isc_unknown);
+        assert!(none.combined_s(L1_HZ, L2_HZ).unwrap().abs() < 1e-20);
+        let d = cnav::GroupDelays {
+            tgd_s: Some(tgd),
+            isc_l1ca_s: Some(0.4e-9),
+            isc_l2c_s: Some(-1.1e-9),
+            isc_l5i5_s: Some(2.0e-9),
+            isc_l5q5_s: Some(2.2e-9),
+            ..cnav::GroupDelays::default()
+        };
+        let g = SignalDelays::gps(0.0, Some(&d));
+        assert!(!g.isc_unknown);
+        let gamma12 = (L1_HZ / L2_HZ).powi(2);
+        let correction = (-1.1e-9 - gamma12 * 0.4e-9) / (1.0 - gamma12);
+        assert!((g.combined_s(L1_HZ, L2_HZ).unwrap() + correction).abs() < 1e-20);
+        assert!((g.at(L1_HZ).unwrap() - (tgd - 0.4e-9)).abs() < 1e-20);
+        let gamma15 = (L1_HZ / L5_HZ).powi(2);
+        assert!((g.at(L5_HZ).unwrap() - (gamma15 * tgd - 2.2e-9)).abs() < 1e-20);
+        assert_eq!(g.at(1_561.098e6), None);
+    }
+
+    /// Galileo: I/NAV's clock (E1,E5b) and F/NAV's (E1,E5a) of the same instant differ by
+    /// BGD(E1,E5b) − BGD(E1,E5a) (both give E1's single-frequency clock); less what their
+    /// E1/E5a combination keeps, both give the same clock, and E1's delay is each message's own
+    /// BGD. F/NAV has no E5b delay.
+    #[test]
+    fn galileo_inav_and_fnav_give_one_dual_frequency_clock() {
+        let (a, b) = (-3.96e-9, -4.42e-9);
+        let clock_fnav = 1.234e-4;
+        let clock_inav = clock_fnav - a + b;
+        let (inav, fnav) = (SignalDelays::galileo(a, Some(b)), SignalDelays::galileo(a, None));
+        let e1_e5a = |d: &SignalDelays| d.combined_s(L1_HZ, L5_HZ).unwrap();
+        assert!(((clock_inav - e1_e5a(&inav)) - (clock_fnav - e1_e5a(&fnav))).abs() < 1e-20);
+        assert!(((clock_inav - inav.at(L1_HZ).unwrap()) - (clock_fnav - fnav.at(L1_HZ).unwrap())).abs() < 1e-20);
+        assert!(inav.combined_s(L1_HZ, E5B_HZ).unwrap().abs() < 1e-20);
+        assert_eq!(fnav.at(E5B_HZ), None);
+    }
 
     /// Any words, satellite and signal numbers: decoded, rejected or ignored, never a panic.
     #[test]

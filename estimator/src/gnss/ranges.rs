@@ -12,8 +12,10 @@
 use navsync_wire::samples::{GnssNavData, GnssRaw, RawMeasurement};
 
 use super::broadcast::{
-    BroadcastEphemeris, GNSS_ID_BEIDOU, GNSS_ID_GALILEO, GNSS_ID_GLONASS, NavCollector, NavEphemeris, carries_lnav,
+    BroadcastEphemeris, GNSS_ID_BEIDOU, GNSS_ID_GALILEO, GNSS_ID_GLONASS, L2_HZ, L5_HZ, NavCollector, NavEphemeris,
+    SignalDelays, carries_lnav,
 };
+use super::cnav;
 use super::glonass::{self, GloEphemeris, GloStore};
 use super::lnav::{self, Ephem1, Ephem2, Ephem3, Subframe};
 use super::orbit::Orbit;
@@ -50,6 +52,22 @@ pub const SPP_SIGNALS: [(u8, u8, f64, bool); 8] = [
     (GNSS_ID_BEIDOU, 10, 1_268.52e6, false),
     (GNSS_ID_GLONASS, 0, 1_602.0e6, false),
 ];
+/// The second signals of an ionosphere-free combination with [`SPP_SIGNALS`]' first, in order of
+/// preference per satellite: (u-blox `gnssId`, `sigId`, carrier frequency in Hz). GPS L2 CL,
+/// L2 CM; Galileo E5a-Q, E5a-I (u-blox interface description, "GNSS signal identifiers"). One
+/// band per system: a receiver delays each band differently (metres between L2 and L5 on the
+/// walk's u-blox X20), and one combination for all of a system's satellites leaves that in the
+/// system's clock. BeiDou's B2a and B1C group delays are in B-CNAV messages, which are not
+/// decoded: BeiDou and GLONASS stay on one frequency.
+pub const DUAL_FREQUENCY_SIGNALS: [(u8, u8, f64); 4] = [
+    (GNSS_ID_GPS, 3, L2_HZ),
+    (GNSS_ID_GPS, 4, L2_HZ),
+    (GNSS_ID_GALILEO, 4, L5_HZ),
+    (GNSS_ID_GALILEO, 3, L5_HZ),
+];
+/// 1σ of each GPS inter-signal correction taken as 0 when no CNAV message type 30 came, s
+/// (the broadcast values are a fraction of a nanosecond to about one).
+const ISC_UNKNOWN_STD_S: f64 = 1e-9;
 /// 1σ of a GLONASS pseudorange's inter-frequency bias, m: each channel's code delay in the
 /// receiver differs from the others' by decimetres to metres, and one inter-system bias per
 /// system leaves it. Added in quadrature to the broadcast accuracy F_T.
@@ -135,6 +153,17 @@ impl RangeEpoch {
     }
 }
 
+/// The second signal of an ionosphere-free combination ([`EphemerisStore::second_signal`]).
+struct SecondSignal {
+    pseudorange_m: f64,
+    /// The receiver's 1σ, m.
+    pseudorange_std_m: f32,
+    freq_hz: f64,
+    /// What the combination keeps of the two signals' group delays, s.
+    combined_delay_s: f64,
+    isc_unknown: bool,
+}
+
 /// The signal [`EphemerisStore::each_signal`] chose for a satellite, with its ephemeris.
 struct Signal {
     model: SatModel,
@@ -207,6 +236,9 @@ pub struct RangeBuildCounts {
     pub no_ephemeris: u64,
     /// Satellites beyond [`MAX_RANGE_SATS`] (the weakest are dropped).
     pub over_capacity: u64,
+    /// Dual-frequency single-point positioning: GPS and Galileo satellites without their
+    /// second signal ([`EphemerisStore::system_observations`]).
+    pub no_second_signal: u64,
 }
 
 /// The subframes 1–3 last received from one satellite and the ephemeris they made.
@@ -219,6 +251,8 @@ struct SatEphemeris {
     healthy: bool,
     /// The user range accuracy of the issue, m (0: not broadcast, an orbit from elsewhere).
     ura_m: f64,
+    /// T_GD and the inter-signal corrections of the latest CNAV message type 30.
+    cnav_delays: Option<cnav::GroupDelays>,
 }
 
 /// Whether a newly completed ephemeris replaces the one a satellite holds: unless the held one
@@ -378,6 +412,11 @@ impl EphemerisStore {
     ///
     /// [`insert_broadcast`]: Self::insert_broadcast
     pub fn on_broadcast(&mut self, e: &NavEphemeris) {
+        if let NavEphemeris::GpsCnav(c) = e
+            && let Some(sat) = usize::from(c.sv).checked_sub(1).and_then(|i| self.sats.get_mut(i))
+        {
+            sat.cnav_delays = Some(c.delays);
+        }
         if let NavEphemeris::Beidou(d) = e
             && d.s1.alpha.iter().any(|a| *a != 0.0)
         {
@@ -543,29 +582,112 @@ impl EphemerisStore {
     /// ECEF of that instant), its clock offset including the signal's group delay, the
     /// ionosphere scale (f_L1/f)² of its carrier, and a σ at zenith of the larger of the
     /// receiver's σ and the broadcast accuracy.
+    ///
+    /// `dual_frequency`: each satellite of a system of [`DUAL_FREQUENCY_SIGNALS`] (GPS,
+    /// Galileo) with its first signal and its second signal's ionosphere-free combination P =
+    /// (f₁²P₁ − f₂²P₂)/(f₁² − f₂²) (IS-GPS-200 §20.3.3.3.3.3, §30.3.3.3.1.1.1; OS SIS ICD
+    /// §5.1.5), the clock less what that keeps of the group delays
+    /// ([`SignalDelays::combined_s`]), an ionosphere scale of 0, and each signal's σ scaled by
+    /// its coefficient. Such a satellite without its second signal is left out
+    /// ([`RangeBuildCounts::no_second_signal`]): on one frequency it would carry the receiver's
+    /// bias between the bands into its system's clock. BeiDou and GLONASS stay on one.
     pub fn system_observations(
         &self,
         raw: &GnssRaw,
         systems: &[u8],
+        dual_frequency: bool,
         counts: &mut RangeBuildCounts,
     ) -> Vec<SystemObservation> {
-        let mut out = Vec::new();
+        let (mut out, mut no_second) = (Vec::new(), 0);
+        let n = usize::from(raw.num_meas).min(raw.meas.len());
+        let meas = &raw.meas[..n];
         self.each_signal(raw, systems, counts, |m, sig| {
-            let dt_sv = sig.model.clock_offset_s(sig.t0_s);
+            let paired = dual_frequency && DUAL_FREQUENCY_SIGNALS.iter().any(|(g, _, _)| *g == m.gnss_id);
+            let second = paired.then(|| self.second_signal(meas, m, sig.freq_hz)).flatten();
+            if paired && second.is_none() {
+                no_second += 1;
+                return;
+            }
+            let mut model = sig.model;
+            if let (true, SatModel::Kepler(o)) = (second.is_some(), &mut model) {
+                o.tgd_s = 0.0;
+            }
+            let dt_sv = model.clock_offset_s(sig.t0_s);
             let t_tx = sig.t0_s - dt_sv;
-            out.push(SystemObservation {
+            let receiver_std_m = f64::from(m.pseudorange_std_m);
+            let mut o = SystemObservation {
                 obs: Observation {
                     sv: m.sv_id,
                     pseudorange_m: m.pseudorange_m,
-                    sat_ecef_m: sig.model.state(t_tx).0,
+                    sat_ecef_m: model.state(t_tx).0,
                     sat_clock_s: dt_sv,
-                    sigma_zenith_m: f64::from(m.pseudorange_std_m).max(sig.accuracy_m),
+                    sigma_zenith_m: receiver_std_m.max(sig.accuracy_m),
                 },
                 gnss_id: m.gnss_id,
                 iono_scale: (L1_HZ / sig.freq_hz).powi(2),
-            });
+                noise_gain: 1.0,
+            };
+            if let Some(p) = second {
+                let (g1, g2) = (sig.freq_hz.powi(2), p.freq_hz.powi(2));
+                let (a1, a2) = (g1 / (g1 - g2), g2 / (g1 - g2));
+                o.obs.pseudorange_m = a1 * m.pseudorange_m - a2 * p.pseudorange_m;
+                o.obs.sat_clock_s = dt_sv - p.combined_delay_s;
+                o.iono_scale = 0.0;
+                o.noise_gain = a1.hypot(a2);
+                let std_m = (a1 * receiver_std_m).hypot(a2 * f64::from(p.pseudorange_std_m));
+                let isc_m = if p.isc_unknown {
+                    o.noise_gain * C_M_S * ISC_UNKNOWN_STD_S
+                } else {
+                    0.0
+                };
+                o.obs.sigma_zenith_m = std_m.max(sig.accuracy_m).hypot(isc_m);
+            }
+            out.push(o);
         });
+        counts.no_second_signal += no_second;
         out
+    }
+
+    /// The second signal of `first`'s satellite (carrier `f1_hz`) for an ionosphere-free
+    /// combination: the first of [`DUAL_FREQUENCY_SIGNALS`] in `meas` with a valid pseudorange
+    /// whose group delay, like `first`'s, the satellite's ephemeris gives.
+    fn second_signal(&self, meas: &[RawMeasurement], first: &RawMeasurement, f1_hz: f64) -> Option<SecondSignal> {
+        let delays = self.signal_delays(first.gnss_id, first.sv_id)?;
+        DUAL_FREQUENCY_SIGNALS
+            .iter()
+            .filter(|(g, _, _)| *g == first.gnss_id)
+            .find_map(|&(_, sig, f2_hz)| {
+                let m = meas.iter().find(|o| {
+                    o.sv_id == first.sv_id
+                        && o.gnss_id == first.gnss_id
+                        && o.sig_id == sig
+                        && o.trk_stat & 1 != 0
+                        && o.pseudorange_m.is_finite()
+                        && o.pseudorange_m > 0.0
+                })?;
+                Some(SecondSignal {
+                    pseudorange_m: m.pseudorange_m,
+                    pseudorange_std_m: m.pseudorange_std_m,
+                    freq_hz: f2_hz,
+                    combined_delay_s: delays.combined_s(f1_hz, f2_hz)?,
+                    isc_unknown: delays.isc_unknown,
+                })
+            })
+    }
+
+    /// The group delays of satellite `sv_id` of system `gnss_id` against its ephemeris' clock:
+    /// GPS from T_GD and CNAV's inter-signal corrections ([`SignalDelays::gps`]), Galileo from
+    /// the BGDs of the ephemeris held; `None` for the other systems.
+    fn signal_delays(&self, gnss_id: u8, sv_id: u8) -> Option<SignalDelays> {
+        let i = usize::from(sv_id).checked_sub(1)?;
+        match gnss_id {
+            GNSS_ID_GPS => {
+                let e = self.sats.get(i)?;
+                Some(SignalDelays::gps(e.orbit?.tgd_s, e.cnav_delays.as_ref()))
+            }
+            GNSS_ID_GALILEO => self.others.gal.get(i)?.map(|e| e.delays),
+            _ => None,
+        }
     }
 
     /// Sets satellite `prn`'s orbit directly (an ephemeris from elsewhere, or a simulation's).
@@ -741,6 +863,7 @@ mod tests {
             iod: 0,
             healthy: true,
             accuracy_m: 1.4,
+            delays: SignalDelays::default(),
         };
         let mut st = EphemerisStore::default();
         st.insert_broadcast(cnav(408_600.0, 0.01));
@@ -785,6 +908,123 @@ mod tests {
         assert_eq!(st.ephemerides, 3);
     }
 
+    /// Every signal the filter and single-point positioning use is one a full epoch keeps
+    /// first, every second signal of a combination next ([`RawMeasurement::keep_rank`]).
+    #[test]
+    fn the_signals_used_are_the_ones_kept() {
+        use navsync_wire::reflect::Reflect;
+        let rank = |gnss_id, sig_id| {
+            let mut m = RawMeasurement::zeroed();
+            (m.gnss_id, m.sig_id) = (gnss_id, sig_id);
+            m.keep_rank()
+        };
+        for (g, sig, _, _) in SPP_SIGNALS {
+            assert_eq!(rank(g, sig), 0, "gnssId {g} sigId {sig}");
+        }
+        for (g, sig, _) in DUAL_FREQUENCY_SIGNALS {
+            assert_eq!(rank(g, sig), 1, "gnssId {g} sigId {sig}");
+        }
+        assert_eq!(rank(GNSS_ID_GPS, 7), 2);
+    }
+
+    /// Dual frequency: a GPS satellite's L1 C/A and L2 CL and a Galileo satellite's E1-C and
+    /// E5a-Q, each delayed by the ionosphere as (f_L1/f)², combine to the range without it and
+    /// with each clock less what the combination keeps of the group delays (GPS: nothing
+    /// without CNAV's corrections, whose σ is added; Galileo I/NAV: BGD(E1,E5b) −
+    /// BGD(E1,E5a)); a GPS satellite without its L2 is left out and counted; BeiDou stays on
+    /// one frequency.
+    #[test]
+    fn dual_frequency_observations_cancel_the_ionosphere() {
+        use crate::gnss::orbit::OrbitFrame;
+        use navsync_wire::reflect::Reflect;
+        let t_rx = 300_000.0;
+        let orbit = |frame, af0: f64, tgd_s| Orbit {
+            sqrt_a: 5_300.0,
+            i0_rad: 0.95,
+            toe_s: t_rx,
+            toc_s: t_rx,
+            af: [af0, 0.0, 0.0],
+            tgd_s,
+            frame,
+            ..Orbit::default()
+        };
+        let (bgd_a, bgd_b) = (-3.9e-9, -4.4e-9);
+        let mut st = EphemerisStore::default();
+        st.insert_orbit(3, orbit(OrbitFrame::Gps, 1e-4, 5e-9));
+        st.insert_orbit(4, orbit(OrbitFrame::Gps, 1e-4, 5e-9));
+        st.insert_broadcast(BroadcastEphemeris {
+            gnss_id: GNSS_ID_GALILEO,
+            sv_id: 5,
+            orbit: orbit(OrbitFrame::Galileo, 1e-3, bgd_b),
+            iod: 1,
+            healthy: true,
+            accuracy_m: 2.0,
+            delays: SignalDelays::galileo(bgd_a, Some(bgd_b)),
+        });
+        st.insert_broadcast(BroadcastEphemeris {
+            gnss_id: GNSS_ID_BEIDOU,
+            sv_id: 20,
+            orbit: orbit(OrbitFrame::BeiDou, 2e-3, 0.0),
+            iod: 1,
+            healthy: true,
+            accuracy_m: 2.0,
+            delays: SignalDelays::default(),
+        });
+        let iono_l1_m = 6.0;
+        let meas = |gnss_id, sv_id, sig_id, freq_hz: f64| {
+            let mut m = RawMeasurement::zeroed();
+            let pr = 2.2e7 + iono_l1_m * (L1_HZ / freq_hz).powi(2);
+            (m.gnss_id, m.sv_id, m.sig_id, m.pseudorange_m, m.trk_stat) = (gnss_id, sv_id, sig_id, pr, 1);
+            m.pseudorange_std_m = 0.5;
+            m
+        };
+        let list = [
+            meas(GNSS_ID_GPS, 3, 0, L1_HZ),
+            meas(GNSS_ID_GPS, 3, 3, L2_HZ),
+            meas(GNSS_ID_GPS, 3, 7, L5_HZ), // L5: not GPS's second band
+            meas(GNSS_ID_GPS, 4, 0, L1_HZ),
+            meas(GNSS_ID_GALILEO, 5, 0, L1_HZ),
+            meas(GNSS_ID_GALILEO, 5, 4, L5_HZ),
+            meas(GNSS_ID_BEIDOU, 20, 4, 1_268.52e6),
+        ];
+        let mut raw = GnssRaw::zeroed();
+        raw.rcv_tow_s = t_rx;
+        raw.meas[..list.len()].copy_from_slice(&list);
+        raw.num_meas = list.len() as u8;
+        let mut counts = RangeBuildCounts::default();
+        let obs = st.system_observations(&raw, &[0, 2, 3], true, &mut counts);
+        assert_eq!(counts.no_second_signal, 1);
+        assert_eq!(obs.len(), 3, "{obs:?}");
+        let find = |g: u8| obs.iter().find(|o| o.gnss_id == g).unwrap();
+        let (g, e, c) = (find(GNSS_ID_GPS), find(GNSS_ID_GALILEO), find(GNSS_ID_BEIDOU));
+        assert_eq!(g.obs.sv, 3);
+        for o in [g, e] {
+            assert!((o.obs.pseudorange_m - 2.2e7).abs() < 1e-6, "{o:?}");
+            assert_eq!(o.iono_scale, 0.0);
+        }
+        assert!((g.obs.sat_clock_s - 1e-4).abs() < 1e-15, "{}", g.obs.sat_clock_s);
+        assert!((e.obs.sat_clock_s - (1e-3 - (bgd_b - bgd_a))).abs() < 1e-15);
+        let gain = |f2: f64| {
+            let (g1, g2) = (L1_HZ * L1_HZ, f2 * f2);
+            (g1 / (g1 - g2)).hypot(g2 / (g1 - g2))
+        };
+        assert!((g.noise_gain - gain(L2_HZ)).abs() < 1e-12 && (g.noise_gain - 2.98).abs() < 0.01);
+        assert!((e.noise_gain - gain(L5_HZ)).abs() < 1e-12);
+        // GPS: 0.5 m per signal through the combination and 1 ns per unknown correction.
+        let want = (0.5 * gain(L2_HZ)).hypot(gain(L2_HZ) * C_M_S * 1e-9);
+        assert!(
+            (g.obs.sigma_zenith_m - want).abs() < 1e-9,
+            "{} vs {want}",
+            g.obs.sigma_zenith_m
+        );
+        assert_eq!((e.obs.sigma_zenith_m, c.noise_gain), (2.0, 1.0));
+        assert!(c.iono_scale > 1.0);
+        // One frequency: GPS 4 is back, each pseudorange as measured.
+        let single = st.system_observations(&raw, &[0, 2, 3], false, &mut counts);
+        assert_eq!(single.len(), 4);
+        assert!(single.iter().all(|o| o.noise_gain == 1.0 && o.iono_scale >= 1.0));
+    }
+
     /// Per satellite the preferred signal (E1-C before E1-B whatever the order), only the
     /// systems asked for, BeiDou's clock at BDT = GPST − 14 s without a group delay on B3I,
     /// Galileo's with its BGD, the ionosphere scale of each carrier; unhealthy satellites and
@@ -811,6 +1051,7 @@ mod tests {
             iod: 1,
             healthy,
             accuracy_m: 2.0,
+            delays: SignalDelays::default(),
         };
         let mut st = EphemerisStore::default();
         st.insert_orbit(3, orbit(OrbitFrame::Gps, [1e-4, 0.0, 0.0], 5e-9, t_rx));
@@ -840,7 +1081,7 @@ mod tests {
         raw.meas[..list.len()].copy_from_slice(&list);
         raw.num_meas = list.len() as u8;
         let mut counts = RangeBuildCounts::default();
-        let obs = st.system_observations(&raw, &[0, 2, 3], &mut counts);
+        let obs = st.system_observations(&raw, &[0, 2, 3], false, &mut counts);
         assert_eq!(obs.len(), 3, "{obs:?}");
         assert_eq!((counts.other_signals, counts.no_ephemeris, counts.invalid), (3, 1, 0));
         let find = |g: u8| obs.iter().find(|o| o.gnss_id == g).unwrap();
@@ -858,7 +1099,7 @@ mod tests {
         assert!((c.iono_scale - (1575.42f64 / 1268.52).powi(2)).abs() < 1e-12);
         assert_eq!(e.obs.sigma_zenith_m, 2.0);
         // Galileo only.
-        let only = st.system_observations(&raw, &[GNSS_ID_GALILEO], &mut counts);
+        let only = st.system_observations(&raw, &[GNSS_ID_GALILEO], false, &mut counts);
         assert_eq!((only.len(), only[0].gnss_id), (1, GNSS_ID_GALILEO));
     }
 }

@@ -171,8 +171,12 @@ pub struct SystemObservation {
     /// The system, u-blox `gnssId` (one of [`SYSTEMS`]).
     pub gnss_id: u8,
     /// (f_L1 / f)² of the signal's carrier: the L1 ionospheric delay times this is the
-    /// signal's (IS-GPS-200 §20.3.3.3.3.2).
+    /// signal's (IS-GPS-200 §20.3.3.3.3.2); 0 for an ionosphere-free combination.
     pub iono_scale: f64,
+    /// What the measurement multiplies each signal's noise by: 1 for one signal,
+    /// √(α₁² + α₂²) for an ionosphere-free combination α₁P₁ − α₂P₂ (≈ 3.0 for L1/L2, 2.6 for
+    /// L1/L5).
+    pub noise_gain: f64,
 }
 
 /// What [`solve`] needs of a measurement: [`Observation`] is GPS L1 C/A.
@@ -544,6 +548,7 @@ mod tests {
                         sigma_zenith_m: 1.0,
                     },
                     gnss_id,
+                    noise_gain: 1.0,
                     iono_scale: 0.0,
                 }
             })

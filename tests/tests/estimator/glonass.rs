@@ -123,7 +123,7 @@ fn glonass_pseudoranges_solve_with_real_immediate_data() {
     println!("{} NAV-PVT fixes", fixes.len());
     let settings = SppSettings::default();
     let solve = |raw: &GnssRaw, counts: &mut RangeBuildCounts| {
-        let obs = store.system_observations(raw, &[6], counts);
+        let obs = store.system_observations(raw, &[6], false, counts);
         spp::solve(&obs, None, raw.rcv_tow_s, [0.0; 3], &settings)
     };
     let (mut worst, mut worst_clock, mut solved) = (0f64, 0f64, 0);
@@ -166,7 +166,7 @@ fn glonass_pseudoranges_solve_with_real_immediate_data() {
     assert!(off.is_err() || off.is_ok_and(|e| e > 100.0), "{off:?}");
     let late = epoch(&glo, &[], rx, utc + 3_600_000_000_000, 18, 1);
     let mut counts = RangeBuildCounts::default();
-    assert!(store.system_observations(&late, &[6], &mut counts).is_empty());
+    assert!(store.system_observations(&late, &[6], false, &mut counts).is_empty());
     assert_eq!(counts.no_ephemeris, u64::from(late.num_meas));
     assert!(late.num_meas >= 1, "{} satellites an hour later", late.num_meas);
 }

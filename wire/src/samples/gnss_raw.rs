@@ -79,6 +79,21 @@ impl GnssRaw {
 }
 
 impl RawMeasurement {
+    /// Which measurements an epoch with more than [`MAX_RAW_MEASUREMENTS`] keeps first (lower
+    /// first, receiver order within a rank; u-blox `gnssId`/`sigId`): 0, the signals
+    /// single-point positioning and the tightly coupled filter use (GPS, SBAS and QZSS L1 C/A,
+    /// Galileo E1, BeiDou B1I and B3I, GLONASS L1OF); 1, the second signals of an
+    /// ionosphere-free combination (GPS L2C, Galileo E5a); 2, the others. An all-band receiver
+    /// reports 70 and more signals per epoch (the walk0827 u-blox X20: 22–25 satellites on
+    /// 2–3 bands each).
+    pub fn keep_rank(&self) -> u8 {
+        match (self.gnss_id, self.sig_id) {
+            (0 | 1 | 5 | 6, 0) | (5, 1) | (2, 0 | 1) | (3, 0 | 1 | 4 | 10) => 0,
+            (0, 3 | 4) | (2, 3 | 4) => 1,
+            _ => 2,
+        }
+    }
+
     /// Whether the receiver kept lock on a carrier between a measurement with lock time
     /// `prev_ms` and this one `dt_s` later with `lock_time_ms`: the count did not fall (unless
     /// both saturated) and covers at least half the interval (a count shorter than that

@@ -20,8 +20,12 @@ use super::tim::{TimTm2, TimTp};
 
 /// Satellites kept from one NAV-SAT / NAV-SVINFO.
 pub const MAX_SATS: usize = 64;
-/// Measurements kept from one RXM-RAWX.
-pub const MAX_MEAS: usize = 64;
+/// Measurements kept from one RXM-RAWX: all its one-byte `numMeas` can announce (an all-band
+/// receiver reports 70 and more; the sample keeps what [`RawMeasurement::keep_rank`] ranks
+/// first).
+///
+/// [`RawMeasurement::keep_rank`]: navsync_shared::samples::RawMeasurement::keep_rank
+pub const MAX_MEAS: usize = 255;
 /// Data words kept from one RXM-SFRBX (GPS L1 C/A: 10, Galileo I/NAV: 8, BeiDou: 10).
 pub const MAX_WORDS: usize = 16;
 /// Sensor readings kept from one ESF-MEAS / ESF-RAW.

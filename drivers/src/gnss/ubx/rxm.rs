@@ -193,6 +193,7 @@ pub fn decode_rxm_sfrbx(p: &[u8]) -> Result<RxmSfrbx, UbxError> {
 mod tests {
     use super::super::nav::tests::P;
     use super::*;
+    use navsync_shared::samples::MAX_RAW_MEASUREMENTS;
 
     #[test]
     fn rxm_rawx_measurements() {
@@ -206,14 +207,14 @@ mod tests {
                 .u1(1)
                 .zeros(2)
         };
-        let meas = |sv: u8| {
+        let meas_sig = |sv: u8, sig: u8| {
             P::default()
                 .r8(21_000_000.5)
                 .r8(110_000_000.25)
                 .r4(-1234.5)
                 .u1(0)
                 .u1(sv)
-                .u1(0)
+                .u1(sig)
                 .u1(0)
                 .u2(64_500)
                 .u1(45)
@@ -223,6 +224,7 @@ mod tests {
                 .u1(0x07)
                 .u1(0)
         };
+        let meas = |sv| meas_sig(sv, 0);
         let mut p = head(2).0;
         p.extend(meas(5).0);
         p.extend(meas(9).0);
@@ -242,12 +244,28 @@ mod tests {
             (0.08, 0.02, 0.008)
         );
         assert!(decode_rxm_rawx(&p[..p.len() - 32]).is_err(), "numMeas says 2");
+        // An all-band receiver's 70 signals, L5 first in its order: all decoded; the sample's
+        // 64 are the 15 L1 C/A, the 25 L2C and the first 24 L5, the other 6 counted.
         let mut big = head(70).0;
-        for i in 0..70 {
-            big.extend(meas(i).0);
+        for i in 0..70u8 {
+            let sig = match i {
+                0..30 => 7,
+                30..55 => 3,
+                _ => 0,
+            };
+            big.extend(meas_sig(i, sig).0);
         }
         let m = decode_rxm_rawx(&big).unwrap();
-        assert_eq!((m.len, m.dropped), (MAX_MEAS, 6));
+        assert_eq!((m.len, m.dropped), (70, 0));
+        let raw = super::super::samples::raw_sample(&m, 0, 0);
+        assert_eq!((usize::from(raw.num_meas), raw.dropped), (MAX_RAW_MEASUREMENTS, 6));
+        let kept: Vec<(u8, u8)> = raw.meas.iter().map(|r| (r.sig_id, r.sv_id)).collect();
+        let want: Vec<(u8, u8)> = (55..70)
+            .map(|sv| (0, sv))
+            .chain((30..55).map(|sv| (3, sv)))
+            .chain((0..24).map(|sv| (7, sv)))
+            .collect();
+        assert_eq!(kept, want);
     }
 
     #[test]

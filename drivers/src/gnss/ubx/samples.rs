@@ -17,7 +17,7 @@ use navsync_shared::samples::{
 
 use super::epoch::SatView;
 use super::esf::EsfMeas;
-use super::rxm::{RxmRawx, RxmSfrbx};
+use super::rxm::{RawxMeas, RxmRawx, RxmSfrbx};
 
 /// The satellites of an epoch (NAV-SAT, or NAV-SVINFO with its legacy numbers converted) as a
 /// [`GnssSky`] sample stamped at the message's receipt with sequence number `seq`: elevation
@@ -69,27 +69,34 @@ pub fn raw_sample(m: &RxmRawx, host_ns: i64, seq: u64) -> GnssRaw {
         }; MAX_RAW_MEASUREMENTS],
     };
     let valid = m.meas.get(..m.len).unwrap_or(&[]);
-    for (o, x) in out.meas.iter_mut().zip(valid) {
-        *o = RawMeasurement {
-            pseudorange_m: x.pr_mes_m,
-            carrier_phase_cycles: x.cp_mes_cycles,
-            doppler_hz: x.do_mes_hz,
-            pseudorange_std_m: x.pr_stdev_m as f32,
-            carrier_phase_std_cycles: x.cp_stdev_cycles as f32,
-            doppler_std_hz: x.do_stdev_hz as f32,
-            lock_time_ms: x.locktime_ms,
-            gnss_id: x.gnss_id,
-            sv_id: x.sv_id,
-            sig_id: x.sig_id,
-            freq_id: x.freq_id,
-            cno_dbhz: x.cno_dbhz,
-            trk_stat: x.trk_stat,
-        };
+    // Beyond the capacity the signals of lower `keep_rank` are kept first.
+    let ranked = (0..=2u8).flat_map(|rank| valid.iter().map(raw_measurement).filter(move |r| r.keep_rank() == rank));
+    for (o, r) in out.meas.iter_mut().zip(ranked) {
+        *o = r;
     }
     let kept = valid.len().min(MAX_RAW_MEASUREMENTS);
     out.num_meas = kept as u8;
     out.dropped = (m.dropped + valid.len() - kept).min(255) as u8;
     out
+}
+
+/// One RXM-RAWX measurement as a [`RawMeasurement`].
+fn raw_measurement(x: &RawxMeas) -> RawMeasurement {
+    RawMeasurement {
+        pseudorange_m: x.pr_mes_m,
+        carrier_phase_cycles: x.cp_mes_cycles,
+        doppler_hz: x.do_mes_hz,
+        pseudorange_std_m: x.pr_stdev_m as f32,
+        carrier_phase_std_cycles: x.cp_stdev_cycles as f32,
+        doppler_std_hz: x.do_stdev_hz as f32,
+        lock_time_ms: x.locktime_ms,
+        gnss_id: x.gnss_id,
+        sv_id: x.sv_id,
+        sig_id: x.sig_id,
+        freq_id: x.freq_id,
+        cno_dbhz: x.cno_dbhz,
+        trk_stat: x.trk_stat,
+    }
 }
 
 /// RXM-SFRBX as a [`GnssNavData`] sample (words unchanged) stamped at `host_ns`, sequence `seq`.
