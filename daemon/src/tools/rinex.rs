@@ -89,7 +89,7 @@ pub struct RinexStats {
     pub epochs: u64,
     /// Measurements in them.
     pub measurements: u64,
-    /// Observations of signals without a u-blox id (not imported).
+    /// Observations of signals without a signal id (`navsync_drivers::gnss::rinex::SIGNALS`) (not imported).
     pub unmapped: u64,
     /// GPS ephemerides (each as subframes 1–3).
     pub ephemerides: u64,
@@ -119,7 +119,7 @@ pub fn main(args: &RinexArgs) -> anyhow::Result<()> {
     use anyhow::Context;
     let s = import(args).with_context(|| format!("importing into {}", args.out.display()))?;
     eprintln!(
-        "{}: {} epochs, {} measurements ({} observations of signals without a u-blox id left out), \
+        "{}: {} epochs, {} measurements ({} observations of signals without a signal id left out), \
          {} GPS ephemerides as {} LNAV subframes, {} GLONASS ephemerides as strings 1–4 (largest \
          rounding {:.1e} LSB)",
         args.out.display(),

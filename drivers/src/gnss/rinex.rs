@@ -11,7 +11,7 @@
 //! (1-based) and the field.
 
 use navsync_shared::reflect::Reflect;
-use navsync_shared::samples::{GnssRaw, LOCK_TIME_MAX_MS, MAX_RAW_MEASUREMENTS, RawMeasurement};
+use navsync_shared::samples::{GnssRaw, LOCK_TIME_MAX_MS, MAX_RAW_MEASUREMENTS, RawMeasurement, SIG_GPS_L2_PY};
 use navsync_shared::time::{GPS_EPOCH_UNIX_S, days_from_civil, gps_minus_utc_s};
 
 /// `freqId` of a GLONASS measurement whose channel the file does not give (u-blox's are
@@ -86,7 +86,7 @@ pub struct ObsFile {
     pub leap_s: Option<i16>,
     /// One sample per epoch (flags 0 and 1), `stamp` zero (the caller stamps).
     pub epochs: Vec<GnssRaw>,
-    /// Observations without a u-blox signal id (P(Y), L2 semi-codeless …), not kept.
+    /// Observations without a signal id ([`SIGNALS`]: L1 P(Y) …), not kept.
     pub unmapped: u64,
     /// GLONASS channel of each slot (index 1–24) from `GLONASS SLOT / FRQ #`, if given.
     pub glonass_channels: [Option<i8>; 25],
@@ -390,8 +390,10 @@ fn version_line(lines: &mut Lines<'_>, want: char) -> Result<(f64, char), RinexE
 /// is the one written; where one RINEX code names two u-blox signals (BeiDou's D1 and D2 of one
 /// band: the code is the band's, D2 the GEO satellites' message; the `X` codes of two
 /// components tracked together, RINEX 3.05 §5.1, as RTKLIB writes a u-blox receiver's
-/// signals: read as the band's first u-blox signal) the first is the one read.
-pub const SIGNALS: [(char, char, char, u8, u8); 30] = [
+/// signals: read as the band's first u-blox signal) the first is the one read. GPS L2 P(Y)
+/// (`C2W`, RINEX 2 `P2`), which u-blox receivers do not report, has navsync's own id
+/// [`SIG_GPS_L2_PY`].
+pub const SIGNALS: [(char, char, char, u8, u8); 31] = [
     ('G', '1', 'C', 0, 0),
     ('G', '2', 'L', 0, 3),
     ('G', '2', 'S', 0, 4),
@@ -422,10 +424,11 @@ pub const SIGNALS: [(char, char, char, u8, u8); 30] = [
     ('J', '2', 'L', 5, 5),
     ('R', '1', 'C', 6, 0),
     ('R', '2', 'C', 6, 2),
+    ('G', '2', 'W', 0, SIG_GPS_L2_PY),
 ];
 
 /// The u-blox (gnssId, sigId) of a RINEX 3 signal: system letter, band digit, attribute
-/// ([`SIGNALS`]); `None` for signals u-blox does not track (GPS P(Y), semi-codeless …).
+/// ([`SIGNALS`]); `None` for signals without an id there (GPS L1 P(Y) …).
 pub fn ublox_signal(system: char, band: char, attribute: char) -> Option<(u8, u8)> {
     SIGNALS
         .iter()
@@ -1176,13 +1179,17 @@ mod tests {
         let e = &f.epochs[0];
         // 2005-04-02 is a Saturday of GPS week 1316.
         assert_eq!((e.week, e.rcv_tow_s), (1316, 6.0 * 86_400.0 + 30.0));
-        assert_eq!(e.num_meas, 2);
+        assert_eq!(e.num_meas, 4);
         let (a, b) = (e.meas[0], e.meas[1]);
         assert_eq!((a.gnss_id, a.sv_id, a.sig_id, a.trk_stat), (0, 3, 0, 0b111));
         assert_eq!((a.pseudorange_m, a.carrier_phase_cycles), (24767686.375, 55923622.160));
-        // LLI 2: half-cycle ambiguity; no P2 on G07 and L2/P2 (P(Y)) are not u-blox signals.
+        // LLI 2: half-cycle ambiguity.
         assert_eq!((b.sv_id, b.trk_stat, b.carrier_phase_cycles), (7, 0b011, -691177.898));
-        assert_eq!(f.unmapped, 2);
+        // L2/P2 as GPS L2 P(Y), after the L1 signals: G07 has no P2, so no valid pseudorange.
+        let (c, d) = (e.meas[2], e.meas[3]);
+        assert_eq!((c.sv_id, c.sig_id, c.pseudorange_m), (3, SIG_GPS_L2_PY, 24767684.822));
+        assert_eq!((d.sv_id, d.sig_id, d.trk_stat & 1), (7, SIG_GPS_L2_PY, 0));
+        assert_eq!(f.unmapped, 0);
     }
 
     const OBS3: &str = "     3.05           OBSERVATION DATA    M                   RINEX VERSION / TYPE
@@ -1441,7 +1448,8 @@ E11  23000000.500    23000005.000
         assert_eq!(rinex_signal(3, 10), Some(('C', '6', 'I')));
         assert_eq!(ublox_signal('C', '6', 'I'), Some((3, 4)));
         assert_eq!(rinex_signal(0, 0), Some(('G', '1', 'C')));
-        assert_eq!((rinex_signal(0, 1), ublox_signal('G', '2', 'W')), (None, None));
+        assert_eq!((rinex_signal(0, 1), ublox_signal('G', '2', 'P')), (None, None));
+        assert_eq!(ublox_signal('G', '2', 'W'), Some((0, SIG_GPS_L2_PY)));
     }
 
     #[test]

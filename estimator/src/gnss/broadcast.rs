@@ -17,6 +17,7 @@ use super::cnav::{self, CnavAssembler, CnavEphemeris, CnavError};
 use super::fnav::{self, FnavAssembler, FnavEphemeris, FnavError};
 use super::galileo::{self, GalAssembler, GalEphemeris, InavError};
 use super::orbit::Orbit;
+use navsync_wire::samples::SIG_GPS_L2_PY;
 
 /// u-blox `gnssId` of GPS.
 pub const GNSS_ID_GPS: u8 = 0;
@@ -96,6 +97,8 @@ pub struct SignalDelays {
     pub l2_s: Option<f64>,
     /// GPS L5, Galileo E5a.
     pub l5_s: Option<f64>,
+    /// GPS L2 P(Y) ([`SIG_GPS_L2_PY`]): γ·T_GD, T_GD's definition (IS-GPS-200 §20.3.3.3.3.2).
+    pub l2_py_s: Option<f64>,
     /// GPS: the inter-signal corrections (CNAV message type 30) were not received and are
     /// taken as 0 (they are ≲ 1 ns; the user adds their σ).
     pub isc_unknown: bool,
@@ -118,6 +121,7 @@ impl SignalDelays {
             l1_s: Some(tgd_s - l1.unwrap_or(0.0)),
             l2_s: Some(gamma(L2_HZ) * tgd_s - l2.unwrap_or(0.0)),
             l5_s: Some(gamma(L5_HZ) * tgd_s - l5.unwrap_or(0.0)),
+            l2_py_s: Some(gamma(L2_HZ) * tgd_s),
             isc_unknown: l1.is_none() || l2.is_none() || l5.is_none(),
         }
     }
@@ -134,15 +138,26 @@ impl SignalDelays {
                 l1_s: Some(b),
                 l2_s: Some(gamma(E5B_HZ) * b),
                 l5_s: Some(b - a + gamma(L5_HZ) * a),
+                l2_py_s: None,
                 isc_unknown: false,
             },
             None => Self {
                 l1_s: Some(a),
                 l2_s: None,
                 l5_s: Some(gamma(L5_HZ) * a),
+                l2_py_s: None,
                 isc_unknown: false,
             },
         }
+    }
+
+    /// The delay of signal `sig_id` (u-blox numbering, [`SIG_GPS_L2_PY`] beyond it) of system
+    /// `gnss_id` on carrier `freq_hz`, s.
+    pub fn of_signal(&self, gnss_id: u8, sig_id: u8, freq_hz: f64) -> Option<f64> {
+        if (gnss_id, sig_id) == (GNSS_ID_GPS, SIG_GPS_L2_PY) {
+            return self.l2_py_s;
+        }
+        self.at(freq_hz)
     }
 
     /// The delay of the signal on carrier `freq_hz` (L1/E1, L2/E5b, L5/E5a), s.
@@ -162,9 +177,14 @@ impl SignalDelays {
     /// their delays, s: (f₁²B₁ − f₂²B₂) / (f₁² − f₂²) (0 for GPS L1/L2 without inter-signal
     /// corrections: T_GD's definition, IS-GPS-200 §20.3.3.3.3.2).
     pub fn combined_s(&self, f1_hz: f64, f2_hz: f64) -> Option<f64> {
-        let (b1, b2) = (self.at(f1_hz)?, self.at(f2_hz)?);
+        Some(Self::combination_keeps(f1_hz, self.at(f1_hz)?, f2_hz, self.at(f2_hz)?))
+    }
+
+    /// (f₁²B₁ − f₂²B₂) / (f₁² − f₂²), s: what the ionosphere-free combination of a signal on
+    /// `f1_hz` delayed by `b1_s` and one on `f2_hz` delayed by `b2_s` keeps of the delays.
+    pub fn combination_keeps(f1_hz: f64, b1_s: f64, f2_hz: f64, b2_s: f64) -> f64 {
         let (g1, g2) = (f1_hz * f1_hz, f2_hz * f2_hz);
-        Some((g1 * b1 - g2 * b2) / (g1 - g2))
+        (g1 * b1_s - g2 * b2_s) / (g1 - g2)
     }
 }
 
@@ -361,6 +381,11 @@ mod tests {
         let gamma15 = (L1_HZ / L5_HZ).powi(2);
         assert!((g.at(L5_HZ).unwrap() - (gamma15 * tgd - 2.2e-9)).abs() < 1e-20);
         assert_eq!(g.at(1_561.098e6), None);
+        // L2 P(Y): γ·T_GD, whatever the L2C correction; with L1 P(Y) (T_GD) nothing is kept.
+        assert_eq!(g.of_signal(GNSS_ID_GPS, SIG_GPS_L2_PY, L2_HZ), Some(gamma12 * tgd));
+        assert_eq!(g.of_signal(GNSS_ID_GPS, 3, L2_HZ), g.l2_s);
+        let py = SignalDelays::combination_keeps(L1_HZ, tgd, L2_HZ, g.l2_py_s.unwrap());
+        assert!(py.abs() < 1e-20);
     }
 
     /// Galileo: I/NAV's clock (E1,E5b) and F/NAV's (E1,E5a) of the same instant differ by

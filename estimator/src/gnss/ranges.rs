@@ -9,7 +9,7 @@
 //! ionosphere, troposphere) is left to the filter, which knows it. The same signal choice
 //! serves single-point positioning ([`EphemerisStore::system_observations`]).
 
-use navsync_wire::samples::{GnssNavData, GnssRaw, RawMeasurement};
+use navsync_wire::samples::{GnssNavData, GnssRaw, RawMeasurement, SIG_GPS_L2_PY};
 
 use super::broadcast::{
     BroadcastEphemeris, GNSS_ID_BEIDOU, GNSS_ID_GALILEO, GNSS_ID_GLONASS, L2_HZ, L5_HZ, NavCollector, NavEphemeris,
@@ -54,14 +54,15 @@ pub const SPP_SIGNALS: [(u8, u8, f64, bool); 8] = [
 ];
 /// The second signals of an ionosphere-free combination with [`SPP_SIGNALS`]' first, in order of
 /// preference per satellite: (u-blox `gnssId`, `sigId`, carrier frequency in Hz). GPS L2 CL,
-/// L2 CM; Galileo E5a-Q, E5a-I (u-blox interface description, "GNSS signal identifiers"). One
+/// L2 CM, L2 P(Y) (a geodetic receiver's, [`SIG_GPS_L2_PY`]); Galileo E5a-Q, E5a-I (u-blox interface description, "GNSS signal identifiers"). One
 /// band per system: a receiver delays each band differently (metres between L2 and L5 on the
 /// walk's u-blox X20), and one combination for all of a system's satellites leaves that in the
 /// system's clock. BeiDou's B2a and B1C group delays are in B-CNAV messages, which are not
 /// decoded: BeiDou and GLONASS stay on one frequency.
-pub const DUAL_FREQUENCY_SIGNALS: [(u8, u8, f64); 4] = [
+pub const DUAL_FREQUENCY_SIGNALS: [(u8, u8, f64); 5] = [
     (GNSS_ID_GPS, 3, L2_HZ),
     (GNSS_ID_GPS, 4, L2_HZ),
+    (GNSS_ID_GPS, SIG_GPS_L2_PY, L2_HZ),
     (GNSS_ID_GALILEO, 4, L5_HZ),
     (GNSS_ID_GALILEO, 3, L5_HZ),
 ];
@@ -669,7 +670,12 @@ impl EphemerisStore {
                     pseudorange_m: m.pseudorange_m,
                     pseudorange_std_m: m.pseudorange_std_m,
                     freq_hz: f2_hz,
-                    combined_delay_s: delays.combined_s(f1_hz, f2_hz)?,
+                    combined_delay_s: SignalDelays::combination_keeps(
+                        f1_hz,
+                        delays.of_signal(first.gnss_id, first.sig_id, f1_hz)?,
+                        f2_hz,
+                        delays.of_signal(m.gnss_id, m.sig_id, f2_hz)?,
+                    ),
                     isc_unknown: delays.isc_unknown,
                 })
             })

@@ -72,7 +72,10 @@ fn geonet_export_imports_back_to_the_same_solutions() {
             text.starts_with("     3.05           OBSERVATION DATA    G"),
             "{station}"
         );
-        assert!(text.contains("G    2 C1C L1C"), "{station}: GPS L1 C/A code and phase");
+        assert!(
+            text.contains("G    4 C1C L1C C2W L2W"),
+            "{station}: GPS L1 C/A and L2 P(Y) code and phase"
+        );
         let nav = std::fs::read_to_string(&xn).unwrap();
         assert!(
             nav.starts_with("     3.05           N: GNSS NAV DATA    G"),

@@ -5,6 +5,9 @@ use super::Stamp;
 
 /// Measurements one [`GnssRaw`] holds.
 pub const MAX_RAW_MEASUREMENTS: usize = 64;
+/// `sig_id` of GPS L2 P(Y), a signal u-blox receivers do not report and so number (their
+/// ids end at 15): a geodetic receiver's semi-codeless L2 (RINEX 3 `C2W`, RINEX 2 `P2`).
+pub const SIG_GPS_L2_PY: u8 = 32;
 
 crate::sample_struct! {
     /// One signal's raw measurements.
@@ -27,7 +30,7 @@ crate::sample_struct! {
         pub gnss_id: u8,
         /// Satellite id within the system.
         pub sv_id: u8,
-        /// Signal id (u-blox `sigId`).
+        /// Signal id (u-blox `sigId`; [`SIG_GPS_L2_PY`] for GPS L2 P(Y)).
         pub sig_id: u8,
         /// GLONASS frequency slot + 7 (0..=13), else 0.
         pub freq_id: u8,
@@ -83,13 +86,13 @@ impl RawMeasurement {
     /// first, receiver order within a rank; u-blox `gnssId`/`sigId`): 0, the signals
     /// single-point positioning and the tightly coupled filter use (GPS, SBAS and QZSS L1 C/A,
     /// Galileo E1, BeiDou B1I and B3I, GLONASS L1OF); 1, the second signals of an
-    /// ionosphere-free combination (GPS L2C, Galileo E5a); 2, the others. An all-band receiver
+    /// ionosphere-free combination (GPS L2C or L2 P(Y), Galileo E5a); 2, the others. An all-band receiver
     /// reports 70 and more signals per epoch (the walk0827 u-blox X20: 22–25 satellites on
     /// 2–3 bands each).
     pub fn keep_rank(&self) -> u8 {
         match (self.gnss_id, self.sig_id) {
             (0 | 1 | 5 | 6, 0) | (5, 1) | (2, 0 | 1) | (3, 0 | 1 | 4 | 10) => 0,
-            (0, 3 | 4) | (2, 3 | 4) => 1,
+            (0, 3 | 4 | SIG_GPS_L2_PY) | (2, 3 | 4) => 1,
             _ => 2,
         }
     }

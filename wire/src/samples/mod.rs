@@ -36,7 +36,7 @@ pub use event_pose::{EVENT_EDGE_FALLING, EVENT_EDGE_RISING, EventPose};
 pub use gnss_event::GnssEvent;
 pub use gnss_fix::*;
 pub use gnss_nav_data::{GnssNavData, MAX_NAV_WORDS};
-pub use gnss_raw::{GnssRaw, LOCK_TIME_MAX_MS, MAX_RAW_MEASUREMENTS, RawMeasurement};
+pub use gnss_raw::{GnssRaw, LOCK_TIME_MAX_MS, MAX_RAW_MEASUREMENTS, RawMeasurement, SIG_GPS_L2_PY};
 pub use gnss_sky::{GnssSky, MAX_SKY_SATELLITES, SkySatellite};
 pub use gnss_time_pulse::GnssTimePulse;
 pub use health::{Counter, Health, MAX_COUNTERS, MAX_RATES, RateEntry};
