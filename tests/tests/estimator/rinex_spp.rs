@@ -180,6 +180,44 @@ pub(crate) fn rtklib_spp_systems(
         .collect()
 }
 
+/// RTKLIB's ionosphere-free single-point solution (`pos1-ionoopt=dual-freq`,
+/// `pos1-frequency=l1+l2` in a `-k` file beside `out`) of `obs`/`nav` with `systems`:
+/// ("week tow", ECEF m) per epoch.
+pub(crate) fn rtklib_dual_frequency(
+    rnx2rtkp: &Path,
+    obs: &Path,
+    nav: &Path,
+    out: &Path,
+    systems: &str,
+) -> Vec<(String, [f64; 3])> {
+    let conf = out.with_extension("conf");
+    std::fs::write(
+        &conf,
+        "pos1-frequency     =l1+l2\npos1-ionoopt       =dual-freq\nout-timeform       =tow\n",
+    )
+    .unwrap();
+    let o = std::process::Command::new(rnx2rtkp)
+        .arg("-k")
+        .arg(&conf)
+        .args(["-p", "0", "-e", "-sys", systems, "-m", MASK_DEG, "-o"])
+        .arg(out)
+        .arg(obs)
+        .arg(nav)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "rnx2rtkp: {}", String::from_utf8_lossy(&o.stderr));
+    std::fs::read_to_string(out)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('%'))
+        .map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            let x = |k: usize| f[k].parse::<f64>().unwrap();
+            (format!("{} {}", f[0], f[1]), [x(2), x(3), x(4)])
+        })
+        .collect()
+}
+
 #[test]
 fn geonet_spp_is_no_worse_than_rtklib() {
     let Some(rnx2rtkp) = rtklib("rnx2rtkp", "NAVSYNC_RNX2RTKP") else {
@@ -319,32 +357,10 @@ fn geonet_dual_frequency_uses_l2_p_y() {
         let (h, solved) = (s["horizontal_rms_m"].as_f64().unwrap(), s["solved"].as_u64().unwrap());
         let used = s["satellites_used_per_system"]["G"].as_u64().unwrap() as f64 / solved.max(1) as f64;
         let theirs = rtklib("rnx2rtkp", "NAVSYNC_RNX2RTKP").map(|rnx2rtkp| {
-            let conf = env.dir.join("dual.conf");
-            std::fs::write(&conf, "pos1-frequency     =l1+l2\npos1-ionoopt       =dual-freq\n").unwrap();
             let out = env.dir.join(format!("{station}-dual.pos"));
-            let o = std::process::Command::new(rnx2rtkp)
-                .arg("-k")
-                .arg(&conf)
-                .args(["-p", "0", "-e", "-sys", "G", "-m", MASK_DEG, "-o"])
-                .arg(&out)
-                .arg(&obs)
-                .arg(&nav)
-                .output()
-                .unwrap();
-            assert!(o.status.success(), "rnx2rtkp: {}", String::from_utf8_lossy(&o.stderr));
-            let positions: Vec<[f64; 3]> = std::fs::read_to_string(&out)
-                .unwrap()
-                .lines()
-                .filter(|l| !l.starts_with('%'))
-                .filter_map(|l| {
-                    let f: Vec<f64> = l
-                        .split_whitespace()
-                        .skip(2)
-                        .take(3)
-                        .filter_map(|x| x.parse().ok())
-                        .collect();
-                    Some([*f.first()?, *f.get(1)?, *f.get(2)?])
-                })
+            let positions: Vec<[f64; 3]> = rtklib_dual_frequency(&rnx2rtkp, &obs, &nav, &out, "G")
+                .into_iter()
+                .map(|(_, p)| p)
                 .collect();
             rms(&positions, reference).0
         });

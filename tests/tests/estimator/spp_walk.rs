@@ -16,7 +16,7 @@ use navsync_shared::earth::geodetic_to_ecef;
 use navsync_tests::{TestEnv, shared_material};
 use serde_json::Value;
 
-use super::rinex_spp::{rtklib, rtklib_spp_systems, run_ok};
+use super::rinex_spp::{rtklib, rtklib_dual_frequency, rtklib_spp_systems, run_ok};
 
 /// The bound on navsync's horizontal RMS at the RTK-fixed epochs, m (measured 8.26 m on 291
 /// epochs with GPS CNAV; 7.61 m on 262 epochs with LNAV alone, 4 ephemerides, the last late
@@ -308,32 +308,11 @@ fn walk_dual_frequency_spp_is_rtklibs() {
     let imported = env.dir.join("walk-rinex.mcap");
     run_ok(&env, &["import", "rinex", &p(&obs), &p(&nav), "--out", &p(&imported)]);
     let (ours, _, _) = navsync_spp_dual(&env, &imported, "G");
-    let conf = env.dir.join("dual.conf");
-    std::fs::write(
-        &conf,
-        "pos1-frequency     =l1+l2\npos1-ionoopt       =dual-freq\nout-timeform       =tow\n",
-    )
-    .unwrap();
-    let out = env.dir.join("rtk-dual.pos");
-    let o = std::process::Command::new(&rnx2rtkp)
-        .arg("-k")
-        .arg(&conf)
-        .args(["-p", "0", "-e", "-sys", "G", "-m", "10", "-o"])
-        .arg(&out)
-        .arg(&obs)
-        .arg(&nav)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "rnx2rtkp: {}", String::from_utf8_lossy(&o.stderr));
-    let theirs: HashMap<i64, [f64; 3]> = std::fs::read_to_string(&out)
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('%'))
-        .filter_map(|l| {
-            let f: Vec<f64> = l.split_whitespace().filter_map(|x| x.parse().ok()).collect();
-            Some((ms(*f.get(1)?)?, [*f.get(2)?, *f.get(3)?, *f.get(4)?]))
-        })
-        .collect();
+    let theirs: HashMap<i64, [f64; 3]> =
+        rtklib_dual_frequency(&rnx2rtkp, &obs, &nav, &env.dir.join("rtk-dual.pos"), "G")
+            .into_iter()
+            .filter_map(|(t, p)| Some((ms(t.split_whitespace().nth(1)?.parse().ok()?)?, p)))
+            .collect();
     let d: Vec<f64> = ours
         .iter()
         .filter_map(|(t, a)| {
