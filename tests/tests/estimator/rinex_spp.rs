@@ -160,29 +160,11 @@ pub(crate) fn rtklib_spp_systems(
     out: &Path,
     systems: &str,
 ) -> Vec<(String, [f64; 3])> {
-    let o = std::process::Command::new(rnx2rtkp)
-        .args(["-p", "0", "-e", "-sys", systems, "-m", MASK_DEG, "-o"])
-        .arg(out)
-        .arg(obs)
-        .arg(nav)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "rnx2rtkp: {}", String::from_utf8_lossy(&o.stderr));
-    std::fs::read_to_string(out)
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('%'))
-        .map(|l| {
-            let f: Vec<&str> = l.split_whitespace().collect();
-            let x = |k: usize| f[k].parse::<f64>().unwrap();
-            (format!("{} {}", f[0], f[1]), [x(2), x(3), x(4)])
-        })
-        .collect()
+    rtklib_spp_with(rnx2rtkp, obs, nav, out, systems, None)
 }
 
 /// RTKLIB's ionosphere-free single-point solution (`pos1-ionoopt=dual-freq`,
-/// `pos1-frequency=l1+l2` in a `-k` file beside `out`) of `obs`/`nav` with `systems`:
-/// ("week tow", ECEF m) per epoch.
+/// `pos1-frequency=l1+l2`) of `obs`/`nav` with `systems`, as [`rtklib_spp_systems`].
 pub(crate) fn rtklib_dual_frequency(
     rnx2rtkp: &Path,
     obs: &Path,
@@ -190,15 +172,27 @@ pub(crate) fn rtklib_dual_frequency(
     out: &Path,
     systems: &str,
 ) -> Vec<(String, [f64; 3])> {
-    let conf = out.with_extension("conf");
-    std::fs::write(
-        &conf,
-        "pos1-frequency     =l1+l2\npos1-ionoopt       =dual-freq\nout-timeform       =tow\n",
-    )
-    .unwrap();
-    let o = std::process::Command::new(rnx2rtkp)
-        .arg("-k")
-        .arg(&conf)
+    let options = "pos1-frequency     =l1+l2\npos1-ionoopt       =dual-freq\nout-timeform       =tow\n";
+    rtklib_spp_with(rnx2rtkp, obs, nav, out, systems, Some(options))
+}
+
+/// `rnx2rtkp -p 0 -e -sys SYSTEMS -m MASK` (with `options` as a `-k` file beside `out`):
+/// ("week tow", ECEF m) per epoch.
+fn rtklib_spp_with(
+    rnx2rtkp: &Path,
+    obs: &Path,
+    nav: &Path,
+    out: &Path,
+    systems: &str,
+    options: Option<&str>,
+) -> Vec<(String, [f64; 3])> {
+    let mut cmd = std::process::Command::new(rnx2rtkp);
+    if let Some(text) = options {
+        let conf = out.with_extension("conf");
+        std::fs::write(&conf, text).unwrap();
+        cmd.arg("-k").arg(conf);
+    }
+    let o = cmd
         .args(["-p", "0", "-e", "-sys", systems, "-m", MASK_DEG, "-o"])
         .arg(out)
         .arg(obs)
