@@ -45,10 +45,11 @@ pub struct SppArgs {
     /// frequency); one receiver clock each.
     #[arg(long, default_value = "G,E,C,R", value_parser = parse_systems)]
     pub systems: Systems,
-    /// GPS and Galileo as the ionosphere-free combination of two signals (GPS L1 C/A and L2C,
-    /// Galileo E1 and E5a) instead of one signal with the broadcast ionosphere model: no
-    /// ionospheric error, about 3× the noise; a satellite without its second signal is left
-    /// out. BeiDou and GLONASS stay on one frequency.
+    /// GPS and Galileo as the ionosphere-free combination of two signals (GPS L1 C/A with L2C,
+    /// or L2 P(Y) from a geodetic receiver's RINEX; Galileo E1 with E5a) instead of one signal
+    /// with the broadcast ionosphere model: no ionospheric error, about 3× the noise. One
+    /// second signal per system and epoch, the one most satellites have; a satellite without it
+    /// is left out. BeiDou and GLONASS stay on one frequency.
     #[arg(long)]
     pub dual_frequency: bool,
     /// The summary as one JSON object on stdout.
@@ -340,7 +341,7 @@ pub fn run(args: &SppArgs) -> anyhow::Result<()> {
         );
         if args.dual_frequency {
             println!(
-                "ionosphere-free (GPS L1/L2C, Galileo E1/E5a); {} GPS and Galileo measurements left out without their second signal",
+                "ionosphere-free (GPS L1/L2, Galileo E1/E5a); {} GPS and Galileo measurements left out without their system's second signal",
                 r.counts.no_second_signal
             );
         }

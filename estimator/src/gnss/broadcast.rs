@@ -88,7 +88,7 @@ const L1_HZ: f64 = 1_575.42e6;
 /// Each signal's group delay against the clock an ephemeris' a_f0..a_f2 describe, s: the
 /// pseudorange on that signal is late by it (its single-frequency user's satellite clock is the
 /// ephemeris' less this). `None`: not broadcast. Two signals' ionosphere-free combination keeps
-/// f₁²B₁ − f₂²B₂ over f₁² − f₂² of them ([`combined_s`](Self::combined_s)).
+/// f₁²B₁ − f₂²B₂ over f₁² − f₂² of them ([`combination_keeps`](Self::combination_keeps)).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SignalDelays {
     /// GPS L1 C/A, Galileo E1.
@@ -173,15 +173,9 @@ impl SignalDelays {
         .and_then(|(_, d)| d)
     }
 
-    /// What the ionosphere-free combination of the signals on `f1_hz` and `f2_hz` keeps of
-    /// their delays, s: (f₁²B₁ − f₂²B₂) / (f₁² − f₂²) (0 for GPS L1/L2 without inter-signal
-    /// corrections: T_GD's definition, IS-GPS-200 §20.3.3.3.3.2).
-    pub fn combined_s(&self, f1_hz: f64, f2_hz: f64) -> Option<f64> {
-        Some(Self::combination_keeps(f1_hz, self.at(f1_hz)?, f2_hz, self.at(f2_hz)?))
-    }
-
     /// (f₁²B₁ − f₂²B₂) / (f₁² − f₂²), s: what the ionosphere-free combination of a signal on
-    /// `f1_hz` delayed by `b1_s` and one on `f2_hz` delayed by `b2_s` keeps of the delays.
+    /// `f1_hz` delayed by `b1_s` and one on `f2_hz` delayed by `b2_s` keeps of the delays (0 for
+    /// GPS L1/L2 P(Y): T_GD's definition, IS-GPS-200 §20.3.3.3.3.2).
     pub fn combination_keeps(f1_hz: f64, b1_s: f64, f2_hz: f64, b2_s: f64) -> f64 {
         let (g1, g2) = (f1_hz * f1_hz, f2_hz * f2_hz);
         (g1 * b1_s - g2 * b2_s) / (g1 - g2)
@@ -358,12 +352,22 @@ mod tests {
     /// with them the combination keeps what IS-GPS-200 §30.3.3.3.1.1.1 adds to it, c·(ISC_L2C
     /// − γ·ISC_L1C/A)/(1 − γ) with the opposite sign (here a delay, there a correction), and
     /// each single frequency's delay is γ·T_GD − ISC.
+    /// What the combination of the signals on `f1_hz` and `f2_hz` keeps of `d`'s delays.
+    fn keeps(d: &SignalDelays, f1_hz: f64, f2_hz: f64) -> Option<f64> {
+        Some(SignalDelays::combination_keeps(
+            f1_hz,
+            d.at(f1_hz)?,
+            f2_hz,
+            d.at(f2_hz)?,
+        ))
+    }
+
     #[test]
     fn gps_delays_follow_the_interface_specification() {
         let tgd = -8.3e-9;
         let none = SignalDelays::gps(tgd, None);
         assert!(none.isc_unknown);
-        assert!(none.combined_s(L1_HZ, L2_HZ).unwrap().abs() < 1e-20);
+        assert!(keeps(&none, L1_HZ, L2_HZ).unwrap().abs() < 1e-20);
         let d = cnav::GroupDelays {
             tgd_s: Some(tgd),
             isc_l1ca_s: Some(0.4e-9),
@@ -376,7 +380,7 @@ mod tests {
         assert!(!g.isc_unknown);
         let gamma12 = (L1_HZ / L2_HZ).powi(2);
         let correction = (-1.1e-9 - gamma12 * 0.4e-9) / (1.0 - gamma12);
-        assert!((g.combined_s(L1_HZ, L2_HZ).unwrap() + correction).abs() < 1e-20);
+        assert!((keeps(&g, L1_HZ, L2_HZ).unwrap() + correction).abs() < 1e-20);
         assert!((g.at(L1_HZ).unwrap() - (tgd - 0.4e-9)).abs() < 1e-20);
         let gamma15 = (L1_HZ / L5_HZ).powi(2);
         assert!((g.at(L5_HZ).unwrap() - (gamma15 * tgd - 2.2e-9)).abs() < 1e-20);
@@ -398,10 +402,10 @@ mod tests {
         let clock_fnav = 1.234e-4;
         let clock_inav = clock_fnav - a + b;
         let (inav, fnav) = (SignalDelays::galileo(a, Some(b)), SignalDelays::galileo(a, None));
-        let e1_e5a = |d: &SignalDelays| d.combined_s(L1_HZ, L5_HZ).unwrap();
+        let e1_e5a = |d: &SignalDelays| keeps(d, L1_HZ, L5_HZ).unwrap();
         assert!(((clock_inav - e1_e5a(&inav)) - (clock_fnav - e1_e5a(&fnav))).abs() < 1e-20);
         assert!(((clock_inav - inav.at(L1_HZ).unwrap()) - (clock_fnav - fnav.at(L1_HZ).unwrap())).abs() < 1e-20);
-        assert!(inav.combined_s(L1_HZ, E5B_HZ).unwrap().abs() < 1e-20);
+        assert!(keeps(&inav, L1_HZ, E5B_HZ).unwrap().abs() < 1e-20);
         assert_eq!(fnav.at(E5B_HZ), None);
     }
 

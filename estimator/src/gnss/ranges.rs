@@ -52,19 +52,17 @@ pub const SPP_SIGNALS: [(u8, u8, f64, bool); 8] = [
     (GNSS_ID_BEIDOU, 10, 1_268.52e6, false),
     (GNSS_ID_GLONASS, 0, 1_602.0e6, false),
 ];
-/// The second signals of an ionosphere-free combination with [`SPP_SIGNALS`]' first, in order of
-/// preference per satellite: (u-blox `gnssId`, `sigId`, carrier frequency in Hz). GPS L2 CL,
-/// L2 CM, L2 P(Y) (a geodetic receiver's, [`SIG_GPS_L2_PY`]); Galileo E5a-Q, E5a-I (u-blox interface description, "GNSS signal identifiers"). One
-/// band per system: a receiver delays each band differently (metres between L2 and L5 on the
-/// walk's u-blox X20), and one combination for all of a system's satellites leaves that in the
-/// system's clock. BeiDou's B2a and B1C group delays are in B-CNAV messages, which are not
+/// The second signals of an ionosphere-free combination with [`SPP_SIGNALS`]' first: (u-blox
+/// `gnssId`, the `sigId`s of one signal in order of preference, carrier frequency in Hz). GPS
+/// L2C (CL, CM: one code, one inter-signal correction), L2 P(Y) (a geodetic receiver's, [`SIG_GPS_L2_PY`]); Galileo E5a-Q, E5a-I (u-blox
+/// interface description, "GNSS signal identifiers"); each epoch uses one per system
+/// ([`second_signals`]). No L5 or E5b: a receiver delays each band differently (metres between
+/// L2 and L5 on the walk's u-blox X20), and L2C and E5a are what its satellites have most. BeiDou's B2a and B1C group delays are in B-CNAV messages, which are not
 /// decoded: BeiDou and GLONASS stay on one frequency.
-pub const DUAL_FREQUENCY_SIGNALS: [(u8, u8, f64); 5] = [
-    (GNSS_ID_GPS, 3, L2_HZ),
-    (GNSS_ID_GPS, 4, L2_HZ),
-    (GNSS_ID_GPS, SIG_GPS_L2_PY, L2_HZ),
-    (GNSS_ID_GALILEO, 4, L5_HZ),
-    (GNSS_ID_GALILEO, 3, L5_HZ),
+pub const DUAL_FREQUENCY_SIGNALS: [(u8, &[u8], f64); 3] = [
+    (GNSS_ID_GPS, &[3, 4], L2_HZ),
+    (GNSS_ID_GPS, &[SIG_GPS_L2_PY], L2_HZ),
+    (GNSS_ID_GALILEO, &[4, 3], L5_HZ),
 ];
 /// 1σ of each GPS inter-signal correction taken as 0 when no CNAV message type 30 came, s
 /// (the broadcast values are a fraction of a nanosecond to about one).
@@ -152,6 +150,33 @@ impl RangeEpoch {
     pub fn sats(&self) -> &[SatRange] {
         &self.sats[..usize::from(self.count).min(MAX_RANGE_SATS)]
     }
+}
+
+/// Whether the receiver marks `m`'s pseudorange valid (u-blox `trkStat` bit 0) and it is a
+/// positive number.
+fn pseudorange_valid(m: &RawMeasurement) -> bool {
+    m.trk_stat & 1 != 0 && m.pseudorange_m.is_finite() && m.pseudorange_m > 0.0
+}
+
+/// Per system of [`DUAL_FREQUENCY_SIGNALS`] the second signal of an epoch's combinations: the
+/// one with a valid pseudorange from most satellites (the table's order among equals), `None`
+/// for a system with none. GPS first, then Galileo.
+fn second_signals(meas: &[RawMeasurement]) -> [Option<(u8, &'static [u8], f64)>; 2] {
+    let mut out = [None; 2];
+    for (slot, system) in out.iter_mut().zip([GNSS_ID_GPS, GNSS_ID_GALILEO]) {
+        let mut best = (0, None);
+        for e in DUAL_FREQUENCY_SIGNALS.iter().filter(|e| e.0 == system) {
+            let n = meas
+                .iter()
+                .filter(|m| m.gnss_id == e.0 && e.1.contains(&m.sig_id) && pseudorange_valid(m))
+                .count();
+            if n > best.0 {
+                best = (n, Some(*e));
+            }
+        }
+        *slot = best.1;
+    }
+    out
 }
 
 /// The second signal of an ionosphere-free combination ([`EphemerisStore::second_signal`]).
@@ -530,9 +555,7 @@ impl EphemerisStore {
                 counts.other_signals += 1;
                 continue;
             };
-            let valid =
-                |m: &RawMeasurement| m.trk_stat & 1 != 0 && m.pseudorange_m.is_finite() && m.pseudorange_m > 0.0;
-            if !valid(m) {
+            if !pseudorange_valid(m) {
                 counts.invalid += 1;
                 continue;
             }
@@ -541,7 +564,7 @@ impl EphemerisStore {
                 j != k
                     && o.gnss_id == m.gnss_id
                     && o.sv_id == m.sv_id
-                    && valid(o)
+                    && pseudorange_valid(o)
                     && rank(o.gnss_id, o.sig_id).is_some_and(|ro| ro < r || (ro == r && j < k))
             });
             if better {
@@ -588,10 +611,13 @@ impl EphemerisStore {
     /// Galileo) with its first signal and its second signal's ionosphere-free combination P =
     /// (f₁²P₁ − f₂²P₂)/(f₁² − f₂²) (IS-GPS-200 §20.3.3.3.3.3, §30.3.3.3.1.1.1; OS SIS ICD
     /// §5.1.5), the clock less what that keeps of the group delays
-    /// ([`SignalDelays::combined_s`]), an ionosphere scale of 0, and each signal's σ scaled by
-    /// its coefficient. Such a satellite without its second signal is left out
-    /// ([`RangeBuildCounts::no_second_signal`]): on one frequency it would carry the receiver's
-    /// bias between the bands into its system's clock. BeiDou and GLONASS stay on one.
+    /// ([`SignalDelays::combination_keeps`]), an ionosphere scale of 0, and each signal's σ
+    /// scaled by its coefficient. One second signal per system and epoch, the one most of its
+    /// satellites have ([`second_signals`]): a receiver delays each signal differently, and one
+    /// combination for all of a system's satellites leaves that in the system's clock. A
+    /// satellite without it is left out ([`RangeBuildCounts::no_second_signal`]): on one
+    /// frequency, or another pair, it would carry the receiver's bias between the signals into
+    /// its system's clock. BeiDou and GLONASS stay on one frequency.
     pub fn system_observations(
         &self,
         raw: &GnssRaw,
@@ -602,9 +628,12 @@ impl EphemerisStore {
         let (mut out, mut no_second) = (Vec::new(), 0);
         let n = usize::from(raw.num_meas).min(raw.meas.len());
         let meas = &raw.meas[..n];
+        let chosen = second_signals(meas);
         self.each_signal(raw, systems, counts, |m, sig| {
             let paired = dual_frequency && DUAL_FREQUENCY_SIGNALS.iter().any(|(g, _, _)| *g == m.gnss_id);
-            let second = paired.then(|| self.second_signal(meas, m, sig.freq_hz)).flatten();
+            let second = paired
+                .then(|| self.second_signal(meas, m, sig.freq_hz, &chosen))
+                .flatten();
             if paired && second.is_none() {
                 no_second += 1;
                 return;
@@ -650,35 +679,33 @@ impl EphemerisStore {
     }
 
     /// The second signal of `first`'s satellite (carrier `f1_hz`) for an ionosphere-free
-    /// combination: the first of [`DUAL_FREQUENCY_SIGNALS`] in `meas` with a valid pseudorange
-    /// whose group delay, like `first`'s, the satellite's ephemeris gives.
-    fn second_signal(&self, meas: &[RawMeasurement], first: &RawMeasurement, f1_hz: f64) -> Option<SecondSignal> {
+    /// combination: its system's signal of `chosen` ([`second_signals`]) with a valid
+    /// pseudorange, when the satellite's ephemeris gives its group delay and `first`'s.
+    fn second_signal(
+        &self,
+        meas: &[RawMeasurement],
+        first: &RawMeasurement,
+        f1_hz: f64,
+        chosen: &[Option<(u8, &[u8], f64)>],
+    ) -> Option<SecondSignal> {
+        let &(_, sigs, f2_hz) = chosen.iter().flatten().find(|(g, _, _)| *g == first.gnss_id)?;
+        let m = sigs.iter().find_map(|&sig| {
+            meas.iter()
+                .find(|o| (o.gnss_id, o.sv_id, o.sig_id) == (first.gnss_id, first.sv_id, sig) && pseudorange_valid(o))
+        })?;
         let delays = self.signal_delays(first.gnss_id, first.sv_id)?;
-        DUAL_FREQUENCY_SIGNALS
-            .iter()
-            .filter(|(g, _, _)| *g == first.gnss_id)
-            .find_map(|&(_, sig, f2_hz)| {
-                let m = meas.iter().find(|o| {
-                    o.sv_id == first.sv_id
-                        && o.gnss_id == first.gnss_id
-                        && o.sig_id == sig
-                        && o.trk_stat & 1 != 0
-                        && o.pseudorange_m.is_finite()
-                        && o.pseudorange_m > 0.0
-                })?;
-                Some(SecondSignal {
-                    pseudorange_m: m.pseudorange_m,
-                    pseudorange_std_m: m.pseudorange_std_m,
-                    freq_hz: f2_hz,
-                    combined_delay_s: SignalDelays::combination_keeps(
-                        f1_hz,
-                        delays.of_signal(first.gnss_id, first.sig_id, f1_hz)?,
-                        f2_hz,
-                        delays.of_signal(m.gnss_id, m.sig_id, f2_hz)?,
-                    ),
-                    isc_unknown: delays.isc_unknown,
-                })
-            })
+        Some(SecondSignal {
+            pseudorange_m: m.pseudorange_m,
+            pseudorange_std_m: m.pseudorange_std_m,
+            freq_hz: f2_hz,
+            combined_delay_s: SignalDelays::combination_keeps(
+                f1_hz,
+                delays.of_signal(first.gnss_id, first.sig_id, f1_hz)?,
+                f2_hz,
+                delays.of_signal(m.gnss_id, m.sig_id, f2_hz)?,
+            ),
+            isc_unknown: delays.isc_unknown,
+        })
     }
 
     /// The group delays of satellite `sv_id` of system `gnss_id` against its ephemeris' clock:
@@ -927,8 +954,10 @@ mod tests {
         for (g, sig, _, _) in SPP_SIGNALS {
             assert_eq!(rank(g, sig), 0, "gnssId {g} sigId {sig}");
         }
-        for (g, sig, _) in DUAL_FREQUENCY_SIGNALS {
-            assert_eq!(rank(g, sig), 1, "gnssId {g} sigId {sig}");
+        for (g, sigs, _) in DUAL_FREQUENCY_SIGNALS {
+            for &sig in sigs {
+                assert_eq!(rank(g, sig), 1, "gnssId {g} sigId {sig}");
+            }
         }
         assert_eq!(rank(GNSS_ID_GPS, 7), 2);
     }
@@ -937,8 +966,9 @@ mod tests {
     /// E5a-Q, each delayed by the ionosphere as (f_L1/f)², combine to the range without it and
     /// with each clock less what the combination keeps of the group delays (GPS: nothing
     /// without CNAV's corrections, whose σ is added; Galileo I/NAV: BGD(E1,E5b) −
-    /// BGD(E1,E5a)); a GPS satellite without its L2 is left out and counted; BeiDou stays on
-    /// one frequency.
+    /// BGD(E1,E5a)); a GPS satellite without the epoch's GPS second signal (L2C, which two
+    /// satellites have, against one with L2 P(Y)) is left out and counted; BeiDou stays on one
+    /// frequency.
     #[test]
     fn dual_frequency_observations_cancel_the_ionosphere() {
         use crate::gnss::orbit::OrbitFrame;
@@ -956,8 +986,9 @@ mod tests {
         };
         let (bgd_a, bgd_b) = (-3.9e-9, -4.4e-9);
         let mut st = EphemerisStore::default();
-        st.insert_orbit(3, orbit(OrbitFrame::Gps, 1e-4, 5e-9));
-        st.insert_orbit(4, orbit(OrbitFrame::Gps, 1e-4, 5e-9));
+        for prn in [3, 4, 6, 7] {
+            st.insert_orbit(prn, orbit(OrbitFrame::Gps, 1e-4, 5e-9));
+        }
         st.insert_broadcast(BroadcastEphemeris {
             gnss_id: GNSS_ID_GALILEO,
             sv_id: 5,
@@ -989,6 +1020,11 @@ mod tests {
             meas(GNSS_ID_GPS, 3, 3, L2_HZ),
             meas(GNSS_ID_GPS, 3, 7, L5_HZ), // L5: not GPS's second band
             meas(GNSS_ID_GPS, 4, 0, L1_HZ),
+            // L2 P(Y) on one satellite, L2C on two: the epoch's GPS pairs are L1/L2C.
+            meas(GNSS_ID_GPS, 6, 0, L1_HZ),
+            meas(GNSS_ID_GPS, 6, SIG_GPS_L2_PY, L2_HZ),
+            meas(GNSS_ID_GPS, 7, 0, L1_HZ),
+            meas(GNSS_ID_GPS, 7, 4, L2_HZ),
             meas(GNSS_ID_GALILEO, 5, 0, L1_HZ),
             meas(GNSS_ID_GALILEO, 5, 4, L5_HZ),
             meas(GNSS_ID_BEIDOU, 20, 4, 1_268.52e6),
@@ -999,8 +1035,14 @@ mod tests {
         raw.num_meas = list.len() as u8;
         let mut counts = RangeBuildCounts::default();
         let obs = st.system_observations(&raw, &[0, 2, 3], true, &mut counts);
-        assert_eq!(counts.no_second_signal, 1);
-        assert_eq!(obs.len(), 3, "{obs:?}");
+        assert_eq!(counts.no_second_signal, 2);
+        assert_eq!(obs.len(), 4, "{obs:?}");
+        let gps: Vec<u8> = obs
+            .iter()
+            .filter(|o| o.gnss_id == GNSS_ID_GPS)
+            .map(|o| o.obs.sv)
+            .collect();
+        assert_eq!(gps, [3, 7]);
         let find = |g: u8| obs.iter().find(|o| o.gnss_id == g).unwrap();
         let (g, e, c) = (find(GNSS_ID_GPS), find(GNSS_ID_GALILEO), find(GNSS_ID_BEIDOU));
         assert_eq!(g.obs.sv, 3);
@@ -1025,9 +1067,9 @@ mod tests {
         );
         assert_eq!((e.obs.sigma_zenith_m, c.noise_gain), (2.0, 1.0));
         assert!(c.iono_scale > 1.0);
-        // One frequency: GPS 4 is back, each pseudorange as measured.
+        // One frequency: GPS 4 and 6 are back, each pseudorange as measured.
         let single = st.system_observations(&raw, &[0, 2, 3], false, &mut counts);
-        assert_eq!(single.len(), 4);
+        assert_eq!(single.len(), 6);
         assert!(single.iter().all(|o| o.noise_gain == 1.0 && o.iono_scale >= 1.0));
     }
 
