@@ -622,7 +622,7 @@ class RawMeasurement(ctypes.Structure):
         ("gnss_id", ctypes.c_uint8),
         # Satellite id within the system.
         ("sv_id", ctypes.c_uint8),
-        # Signal id (u-blox `sigId`).
+        # Signal id (u-blox `sigId`; [`SIG_GPS_L2_PY`] for GPS L2 P(Y)).
         ("sig_id", ctypes.c_uint8),
         # GLONASS frequency slot + 7 (0..=13), else 0.
         ("freq_id", ctypes.c_uint8),
