@@ -228,6 +228,14 @@ fn windows(rec: &Recording) -> Vec<f64> {
         .collect()
 }
 
+/// The error function, to 1.5e-7 (Abramowitz & Stegun 7.1.26).
+fn erf(x: f64) -> f64 {
+    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
+    let poly =
+        t * (0.254_829_592 + t * (-0.284_496_736 + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+    (1.0 - poly * (-x * x).exp()).copysign(x)
+}
+
 fn in_window(sow: f64, t0: f64) -> bool {
     sow >= t0 - 1e-6 && sow <= t0 + WINDOW_S + 1e-6
 }
@@ -537,6 +545,8 @@ struct Replay {
     /// The output's (sow, lat°, lon°, height m) rows.
     track: Vec<(f64, f64, f64, f64)>,
     summary: Value,
+    /// `KF_GINS_STD.txt`'s rows: sow, then the position σ N, E, D, m, …
+    std: Vec<Vec<f64>>,
     /// (sow, Q, horizontal error at the antenna, m, whether N and E are both within 2σ) at each
     /// reference epoch within the output.
     errors: Vec<(f64, f64, f64, bool)>,
@@ -569,6 +579,7 @@ impl Replay {
             nav,
             track,
             summary,
+            std,
             errors,
         }
     }
@@ -600,6 +611,13 @@ impl Replay {
             (a[1] - b[1]).to_radians() * R * a[0].to_radians().cos(),
             b[2] - a[2],
         ]
+    }
+
+    /// The position σ along the unit vector `d` (NED) at `sow`, m, from the N, E and D σ (their
+    /// correlations left out).
+    fn std_along(&self, sow: f64, d: [f64; 3]) -> f64 {
+        let row = &self.std[self.std.partition_point(|r| r[0] < sow).min(self.std.len() - 1)];
+        (0..3).map(|i| (d[i] * row[i + 1]).powi(2)).sum::<f64>().sqrt()
     }
 
     /// Horizontal RMS at the RTK-fixed epochs, m, and their number.
@@ -851,6 +869,12 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
         "\nthe receiver clock: the full-sky tightly coupled filter scaled the TCXO's random-walk FM by {:.2} (ClockWatch)",
         clock_scale as f64 / 100.0
     );
+    // With 2 satellites, what an INS on this IMU gives along d: loose's σ along d at the
+    // window's end (it starts at the RTK fixes' cm, so its growth is the IMU's coasting under
+    // the filter's IMU model), the chance that a coasting of that σ stays within the bar, and
+    // whether the coastings measured lie within 3 of those σ (the bound's premise).
+    let mut coasting_misses = Vec::new();
+    let mut all_four = 1.0;
     for k in KS.into_iter().filter(|k| *k >= 2) {
         let name = format!("{k} satellites");
         eprintln!(
@@ -889,8 +913,33 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
                 if floor > loose / 3.0 { ">" } else { "<=" },
                 loose / 3.0
             );
+            if k == 2 {
+                let loose_run = &runs[nc * v];
+                let sigma = (loose_run.std_along(*t0 + WINDOW_S, d).powi(2) - loose_run.std_along(*t0, d).powi(2))
+                    .max(0.0)
+                    .sqrt();
+                // Meeting the bar needs at least |e_d|·|d_h| ≤ a third of loose's cost.
+                let p = erf(loose / 3.0 / d[0].hypot(d[1]) / (sigma * std::f64::consts::SQRT_2));
+                all_four *= p;
+                eprintln!(
+                    "    an INS's coasting along d over the window, σ {sigma:.2} m (loose's model of this IMU): within the bar with probability {p:.2}; tight blockage {:.1} σ, loose {:.1} σ",
+                    coast.abs() / sigma,
+                    along.abs() / sigma
+                );
+                for (who, e) in [("tight's blockage", coast), ("loose", along)] {
+                    if e.abs() > 3.0 * sigma {
+                        coasting_misses.push(format!(
+                            "W{}: {who} coasted {e:+.2} m along d, beyond 3σ of the IMU model's {sigma:.2} m",
+                            w + 1
+                        ));
+                    }
+                }
+            }
         }
     }
+    eprintln!(
+        "2 satellites: the chance that an INS coasting as the filter's IMU model says stays within the bar along d in all {WINDOWS} windows: {all_four:.4}"
+    );
     eprintln!(
         "\nthe receiver clock at each blockage's end (host time of its last raw epoch), tightly coupled, against the full sky's:"
     );
@@ -943,6 +992,7 @@ fn tight_and_loose_on_the_walk_with_canyon_windows() {
 
     // The criteria.
     let mut failures = clock_misses;
+    failures.extend(coasting_misses);
     for r in original_runs.iter().chain(runs) {
         if !r.summary["problem"].is_null() {
             failures.push(format!("a replay's problem: {}", r.summary["problem"]));
