@@ -271,6 +271,9 @@ pub struct UbxStats {
     pub fix_latency_s: [f64; 3],
     /// Samples moved 1 µs after the one before on their channel (equal receipt times).
     pub nudged: u64,
+    /// The decoder's error counters that grew (damaged frames skipped, …), by their
+    /// health-report name, with what each means.
+    pub decoder_errors: Vec<(&'static str, u64, &'static str)>,
 }
 
 /// Runs `navsync import ubx` and prints what it wrote.
@@ -303,6 +306,9 @@ pub fn main(args: &UbxArgs) -> anyhow::Result<()> {
             String::new()
         }
     );
+    for (name, n, meaning) in &s.decoder_errors {
+        eprintln!("  {}: {name} {n}: {meaning}", args.log.display());
+    }
     anyhow::ensure!(s.imu > 0, "no IMU sample in {}", args.imu.display());
     Ok(())
 }
@@ -393,6 +399,11 @@ fn decode(log: &[u8], chunks: &[(usize, i64)], id: &str, stats: &mut UbxStats) -
             publish_gps_ns: at,
         });
     }
+    d.each_counter(&mut |name, n| {
+        if let Some(meaning) = Decoder::describe_counter(name).filter(|_| n > 0) {
+            stats.decoder_errors.push((name, n, meaning));
+        }
+    });
     for f in fixes {
         let (stamp, epoch) = match &f {
             AnySample::GnssFix(x) => (x.stamp.host_ns, valid(x.gps_ns)),

@@ -19,6 +19,9 @@ const WEEK: i64 = 2381;
 /// The bound on the horizontal RMS at the RTK-fixed epochs, m (measured 0.042 m; the IMU 1 s
 /// late gives 0.99 m).
 const RMS_BOUND_M: f64 = 0.15;
+/// The same for the tightly coupled filter on the log's raw epochs (its whole log: 0.150 m,
+/// `tests/tests/estimator/tight_walk.rs`).
+const TIGHT_RMS_BOUND_M: f64 = 0.5;
 
 fn data() -> PathBuf {
     shared_material("datasets/rtklibexplorer-walk0827")
@@ -258,24 +261,29 @@ fn rtk_fixed() -> Vec<(f64, f64, f64)> {
 /// against the RTK-fixed epochs (m, the output interpolated to each), epochs compared, Δ and
 /// its σ (s), and how often the monitor reset Δ.
 fn estimate(env: &TestEnv, rec: &Path, name: &str) -> (f64, f64, usize, f64, f64, u64) {
+    estimate_with(env, rec, name, &[])
+}
+
+/// As [`estimate`], with `extra` flags for the replay.
+fn estimate_with(env: &TestEnv, rec: &Path, name: &str, extra: &[&str]) -> (f64, f64, usize, f64, f64, u64) {
     let nav = env.dir.join(format!("{name}.nav"));
     let summary = env.dir.join(format!("{name}.json"));
-    run_ok(
-        env,
-        &[
-            "replay",
-            &p(rec),
-            "--estimate",
-            "--lever-arm",
-            "0,-0.05,0",
-            "--summary-json",
-            &p(&summary),
-            "--out",
-            &p(&nav),
-            "--format",
-            "kf-gins",
-        ],
-    );
+    let (r, s, n) = (p(rec), p(&summary), p(&nav));
+    let mut args = vec![
+        "replay",
+        r.as_str(),
+        "--estimate",
+        "--lever-arm",
+        "0,-0.05,0",
+        "--summary-json",
+        s.as_str(),
+        "--out",
+        n.as_str(),
+        "--format",
+        "kf-gins",
+    ];
+    args.extend(extra);
+    run_ok(env, &args);
     let s: Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
     assert!(s["problem"].is_null(), "{name}: {}", s["problem"]);
     let rows: Vec<Vec<f64>> = std::fs::read_to_string(&nav)
@@ -283,6 +291,10 @@ fn estimate(env: &TestEnv, rec: &Path, name: &str) -> (f64, f64, usize, f64, f64
         .lines()
         .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
         .collect();
+    assert!(
+        rows.iter().flatten().all(|x: &f64| x.is_finite()),
+        "{name}: a value that is not finite in the output"
+    );
     let (mut sum, mut max, mut n) = (0.0, 0.0f64, 0usize);
     for (sow, lat, lon) in rtk_fixed() {
         let Some((north, east)) = walk0827_antenna_error(&rows, sow, lat, lon) else {
@@ -353,6 +365,70 @@ fn the_walk_imported_from_ubx_is_estimated_within_its_rtk_fixes_and_a_shifted_im
     // bound, and the monitor starts it again from its prior each time, counted (before that
     // rule it published Δ −0.5 s with a σ of milliseconds).
     assert!(delay_resets > 0, "the IMU 1 s late: Δ {d} s and no reset of Δ counted");
+}
+
+/// The walk's log damaged as a serial line or a disk damages one: `flips` single bits flipped
+/// at places drawn from `seed`, and the last `cut` bytes gone (the last frame cut short).
+fn damaged_log(seed: u64, flips: usize, cut: usize) -> Vec<u8> {
+    let mut bytes = std::fs::read(log()).unwrap();
+    let mut x = seed;
+    let mut next = move || {
+        // xorshift64 (Marsaglia 2003)
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    for _ in 0..flips {
+        let at = (next() % bytes.len() as u64) as usize;
+        bytes[at] ^= 1 << (next() % 8);
+    }
+    bytes.truncate(bytes.len() - cut);
+    bytes
+}
+
+/// A damaged copy of the log: the import keeps every frame that survived, says on stderr how
+/// many were skipped and why (the decoder's error counters, by name), and the recording is
+/// estimated both ways as the whole log is, with nothing that is not finite in the output.
+#[test]
+fn a_damaged_log_keeps_what_survived_and_says_what_was_skipped() {
+    let env = TestEnv::new("ubxdamaged");
+    let imu = data().join("imu.txt");
+    let (_, raw_whole, nav_whole) = decoded_counts();
+    let damaged = env.dir.join("damaged.ubx");
+    std::fs::write(&damaged, damaged_log(0x9e37_79b9_7f4a_7c15, 100, 1000)).unwrap();
+    let rec = env.dir.join("damaged.mcap");
+    let err = run_ok(
+        &env,
+        &["import", "ubx", &p(&damaged), "--imu", &p(&imu), "--out", &p(&rec)],
+    );
+    eprintln!("{err}");
+    // The frames dropped whole, by the counters the import names (a bad checksum or length).
+    let counted = |name: &str| -> Option<u64> {
+        err.lines()
+            .find_map(|l| l.split(&format!(": {name} ")).nth(1)?.split(':').next()?.parse().ok())
+    };
+    let skipped = counted("ubx_bad_checksum")
+        .unwrap_or_else(|| panic!("the import does not count the damaged frames:\n{err}"))
+        + counted("ubx_bad_length").unwrap_or(0);
+    let r = read(&rec);
+    // Every damaged frame is one lost message at most, and only damaged ones are lost (and
+    // the one the cut ends, or its epoch's fix).
+    let lost = (536 - r.fixes.len()) + (raw_whole - r.raw) + (nav_whole - r.nav_data);
+    assert!(r.raw > 0 && !r.fixes.is_empty(), "nothing survived");
+    assert!(
+        lost as u64 <= skipped + 2,
+        "{lost} messages lost, {skipped} frames dropped for a bad checksum or length"
+    );
+    // The fixes lost are at most the damaged ones: loosely coupled as the whole log is.
+    let (rms, _, n, _, _, _) = estimate(&env, &rec, "damaged-loose");
+    assert!(n >= 280 && rms <= RMS_BOUND_M, "loose: {n} epochs, RMS {rms:.3} m");
+    // Tightly coupled on the raw epochs that survived.
+    let (rms, _, n, _, _, _) = estimate_with(&env, &rec, "damaged-tight", &["--coupling", "tight"]);
+    assert!(
+        n >= 280 && rms <= TIGHT_RMS_BOUND_M,
+        "tight: {n} epochs, RMS {rms:.3} m"
+    );
 }
 
 #[test]
