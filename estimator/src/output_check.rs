@@ -42,6 +42,14 @@ pub struct InputsSeen {
     pub fixes_too_old: u64,
     /// The fusion horizon, s.
     pub fusion_horizon_s: f64,
+    /// Tightly coupled (each satellite's measurements fused).
+    pub tight: bool,
+    /// Raw measurement epochs that reached the estimator.
+    pub raw_epochs: u64,
+    /// Pseudoranges fused (tightly coupled).
+    pub ranges_used: u64,
+    /// Raw measurements left out for want of an ephemeris.
+    pub raw_no_ephemeris: u64,
 }
 
 /// Counts of navigation states by usability.
@@ -91,6 +99,15 @@ impl OutputCheck {
                  receiver's output latency (or the GNSS delay) exceeds it, and the states coast on the IMU \
                  between the fixes that came in time; raise --horizon ([estimator] fusion_horizon_s)",
                 seen.fixes_too_old, seen.fixes, seen.fusion_horizon_s
+            ));
+        }
+        if seen.tight && seen.raw_epochs > 0 && seen.ranges_used == 0 && self.aligned > 0 {
+            return Some(format!(
+                "tightly coupled, and no satellite was fused: {} measurements of {} raw epochs had no ephemeris \
+                 (no navigation data, UBX RXM-SFRBX, in the input, or none complete yet); the states coast on \
+                 the IMU from the alignment (their σ says how far); record the receiver's navigation data, or \
+                 use --coupling loose",
+                seen.raw_no_ephemeris, seen.raw_epochs
             ));
         }
         (seen.integrity_resets > 0).then(|| {
@@ -255,5 +272,26 @@ mod tests {
             ..seen
         };
         assert_eq!(c.problem(&few), None);
+    }
+
+    #[test]
+    fn tightly_coupled_without_a_fused_satellite_is_a_problem() {
+        let mut c = OutputCheck::default();
+        (0..100).for_each(|_| c.add(&state(NavStatus::Aligned, 1), true));
+        let seen = InputsSeen {
+            fixes: 100,
+            tight: true,
+            raw_epochs: 100,
+            raw_no_ephemeris: 2000,
+            ..Default::default()
+        };
+        let p = c.problem(&seen).expect("no satellite fused");
+        assert!(
+            p.contains("2000 measurements of 100 raw epochs had no ephemeris"),
+            "{p}"
+        );
+        // One range fused, or loosely coupled: no such problem.
+        assert_eq!(c.problem(&InputsSeen { ranges_used: 1, ..seen }), None);
+        assert_eq!(c.problem(&InputsSeen { tight: false, ..seen }), None);
     }
 }

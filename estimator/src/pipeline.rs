@@ -326,7 +326,7 @@ impl Pipeline {
             Input::PpsEdge(e) => out.time_changed = self.on_pps(e),
             Input::GnssFix(f) => out.time_changed = self.on_fix(f),
             Input::TimePulse(t) => self.on_time_pulse(t),
-            Input::Raw(r) => self.on_raw(r),
+            Input::Raw(r) => out.time_changed = self.on_raw(r),
             Input::NavData(d) => self.on_nav_data(d),
             Input::NetworkTime(t) => out.time_changed = self.on_network_time(t),
             Input::Event(e, id) => self.on_event(e, *id),
@@ -428,24 +428,29 @@ impl Pipeline {
     /// satellite with an ephemeris is fused at the epoch; before alignment, a single-point
     /// solution from them aligns the filter as a fix would. With [`Coupling::LooseSpp`] that
     /// solution is fused as a fix at every epoch. Loosely coupled they are counted and not used.
-    pub fn on_raw(&mut self, raw: &GnssRaw) {
+    /// True when the time mapping changed (from a receiver that sends no fixes, its raw epochs
+    /// label the PPS edges: [`TimeSync::on_raw_epoch`]).
+    pub fn on_raw(&mut self, raw: &GnssRaw) -> bool {
         self.catch_up();
         self.counters.raw_epochs += 1;
         if !self.cfg.nav.coupling.uses_raw() {
             self.counters.raw_unused += 1;
-            return;
+            return false;
         }
-        self.time.tick(raw.stamp.host_ns);
         if !(0.0..navsync_wire::time::SECONDS_PER_WEEK as f64).contains(&raw.rcv_tow_s) || raw.week == 0 {
             // No receiver time (NaN, out of the week, or the week unknown).
+            self.time.tick(raw.stamp.host_ns);
             self.counters.raw_invalid += 1;
-            return;
+            return false;
         }
         let gps_ns = (i64::from(raw.week) * navsync_wire::time::SECONDS_PER_WEEK) * 1_000_000_000
             + (raw.rcv_tow_s * 1e9).round() as i64;
         let utc_ns = navsync_wire::time::utc_ns_from_gps_ns(gps_ns);
+        // A receiver that sends no fixes: its raw epochs label the PPS edges.
+        let changed = self.time.on_raw_epoch(raw.stamp.host_ns, utc_ns);
+        self.time.tick(raw.stamp.host_ns);
         let Some(stamp) = self.epoch_stamp(utc_ns, raw.stamp.host_ns) else {
-            return;
+            return changed;
         };
         // The receiver's time runs c·δt_r ahead of GPS time: the epoch is that much earlier
         // (under software sync Δ absorbs it with the receiver's latency).
@@ -470,6 +475,7 @@ impl Pipeline {
         } else {
             self.counters.raw_unused += 1;
         }
+        changed
     }
 
     /// The ephemeris store, to give it orbits from elsewhere than the receiver's navigation
@@ -595,6 +601,10 @@ impl Pipeline {
             integrity_resets: self.nav.integrity().resets,
             fixes_too_old: self.nav.counters().fixes_too_old,
             fusion_horizon_s: self.cfg.nav.fusion_horizon_s,
+            tight: self.nav.is_tight(),
+            raw_epochs: self.counters.raw_epochs,
+            ranges_used: self.nav.measurement_states().ranges.ranges_used,
+            raw_no_ephemeris: self.range_counts.no_ephemeris,
         }
     }
 

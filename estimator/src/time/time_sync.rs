@@ -23,8 +23,9 @@
 //! service's successive readings are not independent (chrony filters its own measurements), so
 //! the published σ never falls below the latest reading's own.
 //!
-//! Trust. An edge counts only if the receiver reported a valid fix in the last
-//! [`FIX_TRUST_NS`]; without one, the edge is rejected and the mapping goes into holdover.
+//! Trust. An edge counts only if the receiver reported a valid fix (or, from a receiver that
+//! sends no fixes, a raw measurement epoch) in the last [`FIX_TRUST_NS`]; without one, the
+//! edge is rejected and the mapping goes into holdover.
 //!
 //! Pure state machine: fed with samples, no clocks or IPC inside.
 
@@ -156,6 +157,8 @@ pub struct TimeSync {
     last_edge_host_ns: Option<i64>,
     last_used_host_ns: Option<i64>,
     last_valid_fix_host_ns: Option<i64>,
+    /// Host time of the last raw epoch that labelled the edges ([`Self::on_raw_epoch`]).
+    last_raw_label_host_ns: Option<i64>,
     consecutive_rejects: u32,
     /// A holdover began and the mapping has not been locked since (a relock is pending).
     relock_pending: bool,
@@ -198,6 +201,7 @@ impl TimeSync {
             last_edge_host_ns: None,
             last_used_host_ns: None,
             last_valid_fix_host_ns: None,
+            last_raw_label_host_ns: None,
             consecutive_rejects: 0,
             relock_pending: false,
             latency: LatencyStats::default(),
@@ -420,14 +424,29 @@ impl TimeSync {
 
     /// Feeds one GNSS epoch. Returns true when the mapping was updated.
     pub fn on_fix(&mut self, fix: &GnssFix) -> bool {
-        let h = fix.stamp.host_ns;
         let valid = fix.has_position() && fix.utc_ns != i64::MIN;
-        if !valid {
+        valid && self.on_epoch(fix.stamp.host_ns, fix.utc_ns)
+    }
+
+    /// Feeds the time of a raw measurement epoch (UBX RXM-RAWX: the receiver's time, within
+    /// its clock's bias, a millisecond at most, of GPS time) received at host `host_ns`: a
+    /// receiver that sends raw measurements and no fixes (a logger's RAWX + SFRBX) labels the
+    /// PPS edges with it as with a fix's time. Ignored while a fix is trusted ([`FIX_TRUST_NS`]):
+    /// one receiver, one source of labels. Returns true when the mapping was updated.
+    pub fn on_raw_epoch(&mut self, host_ns: i64, utc_ns: i64) -> bool {
+        if self.fix_trusted(host_ns) && self.last_raw_label_host_ns != self.last_valid_fix_host_ns {
             return false;
         }
+        let updated = self.on_epoch(host_ns, utc_ns);
+        self.last_raw_label_host_ns = Some(host_ns);
+        updated
+    }
+
+    /// A GNSS epoch of valid time `utc_ns` received at host `h`: labels the pending PPS edge.
+    fn on_epoch(&mut self, h: i64, utc_ns: i64) -> bool {
         self.last_valid_fix_host_ns = Some(h);
-        self.leap_s = gps_minus_utc_s(fix.utc_ns);
-        self.last_fix_label = Some((h, fix.utc_ns));
+        self.leap_s = gps_minus_utc_s(utc_ns);
+        self.last_fix_label = Some((h, utc_ns));
         let mut updated = false;
         if self.cfg.software_sync {
             self.status = TimeStatus::Software;
@@ -445,8 +464,8 @@ impl TimeSync {
             if let Some(edge) = found {
                 // The edge's second: the latest whole second ≤ the epoch, counted back by the
                 // time from the edge to the receipt (module docs).
-                let label = (fix.utc_ns - (h - edge.host_ns)).div_euclid(NS_PER_S) * NS_PER_S;
-                let label = if label < fix.utc_ns - (h - edge.host_ns) {
+                let label = (utc_ns - (h - edge.host_ns)).div_euclid(NS_PER_S) * NS_PER_S;
+                let label = if label < utc_ns - (h - edge.host_ns) {
                     label + NS_PER_S
                 } else {
                     label
@@ -469,7 +488,7 @@ impl TimeSync {
         }
         if self.clock.is_initialized() && self.status.is_clock_mapped() {
             // Receiver output latency: first byte minus the host time of the epoch's PPS.
-            let epoch_host = self.clock_host_ns_at(fix.utc_ns);
+            let epoch_host = self.clock_host_ns_at(utc_ns);
             self.latency.push((h - epoch_host) as f64 * 1e-9);
         }
         updated
@@ -675,6 +694,62 @@ mod tests {
         assert!(n1 >= 35, "{n1} edges labelled by the receiver");
         assert!(without > 2.0, "the sawtooth shows without qErr: {without} ns");
         assert!(with < 1.5, "with qErr applied: {with} ns");
+    }
+
+    /// Edges once a second and, 60 ms after each, a raw epoch whose receiver time is 0.3 ms
+    /// off GPS; from second `fixes_from` on also a fix. The mapping's error at the ideal
+    /// seconds 20..40, the status, and the edges used.
+    fn run_raw(fixes_from: i64) -> (f64, TimeStatus, u64) {
+        let mut ts = TimeSync::new(TimeSyncConfig::default());
+        let host_of = |utc: i64| H0 + (utc - U0);
+        let mut worst: f64 = 0.0;
+        for k in 1..40i64 {
+            let ideal = U0 + k * NS_PER_S;
+            let mut edge = PpsEdge::zeroed();
+            edge.stamp = Stamp::host(host_of(ideal), k as u64, StampSource::KernelPps);
+            edge.assert_edge = 1;
+            ts.on_pps(&edge);
+            if k >= fixes_from {
+                let mut fix = GnssFix::empty(Stamp::host(host_of(ideal) + 50_000_000, k as u64, StampSource::Receipt));
+                (fix.utc_ns, fix.lat_deg, fix.lon_deg, fix.alt_msl_m, fix.mode) =
+                    (ideal, 48.0, 11.0, 500.0, FixMode::Fix3d as u8);
+                ts.on_fix(&fix);
+            }
+            ts.on_raw_epoch(host_of(ideal) + 60_000_000, ideal + 300_000);
+            ts.tick(host_of(ideal) + 60_000_000);
+            if k >= 20 {
+                let err = (ts.clock.utc_ns_at(host_of(ideal)) - ideal) as f64;
+                worst = worst.max(err.abs());
+            }
+        }
+        (worst, ts.status, ts.counters.pps_used)
+    }
+
+    #[test]
+    fn raw_epochs_label_the_edges_of_a_receiver_without_fixes_and_give_way_to_its_fixes() {
+        // Raw epochs alone: locked, each edge on its own second (the 0.3 ms of the receiver's
+        // clock does not move the label).
+        let (err, status, used) = run_raw(i64::MAX);
+        assert_eq!(status, TimeStatus::Locked);
+        assert!(used >= 35, "{used} edges used");
+        assert!(err < 100.0, "mapping error {err} ns");
+        // With fixes from second 10 on: the same mapping (the fixes label the same seconds).
+        let (err_fixes, status, used_fixes) = run_raw(10);
+        assert_eq!(status, TimeStatus::Locked);
+        assert_eq!(used_fixes, used);
+        assert!(err_fixes < 100.0, "mapping error {err_fixes} ns");
+        // A fix trusted: a raw epoch labels nothing.
+        let mut ts = TimeSync::new(TimeSyncConfig::default());
+        let mut fix = GnssFix::empty(Stamp::host(H0, 1, StampSource::Receipt));
+        (fix.utc_ns, fix.lat_deg, fix.lon_deg, fix.alt_msl_m, fix.mode) = (U0, 48.0, 11.0, 500.0, FixMode::Fix3d as u8);
+        ts.on_fix(&fix);
+        assert!(ts.fix_trusted(H0 + NS_PER_S));
+        let before = ts.last_fix_label;
+        ts.on_raw_epoch(H0 + NS_PER_S, U0 + 7 * NS_PER_S);
+        assert_eq!(
+            ts.last_fix_label, before,
+            "a raw epoch relabelled while a fix is trusted"
+        );
     }
 
     fn reading(host_ns: i64, utc_ns: i64, std_ns: f64) -> NetworkTime {
