@@ -150,10 +150,12 @@ fn pps_out_raises_an_edge_at_each_gnss_second_of_the_mapping() {
         errors_us.iter().all(|&e| e >= -0.01),
         "an edge before its second: {errors_us:?}"
     );
-    // Consecutive seconds, but for edges the process could not raise in time and counted.
+    // Consecutive seconds, but for edges the process could not raise in time and counted (the
+    // counter covers the process's life, the capture a window of it: a late second before the
+    // first edge captured or after the last is counted and leaves no gap).
     let gaps: i64 = seconds.windows(2).map(|w| (w[1] - w[0]) / NS_PER_S - 1).sum();
     assert!(
-        seconds.windows(2).all(|w| w[1] > w[0]) && gaps == counter("pulses_late") as i64,
+        seconds.windows(2).all(|w| w[1] > w[0]) && gaps <= counter("pulses_late") as i64,
         "seconds {seconds:?}, {gaps} missing, pulses_late {}",
         counter("pulses_late")
     );
