@@ -370,24 +370,48 @@ fn the_walk_imported_from_ubx_is_estimated_within_its_rtk_fixes_and_a_shifted_im
     assert!(delay_resets > 0, "the IMU 1 s late: Δ {d} s and no reset of Δ counted");
 }
 
-/// The walk's log damaged as a serial line or a disk damages one: `flips` single bits flipped
-/// at places drawn from `seed`, and the last `cut` bytes gone (the last frame cut short).
-fn damaged_log(seed: u64, flips: usize, cut: usize) -> Vec<u8> {
-    let mut bytes = std::fs::read(log()).unwrap();
-    let mut x = seed;
-    let mut next = move || {
-        // xorshift64 (Marsaglia 2003)
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        x
-    };
-    for _ in 0..flips {
-        let at = (next() % bytes.len() as u64) as usize;
-        bytes[at] ^= 1 << (next() % 8);
+/// The byte ranges and (class, id) of the UBX frames in `bytes` (NMEA, RTCM3 and every other
+/// byte between them skipped).
+fn ubx_frames(bytes: &[u8]) -> Vec<(std::ops::Range<usize>, (u8, u8))> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i..].starts_with(&[0xb5, 0x62]) && i + 6 <= bytes.len() {
+            let len = usize::from(u16::from_le_bytes([bytes[i + 4], bytes[i + 5]]));
+            let end = (i + 8 + len).min(bytes.len());
+            out.push((i..end, (bytes[i + 2], bytes[i + 3])));
+            i = end;
+        } else {
+            i += 1;
+        }
     }
-    bytes.truncate(bytes.len() - cut);
-    bytes
+    out
+}
+
+/// The walk's log damaged as a serial line or a disk damages one: `flips` single bits flipped
+/// at places drawn from `seed` (the simulator's generator), and the last `cut` bytes gone (the
+/// last frame cut short). Also returns how many of the log's NAV-PVT, RXM-RAWX and RXM-SFRBX
+/// frames the damage touched (a flipped bit anywhere in the frame, its sync bytes included, or
+/// a byte of it cut).
+fn damaged_log(seed: u64, flips: usize, cut: usize) -> (Vec<u8>, usize) {
+    let mut bytes = std::fs::read(log()).unwrap();
+    let mut rng = navsync_sim::rng::Rng::new(seed);
+    let mut flipped = Vec::with_capacity(flips);
+    for _ in 0..flips {
+        let at = (rng.next_u64() % bytes.len() as u64) as usize;
+        flipped.push(at);
+        bytes[at] ^= 1 << (rng.next_u64() % 8);
+    }
+    let kept = bytes.len() - cut;
+    let touched = ubx_frames(&std::fs::read(log()).unwrap())
+        .into_iter()
+        .filter(|(r, id)| {
+            [(0x01, 0x07), (0x02, 0x15), (0x02, 0x13)].contains(id)
+                && (r.end > kept || flipped.iter().any(|at| r.contains(at)))
+        })
+        .count();
+    bytes.truncate(kept);
+    (bytes, touched)
 }
 
 /// A damaged copy of the log: the import keeps every frame that survived, says on stderr how
@@ -399,7 +423,8 @@ fn a_damaged_log_keeps_what_survived_and_says_what_was_skipped() {
     let imu = data().join("imu.txt");
     let (_, raw_whole, nav_whole) = decoded_counts();
     let damaged = env.dir.join("damaged.ubx");
-    std::fs::write(&damaged, damaged_log(0x9e37_79b9_7f4a_7c15, 100, 1000)).unwrap();
+    let (bytes, touched) = damaged_log(0x9e37_79b9_7f4a_7c15, 100, 1000);
+    std::fs::write(&damaged, bytes).unwrap();
     let rec = env.dir.join("damaged.mcap");
     let err = run_ok(
         &env,
@@ -415,13 +440,15 @@ fn a_damaged_log_keeps_what_survived_and_says_what_was_skipped() {
         .unwrap_or_else(|| panic!("the import does not count the damaged frames:\n{err}"))
         + counted("ubx_bad_length").unwrap_or(0);
     let r = read(&rec);
-    // Every damaged frame is one lost message at most, and only damaged ones are lost (and
-    // the one the cut ends, or its epoch's fix).
+    // Only damaged frames are lost: a frame with a bad checksum or length is counted, one whose
+    // sync bytes were hit is not a frame any more (its bytes are counted as noise), and the
+    // last one is cut short.
     let lost = (536 - r.fixes.len()) + (raw_whole - r.raw) + (nav_whole - r.nav_data);
+    eprintln!("{lost} messages lost, {touched} frames damaged, {skipped} dropped for a bad checksum or length");
     assert!(r.raw > 0 && !r.fixes.is_empty(), "nothing survived");
     assert!(
-        lost as u64 <= skipped + 2,
-        "{lost} messages lost, {skipped} frames dropped for a bad checksum or length"
+        lost <= touched && skipped as usize <= touched,
+        "{lost} messages lost and {skipped} frames dropped for a bad checksum or length, {touched} frames damaged"
     );
     // The fixes lost are at most the damaged ones: loosely coupled as the whole log is.
     let (rms, _, n, _, _, _) = estimate(&env, &rec, "damaged-loose");
@@ -439,20 +466,15 @@ fn a_damaged_log_keeps_what_survived_and_says_what_was_skipped() {
 fn log_without(drop: &[(u8, u8)]) -> Vec<u8> {
     let bytes = std::fs::read(log()).unwrap();
     let mut out = Vec::with_capacity(bytes.len());
-    let mut i = 0;
-    while i < bytes.len() {
-        if bytes[i..].starts_with(&[0xb5, 0x62]) && i + 6 <= bytes.len() {
-            let len = usize::from(u16::from_le_bytes([bytes[i + 4], bytes[i + 5]]));
-            let end = (i + 8 + len).min(bytes.len());
-            if !drop.contains(&(bytes[i + 2], bytes[i + 3])) {
-                out.extend_from_slice(&bytes[i..end]);
-            }
-            i = end;
-        } else {
-            out.push(bytes[i]);
-            i += 1;
+    let mut at = 0;
+    for (r, id) in ubx_frames(&bytes) {
+        out.extend_from_slice(&bytes[at..r.start]);
+        if !drop.contains(&id) {
+            out.extend_from_slice(&bytes[r.clone()]);
         }
+        at = r.end;
     }
+    out.extend_from_slice(&bytes[at..]);
     out
 }
 
