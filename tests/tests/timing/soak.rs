@@ -71,6 +71,15 @@ impl Seqs {
     }
 }
 
+/// The values of the (time s, value) pairs with `from` ≤ time < `to`.
+fn values_in(series: &[(f64, f64)], from: f64, to: f64) -> Vec<f64> {
+    series
+        .iter()
+        .filter(|(t, _)| *t >= from && *t < to)
+        .map(|p| p.1)
+        .collect()
+}
+
 fn median(v: &[f64]) -> f64 {
     quantile(&mut v.to_vec(), 0.5)
 }
@@ -216,13 +225,7 @@ fn soak_memory_flat_latency_flat_every_loss_reported() {
     // that navsync causes (a queue that backs up, work that grows with the run) raises every
     // later window; a burst of load from elsewhere on the machine raises a few.
     let quarter = secs as f64 / 4.0;
-    let in_range = |from: f64, to: f64| -> Vec<f64> {
-        latency
-            .iter()
-            .filter(|(t, _)| *t >= from && *t < to)
-            .map(|p| p.1)
-            .collect()
-    };
+    let in_range = |from: f64, to: f64| values_in(&latency, from, to);
     let window_p99s = |from: f64, to: f64| -> Vec<f64> {
         let w = LATENCY_WINDOW_S;
         let n = (((to - from) / w).floor() as usize).max(1);
@@ -259,17 +262,10 @@ fn soak_memory_flat_latency_flat_every_loss_reported() {
         ms(&first_w),
         ms(&last_w)
     );
-    let est_in = |from: f64, to: f64| -> Vec<f64> {
-        est_p99
-            .iter()
-            .filter(|(t, _)| *t >= from && *t < to)
-            .map(|p| p.1)
-            .collect()
-    };
     println!(
         "the estimator's own NavState latency p99 per Health report, first quarter [{}] ms, last quarter [{}] ms",
-        ms(&est_in(0.0, quarter)),
-        ms(&est_in(3.0 * quarter, f64::INFINITY))
+        ms(&values_in(&est_p99, 0.0, quarter)),
+        ms(&values_in(&est_p99, 3.0 * quarter, f64::INFINITY))
     );
 
     // Sequence accounting.
