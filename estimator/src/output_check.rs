@@ -102,12 +102,22 @@ impl OutputCheck {
             ));
         }
         if seen.tight && seen.raw_epochs > 0 && seen.ranges_used == 0 && self.aligned > 0 {
+            let why = if seen.raw_no_ephemeris > 0 {
+                format!(
+                    "{} measurements of {} raw epochs had no ephemeris (no navigation data, UBX RXM-SFRBX, in \
+                     the input, or none complete yet)",
+                    seen.raw_no_ephemeris, seen.raw_epochs
+                )
+            } else {
+                format!(
+                    "none of the {} raw epochs had a measurement it could use (the summary's raw_* counters say \
+                     what they left out: other signals, invalid ranges)",
+                    seen.raw_epochs
+                )
+            };
             return Some(format!(
-                "tightly coupled, and no satellite was fused: {} measurements of {} raw epochs had no ephemeris \
-                 (no navigation data, UBX RXM-SFRBX, in the input, or none complete yet); the states coast on \
-                 the IMU from the alignment (their σ says how far); record the receiver's navigation data, or \
-                 use --coupling loose",
-                seen.raw_no_ephemeris, seen.raw_epochs
+                "tightly coupled, and no satellite was fused: {why}; the states coast on the IMU from the \
+                 alignment (their σ says how far); record the receiver's navigation data, or use --coupling loose"
             ));
         }
         (seen.integrity_resets > 0).then(|| {
@@ -290,6 +300,14 @@ mod tests {
             p.contains("2000 measurements of 100 raw epochs had no ephemeris"),
             "{p}"
         );
+        // Measurements left out for other reasons: said so.
+        let p = c
+            .problem(&InputsSeen {
+                raw_no_ephemeris: 0,
+                ..seen
+            })
+            .expect("no satellite fused");
+        assert!(p.contains("none of the 100 raw epochs had a measurement"), "{p}");
         // One range fused, or loosely coupled: no such problem.
         assert_eq!(c.problem(&InputsSeen { ranges_used: 1, ..seen }), None);
         assert_eq!(c.problem(&InputsSeen { tight: false, ..seen }), None);
