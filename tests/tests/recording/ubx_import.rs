@@ -394,7 +394,8 @@ fn ubx_frames(bytes: &[u8]) -> Vec<(std::ops::Range<usize>, (u8, u8))> {
 /// frames the damage touched (a flipped bit anywhere in the frame, its sync bytes included, or
 /// a byte of it cut).
 fn damaged_log(seed: u64, flips: usize, cut: usize) -> (Vec<u8>, usize) {
-    let mut bytes = std::fs::read(log()).unwrap();
+    let original = std::fs::read(log()).unwrap();
+    let mut bytes = original.clone();
     let mut rng = navsync_sim::rng::Rng::new(seed);
     let mut flipped = Vec::with_capacity(flips);
     for _ in 0..flips {
@@ -403,7 +404,7 @@ fn damaged_log(seed: u64, flips: usize, cut: usize) -> (Vec<u8>, usize) {
         bytes[at] ^= 1 << (rng.next_u64() % 8);
     }
     let kept = bytes.len() - cut;
-    let touched = ubx_frames(&std::fs::read(log()).unwrap())
+    let touched = ubx_frames(&original)
         .into_iter()
         .filter(|(r, id)| {
             [(0x01, 0x07), (0x02, 0x15), (0x02, 0x13)].contains(id)
